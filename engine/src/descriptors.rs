@@ -1,0 +1,91 @@
+//! Descriptor handling, in one place: each dispatch gets a descriptor set from
+//! an arena owned by its recording, freed when the recording is dropped.
+
+use crate::buffer::BufferBinding;
+use crate::context::Context;
+use anyhow::{bail, Result};
+use ash::vk;
+use std::sync::Arc;
+
+const SETS_PER_POOL: u32 = 256;
+const BUFFERS_PER_POOL: u32 = SETS_PER_POOL * 16;
+
+pub(crate) struct DescriptorArena {
+    ctx: Arc<Context>,
+    pools: Vec<vk::DescriptorPool>,
+}
+
+impl DescriptorArena {
+    pub(crate) fn new(ctx: &Arc<Context>) -> Self {
+        DescriptorArena { ctx: ctx.clone(), pools: Vec::new() }
+    }
+
+    fn new_pool(&mut self) -> Result<vk::DescriptorPool> {
+        let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: BUFFERS_PER_POOL }];
+        let info = vk::DescriptorPoolCreateInfo::default().max_sets(SETS_PER_POOL).pool_sizes(&sizes);
+        let pool = unsafe { self.ctx.device.create_descriptor_pool(&info, None) }?;
+        self.pools.push(pool);
+        Ok(pool)
+    }
+
+    /// A set for `layout`, written with `bindings` (binding i = bindings[i]).
+    pub(crate) fn bind(&mut self, kernel: &str, layout: vk::DescriptorSetLayout, bindings: &[BufferBinding]) -> Result<vk::DescriptorSet> {
+        let caps = &self.ctx.caps;
+        for (i, b) in bindings.iter().enumerate() {
+            if b.range > caps.max_storage_buffer_range {
+                bail!(
+                    "kernel '{kernel}' binding {i}: range of {:.1} MiB exceeds this device's maxStorageBufferRange ({:.1} MiB); bind it in slices",
+                    b.range as f64 / 1048576.0,
+                    caps.max_storage_buffer_range as f64 / 1048576.0
+                );
+            }
+            if b.offset % caps.min_storage_buffer_offset_alignment != 0 {
+                bail!(
+                    "kernel '{kernel}' binding {i}: offset {} is not a multiple of minStorageBufferOffsetAlignment ({})",
+                    b.offset, caps.min_storage_buffer_offset_alignment
+                );
+            }
+        }
+        let layouts = [layout];
+        let mut set = None;
+        if let Some(&pool) = self.pools.last() {
+            let info = vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts);
+            if let Ok(s) = unsafe { self.ctx.device.allocate_descriptor_sets(&info) } {
+                set = Some(s[0]);
+            }
+        }
+        let set = match set {
+            Some(s) => s,
+            None => {
+                let pool = self.new_pool()?;
+                let info = vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts);
+                unsafe { self.ctx.device.allocate_descriptor_sets(&info) }?[0]
+            }
+        };
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
+            .iter()
+            .map(|b| [vk::DescriptorBufferInfo { buffer: b.buffer, offset: b.offset, range: b.range }])
+            .collect();
+        let writes: Vec<_> = infos
+            .iter()
+            .enumerate()
+            .map(|(i, info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(i as u32)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
+            .collect();
+        unsafe { self.ctx.device.update_descriptor_sets(&writes, &[]) };
+        Ok(set)
+    }
+}
+
+impl Drop for DescriptorArena {
+    fn drop(&mut self) {
+        for p in self.pools.drain(..) {
+            unsafe { self.ctx.device.destroy_descriptor_pool(p, None) };
+        }
+    }
+}

@@ -1,0 +1,13 @@
+//! tgs-pipelines: the compute kernels, compiled from `glsl/` at build time,
+//! with one typed Rust wrapper per kernel family.
+
+/// Embedded SPIR-V of every `glsl/*.comp` (name in upper case).
+pub mod shaders {
+    include!(concat!(env!("OUT_DIR"), "/shaders.rs"));
+}
+
+pub mod scan;
+pub mod sort;
+
+pub use scan::{Count, PrefixSum, ScanScratch};
+pub use sort::{RadixSort, SortConfig, SortScratch};

@@ -1,0 +1,53 @@
+//! Helpers shared by the integration tests.
+
+use std::sync::Arc;
+use tgs_engine::{Context, ContextOptions, DeviceSelector};
+
+/// A context on the default device (or `TGS_DEVICE`) with validation layers
+/// enabled when installed. Use [`check_validation`] at the end of a test.
+pub fn ctx() -> Arc<Context> {
+    let opts = ContextOptions { device: DeviceSelector::from_arg_or_env(None), validation: Some(validation_wanted()) };
+    match Context::new(&opts) {
+        Ok(c) => c,
+        Err(e) => panic!("no Vulkan device for tests: {e:#}"),
+    }
+}
+
+/// Validation is on unless `TGS_VALIDATION=0`.
+pub fn validation_wanted() -> bool {
+    std::env::var("TGS_VALIDATION").map(|v| v != "0").unwrap_or(true)
+}
+
+/// Fail the test if the validation layer reported any error.
+pub fn check_validation(ctx: &Context) {
+    let errs = ctx.validation_errors();
+    assert!(errs.is_empty(), "{} Vulkan validation error(s):\n{}", errs.len(), errs.join("\n"));
+}
+
+/// Small deterministic PRNG (SplitMix64) so failures can be reproduced from the seed.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    pub fn next_u32(&mut self) -> u32 {
+        (self.next_u64() >> 32) as u32
+    }
+    pub fn below(&mut self, n: u32) -> u32 {
+        ((self.next_u32() as u64 * n as u64) >> 32) as u32
+    }
+}
+
+/// A seed from `TGS_SEED` or the clock; printed so a failure can be re-run.
+pub fn seed(test: &str) -> u64 {
+    let s = std::env::var("TGS_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or_else(|| {
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(1)
+    });
+    eprintln!("{test}: seed {s} (re-run with TGS_SEED={s})");
+    s
+}
