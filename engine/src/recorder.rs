@@ -298,6 +298,14 @@ impl Recorder {
         Ok(())
     }
 
+    /// Keep a buffer alive until the recording is dropped (for buffers reached
+    /// through device addresses rather than bindings).
+    pub fn keep_alive(&mut self, b: BufferBinding) {
+        if let Some(k) = b.keep {
+            self.keep.push(k);
+        }
+    }
+
     /// Open a named GPU timing scope (no-op without profiling).
     pub fn begin_scope(&mut self, name: &str) -> Option<usize> {
         let cmd = self.cmd;

@@ -8,6 +8,8 @@ pub mod shaders {
 
 pub mod scan;
 pub mod sort;
+pub mod util;
 
 pub use scan::{Count, PrefixSum, ScanScratch};
 pub use sort::{RadixSort, SortConfig, SortScratch};
+pub use util::Iota;

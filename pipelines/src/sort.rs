@@ -82,6 +82,7 @@ pub struct RadixSort {
     scan: PrefixSum,
     upsweep: Kernel,
     downsweep: Kernel,
+    copy: Kernel,
 }
 
 /// Scratch for sorting up to `capacity` keys: ping-pong buffers, histograms,
@@ -118,6 +119,7 @@ impl RadixSort {
             scan: PrefixSum::new(ctx)?,
             upsweep: k("sort.upsweep", shaders::SORT_UPSWEEP)?,
             downsweep: k("sort.downsweep", shaders::SORT_DOWNSWEEP)?,
+            copy: k("sort.copy", shaders::SORT_COPY)?,
         })
     }
 
@@ -196,9 +198,13 @@ impl RadixSort {
         }
         if passes % 2 == 1 {
             let sc = rec.begin_scope("sort.copy");
-            let bytes = cap as u64 * 4;
-            rec.copy(&scratch.keys.binding(), &keys.binding(), bytes)?;
-            rec.copy(&scratch.vals.binding(), &vals.binding(), bytes)?;
+            // Only the first n (known on the GPU) move: the caller's data past n stays.
+            rec.dispatch_indirect(
+                &self.copy,
+                &[params.clone(), scratch.keys.binding(), scratch.vals.binding(), keys.binding(), vals.binding()],
+                bytemuck::bytes_of(&[0u32, 0u32]),
+                &parts_args,
+            )?;
             rec.end_scope(sc);
         }
         Ok(())

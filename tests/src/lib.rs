@@ -51,3 +51,9 @@ pub fn seed(test: &str) -> u64 {
     eprintln!("{test}: seed {s} (re-run with TGS_SEED={s})");
     s
 }
+
+/// One context per test binary (device creation with validation is slow).
+pub fn ctx_shared() -> &'static Arc<Context> {
+    static CTX: std::sync::OnceLock<Arc<Context>> = std::sync::OnceLock::new();
+    CTX.get_or_init(ctx)
+}

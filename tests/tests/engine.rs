@@ -1,0 +1,240 @@
+//! Engine behaviour: capabilities, validation hook-up, adoption of a host
+//! device, buffers over 128 MiB, profiling, and clear errors.
+
+use std::sync::Arc;
+use tgs_engine::{vk, AdoptInfo, Buffer, Context, ContextOptions, DeviceSelector, EnabledFeatures, Kernel, KernelDesc, Recorder};
+use tgs_pipelines::{shaders, Count, Iota, RadixSort};
+use tgs_tests::*;
+
+#[test]
+fn capabilities_are_sane() {
+    let ctx = ctx_shared();
+    let c = ctx.caps();
+    eprintln!("{}", c.describe());
+    assert!(c.subgroup_size.is_power_of_two() && (4..=128).contains(&c.subgroup_size), "{}", c.subgroup_size);
+    assert!(c.min_subgroup_size <= c.subgroup_size && c.subgroup_size <= c.max_subgroup_size);
+    assert!(c.max_shared_memory >= 16 * 1024);
+    assert!(c.max_storage_buffer_range >= 1 << 27);
+    assert!(c.max_workgroup_count[0] >= 65535);
+    if c.device_name.contains("llvmpipe") {
+        // lavapipe: subgroup 8, or 4 with LP_NATIVE_VECTOR_WIDTH=128 (CI runs both).
+        let want = if std::env::var("LP_NATIVE_VECTOR_WIDTH").as_deref() == Ok("128") { 4 } else { 8 };
+        assert_eq!(c.subgroup_size, want);
+        assert_eq!(c.max_storage_buffer_range, 128 << 20);
+    }
+}
+
+#[test]
+fn validation_layer_is_active_and_catches_errors() {
+    let installed = std::path::Path::new("/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json").exists();
+    if !validation_wanted() || !installed {
+        eprintln!("validation layer not installed or disabled: nothing to check");
+        return;
+    }
+    assert!(ctx_shared().validation_enabled(), "tests must run with the validation layer");
+    // A fresh context, so the deliberate error does not fail the other tests.
+    let ctx = Context::new(&ContextOptions { device: DeviceSelector::from_arg_or_env(None), validation: Some(true) }).unwrap();
+    unsafe {
+        // Invalid: size 0 (VUID-VkBufferCreateInfo-size-00912).
+        let info = vk::BufferCreateInfo::default().size(0).usage(vk::BufferUsageFlags::STORAGE_BUFFER);
+        if let Ok(b) = ctx.device().create_buffer(&info, None) {
+            ctx.device().destroy_buffer(b, None);
+        }
+    }
+    assert!(!ctx.validation_errors().is_empty(), "the validation hook did not report a deliberate error");
+}
+
+/// The host renderer's side: it creates instance, device and queue itself.
+struct Host {
+    entry: ash::Entry,
+    instance: ash::Instance,
+    pd: vk::PhysicalDevice,
+    device: ash::Device,
+    qf: u32,
+    queue: vk::Queue,
+}
+
+fn make_host() -> Host {
+    unsafe {
+        let entry = ash::Entry::load().unwrap();
+        let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
+        let instance = entry.create_instance(&vk::InstanceCreateInfo::default().application_info(&app), None).unwrap();
+        let pds = instance.enumerate_physical_devices().unwrap();
+        let pd = pds[0];
+        let qf = instance
+            .get_physical_device_queue_family_properties(pd)
+            .iter()
+            .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE))
+            .unwrap() as u32;
+        let prio = [1.0f32];
+        let qi = [vk::DeviceQueueCreateInfo::default().queue_family_index(qf).queue_priorities(&prio)];
+        let device = instance.create_device(pd, &vk::DeviceCreateInfo::default().queue_create_infos(&qi), None).unwrap();
+        let queue = device.get_device_queue(qf, 0);
+        Host { entry, instance, pd, device, qf, queue }
+    }
+}
+
+#[test]
+fn adopts_a_host_device_and_leaves_it_alive() {
+    let host = make_host();
+    let ctx = unsafe {
+        Context::adopt(AdoptInfo {
+            entry: host.entry.clone(),
+            instance: host.instance.handle(),
+            physical_device: host.pd,
+            device: host.device.handle(),
+            queue_family_index: host.qf,
+            queue: host.queue,
+            enabled: EnabledFeatures::default(), // the host enabled no optional features
+        })
+        .unwrap()
+    };
+    assert!(!ctx.owns_device());
+    assert!(!ctx.caps().buffer_device_address, "not enabled by the host, so not reported");
+    let sort = RadixSort::new(&ctx).unwrap();
+    let mut rng = Rng(seed("adopt"));
+    let keys: Vec<u32> = (0..10_000).map(|_| rng.next_u32()).collect();
+    let kb = Buffer::from_slice(&ctx, "k", &keys).unwrap();
+    let vb = Buffer::from_slice(&ctx, "v", &(0..10_000u32).collect::<Vec<_>>()).unwrap();
+    let scratch = sort.scratch(10_000).unwrap();
+
+    // Record into the host's own command buffer; the host submits it.
+    unsafe {
+        let d = &host.device;
+        let pool = d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(host.qf), None).unwrap();
+        let cmd = d
+            .allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1))
+            .unwrap()[0];
+        d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).unwrap();
+        let mut rec = Recorder::record_into(&ctx, cmd, 16).unwrap();
+        sort.record(&mut rec, &kb, &vb, &Count::Host(10_000), 32, &scratch).unwrap();
+        rec.finish().unwrap();
+        d.end_command_buffer(cmd).unwrap();
+        let fence = d.create_fence(&vk::FenceCreateInfo::default(), None).unwrap();
+        d.queue_submit(host.queue, &[vk::SubmitInfo::default().command_buffers(&[cmd])], fence).unwrap();
+        d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
+        assert!(rec.timings().unwrap().iter().any(|t| t.name == "sort.downsweep") || !rec.profiling());
+        drop(rec);
+        d.destroy_fence(fence, None);
+        d.destroy_command_pool(pool, None);
+    }
+    let mut expect = keys.clone();
+    expect.sort();
+    assert_eq!(kb.download().unwrap(), expect);
+    drop((kb, vb, scratch, sort));
+    drop(ctx);
+
+    // The host's device is still alive and usable after tgs is gone.
+    unsafe {
+        let b = host
+            .device
+            .create_buffer(&vk::BufferCreateInfo::default().size(64).usage(vk::BufferUsageFlags::STORAGE_BUFFER), None)
+            .unwrap();
+        host.device.destroy_buffer(b, None);
+        host.device.device_wait_idle().unwrap();
+        host.device.destroy_device(None);
+        host.instance.destroy_instance(None);
+    }
+}
+
+#[test]
+fn buffers_over_128_mib() {
+    let ctx = ctx_shared();
+    let range = ctx.caps().max_storage_buffer_range;
+    // A buffer past the binding limit: 40 Mi u32 = 160 MiB (> 128 MiB on lavapipe).
+    let n = ((range / 4) as usize + (8 << 20)).min(80 << 20);
+    let buf = Buffer::<u32>::new(ctx, "big", n).unwrap();
+    let iota = Iota::new(ctx).unwrap();
+
+    // Binding it whole is refused with a clear message.
+    let mut rec = Recorder::new(ctx).unwrap();
+    let e = iota.record(&mut rec, buf.binding(), n as u32, 0).unwrap_err();
+    assert!(format!("{e:#}").contains("maxStorageBufferRange"), "{e:#}");
+    drop(rec);
+
+    // Split bindings: windows of at most the range.
+    let window = (range / 4) as usize / 2;
+    let mut rec = Recorder::new(ctx).unwrap();
+    let mut start = 0;
+    while start < n {
+        let count = window.min(n - start);
+        iota.record(&mut rec, buf.slice(start, count), count as u32, start as u32).unwrap();
+        start += count;
+    }
+    rec.submit_and_wait().unwrap();
+    let tail = buf.download_range(n - 1000, 1000).unwrap();
+    assert_eq!(tail, ((n - 1000) as u32..n as u32).collect::<Vec<_>>());
+    let mid = buf.download_range(window - 3, 6).unwrap();
+    assert_eq!(mid, ((window - 3) as u32..(window + 3) as u32).collect::<Vec<_>>());
+
+    // Buffer device address: the whole buffer from one kernel, no binding.
+    if ctx.features().buffer_device_address {
+        let mut rec = Recorder::new(ctx).unwrap();
+        rec.fill(&buf.slice(n - 4096, 4096), 0).unwrap();
+        iota.record_bda(&mut rec, &buf, (n - 4096) as u32, 4096).unwrap();
+        rec.submit_and_wait().unwrap();
+        let tail = buf.download_range(n - 4096, 4096).unwrap();
+        assert_eq!(tail, ((n - 4096) as u32..n as u32).collect::<Vec<_>>());
+    } else {
+        eprintln!("no buffer device address on this device: BDA part skipped");
+    }
+    check_validation(ctx);
+}
+
+#[test]
+fn profiler_scopes_and_disabled_cost() {
+    let ctx = ctx_shared();
+    let sort = RadixSort::new(ctx).unwrap();
+    let n = 50_000u32;
+    let kb = Buffer::from_slice(ctx, "k", &(0..n).rev().collect::<Vec<_>>()).unwrap();
+    let vb = Buffer::<u32>::new(ctx, "v", n as usize).unwrap();
+    let scratch = sort.scratch(n).unwrap();
+    let mut rec = Recorder::with_profiling(ctx, 128).unwrap();
+    sort.record(&mut rec, &kb, &vb, &Count::Host(n), 32, &scratch).unwrap();
+    let t = rec.submit_and_wait().unwrap();
+    if ctx.caps().timestamp_valid_bits > 0 {
+        let s = tgs_engine::summarize(&t);
+        let passes = 32usize.div_ceil(sort.config().radix_bits as usize);
+        let down = s.iter().find(|x| x.name == "sort.downsweep").expect("downsweep timed");
+        assert_eq!(down.count, passes);
+        assert!(s.iter().all(|x| x.total_ms.is_finite() && x.total_ms >= 0.0));
+        assert!(down.total_ms > 0.0);
+    }
+    // Without profiling: no scopes, no timings.
+    let mut rec = Recorder::new(ctx).unwrap();
+    assert!(!rec.profiling());
+    assert!(rec.begin_scope("x").is_none());
+    sort.record(&mut rec, &kb, &vb, &Count::Host(n), 32, &scratch).unwrap();
+    assert!(rec.submit_and_wait().unwrap().is_empty());
+    check_validation(ctx);
+}
+
+#[test]
+fn clear_errors() {
+    let bad_index = Context::new(&ContextOptions { device: DeviceSelector::Index(999), validation: Some(false) });
+    let e = format!("{:#}", bad_index.err().unwrap());
+    assert!(e.contains("--device 999") && e.contains("only"), "{e}");
+    let bad_name = Context::new(&ContextOptions { device: DeviceSelector::Name("no-such-gpu".into()), validation: Some(false) });
+    let e = format!("{:#}", bad_name.err().unwrap());
+    assert!(e.contains("no-such-gpu") && e.contains("devices are"), "{e}");
+
+    let ctx = ctx_shared();
+    let huge = Buffer::<u32>::new(ctx, "absurd", 1 << 40);
+    let e = format!("{:#}", huge.err().unwrap());
+    assert!(e.contains("absurd") && (e.contains("largest allocation") || e.contains("out of device memory")), "{e}");
+
+    // Wrong number of bindings for a kernel.
+    let k = Kernel::new(ctx, &KernelDesc { name: "util.iota", spirv: shaders::UTIL_IOTA, spec: &[(0, 64)], push_bytes: 8, subgroup_size: None, full_subgroups: false }).unwrap();
+    assert_eq!(k.bindings(), 1);
+    let mut rec = Recorder::new(ctx).unwrap();
+    let e = format!("{:#}", rec.dispatch(&k, &[], &[0; 8], [1, 1, 1]).unwrap_err());
+    assert!(e.contains("declares 1 buffers, 0 given"), "{e}");
+    // Too many workgroups in one dimension.
+    let b = Buffer::<u32>::new(ctx, "b", 4).unwrap();
+    let e = format!("{:#}", rec.dispatch(&k, &[b.binding()], &[0; 8], [u32::MAX, 1, 1]).unwrap_err());
+    assert!(e.contains("exceed the device limit"), "{e}");
+    // An impossible subgroup size.
+    let e = Kernel::new(ctx, &KernelDesc { name: "x", spirv: shaders::UTIL_IOTA, spec: &[], push_bytes: 8, subgroup_size: Some(1024), full_subgroups: false });
+    assert!(format!("{:#}", e.err().unwrap()).contains("subgroup size 1024"));
+    let _ = Arc::clone(ctx);
+}

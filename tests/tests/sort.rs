@@ -1,0 +1,169 @@
+//! The radix sort against the CPU's stable `sort_by_key`, over sizes and key
+//! distributions; stability is checked through the values (original indices).
+//! CI runs this file twice: default lavapipe (subgroup 8) and with
+//! `LP_NATIVE_VECTOR_WIDTH=128` (subgroup 4).
+
+use tgs_engine::{Buffer, Recorder};
+use tgs_pipelines::{Count, RadixSort, SortConfig};
+use tgs_tests::*;
+
+const SIZES: &[usize] = &[0, 1, 7, 8, 255, 256, 257, 4095, 100_003, (1 << 20) + 3];
+
+#[derive(Clone, Copy, Debug)]
+enum Dist {
+    Uniform,
+    AllEqual,
+    Sorted,
+    Reversed,
+    FewUnique,
+    HighBitsOnly,
+}
+const DISTS: &[Dist] = &[Dist::Uniform, Dist::AllEqual, Dist::Sorted, Dist::Reversed, Dist::FewUnique, Dist::HighBitsOnly];
+
+fn keys(d: Dist, n: usize, rng: &mut Rng) -> Vec<u32> {
+    match d {
+        Dist::Uniform => (0..n).map(|_| rng.next_u32()).collect(),
+        Dist::AllEqual => vec![0xDEAD_BEEF; n],
+        Dist::Sorted => {
+            let mut k: Vec<u32> = (0..n).map(|_| rng.next_u32()).collect();
+            k.sort();
+            k
+        }
+        Dist::Reversed => {
+            let mut k: Vec<u32> = (0..n).map(|_| rng.next_u32()).collect();
+            k.sort_by(|a, b| b.cmp(a));
+            k
+        }
+        Dist::FewUnique => {
+            let pool = [3u32, 0xFFFF_FFFF, 17, 0x8000_0000, 0x10];
+            (0..n).map(|_| pool[rng.below(5) as usize]).collect()
+        }
+        Dist::HighBitsOnly => (0..n).map(|_| rng.next_u32() & 0xF000_0000).collect(),
+    }
+}
+
+/// Sort on the GPU and compare with the CPU's stable sort on the low `bits`.
+fn check(sort: &RadixSort, keys_in: &[u32], bits: u32, what: &str) {
+    let ctx = tgs_tests::ctx_shared();
+    let n = keys_in.len();
+    let vals: Vec<u32> = (0..n as u32).collect();
+    let kb = Buffer::from_slice(ctx, "keys", keys_in).unwrap();
+    let vb = Buffer::from_slice(ctx, "vals", &vals).unwrap();
+    let scratch = sort.scratch(n as u32).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    sort.record(&mut rec, &kb, &vb, &Count::Host(n as u32), bits, &scratch).unwrap();
+    rec.submit_and_wait().unwrap();
+    let gk = kb.download().unwrap();
+    let gv = vb.download().unwrap();
+    let mask = if bits == 32 { u32::MAX } else { (1u32 << bits) - 1 };
+    let mut idx: Vec<u32> = (0..n as u32).collect();
+    idx.sort_by_key(|&i| keys_in[i as usize] & mask);
+    if let Some(i) = (0..n).find(|&i| gv[i] != idx[i]) {
+        panic!("{what}: first mismatch at {i}: value {} (key {:#x}), expected {} (key {:#x})",
+            gv[i], keys_in[gv[i] as usize], idx[i], keys_in[idx[i] as usize]);
+    }
+    let ek: Vec<u32> = idx.iter().map(|&i| keys_in[i as usize]).collect();
+    assert!(gk == ek, "{what}: keys differ although values match");
+}
+
+#[test]
+fn sizes_and_distributions_full_32_bits() {
+    let ctx = ctx_shared();
+    let sort = RadixSort::new(ctx).unwrap();
+    eprintln!("device: {}  config: {:?}", ctx.caps().describe(), sort.config());
+    let mut rng = Rng(seed("sort"));
+    for &n in SIZES {
+        for &d in DISTS {
+            let k = keys(d, n, &mut rng);
+            check(&sort, &k, 32, &format!("n={n} {d:?} bits=32"));
+        }
+    }
+    check_validation(ctx);
+}
+
+#[test]
+fn partial_bit_counts() {
+    // Tile-sort style: only the low bits are ordered, higher bits ride along.
+    let ctx = ctx_shared();
+    let sort = RadixSort::new(ctx).unwrap();
+    let mut rng = Rng(seed("sort-bits"));
+    for bits in [1u32, 3, 4, 5, 13, 16, 31] {
+        for &n in &[257usize, 4095, 100_003] {
+            let k = keys(Dist::Uniform, n, &mut rng);
+            check(&sort, &k, bits, &format!("n={n} bits={bits}"));
+        }
+    }
+    // bits = 0 leaves the input untouched.
+    let k = keys(Dist::Uniform, 1000, &mut rng);
+    check(&sort, &k, 0, "bits=0");
+    check_validation(ctx);
+}
+
+#[test]
+fn other_configurations() {
+    // Every configuration the device accepts must give the same answer.
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("sort-configs"));
+    let k = keys(Dist::Uniform, 70_001, &mut rng);
+    let mut tried = 0;
+    for radix_bits in [4u32, 8] {
+        for wg in [64u32, 128, 256, 512] {
+            for kpt in [1u32, 4, 8, 16] {
+                let cfg = SortConfig { wg, kpt, radix_bits };
+                let Ok(sort) = RadixSort::with_config(ctx, cfg) else { continue };
+                tried += 1;
+                check(&sort, &k, 32, &format!("{cfg:?}"));
+                check(&sort, &k[..777], 32, &format!("{cfg:?} n=777"));
+            }
+        }
+    }
+    eprintln!("{tried} configurations sorted");
+    assert!(tried >= 6, "too few sort configurations valid on this device ({tried})");
+    check_validation(ctx);
+}
+
+#[test]
+fn count_from_gpu_buffer() {
+    // The count is read by the GPU (indirect dispatch): the capacity is larger
+    // than the count, and elements past the count must stay untouched.
+    let ctx = ctx_shared();
+    let sort = RadixSort::new(ctx).unwrap();
+    let mut rng = Rng(seed("sort-gpu-count"));
+    let cap = 50_000usize;
+    for (n, bits) in [(0u32, 32u32), (1, 32), (12_345, 32), (50_000, 32), (12_345, 1), (777, 5)] {
+        let k = keys(Dist::Uniform, cap, &mut rng);
+        let kb = Buffer::from_slice(ctx, "keys", &k).unwrap();
+        let vb = Buffer::from_slice(ctx, "vals", &(0..cap as u32).collect::<Vec<_>>()).unwrap();
+        let count = Buffer::from_slice(ctx, "count", &[7u32, n]).unwrap();
+        let scratch = sort.scratch(cap as u32).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        sort.record(&mut rec, &kb, &vb, &Count::Gpu { buffer: count.binding(), index: 1 }, bits, &scratch).unwrap();
+        rec.submit_and_wait().unwrap();
+        let gv = vb.download().unwrap();
+        let mut idx: Vec<u32> = (0..n).collect();
+        let mask = if bits == 32 { u32::MAX } else { (1 << bits) - 1 };
+        idx.sort_by_key(|&i| k[i as usize] & mask);
+        assert_eq!(&gv[..n as usize], &idx[..], "n={n} bits={bits}");
+        // Odd or even pass counts: the tail is the caller's data, untouched.
+        assert_eq!(&gv[n as usize..], &(n..cap as u32).collect::<Vec<_>>()[..], "tail n={n} bits={bits}");
+    }
+    check_validation(ctx);
+}
+
+#[test]
+fn deterministic() {
+    let ctx = ctx_shared();
+    let sort = RadixSort::new(ctx).unwrap();
+    let mut rng = Rng(seed("sort-det"));
+    let k = keys(Dist::FewUnique, 200_000, &mut rng);
+    let run = || {
+        let kb = Buffer::from_slice(ctx, "keys", &k).unwrap();
+        let vb = Buffer::from_slice(ctx, "vals", &(0..k.len() as u32).collect::<Vec<_>>()).unwrap();
+        let scratch = sort.scratch(k.len() as u32).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        sort.record(&mut rec, &kb, &vb, &Count::Host(k.len() as u32), 32, &scratch).unwrap();
+        rec.submit_and_wait().unwrap();
+        (kb.download().unwrap(), vb.download().unwrap())
+    };
+    assert!(run() == run());
+}
