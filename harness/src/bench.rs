@@ -1,0 +1,203 @@
+//! Benchmarks of the sort and scan kernels, shared by `tgs bench` and
+//! `cargo bench` (perf/). GPU times come from timestamp queries per kernel.
+
+use anyhow::{bail, Result};
+use serde::Serialize;
+use std::sync::Arc;
+use std::time::Instant;
+use tgs_engine::{summarize, Buffer, Context, Recorder};
+use tgs_pipelines::{Count, PrefixSum, RadixSort, ScanScratch, SortConfig};
+
+/// Per-kernel GPU time, averaged over the timed repetitions.
+#[derive(Clone, Debug, Serialize)]
+pub struct KernelTime {
+    pub name: String,
+    /// Milliseconds per run, summed over this kernel's dispatches.
+    pub ms: f64,
+    /// Dispatches (or scopes) per run.
+    pub calls: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SortBench {
+    pub device: String,
+    pub n: u32,
+    pub bits: u32,
+    pub config: String,
+    pub reps: u32,
+    pub kernels: Vec<KernelTime>,
+    /// Sum of the per-kernel GPU times, ms per sort.
+    pub gpu_ms: f64,
+    /// Host-measured submit-to-completion time, ms per sort (best of reps).
+    pub wall_ms: f64,
+    pub gpu_mkeys_per_s: f64,
+    /// Rust `slice::sort_unstable_by_key` on the same (key, value) pairs, ms (best of reps).
+    pub cpu_sort_unstable_ms: f64,
+    pub cpu_mkeys_per_s: f64,
+    /// cpu_sort_unstable_ms / gpu_ms
+    pub speedup_vs_cpu: f64,
+    pub verified: bool,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ScanBench {
+    pub device: String,
+    pub n: u32,
+    pub reps: u32,
+    pub kernels: Vec<KernelTime>,
+    pub gpu_ms: f64,
+    pub gpu_melems_per_s: f64,
+    pub cpu_ms: f64,
+}
+
+fn keys(n: u32, seed: u64) -> Vec<u32> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 32) as u32
+        })
+        .collect()
+}
+
+fn average(all: Vec<Vec<tgs_engine::Timing>>) -> Vec<KernelTime> {
+    let reps = all.len().max(1) as f64;
+    let mut out: Vec<KernelTime> = Vec::new();
+    for t in &all {
+        for s in summarize(t) {
+            match out.iter_mut().find(|k| k.name == s.name) {
+                Some(k) => k.ms += s.total_ms / reps,
+                None => out.push(KernelTime { name: s.name, ms: s.total_ms / reps, calls: s.count }),
+            }
+        }
+    }
+    out
+}
+
+/// Time the radix sort of `n` random keys (low `bits` bits), `reps` timed runs after one warm-up.
+pub fn sort(ctx: &Arc<Context>, n: u32, bits: u32, reps: u32, cfg: Option<SortConfig>) -> Result<SortBench> {
+    if bits == 0 || bits > 32 {
+        bail!("--bits must be 1..=32, not {bits}");
+    }
+    let sorter = match cfg {
+        Some(c) => RadixSort::with_config(ctx, c)?,
+        None => RadixSort::new(ctx)?,
+    };
+    let mask = if bits == 32 { u32::MAX } else { (1u32 << bits) - 1 };
+    let k: Vec<u32> = keys(n, 0x5eed ^ n as u64).into_iter().map(|x| x & mask).collect();
+    let v: Vec<u32> = (0..n).collect();
+    let kb = Buffer::new(ctx, "bench.keys", n as usize)?;
+    let vb = Buffer::new(ctx, "bench.vals", n as usize)?;
+    let scratch = sorter.scratch(n)?;
+    let mut timings = Vec::new();
+    let mut wall = f64::INFINITY;
+    let mut verified = true;
+    for rep in 0..=reps {
+        kb.upload(&k)?;
+        vb.upload(&v)?;
+        let mut rec = Recorder::with_profiling(ctx, 512)?;
+        sorter.record(&mut rec, &kb, &vb, &Count::Host(n), bits, &scratch)?;
+        let t0 = Instant::now();
+        let t = rec.submit_and_wait()?;
+        let w = t0.elapsed().as_secs_f64() * 1e3;
+        if rep > 0 {
+            timings.push(t);
+            wall = wall.min(w);
+        } else {
+            let out = kb.download()?;
+            verified = out.windows(2).all(|w| w[0] <= w[1]) && out.len() == k.len();
+        }
+    }
+    let kernels = average(timings);
+    let gpu_ms: f64 = kernels.iter().map(|k| k.ms).sum();
+
+    let mut cpu = f64::INFINITY;
+    for _ in 0..reps.max(1) {
+        let mut pairs: Vec<(u32, u32)> = k.iter().copied().zip(v.iter().copied()).collect();
+        let t0 = Instant::now();
+        pairs.sort_unstable_by_key(|p| p.0);
+        cpu = cpu.min(t0.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box(&pairs);
+    }
+    let cfg = sorter.config();
+    Ok(SortBench {
+        device: ctx.caps().describe(),
+        n,
+        bits,
+        config: format!("wg {} kpt {} radix_bits {}", cfg.wg, cfg.kpt, cfg.radix_bits),
+        reps,
+        kernels,
+        gpu_ms,
+        wall_ms: wall,
+        gpu_mkeys_per_s: n as f64 / (gpu_ms * 1e3),
+        cpu_sort_unstable_ms: cpu,
+        cpu_mkeys_per_s: n as f64 / (cpu * 1e3),
+        speedup_vs_cpu: cpu / gpu_ms,
+        verified,
+    })
+}
+
+/// Time the exclusive prefix sum of `n` u32.
+pub fn scan(ctx: &Arc<Context>, n: u32, reps: u32) -> Result<ScanBench> {
+    let scan = PrefixSum::new(ctx)?;
+    let x: Vec<u32> = keys(n, 7).into_iter().map(|v| v & 0xff).collect();
+    let src = Buffer::from_slice(ctx, "bench.src", &x)?;
+    let dst = Buffer::<u32>::new(ctx, "bench.dst", n as usize)?;
+    let scratch = ScanScratch::new(ctx, n)?;
+    let mut timings = Vec::new();
+    for rep in 0..=reps {
+        let mut rec = Recorder::with_profiling(ctx, 64)?;
+        scan.record(&mut rec, &src, &dst, &Count::Host(n), &scratch)?;
+        let t = rec.submit_and_wait()?;
+        if rep > 0 {
+            timings.push(t);
+        }
+    }
+    let kernels = average(timings);
+    let gpu_ms: f64 = kernels.iter().map(|k| k.ms).sum();
+    let mut cpu = f64::INFINITY;
+    for _ in 0..reps.max(1) {
+        let t0 = Instant::now();
+        let mut acc = 0u32;
+        let out: Vec<u32> = x
+            .iter()
+            .map(|&v| {
+                let r = acc;
+                acc = acc.wrapping_add(v);
+                r
+            })
+            .collect();
+        std::hint::black_box(&out);
+        cpu = cpu.min(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(ScanBench {
+        device: ctx.caps().describe(),
+        n,
+        reps,
+        kernels,
+        gpu_ms,
+        gpu_melems_per_s: n as f64 / (gpu_ms * 1e3),
+        cpu_ms: cpu,
+    })
+}
+
+pub fn print_sort(b: &SortBench) {
+    println!(
+        "sort n={} bits={} [{}]: GPU {:.3} ms ({:.1} Mkeys/s), wall {:.3} ms; CPU sort_unstable_by_key {:.3} ms ({:.1} Mkeys/s); GPU/CPU speed-up {:.2}x{}",
+        b.n, b.bits, b.config, b.gpu_ms, b.gpu_mkeys_per_s, b.wall_ms, b.cpu_sort_unstable_ms, b.cpu_mkeys_per_s, b.speedup_vs_cpu,
+        if b.verified { "" } else { "  ** OUTPUT NOT SORTED **" }
+    );
+    for k in &b.kernels {
+        println!("    {:<16} {:>10.3} ms  ({} calls)", k.name, k.ms, k.calls);
+    }
+}
+
+pub fn print_scan(b: &ScanBench) {
+    println!(
+        "scan n={}: GPU {:.3} ms ({:.1} Melems/s); CPU {:.3} ms",
+        b.n, b.gpu_ms, b.gpu_melems_per_s, b.cpu_ms
+    );
+    for k in &b.kernels {
+        println!("    {:<16} {:>10.3} ms  ({} calls)", k.name, k.ms, k.calls);
+    }
+}

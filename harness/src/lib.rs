@@ -1,0 +1,4 @@
+//! The `tgs` command line and the benchmark code shared with `cargo bench`.
+
+pub mod bench;
+pub mod devices;
