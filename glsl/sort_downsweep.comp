@@ -5,15 +5,18 @@
 // Subgroup s owns the contiguous keys [s*SG*KPT, (s+1)*SG*KPT) of the
 // partition and walks them in order (k, lane), so ranks follow input order:
 //  1. per key, lanes holding the same digit are found with RADIX_BITS ballots;
-//     the rank is the running count of that digit in the subgroup
-//     (sub[s][d], private to the subgroup: no workgroup barrier in the loop)
-//     plus the number of matching lower lanes;
+//     the highest such lane adds their number to the subgroup's running count
+//     of that digit (a shared integer atomic, so the two digits sharing a
+//     packed word never race; counts are exact, hence deterministic) and
+//     shuffles the old count to the others; rank = old count + lower lanes;
 //  2. per digit, the subgroup counts are scanned across subgroups, and the
 //     digit totals across digits (local offsets);
 //  3. keys, then values, are reordered through shared memory so the global
 //     writes are contiguous runs per digit.
-// Works for any subgroup size from MIN_SG to 128; shared arrays are sized
-// by specialization constants.
+// Subgroup counts are u16 pairs (a partition holds < 65,536 keys), which
+// halves shared memory: 8-bit digits fit lavapipe's 32 KiB. Works for any
+// subgroup size from MIN_SG to 128; arrays are sized by specialization
+// constants.
 #include "sort_common.glsl"
 #include "wg_scan.glsl"
 
@@ -24,10 +27,17 @@ layout(std430, binding = 3) readonly buffer Hist { uint hist[]; };
 layout(std430, binding = 4) writeonly buffer KeysOut { uint keys_out[]; };
 layout(std430, binding = 5) writeonly buffer ValsOut { uint vals_out[]; };
 
-shared uint sub[MAX_SG * RADIX];
+#extension GL_KHR_shader_subgroup_shuffle : require
+
+#define RADIX2 (RADIX / 2u)
+shared uint sub[MAX_SG * RADIX2];   // [subgroup][digit pair]: two u16 counts
 shared uint local_off[RADIX];
 shared uint global_off[RADIX];
 shared uint sbuf[gl_WorkGroupSize.x * KPT];
+
+uint sub_count(uint s, uint d) {
+    return (sub[s * RADIX2 + (d >> 1)] >> ((d & 1u) * 16u)) & 0xffffu;
+}
 
 void main() {
     uint n = params[0];
@@ -41,7 +51,7 @@ void main() {
     uint part_base = p * P;
     uint part_n = min(P, n - part_base);
 
-    for (uint i = t; i < gl_NumSubgroups * RADIX; i += WG) {
+    for (uint i = t; i < gl_NumSubgroups * RADIX2; i += WG) {
         sub[i] = 0u;
     }
     barrier();
@@ -66,39 +76,44 @@ void main() {
         }
         uint below = subgroupBallotExclusiveBitCount(match);
         uint same = subgroupBallotBitCount(match);
-        uint prior = valid ? sub[s * RADIX + d] : 0u;
-        subgroupBarrier();
-        if (valid && below == same - 1u) {
-            sub[s * RADIX + d] = prior + same;
+        uint leader = valid ? subgroupBallotFindMSB(match) : lane;
+        uint sh = (d & 1u) * 16u;
+        uint old = 0u;
+        if (valid && lane == leader) {
+            old = atomicAdd(sub[s * RADIX2 + (d >> 1)], same << sh);
         }
-        subgroupMemoryBarrierShared();
-        subgroupBarrier();
+        uint prior = (subgroupShuffle(old, leader) >> sh) & 0xffffu;
         key[k] = kv;
         pos[k] = valid ? prior + below : 0xffffffffu;
     }
     barrier();
 
-    // Per digit: exclusive scan of the subgroup counts across subgroups.
-    uint total = 0u;
-    if (t < RADIX) {
+    // Per digit pair: exclusive scan of the subgroup counts across subgroups.
+    uint tot_lo = 0u, tot_hi = 0u;
+    if (t < RADIX2) {
         for (uint j = 0; j < gl_NumSubgroups; j++) {
-            uint c = sub[j * RADIX + t];
-            sub[j * RADIX + t] = total;
-            total += c;
+            uint w = sub[j * RADIX2 + t];
+            sub[j * RADIX2 + t] = tot_lo | (tot_hi << 16);
+            tot_lo += w & 0xffffu;
+            tot_hi += w >> 16;
         }
     }
     uint all;
-    uint excl = wg_exclusive_scan(t < RADIX ? total : 0u, all);
-    if (t < RADIX) {
-        local_off[t] = excl;
-        global_off[t] = hist[t * parts + p] - excl;
+    uint excl = wg_exclusive_scan(t < RADIX2 ? tot_lo + tot_hi : 0u, all);
+    if (t < RADIX2) {
+        local_off[2u * t] = excl;
+        local_off[2u * t + 1u] = excl + tot_lo;
+    }
+    barrier();
+    for (uint d = t; d < RADIX; d += WG) {
+        global_off[d] = hist[d * parts + p] - local_off[d];
     }
     barrier();
 
     for (uint k = 0; k < KPT; k++) {
         if (pos[k] != 0xffffffffu) {
             uint d = digit_of(key[k]);
-            pos[k] += local_off[d] + sub[s * RADIX + d];
+            pos[k] += local_off[d] + sub_count(s, d);
             sbuf[pos[k]] = key[k];
         }
     }

@@ -22,7 +22,7 @@ use tgs_engine::{Buffer, Capabilities, Context, Kernel, KernelDesc, Recorder};
 /// Shape of the sort kernels (specialization constants).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SortConfig {
-    /// Workgroup size (multiple of the largest subgroup size, >= 2^radix_bits).
+    /// Workgroup size (multiple of the largest subgroup size, >= 2^radix_bits / 2).
     pub wg: u32,
     /// Keys per invocation; a partition is `wg * kpt` keys.
     pub kpt: u32,
@@ -35,16 +35,22 @@ impl SortConfig {
     pub fn shared_bytes(&self, min_sg: u32) -> u32 {
         let radix = 1u32 << self.radix_bits;
         let max_sg = self.wg / min_sg.max(1);
-        4 * (max_sg * radix + 2 * radix + self.wg * self.kpt + max_sg + 1)
+        4 * (max_sg * radix / 2 + 2 * radix + self.wg * self.kpt + max_sg + 1)
     }
 
     /// The widest digit whose shared memory fits (at most 24 KiB used), for this device.
     pub fn for_device(caps: &Capabilities) -> SortConfig {
-        let budget = caps.max_shared_memory.min(24 * 1024);
+        let budget = caps.max_shared_memory.min(28 * 1024);
         let min_sg = caps.min_subgroup_size.max(1);
-        let wide = SortConfig { wg: 256, kpt: 8, radix_bits: 8 };
-        if wide.shared_bytes(min_sg) <= budget {
-            return wide;
+        let candidates = [
+            SortConfig { wg: 256, kpt: 8, radix_bits: 8 },
+            SortConfig { wg: 128, kpt: 16, radix_bits: 8 },
+            SortConfig { wg: 256, kpt: 8, radix_bits: 4 },
+        ];
+        for c in candidates {
+            if c.shared_bytes(min_sg) <= budget && c.wg % caps.max_subgroup_size.max(1) == 0 {
+                return c;
+            }
         }
         SortConfig { wg: 256, kpt: 8, radix_bits: 4 }
     }
@@ -58,8 +64,11 @@ impl SortConfig {
         if !(self.radix_bits == 4 || self.radix_bits == 8) {
             bail!("radix_bits must be 4 or 8, not {}", self.radix_bits);
         }
-        if self.wg < (1 << self.radix_bits) || !self.wg.is_power_of_two() || self.wg > caps.max_workgroup_invocations {
-            bail!("sort workgroup {} must be a power of two >= {} and <= {}", self.wg, 1 << self.radix_bits, caps.max_workgroup_invocations);
+        if self.wg < (1 << (self.radix_bits - 1)) || !self.wg.is_power_of_two() || self.wg > caps.max_workgroup_invocations {
+            bail!("sort workgroup {} must be a power of two >= {} and <= {}", self.wg, 1 << (self.radix_bits - 1), caps.max_workgroup_invocations);
+        }
+        if self.wg * self.kpt > 65535 {
+            bail!("sort partition wg*kpt = {} must be below 65,536 (16-bit counters)", self.wg * self.kpt);
         }
         if self.wg % caps.max_subgroup_size.max(1) != 0 {
             bail!("sort workgroup {} is not a multiple of the subgroup size {}", self.wg, caps.max_subgroup_size);
