@@ -67,8 +67,11 @@ fn main() {
                 if l.is_empty() {
                     continue;
                 }
-                eprintln!("glsl/{l}");
-                println!("cargo:warning=glsl/{l}");
+                // Lines naming a location get the repository path; summaries stay as they are.
+                let located = l.split(':').nth(1).is_some_and(|n| n.trim().parse::<u32>().is_ok());
+                let l = if located { format!("glsl/{l}") } else { l.to_string() };
+                eprintln!("{l}");
+                println!("cargo:warning={l}");
             }
         }
         std::process::exit(1);

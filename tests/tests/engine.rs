@@ -237,4 +237,26 @@ fn clear_errors() {
     let e = Kernel::new(ctx, &KernelDesc { name: "x", spirv: shaders::UTIL_IOTA, spec: &[], push_bytes: 8, subgroup_size: Some(1024), full_subgroups: false });
     assert!(format!("{:#}", e.err().unwrap()).contains("subgroup size 1024"));
     let _ = Arc::clone(ctx);
+    check_validation(ctx);
+}
+
+#[test]
+fn no_driver_error_says_what_to_do() {
+    // Point the loader at no driver, in a child process (the environment is process-wide).
+    if std::env::var("TGS_TEST_CHILD").as_deref() == Ok("no-driver") {
+        let e = Context::new(&ContextOptions { device: DeviceSelector::Best, validation: Some(false) }).err().expect("no driver, no context");
+        let msg = format!("{e:#}");
+        assert!(msg.contains("mesa-vulkan-drivers"), "{msg}");
+        eprintln!("child saw: {msg}");
+        return;
+    }
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "no_driver_error_says_what_to_do", "--nocapture"])
+        .env("TGS_TEST_CHILD", "no-driver")
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("child saw"), "child failed:\n{text}");
 }
