@@ -79,13 +79,18 @@ impl Recorder {
             }
         };
         unsafe { d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT)) }?;
+        Self::assemble(ctx, pool, cmd, true, max_scopes)
+    }
+
+    fn assemble(ctx: &Arc<Context>, pool: vk::CommandPool, cmd: vk::CommandBuffer, owned: bool, max_scopes: u32) -> Result<Recorder> {
         let mut r = Recorder {
             ctx: ctx.clone(),
             pool,
             cmd,
-            owned: true,
+            owned,
             arena: DescriptorArena::new(ctx),
-            dirty: false,
+            // A host command buffer may hold earlier writes: start with a barrier.
+            dirty: !owned,
             ended: false,
             submitted: false,
             profiler: None,
@@ -110,26 +115,7 @@ impl Recorder {
     /// `cmd` must be a primary command buffer in the recording state, from a
     /// pool of this context's queue family.
     pub unsafe fn record_into(ctx: &Arc<Context>, cmd: vk::CommandBuffer, max_scopes: u32) -> Result<Recorder> {
-        let mut r = Recorder {
-            ctx: ctx.clone(),
-            pool: vk::CommandPool::null(),
-            cmd,
-            owned: false,
-            arena: DescriptorArena::new(ctx),
-            dirty: true,
-            ended: false,
-            submitted: false,
-            profiler: None,
-            keep: Vec::new(),
-            kernels: Vec::new(),
-        };
-        if max_scopes > 0 {
-            r.profiler = Profiler::new(ctx, max_scopes)?;
-            if let Some(p) = r.profiler.as_mut() {
-                p.reset(cmd);
-            }
-        }
-        Ok(r)
+        Self::assemble(ctx, vk::CommandPool::null(), cmd, false, max_scopes)
     }
 
     pub fn context(&self) -> &Arc<Context> {
