@@ -56,8 +56,10 @@ fn check(sort: &RadixSort, keys_in: &[u32], bits: u32, what: &str) {
     let gk = kb.download().unwrap();
     let gv = vb.download().unwrap();
     let mask = if bits == 32 { u32::MAX } else { (1u32 << bits) - 1 };
-    let mut idx: Vec<u32> = (0..n as u32).collect();
-    idx.sort_by_key(|&i| keys_in[i as usize] & mask);
+    // Stable order by masked key == unstable order by (masked key, index).
+    let mut pairs: Vec<(u32, u32)> = keys_in.iter().enumerate().map(|(i, &k)| (k & mask, i as u32)).collect();
+    pairs.sort_unstable();
+    let idx: Vec<u32> = pairs.into_iter().map(|p| p.1).collect();
     if let Some(i) = (0..n).find(|&i| gv[i] != idx[i]) {
         panic!("{what}: first mismatch at {i}: value {} (key {:#x}), expected {} (key {:#x})",
             gv[i], keys_in[gv[i] as usize], idx[i], keys_in[idx[i] as usize]);
@@ -166,4 +168,26 @@ fn deterministic() {
         (kb.download().unwrap(), vb.download().unwrap())
     };
     assert!(run() == run());
+}
+
+#[test]
+fn two_d_grids_and_the_largest_size() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("sort-large"));
+    // Small partitions (128 keys) so that there are more than 65,535 of them:
+    // the up-sweep, down-sweep and spine run on 2-D grids.
+    let cfg = SortConfig { wg: 128, kpt: 1, radix_bits: 8 };
+    let small = RadixSort::with_config(ctx, cfg).unwrap();
+    let n = 65_535 * 128 + 1001;
+    let k = keys(Dist::Uniform, n, &mut rng);
+    check(&small, &k, 32, &format!("{cfg:?} n={n} (2-D grid)"));
+
+    // The largest n this device takes: maxStorageBufferRange / 4 keys
+    // (2^25 on lavapipe), capped at 2^25 to bound test time elsewhere.
+    let sort = RadixSort::new(ctx).unwrap();
+    let n = sort.max_keys().min(1 << 25) as usize;
+    let k = keys(Dist::Uniform, n, &mut rng);
+    check(&sort, &k, 32, &format!("largest n={n}"));
+    assert!(sort.scratch(sort.max_keys() as u32 + 1).is_err() || sort.max_keys() >= u32::MAX as u64);
+    check_validation(ctx);
 }
