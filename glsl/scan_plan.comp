@@ -4,7 +4,8 @@
 // sort, so callers never read counts back to the host.
 //
 // params[0] = n (clamped to capacity), params[1] = partitions (sort),
-// params[2 + l] = length of scan level l.
+// params[2 + l] = length of scan level l; params[2 + levels] = the count as
+// read, before clamping (so callers can detect a count over capacity).
 // args[4*0 ..] = partition grid (sort); args[4*(1+l) ..] = grid of scan level l.
 layout(local_size_x = 1) in;
 
@@ -33,7 +34,9 @@ void grid(uint slot, uint groups) {
 }
 
 void main() {
-    uint n = min(count[pc.count_index], pc.capacity);
+    uint requested = count[pc.count_index];
+    uint n = min(requested, pc.capacity);
+    params[2u + pc.levels] = requested;
     uint parts = pc.mode == 1u ? (n + pc.part_size - 1u) / pc.part_size : 0u;
     params[0] = n;
     params[1] = parts;

@@ -73,7 +73,7 @@ impl ScanScratch {
         Ok(ScanScratch {
             capacity,
             levels,
-            params: Buffer::new(ctx, "scan.params", 2 + levels as usize)?,
+            params: Buffer::new(ctx, "scan.params", 3 + levels as usize)?,
             args: Buffer::new(ctx, "scan.args", 4 * (1 + levels as usize))?,
             count: Buffer::new(ctx, "scan.count", 4)?,
             sums,
@@ -82,6 +82,19 @@ impl ScanScratch {
 
     pub fn capacity(&self) -> u32 {
         self.capacity
+    }
+
+    /// After the work ran: the count the GPU read, if it exceeded the
+    /// capacity (the scan or sort then processed only `capacity` elements).
+    /// Reads back one u32; call it when checking, not inside an iteration.
+    pub fn overflow(&self) -> anyhow::Result<Option<u32>> {
+        let requested = self.requested_count()?;
+        Ok((requested > self.capacity).then_some(requested))
+    }
+
+    /// The count the plan kernel last read, before clamping.
+    pub(crate) fn requested_count(&self) -> anyhow::Result<u32> {
+        Ok(self.params.download_range(2 + self.levels as usize, 1)?[0])
     }
 }
 

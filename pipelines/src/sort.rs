@@ -108,6 +108,13 @@ impl SortScratch {
     pub fn capacity(&self) -> u32 {
         self.capacity
     }
+
+    /// After the sort ran: the count the GPU read, if it exceeded the
+    /// capacity (only the first `capacity` pairs were sorted). One read-back.
+    pub fn overflow(&self) -> Result<Option<u32>> {
+        let requested = self.spine.requested_count()?;
+        Ok((requested > self.capacity).then_some(requested))
+    }
 }
 
 impl RadixSort {
@@ -174,6 +181,7 @@ impl RadixSort {
         let radix = 1u32 << self.cfg.radix_bits;
         let sc = rec.begin_scope("sort.plan");
         self.scan.record_plan(rec, &scratch.spine, count, 1, self.cfg.partition(), radix, cap)?;
+        // (A GPU count over `cap` is clamped; `SortScratch::overflow` reports it.)
         rec.end_scope(sc);
         let params = scratch.spine.params.binding();
         let mut parts_args = scratch.spine.args.binding();

@@ -59,7 +59,17 @@ fn wrapping_sums_and_gpu_count() {
         let got = dst.download().unwrap();
         assert_eq!(&got[..n as usize], &cpu_scan(&x[..n as usize])[..], "n={n}");
         assert!(got[n as usize..].iter().all(|&v| v == 0xAAAA_AAAA), "n={n}: wrote past the count");
+        assert_eq!(scratch.overflow().unwrap(), None);
     }
+    // Over capacity: clamped, and reported.
+    let src = Buffer::from_slice(ctx, "src", &x).unwrap();
+    let dst = Buffer::<u32>::new(ctx, "dst", cap).unwrap();
+    let count = Buffer::from_slice(ctx, "count", &[cap as u32 * 2]).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    scan.record(&mut rec, &src, &dst, &Count::Gpu { buffer: count.binding(), index: 0 }, &scratch).unwrap();
+    rec.submit_and_wait().unwrap();
+    assert_eq!(dst.download().unwrap(), cpu_scan(&x), "clamped to capacity");
+    assert_eq!(scratch.overflow().unwrap(), Some(cap as u32 * 2));
     check_validation(ctx);
 }
 

@@ -148,7 +148,21 @@ fn count_from_gpu_buffer() {
         assert_eq!(&gv[..n as usize], &idx[..], "n={n} bits={bits}");
         // Odd or even pass counts: the tail is the caller's data, untouched.
         assert_eq!(&gv[n as usize..], &(n..cap as u32).collect::<Vec<_>>()[..], "tail n={n} bits={bits}");
+        assert_eq!(scratch.overflow().unwrap(), None);
     }
+    // A GPU count over the capacity: the first `cap` pairs are sorted, and the overflow is reported.
+    let k = keys(Dist::Uniform, cap, &mut rng);
+    let kb = Buffer::from_slice(ctx, "keys", &k).unwrap();
+    let vb = Buffer::from_slice(ctx, "vals", &(0..cap as u32).collect::<Vec<_>>()).unwrap();
+    let count = Buffer::from_slice(ctx, "count", &[cap as u32 + 5]).unwrap();
+    let scratch = sort.scratch(cap as u32).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    sort.record(&mut rec, &kb, &vb, &Count::Gpu { buffer: count.binding(), index: 0 }, 32, &scratch).unwrap();
+    rec.submit_and_wait().unwrap();
+    assert_eq!(scratch.overflow().unwrap(), Some(cap as u32 + 5));
+    let mut expect = k.clone();
+    expect.sort();
+    assert_eq!(kb.download().unwrap(), expect);
     check_validation(ctx);
 }
 
