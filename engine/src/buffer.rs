@@ -199,7 +199,7 @@ impl<T: Pod> Buffer<T> {
         let staging = RawBuffer::new(ctx, "staging-upload", bytes.len() as u64, MemoryLocation::CpuToGpu)?;
         staging.with_mapped(|m| m.copy_from_slice(bytes))?;
         let mut rec = Recorder::new(ctx)?;
-        rec.copy_raw(&staging, &self.inner, 0, bytes.len() as u64)?;
+        rec.copy_raw_at(&staging, 0, &self.inner, 0, bytes.len() as u64)?;
         rec.submit_and_wait().with_context(|| format!("uploading buffer '{}'", self.name()))?;
         Ok(())
     }

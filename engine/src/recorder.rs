@@ -269,10 +269,6 @@ impl Recorder {
         Ok(())
     }
 
-    pub(crate) fn copy_raw(&mut self, src: &Arc<RawBuffer>, dst: &Arc<RawBuffer>, dst_off: u64, bytes: u64) -> Result<()> {
-        self.copy_raw_at(src, 0, dst, dst_off, bytes)
-    }
-
     pub(crate) fn copy_raw_at(&mut self, src: &Arc<RawBuffer>, src_off: u64, dst: &Arc<RawBuffer>, dst_off: u64, bytes: u64) -> Result<()> {
         self.check_open()?;
         self.before();

@@ -4,7 +4,7 @@
 //! `LP_NATIVE_VECTOR_WIDTH=128` (subgroup 4).
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Count, RadixSort, SortConfig};
+use tgs_pipelines::{Count, RadixSort, SortConfig, SortScratch};
 use tgs_tests::*;
 
 const SIZES: &[usize] = &[0, 1, 7, 8, 255, 256, 257, 4095, 100_003, (1 << 20) + 3];
@@ -42,19 +42,24 @@ fn keys(d: Dist, n: usize, rng: &mut Rng) -> Vec<u32> {
     }
 }
 
-/// Sort on the GPU and compare with the CPU's stable sort on the low `bits`.
-fn check(sort: &RadixSort, keys_in: &[u32], bits: u32, what: &str) {
-    let ctx = tgs_tests::ctx_shared();
+/// Sort `keys_in` (capacity = its length) with values 0..len on the GPU;
+/// returns the keys, the values and the scratch (for `overflow`).
+fn run_sort(sort: &RadixSort, keys_in: &[u32], count: &Count, bits: u32) -> (Vec<u32>, Vec<u32>, SortScratch) {
+    let ctx = ctx_shared();
     let n = keys_in.len();
-    let vals: Vec<u32> = (0..n as u32).collect();
     let kb = Buffer::from_slice(ctx, "keys", keys_in).unwrap();
-    let vb = Buffer::from_slice(ctx, "vals", &vals).unwrap();
+    let vb = Buffer::from_slice(ctx, "vals", &(0..n as u32).collect::<Vec<_>>()).unwrap();
     let scratch = sort.scratch(n as u32).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    sort.record(&mut rec, &kb, &vb, &Count::Host(n as u32), bits, &scratch).unwrap();
+    sort.record(&mut rec, &kb, &vb, count, bits, &scratch).unwrap();
     rec.submit_and_wait().unwrap();
-    let gk = kb.download().unwrap();
-    let gv = vb.download().unwrap();
+    (kb.download().unwrap(), vb.download().unwrap(), scratch)
+}
+
+/// Sort on the GPU and compare with the CPU's stable sort on the low `bits`.
+fn check(sort: &RadixSort, keys_in: &[u32], bits: u32, what: &str) {
+    let n = keys_in.len();
+    let (gk, gv, _) = run_sort(sort, keys_in, &Count::Host(n as u32), bits);
     let mask = if bits == 32 { u32::MAX } else { (1u32 << bits) - 1 };
     // Stable order by masked key == unstable order by (masked key, index).
     let mut pairs: Vec<(u32, u32)> = keys_in.iter().enumerate().map(|(i, &k)| (k & mask, i as u32)).collect();
@@ -134,14 +139,8 @@ fn count_from_gpu_buffer() {
     let cap = 50_000usize;
     for (n, bits) in [(0u32, 32u32), (1, 32), (12_345, 32), (50_000, 32), (12_345, 1), (777, 5)] {
         let k = keys(Dist::Uniform, cap, &mut rng);
-        let kb = Buffer::from_slice(ctx, "keys", &k).unwrap();
-        let vb = Buffer::from_slice(ctx, "vals", &(0..cap as u32).collect::<Vec<_>>()).unwrap();
         let count = Buffer::from_slice(ctx, "count", &[7u32, n]).unwrap();
-        let scratch = sort.scratch(cap as u32).unwrap();
-        let mut rec = Recorder::new(ctx).unwrap();
-        sort.record(&mut rec, &kb, &vb, &Count::Gpu { buffer: count.binding(), index: 1 }, bits, &scratch).unwrap();
-        rec.submit_and_wait().unwrap();
-        let gv = vb.download().unwrap();
+        let (_, gv, scratch) = run_sort(&sort, &k, &Count::Gpu { buffer: count.binding(), index: 1 }, bits);
         let mut idx: Vec<u32> = (0..n).collect();
         let mask = if bits == 32 { u32::MAX } else { (1 << bits) - 1 };
         idx.sort_by_key(|&i| k[i as usize] & mask);
@@ -152,17 +151,12 @@ fn count_from_gpu_buffer() {
     }
     // A GPU count over the capacity: the first `cap` pairs are sorted, and the overflow is reported.
     let k = keys(Dist::Uniform, cap, &mut rng);
-    let kb = Buffer::from_slice(ctx, "keys", &k).unwrap();
-    let vb = Buffer::from_slice(ctx, "vals", &(0..cap as u32).collect::<Vec<_>>()).unwrap();
     let count = Buffer::from_slice(ctx, "count", &[cap as u32 + 5]).unwrap();
-    let scratch = sort.scratch(cap as u32).unwrap();
-    let mut rec = Recorder::new(ctx).unwrap();
-    sort.record(&mut rec, &kb, &vb, &Count::Gpu { buffer: count.binding(), index: 0 }, 32, &scratch).unwrap();
-    rec.submit_and_wait().unwrap();
+    let (gk, _, scratch) = run_sort(&sort, &k, &Count::Gpu { buffer: count.binding(), index: 0 }, 32);
     assert_eq!(scratch.overflow().unwrap(), Some(cap as u32 + 5));
     let mut expect = k.clone();
     expect.sort();
-    assert_eq!(kb.download().unwrap(), expect);
+    assert_eq!(gk, expect);
     check_validation(ctx);
 }
 
@@ -173,13 +167,8 @@ fn deterministic() {
     let mut rng = Rng(seed("sort-det"));
     let k = keys(Dist::FewUnique, 200_000, &mut rng);
     let run = || {
-        let kb = Buffer::from_slice(ctx, "keys", &k).unwrap();
-        let vb = Buffer::from_slice(ctx, "vals", &(0..k.len() as u32).collect::<Vec<_>>()).unwrap();
-        let scratch = sort.scratch(k.len() as u32).unwrap();
-        let mut rec = Recorder::new(ctx).unwrap();
-        sort.record(&mut rec, &kb, &vb, &Count::Host(k.len() as u32), 32, &scratch).unwrap();
-        rec.submit_and_wait().unwrap();
-        (kb.download().unwrap(), vb.download().unwrap())
+        let (gk, gv, _) = run_sort(&sort, &k, &Count::Host(k.len() as u32), 32);
+        (gk, gv)
     };
     assert!(run() == run());
 }
