@@ -13,3 +13,5 @@ pub mod util;
 pub use scan::{Count, PrefixSum, ScanScratch};
 pub use sort::{RadixSort, SortConfig, SortScratch};
 pub use util::Iota;
+pub mod raster;
+pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, Rasterizer};

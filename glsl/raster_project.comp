@@ -1,0 +1,71 @@
+#version 460
+// One invocation per Gaussian: the 2DGS splat-to-pixel transform, bounding
+// box and tile rectangle, view-dependent features, and the depth sort key.
+// Culled Gaussians get zero tiles and the largest key.
+#include "common.glsl"
+
+layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
+layout(std430, binding = 1) readonly buffer Means { float means[]; };
+layout(std430, binding = 2) readonly buffer Scales { float log_scales[]; };
+layout(std430, binding = 3) readonly buffer Quats { vec4 quats[]; };
+layout(std430, binding = 4) readonly buffer Opac { float opacity[]; };
+layout(std430, binding = 5) readonly buffer Feats { float feats[]; };
+layout(std430, binding = 6) writeonly buffer ProjOut { float proj[]; };
+layout(std430, binding = 7) writeonly buffer FeatOut { float pfeat[]; };
+layout(std430, binding = 8) writeonly buffer Rects { uvec4 rects[]; };
+layout(std430, binding = 9) writeonly buffer Tiles { uint tiles[]; };
+layout(std430, binding = 10) writeonly buffer Keys { uint depth_keys[]; };
+layout(std430, binding = 11) writeonly buffer Ids { uint depth_ids[]; };
+
+#include "raster_project.glsl"
+
+void main() {
+    uint g = wg_linear() * WG + gl_LocalInvocationID.x;
+    if (g >= pc.n) {
+        return;
+    }
+    depth_ids[g] = g;
+    vec3 p = vec3(means[3u * g], means[3u * g + 1u], means[3u * g + 2u]);
+    vec2 ls = vec2(log_scales[2u * g], log_scales[2u * g + 1u]);
+    Proj pr;
+    bool ok = project(p, ls, quats[g], opacity[g], pr);
+    uvec4 rect = uvec4(0u);
+    if (ok) {
+        rect = tile_rect(pr.s.mu, pr.radius);
+    }
+    uint count = (rect.z - rect.x) * (rect.w - rect.y);
+    rects[g] = rect;
+    tiles[g] = count;
+    depth_keys[g] = count > 0u ? floatBitsToUint(pr.pv.z) : 0xFFFFFFFFu;
+    if (count == 0u) {
+        return;
+    }
+    uint b = 16u * g;
+    proj[b + 0u] = pr.s.tu.x; proj[b + 1u] = pr.s.tu.y; proj[b + 2u] = pr.s.tu.z;
+    proj[b + 3u] = pr.s.tv.x; proj[b + 4u] = pr.s.tv.y; proj[b + 5u] = pr.s.tv.z;
+    proj[b + 6u] = pr.s.tw.x; proj[b + 7u] = pr.s.tw.y; proj[b + 8u] = pr.s.tw.z;
+    proj[b + 9u] = pr.s.mu.x; proj[b + 10u] = pr.s.mu.y;
+    proj[b + 11u] = pr.s.n.x; proj[b + 12u] = pr.s.n.y; proj[b + 13u] = pr.s.n.z;
+    proj[b + 14u] = pr.s.o; proj[b + 15u] = pr.pv.z;
+
+    // Features: SH evaluated for the view direction (+0.5, clamped at 0), or plain.
+    uint fb = g * pc.coeffs * CH;
+    if (pc.mode == 1u) {
+        for (uint c = 0u; c < CH; c++) {
+            pfeat[g * CH + c] = feats[fb + c];
+        }
+        return;
+    }
+    float Y[16];
+    vec3 dir = p - cam_centre();
+    float len = length(dir);
+    sh_basis(len > 0.0 ? dir / len : vec3(0.0, 0.0, 1.0), Y);
+    uint nk = active_coeffs();
+    for (uint c = 0u; c < CH; c++) {
+        float v = 0.5;
+        for (uint k = 0u; k < nk; k++) {
+            v += Y[k] * feats[fb + k * CH + c];
+        }
+        pfeat[g * CH + c] = max(v, 0.0);
+    }
+}

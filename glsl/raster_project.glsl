@@ -1,0 +1,91 @@
+// The per-Gaussian 2DGS projection (method-notes §1.3), shared by the
+// forward projection and the per-Gaussian backward. Expects a float buffer
+// `cam` (layout in raster_common.glsl) to be declared before inclusion.
+#ifndef TGS_RASTER_PROJECT_GLSL
+#define TGS_RASTER_PROJECT_GLSL
+#include "raster_common.glsl"
+
+vec3 cam_row(uint i) {
+    return vec3(cam[4u * i], cam[4u * i + 1u], cam[4u * i + 2u]);
+}
+// World -> view rotation applied to v, and its transpose.
+vec3 view_rot(vec3 v) {
+    return vec3(dot(cam_row(0u), v), dot(cam_row(1u), v), dot(cam_row(2u), v));
+}
+vec3 view_rot_t(vec3 v) {
+    return cam_row(0u) * v.x + cam_row(1u) * v.y + cam_row(2u) * v.z;
+}
+vec3 view_t() {
+    return vec3(cam[3], cam[7], cam[11]);
+}
+vec4 intrinsics() {
+    return vec4(cam[12], cam[13], cam[14], cam[15]);
+}
+vec3 cam_centre() {
+    return vec3(cam[16], cam[17], cam[18]);
+}
+
+struct Proj {
+    Splat s;
+    mat3 rot;    // world rotation, columns t_u t_v t_w
+    vec2 scale;
+    vec3 pv;     // centre in view space
+    float sgn;   // +1 or -1: normal flipped to face the camera
+    float d;     // sum(t * Tw * Tw) with t = (9, 9, -1)
+    vec3 f;      // t / d
+    float radius;
+};
+
+bool finite3(vec3 v) {
+    return !any(isnan(v)) && !any(isinf(v));
+}
+
+// Returns false (culled) for degenerate quaternions, centres at or in front
+// of the near plane, edge-on normals with zero cosine, a singular bounding
+// conic, or any non-finite result.
+bool project(vec3 p, vec2 log_s, vec4 q_raw, float o_raw, out Proj pr) {
+    pr.s.o = 1.0 / (1.0 + exp(-o_raw));
+    float qq = dot(q_raw, q_raw);
+    if (!(qq > 1e-30) || isinf(qq)) {
+        return false;
+    }
+    vec4 q = q_raw * inversesqrt(qq);
+    pr.rot = quat_to_rot(q);
+    pr.scale = exp(log_s);
+    pr.pv = view_rot(p) + view_t();
+    if (!(pr.pv.z > NEAR)) {
+        return false;
+    }
+    vec3 au = view_rot(pr.scale.x * pr.rot[0]);
+    vec3 av = view_rot(pr.scale.y * pr.rot[1]);
+    vec4 k = intrinsics();
+    pr.s.tu = vec3(k.x * au.x + k.z * au.z, k.x * av.x + k.z * av.z, k.x * pr.pv.x + k.z * pr.pv.z);
+    pr.s.tv = vec3(k.y * au.y + k.w * au.z, k.y * av.y + k.w * av.z, k.y * pr.pv.y + k.w * pr.pv.z);
+    pr.s.tw = vec3(au.z, av.z, pr.pv.z);
+    vec3 nv = view_rot(pr.rot[2]);
+    float cosv = -dot(pr.pv, nv);
+    if (cosv == 0.0 || isnan(cosv)) {
+        return false;
+    }
+    pr.sgn = cosv < 0.0 ? -1.0 : 1.0;
+    pr.s.n = pr.sgn * nv;
+    const vec3 t = vec3(CUTOFF * CUTOFF, CUTOFF * CUTOFF, -1.0);
+    pr.d = dot(t, pr.s.tw * pr.s.tw);
+    if (pr.d == 0.0) {
+        return false;
+    }
+    pr.f = t / pr.d;
+    pr.s.mu = vec2(dot(pr.f, pr.s.tu * pr.s.tw), dot(pr.f, pr.s.tv * pr.s.tw));
+    vec2 ext = sqrt(max(vec2(1e-4), pr.s.mu * pr.s.mu - vec2(dot(pr.f, pr.s.tu * pr.s.tu), dot(pr.f, pr.s.tv * pr.s.tv))));
+    pr.radius = ceil(max(max(ext.x, ext.y), CUTOFF * FILTER_SIZE));
+    return finite3(pr.s.tu) && finite3(pr.s.tv) && finite3(pr.s.tw) && finite3(vec3(pr.s.mu, pr.radius)) && finite3(pr.s.n);
+}
+
+// Tile rectangle [x0, x1) x [y0, y1) of a projected splat, clamped to the grid.
+uvec4 tile_rect(vec2 mu, float r) {
+    vec2 grid = vec2(pc.tiles_x, pc.tiles_y);
+    vec2 lo = clamp(floor((mu - r) / float(TILE)), vec2(0.0), grid);
+    vec2 hi = clamp(floor((mu + r + float(TILE - 1u)) / float(TILE)), vec2(0.0), grid);
+    return uvec4(uvec2(lo), uvec2(hi));
+}
+#endif

@@ -1,0 +1,145 @@
+#version 460
+// One invocation per depth-ranked Gaussian r: sums its intersection records
+// grads[offsets[r] .. offsets[r+1]) in index order (fixed order, no atomics),
+// then applies the projection backward (method-notes §1.7, per-Gaussian
+// part) and writes the Gaussian's parameter gradients (overwriting), plus
+// the screen-space gradient used by densification (in NDC units, as 3DGS).
+#include "common.glsl"
+
+layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
+layout(std430, binding = 1) readonly buffer Means { float means[]; };
+layout(std430, binding = 2) readonly buffer Scales { float log_scales[]; };
+layout(std430, binding = 3) readonly buffer Quats { vec4 quats[]; };
+layout(std430, binding = 4) readonly buffer Opac { float opacity[]; };
+layout(std430, binding = 5) readonly buffer Feats { float feats[]; };
+layout(std430, binding = 6) readonly buffer Ids { uint ids[]; };
+layout(std430, binding = 7) readonly buffer Offsets { uint offsets[]; };
+layout(std430, binding = 8) readonly buffer Grads { float grads[]; };
+layout(std430, binding = 9) writeonly buffer GMeans { float g_means[]; };
+layout(std430, binding = 10) writeonly buffer GScales { float g_scales[]; };
+layout(std430, binding = 11) writeonly buffer GQuats { vec4 g_quats[]; };
+layout(std430, binding = 12) writeonly buffer GOpac { float g_opacity[]; };
+layout(std430, binding = 13) writeonly buffer GFeats { float g_feats[]; };
+layout(std430, binding = 14) writeonly buffer Densify { vec2 densify[]; };
+
+#include "raster_project.glsl"
+
+vec4 quat_rot_vjp(vec4 q, mat3 dR) {
+    float r = q.x, x = q.y, y = q.z, z = q.w;
+    // dIJ = dL/dR[row I][column J]; GLSL indexes dR[column][row].
+    float d00 = dR[0][0], d10 = dR[0][1], d20 = dR[0][2];
+    float d01 = dR[1][0], d11 = dR[1][1], d21 = dR[1][2];
+    float d02 = dR[2][0], d12 = dR[2][1], d22 = dR[2][2];
+    return 2.0 * vec4(
+        -z * d01 + y * d02 + z * d10 - x * d12 - y * d20 + x * d21,
+        y * d01 + z * d02 + y * d10 - 2.0 * x * d11 - r * d12 + z * d20 + r * d21 - 2.0 * x * d22,
+        -2.0 * y * d00 + x * d01 + r * d02 + x * d10 + z * d12 - r * d20 + z * d21 - 2.0 * y * d22,
+        -2.0 * z * d00 - r * d01 + x * d02 + r * d10 - 2.0 * z * d11 + y * d12 + x * d20 + y * d21);
+}
+
+void main() {
+    uint r = wg_linear() * WG + gl_LocalInvocationID.x;
+    if (r >= pc.n) {
+        return;
+    }
+    uint g = ids[r];
+    uint p0 = min(offsets[r], pc.capacity), p1 = min(offsets[r + 1u], pc.capacity);
+
+    vec3 dTu = vec3(0.0), dTv = vec3(0.0), dTw = vec3(0.0), dn = vec3(0.0);
+    vec2 dmu = vec2(0.0);
+    float dO = 0.0;
+    float df[CH];
+    for (uint c = 0u; c < CH; c++) {
+        df[c] = 0.0;
+    }
+    for (uint p = p0; p < p1; p++) {
+        uint b = p * KREC;
+        dTu += vec3(grads[b], grads[b + 1u], grads[b + 2u]);
+        dTv += vec3(grads[b + 3u], grads[b + 4u], grads[b + 5u]);
+        dTw += vec3(grads[b + 6u], grads[b + 7u], grads[b + 8u]);
+        dmu += vec2(grads[b + 9u], grads[b + 10u]);
+        dO += grads[b + 11u];
+        dn += vec3(grads[b + 12u], grads[b + 13u], grads[b + 14u]);
+        for (uint c = 0u; c < CH; c++) {
+            df[c] += grads[b + 15u + c];
+        }
+    }
+
+    vec3 p = vec3(means[3u * g], means[3u * g + 1u], means[3u * g + 2u]);
+    vec2 ls = vec2(log_scales[2u * g], log_scales[2u * g + 1u]);
+    vec4 qr = quats[g];
+    Proj pr;
+    bool ok = p1 > p0 && project(p, ls, qr, opacity[g], pr);
+    uint fb = g * pc.coeffs * CH;
+    if (!ok) {
+        g_means[3u * g] = 0.0; g_means[3u * g + 1u] = 0.0; g_means[3u * g + 2u] = 0.0;
+        g_scales[2u * g] = 0.0; g_scales[2u * g + 1u] = 0.0;
+        g_quats[g] = vec4(0.0);
+        g_opacity[g] = 0.0;
+        densify[g] = vec2(0.0);
+        for (uint i = 0u; i < pc.coeffs * CH; i++) {
+            g_feats[fb + i] = 0.0;
+        }
+        return;
+    }
+    Splat s = pr.s;
+    densify[g] = vec2(dTu.z * s.tw.z * 0.5 * float(pc.width), dTv.z * s.tw.z * 0.5 * float(pc.height));
+
+    // Bounding-box centre mu = (f . (Tu*Tw), f . (Tv*Tw)), f = t / d, d = t . (Tw*Tw).
+    const vec3 t = vec3(CUTOFF * CUTOFF, CUTOFF * CUTOFF, -1.0);
+    dTu += dmu.x * pr.f * s.tw;
+    dTv += dmu.y * pr.f * s.tw;
+    dTw += dmu.x * (pr.f * s.tu - s.mu.x * 2.0 * t * s.tw / pr.d) + dmu.y * (pr.f * s.tv - s.mu.y * 2.0 * t * s.tw / pr.d);
+
+    // T = K A with A = [s_u R t_u | s_v R t_v | p_view] (R: world -> view).
+    vec4 k = intrinsics();
+    vec3 dA0 = k.x * dTu, dA1 = k.y * dTv, dA2 = k.z * dTu + k.w * dTv + dTw;
+    vec3 d_su_tu = view_rot_t(vec3(dA0.x, dA1.x, dA2.x));
+    vec3 d_sv_tv = view_rot_t(vec3(dA0.y, dA1.y, dA2.y));
+    vec3 dmean = view_rot_t(vec3(dA0.z, dA1.z, dA2.z));
+    vec3 d_tw = pr.sgn * view_rot_t(dn);
+
+    g_scales[2u * g] = dot(pr.rot[0], d_su_tu) * pr.scale.x;
+    g_scales[2u * g + 1u] = dot(pr.rot[1], d_sv_tv) * pr.scale.y;
+    float qlen = length(qr);
+    vec4 qn = qr / qlen;
+    vec4 dqn = quat_rot_vjp(qn, mat3(pr.scale.x * d_su_tu, pr.scale.y * d_sv_tv, d_tw));
+    g_quats[g] = (dqn - qn * dot(qn, dqn)) / qlen;
+    g_opacity[g] = dO * s.o * (1.0 - s.o);
+
+    if (pc.mode == 1u) {
+        for (uint i = 0u; i < pc.coeffs * CH; i++) {
+            g_feats[fb + i] = i < CH ? df[i] : 0.0;
+        }
+    } else {
+        float Y[16];
+        vec3 dY[16];
+        vec3 dirv = p - cam_centre();
+        float len = length(dirv);
+        vec3 dir = len > 0.0 ? dirv / len : vec3(0.0, 0.0, 1.0);
+        sh_basis(dir, Y);
+        sh_basis_grad(dir, dY);
+        uint nk = active_coeffs();
+        vec3 ddir = vec3(0.0);
+        for (uint c = 0u; c < CH; c++) {
+            float v = 0.5;
+            for (uint kk = 0u; kk < nk; kk++) {
+                v += Y[kk] * feats[fb + kk * CH + c];
+            }
+            float gc = v > 0.0 ? df[c] : 0.0;
+            for (uint kk = 0u; kk < pc.coeffs; kk++) {
+                float coef = feats[fb + kk * CH + c];
+                g_feats[fb + kk * CH + c] = kk < nk ? Y[kk] * gc : 0.0;
+                if (kk < nk) {
+                    ddir += gc * coef * dY[kk];
+                }
+            }
+        }
+        if (len > 0.0) {
+            dmean += (ddir - dir * dot(dir, ddir)) / len;
+        }
+    }
+    g_means[3u * g] = dmean.x;
+    g_means[3u * g + 1u] = dmean.y;
+    g_means[3u * g + 2u] = dmean.z;
+}

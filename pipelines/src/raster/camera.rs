@@ -1,0 +1,92 @@
+//! Pinhole cameras in the rasterizer's convention: OpenCV axes (x right,
+//! y down, z forward), pixel centres at integer coordinates (pixel (i, j) is
+//! at x = i, y = j), per-camera fx, fy, cx, cy and size. Loaders convert other
+//! conventions (COLMAP's half-pixel principal point, Blender's OpenGL axes)
+//! into this one at load time.
+
+use anyhow::{bail, Result};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub width: u32,
+    pub height: u32,
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    /// World -> view transform, rows of (R | t): p_view = R p + t.
+    pub world_to_view: [[f32; 4]; 3],
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+fn normalize(a: [f64; 3]) -> [f64; 3] {
+    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    [a[0] / l, a[1] / l, a[2] / l]
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`, `up` pointing up in the image,
+    /// vertical field of view `fov_y` (radians), principal point at the image centre.
+    pub fn look_at(eye: [f32; 3], target: [f32; 3], up: [f32; 3], fov_y: f32, width: u32, height: u32) -> Camera {
+        let e = eye.map(f64::from);
+        let z = normalize(sub(target.map(f64::from), e));
+        let x = normalize(cross(z, up.map(f64::from)));
+        let y = cross(z, x);
+        let f = 0.5 * height as f64 / (0.5 * fov_y as f64).tan();
+        let row = |r: [f64; 3]| [r[0] as f32, r[1] as f32, r[2] as f32, -dot(r, e) as f32];
+        Camera {
+            width,
+            height,
+            fx: f as f32,
+            fy: f as f32,
+            cx: (width as f32 - 1.0) * 0.5,
+            cy: (height as f32 - 1.0) * 0.5,
+            world_to_view: [row(x), row(y), row(z)],
+        }
+    }
+
+    /// Camera centre in world space: -R^T t.
+    pub fn centre(&self) -> [f32; 3] {
+        let m = &self.world_to_view;
+        let mut c = [0.0f32; 3];
+        for (j, cj) in c.iter_mut().enumerate() {
+            *cj = -(0..3).map(|i| m[i][j] * m[i][3]).sum::<f32>();
+        }
+        c
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let finite = [self.fx, self.fy, self.cx, self.cy].iter().chain(self.world_to_view.iter().flatten()).all(|v| v.is_finite());
+        if !finite {
+            bail!("camera has a non-finite intrinsic or pose value: {self:?}");
+        }
+        if !(self.fx > 0.0 && self.fy > 0.0) {
+            bail!("camera focal lengths must be positive (fx {}, fy {})", self.fx, self.fy);
+        }
+        if self.width == 0 || self.height == 0 {
+            bail!("camera image size {}x{} is empty", self.width, self.height);
+        }
+        Ok(())
+    }
+
+    /// The camera block of the rasterizer kernels (see glsl/raster_common.glsl).
+    pub(crate) fn pack(&self, background: &[f32]) -> Vec<f32> {
+        let mut v = Vec::with_capacity(20 + background.len());
+        for r in &self.world_to_view {
+            v.extend_from_slice(r);
+        }
+        v.extend_from_slice(&[self.fx, self.fy, self.cx, self.cy]);
+        v.extend_from_slice(&self.centre());
+        v.push(0.0);
+        v.extend_from_slice(background);
+        v
+    }
+}

@@ -1,0 +1,99 @@
+//! Per-view working memory of the rasterizer: projected splats, binning,
+//! per-pixel outputs and state, and the per-intersection gradient slots.
+//!
+//! Capacities are fixed when recorded (nothing is read back inside an
+//! iteration). After the GPU work ran, [`crate::Rasterizer::fit`] reads two
+//! counters back (8 bytes) and grows the frame when the intersections or the
+//! longest tile outgrew it; the caller then re-runs that view.
+
+use crate::sort::SortScratch;
+use crate::scan::ScanScratch;
+use tgs_engine::Buffer;
+
+/// Output planes, each `width * height` floats, in this order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plane {
+    /// Feature channel c (colour with the background blended in).
+    Feature(u32),
+    /// 1 - final transmittance.
+    Alpha,
+    /// Sum of w_i z_i (divide by alpha for the expected depth).
+    Depth,
+    /// Component k of the blended view-space normal (unnormalised).
+    Normal(u32),
+    /// Depth of the splat where transmittance crossed 0.5 (0 if none).
+    Median,
+    /// Depth distortion, sum_ij w_i w_j (m_i - m_j)^2 on NDC-mapped depth.
+    Distortion,
+}
+
+impl Plane {
+    /// Index of the plane for `channels` feature channels.
+    pub fn index(self, channels: u32) -> u32 {
+        match self {
+            Plane::Feature(c) => c,
+            Plane::Alpha => channels,
+            Plane::Depth => channels + 1,
+            Plane::Normal(k) => channels + 2 + k,
+            Plane::Median => channels + 5,
+            Plane::Distortion => channels + 6,
+        }
+    }
+    /// Number of output planes for `channels` feature channels.
+    pub fn count(channels: u32) -> u32 {
+        channels + 7
+    }
+}
+
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// Gaussians this frame can take.
+    pub max_gaussians: u32,
+    /// Intersections this frame can take.
+    pub capacity: u32,
+    /// Span passes recorded per view (tiles longer than spans * span need more).
+    pub spans: u32,
+    /// The intersection total of the last run (after `fit`).
+    pub last_intersections: u32,
+    pub(crate) cam: Buffer<f32>,
+    pub(crate) proj: Buffer<f32>,
+    pub(crate) pfeat: Buffer<f32>,
+    pub(crate) rects: Buffer<u32>,
+    pub(crate) tiles: Buffer<u32>,
+    pub(crate) depth_keys: Buffer<u32>,
+    pub(crate) depth_ids: Buffer<u32>,
+    pub(crate) depth_scratch: SortScratch,
+    pub(crate) offsets: Buffer<u32>,
+    pub(crate) scan_scratch: ScanScratch,
+    pub(crate) params: Buffer<u32>,
+    pub(crate) args: Buffer<u32>,
+    pub(crate) stats: Buffer<u32>,
+    pub(crate) isect_keys: Buffer<u32>,
+    pub(crate) isect_vals: Buffer<u32>,
+    pub(crate) isect_gid: Buffer<u32>,
+    pub(crate) tile_scratch: SortScratch,
+    pub(crate) ranges: Buffer<u32>,
+    /// Output planes (see [`Plane`]).
+    pub out: Buffer<f32>,
+    /// Upstream gradient of the loss with respect to every output plane
+    /// (same layout as `out`); written by the caller before the backward.
+    pub grad_out: Buffer<f32>,
+    pub(crate) fstate: Buffer<f32>,
+    pub(crate) ustate: Buffer<u32>,
+    pub(crate) bstate: Buffer<f32>,
+    pub(crate) isect_grads: Buffer<f32>,
+    /// Screen-space gradient per Gaussian (2 floats, NDC units) from the last backward.
+    pub densify: Buffer<f32>,
+}
+
+impl Frame {
+    pub fn pixels(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+    pub fn tiles(&self) -> u32 {
+        self.tiles_x * self.tiles_y
+    }
+}

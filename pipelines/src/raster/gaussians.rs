@@ -1,0 +1,109 @@
+//! 2DGS Gaussian sets on the GPU, structure of arrays: means (3), log-scales
+//! (2), quaternions (r, x, y, z), raw opacity (1, sigmoid) and a feature
+//! block of `coeffs` x `channels` floats per Gaussian (coefficient-major:
+//! element [k * channels + c]). Gradients use the same layout.
+
+use anyhow::{bail, Result};
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context};
+
+/// A Gaussian set on the host (flat arrays in the GPU layout).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HostGaussians {
+    pub channels: u32,
+    pub coeffs: u32,
+    pub means: Vec<f32>,
+    pub log_scales: Vec<f32>,
+    pub quats: Vec<f32>,
+    pub opacity: Vec<f32>,
+    pub features: Vec<f32>,
+}
+
+impl HostGaussians {
+    pub fn new(channels: u32, coeffs: u32) -> Self {
+        HostGaussians { channels, coeffs, ..Default::default() }
+    }
+    pub fn len(&self) -> usize {
+        self.opacity.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.opacity.is_empty()
+    }
+    /// Append one Gaussian (`features`: coeffs x channels values).
+    pub fn push(&mut self, mean: [f32; 3], log_scale: [f32; 2], quat: [f32; 4], opacity: f32, features: &[f32]) {
+        self.means.extend_from_slice(&mean);
+        self.log_scales.extend_from_slice(&log_scale);
+        self.quats.extend_from_slice(&quat);
+        self.opacity.push(opacity);
+        self.features.extend_from_slice(features);
+    }
+    pub fn validate(&self) -> Result<()> {
+        let n = self.len();
+        let fpg = (self.coeffs * self.channels) as usize;
+        let checks = [("means", self.means.len(), 3 * n), ("log_scales", self.log_scales.len(), 2 * n), ("quats", self.quats.len(), 4 * n), ("features", self.features.len(), fpg * n)];
+        for (name, got, want) in checks {
+            if got != want {
+                bail!("Gaussian set: {name} has {got} values, expected {want} for {n} Gaussians");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A Gaussian set (or its gradient) on the GPU.
+pub struct Gaussians {
+    pub n: u32,
+    pub channels: u32,
+    pub coeffs: u32,
+    pub means: Buffer<f32>,
+    pub log_scales: Buffer<f32>,
+    pub quats: Buffer<f32>,
+    pub opacity: Buffer<f32>,
+    pub features: Buffer<f32>,
+}
+
+impl Gaussians {
+    /// Zero-initialised buffers for `n` Gaussians.
+    pub fn zeros(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32) -> Result<Gaussians> {
+        let m = n.max(1) as usize;
+        let f = (coeffs * channels) as usize;
+        let g = Gaussians {
+            n,
+            channels,
+            coeffs,
+            means: Buffer::new(ctx, "gaussians.means", 3 * m)?,
+            log_scales: Buffer::new(ctx, "gaussians.log_scales", 2 * m)?,
+            quats: Buffer::new(ctx, "gaussians.quats", 4 * m)?,
+            opacity: Buffer::new(ctx, "gaussians.opacity", m)?,
+            features: Buffer::new(ctx, "gaussians.features", f * m)?,
+        };
+        Ok(g)
+    }
+
+    pub fn upload(ctx: &Arc<Context>, h: &HostGaussians) -> Result<Gaussians> {
+        h.validate()?;
+        let g = Self::zeros(ctx, h.len() as u32, h.channels, h.coeffs)?;
+        if !h.is_empty() {
+            g.means.upload(&h.means)?;
+            g.log_scales.upload(&h.log_scales)?;
+            g.quats.upload(&h.quats)?;
+            g.opacity.upload(&h.opacity)?;
+            g.features.upload(&h.features)?;
+        }
+        Ok(g)
+    }
+
+    pub fn download(&self) -> Result<HostGaussians> {
+        let n = self.n as usize;
+        let f = (self.coeffs * self.channels) as usize;
+        Ok(HostGaussians {
+            channels: self.channels,
+            coeffs: self.coeffs,
+            means: self.means.download_range(0, 3 * n)?,
+            log_scales: self.log_scales.download_range(0, 2 * n)?,
+            quats: self.quats.download_range(0, 4 * n)?,
+            opacity: self.opacity.download_range(0, n)?,
+            features: self.features.download_range(0, f * n)?,
+        })
+    }
+}

@@ -1,0 +1,491 @@
+//! The differentiable 2DGS rasterizer (method-notes §1.3–1.7): projection,
+//! tile binning (depth sort, per-Gaussian emission, stable tile sort, tile
+//! ranges), the per-pixel forward, and an atomic-free backward (one gradient
+//! slot per intersection, then a fixed-order per-Gaussian reduction fused
+//! with the projection backward).
+//!
+//! Counts stay on the GPU within a view (indirect dispatch); capacities are
+//! checked afterwards by [`Rasterizer::fit`].
+
+mod camera;
+mod frame;
+mod gaussians;
+
+pub use camera::Camera;
+pub use frame::{Frame, Plane};
+pub use gaussians::{Gaussians, HostGaussians};
+
+use crate::scan::{Count, PrefixSum, ScanScratch};
+use crate::shaders;
+use crate::sort::RadixSort;
+use anyhow::{bail, Context as _, Result};
+use bytemuck::{Pod, Zeroable};
+use std::sync::Arc;
+use tgs_engine::{groups_2d, Buffer, Context, Kernel, KernelDesc, Recorder};
+
+/// How per-Gaussian features become the rasterized channels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Features {
+    /// Spherical harmonics up to `degree` (0..=3) per channel, evaluated for
+    /// the view direction, + 0.5, clamped at 0 (colour).
+    Sh { degree: u32 },
+    /// One plain value per channel (reflectivity, F0, ...), used as is.
+    Plain,
+}
+
+impl Features {
+    pub fn coeffs(self) -> u32 {
+        match self {
+            Features::Sh { degree } => (degree + 1) * (degree + 1),
+            Features::Plain => 1,
+        }
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Default)]
+struct Push {
+    n: u32,
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    coeffs: u32,
+    degree: u32,
+    mode: u32,
+    capacity: u32,
+    span: u32,
+    span_index: u32,
+    spans: u32,
+}
+
+const WG: u32 = 256;
+const TILE: u32 = 16;
+/// Loop iterations per invocation we allow on devices with a loop limiter
+/// (lavapipe stops loops after 65,535).
+const LOOP_BUDGET: f64 = 50_000.0;
+/// Most feature channels a rasterizer takes.
+pub const MAX_CHANNELS: u32 = 32;
+
+pub struct Rasterizer {
+    ctx: Arc<Context>,
+    channels: u32,
+    features: Features,
+    batch: u32,
+    span: u32,
+    sort: RadixSort,
+    scan: PrefixSum,
+    project: Kernel,
+    gather: Kernel,
+    emit: Kernel,
+    plan: Kernel,
+    ranges: Kernel,
+    forward: Kernel,
+    backward: Kernel,
+    reduce: Kernel,
+}
+
+impl Rasterizer {
+    /// A rasterizer for `channels` feature channels.
+    pub fn new(ctx: &Arc<Context>, channels: u32, features: Features) -> Result<Rasterizer> {
+        Self::with_span(ctx, channels, features, None)
+    }
+
+    /// As [`Rasterizer::new`], with the splats-per-span length forced (a
+    /// multiple of 256; tests use it to exercise multi-span tiles cheaply).
+    pub fn with_span(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>) -> Result<Rasterizer> {
+        if channels == 0 || channels > MAX_CHANNELS {
+            bail!("rasterizer channels must be 1..={MAX_CHANNELS}, not {channels}");
+        }
+        if let Features::Sh { degree } = features {
+            if degree > 3 {
+                bail!("SH degree must be 0..=3, not {degree}");
+            }
+        }
+        let caps = ctx.caps();
+        let min_sg = caps.min_subgroup_size.max(1);
+        let max_sg_count = WG / min_sg;
+        let krec = 15 + channels;
+        let budget = caps.max_shared_memory.min(28 * 1024);
+        let mut batch = 32u32;
+        while batch > 1 && max_sg_count * batch * krec * 4 > budget {
+            batch /= 2;
+        }
+        if max_sg_count * batch * krec * 4 > caps.max_shared_memory {
+            bail!("{channels} channels need {} bytes of shared memory in the backward; the device has {}", max_sg_count * krec * 4, caps.max_shared_memory);
+        }
+        let span = match span {
+            Some(s) if s == 0 || s % WG != 0 => bail!("span must be a positive multiple of {WG}, not {s}"),
+            Some(s) => s,
+            None if caps.is_cpu() => {
+                // Loop iterations per splat in the forward and the backward.
+                let ch = channels as f64;
+                let fwd = 2.0 + ch;
+                let bwd = 3.0 + 2.0 * ch + ((batch * krec).div_ceil(WG) as f64 * (1.0 + max_sg_count as f64) + 1.0) / batch as f64;
+                let s = (LOOP_BUDGET / fwd.max(bwd)) as u32 / WG * WG;
+                s.max(WG)
+            }
+            None => u32::MAX / 2 / WG * WG,
+        };
+        let spec = [(0, WG), (1, min_sg), (4, channels), (5, batch)];
+        let k = |name, spirv, push_bytes, full| {
+            Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full })
+        };
+        let push = std::mem::size_of::<Push>() as u32;
+        Ok(Rasterizer {
+            ctx: ctx.clone(),
+            channels,
+            features,
+            batch,
+            span,
+            sort: RadixSort::new(ctx)?,
+            scan: PrefixSum::new(ctx)?,
+            project: k("raster.project", shaders::RASTER_PROJECT, push, false)?,
+            gather: k("raster.gather", shaders::RASTER_GATHER, 4, false)?,
+            emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
+            plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
+            ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
+            forward: k("raster.forward", shaders::RASTER_FORWARD, push, false)?,
+            backward: k("raster.backward", shaders::RASTER_BACKWARD, push, true)?,
+            reduce: k("raster.reduce", shaders::RASTER_REDUCE, push, false)?,
+        })
+    }
+
+    pub fn channels(&self) -> u32 {
+        self.channels
+    }
+    pub fn features(&self) -> Features {
+        self.features
+    }
+    /// Splats per span (tiles longer than this take several passes).
+    pub fn span(&self) -> u32 {
+        self.span
+    }
+    /// Splats per shared-memory reduction round in the backward.
+    pub fn batch(&self) -> u32 {
+        self.batch
+    }
+    /// Floats per intersection gradient record.
+    pub fn record_len(&self) -> u32 {
+        15 + self.channels
+    }
+
+    /// Largest intersection count a frame can hold on this device.
+    pub fn max_capacity(&self) -> u32 {
+        let by_grads = self.ctx.caps().max_storage_buffer_range / (4 * self.record_len() as u64);
+        by_grads.min(self.sort.max_keys()).min(u32::MAX as u64 / 2) as u32
+    }
+
+    /// Working memory for `width` x `height` views of up to `max_gaussians`
+    /// Gaussians and `capacity` intersections (grown by [`Rasterizer::fit`]).
+    pub fn frame(&self, width: u32, height: u32, max_gaussians: u32, capacity: u32) -> Result<Frame> {
+        let ctx = &self.ctx;
+        if width == 0 || height == 0 {
+            bail!("image size {width}x{height} is empty");
+        }
+        let tiles_x = width.div_ceil(TILE);
+        let tiles_y = height.div_ceil(TILE);
+        let tiles = tiles_x as u64 * tiles_y as u64;
+        if ctx.caps().is_cpu() && tiles * (3 + self.channels as u64) > LOOP_BUDGET as u64 {
+            bail!(
+                "image {width}x{height} has {tiles} tiles; on a CPU driver (loop limit 65,535 per invocation) at most {} tiles fit with {} channels",
+                LOOP_BUDGET as u64 / (3 + self.channels as u64),
+                self.channels
+            );
+        }
+        let capacity = capacity.max(1);
+        if capacity > self.max_capacity() {
+            bail!("intersection capacity {capacity} exceeds this device's maximum of {}", self.max_capacity());
+        }
+        let n = max_gaussians.max(1) as usize;
+        let pixels = (width * height) as usize;
+        let planes = Plane::count(self.channels) as usize;
+        let buf = |name: &str, len: usize| Buffer::<u32>::new(ctx, name, len);
+        let fbuf = |name: &str, len: usize| Buffer::<f32>::new(ctx, name, len);
+        Ok(Frame {
+            width,
+            height,
+            tiles_x,
+            tiles_y,
+            max_gaussians,
+            capacity,
+            spans: 1,
+            last_intersections: 0,
+            cam: fbuf("raster.cam", 20 + MAX_CHANNELS as usize)?,
+            proj: fbuf("raster.proj", 16 * n)?,
+            pfeat: fbuf("raster.pfeat", self.channels as usize * n)?,
+            rects: buf("raster.rects", 4 * n)?,
+            tiles: buf("raster.tiles", n)?,
+            depth_keys: buf("raster.depth_keys", n)?,
+            depth_ids: buf("raster.depth_ids", n)?,
+            depth_scratch: self.sort.scratch(n as u32)?,
+            offsets: buf("raster.offsets", n + 1)?,
+            scan_scratch: ScanScratch::new(ctx, n as u32 + 1)?,
+            params: buf("raster.params", 4)?,
+            args: buf("raster.args", 4)?,
+            stats: buf("raster.stats", 2)?,
+            isect_keys: buf("raster.isect_keys", capacity as usize)?,
+            isect_vals: buf("raster.isect_vals", capacity as usize)?,
+            isect_gid: buf("raster.isect_gid", capacity as usize)?,
+            tile_scratch: self.sort.scratch(capacity)?,
+            ranges: buf("raster.ranges", 2 * tiles as usize)?,
+            out: fbuf("raster.out", planes * pixels)?,
+            grad_out: fbuf("raster.grad_out", planes * pixels)?,
+            fstate: fbuf("raster.fstate", 3 * pixels)?,
+            ustate: buf("raster.ustate", 3 * pixels)?,
+            bstate: fbuf("raster.bstate", 2 * pixels)?,
+            isect_grads: fbuf("raster.isect_grads", capacity as usize * self.record_len() as usize)?,
+            densify: fbuf("raster.densify", 2 * n)?,
+        })
+    }
+
+    fn push(&self, g: &Gaussians, frame: &Frame, degree: u32) -> Push {
+        Push {
+            n: g.n,
+            width: frame.width,
+            height: frame.height,
+            tiles_x: frame.tiles_x,
+            tiles_y: frame.tiles_y,
+            coeffs: g.coeffs,
+            degree,
+            mode: matches!(self.features, Features::Plain) as u32,
+            capacity: frame.capacity,
+            span: self.span,
+            span_index: 0,
+            spans: frame.spans,
+        }
+    }
+
+    fn check_inputs(&self, g: &Gaussians, frame: &Frame) -> Result<()> {
+        if g.channels != self.channels || g.coeffs != self.features.coeffs() {
+            bail!(
+                "Gaussian set has {} channels x {} coefficients; this rasterizer takes {} x {}",
+                g.channels,
+                g.coeffs,
+                self.channels,
+                self.features.coeffs()
+            );
+        }
+        if g.n > frame.max_gaussians {
+            bail!("{} Gaussians exceed the frame's {} (make a larger frame)", g.n, frame.max_gaussians);
+        }
+        Ok(())
+    }
+
+    fn groups(&self, items: u32) -> [u32; 3] {
+        groups_2d(items.div_ceil(WG), self.ctx.caps().max_workgroup_count[0].min(65535))
+    }
+
+    /// Record the forward pass of one view: outputs land in `frame.out`.
+    /// `sh_degree` is the active SH degree (ignored for plain features).
+    pub fn record_forward(&self, rec: &mut Recorder, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
+        self.check_inputs(g, frame)?;
+        cam.validate()?;
+        if cam.width != frame.width || cam.height != frame.height {
+            bail!("camera is {}x{} but the frame is {}x{}", cam.width, cam.height, frame.width, frame.height);
+        }
+        if background.len() != self.channels as usize {
+            bail!("background has {} values; the rasterizer has {} channels", background.len(), self.channels);
+        }
+        let push = self.push(g, frame, sh_degree);
+        let pb = bytemuck::bytes_of(&push);
+        rec.update(&frame.cam.binding(), bytemuck::cast_slice(&cam.pack(background)))?;
+
+        let sc = rec.begin_scope("raster.project");
+        rec.dispatch(
+            &self.project,
+            &[
+                frame.cam.binding(),
+                g.means.binding(),
+                g.log_scales.binding(),
+                g.quats.binding(),
+                g.opacity.binding(),
+                g.features.binding(),
+                frame.proj.binding(),
+                frame.pfeat.binding(),
+                frame.rects.binding(),
+                frame.tiles.binding(),
+                frame.depth_keys.binding(),
+                frame.depth_ids.binding(),
+            ],
+            pb,
+            self.groups(g.n),
+        )?;
+        rec.end_scope(sc);
+
+        self.sort.record(rec, &frame.depth_keys, &frame.depth_ids, &Count::Host(g.n), 32, &frame.depth_scratch).context("depth sort")?;
+
+        let sc = rec.begin_scope("raster.gather");
+        rec.dispatch(&self.gather, &[frame.depth_ids.binding(), frame.tiles.binding(), frame.offsets.binding()], bytemuck::bytes_of(&g.n), self.groups(g.n + 1))?;
+        rec.end_scope(sc);
+        self.scan.record(rec, &frame.offsets, &frame.offsets, &Count::Host(g.n + 1), &frame.scan_scratch)?;
+
+        let sc = rec.begin_scope("raster.plan");
+        let plan_push = [g.n, frame.capacity, WG, self.ctx.caps().max_workgroup_count[0].min(65535)];
+        rec.dispatch(&self.plan, &[frame.offsets.binding(), frame.params.binding(), frame.args.binding(), frame.stats.binding()], bytemuck::cast_slice(&plan_push), [1, 1, 1])?;
+        rec.end_scope(sc);
+
+        let sc = rec.begin_scope("raster.emit");
+        rec.dispatch(
+            &self.emit,
+            &[frame.depth_ids.binding(), frame.offsets.binding(), frame.rects.binding(), frame.isect_keys.binding(), frame.isect_vals.binding(), frame.isect_gid.binding()],
+            pb,
+            self.groups(g.n),
+        )?;
+        rec.end_scope(sc);
+
+        let tiles = frame.tiles();
+        let tile_bits = 32 - (tiles.max(1) - 1).leading_zeros();
+        let count = Count::Gpu { buffer: frame.params.binding(), index: 0 };
+        self.sort.record(rec, &frame.isect_keys, &frame.isect_vals, &count, tile_bits, &frame.tile_scratch).context("tile sort")?;
+
+        let sc = rec.begin_scope("raster.ranges");
+        rec.fill(&frame.ranges.binding(), 0)?;
+        rec.dispatch_indirect(&self.ranges, &[frame.params.binding(), frame.isect_keys.binding(), frame.ranges.binding()], &[], &frame.args.binding())?;
+        rec.end_scope(sc);
+
+        let tile_groups = groups_2d(tiles, self.ctx.caps().max_workgroup_count[0].min(65535));
+        for k in 0..frame.spans {
+            let p = Push { span_index: k, ..push };
+            let sc = rec.begin_scope("raster.forward");
+            rec.dispatch(
+                &self.forward,
+                &[
+                    frame.cam.binding(),
+                    frame.ranges.binding(),
+                    frame.isect_vals.binding(),
+                    frame.isect_gid.binding(),
+                    frame.proj.binding(),
+                    frame.pfeat.binding(),
+                    frame.out.binding(),
+                    frame.fstate.binding(),
+                    frame.ustate.binding(),
+                    frame.stats.binding(),
+                ],
+                bytemuck::bytes_of(&p),
+                tile_groups,
+            )?;
+            rec.end_scope(sc);
+        }
+        Ok(())
+    }
+
+    /// Record the backward of the last forward on `frame` (same Gaussians),
+    /// with the loss gradient of every output plane in `frame.grad_out`.
+    /// Overwrites every gradient in `grads` (and `frame.densify`).
+    pub fn record_backward(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
+        self.check_inputs(g, frame)?;
+        if grads.n != g.n || grads.channels != g.channels || grads.coeffs != g.coeffs {
+            bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
+        }
+        let push = self.push(g, frame, sh_degree);
+        let tile_groups = groups_2d(frame.tiles(), self.ctx.caps().max_workgroup_count[0].min(65535));
+        for k in (0..frame.spans).rev() {
+            let p = Push { span_index: k, ..push };
+            let sc = rec.begin_scope("raster.backward");
+            rec.dispatch(
+                &self.backward,
+                &[
+                    frame.cam.binding(),
+                    frame.ranges.binding(),
+                    frame.isect_vals.binding(),
+                    frame.isect_gid.binding(),
+                    frame.proj.binding(),
+                    frame.pfeat.binding(),
+                    frame.out.binding(),
+                    frame.fstate.binding(),
+                    frame.ustate.binding(),
+                    frame.grad_out.binding(),
+                    frame.bstate.binding(),
+                    frame.isect_grads.binding(),
+                ],
+                bytemuck::bytes_of(&p),
+                tile_groups,
+            )?;
+            rec.end_scope(sc);
+        }
+        let sc = rec.begin_scope("raster.reduce");
+        rec.dispatch(
+            &self.reduce,
+            &[
+                frame.cam.binding(),
+                g.means.binding(),
+                g.log_scales.binding(),
+                g.quats.binding(),
+                g.opacity.binding(),
+                g.features.binding(),
+                frame.depth_ids.binding(),
+                frame.offsets.binding(),
+                frame.isect_grads.binding(),
+                grads.means.binding(),
+                grads.log_scales.binding(),
+                grads.quats.binding(),
+                grads.opacity.binding(),
+                grads.features.binding(),
+                frame.densify.binding(),
+            ],
+            bytemuck::bytes_of(&push),
+            self.groups(g.n),
+        )?;
+        rec.end_scope(sc);
+        Ok(())
+    }
+
+    /// After a recorded view ran: read the intersection total and the span
+    /// overflow flag back (8 bytes). Returns `true` when everything fitted;
+    /// otherwise grows `frame` so that a re-run fits and returns `false`.
+    pub fn fit(&self, frame: &mut Frame) -> Result<bool> {
+        let stats = frame.stats.download()?;
+        let (total, span_overflow) = (stats[0], stats[1] != 0);
+        frame.last_intersections = total;
+        let mut fits = true;
+        if total > frame.capacity {
+            let max = self.max_capacity();
+            if total > max {
+                bail!("this view has {total} tile-splat intersections; the device allows at most {max} (fewer or smaller Gaussians, or a smaller image)");
+            }
+            let cap = (total as u64 + total as u64 / 4).min(max as u64) as u32;
+            self.grow(frame, cap)?;
+            fits = false;
+        }
+        if span_overflow {
+            let r = frame.ranges.download()?;
+            let longest = r.chunks(2).map(|c| c[1].saturating_sub(c[0])).max().unwrap_or(0);
+            frame.spans = longest.div_ceil(self.span).max(frame.spans + 1);
+            fits = false;
+        }
+        Ok(fits)
+    }
+
+    fn grow(&self, frame: &mut Frame, capacity: u32) -> Result<()> {
+        let ctx = &self.ctx;
+        frame.isect_keys = Buffer::new(ctx, "raster.isect_keys", capacity as usize)?;
+        frame.isect_vals = Buffer::new(ctx, "raster.isect_vals", capacity as usize)?;
+        frame.isect_gid = Buffer::new(ctx, "raster.isect_gid", capacity as usize)?;
+        frame.tile_scratch = self.sort.scratch(capacity)?;
+        frame.isect_grads = Buffer::new(ctx, "raster.isect_grads", capacity as usize * self.record_len() as usize)?;
+        frame.capacity = capacity;
+        Ok(())
+    }
+
+    /// Run the forward of one view to completion, growing `frame` and
+    /// re-running when it did not fit. Returns the GPU timings of the last run
+    /// (empty unless `profile`).
+    pub fn forward(&self, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &mut Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
+        loop {
+            let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            self.record_forward(&mut rec, g, cam, background, sh_degree, frame)?;
+            let t = rec.submit_and_wait()?;
+            if self.fit(frame)? {
+                return Ok(t);
+            }
+        }
+    }
+
+    /// Run the backward of the last [`Rasterizer::forward`] on `frame`.
+    pub fn backward(&self, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
+        let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+        self.record_backward(&mut rec, g, grads, sh_degree, frame)?;
+        rec.submit_and_wait()
+    }
+}
