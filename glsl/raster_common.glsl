@@ -134,7 +134,10 @@ bool intersect(vec3 tu, vec3 tv, vec3 tw, vec2 mu, vec2 pix, out Hit h) {
     vec2 dd = mu - pix;
     h.rho2 = FILTER_INV_SQUARE * dot(dd, dd);
     h.g = exp(-0.5 * min(h.rho3, h.rho2));
-    h.z = dot(tw, vec3(h.uv, 1.0));
+    // z = Tw . (u, v, 1) = (Tw . p) / p_z, and Tw . (hx x hy) = Tw . (Tu x Tv)
+    // is constant per splat: this form avoids the cancellation of the dot
+    // product at grazing hits (f32).
+    h.z = dot(tw, cross(tu, tv)) / h.p.z;
     return h.z >= NEAR && !isinf(h.z);
 }
 

@@ -1,5 +1,8 @@
 //! Helpers shared by the integration tests.
 
+pub mod raster_ref;
+pub mod raster_util;
+
 use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
 

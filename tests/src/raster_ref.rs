@@ -1,0 +1,361 @@
+//! CPU f64 reference of the 2DGS forward (method-notes §1.3–1.5): the same
+//! math as glsl/raster_*.comp in straightforward loops (every pixel walks
+//! every Gaussian in depth order; a Gaussian only touches pixels of its tile
+//! rectangle, which is part of the method). Gradients are taken from it by
+//! central finite differences.
+//!
+//! Pixels where f32 rounding on the GPU could flip a discrete decision
+//! (alpha at the 1/255 cut, transmittance at the 1e-4 stop or 0.5 median
+//! crossing, depth at the near plane, a tile-rectangle edge) are flagged
+//! `ambiguous` so tests can leave them out and count them. Pixels with an
+//! ill-conditioned hit (a ray grazing a splat: the hit depth then moves far
+//! under one-ulp changes of the f32 inputs) get a tolerance widened in
+//! proportion to that measured sensitivity (see `sensitivity`).
+
+use tgs_pipelines::{Camera, HostGaussians};
+
+const NEAR: f64 = 0.2;
+const FAR: f64 = 100.0;
+const TILE: f64 = 16.0;
+
+/// A Gaussian set in f64 (same layout as [`HostGaussians`]).
+#[derive(Clone, Debug)]
+pub struct RefScene {
+    pub channels: usize,
+    pub coeffs: usize,
+    pub plain: bool,
+    pub means: Vec<f64>,
+    pub log_scales: Vec<f64>,
+    pub quats: Vec<f64>,
+    pub opacity: Vec<f64>,
+    pub features: Vec<f64>,
+}
+
+impl RefScene {
+    pub fn from_host(h: &HostGaussians, plain: bool) -> RefScene {
+        let f = |v: &Vec<f32>| v.iter().map(|&x| x as f64).collect();
+        RefScene {
+            channels: h.channels as usize,
+            coeffs: h.coeffs as usize,
+            plain,
+            means: f(&h.means),
+            log_scales: f(&h.log_scales),
+            quats: f(&h.quats),
+            opacity: f(&h.opacity),
+            features: f(&h.features),
+        }
+    }
+    pub fn len(&self) -> usize {
+        self.opacity.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.opacity.is_empty()
+    }
+    /// Every parameter as (group name, mutable reference), in a fixed order.
+    pub fn params_mut(&mut self) -> Vec<(&'static str, &mut f64)> {
+        let mut v: Vec<(&'static str, &mut f64)> = Vec::new();
+        v.extend(self.means.iter_mut().map(|x| ("means", x)));
+        v.extend(self.log_scales.iter_mut().map(|x| ("log_scales", x)));
+        v.extend(self.quats.iter_mut().map(|x| ("quats", x)));
+        v.extend(self.opacity.iter_mut().map(|x| ("opacity", x)));
+        v.extend(self.features.iter_mut().map(|x| ("features", x)));
+        v
+    }
+}
+
+type V3 = [f64; 3];
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn cross(a: V3, b: V3) -> V3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+fn scale(a: V3, s: f64) -> V3 {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// The SH basis up to degree 3 (3DGS constants).
+pub fn sh_basis(d: V3) -> [f64; 16] {
+    let (x, y, z) = (d[0], d[1], d[2]);
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    let c1 = 0.4886025119029199;
+    let c2 = [1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396];
+    let c3 = [-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154, -0.4570457994644658, 1.445305721320277, -0.5900435899266435];
+    [
+        0.28209479177387814,
+        -c1 * y,
+        c1 * z,
+        -c1 * x,
+        c2[0] * x * y,
+        c2[1] * y * z,
+        c2[2] * (2.0 * zz - xx - yy),
+        c2[3] * x * z,
+        c2[4] * (xx - yy),
+        c3[0] * y * (3.0 * xx - yy),
+        c3[1] * x * y * z,
+        c3[2] * y * (4.0 * zz - xx - yy),
+        c3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy),
+        c3[4] * x * (4.0 * zz - xx - yy),
+        c3[5] * z * (xx - yy),
+        c3[6] * x * (xx - 3.0 * yy),
+    ]
+}
+
+/// A projected splat.
+#[derive(Clone, Debug)]
+pub struct RefSplat {
+    pub index: usize,
+    pub tu: V3,
+    pub tv: V3,
+    pub tw: V3,
+    pub mu: [f64; 2],
+    pub n: V3,
+    pub o: f64,
+    pub depth: f64,
+    /// Tile rectangle [x0, x1) x [y0, y1).
+    pub rect: [usize; 4],
+    pub feat: Vec<f64>,
+    /// Tiles on which a rounding difference could change the rectangle.
+    pub rect_ambiguous: bool,
+}
+
+struct Cam64 {
+    r: [V3; 3],
+    t: V3,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+    centre: V3,
+    w: usize,
+    h: usize,
+}
+
+impl Cam64 {
+    fn new(c: &Camera) -> Cam64 {
+        let m = c.world_to_view.map(|r| r.map(|x| x as f64));
+        let r = [[m[0][0], m[0][1], m[0][2]], [m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]];
+        let t = [m[0][3], m[1][3], m[2][3]];
+        let centre = [0, 1, 2].map(|j| -(0..3).map(|i| r[i][j] * t[i]).sum::<f64>());
+        Cam64 { r, t, fx: c.fx as f64, fy: c.fy as f64, cx: c.cx as f64, cy: c.cy as f64, centre, w: c.width as usize, h: c.height as usize }
+    }
+    fn rot(&self, v: V3) -> V3 {
+        [dot(self.r[0], v), dot(self.r[1], v), dot(self.r[2], v)]
+    }
+}
+
+/// Ray-splat hit of pixel (x, y): (G with the low-pass filter, hit depth).
+fn hit(tu: V3, tv: V3, tw: V3, mu: [f64; 2], x: f64, y: f64) -> Option<(f64, f64)> {
+    let hx = sub(scale(tw, x), tu);
+    let hy = sub(scale(tw, y), tv);
+    let p = cross(hx, hy);
+    if p[2] == 0.0 {
+        return None;
+    }
+    let (u, v) = (p[0] / p[2], p[1] / p[2]);
+    let rho3 = u * u + v * v;
+    let (dx, dy) = (mu[0] - x, mu[1] - y);
+    let rho2 = 2.0 * (dx * dx + dy * dy);
+    let g = (-0.5 * rho3.min(rho2)).exp();
+    Some((g, tw[0] * u + tw[1] * v + tw[2]))
+}
+
+/// How far this hit moves under f32 rounding: a ray grazing the splat plane
+/// makes the hit depth ill-conditioned (one-ulp changes of the homography
+/// move it far, whatever the f32 formulation). Re-evaluates with the 9
+/// entries of T perturbed by +-1 f32 ulp in two sign patterns; returns the
+/// largest change of depth plus alpha-weighted change (infinite when the
+/// perturbed ray misses).
+fn sensitivity(sp: &RefSplat, x: f64, y: f64, g: f64, z: f64) -> f64 {
+    let ulp = 1.0 / (1u64 << 23) as f64;
+    let mut worst = 0.0f64;
+    for pattern in [0b101_010_101u32, 0b110_011_001] {
+        let e = |row: V3, k: usize| -> V3 { [0, 1, 2].map(|i| row[i] * (1.0 + if pattern >> (3 * k + i) & 1 == 1 { ulp } else { -ulp })) };
+        match hit(e(sp.tu, 0), e(sp.tv, 1), e(sp.tw, 2), sp.mu, x, y) {
+            Some((g2, z2)) => worst = worst.max((z2 - z).abs() + (sp.o * (g2 - g)).abs() * (1.0 + z.abs())),
+            None => return f64::INFINITY,
+        }
+    }
+    worst
+}
+
+fn rect_of(mu: [f64; 2], r: f64, tiles: [f64; 2]) -> [usize; 4] {
+    let lo = |m: f64, g: f64| ((m - r) / TILE).floor().clamp(0.0, g) as usize;
+    let hi = |m: f64, g: f64| ((m + r + TILE - 1.0) / TILE).floor().clamp(0.0, g) as usize;
+    [lo(mu[0], tiles[0]), lo(mu[1], tiles[1]), hi(mu[0], tiles[0]), hi(mu[1], tiles[1])]
+}
+
+fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat> {
+    let p = [s.means[3 * g], s.means[3 * g + 1], s.means[3 * g + 2]];
+    let q = &s.quats[4 * g..4 * g + 4];
+    let qq: f64 = q.iter().map(|v| v * v).sum();
+    if !(qq > 1e-30) || !qq.is_finite() {
+        return None;
+    }
+    let l = qq.sqrt();
+    let (r, x, y, z) = (q[0] / l, q[1] / l, q[2] / l, q[3] / l);
+    let tu_w = [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + r * z), 2.0 * (x * z - r * y)];
+    let tv_w = [2.0 * (x * y - r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + r * x)];
+    let tw_w = [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)];
+    let su = s.log_scales[2 * g].exp();
+    let sv = s.log_scales[2 * g + 1].exp();
+    let pv = {
+        let a = cam.rot(p);
+        [a[0] + cam.t[0], a[1] + cam.t[1], a[2] + cam.t[2]]
+    };
+    if !(pv[2] > NEAR) {
+        return None;
+    }
+    let au = cam.rot(scale(tu_w, su));
+    let av = cam.rot(scale(tv_w, sv));
+    let tu = [cam.fx * au[0] + cam.cx * au[2], cam.fx * av[0] + cam.cx * av[2], cam.fx * pv[0] + cam.cx * pv[2]];
+    let tv = [cam.fy * au[1] + cam.cy * au[2], cam.fy * av[1] + cam.cy * av[2], cam.fy * pv[1] + cam.cy * pv[2]];
+    let tw = [au[2], av[2], pv[2]];
+    let nv = cam.rot(tw_w);
+    let cosv = -dot(pv, nv);
+    if cosv == 0.0 || cosv.is_nan() {
+        return None;
+    }
+    let n = if cosv < 0.0 { scale(nv, -1.0) } else { nv };
+    let t = [9.0, 9.0, -1.0];
+    let d = t[0] * tw[0] * tw[0] + t[1] * tw[1] * tw[1] + t[2] * tw[2] * tw[2];
+    if d == 0.0 {
+        return None;
+    }
+    let f = [t[0] / d, t[1] / d, t[2] / d];
+    let fdot = |a: V3, b: V3| f[0] * a[0] * b[0] + f[1] * a[1] * b[1] + f[2] * a[2] * b[2];
+    let mu = [fdot(tu, tw), fdot(tv, tw)];
+    let ex = (mu[0] * mu[0] - fdot(tu, tu)).max(1e-4).sqrt();
+    let ey = (mu[1] * mu[1] - fdot(tv, tv)).max(1e-4).sqrt();
+    let radius_raw = ex.max(ey).max(3.0 * 0.707106);
+    let radius = radius_raw.ceil();
+    let all = tu.iter().chain(&tv).chain(&tw).chain(&mu).chain(&n).chain(std::iter::once(&radius));
+    if !all.into_iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let tiles = [cam.w.div_ceil(16) as f64, cam.h.div_ceil(16) as f64];
+    let rect = rect_of(mu, radius, tiles);
+    if rect[2] <= rect[0] || rect[3] <= rect[1] {
+        return None;
+    }
+    // Could f32 rounding move the rectangle? (mu or radius near a boundary)
+    let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
+    let near_int = |v: f64| (v - v.round()).abs() < 1e-5 * (1.0 + v.abs());
+    let mut rect_ambiguous = near_int(radius_raw) && radius_raw > 3.0 * 0.707106 + 1e-3;
+    for dm in [-dl, dl] {
+        rect_ambiguous |= rect_of([mu[0] + dm, mu[1] + dm], radius, tiles) != rect;
+    }
+    let ch = s.channels;
+    let fb = g * s.coeffs * ch;
+    let feat = if s.plain {
+        s.features[fb..fb + ch].to_vec()
+    } else {
+        let dir = sub(p, cam.centre);
+        let len = dot(dir, dir).sqrt();
+        let dir = if len > 0.0 { scale(dir, 1.0 / len) } else { [0.0, 0.0, 1.0] };
+        let y = sh_basis(dir);
+        let dg = degree.min(3) as usize;
+        let nk = ((dg + 1) * (dg + 1)).min(s.coeffs);
+        (0..ch).map(|c| (0.5 + (0..nk).map(|k| y[k] * s.features[fb + k * ch + c]).sum::<f64>()).max(0.0)).collect()
+    };
+    let o = 1.0 / (1.0 + (-s.opacity[g]).exp());
+    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, feat, rect_ambiguous })
+}
+
+/// The reference render: planes in the GPU layout (CH features, alpha,
+/// depth numerator, normal ×3, median, distortion), each w*h.
+pub struct RefRender {
+    pub planes: Vec<f64>,
+    pub ambiguous: Vec<bool>,
+    /// Per-pixel max abs error allowed: 1e-4, widened in proportion to the
+    /// measured rounding sensitivity of ill-conditioned hits.
+    pub tolerance: Vec<f64>,
+    pub splats: Vec<RefSplat>,
+}
+
+pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> RefRender {
+    let c = Cam64::new(cam);
+    let (w, h) = (c.w, c.h);
+    let ch = s.channels;
+    let mut splats: Vec<RefSplat> = (0..s.len()).filter_map(|g| project(s, g, &c, degree)).collect();
+    // Depth order; the GPU's radix sort is stable, so ties keep index order.
+    // The GPU sorts the f32 depth, so compare that.
+    splats.sort_by(|a, b| (a.depth as f32).partial_cmp(&(b.depth as f32)).unwrap().then(a.index.cmp(&b.index)));
+    let np = w * h;
+    let mut planes = vec![0.0; (ch + 7) * np];
+    let mut ambiguous = vec![false; np];
+    let mut tolerance = vec![1e-4; np];
+    for py in 0..h {
+        for px in 0..w {
+            let i = py * w + px;
+            let (tx, ty) = (px / 16, py / 16);
+            let (xf, yf) = (px as f64, py as f64);
+            let mut acc = vec![0.0; ch];
+            let (mut t, mut dsum, mut m1, mut m2, mut dist, mut med) = (1.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let mut nsum = [0.0; 3];
+            let mut amb = false;
+            let mut tol = 1e-4f64;
+            for sp in &splats {
+                let r = sp.rect;
+                if tx < r[0] || tx >= r[2] || ty < r[1] || ty >= r[3] {
+                    continue;
+                }
+                amb |= sp.rect_ambiguous;
+                let Some((g, z)) = hit(sp.tu, sp.tv, sp.tw, sp.mu, xf, yf) else {
+                    continue;
+                };
+                if !(z >= NEAR) || z.is_infinite() {
+                    continue;
+                }
+                let alpha = (sp.o * g).min(0.99);
+                amb |= (alpha * 255.0 - 1.0).abs() < 1e-3;
+                if alpha < 1.0 / 255.0 {
+                    continue;
+                }
+                let sens = sensitivity(sp, xf, yf, g, z);
+                amb |= sens.is_infinite();
+                if sens.is_finite() {
+                    tol = tol.max(1e-4 + 50.0 * sens);
+                }
+                let tn = t * (1.0 - alpha);
+                amb |= (tn / 1e-4 - 1.0).abs() < 1e-3;
+                if tn < 1e-4 {
+                    break;
+                }
+                let wgt = alpha * t;
+                for (a, f) in acc.iter_mut().zip(&sp.feat) {
+                    *a += wgt * f;
+                }
+                dsum += wgt * z;
+                for k in 0..3 {
+                    nsum[k] += wgt * sp.n[k];
+                }
+                let m = FAR / (FAR - NEAR) * (1.0 - NEAR / z);
+                dist += wgt * (m * m * (1.0 - t) + m2 - 2.0 * m * m1);
+                m1 += wgt * m;
+                m2 += wgt * m * m;
+                amb |= (t - 0.5).abs() < 1e-4;
+                if t > 0.5 {
+                    med = z;
+                }
+                t = tn;
+            }
+            for c in 0..ch {
+                planes[c * np + i] = acc[c] + t * background[c];
+            }
+            planes[ch * np + i] = 1.0 - t;
+            planes[(ch + 1) * np + i] = dsum;
+            for k in 0..3 {
+                planes[(ch + 2 + k) * np + i] = nsum[k];
+            }
+            planes[(ch + 5) * np + i] = med;
+            planes[(ch + 6) * np + i] = dist;
+            ambiguous[i] = amb;
+            tolerance[i] = tol;
+        }
+    }
+    RefRender { planes, ambiguous, tolerance, splats }
+}
