@@ -241,10 +241,13 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
     if rect[2] <= rect[0] || rect[3] <= rect[1] {
         return None;
     }
-    // Could f32 rounding move the rectangle? (mu or radius near a boundary)
+    // Could f32 rounding move the rectangle? (mu or the radius's ceiling
+    // near a boundary)
     let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
-    let near_int = |v: f64| (v - v.round()).abs() < 1e-5 * (1.0 + v.abs());
-    let mut rect_ambiguous = near_int(radius_raw) && radius_raw > 3.0 * 0.707106 + 1e-3;
+    let mut rect_ambiguous = false;
+    for rr in [radius_raw * (1.0 - 1e-6), radius_raw * (1.0 + 1e-6)] {
+        rect_ambiguous |= rect_of(mu, rr.max(3.0 * 0.707106).ceil(), tiles) != rect;
+    }
     for dm in [-dl, dl] {
         rect_ambiguous |= rect_of([mu[0] + dm, mu[1] + dm], radius, tiles) != rect;
     }
@@ -311,7 +314,7 @@ pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> Re
                     continue;
                 }
                 let alpha = (sp.o * g).min(0.99);
-                amb |= (alpha * 255.0 - 1.0).abs() < 1e-3;
+                amb |= (alpha * 255.0 - 1.0).abs() < 2e-5;
                 if alpha < 1.0 / 255.0 {
                     continue;
                 }
@@ -321,7 +324,7 @@ pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> Re
                     tol = tol.max(1e-4 + 50.0 * sens);
                 }
                 let tn = t * (1.0 - alpha);
-                amb |= (tn / 1e-4 - 1.0).abs() < 1e-3;
+                amb |= (tn / 1e-4 - 1.0).abs() < 1e-4;
                 if tn < 1e-4 {
                     break;
                 }

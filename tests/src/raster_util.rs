@@ -117,6 +117,12 @@ pub fn compare_forward(gpu: &[f32], cpu: &raster_ref::RefRender, channels: u32, 
 /// Forward on GPU and CPU: every unambiguous pixel within its tolerance
 /// (1e-4 abs unless ill-conditioned), at most 1% of pixels ambiguous.
 pub fn check_forward(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, what: &str) -> GpuRun {
+    check_forward_with(rast, host, cam, bg, degree, 0.01, what)
+}
+
+/// As [`check_forward`] with at most a fraction `max_ambiguous` of pixels
+/// left out (dense piles of faint splats sit at the 1/255 cut more often).
+pub fn check_forward_with(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, max_ambiguous: f64, what: &str) -> GpuRun {
     let run = gpu_run(rast, host, cam, bg, degree, None);
     let scene = RefScene::from_host(host, rast.features() == Features::Plain);
     let bg64: Vec<f64> = bg.iter().map(|&v| v as f64).collect();
@@ -125,7 +131,7 @@ pub fn check_forward(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: 
     let (err, at, skipped, widened) = compare_forward(&run.out, &cpu, rast.channels(), pixels);
     eprintln!("{what}: worst error/tolerance {err:.3} ({at}); {skipped} ambiguous and {widened} ill-conditioned pixels of {pixels}; {} intersections", run.intersections);
     assert!(err <= 1.0, "{what}: forward differs from the CPU reference: {at}");
-    assert!(skipped * 100 <= pixels.max(100), "{what}: {skipped} of {pixels} pixels ambiguous");
+    assert!(skipped as f64 <= max_ambiguous * pixels.max(100) as f64, "{what}: {skipped} of {pixels} pixels ambiguous");
     run
 }
 
@@ -144,6 +150,13 @@ pub fn ref_loss(s: &RefScene, cam: &Camera, bg: &[f64], degree: u32, weights: &[
 /// most 2%). Groups whose gradient is exactly zero everywhere are reported
 /// and must be in `zero_ok`.
 pub fn check_gradients(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, rng: &mut Rng, zero_ok: &[&str], what: &str) {
+    check_gradients_with(rast, host, cam, bg, degree, rng, zero_ok, 0.02, what)
+}
+
+/// As [`check_gradients`], allowing a fraction `max_unstable` of the
+/// parameters to sit on a discontinuity (e.g. exactly equal depths).
+#[allow(clippy::too_many_arguments)]
+pub fn check_gradients_with(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, rng: &mut Rng, zero_ok: &[&str], max_unstable: f64, what: &str) {
     let plain = rast.features() == Features::Plain;
     let base = RefScene::from_host(host, plain);
     let bg64: Vec<f64> = bg.iter().map(|&v| v as f64).collect();
@@ -178,7 +191,7 @@ pub fn check_gradients(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg
     let mut unstable = vec![false; nparams];
     let eps = 1e-6;
     for i in 0..nparams {
-        let mut eval = |delta: f64| {
+        let eval = |delta: f64| {
             let mut s = base.clone();
             let mut ps = s.params_mut();
             *ps[i].1 += delta;
@@ -192,7 +205,7 @@ pub fn check_gradients(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg
     }
     let n_unstable = unstable.iter().filter(|&&u| u).count();
     eprintln!("{what}: {nparams} parameters, {n_unstable} on a discontinuity (left out)");
-    assert!(n_unstable * 50 <= nparams, "{what}: {n_unstable} of {nparams} finite differences unstable");
+    assert!(n_unstable as f64 <= max_unstable * nparams as f64, "{what}: {n_unstable} of {nparams} finite differences unstable");
     for group in ["means", "log_scales", "quats", "opacity", "features"] {
         let (mut num, mut den, mut worst) = (0.0f64, 0.0f64, (0.0f64, 0usize));
         for i in 0..nparams {

@@ -33,3 +33,117 @@ fn gradients_match_finite_differences_sh3() {
     check_gradients(&rast, &scene, &cam, &[0.2, 0.3, 0.7], 3, &mut rng, &[], "sh3");
     check_validation(ctx);
 }
+
+#[test]
+fn gradients_plain_features_one_and_eight_channels() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("gradients_plain_features_one_and_eight_channels"));
+    for ch in [1u32, 8] {
+        let rast = Rasterizer::new(ctx, ch, Features::Plain).unwrap();
+        let mut spec = SceneSpec::new(10, ch, Features::Plain);
+        spec.log_scale = (-2.2, -1.0);
+        let scene = random_scene(&mut rng, &spec);
+        let cam = default_camera(35, 21);
+        let bg: Vec<f32> = (0..ch).map(|c| 0.1 * c as f32).collect();
+        check_forward(&rast, &scene, &cam, &bg, 0, &format!("plain C={ch}"));
+        check_gradients(&rast, &scene, &cam, &bg, 0, &mut rng, &[], &format!("plain C={ch}"));
+    }
+    check_validation(ctx);
+}
+
+#[test]
+fn sh_degree_zero_and_partial_activation() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("sh_degree_zero_and_partial_activation"));
+    // Degree-0 SH (one coefficient per channel).
+    let f0 = Features::Sh { degree: 0 };
+    let rast = Rasterizer::new(ctx, 3, f0).unwrap();
+    let mut spec = SceneSpec::new(10, 3, f0);
+    spec.log_scale = (-2.2, -1.0);
+    let scene = random_scene(&mut rng, &spec);
+    let cam = default_camera(30, 20);
+    check_forward(&rast, &scene, &cam, &[0.0; 3], 0, "sh0");
+    check_gradients(&rast, &scene, &cam, &[0.0; 3], 0, &mut rng, &[], "sh0");
+    // Degree-3 storage with degree 1 active: higher coefficients have no effect
+    // (their gradient is exactly zero) and the forward ignores them.
+    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
+    let mut spec = SceneSpec::new(10, 3, SH3);
+    spec.log_scale = (-2.2, -1.0);
+    let scene = random_scene(&mut rng, &spec);
+    check_forward(&rast, &scene, &cam, &[0.0; 3], 1, "sh3 active 1");
+    check_gradients(&rast, &scene, &cam, &[0.0; 3], 1, &mut rng, &[], "sh3 active 1");
+    let pixels = 30 * 20;
+    let run = gpu_run(&rast, &scene, &cam, &[0.0; 3], 1, Some(&constant_grads(3, pixels, 1.0)));
+    let g = run.grads.unwrap();
+    for i in 0..scene.len() {
+        for k in 4..16 {
+            for c in 0..3 {
+                assert_eq!(g.features[(i * 16 + k) * 3 + c], 0.0, "inactive SH coefficient {k} got a gradient");
+            }
+        }
+    }
+    check_validation(ctx);
+}
+
+#[test]
+fn backward_is_bit_identical_run_to_run() {
+    let ctx = ctx_shared();
+    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
+    let mut rng = Rng(seed("backward_is_bit_identical_run_to_run"));
+    let mut spec = SceneSpec::new(2000, 3, SH3);
+    spec.log_scale = (-3.0, -1.5);
+    let scene = random_scene(&mut rng, &spec);
+    let cam = default_camera(64, 48);
+    let pixels = 64 * 48;
+    let grads: Vec<f32> = (0..constant_grads(3, pixels, 0.0).len()).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let a = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
+    let b = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
+    assert!(a.intersections > 2000, "scene too sparse: {} intersections", a.intersections);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a.out), bits(&b.out), "forward differs between runs");
+    let (ga, gb) = (a.grads.unwrap(), b.grads.unwrap());
+    for (name, x, y) in [
+        ("means", &ga.means, &gb.means),
+        ("log_scales", &ga.log_scales, &gb.log_scales),
+        ("quats", &ga.quats, &gb.quats),
+        ("opacity", &ga.opacity, &gb.opacity),
+        ("features", &ga.features, &gb.features),
+        ("densify", &a.densify, &b.densify),
+    ] {
+        assert_eq!(bits(x), bits(y), "{name} gradients differ between runs");
+        assert!(x.iter().any(|&v| v != 0.0), "{name} gradients are all zero");
+    }
+    check_validation(ctx);
+}
+
+/// Tiles longer than the span take several passes; with a forced span of
+/// 256 a dense scene must give bit-identical outputs and gradients to the
+/// single-pass run (the per-pixel operation sequence is the same).
+#[test]
+fn multi_span_tiles_match_single_span() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("multi_span_tiles_match_single_span"));
+    let mut spec = SceneSpec::new(3000, 3, SH3);
+    spec.log_scale = (-2.5, -1.5);
+    spec.opacity = (-6.0, -3.0);
+    let scene = random_scene(&mut rng, &spec);
+    let cam = default_camera(40, 24);
+    let pixels = 40 * 24;
+    let grads: Vec<f32> = (0..constant_grads(3, pixels, 0.0).len()).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let one = Rasterizer::new(ctx, 3, SH3).unwrap();
+    let many = Rasterizer::with_span(ctx, 3, SH3, Some(256)).unwrap();
+    let a = gpu_run(&one, &scene, &cam, &[0.3; 3], 3, Some(&grads));
+    let b = gpu_run(&many, &scene, &cam, &[0.3; 3], 3, Some(&grads));
+    assert_eq!(a.spans, 1);
+    assert!(b.spans >= 4, "expected several spans, got {}", b.spans);
+    eprintln!("{} intersections, {} spans of 256", b.intersections, b.spans);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a.out), bits(&b.out), "forward differs");
+    let (ga, gb) = (a.grads.unwrap(), b.grads.unwrap());
+    assert_eq!(bits(&ga.means), bits(&gb.means));
+    assert_eq!(bits(&ga.quats), bits(&gb.quats));
+    assert_eq!(bits(&ga.features), bits(&gb.features));
+    assert_eq!(bits(&ga.opacity), bits(&gb.opacity));
+    check_forward(&many, &scene, &cam, &[0.3; 3], 3, "span 256");
+    check_validation(ctx);
+}
