@@ -118,8 +118,10 @@ pub struct RefSplat {
     /// Tile rectangle [x0, x1) x [y0, y1).
     pub rect: [usize; 4],
     pub feat: Vec<f64>,
-    /// Tiles on which a rounding difference could change the rectangle.
-    pub rect_ambiguous: bool,
+    /// Union and intersection of the rectangle under rounding-sized
+    /// perturbations: tiles between them are ambiguous.
+    pub outer: [usize; 4],
+    pub inner: [usize; 4],
 }
 
 struct Cam64 {
@@ -241,15 +243,26 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
     if rect[2] <= rect[0] || rect[3] <= rect[1] {
         return None;
     }
-    // Could f32 rounding move the rectangle? (mu or the radius's ceiling
-    // near a boundary)
+    // Could f32 rounding move the rectangle (mu, or the radius's ceiling,
+    // near a boundary)? Tiles inside every perturbed rectangle are safe; the
+    // ones in some but not all are ambiguous.
     let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
-    let mut rect_ambiguous = false;
+    let mut variants = vec![rect];
     for rr in [radius_raw * (1.0 - 1e-6), radius_raw * (1.0 + 1e-6)] {
-        rect_ambiguous |= rect_of(mu, rr.max(3.0 * 0.707106).ceil(), tiles) != rect;
+        variants.push(rect_of(mu, rr.max(3.0 * 0.707106).ceil(), tiles));
     }
     for dm in [-dl, dl] {
-        rect_ambiguous |= rect_of([mu[0] + dm, mu[1] + dm], radius, tiles) != rect;
+        variants.push(rect_of([mu[0] + dm, mu[1] + dm], radius, tiles));
+    }
+    let mut outer = rect;
+    let mut inner = rect;
+    for v in &variants {
+        for k in 0..2 {
+            outer[k] = outer[k].min(v[k]);
+            inner[k] = inner[k].max(v[k]);
+            outer[k + 2] = outer[k + 2].max(v[k + 2]);
+            inner[k + 2] = inner[k + 2].min(v[k + 2]);
+        }
     }
     let ch = s.channels;
     let fb = g * s.coeffs * ch;
@@ -265,7 +278,7 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
         (0..ch).map(|c| (0.5 + (0..nk).map(|k| y[k] * s.features[fb + k * ch + c]).sum::<f64>()).max(0.0)).collect()
     };
     let o = 1.0 / (1.0 + (-s.opacity[g]).exp());
-    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, feat, rect_ambiguous })
+    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, feat })
 }
 
 /// The reference render: planes in the GPU layout (CH features, alpha,
@@ -280,10 +293,26 @@ pub struct RefRender {
 }
 
 pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> RefRender {
+    render_with_rects(s, cam, background, degree, None)
+}
+
+/// As [`render`], with the tile rectangles taken from the GPU (the binning
+/// decision), so rounding at rectangle edges cannot make the two differ.
+/// Check the GPU's rectangles with [`rects_agree`].
+pub fn render_with_rects(s: &RefScene, cam: &Camera, background: &[f64], degree: u32, rects: Option<&[[u32; 4]]>) -> RefRender {
     let c = Cam64::new(cam);
     let (w, h) = (c.w, c.h);
     let ch = s.channels;
     let mut splats: Vec<RefSplat> = (0..s.len()).filter_map(|g| project(s, g, &c, degree)).collect();
+    if let Some(r) = rects {
+        for sp in &mut splats {
+            let g = r[sp.index].map(|v| v as usize);
+            sp.rect = g;
+            sp.inner = g;
+            sp.outer = g;
+        }
+        splats.retain(|sp| sp.rect[2] > sp.rect[0] && sp.rect[3] > sp.rect[1]);
+    }
     // Depth order; the GPU's radix sort is stable, so ties keep index order.
     // The GPU sorts the f32 depth, so compare that.
     splats.sort_by(|a, b| (a.depth as f32).partial_cmp(&(b.depth as f32)).unwrap().then(a.index.cmp(&b.index)));
@@ -302,11 +331,11 @@ pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> Re
             let mut amb = false;
             let mut tol = 1e-4f64;
             for sp in &splats {
-                let r = sp.rect;
-                if tx < r[0] || tx >= r[2] || ty < r[1] || ty >= r[3] {
+                let inside = |r: [usize; 4]| tx >= r[0] && tx < r[2] && ty >= r[1] && ty < r[3];
+                amb |= inside(sp.outer) && !inside(sp.inner);
+                if !inside(sp.rect) {
                     continue;
                 }
-                amb |= sp.rect_ambiguous;
                 let Some((g, z)) = hit(sp.tu, sp.tv, sp.tw, sp.mu, xf, yf) else {
                     continue;
                 };
@@ -361,4 +390,30 @@ pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> Re
         }
     }
     RefRender { planes, ambiguous, tolerance, splats }
+}
+
+/// Gaussians whose GPU tile rectangle is not between the reference's inner
+/// and outer rectangles (or that one side culls and the other does not, with
+/// a rectangle that cannot be empty). Returns their indices.
+pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) -> Vec<usize> {
+    let c = Cam64::new(cam);
+    let mut bad = Vec::new();
+    for (g, r) in gpu.iter().enumerate() {
+        let r = r.map(|v| v as usize);
+        let empty = r[2] <= r[0] || r[3] <= r[1];
+        match project(s, g, &c, degree) {
+            None => {
+                if !empty {
+                    bad.push(g);
+                }
+            }
+            Some(sp) => {
+                let within = (0..2).all(|k| sp.outer[k] <= r[k] && r[k] <= sp.inner[k] && sp.inner[k + 2] <= r[k + 2] && r[k + 2] <= sp.outer[k + 2]);
+                if !within {
+                    bad.push(g);
+                }
+            }
+        }
+    }
+    bad
 }

@@ -63,6 +63,8 @@ pub struct GpuRun {
     pub densify: Vec<f32>,
     pub intersections: u32,
     pub spans: u32,
+    /// Tile rectangle of every Gaussian.
+    pub rects: Vec<[u32; 4]>,
 }
 
 /// Forward (and backward when `grad_out` is given) on the GPU.
@@ -72,7 +74,8 @@ pub fn gpu_run(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32]
     let mut frame = rast.frame(cam.width, cam.height, host.len() as u32, 1024).unwrap();
     rast.forward(&g, cam, bg, degree, &mut frame, false).unwrap();
     let out = frame.out.download().unwrap();
-    let mut run = GpuRun { out, grads: None, densify: vec![], intersections: frame.last_intersections, spans: frame.spans };
+    let rects = frame.download_rects(host.len()).unwrap();
+    let mut run = GpuRun { out, grads: None, densify: vec![], intersections: frame.last_intersections, spans: frame.spans, rects };
     if let Some(go) = grad_out {
         frame.grad_out.upload(go).unwrap();
         let grads = Gaussians::zeros(ctx, g.n, g.channels, g.coeffs).unwrap();
@@ -126,7 +129,9 @@ pub fn check_forward_with(rast: &Rasterizer, host: &HostGaussians, cam: &Camera,
     let run = gpu_run(rast, host, cam, bg, degree, None);
     let scene = RefScene::from_host(host, rast.features() == Features::Plain);
     let bg64: Vec<f64> = bg.iter().map(|&v| v as f64).collect();
-    let cpu = raster_ref::render(&scene, cam, &bg64, degree);
+    let bad = raster_ref::rects_agree(&scene, cam, degree, &run.rects);
+    assert!(bad.is_empty(), "{what}: tile rectangles of Gaussians {bad:?} differ from the reference beyond rounding");
+    let cpu = raster_ref::render_with_rects(&scene, cam, &bg64, degree, Some(&run.rects));
     let pixels = (cam.width * cam.height) as usize;
     let (err, at, skipped, widened) = compare_forward(&run.out, &cpu, rast.channels(), pixels);
     eprintln!("{what}: worst error/tolerance {err:.3} ({at}); {skipped} ambiguous and {widened} ill-conditioned pixels of {pixels}; {} intersections", run.intersections);

@@ -118,7 +118,8 @@ fn backward_is_bit_identical_run_to_run() {
 
 /// Tiles longer than the span take several passes; with a forced span of
 /// 256 a dense scene must give bit-identical outputs and gradients to the
-/// single-pass run (the per-pixel operation sequence is the same).
+/// run with the device's default span (the per-pixel operation sequence is
+/// the same however the list is cut).
 #[test]
 fn multi_span_tiles_match_single_span() {
     let ctx = ctx_shared();
@@ -134,8 +135,7 @@ fn multi_span_tiles_match_single_span() {
     let many = Rasterizer::with_span(ctx, 3, SH3, Some(256)).unwrap();
     let a = gpu_run(&one, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b = gpu_run(&many, &scene, &cam, &[0.3; 3], 3, Some(&grads));
-    assert_eq!(a.spans, 1);
-    assert!(b.spans >= 4, "expected several spans, got {}", b.spans);
+    assert!(b.spans >= 4 && b.spans > a.spans, "expected more spans with the short span: {} vs {}", b.spans, a.spans);
     eprintln!("{} intersections, {} spans of 256", b.intersections, b.spans);
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&a.out), bits(&b.out), "forward differs");

@@ -90,6 +90,11 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// Tile rectangles [x0, y0, x1, y1) of the first `n` Gaussians from the
+    /// last forward (empty for culled ones). One read-back, for inspection.
+    pub fn download_rects(&self, n: usize) -> anyhow::Result<Vec<[u32; 4]>> {
+        Ok(self.rects.download_range(0, 4 * n)?.chunks(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
+    }
     pub fn pixels(&self) -> usize {
         self.width as usize * self.height as usize
     }
