@@ -53,6 +53,19 @@ enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// 2DGS rasterizer forward + backward on a synthetic scene of N Gaussians.
+    Raster {
+        #[arg(long, default_value_t = 100_000)]
+        n: u32,
+        #[arg(long, default_value_t = 256)]
+        width: u32,
+        #[arg(long, default_value_t = 256)]
+        height: u32,
+        #[arg(long, default_value_t = 3)]
+        reps: u32,
+        #[arg(long)]
+        json: bool,
+    },
     /// Exclusive prefix sum of N u32.
     Scan {
         #[arg(long, default_value_t = 1 << 20)]
@@ -97,6 +110,14 @@ fn run(cli: Cli) -> Result<()> {
                     }
                     if !b.verified {
                         anyhow::bail!("the GPU sort produced unsorted output");
+                    }
+                }
+                Bench::Raster { n, width, height, reps, json } => {
+                    let b = tgs::bench_raster::raster(&ctx, *n, *width, *height, *reps)?;
+                    if *json {
+                        println!("{}", serde_json::to_string_pretty(&b)?);
+                    } else {
+                        tgs::bench_raster::print_raster(&b);
                     }
                 }
                 Bench::Scan { n, reps, json } => {

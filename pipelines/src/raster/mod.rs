@@ -313,12 +313,16 @@ impl Rasterizer {
         )?;
         rec.end_scope(sc);
 
+        let sc = rec.begin_scope("raster.depth_sort");
         self.sort.record(rec, &frame.depth_keys, &frame.depth_ids, &Count::Host(g.n), 32, &frame.depth_scratch).context("depth sort")?;
+        rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.gather");
         rec.dispatch(&self.gather, &[frame.depth_ids.binding(), frame.tiles.binding(), frame.offsets.binding()], bytemuck::bytes_of(&g.n), self.groups(g.n + 1))?;
         rec.end_scope(sc);
+        let sc = rec.begin_scope("raster.scan");
         self.scan.record(rec, &frame.offsets, &frame.offsets, &Count::Host(g.n + 1), &frame.scan_scratch)?;
+        rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.plan");
         let plan_push = [g.n, frame.capacity, WG, self.ctx.caps().max_workgroup_count[0].min(65535)];
@@ -337,7 +341,9 @@ impl Rasterizer {
         let tiles = frame.tiles();
         let tile_bits = 32 - (tiles.max(1) - 1).leading_zeros();
         let count = Count::Gpu { buffer: frame.params.binding(), index: 0 };
+        let sc = rec.begin_scope("raster.tile_sort");
         self.sort.record(rec, &frame.isect_keys, &frame.isect_vals, &count, tile_bits, &frame.tile_scratch).context("tile sort")?;
+        rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.ranges");
         rec.fill(&frame.ranges.binding(), 0)?;
