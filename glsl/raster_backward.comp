@@ -30,6 +30,7 @@ layout(std430, binding = 10) buffer BState { float bstate[]; };
 layout(std430, binding = 11) writeonly buffer Grads { float grads[]; };
 
 shared float part[MAX_SG * BATCH * KREC];
+shared uint s_last[MAX_SG];
 
 void main() {
     uint tile = wg_linear();
@@ -83,6 +84,28 @@ void main() {
     }
     float A = 1.0 - Tf;
     const float DMDZ = FAR * NEAR / (FAR - NEAR);
+
+    // No pixel of the tile blended anything past its last contributor:
+    // start from the largest one (the forward usually stops well before the
+    // end of the list).
+    uint sg_last = subgroupMax(last);
+    if (subgroupElect()) {
+        s_last[gl_SubgroupID] = sg_last;
+    }
+    barrier();
+    uint tile_last = 0u;
+    for (uint s = 0u; s < gl_NumSubgroups; s++) {
+        tile_last = max(tile_last, s_last[s]);
+    }
+    uint full_end = end;
+    end = min(end, max(tile_last, start));
+    // The skipped intersections still own their slots: zero them.
+    for (uint q = end + lid; q < full_end; q += WG) {
+        uint b = vals[q] * KREC;
+        for (uint k = 0u; k < KREC; k++) {
+            grads[b + k] = 0.0;
+        }
+    }
 
     uint bend = end;
     while (bend > start) {

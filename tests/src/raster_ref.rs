@@ -122,6 +122,10 @@ pub struct RefSplat {
     /// perturbations: tiles between them are ambiguous.
     pub outer: [usize; 4],
     pub inner: [usize; 4],
+    /// Half-extent before the ceiling (pixels).
+    pub radius_raw: f64,
+    /// |cos| between the normal and the ray to the centre.
+    pub cos_view: f64,
 }
 
 struct Cam64 {
@@ -278,7 +282,7 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
         (0..ch).map(|c| (0.5 + (0..nk).map(|k| y[k] * s.features[fb + k * ch + c]).sum::<f64>()).max(0.0)).collect()
     };
     let o = 1.0 / (1.0 + (-s.opacity[g]).exp());
-    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, feat })
+    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, radius_raw, cos_view: cosv.abs() / dot(pv, pv).sqrt(), feat })
 }
 
 /// The reference render: planes in the GPU layout (CH features, alpha,
@@ -407,6 +411,7 @@ pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) ->
                     bad.push(g);
                 }
             }
+            Some(sp) if bbox_ill_conditioned(&sp) => {}
             Some(sp) => {
                 let within = (0..2).all(|k| sp.outer[k] <= r[k] && r[k] <= sp.inner[k] && sp.inner[k + 2] <= r[k + 2] && r[k + 2] <= sp.outer[k + 2]);
                 if !within {
@@ -416,4 +421,33 @@ pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) ->
         }
     }
     bad
+}
+
+/// The 3-sigma box of a nearly edge-on splat is ill-conditioned (its conic
+/// is close to degenerate): does its tile rectangle change when the entries
+/// of T move by one f32 ulp?
+fn bbox_ill_conditioned(sp: &RefSplat) -> bool {
+    let ulp = 1.0 / (1u64 << 23) as f64;
+    if sp.cos_view < 1e-3 {
+        return true; // seen edge-on: the bounding conic is degenerate
+    }
+    let w = sp.tw;
+    let d = 9.0 * (w[0] * w[0] + w[1] * w[1]) - w[2] * w[2];
+    if d.abs() < 1e-3 * (9.0 * (w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]) {
+        return true;
+    }
+    [0b101_010_101u32, 0b110_011_001, 0b011_100_110].iter().any(|&pattern| {
+        let e = |row: V3, k: usize| -> V3 { [0, 1, 2].map(|i| row[i] * (1.0 + if pattern >> (3 * k + i) & 1 == 1 { 2.0 * ulp } else { -2.0 * ulp })) };
+        let (tu, tv, tw) = (e(sp.tu, 0), e(sp.tv, 1), e(sp.tw, 2));
+        let t = [9.0, 9.0, -1.0];
+        let d: f64 = (0..3).map(|i| t[i] * tw[i] * tw[i]).sum();
+        let f = t.map(|v| v / d);
+        let fdot = |a: V3, b: V3| f[0] * a[0] * b[0] + f[1] * a[1] * b[1] + f[2] * a[2] * b[2];
+        let mu = [fdot(tu, tw), fdot(tv, tw)];
+        let ex = (mu[0] * mu[0] - fdot(tu, tu)).max(1e-4).sqrt();
+        let ey = (mu[1] * mu[1] - fdot(tv, tv)).max(1e-4).sqrt();
+        let r = ex.max(ey).max(3.0 * 0.707106).ceil();
+        let tiles = [sp.outer[2].max(sp.rect[2]) as f64, sp.outer[3].max(sp.rect[3]) as f64];
+        !r.is_finite() || rect_of(mu, r, tiles) != rect_of(sp.mu, (sp.radius_raw).max(3.0 * 0.707106).ceil(), tiles)
+    })
 }

