@@ -60,7 +60,8 @@ fn keys(n: u32, seed: u64) -> Vec<u32> {
         .collect()
 }
 
-fn average(all: Vec<Vec<tgs_engine::Timing>>) -> Vec<KernelTime> {
+/// Per-kernel times averaged over repetitions (each a run's timings).
+pub(crate) fn average(all: Vec<Vec<tgs_engine::Timing>>) -> Vec<KernelTime> {
     let reps = all.len().max(1) as f64;
     let mut out: Vec<KernelTime> = Vec::new();
     for t in &all {

@@ -2,12 +2,12 @@
 //! W x H, one forward + backward per repetition, GPU time per kernel from
 //! timestamp queries. Shared by `tgs bench raster` and `cargo bench`.
 
-use crate::bench::KernelTime;
+use crate::bench::{average, KernelTime};
 use anyhow::{ensure, Result};
 use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
-use tgs_engine::{summarize, Context, Recorder};
+use tgs_engine::{Context, Recorder};
 use tgs_pipelines::{Camera, Features, Gaussians, HostGaussians, Rasterizer};
 
 #[derive(Clone, Debug, Serialize)]
@@ -89,15 +89,7 @@ pub fn raster(ctx: &Arc<Context>, n: u32, width: u32, height: u32, reps: u32) ->
         ensure!(rast.fit(&mut frame)?, "the frame grew during timed runs");
         all.push(t);
     }
-    let mut kernels: Vec<KernelTime> = Vec::new();
-    for t in &all {
-        for s in summarize(t) {
-            match kernels.iter_mut().find(|k| k.name == s.name) {
-                Some(k) => k.ms += s.total_ms / reps as f64,
-                None => kernels.push(KernelTime { name: s.name, ms: s.total_ms / reps as f64, calls: s.count }),
-            }
-        }
-    }
+    let mut kernels = average(all);
     let take = |name: &str, ks: &mut Vec<KernelTime>| {
         let i = ks.iter().position(|k| k.name == name);
         i.map(|i| ks.remove(i).ms).unwrap_or(0.0)

@@ -122,8 +122,6 @@ pub struct RefSplat {
     /// perturbations: tiles between them are ambiguous.
     pub outer: [usize; 4],
     pub inner: [usize; 4],
-    /// Half-extent before the ceiling (pixels).
-    pub radius_raw: f64,
     /// |cos| between the normal and the ray to the centre.
     pub cos_view: f64,
 }
@@ -147,6 +145,10 @@ impl Cam64 {
         let t = [m[0][3], m[1][3], m[2][3]];
         let centre = [0, 1, 2].map(|j| -(0..3).map(|i| r[i][j] * t[i]).sum::<f64>());
         Cam64 { r, t, fx: c.fx as f64, fy: c.fy as f64, cx: c.cx as f64, cy: c.cy as f64, centre, w: c.width as usize, h: c.height as usize }
+    }
+    /// The tile grid, as the bounds rectangles are clamped to.
+    fn tiles(&self) -> [f64; 2] {
+        [self.w.div_ceil(16) as f64, self.h.div_ceil(16) as f64]
     }
     fn rot(&self, v: V3) -> V3 {
         [dot(self.r[0], v), dot(self.r[1], v), dot(self.r[2], v)]
@@ -176,16 +178,39 @@ fn hit(tu: V3, tv: V3, tw: V3, mu: [f64; 2], x: f64, y: f64) -> Option<(f64, f64
 /// largest change of depth plus alpha-weighted change (infinite when the
 /// perturbed ray misses).
 fn sensitivity(sp: &RefSplat, x: f64, y: f64, g: f64, z: f64) -> f64 {
-    let ulp = 1.0 / (1u64 << 23) as f64;
     let mut worst = 0.0f64;
     for pattern in [0b101_010_101u32, 0b110_011_001] {
-        let e = |row: V3, k: usize| -> V3 { [0, 1, 2].map(|i| row[i] * (1.0 + if pattern >> (3 * k + i) & 1 == 1 { ulp } else { -ulp })) };
-        match hit(e(sp.tu, 0), e(sp.tv, 1), e(sp.tw, 2), sp.mu, x, y) {
+        let (tu, tv, tw) = perturb(sp, pattern, 1.0);
+        match hit(tu, tv, tw, sp.mu, x, y) {
             Some((g2, z2)) => worst = worst.max((z2 - z).abs() + (sp.o * (g2 - g)).abs() * (1.0 + z.abs())),
             None => return f64::INFINITY,
         }
     }
     worst
+}
+
+/// The rows of T with each entry moved by `ulps` f32 ulps, up or down as
+/// bit (3 * row + column) of `pattern` says.
+fn perturb(sp: &RefSplat, pattern: u32, ulps: f64) -> (V3, V3, V3) {
+    let ulp = ulps / (1u64 << 23) as f64;
+    let e = |row: V3, k: usize| -> V3 { [0, 1, 2].map(|i| row[i] * (1.0 + if pattern >> (3 * k + i) & 1 == 1 { ulp } else { -ulp })) };
+    (e(sp.tu, 0), e(sp.tv, 1), e(sp.tw, 2))
+}
+
+/// Centre of the 3-sigma bounding box and its half-extent (at least the
+/// low-pass radius, before the ceiling); None for a singular conic.
+fn bbox(tu: V3, tv: V3, tw: V3) -> Option<([f64; 2], f64)> {
+    let t = [9.0, 9.0, -1.0];
+    let d = t[0] * tw[0] * tw[0] + t[1] * tw[1] * tw[1] + t[2] * tw[2] * tw[2];
+    if d == 0.0 {
+        return None;
+    }
+    let f = [t[0] / d, t[1] / d, t[2] / d];
+    let fdot = |a: V3, b: V3| f[0] * a[0] * b[0] + f[1] * a[1] * b[1] + f[2] * a[2] * b[2];
+    let mu = [fdot(tu, tw), fdot(tv, tw)];
+    let ex = (mu[0] * mu[0] - fdot(tu, tu)).max(1e-4).sqrt();
+    let ey = (mu[1] * mu[1] - fdot(tv, tv)).max(1e-4).sqrt();
+    Some((mu, ex.max(ey).max(3.0 * 0.707106)))
 }
 
 fn rect_of(mu: [f64; 2], r: f64, tiles: [f64; 2]) -> [usize; 4] {
@@ -226,23 +251,13 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
         return None;
     }
     let n = if cosv < 0.0 { scale(nv, -1.0) } else { nv };
-    let t = [9.0, 9.0, -1.0];
-    let d = t[0] * tw[0] * tw[0] + t[1] * tw[1] * tw[1] + t[2] * tw[2] * tw[2];
-    if d == 0.0 {
-        return None;
-    }
-    let f = [t[0] / d, t[1] / d, t[2] / d];
-    let fdot = |a: V3, b: V3| f[0] * a[0] * b[0] + f[1] * a[1] * b[1] + f[2] * a[2] * b[2];
-    let mu = [fdot(tu, tw), fdot(tv, tw)];
-    let ex = (mu[0] * mu[0] - fdot(tu, tu)).max(1e-4).sqrt();
-    let ey = (mu[1] * mu[1] - fdot(tv, tv)).max(1e-4).sqrt();
-    let radius_raw = ex.max(ey).max(3.0 * 0.707106);
+    let (mu, radius_raw) = bbox(tu, tv, tw)?;
     let radius = radius_raw.ceil();
     let all = tu.iter().chain(&tv).chain(&tw).chain(&mu).chain(&n).chain(std::iter::once(&radius));
     if !all.into_iter().all(|v| v.is_finite()) {
         return None;
     }
-    let tiles = [cam.w.div_ceil(16) as f64, cam.h.div_ceil(16) as f64];
+    let tiles = cam.tiles();
     let rect = rect_of(mu, radius, tiles);
     if rect[2] <= rect[0] || rect[3] <= rect[1] {
         return None;
@@ -282,7 +297,7 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
         (0..ch).map(|c| (0.5 + (0..nk).map(|k| y[k] * s.features[fb + k * ch + c]).sum::<f64>()).max(0.0)).collect()
     };
     let o = 1.0 / (1.0 + (-s.opacity[g]).exp());
-    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, radius_raw, cos_view: cosv.abs() / dot(pv, pv).sqrt(), feat })
+    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, cos_view: cosv.abs() / dot(pv, pv).sqrt(), feat })
 }
 
 /// The reference render: planes in the GPU layout (CH features, alpha,
@@ -411,7 +426,7 @@ pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) ->
                     bad.push(g);
                 }
             }
-            Some(sp) if bbox_ill_conditioned(&sp) => {}
+            Some(sp) if bbox_ill_conditioned(&sp, c.tiles()) => {}
             Some(sp) => {
                 let within = (0..2).all(|k| sp.outer[k] <= r[k] && r[k] <= sp.inner[k] && sp.inner[k + 2] <= r[k + 2] && r[k + 2] <= sp.outer[k + 2]);
                 if !within {
@@ -426,8 +441,7 @@ pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) ->
 /// The 3-sigma box of a nearly edge-on splat is ill-conditioned (its conic
 /// is close to degenerate): does its tile rectangle change when the entries
 /// of T move by one f32 ulp?
-fn bbox_ill_conditioned(sp: &RefSplat) -> bool {
-    let ulp = 1.0 / (1u64 << 23) as f64;
+fn bbox_ill_conditioned(sp: &RefSplat, tiles: [f64; 2]) -> bool {
     if sp.cos_view < 1e-3 {
         return true; // seen edge-on: the bounding conic is degenerate
     }
@@ -437,17 +451,10 @@ fn bbox_ill_conditioned(sp: &RefSplat) -> bool {
         return true;
     }
     [0b101_010_101u32, 0b110_011_001, 0b011_100_110].iter().any(|&pattern| {
-        let e = |row: V3, k: usize| -> V3 { [0, 1, 2].map(|i| row[i] * (1.0 + if pattern >> (3 * k + i) & 1 == 1 { 2.0 * ulp } else { -2.0 * ulp })) };
-        let (tu, tv, tw) = (e(sp.tu, 0), e(sp.tv, 1), e(sp.tw, 2));
-        let t = [9.0, 9.0, -1.0];
-        let d: f64 = (0..3).map(|i| t[i] * tw[i] * tw[i]).sum();
-        let f = t.map(|v| v / d);
-        let fdot = |a: V3, b: V3| f[0] * a[0] * b[0] + f[1] * a[1] * b[1] + f[2] * a[2] * b[2];
-        let mu = [fdot(tu, tw), fdot(tv, tw)];
-        let ex = (mu[0] * mu[0] - fdot(tu, tu)).max(1e-4).sqrt();
-        let ey = (mu[1] * mu[1] - fdot(tv, tv)).max(1e-4).sqrt();
-        let r = ex.max(ey).max(3.0 * 0.707106).ceil();
-        let tiles = [sp.outer[2].max(sp.rect[2]) as f64, sp.outer[3].max(sp.rect[3]) as f64];
-        !r.is_finite() || rect_of(mu, r, tiles) != rect_of(sp.mu, (sp.radius_raw).max(3.0 * 0.707106).ceil(), tiles)
+        let (tu, tv, tw) = perturb(sp, pattern, 2.0);
+        match bbox(tu, tv, tw) {
+            Some((mu, r)) => !r.is_finite() || rect_of(mu, r.ceil(), tiles) != sp.rect,
+            None => true,
+        }
     })
 }

@@ -237,7 +237,12 @@ pub fn check_gradients_with(rast: &Rasterizer, host: &HostGaussians, cam: &Camer
     }
 }
 
-/// Upload a buffer of upstream gradients of the right size filled with `v`.
+/// Upstream gradients for every output plane, all equal to `v`.
 pub fn constant_grads(channels: u32, pixels: usize, v: f32) -> Vec<f32> {
     vec![v; Plane::count(channels) as usize * pixels]
+}
+
+/// Upstream gradients for every output plane, uniform in [-1, 1).
+pub fn random_grads(rng: &mut Rng, channels: u32, pixels: usize) -> Vec<f32> {
+    (0..Plane::count(channels) as usize * pixels).map(|_| rng.uniform(-1.0, 1.0) as f32).collect()
 }

@@ -95,7 +95,7 @@ fn backward_is_bit_identical_run_to_run() {
     let scene = random_scene(&mut rng, &spec);
     let cam = default_camera(64, 48);
     let pixels = 64 * 48;
-    let grads: Vec<f32> = (0..constant_grads(3, pixels, 0.0).len()).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let grads = random_grads(&mut rng, 3, pixels);
     let a = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     assert!(a.intersections > 2000, "scene too sparse: {} intersections", a.intersections);
@@ -130,7 +130,7 @@ fn multi_span_tiles_match_single_span() {
     let scene = random_scene(&mut rng, &spec);
     let cam = default_camera(40, 24);
     let pixels = 40 * 24;
-    let grads: Vec<f32> = (0..constant_grads(3, pixels, 0.0).len()).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let grads = random_grads(&mut rng, 3, pixels);
     let one = Rasterizer::new(ctx, 3, SH3).unwrap();
     let many = Rasterizer::with_span(ctx, 3, SH3, Some(256)).unwrap();
     let a = gpu_run(&one, &scene, &cam, &[0.3; 3], 3, Some(&grads));

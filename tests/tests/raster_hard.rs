@@ -2,7 +2,7 @@
 //! with the CPU f64 reference (see tests/src/raster_ref.rs for the
 //! tolerances).
 
-use tgs_pipelines::{Camera, Features, HostGaussians, Rasterizer};
+use tgs_pipelines::{Camera, Features, HostGaussians, Plane, Rasterizer};
 use tgs_tests::raster_ref::{render, RefScene};
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
@@ -31,7 +31,7 @@ fn feats(rng: &mut Rng, n: usize) -> Vec<f32> {
 fn check_finite_backward(rast: &Rasterizer, scene: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, rng: &mut Rng, what: &str) -> GpuRun {
     check_forward(rast, scene, cam, bg, degree, what);
     let pixels = (cam.width * cam.height) as usize;
-    let go: Vec<f32> = (0..constant_grads(rast.channels(), pixels, 0.0).len()).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let go = random_grads(rng, rast.channels(), pixels);
     let run = gpu_run(rast, scene, cam, bg, degree, Some(&go));
     let g = run.grads.as_ref().unwrap();
     for (name, v) in [("means", &g.means), ("log_scales", &g.log_scales), ("quats", &g.quats), ("opacity", &g.opacity), ("features", &g.features), ("densify", &run.densify)] {
@@ -224,7 +224,7 @@ fn tile_with_fifty_thousand_splats() {
     // Gradients of the front-most and back-most splats that reach a pixel,
     // against finite differences of the reference.
     let pixels = 24 * 20;
-    let planes = constant_grads(3, pixels, 0.0).len();
+    let planes = Plane::count(3) as usize * pixels;
     let base = RefScene::from_host(&s, true);
     let reference = render(&base, &cam, &[0.0; 3], 0);
     // Zero weight where a discrete decision is ambiguous (see raster_ref).

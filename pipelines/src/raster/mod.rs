@@ -21,7 +21,7 @@ use crate::sort::RadixSort;
 use anyhow::{bail, Context as _, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use tgs_engine::{groups_2d, Buffer, Context, Kernel, KernelDesc, Recorder};
+use tgs_engine::{groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Recorder};
 
 /// How per-Gaussian features become the rasterized channels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -272,8 +272,35 @@ impl Rasterizer {
         Ok(())
     }
 
+    /// Largest workgroup count per dimension (grids beyond it are 2-D).
+    fn max_x(&self) -> u32 {
+        self.ctx.caps().max_workgroup_count[0].min(65535)
+    }
+
+    /// Grid of one invocation per item.
     fn groups(&self, items: u32) -> [u32; 3] {
-        groups_2d(items.div_ceil(WG), self.ctx.caps().max_workgroup_count[0].min(65535))
+        groups_2d(items.div_ceil(WG), self.max_x())
+    }
+
+    /// Bindings 0..=5 of the project and reduce kernels: camera, then the
+    /// Gaussian parameters.
+    fn param_bindings(frame: &Frame, g: &Gaussians) -> Vec<BufferBinding> {
+        vec![frame.cam.binding(), g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), g.features.binding()]
+    }
+
+    /// Bindings 0..=8 of the per-tile forward and backward kernels.
+    fn tile_bindings(frame: &Frame) -> Vec<BufferBinding> {
+        vec![
+            frame.cam.binding(),
+            frame.ranges.binding(),
+            frame.isect_vals.binding(),
+            frame.isect_gid.binding(),
+            frame.proj.binding(),
+            frame.pfeat.binding(),
+            frame.out.binding(),
+            frame.fstate.binding(),
+            frame.ustate.binding(),
+        ]
     }
 
     /// Record the forward pass of one view: outputs land in `frame.out`.
@@ -292,25 +319,16 @@ impl Rasterizer {
         rec.update(&frame.cam.binding(), bytemuck::cast_slice(&cam.pack(background)))?;
 
         let sc = rec.begin_scope("raster.project");
-        rec.dispatch(
-            &self.project,
-            &[
-                frame.cam.binding(),
-                g.means.binding(),
-                g.log_scales.binding(),
-                g.quats.binding(),
-                g.opacity.binding(),
-                g.features.binding(),
-                frame.proj.binding(),
-                frame.pfeat.binding(),
-                frame.rects.binding(),
-                frame.tiles.binding(),
-                frame.depth_keys.binding(),
-                frame.depth_ids.binding(),
-            ],
-            pb,
-            self.groups(g.n),
-        )?;
+        let mut bindings = Self::param_bindings(frame, g);
+        bindings.extend([
+            frame.proj.binding(),
+            frame.pfeat.binding(),
+            frame.rects.binding(),
+            frame.tiles.binding(),
+            frame.depth_keys.binding(),
+            frame.depth_ids.binding(),
+        ]);
+        rec.dispatch(&self.project, &bindings, pb, self.groups(g.n))?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.depth_sort");
@@ -325,7 +343,7 @@ impl Rasterizer {
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.plan");
-        let plan_push = [g.n, frame.capacity, WG, self.ctx.caps().max_workgroup_count[0].min(65535)];
+        let plan_push = [g.n, frame.capacity, WG, self.max_x()];
         rec.dispatch(&self.plan, &[frame.offsets.binding(), frame.params.binding(), frame.args.binding(), frame.stats.binding()], bytemuck::cast_slice(&plan_push), [1, 1, 1])?;
         rec.end_scope(sc);
 
@@ -350,27 +368,13 @@ impl Rasterizer {
         rec.dispatch_indirect(&self.ranges, &[frame.params.binding(), frame.isect_keys.binding(), frame.ranges.binding()], &[], &frame.args.binding())?;
         rec.end_scope(sc);
 
-        let tile_groups = groups_2d(tiles, self.ctx.caps().max_workgroup_count[0].min(65535));
+        let tile_groups = groups_2d(tiles, self.max_x());
+        let mut bindings = Self::tile_bindings(frame);
+        bindings.push(frame.stats.binding());
         for k in 0..frame.spans {
             let p = Push { span_index: k, ..push };
             let sc = rec.begin_scope("raster.forward");
-            rec.dispatch(
-                &self.forward,
-                &[
-                    frame.cam.binding(),
-                    frame.ranges.binding(),
-                    frame.isect_vals.binding(),
-                    frame.isect_gid.binding(),
-                    frame.proj.binding(),
-                    frame.pfeat.binding(),
-                    frame.out.binding(),
-                    frame.fstate.binding(),
-                    frame.ustate.binding(),
-                    frame.stats.binding(),
-                ],
-                bytemuck::bytes_of(&p),
-                tile_groups,
-            )?;
+            rec.dispatch(&self.forward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
         Ok(())
@@ -385,54 +389,29 @@ impl Rasterizer {
             bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
         }
         let push = self.push(g, frame, sh_degree);
-        let tile_groups = groups_2d(frame.tiles(), self.ctx.caps().max_workgroup_count[0].min(65535));
+        let tile_groups = groups_2d(frame.tiles(), self.max_x());
+        let mut bindings = Self::tile_bindings(frame);
+        bindings.extend([frame.grad_out.binding(), frame.bstate.binding(), frame.isect_grads.binding()]);
         for k in (0..frame.spans).rev() {
             let p = Push { span_index: k, ..push };
             let sc = rec.begin_scope("raster.backward");
-            rec.dispatch(
-                &self.backward,
-                &[
-                    frame.cam.binding(),
-                    frame.ranges.binding(),
-                    frame.isect_vals.binding(),
-                    frame.isect_gid.binding(),
-                    frame.proj.binding(),
-                    frame.pfeat.binding(),
-                    frame.out.binding(),
-                    frame.fstate.binding(),
-                    frame.ustate.binding(),
-                    frame.grad_out.binding(),
-                    frame.bstate.binding(),
-                    frame.isect_grads.binding(),
-                ],
-                bytemuck::bytes_of(&p),
-                tile_groups,
-            )?;
+            rec.dispatch(&self.backward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
         let sc = rec.begin_scope("raster.reduce");
-        rec.dispatch(
-            &self.reduce,
-            &[
-                frame.cam.binding(),
-                g.means.binding(),
-                g.log_scales.binding(),
-                g.quats.binding(),
-                g.opacity.binding(),
-                g.features.binding(),
-                frame.depth_ids.binding(),
-                frame.offsets.binding(),
-                frame.isect_grads.binding(),
-                grads.means.binding(),
-                grads.log_scales.binding(),
-                grads.quats.binding(),
-                grads.opacity.binding(),
-                grads.features.binding(),
-                frame.densify.binding(),
-            ],
-            bytemuck::bytes_of(&push),
-            self.groups(g.n),
-        )?;
+        let mut bindings = Self::param_bindings(frame, g);
+        bindings.extend([
+            frame.depth_ids.binding(),
+            frame.offsets.binding(),
+            frame.isect_grads.binding(),
+            grads.means.binding(),
+            grads.log_scales.binding(),
+            grads.quats.binding(),
+            grads.opacity.binding(),
+            grads.features.binding(),
+            frame.densify.binding(),
+        ]);
+        rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
         rec.end_scope(sc);
         Ok(())
     }
