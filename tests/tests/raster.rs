@@ -144,6 +144,8 @@ fn multi_span_tiles_match_single_span() {
     assert_eq!(bits(&ga.quats), bits(&gb.quats));
     assert_eq!(bits(&ga.features), bits(&gb.features));
     assert_eq!(bits(&ga.opacity), bits(&gb.opacity));
-    check_forward(&many, &scene, &cam, &[0.3; 3], 3, "span 256");
+    // A dense pile of faint splats: more pixels sit at the 1/255 cut (the
+    // same allowance as the 50k-splat pile).
+    check_forward_with(&many, &scene, &cam, &[0.3; 3], 3, 0.05, "span 256");
     check_validation(ctx);
 }

@@ -133,8 +133,12 @@ fn saturated_opacity_clamps_alpha() {
     let cam = default_camera(36, 20);
     let mut spec = SceneSpec::new(12, 3, SH3);
     spec.log_scale = (-2.0, -1.0);
-    spec.opacity = (6.0, 30.0);
-    let scene = random_scene(&mut rng, &spec);
+    // Raw opacity above 4.6 saturates (sigmoid > 0.99); up to 8 the opacity
+    // gradients stay well above the finite differences' noise floor.
+    spec.opacity = (2.0, 8.0);
+    let mut scene = random_scene(&mut rng, &spec);
+    // One large splat facing the camera at the look-at point: always saturates.
+    scene.push([0.05, 0.02, 0.0], [-1.0, -1.0], [1.0, 0.0, 0.0, 0.0], 30.0, &feats(&mut rng, 48));
     let run = check_finite_backward(&rast, &scene, &cam, &[0.0; 3], 3, &mut rng, "opacity -> 1");
     // Where the front splat saturates, alpha is 0.99 per layer: alpha output
     // reaches 1 - 0.01^k but never exceeds 1.
@@ -189,8 +193,13 @@ fn empty_scene_and_one_pixel_image() {
 
     let mut spec = SceneSpec::new(40, 3, SH3);
     spec.log_scale = (-1.5, -0.5);
-    let scene = random_scene(&mut rng, &spec);
     let one = default_camera(1, 1);
+    // The gradient check needs the single pixel to be checkable (no severe
+    // grazing hit on it, which happens in about one scene in eight).
+    let scene = (0..20)
+        .map(|_| random_scene(&mut rng, &spec))
+        .find(|s| render(&RefScene::from_host(s, false), &one, &[0.1; 3], 3).gradient_checkable(0))
+        .expect("no 1x1 scene with a checkable pixel in 20 draws");
     let r = check_finite_backward(&rast, &scene, &one, &[0.1; 3], 3, &mut rng, "1x1");
     assert!(r.out[3] > 0.0, "nothing covers the single pixel");
     check_gradients(&rast, &scene, &one, &[0.1; 3], 3, &mut rng, &[], "1x1");
@@ -207,7 +216,9 @@ fn tile_with_fifty_thousand_splats() {
     let mut rng = Rng(seed("tile_with_fifty_thousand_splats"));
     let cam = axis_camera(24, 20, 20.0);
     let mut s = HostGaussians::new(3, 1);
-    let n = 50_000;
+    // A few more than 50,000: a random orientation can be edge-on to within
+    // rounding (culled, correctly), and the tile must keep 50,000.
+    let n = 50_050;
     for _ in 0..n {
         let z = rng.uniform(2.0, 6.0);
         let (px, py) = (rng.uniform(3.0, 12.5), rng.uniform(3.0, 12.5));
@@ -217,7 +228,7 @@ fn tile_with_fifty_thousand_splats() {
     }
     let run = check_forward_with(&rast, &s, &cam, &[0.0; 3], 0, 0.05, "50k splats in a tile");
     eprintln!("{} intersections in {} span passes of {}", run.intersections, run.spans, rast.span());
-    assert!(run.intersections >= n as u32);
+    assert!(run.intersections >= 50_000, "only {} splats in the tile", run.intersections);
     if ctx.caps().is_cpu() {
         assert!(run.spans > 1, "the heavy tile should need several spans on a CPU driver");
     }
@@ -227,8 +238,9 @@ fn tile_with_fifty_thousand_splats() {
     let planes = Plane::count(3) as usize * pixels;
     let base = RefScene::from_host(&s, true);
     let reference = render(&base, &cam, &[0.0; 3], 0);
-    // Zero weight where a discrete decision is ambiguous (see raster_ref).
-    let weights: Vec<f64> = (0..planes).map(|i| if reference.ambiguous[i % pixels] { 0.0 } else { rng.uniform(-1.0, 1.0) }).collect();
+    // Zero weight where a discrete decision is ambiguous or a hit is
+    // severely ill-conditioned (see raster_ref and check_gradients).
+    let weights: Vec<f64> = (0..planes).map(|i| if reference.gradient_checkable(i % pixels) { rng.uniform(-1.0, 1.0) } else { 0.0 }).collect();
     let w32: Vec<f32> = weights.iter().map(|&w| w as f32).collect();
     let gpu = gpu_run(&rast, &s, &cam, &[0.0; 3], 0, Some(&w32));
     let g = gpu.grads.unwrap();
