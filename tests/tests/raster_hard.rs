@@ -137,8 +137,9 @@ fn saturated_opacity_clamps_alpha() {
     // gradients stay well above the finite differences' noise floor.
     spec.opacity = (2.0, 8.0);
     let mut scene = random_scene(&mut rng, &spec);
-    // One large splat facing the camera at the look-at point: always saturates.
-    scene.push([0.05, 0.02, 0.0], [-1.0, -1.0], [1.0, 0.0, 0.0, 0.0], 30.0, &feats(&mut rng, 48));
+    // One splat facing the camera at the look-at point, about 6 px across
+    // (G >= 0.99 at the nearest pixel centre): always saturates.
+    scene.push([0.05, 0.02, 0.0], [0.0, 0.0], [1.0, 0.0, 0.0, 0.0], 30.0, &feats(&mut rng, 48));
     let run = check_finite_backward(&rast, &scene, &cam, &[0.0; 3], 3, &mut rng, "opacity -> 1");
     // Where the front splat saturates, alpha is 0.99 per layer: alpha output
     // reaches 1 - 0.01^k but never exceeds 1.
