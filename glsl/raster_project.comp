@@ -16,6 +16,8 @@ layout(std430, binding = 8) writeonly buffer Rects { uvec4 rects[]; };
 layout(std430, binding = 9) writeonly buffer Tiles { uint tiles[]; };
 layout(std430, binding = 10) writeonly buffer Keys { uint depth_keys[]; };
 layout(std430, binding = 11) writeonly buffer Ids { uint depth_ids[]; };
+// Screen radius in pixels (0 when culled): densification statistics.
+layout(std430, binding = 12) writeonly buffer Radii { float radii[]; };
 
 #include "raster_project.glsl"
 
@@ -36,6 +38,7 @@ void main() {
     uint count = (rect.z - rect.x) * (rect.w - rect.y);
     rects[g] = rect;
     tiles[g] = count;
+    radii[g] = count > 0u ? pr.radius : 0.0;
     depth_keys[g] = count > 0u ? floatBitsToUint(pr.pv.z) : 0xFFFFFFFFu;
     if (count == 0u) {
         return;

@@ -15,3 +15,5 @@ pub use sort::{RadixSort, SortConfig, SortScratch};
 pub use util::Iota;
 pub mod raster;
 pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, Rasterizer};
+pub mod train;
+pub use train::{Adam, AdamGroup, DensifyParams, DensifyReport, Densifier, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};

@@ -87,6 +87,8 @@ pub struct Frame {
     pub(crate) isect_grads: Buffer<f32>,
     /// Screen-space gradient per Gaussian (2 floats, NDC units) from the last backward.
     pub densify: Buffer<f32>,
+    /// Screen radius in pixels per Gaussian from the last forward (0 = culled).
+    pub radii: Buffer<f32>,
 }
 
 impl Frame {

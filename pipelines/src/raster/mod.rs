@@ -236,6 +236,7 @@ impl Rasterizer {
             bstate: fbuf("raster.bstate", 2 * pixels)?,
             isect_grads: fbuf("raster.isect_grads", capacity as usize * self.record_len() as usize)?,
             densify: fbuf("raster.densify", 2 * n)?,
+            radii: fbuf("raster.radii", n)?,
         })
     }
 
@@ -327,6 +328,7 @@ impl Rasterizer {
             frame.tiles.binding(),
             frame.depth_keys.binding(),
             frame.depth_ids.binding(),
+            frame.radii.binding(),
         ]);
         rec.dispatch(&self.project, &bindings, pb, self.groups(g.n))?;
         rec.end_scope(sc);

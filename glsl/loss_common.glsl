@@ -1,0 +1,53 @@
+// Shared definitions of the image-loss kernels (loss_*.comp): one invocation
+// per pixel (or per pixel and plane), planar images of width * height floats.
+#ifndef TGS_LOSS_COMMON_GLSL
+#define TGS_LOSS_COMMON_GLSL
+#include "common.glsl"
+
+layout(push_constant) uniform Push {
+    uint width;
+    uint height;
+    uint channels;   // colour channels C (the first C planes of the render)
+    uint nplanes;    // planes processed by a blur
+    float fx, fy, cx, cy;
+    float w_l1;      // (1 - lambda_ssim)
+    float w_ssim;    // lambda_ssim
+    float w_normal;  // lambda_normal (0: normal consistency off)
+    float w_dist;    // lambda_dist
+    uint mode;       // blur: 0 = products of render and target, 1 = planes
+    uint dir;        // blur: 0 = horizontal, 1 = vertical
+    uint plane_alpha;
+    uint plane_depth;
+    uint plane_normal;
+    uint plane_median;
+    uint plane_dist;
+    uint pad;
+} pc;
+
+uint pixels() {
+    return pc.width * pc.height;
+}
+
+// SSIM constants (Wang et al.; 3DGS/2DGS utils/loss_utils.py).
+const float SSIM_C1 = 0.0001;
+const float SSIM_C2 = 0.0009;
+const int SSIM_RADIUS = 5;
+const float SSIM_SIGMA = 1.5;
+
+// Deterministic workgroup sum of one value per invocation (fixed tree order).
+shared float s_red[256];
+float wg_sum(float v) {
+    uint lid = gl_LocalInvocationID.x;
+    barrier();
+    s_red[lid] = v;
+    barrier();
+    for (uint s = WG / 2u; s > 0u; s >>= 1u) {
+        if (lid < s) {
+            s_red[lid] += s_red[lid + s];
+        }
+        barrier();
+    }
+    return s_red[0];
+}
+
+#endif

@@ -1,0 +1,56 @@
+#version 460
+// Per pixel: SSIM of every colour channel from the blurred moments, its
+// gradient coefficients with respect to the blurred x, x^2 and xy (scaled by
+// -lambda_ssim / (pixels * C), blurred again by the caller), and workgroup
+// partial sums of L1, squared error and SSIM (partials[4 * wg + 0..2]).
+#include "loss_common.glsl"
+
+layout(std430, binding = 0) readonly buffer Render { float render[]; };
+layout(std430, binding = 1) readonly buffer Target { float target[]; };
+layout(std430, binding = 2) readonly buffer Moments { float mom[]; };
+layout(std430, binding = 3) writeonly buffer Coef { float coef[]; };
+layout(std430, binding = 4) writeonly buffer Partials { float partials[]; };
+
+void main() {
+    uint pix = wg_linear() * WG + gl_LocalInvocationID.x;
+    uint n = pixels();
+    float l1 = 0.0, se = 0.0, ss = 0.0;
+    if (pix < n) {
+        float k = -pc.w_ssim / (float(n) * float(pc.channels));
+        for (uint c = 0u; c < pc.channels; c++) {
+            float mx = mom[(5u * c + 0u) * n + pix];
+            float my = mom[(5u * c + 1u) * n + pix];
+            float exx = mom[(5u * c + 2u) * n + pix];
+            float eyy = mom[(5u * c + 3u) * n + pix];
+            float exy = mom[(5u * c + 4u) * n + pix];
+            float sxx = exx - mx * mx;
+            float syy = eyy - my * my;
+            float sxy = exy - mx * my;
+            float a1 = 2.0 * mx * my + SSIM_C1;
+            float a2 = 2.0 * sxy + SSIM_C2;
+            float b1 = mx * mx + my * my + SSIM_C1;
+            float b2 = sxx + syy + SSIM_C2;
+            float s = (a1 * a2) / (b1 * b2);
+            // Partial derivatives holding the (co)variances, then through them.
+            float d_mx = 2.0 * my * a2 / (b1 * b2) - s * 2.0 * mx / b1;
+            float d_sxx = -s / b2;
+            float d_sxy = 2.0 * a1 / (b1 * b2);
+            coef[(3u * c + 0u) * n + pix] = k * (d_mx - 2.0 * mx * d_sxx - my * d_sxy);
+            coef[(3u * c + 1u) * n + pix] = k * d_sxx;
+            coef[(3u * c + 2u) * n + pix] = k * d_sxy;
+            float d = render[c * n + pix] - target[c * n + pix];
+            l1 += abs(d);
+            se += d * d;
+            ss += s;
+        }
+    }
+    float t0 = wg_sum(l1);
+    float t1 = wg_sum(se);
+    float t2 = wg_sum(ss);
+    if (gl_LocalInvocationID.x == 0u) {
+        uint w = wg_linear();
+        partials[4u * w + 0u] = t0;
+        partials[4u * w + 1u] = t1;
+        partials[4u * w + 2u] = t2;
+    }
+}

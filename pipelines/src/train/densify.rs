@@ -1,0 +1,164 @@
+//! Adaptive density control on the GPU (method-notes §1.11): statistics per
+//! view, then clone / split / prune decided per Gaussian, compacted with the
+//! exclusive scan and written into fresh buffers. Only the new total (4
+//! bytes) comes back to the host, to size the new buffers.
+
+use super::set::TrainableSet;
+use super::{grid, kernel};
+use crate::raster::{Frame, Gaussians};
+use crate::scan::{Count, PrefixSum, ScanScratch};
+use crate::shaders;
+use anyhow::Result;
+use bytemuck::{Pod, Zeroable};
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context, Kernel, Recorder};
+
+/// Thresholds of one densification step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DensifyParams {
+    /// Clone/split when the mean screen gradient reaches this (NDC units).
+    pub grad_threshold: f32,
+    /// Clone at or below this world scale, split above (percent_dense * extent).
+    pub dense_scale: f32,
+    /// Prune below this opacity.
+    pub opacity_min: f32,
+    /// Also prune large Gaussians (screen radius / world scale).
+    pub prune_big: bool,
+    pub big_screen: f32,
+    pub big_world: f32,
+    /// Clone and split (false: prune only).
+    pub grow: bool,
+    /// Seed of the split children's offsets.
+    pub seed: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MarkPush {
+    n: u32,
+    grow: u32,
+    prune_big: u32,
+    pad: u32,
+    grad_threshold: f32,
+    dense_scale: f32,
+    opacity_min: f32,
+    big_world: f32,
+    big_screen: f32,
+}
+
+/// What one densification did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DensifyReport {
+    pub before: u32,
+    pub after: u32,
+}
+
+pub struct Densifier {
+    ctx: Arc<Context>,
+    scan: PrefixSum,
+    stats: Kernel,
+    mark: Kernel,
+    apply: Kernel,
+    reset: Kernel,
+}
+
+impl Densifier {
+    pub fn new(ctx: &Arc<Context>) -> Result<Densifier> {
+        Ok(Densifier {
+            ctx: ctx.clone(),
+            scan: PrefixSum::new(ctx)?,
+            stats: kernel(ctx, "densify.stats", shaders::DENSIFY_STATS, 4)?,
+            mark: kernel(ctx, "densify.mark", shaders::DENSIFY_MARK, std::mem::size_of::<MarkPush>() as u32)?,
+            apply: kernel(ctx, "densify.apply", shaders::DENSIFY_APPLY, 16)?,
+            reset: kernel(ctx, "densify.opacity_reset", shaders::OPACITY_RESET, 8)?,
+        })
+    }
+
+    /// Record the statistics update from the last forward/backward on `frame`.
+    pub fn record_stats(&self, rec: &mut Recorder, set: &TrainableSet, frame: &Frame) -> Result<()> {
+        let n = set.len();
+        if n == 0 {
+            return Ok(());
+        }
+        rec.dispatch(
+            &self.stats,
+            &[frame.densify.binding(), frame.radii.binding(), set.accum.binding(), set.denom.binding(), set.max_radii.binding()],
+            bytemuck::bytes_of(&n),
+            grid(&self.ctx, n),
+        )
+    }
+
+    /// Record the opacity reset: o <- min(o, cap), opacity moments zeroed.
+    pub fn record_opacity_reset(&self, rec: &mut Recorder, set: &TrainableSet, cap: f32) -> Result<()> {
+        let n = set.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let raw = (cap / (1.0 - cap)).ln();
+        let push: [u32; 2] = [n, raw.to_bits()];
+        rec.dispatch(&self.reset, &[set.params.opacity.binding(), set.m.opacity.binding(), set.v.opacity.binding()], bytemuck::cast_slice(&push), grid(&self.ctx, n))
+    }
+
+    /// Clone, split and prune `set` (two submissions and a 4-byte read-back).
+    /// The statistics of the result start at zero.
+    pub fn densify(&self, set: &mut TrainableSet, p: &DensifyParams) -> Result<DensifyReport> {
+        let ctx = &self.ctx;
+        let n = set.len();
+        let counts = Buffer::<u32>::new(ctx, "densify.counts", n as usize + 1)?;
+        let action = Buffer::<u32>::new(ctx, "densify.action", n.max(1) as usize)?;
+        let scratch = ScanScratch::new(ctx, n + 1)?;
+        let mut rec = Recorder::new(ctx)?;
+        let push = MarkPush {
+            n,
+            grow: p.grow as u32,
+            prune_big: p.prune_big as u32,
+            pad: 0,
+            grad_threshold: p.grad_threshold,
+            dense_scale: p.dense_scale,
+            opacity_min: p.opacity_min,
+            big_world: p.big_world,
+            big_screen: p.big_screen,
+        };
+        let g = &set.params;
+        rec.dispatch(
+            &self.mark,
+            &[g.opacity.binding(), g.log_scales.binding(), set.accum.binding(), set.denom.binding(), set.max_radii.binding(), counts.binding(), action.binding()],
+            bytemuck::bytes_of(&push),
+            grid(ctx, n + 1),
+        )?;
+        self.scan.record(&mut rec, &counts, &counts, &Count::Host(n + 1), &scratch)?;
+        rec.submit_and_wait()?;
+        let total = counts.download_range(n as usize, 1)?[0];
+
+        let (c, k) = (g.channels, g.coeffs);
+        let (params, m, v) = (Gaussians::zeros(ctx, total, c, k)?, Gaussians::zeros(ctx, total, c, k)?, Gaussians::zeros(ctx, total, c, k)?);
+        let mut rec = Recorder::new(ctx)?;
+        let f = (c * k) as usize;
+        // Modes of densify_apply.comp: 0 moments, 1 copy, 2 means, 3 log-scales.
+        for (src, dst, is_param) in [(&set.params, &params, true), (&set.m, &m, false), (&set.v, &v, false)] {
+            let mode = is_param as u32;
+            let arrays = [
+                (&src.means, &dst.means, 3usize, if is_param { 2 } else { 0 }),
+                (&src.log_scales, &dst.log_scales, 2, if is_param { 3 } else { 0 }),
+                (&src.quats, &dst.quats, 4, mode),
+                (&src.opacity, &dst.opacity, 1, mode),
+                (&src.features, &dst.features, f, mode),
+            ];
+            for (s, d, width, mode) in arrays {
+                let push = [n, width as u32, mode, p.seed];
+                rec.dispatch(
+                    &self.apply,
+                    &[s.binding(), d.binding(), counts.binding(), action.binding(), g.log_scales.binding(), g.quats.binding()],
+                    bytemuck::cast_slice(&push),
+                    grid(ctx, n),
+                )?;
+            }
+        }
+        rec.submit_and_wait()?;
+        let mut next = TrainableSet::with_params(ctx, params)?;
+        next.m = m;
+        next.v = v;
+        *set = next;
+        Ok(DensifyReport { before: n, after: total })
+    }
+}

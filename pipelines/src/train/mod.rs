@@ -1,0 +1,34 @@
+//! Training kernels: the image loss (L1 + D-SSIM, normal consistency,
+//! distortion weight) forward and backward, the fused Adam step, and the
+//! adaptive density control (statistics, clone/split/prune with scan
+//! compaction, opacity reset) on a trainable Gaussian set.
+
+mod adam;
+mod densify;
+mod loss;
+mod set;
+
+pub use adam::{Adam, AdamGroup};
+pub use densify::{DensifyParams, DensifyReport, Densifier};
+pub use loss::{ImageLoss, LossScratch, LossValues, LossWeights};
+pub use set::TrainableSet;
+
+use tgs_engine::{groups_2d, Context};
+
+pub(crate) const WG: u32 = 256;
+
+/// Grid of one invocation per item (2-D beyond the per-dimension limit).
+pub(crate) fn grid(ctx: &Context, items: u32) -> [u32; 3] {
+    groups_2d(items.div_ceil(WG), ctx.caps().max_workgroup_count[0].min(65535))
+}
+
+/// Linear workgroup count of [`grid`] (partial-sum slots).
+pub(crate) fn grid_len(ctx: &Context, items: u32) -> u32 {
+    let g = grid(ctx, items);
+    g[0] * g[1] * g[2]
+}
+
+pub(crate) fn kernel(ctx: &std::sync::Arc<Context>, name: &str, spirv: &[u8], push_bytes: u32) -> anyhow::Result<tgs_engine::Kernel> {
+    let spec = [(0, WG), (1, ctx.caps().min_subgroup_size.max(1)), (2, 1)];
+    tgs_engine::Kernel::new(ctx, &tgs_engine::KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false })
+}
