@@ -1,5 +1,9 @@
-//! The `tgs` command line and the benchmark code shared with `cargo bench`.
+//! The `tgs` command line and library: datasets, the trainer, outputs, the
+//! procedural scene and the benchmark code shared with `cargo bench`.
 
 pub mod bench;
 pub mod bench_raster;
+pub mod data;
 pub mod devices;
+pub mod export;
+pub mod train;

@@ -1,0 +1,148 @@
+//! Datasets: the NeRF-synthetic/Blender layout (with the optional per-frame
+//! normals and transmissive masks of this project) and COLMAP sparse models.
+//! Every camera convention is converted at load time to the rasterizer's
+//! (OpenCV axes, pixel centres at integers, per-image fx, fy, cx, cy).
+
+pub mod blender;
+pub mod colmap;
+pub mod image_io;
+
+use anyhow::{bail, Result};
+use image_io::ImageF;
+use std::path::{Path, PathBuf};
+use tgs_pipelines::Camera;
+
+/// One image with its camera and optional geometry ground truth.
+#[derive(Clone, Debug)]
+pub struct View {
+    pub name: String,
+    pub camera: Camera,
+    /// RGB in [0, 1], interleaved.
+    pub image: ImageF,
+    /// World-space unit normals facing the camera (HxWx3), if given.
+    pub normals: Option<ImageF>,
+    /// True where the first hit is transmissive, if given.
+    pub mask: Option<Vec<bool>>,
+}
+
+/// Initial points with colours in [0, 1] (SfM points, points3d.ply).
+#[derive(Clone, Debug, Default)]
+pub struct Points {
+    pub positions: Vec<[f32; 3]>,
+    pub colors: Vec<[f32; 3]>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    pub root: PathBuf,
+    pub format: &'static str,
+    pub train: Vec<View>,
+    pub test: Vec<View>,
+    pub points: Option<Points>,
+    pub background: [f32; 3],
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoadOptions {
+    /// Integer image downscale factor (1 = full size).
+    pub downscale: u32,
+    /// Background RGBA images are composited on (and the render's background).
+    pub background: [f32; 3],
+    /// COLMAP: every `holdout`-th image (sorted by name) is a test image; 0 = none.
+    pub holdout: u32,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions { downscale: 1, background: [1.0; 3], holdout: 8 }
+    }
+}
+
+impl Dataset {
+    /// Load a Blender-layout (transforms_train.json) or COLMAP (sparse/) dataset.
+    pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
+        if opts.downscale == 0 {
+            bail!("--downscale must be at least 1");
+        }
+        if !root.is_dir() {
+            bail!("{}: dataset directory does not exist", root.display());
+        }
+        let ds = if root.join("transforms_train.json").is_file() {
+            blender::load(root, opts)?
+        } else if colmap::find_model(root).is_some() {
+            colmap::load(root, opts)?
+        } else {
+            bail!("{}: neither transforms_train.json (Blender layout) nor sparse/0 or sparse/ (COLMAP) found", root.display());
+        };
+        if ds.train.is_empty() {
+            bail!("{}: the training split is empty", root.display());
+        }
+        Ok(ds)
+    }
+
+    /// Scene extent (method-notes §1.12): 1.1 x the largest distance of a
+    /// training camera from their mean, and that mean.
+    pub fn extent(&self) -> (f32, [f32; 3]) {
+        let centres: Vec<[f32; 3]> = self.train.iter().map(|v| v.camera.centre()).collect();
+        let n = centres.len().max(1) as f32;
+        let mut mean = [0.0f32; 3];
+        for c in &centres {
+            for k in 0..3 {
+                mean[k] += c[k] / n;
+            }
+        }
+        let far = centres.iter().map(|c| (0..3).map(|k| (c[k] - mean[k]).powi(2)).sum::<f32>().sqrt()).fold(0.0f32, f32::max);
+        (1.1 * far.max(1e-6), mean)
+    }
+}
+
+/// Scale a camera's intrinsics for an image downscaled by `factor` (pixel
+/// centres at integers: x' = (x + 0.5) / f - 0.5).
+pub fn downscale_camera(cam: &Camera, factor: u32) -> Camera {
+    if factor <= 1 {
+        return *cam;
+    }
+    let f = factor as f32;
+    Camera {
+        width: cam.width / factor,
+        height: cam.height / factor,
+        fx: cam.fx / f,
+        fy: cam.fy / f,
+        cx: (cam.cx + 0.5) / f - 0.5,
+        cy: (cam.cy + 0.5) / f - 0.5,
+        ..*cam
+    }
+}
+
+/// Downscale a mask: a pixel stays set only when all its sub-pixels are.
+pub fn downscale_mask(w: u32, h: u32, mask: &[bool], factor: u32) -> Vec<bool> {
+    if factor <= 1 {
+        return mask.to_vec();
+    }
+    let (nw, nh) = (w / factor, h / factor);
+    let mut out = vec![false; (nw * nh) as usize];
+    for y in 0..nh {
+        for x in 0..nw {
+            let mut all = true;
+            for dy in 0..factor {
+                for dx in 0..factor {
+                    all &= mask[((y * factor + dy) * w + x * factor + dx) as usize];
+                }
+            }
+            out[(y * nw + x) as usize] = all;
+        }
+    }
+    out
+}
+
+/// Downscale normals: average, then renormalise.
+pub fn downscale_normals(n: &ImageF, factor: u32) -> Result<ImageF> {
+    let mut d = n.downscale(factor)?;
+    for p in d.data.chunks_mut(3) {
+        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        if l > 1e-12 {
+            p.iter_mut().for_each(|v| *v /= l);
+        }
+    }
+    Ok(d)
+}

@@ -1,0 +1,2 @@
+//! Files a run writes for people and other tools: PLY splats and points.
+pub mod ply;

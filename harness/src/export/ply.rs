@@ -1,0 +1,196 @@
+//! PLY files: the standard 3DGS/2DGS splat layout that splat viewers open
+//! (x y z, nx ny nz, f_dc_0..2, f_rest_* channel-major, opacity (raw),
+//! scale_0..2 (log; scale_2 is a thin third axis for 3DGS viewers, 2DGS
+//! readers ignore it), rot_0..3 (w x y z)), and point clouds (x y z with
+//! optional uchar red green blue) for initialisation.
+
+use crate::data::Points;
+use anyhow::{bail, Context as _, Result};
+use std::io::Write;
+use std::path::Path;
+use tgs_pipelines::HostGaussians;
+
+/// Log of the third (normal) axis written for viewers that expect 3 scales.
+pub const THIN_LOG_SCALE: f32 = -13.8;
+
+pub fn write_splats(path: &Path, g: &HostGaussians) -> Result<()> {
+    g.validate()?;
+    let c = g.channels as usize;
+    let k = g.coeffs as usize;
+    if c != 3 {
+        bail!("splat PLY needs 3 colour channels, the set has {c}");
+    }
+    let rest = (k - 1) * 3;
+    let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
+    header += &format!("element vertex {}\n", g.len());
+    for p in ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] {
+        header += &format!("property float {p}\n");
+    }
+    for i in 0..rest {
+        header += &format!("property float f_rest_{i}\n");
+    }
+    for p in ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"] {
+        header += &format!("property float {p}\n");
+    }
+    header += "end_header\n";
+    let mut out = Vec::with_capacity(header.len() + g.len() * (17 + rest) * 4);
+    out.extend_from_slice(header.as_bytes());
+    let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
+    for i in 0..g.len() {
+        let f = &g.features[i * k * c..(i + 1) * k * c];
+        (0..3).for_each(|j| put(g.means[3 * i + j]));
+        (0..3).for_each(|_| put(0.0));
+        (0..3).for_each(|ch| put(f[ch]));
+        for ch in 0..3 {
+            for kk in 1..k {
+                put(f[kk * c + ch]);
+            }
+        }
+        put(g.opacity[i]);
+        put(g.log_scales[2 * i]);
+        put(g.log_scales[2 * i + 1]);
+        put(THIN_LOG_SCALE);
+        (0..4).for_each(|j| put(g.quats[4 * i + j]));
+    }
+    let tmp = path.with_extension("ply.tmp");
+    std::fs::File::create(&tmp).and_then(|mut f| f.write_all(&out)).with_context(|| format!("{}: cannot write", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Read a splat PLY written by [`write_splats`] (or 3DGS/2DGS) back.
+pub fn read_splats(path: &Path) -> Result<HostGaussians> {
+    let (names, n, body) = read_binary(path)?;
+    let idx = |name: &str| names.iter().position(|p| p == name).with_context(|| format!("{}: no property '{name}'", path.display()));
+    let rest = names.iter().filter(|p| p.starts_with("f_rest_")).count();
+    if rest % 3 != 0 {
+        bail!("{}: {rest} f_rest properties is not a multiple of 3", path.display());
+    }
+    let k = rest / 3 + 1;
+    let mut g = HostGaussians::new(3, k as u32);
+    let stride = names.len();
+    let (ix, idc, irest, iop, is0, is1, ir) = (idx("x")?, idx("f_dc_0")?, idx("f_rest_0").unwrap_or(0), idx("opacity")?, idx("scale_0")?, idx("scale_1")?, idx("rot_0")?);
+    for i in 0..n {
+        let row = &body[i * stride..(i + 1) * stride];
+        let mut feats = vec![0.0; 3 * k];
+        for ch in 0..3 {
+            feats[ch] = row[idc + ch];
+            for kk in 1..k {
+                feats[kk * 3 + ch] = row[irest + ch * (k - 1) + kk - 1];
+            }
+        }
+        g.push([row[ix], row[ix + 1], row[ix + 2]], [row[is0], row[is1]], [row[ir], row[ir + 1], row[ir + 2], row[ir + 3]], row[iop], &feats);
+    }
+    Ok(g)
+}
+
+/// Float properties of a binary little-endian PLY whose only element is vertex.
+fn read_binary(path: &Path) -> Result<(Vec<String>, usize, Vec<f32>)> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let end = bytes.windows(11).position(|w| w == b"end_header\n").with_context(|| format!("{}: not a PLY (no end_header)", path.display()))?;
+    let header = std::str::from_utf8(&bytes[..end]).with_context(|| format!("{}: header is not text", path.display()))?;
+    if !header.contains("format binary_little_endian") {
+        bail!("{}: only binary little-endian PLY is read", path.display());
+    }
+    let mut n = 0usize;
+    let mut names = Vec::new();
+    for l in header.lines() {
+        let t: Vec<&str> = l.split_whitespace().collect();
+        match t.as_slice() {
+            ["element", "vertex", c] => n = c.parse().with_context(|| format!("{}: bad vertex count", path.display()))?,
+            ["property", "float", name] => names.push(name.to_string()),
+            ["property", ty, _] => bail!("{}: property type {ty} not supported here", path.display()),
+            _ => {}
+        }
+    }
+    let body = &bytes[end + 11..];
+    if body.len() < n * names.len() * 4 {
+        bail!("{}: truncated ({} bytes for {n} vertices of {} floats)", path.display(), body.len(), names.len());
+    }
+    let vals = body[..n * names.len() * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    Ok((names, n, vals))
+}
+
+/// Write a point cloud (x y z float, red green blue uchar).
+pub fn write_points(path: &Path, pts: &Points) -> Result<()> {
+    let mut out = format!("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n", pts.positions.len()).into_bytes();
+    for (p, c) in pts.positions.iter().zip(&pts.colors) {
+        p.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+        c.iter().for_each(|v| out.push((v.clamp(0.0, 1.0) * 255.0).round() as u8));
+    }
+    std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Read x, y, z and (if present) red, green, blue from a binary PLY point
+/// cloud (float or double positions, uchar colours, other properties skipped).
+pub fn read_points(path: &Path) -> Result<Points> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let end = bytes.windows(11).position(|w| w == b"end_header\n").with_context(|| format!("{}: not a PLY (no end_header)", path.display()))?;
+    let header = std::str::from_utf8(&bytes[..end]).with_context(|| format!("{}: header is not text", path.display()))?;
+    if !header.contains("format binary_little_endian") {
+        bail!("{}: only binary little-endian PLY point clouds are read", path.display());
+    }
+    let mut n = 0usize;
+    let mut props: Vec<(String, usize)> = Vec::new();
+    let mut in_vertex = false;
+    for l in header.lines() {
+        let t: Vec<&str> = l.split_whitespace().collect();
+        match t.as_slice() {
+            ["element", name, c] => {
+                in_vertex = *name == "vertex";
+                if in_vertex {
+                    n = c.parse().with_context(|| format!("{}: bad vertex count", path.display()))?;
+                }
+            }
+            ["property", ty, name] if in_vertex => {
+                let size = match *ty {
+                    "float" | "float32" | "int" | "uint" | "int32" | "uint32" => 4,
+                    "double" | "float64" => 8,
+                    "uchar" | "uint8" | "char" | "int8" => 1,
+                    "short" | "ushort" | "int16" | "uint16" => 2,
+                    _ => bail!("{}: property type {ty} not supported", path.display()),
+                };
+                props.push((format!("{ty}:{name}"), size));
+            }
+            _ => {}
+        }
+    }
+    let stride: usize = props.iter().map(|p| p.1).sum();
+    let body = &bytes[end + 11..];
+    if body.len() < n * stride {
+        bail!("{}: truncated ({} bytes for {n} points of {stride} bytes)", path.display(), body.len());
+    }
+    let find = |name: &str| -> Option<(usize, &str)> {
+        let mut off = 0;
+        for (p, s) in &props {
+            let (ty, nm) = p.split_once(':').unwrap();
+            if nm == name {
+                return Some((off, ty));
+            }
+            off += s;
+        }
+        None
+    };
+    let xyz: Vec<(usize, &str)> = ["x", "y", "z"].iter().map(|a| find(a).with_context(|| format!("{}: no '{a}' property", path.display()))).collect::<Result<_>>()?;
+    let rgb: Option<Vec<(usize, &str)>> = ["red", "green", "blue"].iter().map(|a| find(a)).collect();
+    let mut pts = Points::default();
+    for i in 0..n {
+        let row = &body[i * stride..(i + 1) * stride];
+        let read = |(off, ty): (usize, &str)| -> f32 {
+            match ty {
+                "double" | "float64" => f64::from_le_bytes(row[off..off + 8].try_into().unwrap()) as f32,
+                "uchar" | "uint8" => row[off] as f32 / 255.0,
+                _ => f32::from_le_bytes(row[off..off + 4].try_into().unwrap()),
+            }
+        };
+        let p = [read(xyz[0]), read(xyz[1]), read(xyz[2])];
+        if !p.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        pts.positions.push(p);
+        pts.colors.push(match &rgb {
+            Some(c) => [read(c[0]), read(c[1]), read(c[2])],
+            None => [0.5; 3],
+        });
+    }
+    Ok(pts)
+}

@@ -1,0 +1,204 @@
+//! Training configuration: defaults from method-notes §1.8–1.12 (the
+//! `paper` preset), a `quick` preset for minutes on a CPU driver, a TOML
+//! file, and `--set key=value` overrides, applied in that order.
+
+use anyhow::{bail, Context as _, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// Stage I iterations.
+    pub iterations: u32,
+    pub seed: u64,
+    /// Largest SH degree; the active degree grows by one every `sh_interval`.
+    pub sh_degree: u32,
+    pub sh_interval: u32,
+    pub lambda_ssim: f32,
+    pub lambda_normal: f32,
+    pub normal_from: u32,
+    pub lambda_dist: f32,
+    pub dist_from: u32,
+    /// Position lr (x scene extent), log-linear from `lr_means` to `lr_means_final` over the stage.
+    pub lr_means: f32,
+    pub lr_means_final: f32,
+    pub lr_features_dc: f32,
+    pub lr_features_rest: f32,
+    pub lr_opacity: f32,
+    pub lr_scales: f32,
+    pub lr_quats: f32,
+    pub adam_eps: f32,
+    pub densify_from: u32,
+    pub densify_until: u32,
+    pub densify_interval: u32,
+    pub densify_grad: f32,
+    pub percent_dense: f32,
+    pub prune_opacity: f32,
+    pub opacity_reset_interval: u32,
+    /// Prune Gaussians larger than this many pixels (after the first opacity reset).
+    pub max_screen_size: f32,
+    /// Prune Gaussians larger than this fraction of the scene extent (likewise).
+    pub max_world_size: f32,
+    /// Hard cap on the Gaussian count (growth stops there).
+    pub max_gaussians: u32,
+    /// Random initialisation when the dataset has no points: count and cube half-size.
+    pub init_points: u32,
+    pub init_half_extent: f32,
+    /// Background colour: "white", "black" or "r,g,b".
+    pub background: String,
+    pub downscale: u32,
+    /// COLMAP test split: every n-th image (0: no test split).
+    pub holdout: u32,
+    /// Evaluate the test views every this many iterations (0: only at the end).
+    pub test_interval: u32,
+    /// Write a checkpoint every this many iterations (0: only at the end).
+    pub checkpoint_interval: u32,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self::paper()
+    }
+}
+
+impl TrainConfig {
+    /// The 2DGS schedule of method-notes §1.8–1.12 (30k iterations).
+    pub fn paper() -> TrainConfig {
+        TrainConfig {
+            iterations: 30_000,
+            seed: 0,
+            sh_degree: 3,
+            sh_interval: 1000,
+            lambda_ssim: 0.2,
+            lambda_normal: 0.05,
+            normal_from: 7000,
+            lambda_dist: 0.0,
+            dist_from: 3000,
+            lr_means: 1.6e-4,
+            lr_means_final: 1.6e-6,
+            lr_features_dc: 2.5e-3,
+            lr_features_rest: 2.5e-3 / 20.0,
+            lr_opacity: 0.05,
+            lr_scales: 5e-3,
+            lr_quats: 1e-3,
+            adam_eps: 1e-15,
+            densify_from: 500,
+            densify_until: 15_000,
+            densify_interval: 100,
+            densify_grad: 2e-4,
+            percent_dense: 0.01,
+            prune_opacity: 0.05,
+            opacity_reset_interval: 3000,
+            max_screen_size: 20.0,
+            max_world_size: 0.1,
+            max_gaussians: 2_000_000,
+            init_points: 100_000,
+            init_half_extent: 1.3,
+            background: "white".into(),
+            downscale: 1,
+            holdout: 8,
+            test_interval: 5000,
+            checkpoint_interval: 5000,
+        }
+    }
+
+    /// The same schedule compressed ~10x (3,000 iterations, 10k initial
+    /// points), for minutes on a CPU driver.
+    pub fn quick() -> TrainConfig {
+        TrainConfig {
+            iterations: 3000,
+            sh_interval: 500,
+            normal_from: 1500,
+            dist_from: 1000,
+            densify_from: 300,
+            densify_until: 2000,
+            opacity_reset_interval: 1000,
+            init_points: 10_000,
+            max_gaussians: 200_000,
+            test_interval: 1000,
+            checkpoint_interval: 500,
+            ..Self::paper()
+        }
+    }
+
+    pub fn preset(name: &str) -> Result<TrainConfig> {
+        match name {
+            "paper" => Ok(Self::paper()),
+            "quick" => Ok(Self::quick()),
+            _ => bail!("unknown preset '{name}' (quick or paper)"),
+        }
+    }
+
+    /// Overlay the keys of a TOML file.
+    pub fn merge_toml_file(&mut self, path: &Path) -> Result<()> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the config", path.display()))?;
+        let table: toml::Table = text.parse().with_context(|| format!("{}: not valid TOML", path.display()))?;
+        self.merge(table).with_context(|| format!("{}", path.display()))
+    }
+
+    /// Apply `key=value` (value in TOML syntax; bare words are strings).
+    pub fn set(&mut self, kv: &str) -> Result<()> {
+        let (k, v) = kv.split_once('=').with_context(|| format!("--set '{kv}': expected KEY=VALUE"))?;
+        let (k, v) = (k.trim(), v.trim());
+        let value: toml::Value = format!("x = {v}").parse::<toml::Table>().ok().and_then(|mut t| t.remove("x")).unwrap_or_else(|| toml::Value::String(v.to_string()));
+        let mut table = toml::Table::new();
+        table.insert(k.to_string(), value);
+        self.merge(table).with_context(|| format!("--set '{kv}'"))
+    }
+
+    fn merge(&mut self, overlay: toml::Table) -> Result<()> {
+        let mut base = toml::Table::try_from(&*self).context("serialising the config")?;
+        for (k, v) in overlay {
+            if !base.contains_key(&k) {
+                bail!("unknown setting '{k}'");
+            }
+            // Integers given for float settings are fine.
+            let v = match (&base[&k], v) {
+                (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(i as f64),
+                (_, v) => v,
+            };
+            base.insert(k, v);
+        }
+        *self = base.try_into().context("invalid setting")?;
+        self.validate()
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.iterations == 0 {
+            bail!("iterations must be at least 1");
+        }
+        if self.sh_degree > 3 {
+            bail!("sh_degree must be 0..=3, not {}", self.sh_degree);
+        }
+        if self.sh_interval == 0 || self.densify_interval == 0 {
+            bail!("sh_interval and densify_interval must be at least 1");
+        }
+        if !(0.0..=1.0).contains(&self.lambda_ssim) {
+            bail!("lambda_ssim must be in [0, 1], not {}", self.lambda_ssim);
+        }
+        if self.downscale == 0 {
+            bail!("downscale must be at least 1");
+        }
+        let lrs = [self.lr_means, self.lr_means_final, self.lr_features_dc, self.lr_features_rest, self.lr_opacity, self.lr_scales, self.lr_quats, self.adam_eps];
+        if lrs.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            bail!("learning rates and adam_eps must be finite and non-negative");
+        }
+        self.background_rgb()?;
+        Ok(())
+    }
+
+    pub fn background_rgb(&self) -> Result<[f32; 3]> {
+        match self.background.as_str() {
+            "white" => Ok([1.0; 3]),
+            "black" => Ok([0.0; 3]),
+            s => {
+                let v: Vec<f32> = s.split(',').map(|t| t.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|_| anyhow::anyhow!("background '{s}' is not white, black or r,g,b"))?;
+                match v.as_slice() {
+                    [r, g, b] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b]),
+                    _ => bail!("background '{s}' must be three values in [0, 1]"),
+                }
+            }
+        }
+    }
+}

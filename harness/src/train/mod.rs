@@ -1,0 +1,10 @@
+//! Training: configuration, initialisation, the stage-scheduled trainer,
+//! checkpoints, and the `tgs train` driver (progress, logs, outputs).
+pub mod checkpoint;
+pub mod config;
+pub mod init;
+pub mod rng;
+pub mod trainer;
+
+pub use config::TrainConfig;
+pub use trainer::{Schedule, Stage, StepReport, Trainer};
