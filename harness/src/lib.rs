@@ -5,5 +5,8 @@ pub mod bench;
 pub mod bench_raster;
 pub mod data;
 pub mod devices;
+pub mod eval;
 pub mod export;
+pub mod render;
+pub mod scene;
 pub mod train;

@@ -1,4 +1,6 @@
 use anyhow::Result;
+use std::path::PathBuf;
+use tgs::train::run::TrainArgs;
 use clap::{Parser, Subcommand};
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
 use tgs_pipelines::SortConfig;
@@ -23,11 +25,80 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Train a TransmissiveGS scene (Stage I so far) on a dataset directory
+    /// (Blender layout or COLMAP); without one, on the built-in scene.
+    Train {
+        /// Dataset directory (transforms_train.json or sparse/); default: the built-in scene, written to OUT/scene.
+        dataset: Option<PathBuf>,
+        /// Run directory: checkpoint, log, outputs.
+        #[arg(long, default_value = "runs/glass")]
+        out: PathBuf,
+        /// Settings preset: quick or paper.
+        #[arg(long, default_value = "quick")]
+        preset: String,
+        /// TOML file of settings (applied after the preset).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Any setting as KEY=VALUE (repeatable; applied last). See config.toml in a run directory for the keys.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        #[arg(long)]
+        iterations: Option<u32>,
+        #[arg(long)]
+        downscale: Option<u32>,
+        /// Background: white, black or r,g,b.
+        #[arg(long)]
+        background: Option<String>,
+        /// Continue from OUT/checkpoint.bin.
+        #[arg(long)]
+        resume: bool,
+        /// Time every kernel of every iteration (GPU timestamps) into metrics.json.
+        #[arg(long)]
+        profile: bool,
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// PSNR, SSIM and normal MAE of a run's checkpoint on its test views.
+    Eval {
+        run: PathBuf,
+        /// Also write the renders here.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Render a run's checkpoint along test, train or orbit cameras.
+    Render {
+        run: PathBuf,
+        #[arg(long, default_value = "test")]
+        cameras: String,
+        /// Orbit frames.
+        #[arg(long, default_value_t = 60)]
+        frames: u32,
+        /// Output directory (default RUN/renders/CAMERAS).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Built-in procedural scenes.
+    Scene {
+        #[command(subcommand)]
+        what: SceneCmd,
+    },
     /// Time kernels with GPU timestamps.
     Bench {
         #[command(subcommand)]
         what: Bench,
     },
+}
+
+#[derive(Subcommand)]
+enum SceneCmd {
+    /// Write a built-in scene (glass, glass-tiny) as a dataset.
+    Make {
+        name: String,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// List the built-in scenes.
+    List,
 }
 
 #[derive(Subcommand)]
@@ -87,6 +158,65 @@ fn context(cli: &Cli) -> Result<std::sync::Arc<Context>> {
 fn run(cli: Cli) -> Result<()> {
     match &cli.cmd {
         Cmd::Devices { json } => tgs::devices::run(*json),
+        Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, profile, quiet } => {
+            let ctx = context(&cli)?;
+            let mut set = set.clone();
+            if let Some(d) = downscale {
+                set.push(format!("downscale={d}"));
+            }
+            if let Some(b) = background {
+                set.push(format!("background=\"{b}\""));
+            }
+            let args = TrainArgs {
+                dataset: dataset.clone(),
+                out: out.clone(),
+                preset: Some(preset.clone()),
+                config: config.clone(),
+                set,
+                iterations: *iterations,
+                resume: *resume,
+                profile: *profile,
+                quiet: *quiet,
+            };
+            let o = tgs::train::run::train(&ctx, &args)?;
+            if o.interrupted {
+                std::process::exit(130);
+            }
+            Ok(())
+        }
+        Cmd::Eval { run, out } => {
+            let ctx = context(&cli)?;
+            let (mut tr, data) = tgs::train::run::open_run(&ctx, run)?;
+            if data.test.is_empty() {
+                anyhow::bail!("{}: the dataset has no test views", data.root.display());
+            }
+            let m = tgs::eval::evaluate(&mut tr, &data.test, out.as_deref())?;
+            println!("{}", serde_json::to_string_pretty(&m)?);
+            Ok(())
+        }
+        Cmd::Render { run, cameras, frames, out } => {
+            let ctx = context(&cli)?;
+            let dir = out.clone().unwrap_or_else(|| run.join("renders").join(cameras));
+            let n = tgs::render::render(&ctx, run, cameras, *frames, &dir)?;
+            eprintln!("{n} views written to {}", dir.display());
+            Ok(())
+        }
+        Cmd::Scene { what } => match what {
+            SceneCmd::List => {
+                for s in tgs::scene::SCENES {
+                    println!("{:12} {}x{} px, {} train + {} test views", s.name, s.size, s.size, s.train, s.test);
+                }
+                Ok(())
+            }
+            SceneCmd::Make { name, out } => {
+                let spec = tgs::scene::spec(name)?;
+                let bar = indicatif::ProgressBar::new((spec.train + spec.test) as u64);
+                tgs::scene::make(&spec, out, |d, _| bar.set_position(d as u64))?;
+                bar.finish_and_clear();
+                eprintln!("scene '{}' written to {}", spec.name, out.display());
+                Ok(())
+            }
+        },
         Cmd::Bench { what } => {
             let ctx = context(&cli)?;
             match what {

@@ -4,6 +4,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod init;
 pub mod rng;
+pub mod run;
 pub mod trainer;
 
 pub use config::TrainConfig;

@@ -1,0 +1,174 @@
+//! Evaluation on test views: PSNR and SSIM (the 3DGS/2DGS conventions of
+//! method-notes §5: renders clamped to [0, 1], 11x11 Gaussian SSIM with zero
+//! padding, per-image values averaged), and where the dataset has normals
+//! and transmissive masks, the mean angular error (degrees) of the rendered
+//! normal on mask pixels (a mask pixel the render leaves empty counts 90°).
+//! Also writes the renders: colour PNG, world normals PNG, depth EXR + PNG.
+
+use crate::data::image_io::{write_exr, write_png, ImageF};
+use crate::data::View;
+use crate::train::trainer::Rendered;
+use crate::train::Trainer;
+use anyhow::Result;
+use serde::Serialize;
+use std::path::Path;
+use tgs_pipelines::{Camera, Plane};
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ViewMetrics {
+    pub name: String,
+    pub psnr: f64,
+    pub ssim: f64,
+    pub normal_mae_deg: Option<f64>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Metrics {
+    pub iteration: u32,
+    pub gaussians: u32,
+    pub views: usize,
+    pub psnr: f64,
+    pub ssim: f64,
+    pub normal_mae_deg: Option<f64>,
+    pub per_view: Vec<ViewMetrics>,
+}
+
+pub fn psnr(a: &[f32], b: &[f32]) -> f64 {
+    let mse = a.iter().zip(b).map(|(x, y)| ((x.clamp(0.0, 1.0) - y) as f64).powi(2)).sum::<f64>() / a.len().max(1) as f64;
+    -10.0 * mse.max(1e-20).log10()
+}
+
+/// Mean SSIM over channels and pixels of two planar images (f64).
+pub fn ssim(a: &[f32], b: &[f32], w: usize, h: usize, channels: usize) -> f64 {
+    let g: Vec<f64> = {
+        let raw: Vec<f64> = (-5..=5).map(|t: i32| (-(t * t) as f64 / (2.0 * 1.5 * 1.5)).exp()).collect();
+        let s: f64 = raw.iter().sum();
+        raw.iter().map(|v| v / s).collect()
+    };
+    let blur = |src: &[f64]| -> Vec<f64> {
+        let mut tmp = vec![0.0; w * h];
+        let mut out = vec![0.0; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                tmp[y * w + x] = (-5i64..=5).filter_map(|t| {
+                    let xx = x as i64 + t;
+                    (xx >= 0 && xx < w as i64).then(|| g[(t + 5) as usize] * src[y * w + xx as usize])
+                }).sum();
+            }
+        }
+        for y in 0..h {
+            for x in 0..w {
+                out[y * w + x] = (-5i64..=5).filter_map(|t| {
+                    let yy = y as i64 + t;
+                    (yy >= 0 && yy < h as i64).then(|| g[(t + 5) as usize] * tmp[yy as usize * w + x])
+                }).sum();
+            }
+        }
+        out
+    };
+    let (c1, c2) = (0.01f64.powi(2), 0.03f64.powi(2));
+    let n = w * h;
+    let mut total = 0.0;
+    for c in 0..channels {
+        let x: Vec<f64> = a[c * n..(c + 1) * n].iter().map(|v| v.clamp(0.0, 1.0) as f64).collect();
+        let y: Vec<f64> = b[c * n..(c + 1) * n].iter().map(|&v| v as f64).collect();
+        let prod = |p: &[f64], q: &[f64]| p.iter().zip(q).map(|(a, b)| a * b).collect::<Vec<_>>();
+        let (mx, my) = (blur(&x), blur(&y));
+        let (exx, eyy, exy) = (blur(&prod(&x, &x)), blur(&prod(&y, &y)), blur(&prod(&x, &y)));
+        for i in 0..n {
+            let (sx, sy, sxy) = (exx[i] - mx[i] * mx[i], eyy[i] - my[i] * my[i], exy[i] - mx[i] * my[i]);
+            total += ((2.0 * mx[i] * my[i] + c1) * (2.0 * sxy + c2)) / ((mx[i] * mx[i] + my[i] * my[i] + c1) * (sx + sy + c2));
+        }
+    }
+    total / (n * channels).max(1) as f64
+}
+
+/// World-space unit normals (interleaved) of a render; zero where empty.
+pub fn world_normals(r: &Rendered, cam: &Camera) -> Vec<[f32; 3]> {
+    let m = &cam.world_to_view;
+    let (nx, ny, nz) = (r.plane(Plane::Normal(0)), r.plane(Plane::Normal(1)), r.plane(Plane::Normal(2)));
+    (0..nx.len())
+        .map(|i| {
+            let v = [nx[i], ny[i], nz[i]];
+            // world = R^T view
+            let w = [0, 1, 2].map(|j| (0..3).map(|k| m[k][j] * v[k]).sum::<f32>());
+            let l = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+            if l > 1e-8 && l.is_finite() {
+                w.map(|x| x / l)
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect()
+}
+
+/// Mean angular error (degrees) on mask pixels; None without a GT or mask pixels.
+pub fn normal_mae(normals: &[[f32; 3]], view: &View) -> Option<f64> {
+    let (gt, mask) = (view.normals.as_ref()?, view.mask.as_ref()?);
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for (i, &m) in mask.iter().enumerate() {
+        if !m {
+            continue;
+        }
+        let g = &gt.data[3 * i..3 * i + 3];
+        let gl = (g.iter().map(|v| (*v as f64).powi(2)).sum::<f64>()).sqrt();
+        if gl < 1e-6 {
+            continue;
+        }
+        let n = normals[i];
+        let d = (0..3).map(|k| n[k] as f64 * g[k] as f64).sum::<f64>() / gl;
+        let empty = n == [0.0; 3];
+        sum += if empty { 90.0 } else { d.clamp(-1.0, 1.0).acos().to_degrees() };
+        count += 1;
+    }
+    (count > 0).then(|| sum / count as f64)
+}
+
+/// Render, measure and (with `out`) write every view.
+pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<Metrics> {
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut per_view = Vec::new();
+    for v in views {
+        let r = tr.render(&v.camera)?;
+        let (w, h) = (r.width as usize, r.height as usize);
+        let rgb = &r.planes[..3 * w * h];
+        let target = v.image.planar();
+        let normals = world_normals(&r, &v.camera);
+        let m = ViewMetrics { name: v.name.clone(), psnr: psnr(rgb, &target), ssim: ssim(rgb, &target, w, h, 3), normal_mae_deg: normal_mae(&normals, v) };
+        if let Some(dir) = out {
+            write_outputs(dir, &v.name, &r, &normals)?;
+        }
+        per_view.push(m);
+    }
+    let k = per_view.len().max(1) as f64;
+    let maes: Vec<f64> = per_view.iter().filter_map(|m| m.normal_mae_deg).collect();
+    Ok(Metrics {
+        iteration: tr.iteration,
+        gaussians: tr.set.len(),
+        views: per_view.len(),
+        psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
+        ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,
+        normal_mae_deg: (!maes.is_empty()).then(|| maes.iter().sum::<f64>() / maes.len() as f64),
+        per_view,
+    })
+}
+
+/// `NAME.png` (colour), `NAME_normal.png` (world normal * 0.5 + 0.5),
+/// `NAME_depth.exr` (expected depth, 0 where empty) and `NAME_depth.png`
+/// (normalised to the view's depth range).
+pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]]) -> Result<()> {
+    let (w, h) = (r.width, r.height);
+    let n = (w * h) as usize;
+    write_png(&dir.join(format!("{name}.png")), &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]))?;
+    let nimg = ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() };
+    write_png(&dir.join(format!("{name}_normal.png")), &nimg)?;
+    let (a, d) = (r.plane(Plane::Alpha), r.plane(Plane::Depth));
+    let depth: Vec<f32> = (0..n).map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 }).collect();
+    write_exr(&dir.join(format!("{name}_depth.exr")), &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
+    let (lo, hi) = depth.iter().filter(|v| **v > 0.0).fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
+    let scaled = depth.iter().map(|&v| if v > 0.0 && hi > lo { 1.0 - (v - lo) / (hi - lo) } else { 0.0 }).collect();
+    write_png(&dir.join(format!("{name}_depth.png")), &ImageF { width: w, height: h, channels: 1, data: scaled })
+}

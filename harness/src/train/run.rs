@@ -1,0 +1,263 @@
+//! `tgs train`: configuration, dataset (the built-in scene by default),
+//! the training loop with a progress bar and a JSON-lines log, periodic test
+//! evaluation and atomic checkpoints, Ctrl-C handling, and the outputs
+//! (point_cloud.ply, test renders, metrics.json).
+
+use super::checkpoint;
+use super::config::TrainConfig;
+use super::trainer::Trainer;
+use crate::data::{Dataset, LoadOptions};
+use crate::eval::{evaluate, Metrics};
+use crate::export::ply::write_splats;
+use anyhow::{bail, Context as _, Result};
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+use tgs_engine::Context;
+
+pub const CHECKPOINT: &str = "checkpoint.bin";
+pub const DEFAULT_SCENE: &str = "glass";
+
+#[derive(Clone, Debug, Default)]
+pub struct TrainArgs {
+    /// Dataset directory; None trains on the built-in scene (written to OUT/scene).
+    pub dataset: Option<PathBuf>,
+    pub out: PathBuf,
+    pub preset: Option<String>,
+    pub config: Option<PathBuf>,
+    pub set: Vec<String>,
+    pub iterations: Option<u32>,
+    pub resume: bool,
+    /// Collect per-kernel GPU timings for every iteration (timings.json).
+    pub profile: bool,
+    /// No progress bar or periodic lines.
+    pub quiet: bool,
+}
+
+/// What a finished (or interrupted) run reports.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    pub iteration: u32,
+    pub interrupted: bool,
+    pub first_loss: Option<f64>,
+    pub last_loss: f64,
+    pub metrics: Option<Metrics>,
+    pub wall_s: f64,
+}
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+fn install_ctrlc() {
+    // A second installation in one process (tests) fails harmlessly.
+    let _ = ctrlc::set_handler(|| {
+        if INTERRUPTED.swap(true, Ordering::SeqCst) {
+            eprintln!("\nsecond Ctrl-C: exiting without a checkpoint");
+            std::process::exit(130);
+        }
+        eprintln!("\nCtrl-C: finishing the iteration and writing a checkpoint (Ctrl-C again to abort)");
+    });
+}
+
+/// Ask a running `train` in this process to stop at the next iteration (as Ctrl-C does).
+pub fn request_stop() {
+    INTERRUPTED.store(true, Ordering::SeqCst);
+}
+
+pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
+    let mut cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
+    if let Some(p) = &a.config {
+        cfg.merge_toml_file(p)?;
+    }
+    for kv in &a.set {
+        cfg.set(kv)?;
+    }
+    if let Some(n) = a.iterations {
+        cfg.iterations = n;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// The dataset directory, writing the built-in scene first when none is given.
+pub fn dataset_dir(a: &TrainArgs, quiet: bool) -> Result<PathBuf> {
+    if let Some(d) = &a.dataset {
+        return Ok(d.clone());
+    }
+    let dir = a.out.join("scene");
+    if !dir.join("transforms_train.json").is_file() {
+        let spec = crate::scene::spec(DEFAULT_SCENE)?;
+        if !quiet {
+            eprintln!("no dataset given: writing the built-in scene '{}' to {}", spec.name, dir.display());
+        }
+        crate::scene::make(&spec, &dir, |_, _| {})?;
+    }
+    Ok(dir)
+}
+
+pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
+    let opts = LoadOptions { downscale: cfg.downscale, background: cfg.background_rgb()?, holdout: cfg.holdout };
+    Dataset::load(dir, &opts)
+}
+
+pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
+    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
+    let ckpt = a.out.join(CHECKPOINT);
+    let start = Instant::now();
+    let (mut tr, data, dataset_str) = if a.resume {
+        if !ckpt.is_file() {
+            bail!("{}: no checkpoint to resume from", ckpt.display());
+        }
+        let (h, _) = checkpoint::read(&ckpt)?;
+        let dir = PathBuf::from(&h.dataset);
+        let data = load_dataset(&dir, &h.config)?;
+        let mut tr = checkpoint::restore(ctx, &ckpt, &data)?;
+        if let Some(n) = a.iterations {
+            tr.cfg.iterations = n;
+            tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
+        }
+        (tr, data, h.dataset)
+    } else {
+        let cfg = config_from_args(a)?;
+        let dir = dataset_dir(a, a.quiet)?;
+        let data = load_dataset(&dir, &cfg)?;
+        let tr = Trainer::new(ctx, cfg, &data)?;
+        (tr, data, dir.to_string_lossy().into_owned())
+    };
+    std::fs::write(a.out.join("config.toml"), toml::to_string(&tr.cfg)?).context("writing config.toml")?;
+    install_ctrlc();
+    INTERRUPTED.store(false, Ordering::SeqCst);
+
+    let total = tr.schedule.total();
+    let mut log = std::fs::OpenOptions::new().create(true).append(true).open(a.out.join("log.jsonl")).context("opening log.jsonl")?;
+    let tty = std::io::stderr().is_terminal() && !a.quiet;
+    let bar = if tty {
+        let b = indicatif::ProgressBar::new(total as u64);
+        b.set_style(indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} [{elapsed_precise} < {eta}, {per_sec}]").unwrap());
+        b.set_position(tr.iteration as u64);
+        Some(b)
+    } else {
+        None
+    };
+    if !a.quiet {
+        eprintln!(
+            "training on {} ({} train / {} test views, {}) with {} Gaussians on {}",
+            data.root.display(),
+            data.train.len(),
+            data.test.len(),
+            data.format,
+            tr.set.len(),
+            ctx.caps().describe()
+        );
+    }
+    let mut timing_sums: BTreeMap<String, (f64, u64)> = BTreeMap::new();
+    let mut first_loss = None;
+    let mut last_loss = f64::NAN;
+    let loop_start = Instant::now();
+    let start_it = tr.iteration;
+    let mut interrupted = false;
+    while !tr.done() {
+        let r = tr.step(a.profile)?;
+        if !r.loss.is_finite() {
+            checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str)?;
+            bail!("iteration {}: the loss is {} (state saved to checkpoint-nonfinite.bin)", r.iteration, r.loss);
+        }
+        first_loss.get_or_insert(r.loss);
+        last_loss = r.loss;
+        for t in &r.timings {
+            let e = timing_sums.entry(t.name.clone()).or_insert((0.0, 0));
+            e.0 += t.ms;
+            e.1 += 1;
+        }
+        let elapsed = loop_start.elapsed().as_secs_f64();
+        let its = (r.iteration - start_it) as f64 / elapsed.max(1e-9);
+        let mut line = json!({
+            "iteration": r.iteration, "stage": "I", "view": r.view, "loss": r.loss, "l1": r.values.l1, "ssim": r.values.ssim,
+            "psnr": r.values.psnr(), "gaussians": r.gaussians, "it_per_s": its, "elapsed_s": start.elapsed().as_secs_f64(),
+        });
+        if r.values.normal.is_finite() {
+            line["normal"] = json!(r.values.normal);
+        }
+        if let Some((b, a2)) = r.densified {
+            line["densified"] = json!({"before": b, "after": a2});
+        }
+        let cfg = &tr.cfg;
+        if cfg.test_interval > 0 && r.iteration % cfg.test_interval == 0 && r.iteration < total && !data.test.is_empty() {
+            let m = evaluate(&mut tr, &data.test, None)?;
+            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg});
+            if !tty && !a.quiet {
+                eprintln!("[{}] test PSNR {:.2} SSIM {:.4}", r.iteration, m.psnr, m.ssim);
+            }
+        }
+        writeln!(log, "{line}")?;
+        let msg = format!("loss {:.4} PSNR {:.2} N {}", r.loss, r.values.psnr(), r.gaussians);
+        if let Some(b) = &bar {
+            b.set_position(r.iteration as u64);
+            b.set_message(msg);
+        } else if !a.quiet && (r.iteration % 100 == 0 || r.iteration == total) {
+            let eta = (total - r.iteration) as f64 / its.max(1e-9);
+            eprintln!("[{}/{total}] {msg} {its:.2} it/s ETA {eta:.0}s", r.iteration);
+        }
+        let ck = tr.cfg.checkpoint_interval;
+        if ck > 0 && r.iteration % ck == 0 && r.iteration < total {
+            checkpoint::save(&tr, &ckpt, &dataset_str)?;
+        }
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            interrupted = true;
+            break;
+        }
+    }
+    if let Some(b) = &bar {
+        b.finish();
+    }
+    checkpoint::save(&tr, &ckpt, &dataset_str)?;
+    if interrupted {
+        if !a.quiet {
+            eprintln!("stopped at iteration {}; checkpoint {}; continue with --resume", tr.iteration, ckpt.display());
+        }
+        return Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics: None, wall_s: start.elapsed().as_secs_f64() });
+    }
+    let train_s = loop_start.elapsed().as_secs_f64();
+    write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
+    let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&a.out.join("renders/test")))?) };
+    let timings: BTreeMap<String, f64> = timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64)).collect();
+    let doc = json!({
+        "dataset": dataset_str,
+        "device": ctx.caps().describe(),
+        "iterations": tr.iteration,
+        "gaussians": tr.set.len(),
+        "train_wall_s": train_s,
+        "total_wall_s": start.elapsed().as_secs_f64(),
+        "first_loss": first_loss,
+        "final_loss": last_loss,
+        "test": metrics,
+        "gpu_ms_per_iteration": if a.profile { json!(timings) } else { json!(null) },
+    });
+    std::fs::write(a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?).context("writing metrics.json")?;
+    if !a.quiet {
+        if let Some(m) = &metrics {
+            let mae = m.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
+            eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{mae}", tr.iteration, tr.set.len(), m.psnr, m.ssim);
+        }
+        if a.profile {
+            eprintln!("GPU ms per iteration by kernel:");
+            for (k, v) in &timings {
+                eprintln!("  {k:24} {v:9.3}");
+            }
+        }
+        eprintln!("outputs in {}", a.out.display());
+    }
+    Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: start.elapsed().as_secs_f64() })
+}
+
+/// Load a run directory's checkpoint with its dataset.
+pub fn open_run(ctx: &Arc<Context>, run: &Path) -> Result<(Trainer, Dataset)> {
+    let ckpt = run.join(CHECKPOINT);
+    let (h, _) = checkpoint::read(&ckpt)?;
+    let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
+    let tr = checkpoint::restore(ctx, &ckpt, &data)?;
+    Ok((tr, data))
+}
