@@ -2,6 +2,7 @@
 
 pub mod raster_ref;
 pub mod raster_util;
+pub mod loss_ref;
 
 use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
