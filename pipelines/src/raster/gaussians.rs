@@ -77,6 +77,7 @@ impl Gaussians {
             opacity: Buffer::new(ctx, "gaussians.opacity", m)?,
             features: Buffer::new(ctx, "gaussians.features", f * m)?,
         };
+        crate::util::zero(ctx, &[g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), g.features.binding()])?;
         Ok(g)
     }
 

@@ -28,7 +28,7 @@ impl TrainableSet {
     pub(crate) fn with_params(ctx: &Arc<Context>, params: Gaussians) -> Result<TrainableSet> {
         let (n, c, k) = (params.n, params.channels, params.coeffs);
         let m = n.max(1) as usize;
-        Ok(TrainableSet {
+        let set = TrainableSet {
             grads: Gaussians::zeros(ctx, n, c, k)?,
             m: Gaussians::zeros(ctx, n, c, k)?,
             v: Gaussians::zeros(ctx, n, c, k)?,
@@ -36,7 +36,9 @@ impl TrainableSet {
             denom: Buffer::new(ctx, "set.denom", m)?,
             max_radii: Buffer::new(ctx, "set.max_radii", m)?,
             params,
-        })
+        };
+        crate::util::zero(ctx, &[set.accum.binding(), set.denom.binding(), set.max_radii.binding()])?;
+        Ok(set)
     }
 
     pub fn len(&self) -> u32 {

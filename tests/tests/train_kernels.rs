@@ -1,0 +1,166 @@
+//! Adam and adaptive density control on the GPU against CPU expectations.
+
+use tgs_engine::{Buffer, Recorder};
+use tgs_pipelines::{Adam, AdamGroup, DensifyParams, Densifier, HostGaussians, TrainableSet};
+use tgs_tests::Rng;
+use tgs_tests::{check_validation, ctx_shared, seed};
+
+#[test]
+fn adam_matches_f64_reference_and_ignores_non_finite_gradients() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("adam_matches_f64_reference"));
+    let n = 1000;
+    let group = AdamGroup { lr: 0.01, lr_rest: 0.001, stride: 4, split: 1 };
+    let adam = Adam::new(ctx, 1e-15).unwrap();
+    let p0: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let (param, grad, m, v) = (Buffer::from_slice(ctx, "p", &p0).unwrap(), Buffer::<f32>::new(ctx, "g", n).unwrap(), Buffer::<f32>::new(ctx, "m", n).unwrap(), Buffer::<f32>::new(ctx, "v", n).unwrap());
+    let (mut p, mut m64, mut v64) = (p0.iter().map(|&x| x as f64).collect::<Vec<_>>(), vec![0f64; n], vec![0f64; n]);
+    for t in 1..=6u64 {
+        let mut g: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32 * if rng.below(10) == 0 { 0.0 } else { 1.0 }).collect();
+        g[7] = f32::NAN;
+        g[11] = f32::INFINITY;
+        grad.upload(&g).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        adam.record(&mut rec, &param, &grad, &m, &v, n, &group, t).unwrap();
+        rec.submit_and_wait().unwrap();
+        let (b1, b2) = (0.9f64, 0.999f64);
+        for i in 0..n {
+            let gi = if g[i].is_finite() { g[i] as f64 } else { 0.0 };
+            m64[i] = b1 * m64[i] + (1.0 - b1) * gi;
+            v64[i] = b2 * v64[i] + (1.0 - b2) * gi * gi;
+            let lr = if i % 4 < 1 { 0.01 } else { 0.001 };
+            let denom = v64[i].sqrt() / (1.0 - b2.powi(t as i32)).sqrt() + 1e-15;
+            p[i] -= lr / (1.0 - b1.powi(t as i32)) * m64[i] / denom;
+        }
+    }
+    let got = param.download().unwrap();
+    for i in 0..n {
+        assert!((got[i] as f64 - p[i]).abs() < 2e-6, "element {i}: GPU {} vs reference {}", got[i], p[i]);
+    }
+    assert!(got.iter().all(|v| v.is_finite()));
+    check_validation(ctx);
+}
+
+/// Eight Gaussians, one per densification case.
+fn cases() -> (HostGaussians, Vec<f32>, Vec<f32>, Vec<f32>) {
+    let mut g = HostGaussians::new(3, 4);
+    let logit = |o: f32| (o / (1.0 - o)).ln();
+    // (opacity, log-scale, mean grad, views, max radius)
+    let spec: [(f32, f32, f32, f32, f32); 8] = [
+        (0.5, -4.0, 1e-5, 3.0, 4.0), // 0 keep
+        (0.5, -4.0, 5e-4, 2.0, 4.0), // 1 clone
+        (0.5, -1.0, 5e-4, 2.0, 4.0), // 2 split
+        (0.01, -4.0, 1e-5, 2.0, 4.0), // 3 prune: opacity
+        (0.5, 0.5, 1e-5, 2.0, 4.0),  // 4 prune: world size
+        (0.5, -4.0, 1e-5, 2.0, 40.0), // 5 prune: screen size
+        (0.5, -4.0, 1.0, 0.0, 0.0),  // 6 never seen: keep
+        (0.5, -2.5, 3e-4, 1.0, 4.0), // 7 split (scale 0.082 > 0.01 * extent)
+    ];
+    let (mut acc, mut den, mut rad) = (vec![], vec![], vec![]);
+    for (i, &(o, ls, gr, views, r)) in spec.iter().enumerate() {
+        let feats: Vec<f32> = (0..12).map(|k| (i * 12 + k) as f32 * 0.01).collect();
+        g.push([i as f32, 0.5 * i as f32, -0.25 * i as f32], [ls, ls - 0.3], [0.9, 0.1 * i as f32, 0.2, -0.3], logit(o), &feats);
+        acc.push(if views > 0.0 { gr * views } else { 1.0 });
+        den.push(views);
+        rad.push(r);
+    }
+    (g, acc, den, rad)
+}
+
+fn densify(seed_value: u32) -> (HostGaussians, HostGaussians, HostGaussians, [Vec<f32>; 3]) {
+    let ctx = ctx_shared();
+    let (g, acc, den, rad) = cases();
+    let mut set = TrainableSet::new(ctx, &g).unwrap();
+    set.accum.upload(&acc).unwrap();
+    set.denom.upload(&den).unwrap();
+    set.max_radii.upload(&rad).unwrap();
+    // Moments: recognisable values per Gaussian.
+    let mut mh = g.clone();
+    for (k, arr) in [&mut mh.means, &mut mh.log_scales, &mut mh.quats, &mut mh.opacity, &mut mh.features].into_iter().enumerate() {
+        let w = arr.len() / 8;
+        for (j, v) in arr.iter_mut().enumerate() {
+            *v = 100.0 * (j / w + 1) as f32 + k as f32;
+        }
+    }
+    for (dst, src) in [(&set.m, &mh), (&set.v, &mh)] {
+        dst.means.upload(&src.means).unwrap();
+        dst.log_scales.upload(&src.log_scales).unwrap();
+        dst.quats.upload(&src.quats).unwrap();
+        dst.opacity.upload(&src.opacity).unwrap();
+        dst.features.upload(&src.features).unwrap();
+    }
+    let d = Densifier::new(ctx).unwrap();
+    let p = DensifyParams { grad_threshold: 2e-4, dense_scale: 0.01 * 5.0, opacity_min: 0.05, prune_big: true, big_screen: 20.0, big_world: 0.1 * 5.0, grow: true, seed: seed_value };
+    let r = d.densify(&mut set, &p).unwrap();
+    assert_eq!((r.before, r.after), (8, 8), "kept 0, 6 (2) + clone 1 (2) + split 2, 7 (4) = 8");
+    check_validation(ctx);
+    let stats = [set.accum.download().unwrap(), set.denom.download().unwrap(), set.max_radii.download().unwrap()];
+    (set.params.download().unwrap(), set.m.download().unwrap(), set.v.download().unwrap(), stats)
+}
+
+#[test]
+fn densify_clones_splits_and_prunes() {
+    let (g, _, _, _) = cases();
+    let (out, m, v, stats) = densify(7);
+    // Output order follows the input: 0, 1, 1', 2a, 2b, 6, 7a, 7b.
+    let src = [0usize, 1, 1, 2, 2, 6, 7, 7];
+    let fresh = [false, false, true, true, true, false, true, true];
+    let split = [false, false, false, true, true, false, true, true];
+    for (o, (&s, (&is_new, &is_split))) in src.iter().zip(fresh.iter().zip(&split)).enumerate() {
+        assert_eq!(out.opacity[o], g.opacity[s], "output {o}: opacity of {s}");
+        assert_eq!(&out.quats[4 * o..4 * o + 4], &g.quats[4 * s..4 * s + 4]);
+        assert_eq!(&out.features[12 * o..12 * o + 12], &g.features[12 * s..12 * s + 12]);
+        for k in 0..2 {
+            let want = g.log_scales[2 * s + k] - if is_split { 1.6f32.ln() } else { 0.0 };
+            assert!((out.log_scales[2 * o + k] - want).abs() < 1e-6, "output {o}: log-scale {} vs {want}", out.log_scales[2 * o + k]);
+        }
+        let d: Vec<f32> = (0..3).map(|k| out.means[3 * o + k] - g.means[3 * s + k]).collect();
+        if is_split {
+            // Offset in the splat's plane: orthogonal to t_w (third column of R).
+            let q = &g.quats[4 * s..4 * s + 4];
+            let l = q.iter().map(|x| x * x).sum::<f32>().sqrt();
+            let (r, x, y, z) = (q[0] / l, q[1] / l, q[2] / l, q[3] / l);
+            let tw = [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)];
+            let dot: f32 = (0..3).map(|k| d[k] * tw[k]).sum();
+            let len = d.iter().map(|v| v * v).sum::<f32>().sqrt();
+            let smax = g.log_scales[2 * s].max(g.log_scales[2 * s + 1]).exp();
+            assert!(dot.abs() < 1e-5 && len > 0.0 && len < 6.0 * smax, "output {o}: split offset {d:?} (normal component {dot}, scale {smax})");
+        } else {
+            assert!(d.iter().all(|&v| v == 0.0), "output {o}: mean moved");
+        }
+        for (name, mom) in [("m", &m), ("v", &v)] {
+            let want = if is_new { 0.0 } else { 100.0 * (s + 1) as f32 + 3.0 };
+            assert_eq!(mom.opacity[o], want, "output {o}: Adam {name} of the opacity");
+            let want = if is_new { 0.0 } else { 100.0 * (s + 1) as f32 + 4.0 };
+            assert!(mom.features[12 * o..12 * o + 12].iter().all(|&x| x == want), "output {o}: Adam {name} of the features");
+        }
+    }
+    assert!(stats.iter().all(|s| s.iter().all(|&x| x == 0.0)), "statistics start at zero after densification");
+    // Deterministic per seed; another seed moves the split children.
+    let (again, _, _, _) = densify(7);
+    assert_eq!(out, again);
+    let (other, _, _, _) = densify(8);
+    assert_ne!(out.means, other.means);
+}
+
+#[test]
+fn densify_prune_only_and_empty_result() {
+    let ctx = ctx_shared();
+    let (g, acc, den, rad) = cases();
+    let d = Densifier::new(ctx).unwrap();
+    let mut set = TrainableSet::new(ctx, &g).unwrap();
+    set.accum.upload(&acc).unwrap();
+    set.denom.upload(&den).unwrap();
+    set.max_radii.upload(&rad).unwrap();
+    let p = DensifyParams { grad_threshold: 2e-4, dense_scale: 0.05, opacity_min: 0.05, prune_big: false, big_screen: 20.0, big_world: 0.5, grow: false, seed: 1 };
+    let r = d.densify(&mut set, &p).unwrap();
+    assert_eq!(r.after, 7, "only the transparent Gaussian goes without growth or size pruning");
+    // Everything below the opacity threshold: an empty set, then still usable.
+    let p = DensifyParams { opacity_min: 0.99, ..p };
+    let r = d.densify(&mut set, &p).unwrap();
+    assert_eq!(r.after, 0);
+    assert!(set.is_empty());
+    let r = d.densify(&mut set, &p).unwrap();
+    assert_eq!((r.before, r.after), (0, 0));
+    check_validation(ctx);
+}
