@@ -246,7 +246,7 @@ impl<'a> Cursor<'a> {
         let n = self.u64()?;
         let left = (self.b.len() - self.at) as u64;
         if n.saturating_mul(each as u64) > left {
-            bail!("count {n} at byte {} exceeds the file", self.at - 8);
+            bail!("truncated: count {n} at byte {} exceeds the file", self.at - 8);
         }
         Ok(n as usize)
     }

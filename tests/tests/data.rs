@@ -1,0 +1,312 @@
+//! Dataset loaders on hand-made fixtures: Blender layout (RGBA compositing,
+//! camera conversion, normals in .npy/.png/.exr, masks, downscale) and
+//! COLMAP text and binary models (pinhole conventions, the every-8th split),
+//! and every bad input stopping with an error that names the file.
+
+use std::path::{Path, PathBuf};
+use tgs::data::colmap::{parse_cameras_bin, parse_cameras_txt, parse_images_bin, parse_images_txt, parse_points_bin, parse_points_txt};
+use tgs::data::image_io::{write_exr, write_npy, ImageF};
+use tgs::data::{Dataset, LoadOptions};
+use tgs_pipelines::Camera;
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("tgs-data-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn png_rgba(path: &Path, w: u32, h: u32, px: [u8; 4]) {
+    let bytes: Vec<u8> = (0..w * h).flat_map(|_| px).collect();
+    image::save_buffer(path, &bytes, w, h, image::ExtendedColorType::Rgba8).unwrap();
+}
+
+fn project(cam: &Camera, p: [f32; 3]) -> [f32; 2] {
+    let m = &cam.world_to_view;
+    let v: Vec<f32> = (0..3).map(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3]).collect();
+    [cam.fx * v[0] / v[2] + cam.cx, cam.fy * v[1] / v[2] + cam.cy]
+}
+
+/// A camera at (0, -4, 0) looking at the origin along +y, z up (Blender c2w).
+const C2W: &str = "[[1,0,0,0],[0,0,-1,-4],[0,1,0,0],[0,0,0,1]]";
+
+fn blender_fixture(name: &str, w: u32, h: u32) -> PathBuf {
+    let d = tmp(name);
+    std::fs::create_dir_all(d.join("train")).unwrap();
+    std::fs::create_dir_all(d.join("test")).unwrap();
+    png_rgba(&d.join("train/a.png"), w, h, [255, 0, 0, 128]);
+    png_rgba(&d.join("test/b.png"), w, h, [0, 255, 0, 255]);
+    let n = ImageF { width: w, height: h, channels: 3, data: (0..w * h).flat_map(|_| [0.0f32, -1.0, 0.0]).collect() };
+    write_npy(&d.join("test/b_normal.npy"), &n).unwrap();
+    image::save_buffer(d.join("test/b_mask.png"), &vec![255u8; (w * h) as usize], w, h, image::ExtendedColorType::L8).unwrap();
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    std::fs::write(
+        d.join("transforms_test.json"),
+        format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./test/b", "transform_matrix": {C2W}, "normal_path": "./test/b_normal.npy", "mask_path": "./test/b_mask.png"}}]}}"#),
+    )
+    .unwrap();
+    d
+}
+
+#[test]
+fn blender_layout_loads_with_conventions_converted() {
+    let d = blender_fixture("blender", 8, 6);
+    let ds = Dataset::load(&d, &LoadOptions { background: [0.0, 0.0, 1.0], ..Default::default() }).unwrap();
+    assert_eq!((ds.train.len(), ds.test.len(), ds.format), (1, 1, "blender"));
+    let v = &ds.train[0];
+    // 50% red over a blue background.
+    let px = &v.image.data[..3];
+    assert!((px[0] - 128.0 / 255.0).abs() < 1e-6 && px[1] == 0.0 && (px[2] - 127.0 / 255.0).abs() < 0.01, "composited pixel {px:?}");
+    // The world origin is straight ahead: at the principal point (image centre).
+    let c = v.camera;
+    let p = project(&c, [0.0, 0.0, 0.0]);
+    assert!((p[0] - 3.5).abs() < 1e-5 && (p[1] - 2.5).abs() < 1e-5, "origin projects to {p:?}");
+    // World +z is up: above the centre in the image (smaller y); +x is right.
+    assert!(project(&c, [0.0, 0.0, 0.5])[1] < 2.5 && project(&c, [0.5, 0.0, 0.0])[0] > 3.5);
+    assert!((c.fx - 0.5 * 8.0 / (0.4f32).tan()).abs() < 1e-4);
+    let t = &ds.test[0];
+    assert_eq!(t.normals.as_ref().unwrap().data[..3], [0.0, -1.0, 0.0]);
+    assert!(t.mask.as_ref().unwrap().iter().all(|&m| m));
+    // Downscale by 2: sizes halve, the origin still projects to the new centre.
+    let ds2 = Dataset::load(&d, &LoadOptions { downscale: 2, ..Default::default() }).unwrap();
+    let c2 = ds2.train[0].camera;
+    assert_eq!((c2.width, c2.height, ds2.train[0].image.width), (4, 3, 4));
+    let p = project(&c2, [0.0, 0.0, 0.0]);
+    assert!((p[0] - 1.5).abs() < 1e-5 && (p[1] - 1.0).abs() < 1e-5, "downscaled origin at {p:?}");
+}
+
+#[test]
+fn normals_read_from_npy_png_and_exr_alike() {
+    let d = tmp("normals");
+    let img = ImageF { width: 3, height: 2, channels: 3, data: vec![0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0] };
+    write_npy(&d.join("n.npy"), &img).unwrap();
+    write_exr(&d.join("n.exr"), &img).unwrap();
+    let png: Vec<u8> = img.data.iter().map(|v| ((v + 1.0) * 0.5 * 255.0).round() as u8).collect();
+    image::save_buffer(d.join("n_normal.png"), &png, 3, 2, image::ExtendedColorType::Rgb8).unwrap();
+    for f in ["n.npy", "n.exr", "n_normal.png"] {
+        let r = tgs::data::image_io::read_normals(&d.join(f)).unwrap();
+        assert_eq!((r.width, r.height), (3, 2), "{f}");
+        for (a, b) in r.data.iter().zip(&img.data) {
+            assert!((a - b).abs() < 0.01, "{f}: {a} vs {b}");
+        }
+    }
+}
+
+fn expect_err(r: anyhow::Result<Dataset>, needles: &[&str]) {
+    let e = format!("{:#}", r.err().expect("loading should fail"));
+    for n in needles {
+        assert!(e.contains(n), "error '{e}' should mention '{n}'");
+    }
+}
+
+#[test]
+fn blender_bad_inputs_name_the_file() {
+    let opts = LoadOptions::default();
+    let d = blender_fixture("missing", 4, 4);
+    std::fs::remove_file(d.join("train/a.png")).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["a.png"]);
+
+    let d = blender_fixture("corrupt", 4, 4);
+    std::fs::write(d.join("train/a.png"), b"not a png at all").unwrap();
+    expect_err(Dataset::load(&d, &opts), &["a.png", "cannot read"]);
+
+    let d = blender_fixture("nonfinite", 4, 4);
+    std::fs::write(d.join("transforms_train.json"), r#"{"camera_angle_x": 0.8, "frames": [{"file_path": "./train/a", "transform_matrix": [[1,0,0,0],[0,0,-1,1e999],[0,1,0,0],[0,0,0,1]]}]}"#).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["transforms_train.json"]);
+
+    let d = blender_fixture("notfour", 4, 4);
+    std::fs::write(d.join("transforms_train.json"), r#"{"camera_angle_x": 0.8, "frames": [{"file_path": "./train/a", "transform_matrix": [[1,0,0],[0,1,0],[0,0,1]]}]}"#).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "4x4"]);
+
+    let d = blender_fixture("mask", 4, 4);
+    image::save_buffer(d.join("test/b_mask.png"), &[255u8; 6], 3, 2, image::ExtendedColorType::L8).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["b_mask.png", "3x2", "4x4"]);
+
+    let d = blender_fixture("normalsize", 4, 4);
+    write_npy(&d.join("test/b_normal.npy"), &ImageF::new(5, 4, 3)).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["b_normal.npy", "5x4"]);
+
+    let d = blender_fixture("badnpy", 4, 4);
+    std::fs::write(d.join("test/b_normal.npy"), b"\x93NUMPY\x01\x00\x10\x00{'descr': '<i4'}").unwrap();
+    expect_err(Dataset::load(&d, &opts), &["b_normal.npy"]);
+
+    let d = blender_fixture("empty", 4, 4);
+    std::fs::write(d.join("transforms_train.json"), r#"{"camera_angle_x": 0.8, "frames": []}"#).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "no frames"]);
+
+    let d = blender_fixture("nofov", 4, 4);
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["camera_angle_x"]);
+
+    expect_err(Dataset::load(Path::new("/nonexistent/tgs-dataset"), &opts), &["/nonexistent/tgs-dataset"]);
+    let d = tmp("neither");
+    expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "sparse"]);
+}
+
+// ---- COLMAP ----
+
+struct Img {
+    name: &'static str,
+    q: [f64; 4],
+    t: [f64; 3],
+    cam: u32,
+}
+
+fn images() -> Vec<Img> {
+    // Nine images (names deliberately unsorted): identity rotation, cameras at z = -4 - i/10.
+    (0..9).map(|i| Img { name: ["c.png", "a.png", "i.png", "b.png", "h.png", "d.png", "g.png", "e.png", "f.png"][i], q: [1.0, 0.0, 0.0, 0.0], t: [0.0, 0.0, 4.0 + i as f64 / 10.0], cam: 1 + (i % 2) as u32 }).collect()
+}
+
+fn write_text_model(dir: &Path, model2: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("cameras.txt"), format!("# Camera list\n1 PINHOLE 8 6 10 11 4 3\n2 {model2}\n")).unwrap();
+    let mut s = String::from("# Image list\n");
+    for (i, im) in images().iter().enumerate() {
+        s += &format!("{} {} {} {} {} {} {} {} {} {}\n", i + 1, im.q[0], im.q[1], im.q[2], im.q[3], im.t[0], im.t[1], im.t[2], im.cam, im.name);
+        s += "1.0 2.0 -1\n";
+    }
+    std::fs::write(dir.join("images.txt"), s).unwrap();
+    std::fs::write(dir.join("points3D.txt"), "# points\n1 0.5 0.25 1 255 128 0 0.1 1 0\n2 -1 0 0.5 0 0 255 0.2\n").unwrap();
+}
+
+fn write_binary_model(dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut c = Vec::new();
+    c.extend(2u64.to_le_bytes());
+    for (id, model, params) in [(1i32, 1i32, vec![10.0f64, 11.0, 4.0, 3.0]), (2, 0, vec![9.0, 4.0, 3.0])] {
+        c.extend(id.to_le_bytes());
+        c.extend(model.to_le_bytes());
+        c.extend(8u64.to_le_bytes());
+        c.extend(6u64.to_le_bytes());
+        params.iter().for_each(|p| c.extend(p.to_le_bytes()));
+    }
+    std::fs::write(dir.join("cameras.bin"), c).unwrap();
+    let mut b = Vec::new();
+    b.extend((images().len() as u64).to_le_bytes());
+    for (i, im) in images().iter().enumerate() {
+        b.extend((i as i32 + 1).to_le_bytes());
+        im.q.iter().chain(&im.t).for_each(|v| b.extend(v.to_le_bytes()));
+        b.extend((im.cam as i32).to_le_bytes());
+        b.extend(im.name.as_bytes());
+        b.push(0);
+        b.extend(1u64.to_le_bytes());
+        b.extend(1.0f64.to_le_bytes());
+        b.extend(2.0f64.to_le_bytes());
+        b.extend((-1i64).to_le_bytes());
+    }
+    std::fs::write(dir.join("images.bin"), b).unwrap();
+    let mut p = Vec::new();
+    p.extend(2u64.to_le_bytes());
+    for (id, xyz, rgb, track) in [(1u64, [0.5f64, 0.25, 1.0], [255u8, 128, 0], 1u64), (2, [-1.0, 0.0, 0.5], [0, 0, 255], 0)] {
+        p.extend(id.to_le_bytes());
+        xyz.iter().for_each(|v| p.extend(v.to_le_bytes()));
+        p.extend(rgb);
+        p.extend(0.1f64.to_le_bytes());
+        p.extend(track.to_le_bytes());
+        for _ in 0..track {
+            p.extend(1i32.to_le_bytes());
+            p.extend(0i32.to_le_bytes());
+        }
+    }
+    std::fs::write(dir.join("points3D.bin"), p).unwrap();
+}
+
+fn colmap_fixture(name: &str, binary: bool) -> PathBuf {
+    let d = tmp(name);
+    std::fs::create_dir_all(d.join("images")).unwrap();
+    for im in images() {
+        png_rgba(&d.join("images").join(im.name), 8, 6, [10, 20, 30, 255]);
+    }
+    if binary {
+        write_binary_model(&d.join("sparse/0"));
+    } else {
+        write_text_model(&d.join("sparse/0"), "SIMPLE_PINHOLE 8 6 9 4 3");
+    }
+    d
+}
+
+#[test]
+fn colmap_text_and_binary_agree() {
+    let t = colmap_fixture("colmap-txt", false);
+    let b = colmap_fixture("colmap-bin", true);
+    let dir = |d: &PathBuf| d.join("sparse/0");
+    assert_eq!(parse_cameras_txt(&std::fs::read_to_string(dir(&t).join("cameras.txt")).unwrap()).unwrap(), parse_cameras_bin(&std::fs::read(dir(&b).join("cameras.bin")).unwrap()).unwrap());
+    assert_eq!(parse_images_txt(&std::fs::read_to_string(dir(&t).join("images.txt")).unwrap()).unwrap(), parse_images_bin(&std::fs::read(dir(&b).join("images.bin")).unwrap()).unwrap());
+    let (pt, pb) = (parse_points_txt(&std::fs::read_to_string(dir(&t).join("points3D.txt")).unwrap()).unwrap(), parse_points_bin(&std::fs::read(dir(&b).join("points3D.bin")).unwrap()).unwrap());
+    assert_eq!((pt.positions.clone(), pt.colors.clone()), (pb.positions, pb.colors));
+    assert_eq!(pt.positions, vec![[0.5, 0.25, 1.0], [-1.0, 0.0, 0.5]]);
+
+    for d in [&t, &b] {
+        let ds = Dataset::load(d, &LoadOptions::default()).unwrap();
+        assert_eq!(ds.format, "colmap");
+        // Sorted by name a..i; every 8th (a, i) is a test image.
+        let names = |v: &[tgs::data::View]| v.iter().map(|x| x.name.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&ds.test), ["a.png", "i.png"]);
+        assert_eq!(names(&ds.train), ["b.png", "c.png", "d.png", "e.png", "f.png", "g.png", "h.png"]);
+        // c.png (image 0) has the PINHOLE camera fx 10 fy 11 cx 4 cy 3; COLMAP puts pixel 0's centre at 0.5.
+        let c = ds.train[1].camera;
+        assert_eq!((c.fx, c.fy, c.cx, c.cy), (10.0, 11.0, 3.5, 2.5));
+        let p = project(&c, [0.0, 0.0, 0.0]);
+        assert!((p[0] - 3.5).abs() < 1e-6 && (p[1] - 2.5).abs() < 1e-6);
+        // a.png (image 1) has the SIMPLE_PINHOLE camera f 9 cx 4 cy 3.
+        let c = ds.test[0].camera;
+        assert_eq!((c.fx, c.fy, c.cx, c.cy), (9.0, 9.0, 3.5, 2.5));
+        assert_eq!(ds.points.as_ref().unwrap().positions.len(), 2);
+        let ds2 = Dataset::load(d, &LoadOptions { downscale: 2, ..Default::default() }).unwrap();
+        let c2 = ds2.test[0].camera;
+        assert_eq!((c2.width, c2.height, c2.fx, c2.cx), (4, 3, 4.5, 1.5));
+    }
+}
+
+#[test]
+fn colmap_bad_inputs_name_the_problem() {
+    let opts = LoadOptions::default();
+    let d = colmap_fixture("colmap-model", false);
+    write_text_model(&d.join("sparse/0"), "OPENCV 8 6 9 9 4 3 0.1 0.01 0 0");
+    expect_err(Dataset::load(&d, &opts), &["OPENCV", "PINHOLE"]);
+
+    let d = colmap_fixture("colmap-trunc", true);
+    let b = std::fs::read(d.join("sparse/0/images.bin")).unwrap();
+    std::fs::write(d.join("sparse/0/images.bin"), &b[..b.len() - 20]).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["images.bin", "truncated"]);
+
+    let d = colmap_fixture("colmap-count", true);
+    let mut b = std::fs::read(d.join("sparse/0/cameras.bin")).unwrap();
+    b[..8].copy_from_slice(&u64::MAX.to_le_bytes());
+    std::fs::write(d.join("sparse/0/cameras.bin"), b).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["cameras.bin"]);
+
+    let d = colmap_fixture("colmap-missing", false);
+    std::fs::remove_file(d.join("images/e.png")).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["e.png"]);
+
+    let d = colmap_fixture("colmap-size", false);
+    png_rgba(&d.join("images/e.png"), 7, 6, [0, 0, 0, 255]);
+    expect_err(Dataset::load(&d, &opts), &["e.png", "7x6", "8x6"]);
+
+    let d = colmap_fixture("colmap-text", false);
+    std::fs::write(d.join("sparse/0/cameras.txt"), "1 PINHOLE 8 six 10 11 4 3\n").unwrap();
+    expect_err(Dataset::load(&d, &opts), &["cameras.txt", "line 1", "six"]);
+
+    let d = colmap_fixture("colmap-quat", false);
+    let t = std::fs::read_to_string(d.join("sparse/0/images.txt")).unwrap().replacen("1 1 0 0 0", "1 0 0 0 0", 1);
+    std::fs::write(d.join("sparse/0/images.txt"), t).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["c.png", "quaternion"]);
+
+    let d = colmap_fixture("colmap-cam", false);
+    let t = std::fs::read_to_string(d.join("sparse/0/images.txt")).unwrap().replacen(" 1 c.png", " 7 c.png", 1);
+    std::fs::write(d.join("sparse/0/images.txt"), t).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["c.png", "camera 7"]);
+}
+
+#[test]
+fn shared_lantern_dataset_loads() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/lantern");
+    if !root.is_dir() {
+        eprintln!("skipping: {} not present", root.display());
+        return;
+    }
+    let ds = Dataset::load(&root, &LoadOptions::default()).unwrap();
+    assert_eq!((ds.train.len(), ds.test.len()), (60, 12));
+    assert!(ds.test.iter().all(|v| v.normals.is_some() && v.mask.is_some() && v.image.width == 200));
+}
