@@ -164,3 +164,26 @@ fn densify_prune_only_and_empty_result() {
     assert_eq!((r.before, r.after), (0, 0));
     check_validation(ctx);
 }
+
+#[test]
+fn opacity_reset_caps_opacity_and_clears_its_moments() {
+    let ctx = ctx_shared();
+    let (g, _, _, _) = cases();
+    let set = TrainableSet::new(ctx, &g).unwrap();
+    let ones = vec![1.0f32; 8];
+    set.m.opacity.upload(&ones).unwrap();
+    set.v.opacity.upload(&ones).unwrap();
+    set.m.means.upload(&vec![1.0f32; 24]).unwrap();
+    let d = Densifier::new(ctx).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    d.record_opacity_reset(&mut rec, &set, 0.01).unwrap();
+    rec.submit_and_wait().unwrap();
+    let cap = (0.01f32 / 0.99).ln();
+    let got = set.params.opacity.download().unwrap();
+    for (a, b) in got.iter().zip(&g.opacity) {
+        assert_eq!(*a, b.min(cap));
+    }
+    assert!(set.m.opacity.download().unwrap().iter().chain(&set.v.opacity.download().unwrap()).all(|&x| x == 0.0));
+    assert!(set.m.means.download().unwrap().iter().all(|&x| x == 1.0), "other moments untouched");
+    check_validation(ctx);
+}

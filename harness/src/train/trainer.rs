@@ -13,7 +13,7 @@ use super::config::TrainConfig;
 use super::init::{gaussians_from_points, random_points};
 use super::rng::Rng;
 use crate::data::{Dataset, View};
-use anyhow::{Context as _, Result};
+use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
@@ -248,12 +248,6 @@ impl Trainer {
             self.adam.record(&mut rec, p, g, m, v, len, &group, it as u64)?;
         }
         rec.end_scope(sc);
-        let reset = it < cfg.densify_until
-            && cfg.opacity_reset_interval > 0
-            && (it % cfg.opacity_reset_interval == 0 || (self.background == [1.0; 3] && it == cfg.densify_from));
-        if reset {
-            self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
-        }
         timings.extend(rec.submit_and_wait()?);
         let values = b.loss.values()?;
         let loss = values.photometric(cfg.lambda_ssim as f64)
@@ -272,7 +266,23 @@ impl Trainer {
                 seed: (cfg.seed as u32) ^ it.wrapping_mul(0x9E37_79B9),
             };
             let r = self.densifier.densify(&mut self.set, &p)?;
+            if r.after == 0 && r.before > 0 {
+                bail!(
+                    "iteration {it}: densification pruned all {} Gaussians (opacity below prune_opacity {}; an opacity reset too close before a densification does this)",
+                    r.before,
+                    cfg.prune_opacity
+                );
+            }
             densified = Some((r.before, r.after));
+        }
+        // After densification, as in 2DGS (a reset first would prune everything).
+        let reset = it < cfg.densify_until
+            && cfg.opacity_reset_interval > 0
+            && (it % cfg.opacity_reset_interval == 0 || (self.background == [1.0; 3] && it == cfg.densify_from));
+        if reset {
+            let mut rec = Recorder::new(&self.ctx)?;
+            self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
+            rec.submit_and_wait()?;
         }
         self.iteration = it;
         Ok(StepReport { iteration: it, view, loss, values, gaussians: self.set.len(), densified, timings })
