@@ -78,9 +78,9 @@ fn stage_one_trains_and_resumes_exactly() {
     assert!(last < 0.6 * first, "loss fell only from {first:.4} to {last:.4}");
     assert!(log.iter().any(|l| l.get("densified").is_some()), "densification never ran");
     assert!(log.iter().any(|l| l.get("test").is_some()), "no periodic test evaluation");
-    // Test views: 150 iterations must beat predicting the mean colour by 4 dB
-    // (measured: about 8 dB above it).
-    assert!(m.psnr > baseline + 4.0, "test PSNR {:.2} vs mean-colour baseline {baseline:.2}", m.psnr);
+    // Test views: 150 iterations must beat predicting each image by its mean
+    // colour by 3 dB (measured on lavapipe: 19.8 vs 14.6 dB, +5.2 dB).
+    assert!(m.psnr > baseline + 3.0, "test PSNR {:.2} vs mean-colour baseline {baseline:.2}", m.psnr);
     assert!(m.normal_mae_deg.is_some_and(|v| v.is_finite() && v < 90.0));
     // Outputs people open.
     let ply = tgs::export::ply::read_splats(&full.join("point_cloud.ply")).unwrap();

@@ -24,7 +24,7 @@ pub struct SceneSpec {
 }
 
 pub const SCENES: [SceneSpec; 2] = [
-    SceneSpec { name: "glass", size: 96, train: 40, test: 8, points: 8000 },
+    SceneSpec { name: "glass", size: 64, train: 32, test: 8, points: 4000 },
     SceneSpec { name: "glass-tiny", size: 48, train: 16, test: 4, points: 2000 },
 ];
 
