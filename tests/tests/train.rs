@@ -94,6 +94,14 @@ fn stage_one_trains_and_resumes_exactly() {
     }
     let img = image::open(full.join("renders/test/r_0.png")).unwrap();
     assert_eq!((img.width(), img.height()), (48, 48));
+    // `tgs eval` and `tgs render` on the run directory.
+    let (mut tr, data) = tgs::train::run::open_run(ctx, &full).unwrap();
+    let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
+    assert_eq!((again.psnr, again.ssim), (m.psnr, m.ssim), "evaluation from the checkpoint differs");
+    let orbit = full.join("orbit");
+    assert_eq!(tgs::render::render(ctx, &full, "orbit", 3, &orbit).unwrap(), 3);
+    assert!(orbit.join("orbit_0002.png").is_file());
+    assert!(tgs::render::render(ctx, &full, "sideways", 3, &orbit).is_err());
 
     // Stopped (as by Ctrl-C) part-way, then resumed.
     let part = base.join("part");

@@ -125,7 +125,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let dir = dataset_dir(a, a.quiet)?;
         let data = load_dataset(&dir, &cfg)?;
         let tr = Trainer::new(ctx, cfg, &data)?;
-        (tr, data, dir.to_string_lossy().into_owned())
+        // Absolute, so that --resume, eval and render work from any directory.
+        let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
+        (tr, data, abs.to_string_lossy().into_owned())
     };
     std::fs::write(a.out.join("config.toml"), toml::to_string(&tr.cfg)?).context("writing config.toml")?;
     install_ctrlc();
