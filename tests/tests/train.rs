@@ -142,6 +142,11 @@ fn bad_settings_and_missing_checkpoints_are_reported() {
     let mut a = args(&out);
     a.set.push("lambda_ssim=2".into());
     assert!(format!("{:#}", train(ctx, &a).unwrap_err()).contains("lambda_ssim"));
+    // A run directory with a checkpoint is not overwritten without --resume.
+    let a = args(&out);
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("checkpoint.bin"), b"x").unwrap();
+    assert!(format!("{:#}", train(ctx, &a).unwrap_err()).contains("--resume"));
     let a = TrainArgs { resume: true, ..args(&out) };
     assert!(format!("{:#}", train(ctx, &a).unwrap_err()).contains("checkpoint"));
     std::fs::create_dir_all(&out).unwrap();

@@ -121,6 +121,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         (tr, data, h.dataset)
     } else {
+        if ckpt.is_file() {
+            bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
+        }
         let cfg = config_from_args(a)?;
         let dir = dataset_dir(a, a.quiet)?;
         let data = load_dataset(&dir, &cfg)?;
@@ -134,7 +137,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     INTERRUPTED.store(false, Ordering::SeqCst);
 
     let total = tr.schedule.total();
-    let mut log = std::fs::OpenOptions::new().create(true).append(true).open(a.out.join("log.jsonl")).context("opening log.jsonl")?;
+    let mut log = std::fs::OpenOptions::new().create(true).append(a.resume).write(true).truncate(!a.resume).open(a.out.join("log.jsonl")).context("opening log.jsonl")?;
     let tty = std::io::stderr().is_terminal() && !a.quiet;
     let bar = if tty {
         let b = indicatif::ProgressBar::new(total as u64);
