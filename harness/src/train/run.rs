@@ -180,7 +180,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let elapsed = loop_start.elapsed().as_secs_f64();
         let its = (r.iteration - start_it) as f64 / elapsed.max(1e-9);
         let mut line = json!({
-            "iteration": r.iteration, "stage": "I", "view": r.view, "loss": r.loss, "l1": r.values.l1, "ssim": r.values.ssim,
+            "iteration": r.iteration, "stage": r.stage.name(), "view": r.view, "loss": r.loss, "l1": r.values.l1, "ssim": r.values.ssim,
             "psnr": r.values.psnr(), "gaussians": r.gaussians, "it_per_s": its, "elapsed_s": start.elapsed().as_secs_f64(),
         });
         if r.values.normal.is_finite() {

@@ -12,7 +12,7 @@
 use super::config::TrainConfig;
 use super::init::{gaussians_from_points, random_points};
 use super::rng::Rng;
-use crate::data::{Dataset, View};
+use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -20,16 +20,17 @@ use tgs_engine::{Buffer, Context, Recorder, Timing};
 use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// Training stages (paper §3–4). Only Stage I exists so far.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Stage {
     /// Stage I: the scattering set alone (2DGS).
+    #[default]
     Scattering,
 }
 
 impl Stage {
     pub fn name(self) -> &'static str {
         match self {
-            Stage::Scattering => "I-scattering",
+            Stage::Scattering => "I",
         }
     }
 }
@@ -64,6 +65,7 @@ impl Schedule {
 #[derive(Clone, Debug, Default)]
 pub struct StepReport {
     pub iteration: u32,
+    pub stage: Stage,
     pub view: u32,
     pub loss: f64,
     pub values: LossValues,
@@ -154,10 +156,6 @@ impl Trainer {
         })
     }
 
-    pub fn context(&self) -> &Arc<Context> {
-        &self.ctx
-    }
-
     pub fn done(&self) -> bool {
         self.iteration >= self.schedule.total()
     }
@@ -189,14 +187,7 @@ impl Trainer {
     /// Run the forward of `cam` until it fits its frame.
     fn forward(&mut self, cam: &Camera, sh: u32, profile: bool) -> Result<Vec<Timing>> {
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
-        loop {
-            let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
-            self.raster.record_forward(&mut rec, &self.set.params, cam, &self.background, sh, &b.frame)?;
-            let t = rec.submit_and_wait()?;
-            if self.raster.fit(&mut b.frame)? {
-                return Ok(t);
-            }
-        }
+        self.raster.forward(&self.set.params, cam, &self.background, sh, &mut b.frame, profile)
     }
 
     /// One training iteration.
@@ -285,7 +276,7 @@ impl Trainer {
             rec.submit_and_wait()?;
         }
         self.iteration = it;
-        Ok(StepReport { iteration: it, view, loss, values, gaussians: self.set.len(), densified, timings })
+        Ok(StepReport { iteration: it, stage: Stage::Scattering, view, loss, values, gaussians: self.set.len(), densified, timings })
     }
 
     /// Render `cam` with the current Gaussians (all output planes).
@@ -299,10 +290,6 @@ impl Trainer {
     /// Current Gaussians on the host.
     pub fn gaussians(&self) -> Result<HostGaussians> {
         self.set.params.download()
-    }
-
-    pub fn train_views(&self) -> usize {
-        self.cameras.len()
     }
 }
 
@@ -319,9 +306,4 @@ fn view_buffers<'a>(sizes: &'a mut HashMap<(u32, u32), ViewBuffers>, raster: &Ra
         sizes.insert((w, h), ViewBuffers { frame, loss });
     }
     Ok(sizes.get_mut(&(w, h)).unwrap())
-}
-
-/// Render every view of `views` (for evaluation and outputs).
-pub fn render_views(tr: &mut Trainer, views: &[View]) -> Result<Vec<Rendered>> {
-    views.iter().map(|v| tr.render(&v.camera)).collect()
 }
