@@ -65,9 +65,17 @@ pub struct Gaussians {
 impl Gaussians {
     /// Zero-initialised buffers for `n` Gaussians.
     pub fn zeros(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32) -> Result<Gaussians> {
+        let g = Self::uninit(ctx, n, channels, coeffs)?;
+        crate::util::zero(ctx, &[g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), g.features.binding()])?;
+        Ok(g)
+    }
+
+    /// Buffers for `n` Gaussians with undefined contents, for callers that
+    /// write every element before reading any.
+    pub(crate) fn uninit(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32) -> Result<Gaussians> {
         let m = n.max(1) as usize;
         let f = (coeffs * channels) as usize;
-        let g = Gaussians {
+        Ok(Gaussians {
             n,
             channels,
             coeffs,
@@ -76,9 +84,7 @@ impl Gaussians {
             quats: Buffer::new(ctx, "gaussians.quats", 4 * m)?,
             opacity: Buffer::new(ctx, "gaussians.opacity", m)?,
             features: Buffer::new(ctx, "gaussians.features", f * m)?,
-        };
-        crate::util::zero(ctx, &[g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), g.features.binding()])?;
-        Ok(g)
+        })
     }
 
     pub fn upload(ctx: &Arc<Context>, h: &HostGaussians) -> Result<Gaussians> {

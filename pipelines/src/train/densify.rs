@@ -131,7 +131,8 @@ impl Densifier {
         let total = counts.download_range(n as usize, 1)?[0];
 
         let (c, k) = (g.channels, g.coeffs);
-        let (params, m, v) = (Gaussians::zeros(ctx, total, c, k)?, Gaussians::zeros(ctx, total, c, k)?, Gaussians::zeros(ctx, total, c, k)?);
+        // densify_apply writes every element of the new buffers.
+        let (params, m, v) = (Gaussians::uninit(ctx, total, c, k)?, Gaussians::uninit(ctx, total, c, k)?, Gaussians::uninit(ctx, total, c, k)?);
         let mut rec = Recorder::new(ctx)?;
         let f = (c * k) as usize;
         // Modes of densify_apply.comp: 0 moments, 1 copy, 2 means, 3 log-scales.
@@ -155,10 +156,7 @@ impl Densifier {
             }
         }
         rec.submit_and_wait()?;
-        let mut next = TrainableSet::with_params(ctx, params)?;
-        next.m = m;
-        next.v = v;
-        *set = next;
+        *set = TrainableSet::from_parts(ctx, params, m, v)?;
         Ok(DensifyReport { before: n, after: total })
     }
 }

@@ -22,19 +22,21 @@ impl TrainableSet {
     /// A set with these parameters, zero moments and statistics.
     pub fn new(ctx: &Arc<Context>, h: &HostGaussians) -> Result<TrainableSet> {
         let params = Gaussians::upload(ctx, h)?;
-        Self::with_params(ctx, params)
+        let (n, c, k) = (params.n, params.channels, params.coeffs);
+        Self::from_parts(ctx, params, Gaussians::zeros(ctx, n, c, k)?, Gaussians::zeros(ctx, n, c, k)?)
     }
 
-    pub(crate) fn with_params(ctx: &Arc<Context>, params: Gaussians) -> Result<TrainableSet> {
+    /// A set from parameters and Adam moments; zero gradients and statistics.
+    pub(crate) fn from_parts(ctx: &Arc<Context>, params: Gaussians, m: Gaussians, v: Gaussians) -> Result<TrainableSet> {
         let (n, c, k) = (params.n, params.channels, params.coeffs);
-        let m = n.max(1) as usize;
+        let len = n.max(1) as usize;
         let set = TrainableSet {
             grads: Gaussians::zeros(ctx, n, c, k)?,
-            m: Gaussians::zeros(ctx, n, c, k)?,
-            v: Gaussians::zeros(ctx, n, c, k)?,
-            accum: Buffer::new(ctx, "set.accum", m)?,
-            denom: Buffer::new(ctx, "set.denom", m)?,
-            max_radii: Buffer::new(ctx, "set.max_radii", m)?,
+            m,
+            v,
+            accum: Buffer::new(ctx, "set.accum", len)?,
+            denom: Buffer::new(ctx, "set.denom", len)?,
+            max_radii: Buffer::new(ctx, "set.max_radii", len)?,
             params,
         };
         crate::util::zero(ctx, &[set.accum.binding(), set.denom.binding(), set.max_radii.binding()])?;
