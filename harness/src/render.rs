@@ -3,6 +3,7 @@
 //! cameras' mean height, looking at the point nearest all their optical axes).
 
 use crate::eval::{world_normals, write_outputs};
+use crate::scene::trace::{cross, dot, sub};
 use crate::train::run::open_run;
 use anyhow::{bail, Result};
 use std::path::Path;
@@ -10,12 +11,6 @@ use std::sync::Arc;
 use tgs_engine::Context;
 use tgs_pipelines::Camera;
 
-fn v_sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn v_dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 
 /// `frames` cameras orbiting the training cameras (intrinsics of the first).
 pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
@@ -52,24 +47,24 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
     };
     let up = {
         let s = [0, 1, 2].map(|k| ups.iter().map(|u| u[k]).sum::<f64>());
-        let l = v_dot(s, s).sqrt().max(1e-12);
+        let l = dot(s, s).sqrt().max(1e-12);
         s.map(|v| v / l)
     };
     // Orbit in the plane perpendicular to `up` at the cameras' mean height.
-    let rel: Vec<[f64; 3]> = centres.iter().map(|c| v_sub(*c, target)).collect();
-    let height = rel.iter().map(|r| v_dot(*r, up)).sum::<f64>() / n;
+    let rel: Vec<[f64; 3]> = centres.iter().map(|c| sub(*c, target)).collect();
+    let height = rel.iter().map(|r| dot(*r, up)).sum::<f64>() / n;
     let radius = rel.iter().map(|r| {
-        let h = v_dot(*r, up);
-        (v_dot(*r, *r) - h * h).max(0.0).sqrt()
+        let h = dot(*r, up);
+        (dot(*r, *r) - h * h).max(0.0).sqrt()
     }).sum::<f64>() / n;
     let e0 = {
         let r = rel[0];
-        let h = v_dot(r, up);
-        let p = v_sub(r, up.map(|u| u * h));
-        let l = v_dot(p, p).sqrt().max(1e-12);
+        let h = dot(r, up);
+        let p = sub(r, up.map(|u| u * h));
+        let l = dot(p, p).sqrt().max(1e-12);
         p.map(|v| v / l)
     };
-    let e1 = [up[1] * e0[2] - up[2] * e0[1], up[2] * e0[0] - up[0] * e0[2], up[0] * e0[1] - up[1] * e0[0]];
+    let e1 = cross(up, e0);
     let fov_y = 2.0 * ((0.5 * c0.height as f32) / c0.fy).atan();
     Ok((0..frames.max(1))
         .map(|i| {

@@ -46,6 +46,13 @@ fn eye(i: u32, n: u32, test: bool) -> V3 {
     [r * a.cos(), r * a.sin(), h]
 }
 
+/// Camera basis at `e` looking at TARGET, z up: (forward, right, up).
+fn basis(e: V3) -> (V3, V3, V3) {
+    let f = norm(sub(TARGET, e));
+    let r = norm(cross(f, [0.0, 0.0, 1.0]));
+    (f, r, cross(r, f))
+}
+
 struct View {
     rgb: ImageF,
     normals: ImageF,
@@ -57,9 +64,7 @@ struct View {
 /// centre (world, facing the camera; 0 on background); mask where all four
 /// samples first hit glass.
 fn render(scene: &Scene, e: V3, size: u32) -> View {
-    let f = norm(sub(TARGET, e));
-    let r = norm(cross(f, [0.0, 0.0, 1.0]));
-    let u = cross(r, f);
+    let (f, r, u) = basis(e);
     let focal = 0.5 * size as f64 / (0.5 * FOV_X).tan();
     let c = 0.5 * size as f64;
     let dir = |x: f64, y: f64| norm(add(add(mul(r, (x - c) / focal), mul(u, -(y - c) / focal)), f));
@@ -104,9 +109,7 @@ fn surface_points(scene: &Scene, spec: &SceneSpec) -> Points {
     };
     for k in 0..spec.points {
         let e = eye(k % spec.train, spec.train, false);
-        let f = norm(sub(TARGET, e));
-        let r = norm(cross(f, [0.0, 0.0, 1.0]));
-        let u = cross(r, f);
+        let (f, r, u) = basis(e);
         let t = (0.5 * FOV_X).tan();
         let d = norm(add(add(mul(r, (2.0 * next() - 1.0) * t), mul(u, (2.0 * next() - 1.0) * t)), f));
         if let Some(h) = scene.intersect(e, d, f64::INFINITY, true) {

@@ -131,15 +131,15 @@ impl Scene {
                 take(Hit { t, p, n, mat: Material::Diffuse(mul(bx.color, 0.75 + 0.25 * stripe)) });
             }
         }
-        for (t, _) in hit_sphere(self.ball.0, self.ball.1, o, d) {
+        // The ball is opaque: only its nearest hit counts.
+        if let Some(&t) = hit_sphere(self.ball.0, self.ball.1, o, d).first() {
             let p = add(o, mul(d, t));
             let n = norm(sub(p, self.ball.0));
             let band = (((n[2] * 4.0).floor() as i64) & 1) as f64;
             take(Hit { t, p, n, mat: Material::Diffuse([0.9, 0.45 + 0.25 * band, 0.15]) });
-            break;
         }
         if glass {
-            for (t, _) in hit_sphere(GLASS_C, GLASS_R, o, d) {
+            for t in hit_sphere(GLASS_C, GLASS_R, o, d) {
                 let p = add(o, mul(d, t));
                 take(Hit { t, p, n: norm(sub(p, GLASS_C)), mat: Material::Glass });
             }
@@ -175,7 +175,8 @@ impl Scene {
     }
 }
 
-fn hit_sphere(c: V3, r: f64, o: V3, d: V3) -> Vec<(f64, ())> {
+/// Ray parameters t > 0 where the ray meets the sphere, nearest first.
+fn hit_sphere(c: V3, r: f64, o: V3, d: V3) -> Vec<f64> {
     let oc = sub(o, c);
     let b = dot(oc, d);
     let cc = dot(oc, oc) - r * r;
@@ -184,7 +185,7 @@ fn hit_sphere(c: V3, r: f64, o: V3, d: V3) -> Vec<(f64, ())> {
         return Vec::new();
     }
     let s = disc.sqrt();
-    vec![(-b - s, ()), (-b + s, ())].into_iter().filter(|(t, _)| *t > 1e-6).collect()
+    [-b - s, -b + s].into_iter().filter(|&t| t > 1e-6).collect()
 }
 
 fn hit_box(b: &Box3, o: V3, d: V3) -> Option<(f64, V3)> {
