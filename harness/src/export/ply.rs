@@ -83,8 +83,17 @@ pub fn read_splats(path: &Path) -> Result<HostGaussians> {
     Ok(g)
 }
 
-/// Float properties of a binary little-endian PLY whose only element is vertex.
-fn read_binary(path: &Path) -> Result<(Vec<String>, usize, Vec<f32>)> {
+/// A vertex property: name, type and byte size.
+struct Property {
+    name: String,
+    ty: String,
+    size: usize,
+}
+
+/// The vertex properties, vertex count, file bytes and the offset of the
+/// body of a binary little-endian PLY (the body holds at least count x
+/// stride bytes).
+fn read_vertices(path: &Path) -> Result<(Vec<Property>, usize, Vec<u8>, usize)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     let end = bytes.windows(11).position(|w| w == b"end_header\n").with_context(|| format!("{}: not a PLY (no end_header)", path.display()))?;
     let header = std::str::from_utf8(&bytes[..end]).with_context(|| format!("{}: header is not text", path.display()))?;
@@ -92,45 +101,7 @@ fn read_binary(path: &Path) -> Result<(Vec<String>, usize, Vec<f32>)> {
         bail!("{}: only binary little-endian PLY is read", path.display());
     }
     let mut n = 0usize;
-    let mut names = Vec::new();
-    for l in header.lines() {
-        let t: Vec<&str> = l.split_whitespace().collect();
-        match t.as_slice() {
-            ["element", "vertex", c] => n = c.parse().with_context(|| format!("{}: bad vertex count", path.display()))?,
-            ["property", "float", name] => names.push(name.to_string()),
-            ["property", ty, _] => bail!("{}: property type {ty} not supported here", path.display()),
-            _ => {}
-        }
-    }
-    let body = &bytes[end + 11..];
-    if body.len() < n * names.len() * 4 {
-        bail!("{}: truncated ({} bytes for {n} vertices of {} floats)", path.display(), body.len(), names.len());
-    }
-    let vals = body[..n * names.len() * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
-    Ok((names, n, vals))
-}
-
-/// Write a point cloud (x y z float, red green blue uchar).
-pub fn write_points(path: &Path, pts: &Points) -> Result<()> {
-    let mut out = format!("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n", pts.positions.len()).into_bytes();
-    for (p, c) in pts.positions.iter().zip(&pts.colors) {
-        p.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
-        c.iter().for_each(|v| out.push((v.clamp(0.0, 1.0) * 255.0).round() as u8));
-    }
-    std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
-}
-
-/// Read x, y, z and (if present) red, green, blue from a binary PLY point
-/// cloud (float or double positions, uchar colours, other properties skipped).
-pub fn read_points(path: &Path) -> Result<Points> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let end = bytes.windows(11).position(|w| w == b"end_header\n").with_context(|| format!("{}: not a PLY (no end_header)", path.display()))?;
-    let header = std::str::from_utf8(&bytes[..end]).with_context(|| format!("{}: header is not text", path.display()))?;
-    if !header.contains("format binary_little_endian") {
-        bail!("{}: only binary little-endian PLY point clouds are read", path.display());
-    }
-    let mut n = 0usize;
-    let mut props: Vec<(String, usize)> = Vec::new();
+    let mut props = Vec::new();
     let mut in_vertex = false;
     for l in header.lines() {
         let t: Vec<&str> = l.split_whitespace().collect();
@@ -149,24 +120,53 @@ pub fn read_points(path: &Path) -> Result<Points> {
                     "short" | "ushort" | "int16" | "uint16" => 2,
                     _ => bail!("{}: property type {ty} not supported", path.display()),
                 };
-                props.push((format!("{ty}:{name}"), size));
+                props.push(Property { name: name.to_string(), ty: ty.to_string(), size });
             }
             _ => {}
         }
     }
-    let stride: usize = props.iter().map(|p| p.1).sum();
-    let body = &bytes[end + 11..];
-    if body.len() < n * stride {
-        bail!("{}: truncated ({} bytes for {n} points of {stride} bytes)", path.display(), body.len());
+    let stride: usize = props.iter().map(|p| p.size).sum();
+    let body = bytes.len() - (end + 11);
+    if body < n * stride {
+        bail!("{}: truncated ({body} bytes for {n} vertices of {stride} bytes)", path.display());
     }
+    Ok((props, n, bytes, end + 11))
+}
+
+/// Float properties of a PLY whose vertex properties are all `float`.
+fn read_binary(path: &Path) -> Result<(Vec<String>, usize, Vec<f32>)> {
+    let (props, n, bytes, start) = read_vertices(path)?;
+    let body = &bytes[start..];
+    if let Some(p) = props.iter().find(|p| p.ty != "float") {
+        bail!("{}: property type {} not supported here", path.display(), p.ty);
+    }
+    let vals = body[..n * props.len() * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    Ok((props.into_iter().map(|p| p.name).collect(), n, vals))
+}
+
+/// Write a point cloud (x y z float, red green blue uchar).
+pub fn write_points(path: &Path, pts: &Points) -> Result<()> {
+    let mut out = format!("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n", pts.positions.len()).into_bytes();
+    for (p, c) in pts.positions.iter().zip(&pts.colors) {
+        p.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+        c.iter().for_each(|v| out.push((v.clamp(0.0, 1.0) * 255.0).round() as u8));
+    }
+    std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Read x, y, z and (if present) red, green, blue from a binary PLY point
+/// cloud (float or double positions, uchar colours, other properties skipped).
+pub fn read_points(path: &Path) -> Result<Points> {
+    let (props, n, bytes, start) = read_vertices(path)?;
+    let body = &bytes[start..];
+    let stride: usize = props.iter().map(|p| p.size).sum();
     let find = |name: &str| -> Option<(usize, &str)> {
         let mut off = 0;
-        for (p, s) in &props {
-            let (ty, nm) = p.split_once(':').unwrap();
-            if nm == name {
-                return Some((off, ty));
+        for p in &props {
+            if p.name == name {
+                return Some((off, p.ty.as_str()));
             }
-            off += s;
+            off += p.size;
         }
         None
     };
