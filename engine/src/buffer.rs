@@ -123,17 +123,46 @@ pub struct Buffer<T> {
 }
 
 impl<T: Pod> Buffer<T> {
-    /// Allocate `len` elements (contents undefined).
+    /// Allocate `len` elements, all zero. This is the default: device memory
+    /// is reused between buffers, so undefined contents would differ from run
+    /// to run.
     pub fn new(ctx: &Arc<Context>, name: &str, len: usize) -> Result<Self> {
+        let b = Self::alloc(ctx, name, len)?;
+        b.fill_bits(0)?;
+        Ok(b)
+    }
+
+    /// Allocate `len` elements with undefined contents. Only for buffers that
+    /// a kernel or copy writes completely (every element later read) before
+    /// anything reads them; say at the call site what writes them. On a
+    /// context with [`Context::set_poison_uninit`] on, the memory is filled
+    /// with 0xFFFFFFFF so a read before a write shows up deterministically.
+    pub fn uninit(ctx: &Arc<Context>, name: &str, len: usize) -> Result<Self> {
+        let b = Self::alloc(ctx, name, len)?;
+        if ctx.poison_uninit.load(std::sync::atomic::Ordering::SeqCst) {
+            b.fill_bits(u32::MAX)?;
+        }
+        Ok(b)
+    }
+
+    fn alloc(ctx: &Arc<Context>, name: &str, len: usize) -> Result<Self> {
         let bytes = (len as u64)
             .checked_mul(std::mem::size_of::<T>() as u64)
             .ok_or_else(|| anyhow!("buffer '{name}': size overflow"))?;
         Ok(Buffer { inner: RawBuffer::new(ctx, name, bytes, MemoryLocation::GpuOnly)?, len, _t: PhantomData })
     }
 
+    /// Fill the whole allocation with a repeated 32-bit pattern (blocking).
+    fn fill_bits(&self, bits: u32) -> Result<()> {
+        let mut rec = Recorder::new(&self.inner.ctx)?;
+        rec.fill(&self.binding(), bits)?;
+        rec.submit_and_wait().with_context(|| format!("initialising buffer '{}'", self.name()))?;
+        Ok(())
+    }
+
     /// Allocate and fill from `data`.
     pub fn from_slice(ctx: &Arc<Context>, name: &str, data: &[T]) -> Result<Self> {
-        let b = Self::new(ctx, name, data.len())?;
+        let b = Self::uninit(ctx, name, data.len())?;
         b.upload(data)?;
         Ok(b)
     }

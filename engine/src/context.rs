@@ -57,6 +57,8 @@ pub struct Context {
     owns: bool,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
     validation: Arc<ValidationLog>,
+    /// Fill buffers made with `Buffer::uninit` with 0xFFFFFFFF (NaN as f32).
+    pub(crate) poison_uninit: std::sync::atomic::AtomicBool,
 }
 
 pub(crate) fn load_entry() -> Result<ash::Entry> {
@@ -249,6 +251,7 @@ impl Context {
             owns,
             debug,
             validation,
+            poison_uninit: std::sync::atomic::AtomicBool::new(false),
         }))
     }
 
@@ -280,6 +283,15 @@ impl Context {
     /// Whether the validation layer is active on this context.
     pub fn validation_enabled(&self) -> bool {
         self.debug.is_some()
+    }
+
+    /// From now on, fill every buffer made with `Buffer::uninit` with the bit
+    /// pattern 0xFFFFFFFF (a NaN as f32, the largest u32) instead of leaving
+    /// it undefined, so that a kernel reading memory nobody wrote fails the
+    /// same way every run instead of depending on what an earlier user of the
+    /// memory left there. Tests turn this on; it costs one fill per buffer.
+    pub fn set_poison_uninit(&self, on: bool) {
+        self.poison_uninit.store(on, std::sync::atomic::Ordering::SeqCst);
     }
 
     /// Validation errors reported so far (empty without the layer).

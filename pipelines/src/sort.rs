@@ -157,8 +157,9 @@ impl RadixSort {
         let radix = 1u32 << self.cfg.radix_bits;
         Ok(SortScratch {
             capacity,
-            keys: Buffer::new(&self.ctx, "sort.keys_tmp", capacity as usize)?,
-            vals: Buffer::new(&self.ctx, "sort.vals_tmp", capacity as usize)?,
+            // Each pass writes the first `count` entries before the next reads them.
+            keys: Buffer::uninit(&self.ctx, "sort.keys_tmp", capacity as usize)?,
+            vals: Buffer::uninit(&self.ctx, "sort.vals_tmp", capacity as usize)?,
             hist: Buffer::new(&self.ctx, "sort.hist", (parts * radix) as usize)?,
             spine: ScanScratch::new(&self.ctx, parts * radix)?,
         })

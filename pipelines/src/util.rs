@@ -54,13 +54,3 @@ impl Iota {
         rec.dispatch(k, &[], &push, self.grid(count))
     }
 }
-
-/// Fill every binding with zero bytes (one submission).
-pub fn zero(ctx: &Arc<Context>, bindings: &[BufferBinding]) -> Result<()> {
-    let mut rec = Recorder::new(ctx)?;
-    for b in bindings {
-        rec.fill(b, 0)?;
-    }
-    rec.submit_and_wait()?;
-    Ok(())
-}

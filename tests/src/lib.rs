@@ -8,11 +8,16 @@ use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
 
 /// A context on the default device (or `TGS_DEVICE`) with validation layers
-/// enabled when installed. Use [`check_validation`] at the end of a test.
+/// enabled when installed and `Buffer::uninit` memory poisoned (all bits set). Use [`check_validation`] at the end of a test.
 pub fn ctx() -> Arc<Context> {
     let opts = ContextOptions { device: DeviceSelector::from_arg_or_env(None), validation: Some(validation_wanted()) };
     match Context::new(&opts) {
-        Ok(c) => c,
+        Ok(c) => {
+            // A kernel that reads memory nobody wrote then fails every run,
+            // not only when an earlier test left the wrong bytes there.
+            c.set_poison_uninit(true);
+            c
+        }
         Err(e) => panic!("no Vulkan device for tests: {e:#}"),
     }
 }

@@ -260,3 +260,29 @@ fn no_driver_error_says_what_to_do() {
     let text = String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success() && text.contains("child saw"), "child failed:\n{text}");
 }
+
+/// Device memory is reused between buffers (gpu-allocator sub-allocates one
+/// block): a new buffer must still read as zeros, and an `uninit` one as the
+/// poison pattern tests turn on, never as what the previous owner left.
+#[test]
+fn new_buffers_are_zero_even_on_reused_memory() {
+    let ctx = ctx_shared();
+    let n = 4096;
+    for round in 0..4 {
+        let junk: Vec<u32> = (0..n as u32).map(|i| 0xDEAD_0000 | i | round).collect();
+        let dirty = Buffer::<u32>::from_slice(ctx, "dirty", &junk).unwrap();
+        assert_eq!(dirty.download().unwrap(), junk);
+        drop(dirty);
+        let fresh = Buffer::<u32>::new(ctx, "fresh", n).unwrap();
+        assert!(fresh.download().unwrap().iter().all(|&v| v == 0), "round {round}: Buffer::new is not zero");
+        drop(fresh);
+        let f = Buffer::<f32>::new(ctx, "fresh_f32", n).unwrap();
+        assert!(f.download().unwrap().iter().all(|&v| v.to_bits() == 0));
+        drop(f);
+        let dirty = Buffer::<u32>::from_slice(ctx, "dirty", &junk).unwrap();
+        drop(dirty);
+        let u = Buffer::<u32>::uninit(ctx, "poisoned", n).unwrap();
+        assert!(u.download().unwrap().iter().all(|&v| v == u32::MAX), "round {round}: uninit memory is not poisoned in tests");
+    }
+    check_validation(ctx);
+}

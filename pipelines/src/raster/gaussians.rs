@@ -65,32 +65,38 @@ pub struct Gaussians {
 impl Gaussians {
     /// Zero-initialised buffers for `n` Gaussians.
     pub fn zeros(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32) -> Result<Gaussians> {
-        let g = Self::uninit(ctx, n, channels, coeffs)?;
-        crate::util::zero(ctx, &[g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), g.features.binding()])?;
-        Ok(g)
+        Self::make(ctx, n, channels, coeffs, Buffer::new)
     }
 
     /// Buffers for `n` Gaussians with undefined contents, for callers that
-    /// write every element before reading any.
+    /// write every element before reading any (see [`Buffer::uninit`]).
     pub(crate) fn uninit(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32) -> Result<Gaussians> {
+        Self::make(ctx, n, channels, coeffs, Buffer::uninit)
+    }
+
+    fn make(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32, alloc: fn(&Arc<Context>, &str, usize) -> Result<Buffer<f32>>) -> Result<Gaussians> {
         let m = n.max(1) as usize;
         let f = (coeffs * channels) as usize;
         Ok(Gaussians {
             n,
             channels,
             coeffs,
-            means: Buffer::new(ctx, "gaussians.means", 3 * m)?,
-            log_scales: Buffer::new(ctx, "gaussians.log_scales", 2 * m)?,
-            quats: Buffer::new(ctx, "gaussians.quats", 4 * m)?,
-            opacity: Buffer::new(ctx, "gaussians.opacity", m)?,
-            features: Buffer::new(ctx, "gaussians.features", f * m)?,
+            means: alloc(ctx, "gaussians.means", 3 * m)?,
+            log_scales: alloc(ctx, "gaussians.log_scales", 2 * m)?,
+            quats: alloc(ctx, "gaussians.quats", 4 * m)?,
+            opacity: alloc(ctx, "gaussians.opacity", m)?,
+            features: alloc(ctx, "gaussians.features", f * m)?,
         })
     }
 
     pub fn upload(ctx: &Arc<Context>, h: &HostGaussians) -> Result<Gaussians> {
         h.validate()?;
-        let g = Self::zeros(ctx, h.len() as u32, h.channels, h.coeffs)?;
-        if !h.is_empty() {
+        if h.is_empty() {
+            return Self::zeros(ctx, 0, h.channels, h.coeffs);
+        }
+        // The uploads below write every element.
+        let g = Self::uninit(ctx, h.len() as u32, h.channels, h.coeffs)?;
+        {
             g.means.upload(&h.means)?;
             g.log_scales.upload(&h.log_scales)?;
             g.quats.upload(&h.quats)?;

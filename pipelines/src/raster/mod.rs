@@ -201,6 +201,10 @@ impl Rasterizer {
         let pixels = (width * height) as usize;
         let planes = Plane::count(self.channels) as usize;
         let buf = |name: &str, len: usize| Buffer::<u32>::new(ctx, name, len);
+        // Intersection arrays: emission writes entries [0, count) and the
+        // backward every record of them (zeros past a tile's last
+        // contributor) before anything reads them.
+        let ibuf = |name: &str, len: usize| Buffer::<u32>::uninit(ctx, name, len);
         let fbuf = |name: &str, len: usize| Buffer::<f32>::new(ctx, name, len);
         Ok(Frame {
             width,
@@ -224,9 +228,9 @@ impl Rasterizer {
             params: buf("raster.params", 4)?,
             args: buf("raster.args", 4)?,
             stats: buf("raster.stats", 2)?,
-            isect_keys: buf("raster.isect_keys", capacity as usize)?,
-            isect_vals: buf("raster.isect_vals", capacity as usize)?,
-            isect_gid: buf("raster.isect_gid", capacity as usize)?,
+            isect_keys: ibuf("raster.isect_keys", capacity as usize)?,
+            isect_vals: ibuf("raster.isect_vals", capacity as usize)?,
+            isect_gid: ibuf("raster.isect_gid", capacity as usize)?,
             tile_scratch: self.sort.scratch(capacity)?,
             ranges: buf("raster.ranges", 2 * tiles as usize)?,
             out: fbuf("raster.out", planes * pixels)?,
@@ -234,7 +238,7 @@ impl Rasterizer {
             fstate: fbuf("raster.fstate", 3 * pixels)?,
             ustate: buf("raster.ustate", 3 * pixels)?,
             bstate: fbuf("raster.bstate", 2 * pixels)?,
-            isect_grads: fbuf("raster.isect_grads", capacity as usize * self.record_len() as usize)?,
+            isect_grads: Buffer::uninit(ctx, "raster.isect_grads", capacity as usize * self.record_len() as usize)?,
             densify: fbuf("raster.densify", 2 * n)?,
             radii: fbuf("raster.radii", n)?,
         })
@@ -446,11 +450,12 @@ impl Rasterizer {
 
     fn grow(&self, frame: &mut Frame, capacity: u32) -> Result<()> {
         let ctx = &self.ctx;
-        frame.isect_keys = Buffer::new(ctx, "raster.isect_keys", capacity as usize)?;
-        frame.isect_vals = Buffer::new(ctx, "raster.isect_vals", capacity as usize)?;
-        frame.isect_gid = Buffer::new(ctx, "raster.isect_gid", capacity as usize)?;
+        // As in `frame`: written in full before they are read.
+        frame.isect_keys = Buffer::uninit(ctx, "raster.isect_keys", capacity as usize)?;
+        frame.isect_vals = Buffer::uninit(ctx, "raster.isect_vals", capacity as usize)?;
+        frame.isect_gid = Buffer::uninit(ctx, "raster.isect_gid", capacity as usize)?;
         frame.tile_scratch = self.sort.scratch(capacity)?;
-        frame.isect_grads = Buffer::new(ctx, "raster.isect_grads", capacity as usize * self.record_len() as usize)?;
+        frame.isect_grads = Buffer::uninit(ctx, "raster.isect_grads", capacity as usize * self.record_len() as usize)?;
         frame.capacity = capacity;
         Ok(())
     }

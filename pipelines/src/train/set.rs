@@ -30,7 +30,7 @@ impl TrainableSet {
     pub(crate) fn from_parts(ctx: &Arc<Context>, params: Gaussians, m: Gaussians, v: Gaussians) -> Result<TrainableSet> {
         let (n, c, k) = (params.n, params.channels, params.coeffs);
         let len = n.max(1) as usize;
-        let set = TrainableSet {
+        Ok(TrainableSet {
             grads: Gaussians::zeros(ctx, n, c, k)?,
             m,
             v,
@@ -38,9 +38,7 @@ impl TrainableSet {
             denom: Buffer::new(ctx, "set.denom", len)?,
             max_radii: Buffer::new(ctx, "set.max_radii", len)?,
             params,
-        };
-        crate::util::zero(ctx, &[set.accum.binding(), set.denom.binding(), set.max_radii.binding()])?;
-        Ok(set)
+        })
     }
 
     pub fn len(&self) -> u32 {
