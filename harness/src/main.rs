@@ -33,9 +33,11 @@ enum Cmd {
         /// Run directory: checkpoint, log, outputs.
         #[arg(long, default_value = "runs/glass")]
         out: PathBuf,
-        /// Settings preset: quick or paper.
-        #[arg(long, default_value = "quick")]
-        preset: String,
+        /// Settings preset: quick (the default) or paper. With --resume, the
+        /// run's saved settings are used and only iterations, test_interval
+        /// and checkpoint_interval may change.
+        #[arg(long)]
+        preset: Option<String>,
         /// TOML file of settings (applied after the preset).
         #[arg(long)]
         config: Option<PathBuf>,
@@ -49,7 +51,9 @@ enum Cmd {
         /// Background: white, black or r,g,b.
         #[arg(long)]
         background: Option<String>,
-        /// Continue from OUT/checkpoint.bin.
+        /// Continue from OUT/checkpoint.bin with the run's saved settings and
+        /// dataset (options that would change them are refused, except
+        /// --iterations and --set test_interval / checkpoint_interval).
         #[arg(long)]
         resume: bool,
         /// Time every kernel of every iteration (GPU timestamps) into metrics.json.
@@ -160,20 +164,15 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Devices { json } => tgs::devices::run(*json),
         Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, profile, quiet } => {
             let ctx = context(&cli)?;
-            let mut set = set.clone();
-            if let Some(d) = downscale {
-                set.push(format!("downscale={d}"));
-            }
-            if let Some(b) = background {
-                set.push(format!("background=\"{b}\""));
-            }
             let args = TrainArgs {
                 dataset: dataset.clone(),
                 out: out.clone(),
-                preset: Some(preset.clone()),
+                preset: preset.clone(),
                 config: config.clone(),
-                set,
+                set: set.clone(),
                 iterations: *iterations,
+                downscale: *downscale,
+                background: background.clone(),
                 resume: *resume,
                 profile: *profile,
                 quiet: *quiet,

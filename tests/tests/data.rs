@@ -310,3 +310,88 @@ fn shared_lantern_dataset_loads() {
     assert_eq!((ds.train.len(), ds.test.len()), (60, 12));
     assert!(ds.test.iter().all(|v| v.normals.is_some() && v.mask.is_some() && v.image.width == 200));
 }
+
+/// Inputs that used to panic or load silently: each is refused with the file,
+/// the frame or the option named.
+#[test]
+fn hostile_inputs_are_refused_not_trained() {
+    let opts = LoadOptions::default();
+    // A vertex count whose byte size wraps usize (it panicked in ply.rs).
+    let d = blender_fixture("ply-count", 4, 4);
+    let ply = "ply\nformat binary_little_endian 1.0\nelement vertex 1229782938247303442\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    std::fs::write(d.join("points3d.ply"), [ply.as_bytes(), &[0u8; 24]].concat()).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["points3d.ply", "1229782938247303442"]);
+    assert!(tgs::export::ply::read_splats(&d.join("points3d.ply")).is_err());
+
+    // Camera-to-world matrices that are not rigid motions: named by frame.
+    for (name, m) in [
+        ("zeros", "[[0,0,0,0],[0,0,0,0],[0,0,0,0],[0,0,0,0]]"),
+        ("singular", "[[1,0,0,0],[0,0,0,-4],[0,1,0,0],[0,0,0,1]]"),
+        ("rank2", "[[1,0,0,0],[0,1,0,-4],[0,1,0,0],[0,0,0,1]]"),
+        ("scaled", "[[2,0,0,0],[0,0,-2,-4],[0,2,0,0],[0,0,0,1]]"),
+        ("mirrored", "[[-1,0,0,0],[0,0,-1,-4],[0,1,0,0],[0,0,0,1]]"),
+        ("projective", "[[1,0,0,0],[0,0,-1,-4],[0,1,0,0],[0,0.5,0,1]]"),
+    ] {
+        let d = blender_fixture(&format!("pose-{name}"), 4, 4);
+        std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": {m}}}]}}"#)).unwrap();
+        expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "frame 0", "./train/a", "transform_matrix"]);
+    }
+    // Python's json.dump writes NaN and Infinity as bare words.
+    for (word, shown) in [("NaN", "NaN"), ("Infinity", "Infinity"), ("-Infinity", "-Infinity")] {
+        let d = blender_fixture(&format!("nan{shown}"), 4, 4);
+        std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": [[1,0,0,0],[0,0,-1,{word}],[0,1,0,0],[0,0,0,1]]}}]}}"#)).unwrap();
+        expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "frame 0", "transform_matrix[1][3]", shown]);
+    }
+    let d = blender_fixture("nan-fov", 4, 4);
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": NaN, "frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "camera_angle_x", "NaN"]);
+    // A string containing the word is still a string (a file name here).
+    let d = blender_fixture("nan-name", 4, 4);
+    std::fs::rename(d.join("train/a.png"), d.join("train/NaN.png")).unwrap();
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/NaN", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    assert_eq!(Dataset::load(&d, &opts).unwrap().train[0].name, "NaN");
+
+    // A downscale that leaves nothing names the option and the image.
+    let d = blender_fixture("downscale", 4, 4);
+    expect_err(Dataset::load(&d, &LoadOptions { downscale: 1000, ..opts }), &["--downscale 1000", "a.png"]);
+    let c = colmap_fixture("colmap-downscale", false);
+    expect_err(Dataset::load(&c, &LoadOptions { downscale: 1000, ..opts }), &["--downscale 1000", ".png"]);
+
+    // images.txt without the (possibly empty) 2-D points lines would load
+    // every second image: detected.
+    let c = colmap_fixture("colmap-nopoints", false);
+    let t: String = std::fs::read_to_string(c.join("sparse/0/images.txt")).unwrap().lines().filter(|l| *l != "1.0 2.0 -1").map(|l| format!("{l}\n")).collect();
+    std::fs::write(c.join("sparse/0/images.txt"), t).unwrap();
+    expect_err(Dataset::load(&c, &opts), &["images.txt", "line 3", "2-D points"]);
+    // Empty points lines are fine.
+    let c = colmap_fixture("colmap-emptypoints", false);
+    let t = std::fs::read_to_string(c.join("sparse/0/images.txt")).unwrap().replace("1.0 2.0 -1\n", "\n");
+    std::fs::write(c.join("sparse/0/images.txt"), t).unwrap();
+    assert_eq!(Dataset::load(&c, &opts).unwrap().train.len() + Dataset::load(&c, &opts).unwrap().test.len(), 9);
+
+    // A .npy shape whose byte size wraps.
+    let d = blender_fixture("npy-shape", 4, 4);
+    let header = "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 3), }";
+    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+    npy.extend((header.len() as u16).to_le_bytes());
+    npy.extend(header.as_bytes());
+    npy.extend([0u8; 64]);
+    std::fs::write(d.join("test/b_normal.npy"), npy).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["b_normal.npy", "too large"]);
+}
+
+#[test]
+fn scene_make_never_overwrites() {
+    let spec = tgs::scene::spec("glass-tiny").unwrap();
+    let d = tmp("scene-nonempty");
+    std::fs::write(d.join("keep.txt"), "mine").unwrap();
+    let e = format!("{:#}", tgs::scene::make(&spec, &d, |_, _| {}).unwrap_err());
+    assert!(e.contains("not empty") && e.contains("scene-nonempty"), "{e}");
+    assert_eq!(std::fs::read_to_string(d.join("keep.txt")).unwrap(), "mine");
+    assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+    // An existing empty directory is fine, and no partial directory is left.
+    let d = tmp("scene-empty");
+    tgs::scene::make(&spec, &d, |_, _| {}).unwrap();
+    assert!(d.join("transforms_train.json").is_file() && d.join("points3d.ply").is_file());
+    assert!(!d.with_file_name(format!("{}.tgs-partial", d.file_name().unwrap().to_string_lossy())).exists());
+}

@@ -12,20 +12,94 @@ use tgs_pipelines::Camera;
 
 #[derive(Deserialize)]
 struct Transforms {
-    camera_angle_x: Option<f64>,
-    fl_x: Option<f64>,
-    fl_y: Option<f64>,
-    cx: Option<f64>,
-    cy: Option<f64>,
+    camera_angle_x: Option<Num>,
+    fl_x: Option<Num>,
+    fl_y: Option<Num>,
+    cx: Option<Num>,
+    cy: Option<Num>,
     frames: Vec<Frame>,
 }
 
 #[derive(Deserialize)]
 struct Frame {
     file_path: String,
-    transform_matrix: Vec<Vec<f64>>,
+    transform_matrix: Vec<Vec<Num>>,
     normal_path: Option<String>,
     mask_path: Option<String>,
+}
+
+/// A number as written in the file. Python's `json.dump` writes NaN and
+/// Infinity as bare words, which JSON does not allow; they are read (see
+/// [`quote_non_finite`]) so that the error can name the frame and the value.
+#[derive(Deserialize, Clone, Debug)]
+#[serde(untagged)]
+enum Num {
+    Number(f64),
+    Word(String),
+}
+
+impl Num {
+    /// The value, or an error naming `what` when it is not a finite number.
+    fn finite(&self, what: &str) -> Result<f64> {
+        match self {
+            Num::Number(v) if v.is_finite() => Ok(*v),
+            Num::Number(v) => bail!("{what} is {v}"),
+            Num::Word(w) if ["NaN", "Infinity", "-Infinity"].contains(&w.as_str()) => bail!("{what} is {w}"),
+            Num::Word(w) => bail!("{what} is '{w}', not a number"),
+        }
+    }
+}
+
+/// Quote the bare words NaN, Infinity and -Infinity outside strings so that
+/// the JSON parser accepts them as strings.
+fn quote_non_finite(text: &str) -> String {
+    let mut out = String::with_capacity(text.len() + 16);
+    let (mut in_string, mut escaped) = (false, false);
+    let mut rest = text;
+    while let Some(c) = rest.chars().next() {
+        if in_string {
+            if escaped {
+                escaped = false;
+            } else if c == '\\' {
+                escaped = true;
+            } else if c == '"' {
+                in_string = false;
+            }
+        } else if c == '"' {
+            in_string = true;
+        } else if let Some(word) = ["NaN", "Infinity", "-Infinity"].into_iter().find(|w| rest.starts_with(w)) {
+            out.push('"');
+            out.push_str(word);
+            out.push('"');
+            rest = &rest[word.len()..];
+            continue;
+        }
+        out.push(c);
+        rest = &rest[c.len_utf8()..];
+    }
+    out
+}
+
+/// A camera-to-world matrix must be a rigid motion: rotation (orthonormal,
+/// determinant +1) and translation, bottom row 0 0 0 1. Scale, shear or a
+/// singular matrix would silently distort the scene and its extent.
+fn check_rigid(m: &[[f64; 4]; 4]) -> Result<()> {
+    let bottom = [0.0, 0.0, 0.0, 1.0];
+    if m[3].iter().zip(bottom).any(|(a, b)| (a - b).abs() > 1e-4) {
+        bail!("transform_matrix's bottom row is {:?}, not [0, 0, 0, 1]", m[3]);
+    }
+    let mut dev = 0.0f64;
+    for i in 0..3 {
+        for j in 0..3 {
+            let dot: f64 = (0..3).map(|k| m[k][i] * m[k][j]).sum();
+            dev = dev.max((dot - if i == j { 1.0 } else { 0.0 }).abs());
+        }
+    }
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    if dev > 1e-3 || det < 0.0 {
+        bail!("transform_matrix is not a rigid camera pose: its 3x3 rotation part has determinant {det:.4} and is off orthonormal by {dev:.3} (tgs needs a rotation and a translation, without scale, shear or mirroring)");
+    }
+    Ok(())
 }
 
 pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
@@ -65,31 +139,40 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
         return Ok(None);
     }
     let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let tf: Transforms = serde_json::from_str(&text).with_context(|| format!("{}: not a valid transforms file", path.display()))?;
+    let tf: Transforms = serde_json::from_str(&quote_non_finite(&text)).with_context(|| format!("{}: not a valid transforms file", path.display()))?;
+    let opt = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose().with_context(|| path.display().to_string());
+    let (fl_x, fl_y, cx, cy) = (opt(&tf.fl_x, "fl_x")?, opt(&tf.fl_y, "fl_y")?, opt(&tf.cx, "cx")?, opt(&tf.cy, "cy")?);
+    let angle_x = opt(&tf.camera_angle_x, "camera_angle_x")?;
     if tf.frames.is_empty() {
         bail!("{}: the {split} split has no frames", path.display());
     }
     let mut views = Vec::with_capacity(tf.frames.len());
     for (i, f) in tf.frames.iter().enumerate() {
         let what = || format!("{}: frame {i} ('{}')", path.display(), f.file_path);
-        let rows: Vec<[f64; 4]> = f.transform_matrix.iter().map(|r| <[f64; 4]>::try_from(r.as_slice())).collect::<Result<_, _>>().map_err(|_| anyhow::anyhow!("{}: transform_matrix is not 4x4", what()))?;
-        let m: [[f64; 4]; 4] = rows.try_into().map_err(|_| anyhow::anyhow!("{}: transform_matrix is not 4x4", what()))?;
-        if m.iter().flatten().any(|v| !v.is_finite()) {
-            bail!("{}: transform_matrix has a non-finite value", what());
+        if f.transform_matrix.len() != 4 || f.transform_matrix.iter().any(|r| r.len() != 4) {
+            bail!("{}: transform_matrix is not 4x4", what());
         }
+        let mut m = [[0f64; 4]; 4];
+        for (i, row) in f.transform_matrix.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                m[i][j] = v.finite(&format!("transform_matrix[{i}][{j}]")).with_context(what)?;
+            }
+        }
+        check_rigid(&m).with_context(what)?;
         let img_path = resolve(root, &f.file_path, "png");
         let image = read_rgb(&img_path, opts.background).with_context(what)?;
         let (w, h) = (image.width, image.height);
-        let fx = match (tf.fl_x, tf.camera_angle_x) {
+        let small = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
+        let fx = match (fl_x, angle_x) {
             (Some(fx), _) => fx,
             (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),
             (None, Some(a)) => bail!("{}: camera_angle_x {a} is not in (0, pi)", path.display()),
             (None, None) => bail!("{}: neither camera_angle_x nor fl_x is given", path.display()),
         };
-        let fy = tf.fl_y.unwrap_or(fx);
+        let fy = fl_y.unwrap_or(fx);
         // Principal point in pixel-edge coordinates (centre W/2), shifted to centres at integers.
-        let cx = tf.cx.unwrap_or(0.5 * w as f64) - 0.5;
-        let cy = tf.cy.unwrap_or(0.5 * h as f64) - 0.5;
+        let cx = cx.unwrap_or(0.5 * w as f64) - 0.5;
+        let cy = cy.unwrap_or(0.5 * h as f64) - 0.5;
         let cam = Camera { width: w, height: h, fx: fx as f32, fy: fy as f32, cx: cx as f32, cy: cy as f32, world_to_view: gl_c2w_to_w2v(&m) };
         cam.validate().with_context(what)?;
         let normals = match &f.normal_path {
@@ -114,7 +197,7 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
             }
             None => None,
         };
-        let image = image.downscale(opts.downscale).with_context(what)?;
+        let image = small;
         let name = Path::new(&f.file_path).file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| format!("{split}_{i}"));
         views.push(View { name, camera: downscale_camera(&cam, opts.downscale), image, normals, mask });
     }

@@ -78,7 +78,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
             if (image.width, image.height) != (cam.width, cam.height) {
                 bail!("{}: image is {}x{} but camera {} says {}x{}", path.display(), image.width, image.height, cc.id, cam.width, cam.height);
             }
-            (image.downscale(opts.downscale)?, downscale_camera(&cam, opts.downscale))
+            (image.downscale(opts.downscale).with_context(|| path.display().to_string())?, downscale_camera(&cam, opts.downscale))
         };
         let view = View { name: im.name.clone(), camera: cam, image, normals: None, mask: None };
         if opts.holdout > 0 && i % opts.holdout as usize == 0 {
@@ -201,9 +201,26 @@ pub fn parse_images_txt(text: &str) -> Result<Vec<ColmapImage>> {
             bail!("line {ln}: missing image name");
         }
         out.push(ColmapImage { id, qvec: q, tvec: t, camera_id, name });
-        lines.next(); // the 2-D points line
+        // The 2-D points line (possibly empty). COLMAP always writes it; a
+        // file without it would otherwise lose every second image silently.
+        if let Some((j, pl)) = lines.next() {
+            if !is_points2d_line(pl) {
+                bail!(
+                    "line {}: expected the 2-D points of image {id} (X Y POINT3D_ID triples, or an empty line), found '{}'; images.txt has two lines per image and the second may be empty but not missing",
+                    j + 1,
+                    pl.chars().take(60).collect::<String>()
+                );
+            }
+        }
     }
     Ok(out)
+}
+
+/// Whether a line is an images.txt 2-D points line: X Y POINT3D_ID triples
+/// (the id an integer, -1 for none).
+fn is_points2d_line(l: &str) -> bool {
+    let t: Vec<&str> = l.split_whitespace().collect();
+    t.len() % 3 == 0 && t.chunks(3).all(|p| p[0].parse::<f64>().is_ok() && p[1].parse::<f64>().is_ok() && p[2].parse::<i64>().is_ok())
 }
 
 pub fn parse_points_txt(text: &str) -> Result<Points> {
@@ -260,8 +277,8 @@ pub fn parse_cameras_bin(b: &[u8]) -> Result<Vec<ColmapCamera>> {
         let id = c.i32()? as u32;
         let model_id = c.i32()?;
         let &(model, np) = MODELS.get(model_id as usize).with_context(|| format!("camera {id}: unknown model id {model_id}"))?;
-        let width = c.u64()? as u32;
-        let height = c.u64()? as u32;
+        let width = u32::try_from(c.u64()?).with_context(|| format!("camera {id}: width out of range"))?;
+        let height = u32::try_from(c.u64()?).with_context(|| format!("camera {id}: height out of range"))?;
         let params = (0..np).map(|_| c.f64()).collect::<Result<Vec<_>>>()?;
         out.push(ColmapCamera { id, model: model.into(), width, height, params });
     }

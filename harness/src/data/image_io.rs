@@ -51,7 +51,7 @@ impl ImageF {
         }
         let (w, h) = (self.width / factor, self.height / factor);
         if w == 0 || h == 0 {
-            bail!("downscaling a {}x{} image by {factor} leaves nothing", self.width, self.height);
+            bail!("--downscale {factor} leaves nothing of a {}x{} image", self.width, self.height);
         }
         let c = self.channels as usize;
         let mut out = ImageF::new(w, h, self.channels);
@@ -169,10 +169,16 @@ pub fn parse_npy(bytes: &[u8]) -> Result<ImageF> {
         [h, w, c] => (*h, *w, *c),
         _ => bail!("shape {dims:?} is not (H, W) or (H, W, C)"),
     };
-    let count = h * w * c;
+    // The shape comes from the file: check the products instead of wrapping.
+    let count = h.checked_mul(w).and_then(|v| v.checked_mul(c));
+    let need = count.and_then(|n| n.checked_mul(elem));
     let data = &bytes[start + hlen..];
-    if data.len() < count * elem {
-        bail!("holds {} bytes of data; shape {dims:?} needs {}", data.len(), count * elem);
+    let (Some(count), Some(need)) = (count, need) else { bail!("shape {dims:?} is too large") };
+    if u32::try_from(h).is_err() || u32::try_from(w).is_err() || u32::try_from(c).is_err() {
+        bail!("shape {dims:?} is too large");
+    }
+    if data.len() < need {
+        bail!("holds {} bytes of data; shape {dims:?} needs {need}", data.len());
     }
     let values: Vec<f32> = if elem == 4 {
         data[..count * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()

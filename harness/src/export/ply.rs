@@ -6,7 +6,6 @@
 
 use crate::data::Points;
 use anyhow::{bail, Context as _, Result};
-use std::io::Write;
 use std::path::Path;
 use tgs_pipelines::HostGaussians;
 
@@ -52,9 +51,7 @@ pub fn write_splats(path: &Path, g: &HostGaussians) -> Result<()> {
         put(THIN_LOG_SCALE);
         (0..4).for_each(|j| put(g.quats[4 * i + j]));
     }
-    let tmp = path.with_extension("ply.tmp");
-    std::fs::File::create(&tmp).and_then(|mut f| f.write_all(&out)).with_context(|| format!("{}: cannot write", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot write", path.display()))
+    super::atomic_write(path, &out)
 }
 
 /// Read a splat PLY written by [`write_splats`] (or 3DGS/2DGS) back.
@@ -126,9 +123,13 @@ fn read_vertices(path: &Path) -> Result<(Vec<Property>, usize, Vec<u8>, usize)> 
         }
     }
     let stride: usize = props.iter().map(|p| p.size).sum();
+    if stride == 0 {
+        bail!("{}: the vertex element has no properties", path.display());
+    }
     let body = bytes.len() - (end + 11);
-    if body < n * stride {
-        bail!("{}: truncated ({body} bytes for {n} vertices of {stride} bytes)", path.display());
+    // The count comes from the file: a huge one must not wrap the product.
+    if n.checked_mul(stride).is_none_or(|need| body < need) {
+        bail!("{}: truncated or corrupt header ({body} bytes of data for {n} vertices of {stride} bytes)", path.display());
     }
     Ok((props, n, bytes, end + 11))
 }
@@ -151,7 +152,7 @@ pub fn write_points(path: &Path, pts: &Points) -> Result<()> {
         p.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
         c.iter().for_each(|v| out.push((v.clamp(0.0, 1.0) * 255.0).round() as u8));
     }
-    std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
+    super::atomic_write(path, &out)
 }
 
 /// Read x, y, z and (if present) red, green, blue from a binary PLY point

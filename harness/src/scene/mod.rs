@@ -121,8 +121,33 @@ fn surface_points(scene: &Scene, spec: &SceneSpec) -> Points {
     pts
 }
 
-/// Write the scene `spec` into `dir` (created if needed).
-pub fn make(spec: &SceneSpec, dir: &Path, mut progress: impl FnMut(u32, u32)) -> Result<()> {
+/// Write the scene `spec` as a dataset into `dir`, which must not exist or
+/// be empty (files in it are never overwritten). The files are written into
+/// a sibling `DIR.tgs-partial` directory that is renamed to `dir` when
+/// complete, so an interrupted run never leaves a half-written dataset.
+pub fn make(spec: &SceneSpec, dir: &Path, progress: impl FnMut(u32, u32)) -> Result<()> {
+    if dir.exists() {
+        let mut entries = std::fs::read_dir(dir).with_context(|| format!("{}: exists and is not a readable directory", dir.display()))?;
+        if entries.next().is_some() {
+            bail!("{}: the directory is not empty; choose a new or empty one (tgs scene make never overwrites files)", dir.display());
+        }
+    }
+    let name = dir.file_name().with_context(|| format!("{}: not a directory path", dir.display()))?;
+    let mut partial = name.to_os_string();
+    partial.push(".tgs-partial");
+    let partial = dir.with_file_name(partial);
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).with_context(|| format!("{}: cannot remove a previous partial write", partial.display()))?;
+    }
+    write_dataset(spec, &partial, progress)?;
+    if dir.exists() {
+        std::fs::remove_dir(dir).with_context(|| format!("{}: cannot replace the empty directory", dir.display()))?;
+    }
+    std::fs::rename(&partial, dir).with_context(|| format!("{}: cannot move {} into place", dir.display(), partial.display()))?;
+    crate::export::sync_dir(dir)
+}
+
+fn write_dataset(spec: &SceneSpec, dir: &Path, mut progress: impl FnMut(u32, u32)) -> Result<()> {
     let scene = Scene::new();
     let total = spec.train + spec.test;
     let mut done = 0;

@@ -10,7 +10,6 @@ use super::trainer::Trainer;
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
-use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
@@ -50,9 +49,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
     };
     let json = serde_json::to_vec(&header)?;
-    let tmp = path.with_extension("tmp");
-    let write = || -> Result<()> {
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+    crate::export::atomic_write_with(path, |f| {
         f.write_all(MAGIC)?;
         f.write_all(&(json.len() as u32).to_le_bytes())?;
         f.write_all(&json)?;
@@ -60,11 +57,9 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
             let data = buf.download_range(0, w * n)?;
             f.write_all(bytemuck::cast_slice(&data))?;
         }
-        f.into_inner().map_err(|e| e.into_error())?.sync_all()?;
         Ok(())
-    };
-    write().with_context(|| format!("{}: cannot write the checkpoint", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot move the checkpoint into place", path.display()))
+    })
+    .context("writing the checkpoint")
 }
 
 /// Read a checkpoint's header and arrays.
@@ -75,12 +70,12 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
         return Err(bad("magic"));
     }
     let hlen = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
-    let hbytes = bytes.get(12..12 + hlen).ok_or_else(|| bad("header length"))?;
+    let hbytes = 12usize.checked_add(hlen).and_then(|end| bytes.get(12..end)).ok_or_else(|| bad("header length"))?;
     let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut at = 12 + hlen;
     let mut arrays = Vec::new();
     for (name, len) in &header.arrays {
-        let b = bytes.get(at..at + 4 * len).ok_or_else(|| bad(&format!("array {name} truncated")))?;
+        let b = len.checked_mul(4).and_then(|n| at.checked_add(n)).and_then(|end| bytes.get(at..end)).ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
         arrays.push(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect());
         at += 4 * len;
     }
@@ -108,19 +103,45 @@ pub fn gaussians(h: &Header, arrays: &[Vec<f32>]) -> Result<HostGaussians> {
     Ok(g)
 }
 
-/// A trainer restored from a checkpoint on `data` (the same dataset).
+/// A trainer restored from a checkpoint on `data` (the same dataset). Every
+/// array must have exactly the length its header's Gaussian count implies.
 pub fn restore(ctx: &Arc<Context>, path: &Path, data: &Dataset) -> Result<Trainer> {
     let (h, arrays) = read(path)?;
-    let g = gaussians(&h, &arrays)?;
+    let bad = |what: String| anyhow::anyhow!("{}: corrupt checkpoint ({what})", path.display());
+    h.config.validate().map_err(|e| bad(format!("settings: {e:#}")))?;
+    let k = (h.config.sh_degree + 1).pow(2);
+    if h.channels != 3 || h.coeffs != k {
+        return Err(bad(format!("{} channels x {} coefficients; sh_degree {} needs 3 x {k}", h.channels, h.coeffs, h.config.sh_degree)));
+    }
+    if !(h.extent.is_finite() && h.extent > 0.0) {
+        return Err(bad(format!("scene extent {}", h.extent)));
+    }
+    if let Some(v) = h.stack.iter().find(|&&v| v as usize >= data.train.len()) {
+        return Err(bad(format!("view {v} in the view order, the dataset has {} training views", data.train.len())));
+    }
+    let g = gaussians(&h, &arrays).map_err(|e| bad(format!("{e:#}")))?;
+    if g.len() != h.n as usize {
+        return Err(bad(format!("{} Gaussians in the arrays, {} in the header", g.len(), h.n)));
+    }
     let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
     let bufs = tr.set.arrays();
     if bufs.len() != arrays.len() {
         bail!("{}: {} arrays, this version of tgs expects {}", path.display(), arrays.len(), bufs.len());
     }
-    for ((name, buf, _), (hname, data)) in bufs.iter().zip(h.arrays.iter().map(|a| &a.0).zip(&arrays)) {
+    for ((name, _, _), (hname, _)) in bufs.iter().zip(&h.arrays) {
         if name != hname {
-            bail!("{}: array '{hname}' where '{name}' was expected", path.display());
+            return Err(bad(format!("array '{hname}' where '{name}' was expected")));
         }
+    }
+    for ((name, _, width), data) in bufs.iter().zip(&arrays) {
+        if data.len() != width * h.n as usize {
+            return Err(bad(format!("array '{name}' has {} values, {} Gaussians need {}", data.len(), h.n, width * h.n as usize)));
+        }
+        if data.iter().any(|v| !v.is_finite()) {
+            return Err(bad(format!("array '{name}' holds NaN or infinite values")));
+        }
+    }
+    for ((_, buf, _), data) in bufs.iter().zip(&arrays) {
         if !data.is_empty() {
             buf.upload(data)?;
         }

@@ -8,6 +8,7 @@ use super::config::TrainConfig;
 use super::trainer::Trainer;
 use crate::data::{Dataset, LoadOptions};
 use crate::eval::{evaluate, Metrics};
+use crate::export::atomic_write;
 use crate::export::ply::write_splats;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
@@ -31,6 +32,10 @@ pub struct TrainArgs {
     pub config: Option<PathBuf>,
     pub set: Vec<String>,
     pub iterations: Option<u32>,
+    /// `--downscale N` (the `downscale` setting).
+    pub downscale: Option<u32>,
+    /// `--background white|black|r,g,b` (the `background` setting).
+    pub background: Option<String>,
     pub resume: bool,
     /// Collect per-kernel GPU timings for every iteration (timings.json).
     pub profile: bool,
@@ -51,14 +56,17 @@ pub struct Outcome {
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
-fn install_ctrlc() {
+/// Ctrl-C (SIGINT), SIGTERM (what batch schedulers send before killing a
+/// job) and SIGHUP all stop training at the end of the iteration with a
+/// checkpoint; a second one exits at once.
+fn install_signal_handler() {
     // A second installation in one process (tests) fails harmlessly.
     let _ = ctrlc::set_handler(|| {
         if INTERRUPTED.swap(true, Ordering::SeqCst) {
-            eprintln!("\nsecond Ctrl-C: exiting without a checkpoint");
+            eprintln!("\nsecond interrupt: exiting without a checkpoint");
             std::process::exit(130);
         }
-        eprintln!("\nCtrl-C: finishing the iteration and writing a checkpoint (Ctrl-C again to abort)");
+        eprintln!("\ninterrupted (Ctrl-C or SIGTERM): finishing the iteration and writing a checkpoint (interrupt again to abort)");
     });
 }
 
@@ -67,18 +75,64 @@ pub fn request_stop() {
     INTERRUPTED.store(true, Ordering::SeqCst);
 }
 
+/// Settings a resumed run may change: they do not alter what was already
+/// trained (the schedule is a function of the iteration count).
+pub const RESUMABLE_SETTINGS: [&str; 3] = ["iterations", "test_interval", "checkpoint_interval"];
+
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
-    let mut cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
+    let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
+    apply_args(cfg, a)
+}
+
+/// Overlay the config file, `--set`, `--downscale`, `--background` and
+/// `--iterations` (in that order) on `cfg`.
+fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainConfig> {
     if let Some(p) = &a.config {
         cfg.merge_toml_file(p)?;
     }
     for kv in &a.set {
         cfg.set(kv)?;
     }
+    if let Some(d) = a.downscale {
+        cfg.downscale = d;
+        cfg.validate().with_context(|| format!("--downscale {d}"))?;
+    }
+    if let Some(b) = &a.background {
+        cfg.background = b.clone();
+        cfg.validate().with_context(|| format!("--background '{b}'"))?;
+    }
     if let Some(n) = a.iterations {
         cfg.iterations = n;
+        cfg.validate().with_context(|| format!("--iterations {n}"))?;
     }
     cfg.validate()?;
+    Ok(cfg)
+}
+
+/// The settings of a resumed run: the checkpoint's, with the options given
+/// now applied on top (a `--preset` replaces them all). Any difference
+/// outside [`RESUMABLE_SETTINGS`] would silently train another model than
+/// the one checkpointed, so it is refused with the key and both values.
+pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> {
+    let base = match &a.preset {
+        Some(p) => TrainConfig::preset(p)?,
+        None => saved.clone(),
+    };
+    let cfg = apply_args(base, a)?;
+    let old = toml::Table::try_from(saved)?;
+    let new = toml::Table::try_from(&cfg)?;
+    let conflicts: Vec<String> = new
+        .iter()
+        .filter(|(k, v)| !RESUMABLE_SETTINGS.contains(&k.as_str()) && old.get(*k) != Some(v))
+        .map(|(k, v)| format!("{k} = {} in the checkpoint, {v} given", old.get(k).map(|o| o.to_string()).unwrap_or_default()))
+        .collect();
+    if !conflicts.is_empty() {
+        bail!(
+            "--resume continues a run with the settings it was started with; these options change them:\n  {}\nonly {} may change when resuming (start a new run with another --out to train with other settings)",
+            conflicts.join("\n  "),
+            RESUMABLE_SETTINGS.join(", ")
+        );
+    }
     Ok(cfg)
 }
 
@@ -112,13 +166,22 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             bail!("{}: no checkpoint to resume from", ckpt.display());
         }
         let (h, _) = checkpoint::read(&ckpt)?;
+        let cfg = resume_config(a, &h.config)?;
         let dir = PathBuf::from(&h.dataset);
+        if let Some(given) = &a.dataset {
+            let same = std::fs::canonicalize(given).map(|g| g == dir).unwrap_or(false);
+            if !same {
+                bail!("--resume continues the run on its own dataset {}; {} was given (leave it out, or start a new run with another --out)", dir.display(), given.display());
+            }
+        }
         let data = load_dataset(&dir, &h.config)?;
         let mut tr = checkpoint::restore(ctx, &ckpt, &data)?;
-        if let Some(n) = a.iterations {
-            tr.cfg.iterations = n;
-            tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
+        if cfg.iterations < tr.iteration {
+            bail!("--iterations {}: the checkpoint is already at iteration {}", cfg.iterations, tr.iteration);
         }
+        tr.cfg = cfg;
+        tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
+        truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
         (tr, data, h.dataset)
     } else {
         if ckpt.is_file() {
@@ -132,8 +195,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
         (tr, data, abs.to_string_lossy().into_owned())
     };
-    std::fs::write(a.out.join("config.toml"), toml::to_string(&tr.cfg)?).context("writing config.toml")?;
-    install_ctrlc();
+    atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
+    install_signal_handler();
     INTERRUPTED.store(false, Ordering::SeqCst);
 
     let total = tr.schedule.total();
@@ -185,6 +248,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         });
         if r.values.normal.is_finite() {
             line["normal"] = json!(r.values.normal);
+        }
+        if r.opacity_reset {
+            line["opacity_reset"] = json!(true);
         }
         if let Some((b, a2)) = r.densified {
             line["densified"] = json!({"before": b, "after": a2});
@@ -241,7 +307,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         "test": metrics,
         "gpu_ms_per_iteration": if a.profile { json!(timings) } else { json!(null) },
     });
-    std::fs::write(a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?).context("writing metrics.json")?;
+    atomic_write(&a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?.as_bytes())?;
     if !a.quiet {
         if let Some(m) = &metrics {
             let mae = m.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
@@ -256,6 +322,29 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         eprintln!("outputs in {}", a.out.display());
     }
     Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: start.elapsed().as_secs_f64() })
+}
+
+/// Drop the log lines of iterations after `iteration` (those a killed run
+/// logged past its last checkpoint, which the resumed run logs again).
+fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e).with_context(|| format!("{}: cannot read", path.display())),
+    };
+    let mut kept = String::new();
+    for line in text.lines() {
+        // A line torn by the kill does not parse: it is dropped too.
+        let it = serde_json::from_str::<serde_json::Value>(line).ok().and_then(|v| v["iteration"].as_u64());
+        if it.is_some_and(|i| i <= iteration as u64) {
+            kept.push_str(line);
+            kept.push('\n');
+        }
+    }
+    if kept.len() != text.len() {
+        atomic_write(path, kept.as_bytes())?;
+    }
+    Ok(())
 }
 
 /// Load a run directory's checkpoint with its dataset.

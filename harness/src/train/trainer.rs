@@ -71,6 +71,8 @@ pub struct StepReport {
     pub values: LossValues,
     pub gaussians: u32,
     pub densified: Option<(u32, u32)>,
+    /// The opacity reset (after the previous iteration) ran before this one.
+    pub opacity_reset: bool,
     pub timings: Vec<Timing>,
 }
 
@@ -194,9 +196,20 @@ impl Trainer {
     pub fn step(&mut self, profile: bool) -> Result<StepReport> {
         let it = self.iteration + 1;
         let (stage, _) = self.schedule.at(it).context("training is already complete")?;
-        match stage {
-            Stage::Scattering => self.step_scattering(it, profile),
+        // The reset that follows iteration it-1 runs here, at the start of
+        // the next iteration (the same order of operations as 2DGS), so that
+        // a test evaluation or checkpoint at it-1 sees the trained state.
+        let reset = self.cfg.opacity_reset_after(it - 1, self.background == [1.0; 3]);
+        if reset {
+            let mut rec = Recorder::new(&self.ctx)?;
+            self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
+            rec.submit_and_wait()?;
         }
+        let mut report = match stage {
+            Stage::Scattering => self.step_scattering(it, profile)?,
+        };
+        report.opacity_reset = reset;
+        Ok(report)
     }
 
     fn step_scattering(&mut self, it: u32, profile: bool) -> Result<StepReport> {
@@ -266,17 +279,8 @@ impl Trainer {
             }
             densified = Some((r.before, r.after));
         }
-        // After densification, as in 2DGS (a reset first would prune everything).
-        let reset = it < cfg.densify_until
-            && cfg.opacity_reset_interval > 0
-            && (it % cfg.opacity_reset_interval == 0 || (self.background == [1.0; 3] && it == cfg.densify_from));
-        if reset {
-            let mut rec = Recorder::new(&self.ctx)?;
-            self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
-            rec.submit_and_wait()?;
-        }
         self.iteration = it;
-        Ok(StepReport { iteration: it, stage: Stage::Scattering, view, loss, values, gaussians: self.set.len(), densified, timings })
+        Ok(StepReport { iteration: it, stage: Stage::Scattering, view, loss, values, gaussians: self.set.len(), densified, opacity_reset: false, timings })
     }
 
     /// Render `cam` with the current Gaussians (all output planes).
