@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
-use tgs_pipelines::HostGaussians;
+use tgs_pipelines::{HostGaussians, TrainableSet};
 
 const MAGIC: &[u8; 8] = b"TGSCKPT1";
 
@@ -119,28 +119,25 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, data: &Dataset) -> Result<Traine
     if let Some(v) = h.stack.iter().find(|&&v| v as usize >= data.train.len()) {
         return Err(bad(format!("view {v} in the view order, the dataset has {} training views", data.train.len())));
     }
-    let g = gaussians(&h, &arrays).map_err(|e| bad(format!("{e:#}")))?;
-    if g.len() != h.n as usize {
-        return Err(bad(format!("{} Gaussians in the arrays, {} in the header", g.len(), h.n)));
+    let layout = TrainableSet::layout((h.channels * h.coeffs) as usize);
+    if layout.len() != arrays.len() {
+        bail!("{}: {} arrays, this version of tgs expects {}", path.display(), arrays.len(), layout.len());
     }
-    let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
-    let bufs = tr.set.arrays();
-    if bufs.len() != arrays.len() {
-        bail!("{}: {} arrays, this version of tgs expects {}", path.display(), arrays.len(), bufs.len());
-    }
-    for ((name, _, _), (hname, _)) in bufs.iter().zip(&h.arrays) {
+    for ((name, width), (hname, data)) in layout.iter().zip(h.arrays.iter().map(|a| &a.0).zip(&arrays)) {
         if name != hname {
             return Err(bad(format!("array '{hname}' where '{name}' was expected")));
         }
-    }
-    for ((name, _, width), data) in bufs.iter().zip(&arrays) {
-        if data.len() != width * h.n as usize {
-            return Err(bad(format!("array '{name}' has {} values, {} Gaussians need {}", data.len(), h.n, width * h.n as usize)));
+        let want = (h.n as usize).checked_mul(*width).ok_or_else(|| bad(format!("{} Gaussians", h.n)))?;
+        if data.len() != want {
+            return Err(bad(format!("array '{name}' has {} values, {} Gaussians need {want}", data.len(), h.n)));
         }
         if data.iter().any(|v| !v.is_finite()) {
             return Err(bad(format!("array '{name}' holds NaN or infinite values")));
         }
     }
+    let g = gaussians(&h, &arrays).map_err(|e| bad(format!("{e:#}")))?;
+    let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
+    let bufs = tr.set.arrays();
     for ((_, buf, _), data) in bufs.iter().zip(&arrays) {
         if !data.is_empty() {
             buf.upload(data)?;

@@ -48,21 +48,31 @@ impl TrainableSet {
         self.params.n == 0
     }
 
-    /// Every per-Gaussian array with its width in floats, in a fixed order:
-    /// parameters, first moments, second moments (checkpoints use it).
+    /// The names and widths (floats per Gaussian) of every per-Gaussian
+    /// array of a set with `features` floats of features per Gaussian, in a
+    /// fixed order: parameters, first moments, second moments, statistics.
+    /// Checkpoints are laid out in this order.
+    pub fn layout(features: usize) -> Vec<(String, usize)> {
+        let mut out = Vec::new();
+        for prefix in ["param", "adam_m", "adam_v"] {
+            for (name, w) in [("means", 3), ("log_scales", 2), ("quats", 4), ("opacity", 1), ("features", features)] {
+                out.push((format!("{prefix}.{name}"), w));
+            }
+        }
+        for name in ["stats.accum", "stats.denom", "stats.max_radii"] {
+            out.push((name.to_string(), 1));
+        }
+        out
+    }
+
+    /// Every per-Gaussian array with its name and width, in [`Self::layout`] order.
     pub fn arrays(&self) -> Vec<(String, &Buffer<f32>, usize)> {
         let f = (self.params.channels * self.params.coeffs) as usize;
-        let mut out = Vec::new();
-        for (prefix, g) in [("param", &self.params), ("adam_m", &self.m), ("adam_v", &self.v)] {
-            out.push((format!("{prefix}.means"), &g.means, 3));
-            out.push((format!("{prefix}.log_scales"), &g.log_scales, 2));
-            out.push((format!("{prefix}.quats"), &g.quats, 4));
-            out.push((format!("{prefix}.opacity"), &g.opacity, 1));
-            out.push((format!("{prefix}.features"), &g.features, f));
+        let mut bufs = Vec::new();
+        for g in [&self.params, &self.m, &self.v] {
+            bufs.extend([&g.means, &g.log_scales, &g.quats, &g.opacity, &g.features]);
         }
-        out.push(("stats.accum".into(), &self.accum, 1));
-        out.push(("stats.denom".into(), &self.denom, 1));
-        out.push(("stats.max_radii".into(), &self.max_radii, 1));
-        out
+        bufs.extend([&self.accum, &self.denom, &self.max_radii]);
+        Self::layout(f).into_iter().zip(bufs).map(|((name, w), b)| (name, b, w)).collect()
     }
 }
