@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod bench_raster;
+pub mod bench_train;
 pub mod data;
 pub mod devices;
 pub mod eval;

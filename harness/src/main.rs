@@ -95,7 +95,8 @@ enum Cmd {
 
 #[derive(Subcommand)]
 enum SceneCmd {
-    /// Write a built-in scene (glass, glass-tiny) as a dataset.
+    /// Write a built-in scene (glass, glass-tiny, spheres-128, spheres-256) as
+    /// a dataset into a new or empty directory.
     Make {
         name: String,
         #[arg(long)]
@@ -138,6 +139,23 @@ enum Bench {
         height: u32,
         #[arg(long, default_value_t = 3)]
         reps: u32,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Whole training iterations (forward, loss, backward, Adam; count frozen)
+    /// on Brush's workload: the spheres scene, 20 views, SH 3.
+    Train {
+        /// Image size (square).
+        #[arg(long, default_value_t = 128)]
+        res: u32,
+        /// Gaussians (initial points on the spheres).
+        #[arg(long, default_value_t = 10_000)]
+        points: u32,
+        /// Timed iterations (after the warm-up).
+        #[arg(long, default_value_t = 20)]
+        iterations: u32,
+        #[arg(long, default_value_t = 3)]
+        warmup: u32,
         #[arg(long)]
         json: bool,
     },
@@ -202,17 +220,19 @@ fn run(cli: Cli) -> Result<()> {
         }
         Cmd::Scene { what } => match what {
             SceneCmd::List => {
-                for s in tgs::scene::SCENES {
-                    println!("{:12} {}x{} px, {} train + {} test views", s.name, s.size, s.size, s.train, s.test);
+                for line in tgs::scene::list() {
+                    println!("{line}");
                 }
                 Ok(())
             }
             SceneCmd::Make { name, out } => {
-                let spec = tgs::scene::spec(name)?;
-                let bar = indicatif::ProgressBar::new((spec.train + spec.test) as u64);
-                tgs::scene::make(&spec, out, |d, _| bar.set_position(d as u64))?;
+                let bar = indicatif::ProgressBar::new(0);
+                tgs::scene::make_named(name, out, |d, total| {
+                    bar.set_length(total as u64);
+                    bar.set_position(d as u64)
+                })?;
                 bar.finish_and_clear();
-                eprintln!("scene '{}' written to {}", spec.name, out.display());
+                eprintln!("scene '{name}' written to {}", out.display());
                 Ok(())
             }
         },
@@ -247,6 +267,14 @@ fn run(cli: Cli) -> Result<()> {
                         println!("{}", serde_json::to_string_pretty(&b)?);
                     } else {
                         tgs::bench_raster::print_raster(&b);
+                    }
+                }
+                Bench::Train { res, points, iterations, warmup, json } => {
+                    let b = tgs::bench_train::train(&ctx, *res, *points, *warmup, *iterations)?;
+                    if *json {
+                        println!("{}", serde_json::to_string_pretty(&b)?);
+                    } else {
+                        tgs::bench_train::print_train(&b);
                     }
                 }
                 Bench::Scan { n, reps, json } => {

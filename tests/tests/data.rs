@@ -395,3 +395,39 @@ fn scene_make_never_overwrites() {
     assert!(d.join("transforms_train.json").is_file() && d.join("points3d.ply").is_file());
     assert!(!d.with_file_name(format!("{}.tgs-partial", d.file_name().unwrap().to_string_lossy())).exists());
 }
+
+/// Brush's workload, ported: the written dataset loads, looks at the
+/// origin, has coloured spheres on black and the requested points; the
+/// in-memory dataset is the same.
+#[test]
+fn spheres_scene_is_brushs_workload() {
+    let d = tmp("spheres");
+    std::fs::remove_dir(&d).unwrap();
+    tgs::scene::make_named("spheres-128", &d, |_, _| {}).unwrap();
+    let ds = Dataset::load(&d, &LoadOptions { background: [0.0; 3], ..Default::default() }).unwrap();
+    assert_eq!((ds.train.len(), ds.test.len()), (20, 4));
+    assert_eq!(ds.points.as_ref().unwrap().positions.len(), 10_000);
+    let mem = tgs::scene::spheres::dataset(&tgs::scene::spheres::SpheresSpec::named("spheres-128").unwrap()).unwrap();
+    for (a, b) in ds.train.iter().zip(&mem.train) {
+        assert_eq!((a.camera.width, a.camera.height), (128, 128));
+        // The PNG is 8-bit: the same image to within quantisation.
+        assert!(a.image.data.iter().zip(&b.image.data).all(|(x, y)| (x - y).abs() <= 0.5 / 255.0 + 1e-6));
+        for k in 0..3 {
+            for j in 0..4 {
+                assert!((a.camera.world_to_view[k][j] - b.camera.world_to_view[k][j]).abs() < 1e-5);
+            }
+        }
+        // The origin (the big sphere's centre) is at the image centre, in front.
+        let p = project(&a.camera, [0.0, 0.0, 0.0]);
+        assert!((p[0] - 63.5).abs() < 1e-3 && (p[1] - 63.5).abs() < 1e-3, "{p:?}");
+        let lit = a.image.data.chunks(3).filter(|c| c.iter().any(|&v| v > 0.05)).count();
+        let black = a.image.data.chunks(3).filter(|c| c.iter().all(|&v| v == 0.0)).count();
+        assert!(lit > 128 * 128 / 10 && black > 128 * 128 / 10, "{lit} lit and {black} black pixels");
+    }
+    // Points lie on the spheres (the first has radius 0.55 at the origin).
+    let pts = &mem.points.as_ref().unwrap().positions;
+    let on_first = pts.iter().filter(|p| ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - 0.55).abs() < 1e-4).count();
+    assert!(on_first > pts.len() / 4 && on_first < pts.len() / 2, "{on_first} of {} on the centre sphere", pts.len());
+    assert!(tgs::scene::make_named("spheres-128", &d, |_, _| {}).is_err(), "overwrote a dataset");
+    assert!(format!("{:#}", tgs::scene::make_named("cubes", &tmp("cubes"), |_, _| {}).unwrap_err()).contains("spheres-256"));
+}

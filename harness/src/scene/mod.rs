@@ -3,6 +3,7 @@
 //! per-frame normals `.npy` and transmissive masks), plus a `points3d.ply`
 //! of visible surface points (what SfM would give) for initialisation.
 
+pub mod spheres;
 pub mod trace;
 
 use crate::data::image_io::{write_mask, write_npy, write_png, ImageF};
@@ -31,7 +32,7 @@ pub const SCENES: [SceneSpec; 2] = [
 pub fn spec(name: &str) -> Result<SceneSpec> {
     match SCENES.iter().find(|s| s.name == name) {
         Some(s) => Ok(*s),
-        None => bail!("unknown scene '{name}' (built-in: {})", SCENES.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")),
+        None => bail!("unknown scene '{name}' (built-in: {}, {})", SCENES.iter().map(|s| s.name).collect::<Vec<_>>().join(", "), spheres::SpheresSpec::NAMED.map(|s| s.0).join(", ")),
     }
 }
 
@@ -121,15 +122,20 @@ fn surface_points(scene: &Scene, spec: &SceneSpec) -> Points {
     pts
 }
 
-/// Write the scene `spec` as a dataset into `dir`, which must not exist or
-/// be empty (files in it are never overwritten). The files are written into
-/// a sibling `DIR.tgs-partial` directory that is renamed to `dir` when
-/// complete, so an interrupted run never leaves a half-written dataset.
+/// Write the scene `spec` as a dataset into `dir` (see [`write_new_dir`]).
 pub fn make(spec: &SceneSpec, dir: &Path, progress: impl FnMut(u32, u32)) -> Result<()> {
+    write_new_dir(dir, |partial| write_dataset(spec, partial, progress))
+}
+
+/// Fill a new directory `dir`, which must not exist or be empty (files in it
+/// are never overwritten). `fill` writes into a sibling `DIR.tgs-partial`
+/// directory that is renamed to `dir` when complete, so an interrupted run
+/// never leaves a half-written dataset.
+pub fn write_new_dir(dir: &Path, fill: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     if dir.exists() {
         let mut entries = std::fs::read_dir(dir).with_context(|| format!("{}: exists and is not a readable directory", dir.display()))?;
         if entries.next().is_some() {
-            bail!("{}: the directory is not empty; choose a new or empty one (tgs scene make never overwrites files)", dir.display());
+            bail!("{}: the directory is not empty; choose a new or empty one (tgs never overwrites a dataset)", dir.display());
         }
     }
     let name = dir.file_name().with_context(|| format!("{}: not a directory path", dir.display()))?;
@@ -139,12 +145,31 @@ pub fn make(spec: &SceneSpec, dir: &Path, progress: impl FnMut(u32, u32)) -> Res
     if partial.exists() {
         std::fs::remove_dir_all(&partial).with_context(|| format!("{}: cannot remove a previous partial write", partial.display()))?;
     }
-    write_dataset(spec, &partial, progress)?;
+    std::fs::create_dir_all(&partial).with_context(|| format!("{}: cannot create", partial.display()))?;
+    fill(&partial)?;
     if dir.exists() {
         std::fs::remove_dir(dir).with_context(|| format!("{}: cannot replace the empty directory", dir.display()))?;
     }
     std::fs::rename(&partial, dir).with_context(|| format!("{}: cannot move {} into place", dir.display(), partial.display()))?;
     crate::export::sync_dir(dir)
+}
+
+/// Write the built-in scene called `name` (`glass`, `glass-tiny`,
+/// `spheres-128`, `spheres-256`) into the new directory `dir`.
+pub fn make_named(name: &str, dir: &Path, progress: impl FnMut(u32, u32)) -> Result<()> {
+    match spheres::SpheresSpec::named(name) {
+        Some(s) => write_new_dir(dir, |p| spheres::write(&s, p, progress)),
+        None => make(&spec(name)?, dir, progress),
+    }
+}
+
+/// One line per built-in scene: name, size, views.
+pub fn list() -> Vec<String> {
+    let mut out: Vec<String> = SCENES.iter().map(|s| format!("{:12} {}x{} px, {} train + {} test views, glass sphere", s.name, s.size, s.size, s.train, s.test)).collect();
+    for (name, s) in spheres::SpheresSpec::NAMED {
+        out.push(format!("{name:12} {}x{} px, {} train + {} test views, {} initial points (Brush's workload)", s.res, s.res, s.train, s.test, s.points));
+    }
+    out
 }
 
 fn write_dataset(spec: &SceneSpec, dir: &Path, mut progress: impl FnMut(u32, u32)) -> Result<()> {

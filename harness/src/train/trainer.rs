@@ -291,6 +291,11 @@ impl Trainer {
         Ok(Rendered { width: cam.width, height: cam.height, planes: b.frame.out.download()? })
     }
 
+    /// Intersections (Gaussian, tile pairs) of the last view rendered.
+    pub fn last_intersections(&self) -> u32 {
+        self.sizes.values().map(|b| b.frame.last_intersections).max().unwrap_or(0)
+    }
+
     /// Current Gaussians on the host.
     pub fn gaussians(&self) -> Result<HostGaussians> {
         self.set.params.download()

@@ -1,0 +1,151 @@
+//! Benchmark of whole training iterations (forward, loss, backward, reduce,
+//! Adam) on Brush's workload, the spheres scene (`scene::spheres`): 20
+//! views, SH degree 3 active from the start, densification off so the
+//! Gaussian count stays at the initial points. Wall time per iteration
+//! includes all host work (submissions, read-backs); a second, profiled
+//! series gives GPU ms per kernel. Shared by `tgs bench train` and
+//! `cargo bench --bench train`.
+
+use crate::bench::{average, KernelTime};
+use crate::scene::spheres::{self, SpheresSpec};
+use crate::train::{TrainConfig, Trainer};
+use anyhow::{ensure, Result};
+use serde::Serialize;
+use std::sync::Arc;
+use std::time::Instant;
+use tgs_engine::Context;
+
+/// Brush's whole-iteration time on this project's 2-core lavapipe machine
+/// (DEVELOPERS.md), seconds, for (resolution, Gaussians).
+pub const BRUSH_LAVAPIPE_S: [((u32, u32), f64); 2] = [((128, 10_000), 0.9), ((256, 50_000), 4.5)];
+
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainBench {
+    pub device: String,
+    pub width: u32,
+    pub height: u32,
+    pub views: u32,
+    pub gaussians: u32,
+    pub sh_degree: u32,
+    pub warmup: u32,
+    pub iterations: u32,
+    /// Host wall time per iteration, ms: mean and best over the timed series.
+    pub wall_ms: f64,
+    pub wall_ms_best: f64,
+    pub it_per_s: f64,
+    /// GPU ms per iteration by stage (from the profiled series): forward
+    /// (projection, sorts, binning, rasterization), loss (SSIM + gradient
+    /// planes), backward (rasterizer backward + per-Gaussian reduce), Adam.
+    pub forward_ms: f64,
+    pub loss_ms: f64,
+    pub backward_ms: f64,
+    pub adam_ms: f64,
+    pub gpu_ms: f64,
+    /// Every timed scope (nested sort/scan passes included), ms per iteration.
+    pub kernels: Vec<KernelTime>,
+    /// Rasterized (Gaussian, tile) pairs of the last view.
+    pub intersections: u32,
+    /// Brush's time for this workload on the reference machine (lavapipe, 2
+    /// cores), when it is one of the two measured.
+    pub brush_lavapipe_s: Option<f64>,
+}
+
+/// Top-level scopes of a training step, by stage. Scopes named `sort.*`
+/// and `scan.*` are nested inside `raster.*` ones and not summed again.
+fn stage_of(name: &str) -> Option<&'static str> {
+    match name {
+        "raster.backward" | "raster.reduce" => Some("backward"),
+        "adam" => Some("adam"),
+        "densify.stats" => Some("backward"),
+        n if n.starts_with("loss.") => Some("loss"),
+        n if n.starts_with("raster.") => Some("forward"),
+        _ => None,
+    }
+}
+
+/// Time `iterations` training iterations (after `warmup`) on the spheres
+/// scene at `res`² with `points` Gaussians.
+pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations: u32) -> Result<TrainBench> {
+    ensure!(iterations > 0, "--iterations must be at least 1");
+    let spec = SpheresSpec { res, points, ..SpheresSpec::NAMED[0].1 };
+    let data = spheres::dataset(&spec)?;
+    let profiled = iterations.clamp(1, 5);
+    // SH degree 3 is active from iteration 3 on (sh_interval 1).
+    let warmup = warmup.max(3);
+    let cfg = TrainConfig {
+        iterations: warmup + iterations + profiled,
+        background: "black".into(),
+        sh_degree: 3,
+        sh_interval: 1,
+        // Densification off: the count stays fixed, as in Brush's timing.
+        densify_until: 0,
+        test_interval: 0,
+        checkpoint_interval: 0,
+        ..TrainConfig::quick()
+    };
+    let mut tr = Trainer::new(ctx, cfg, &data)?;
+    for _ in 0..warmup {
+        tr.step(false)?;
+    }
+    let mut walls = Vec::new();
+    for _ in 0..iterations {
+        let t = Instant::now();
+        tr.step(false)?;
+        walls.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let mut all = Vec::new();
+    let mut intersections = 0;
+    for _ in 0..profiled {
+        let r = tr.step(true)?;
+        all.push(r.timings);
+        intersections = tr.last_intersections();
+    }
+    let kernels = average(all);
+    let stage = |s: &str| kernels.iter().filter(|k| stage_of(&k.name) == Some(s)).map(|k| k.ms).sum::<f64>();
+    let (forward_ms, loss_ms, backward_ms, adam_ms) = (stage("forward"), stage("loss"), stage("backward"), stage("adam"));
+    let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
+    Ok(TrainBench {
+        device: ctx.caps().describe(),
+        width: res,
+        height: res,
+        views: spec.train,
+        gaussians: tr.set.len(),
+        sh_degree: 3,
+        warmup,
+        iterations,
+        wall_ms,
+        wall_ms_best: walls.iter().copied().fold(f64::INFINITY, f64::min),
+        it_per_s: 1e3 / wall_ms,
+        forward_ms,
+        loss_ms,
+        backward_ms,
+        adam_ms,
+        gpu_ms: forward_ms + loss_ms + backward_ms + adam_ms,
+        kernels,
+        intersections,
+        brush_lavapipe_s: BRUSH_LAVAPIPE_S.iter().find(|(k, _)| *k == (res, points)).map(|(_, s)| *s),
+    })
+}
+
+pub fn print_train(b: &TrainBench) {
+    println!("device: {}", b.device);
+    println!(
+        "train {}x{}, {} Gaussians, SH {}, {} views, {} intersections: {:.1} ms/iteration wall (best {:.1}), {:.2} it/s",
+        b.width, b.height, b.gaussians, b.sh_degree, b.views, b.intersections, b.wall_ms, b.wall_ms_best, b.it_per_s
+    );
+    println!(
+        "  GPU ms/iteration: forward {:.1}, loss {:.1}, backward {:.1} ({:.2}x forward), Adam {:.1}; total {:.1}",
+        b.forward_ms,
+        b.loss_ms,
+        b.backward_ms,
+        b.backward_ms / b.forward_ms.max(1e-9),
+        b.adam_ms,
+        b.gpu_ms
+    );
+    if let Some(s) = b.brush_lavapipe_s {
+        println!("  Brush on the reference lavapipe machine: {:.0} ms/iteration ({:.2}x; the goal is 10x: {:.0} ms)", s * 1e3, s * 1e3 / b.wall_ms, s * 1e2);
+    }
+    for k in &b.kernels {
+        println!("  {:24} {:9.3} ms  ({} calls)", k.name, k.ms, k.calls);
+    }
+}
