@@ -109,7 +109,7 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
         width: res,
         height: res,
         views: spec.train,
-        gaussians: tr.set.len(),
+        gaussians: tr.scattering.set.len(),
         sh_degree: 3,
         warmup,
         iterations,

@@ -147,7 +147,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
     let maes: Vec<f64> = per_view.iter().filter_map(|m| m.normal_mae_deg).collect();
     Ok(Metrics {
         iteration: tr.iteration,
-        gaussians: tr.set.len(),
+        gaussians: tr.scattering.set.len(),
         views: per_view.len(),
         psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,

@@ -33,7 +33,7 @@ pub struct Header {
 }
 
 pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
-    let set = &tr.set;
+    let set = &tr.scattering.set;
     let n = set.len() as usize;
     let arrays = set.arrays();
     let header = Header {
@@ -137,7 +137,7 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, data: &Dataset) -> Result<Traine
     }
     let g = gaussians(&h, &arrays).map_err(|e| bad(format!("{e:#}")))?;
     let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
-    let bufs = tr.set.arrays();
+    let bufs = tr.scattering.set.arrays();
     for ((_, buf, _), data) in bufs.iter().zip(&arrays) {
         if !data.is_empty() {
             buf.upload(data)?;

@@ -217,7 +217,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             data.train.len(),
             data.test.len(),
             data.format,
-            tr.set.len(),
+            tr.scattering.set.len(),
             ctx.caps().describe()
         );
     }
@@ -299,7 +299,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         "dataset": dataset_str,
         "device": ctx.caps().describe(),
         "iterations": tr.iteration,
-        "gaussians": tr.set.len(),
+        "gaussians": tr.scattering.set.len(),
         "train_wall_s": train_s,
         "total_wall_s": start.elapsed().as_secs_f64(),
         "first_loss": first_loss,
@@ -311,7 +311,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     if !a.quiet {
         if let Some(m) = &metrics {
             let mae = m.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
-            eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{mae}", tr.iteration, tr.set.len(), m.psnr, m.ssim);
+            eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{mae}", tr.iteration, tr.scattering.set.len(), m.psnr, m.ssim);
         }
         if a.profile {
             eprintln!("GPU ms per iteration by kernel:");

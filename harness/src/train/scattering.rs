@@ -1,0 +1,190 @@
+//! Stage I's model: the scattering Gaussian set (2DGS surfels) with what
+//! trains it: the rasterizer, the image loss, Adam and density control.
+//! The trainer decides which view, which iteration and which settings; this
+//! model records the GPU work of one step (two submissions: the forward,
+//! grown and re-run if its frame overflowed, then loss + backward +
+//! densification statistics + Adam) and densifies when asked. It never
+//! refers to the trainer.
+
+use super::config::TrainConfig;
+use anyhow::{bail, Context as _, Result};
+use std::collections::HashMap;
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context, Recorder, Timing};
+use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Plane, Rasterizer, TrainableSet};
+
+/// Render planes of one view, downloaded.
+pub struct Rendered {
+    pub width: u32,
+    pub height: u32,
+    /// Planes in the rasterizer's order (see `Plane`).
+    pub planes: Vec<f32>,
+}
+
+impl Rendered {
+    pub fn plane(&self, p: Plane) -> &[f32] {
+        let n = (self.width * self.height) as usize;
+        let i = p.index(3) as usize;
+        &self.planes[i * n..(i + 1) * n]
+    }
+}
+
+/// What the trainer passes for one step of this model.
+pub struct StepInput<'a> {
+    /// Global iteration (1-based), the Adam step count.
+    pub iteration: u32,
+    pub camera: &'a Camera,
+    /// The view's image, planar RGB.
+    pub target: &'a Buffer<f32>,
+    /// Active SH degree.
+    pub sh_degree: u32,
+    /// Position learning rate (already scaled by the scene extent).
+    pub lr_means: f32,
+    pub background: [f32; 3],
+    /// Scene extent (densification thresholds are relative to it).
+    pub extent: f32,
+    pub profile: bool,
+}
+
+/// What one step did.
+pub struct StepOutput {
+    pub loss: f64,
+    pub values: LossValues,
+    /// Gaussian count before and after, when this step densified.
+    pub densified: Option<(u32, u32)>,
+    pub timings: Vec<Timing>,
+}
+
+struct ViewBuffers {
+    frame: Frame,
+    loss: LossScratch,
+}
+
+pub struct ScatteringModel {
+    ctx: Arc<Context>,
+    raster: Rasterizer,
+    loss: ImageLoss,
+    adam: Adam,
+    densifier: Densifier,
+    pub set: TrainableSet,
+    /// Frame and loss buffers per image size.
+    sizes: HashMap<(u32, u32), ViewBuffers>,
+}
+
+impl ScatteringModel {
+    pub fn new(ctx: &Arc<Context>, g: &HostGaussians, sh_degree: u32, adam_eps: f32) -> Result<ScatteringModel> {
+        Ok(ScatteringModel {
+            ctx: ctx.clone(),
+            raster: Rasterizer::new(ctx, 3, Features::Sh { degree: sh_degree })?,
+            loss: ImageLoss::new(ctx)?,
+            adam: Adam::new(ctx, adam_eps)?,
+            densifier: Densifier::new(ctx)?,
+            set: TrainableSet::new(ctx, g)?,
+            sizes: HashMap::new(),
+        })
+    }
+
+    /// Run the forward of `cam` until it fits its frame.
+    fn forward(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
+        let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
+        self.raster.forward(&self.set.params, cam, background, sh, &mut b.frame, profile)
+    }
+
+    /// One training step on one view; densifies when `cfg`'s schedule says so.
+    pub fn step(&mut self, cfg: &TrainConfig, x: &StepInput) -> Result<StepOutput> {
+        let (it, cam, sh) = (x.iteration, x.camera, x.sh_degree);
+        let mut timings = self.forward(cam, sh, &x.background, x.profile)?;
+        let weights = LossWeights {
+            ssim: cfg.lambda_ssim,
+            normal: if it > cfg.normal_from { cfg.lambda_normal } else { 0.0 },
+            dist: if it > cfg.dist_from { cfg.lambda_dist } else { 0.0 },
+        };
+        let stats = it < cfg.densify_until;
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("view buffers missing after the forward")?;
+        let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+        self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
+        self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+        if stats {
+            let sc = rec.begin_scope("densify.stats");
+            self.densifier.record_stats(&mut rec, &self.set, &b.frame)?;
+            rec.end_scope(sc);
+        }
+        let sc = rec.begin_scope("adam");
+        let s = &self.set;
+        let n = s.len() as usize;
+        let k = s.params.coeffs;
+        let groups = [
+            (&s.params.means, &s.grads.means, &s.m.means, &s.v.means, 3 * n, AdamGroup::single(x.lr_means)),
+            (&s.params.log_scales, &s.grads.log_scales, &s.m.log_scales, &s.v.log_scales, 2 * n, AdamGroup::single(cfg.lr_scales)),
+            (&s.params.quats, &s.grads.quats, &s.m.quats, &s.v.quats, 4 * n, AdamGroup::single(cfg.lr_quats)),
+            (&s.params.opacity, &s.grads.opacity, &s.m.opacity, &s.v.opacity, n, AdamGroup::single(cfg.lr_opacity)),
+            (&s.params.features, &s.grads.features, &s.m.features, &s.v.features, 3 * k as usize * n, AdamGroup { lr: cfg.lr_features_dc, lr_rest: cfg.lr_features_rest, stride: 3 * k, split: 3 }),
+        ];
+        for (p, g, m, v, len, group) in groups {
+            self.adam.record(&mut rec, p, g, m, v, len, &group, it as u64)?;
+        }
+        rec.end_scope(sc);
+        timings.extend(rec.submit_and_wait()?);
+        let values = b.loss.values()?;
+        let loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
+
+        let mut densified = None;
+        if it < cfg.densify_until && it > cfg.densify_from && it % cfg.densify_interval == 0 {
+            let p = DensifyParams {
+                grad_threshold: cfg.densify_grad,
+                dense_scale: cfg.percent_dense * x.extent,
+                opacity_min: cfg.prune_opacity,
+                prune_big: it > cfg.opacity_reset_interval,
+                big_screen: cfg.max_screen_size,
+                big_world: cfg.max_world_size * x.extent,
+                grow: self.set.len() < cfg.max_gaussians,
+                seed: (cfg.seed as u32) ^ it.wrapping_mul(0x9E37_79B9),
+            };
+            let r = self.densifier.densify(&mut self.set, &p)?;
+            if r.after == 0 && r.before > 0 {
+                bail!(
+                    "iteration {it}: densification pruned all {} Gaussians (opacity below prune_opacity {}; an opacity reset too close before a densification does this)",
+                    r.before,
+                    cfg.prune_opacity
+                );
+            }
+            densified = Some((r.before, r.after));
+        }
+        Ok(StepOutput { loss, values, densified, timings })
+    }
+
+    /// Cap every opacity at 0.01 (and clear its Adam moments).
+    pub fn reset_opacity(&mut self) -> Result<()> {
+        let mut rec = Recorder::new(&self.ctx)?;
+        self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
+        rec.submit_and_wait()?;
+        Ok(())
+    }
+
+    /// Render `cam` with the current Gaussians (all output planes).
+    pub fn render(&mut self, cam: &Camera, sh: u32, background: &[f32; 3]) -> Result<Rendered> {
+        self.forward(cam, sh, background, false)?;
+        let b = &self.sizes[&(cam.width, cam.height)];
+        Ok(Rendered { width: cam.width, height: cam.height, planes: b.frame.out.download()? })
+    }
+
+    /// Intersections (Gaussian, tile pairs) of the last view rendered.
+    pub fn last_intersections(&self) -> u32 {
+        self.sizes.values().map(|b| b.frame.last_intersections).max().unwrap_or(0)
+    }
+}
+
+/// The frame and loss buffers for one image size, (re)made when the set
+/// outgrew the frame (the intersection capacity carries over).
+fn view_buffers<'a>(sizes: &'a mut HashMap<(u32, u32), ViewBuffers>, raster: &Rasterizer, loss: &ImageLoss, n: u32, w: u32, h: u32) -> Result<&'a mut ViewBuffers> {
+    let old = sizes.get(&(w, h)).map(|b| (b.frame.max_gaussians, b.frame.capacity));
+    if old.is_none_or(|(max_g, _)| max_g < n) {
+        let old_cap = old.map(|o| o.1).unwrap_or(0);
+        let max_g = n + n / 2 + 1024;
+        let cap = old_cap.max((2 * max_g).min(raster.max_capacity()));
+        let frame = raster.frame(w, h, max_g, cap)?;
+        let loss = loss.scratch(w, h, 3)?;
+        sizes.insert((w, h), ViewBuffers { frame, loss });
+    }
+    Ok(sizes.get_mut(&(w, h)).unwrap())
+}
