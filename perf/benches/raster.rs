@@ -4,18 +4,11 @@
 //! 256², and 300k at 800² where the device has the memory (skip it with
 //! TGS_BENCH_RASTER_LARGE=0). JSON goes to target/tgs-bench/raster.json.
 
-use serde_json::json;
-use tgs_engine::{Context, ContextOptions, DeviceSelector};
-
 fn main() -> anyhow::Result<()> {
-    // `cargo bench -- NAME` runs only benches whose name contains NAME.
-    if let Some(f) = std::env::args().skip(1).find(|a| !a.starts_with('-')) {
-        if !"raster".contains(f.as_str()) {
-            return Ok(());
-        }
+    if !tgs_perf::wanted("raster") {
+        return Ok(());
     }
-    let ctx = Context::new(&ContextOptions { device: DeviceSelector::from_arg_or_env(None), validation: Some(false) })?;
-    println!("device: {}", ctx.caps().describe());
+    let ctx = tgs_perf::context()?;
     let large = std::env::var("TGS_BENCH_RASTER_LARGE").map(|v| v != "0").unwrap_or(true);
     let reps = if ctx.caps().is_cpu() { 2 } else { 10 };
     let mut sizes = vec![(10_000u32, 128u32, 128u32), (100_000, 256, 256)];
@@ -33,9 +26,6 @@ fn main() -> anyhow::Result<()> {
             Err(e) => println!("raster {n} Gaussians at {w}x{h}: skipped: {e:#}"),
         }
     }
-    let date = std::process::Command::new("date").arg("-u").arg("+%Y-%m-%d").output().ok()
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string()).unwrap_or_default();
-    let p = tgs_perf::write_json("raster", &json!({ "device": ctx.caps().describe(), "date": date, "runs": runs }))?;
-    println!("wrote {}", p.display());
+    tgs_perf::write_runs("raster", &ctx, serde_json::to_value(runs)?)?;
     Ok(())
 }

@@ -4,18 +4,11 @@
 //! Prints the device, wall and per-kernel GPU ms per iteration, and Brush's
 //! time on the reference lavapipe machine; JSON to target/tgs-bench/train.json.
 
-use serde_json::json;
-use tgs_engine::{Context, ContextOptions, DeviceSelector};
-
 fn main() -> anyhow::Result<()> {
-    // `cargo bench -- NAME` runs only benches whose name contains NAME.
-    if let Some(f) = std::env::args().skip(1).find(|a| !a.starts_with('-')) {
-        if !"train".contains(f.as_str()) {
-            return Ok(());
-        }
+    if !tgs_perf::wanted("train") {
+        return Ok(());
     }
-    let ctx = Context::new(&ContextOptions { device: DeviceSelector::from_arg_or_env(None), validation: Some(false) })?;
-    println!("device: {}", ctx.caps().describe());
+    let ctx = tgs_perf::context()?;
     let cpu = ctx.caps().is_cpu();
     let mut runs = Vec::new();
     for (res, points) in [(128u32, 10_000u32), (256, 50_000)] {
@@ -28,9 +21,6 @@ fn main() -> anyhow::Result<()> {
         tgs::bench_train::print_train(&b);
         runs.push(b);
     }
-    let date = std::process::Command::new("date").arg("-u").arg("+%Y-%m-%d").output().ok()
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string()).unwrap_or_default();
-    let p = tgs_perf::write_json("train", &json!({ "device": ctx.caps().describe(), "date": date, "runs": runs }))?;
-    println!("wrote {}", p.display());
+    tgs_perf::write_runs("train", &ctx, serde_json::to_value(runs)?)?;
     Ok(())
 }
