@@ -109,6 +109,14 @@ fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainConfig> {
     Ok(cfg)
 }
 
+/// A setting's value as the user typed it (settings are f32: no f64 digits).
+fn show(v: &toml::Value) -> String {
+    match v {
+        toml::Value::Float(f) => format!("{}", *f as f32),
+        v => v.to_string(),
+    }
+}
+
 /// The settings of a resumed run: the checkpoint's, with the options given
 /// now applied on top (a `--preset` replaces them all). Any difference
 /// outside [`RESUMABLE_SETTINGS`] would silently train another model than
@@ -124,7 +132,7 @@ pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> 
     let conflicts: Vec<String> = new
         .iter()
         .filter(|(k, v)| !RESUMABLE_SETTINGS.contains(&k.as_str()) && old.get(*k) != Some(v))
-        .map(|(k, v)| format!("{k} = {} in the checkpoint, {v} given", old.get(k).map(|o| o.to_string()).unwrap_or_default()))
+        .map(|(k, v)| format!("{k} = {} in the checkpoint, {} given", old.get(k).map(show).unwrap_or_default(), show(v)))
         .collect();
     if !conflicts.is_empty() {
         bail!(
