@@ -2,7 +2,7 @@
 //! finite differences of it (gradients), plus determinism, multi-span tiles
 //! and the hard cases. CI runs this at subgroup 8 and 4.
 
-use tgs_pipelines::{Features, Rasterizer};
+use tgs_pipelines::{Features, RasterKernels, Rasterizer};
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
 
@@ -117,9 +117,9 @@ fn backward_is_bit_identical_run_to_run() {
 }
 
 /// Tiles longer than the span take several passes; with a forced span of
-/// 256 a dense scene must give bit-identical outputs and gradients to the
-/// run with the device's default span (the per-pixel operation sequence is
-/// the same however the list is cut).
+/// half the default a dense scene must give bit-identical outputs and
+/// gradients to the run with the device's default span (the per-pixel
+/// operation sequence is the same however the list is cut).
 #[test]
 fn multi_span_tiles_match_single_span() {
     let ctx = ctx_shared();
@@ -132,11 +132,12 @@ fn multi_span_tiles_match_single_span() {
     let pixels = 40 * 24;
     let grads = random_grads(&mut rng, 3, pixels);
     let one = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let many = Rasterizer::with_span(ctx, 3, SH3, Some(256)).unwrap();
+    let short = (one.span().min(512) / 2).max(32) / 32 * 32;
+    let many = Rasterizer::with_span(ctx, 3, SH3, Some(short)).unwrap();
     let a = gpu_run(&one, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b = gpu_run(&many, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     assert!(b.spans >= 4 && b.spans > a.spans, "expected more spans with the short span: {} vs {}", b.spans, a.spans);
-    eprintln!("{} intersections, {} spans of 256", b.intersections, b.spans);
+    eprintln!("{} intersections, {} spans of {short} (default span {}: {})", b.intersections, b.spans, one.span(), a.spans);
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&a.out), bits(&b.out), "forward differs");
     let (ga, gb) = (a.grads.unwrap(), b.grads.unwrap());
@@ -146,6 +147,53 @@ fn multi_span_tiles_match_single_span() {
     assert_eq!(bits(&ga.opacity), bits(&gb.opacity));
     // A dense pile of faint splats: more pixels sit at the 1/255 cut (the
     // same allowance as the 50k-splat pile).
-    check_forward_with(&many, &scene, &cam, &[0.3; 3], 3, 0.05, "span 256");
+    check_forward_with(&many, &scene, &cam, &[0.3; 3], 3, 0.05, "short span");
+    check_validation(ctx);
+}
+
+/// Both tile-kernel variants on this device: the Workgroup kernels (what
+/// GPUs run) against the f64 reference and finite differences, as the
+/// default kernels are above; the two forwards bit-identical (the same
+/// per-pixel operations); the two backwards equal up to the order their
+/// per-splat sums are added in, each bit-identical run to run.
+#[test]
+fn workgroup_and_subgroup_kernels_agree() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("workgroup_and_subgroup_kernels_agree"));
+    let wg = Rasterizer::with_options(ctx, 3, SH3, None, RasterKernels::Workgroup).unwrap();
+    let sg = Rasterizer::with_options(ctx, 3, SH3, None, RasterKernels::Subgroup).unwrap();
+    assert_eq!((wg.kernels(), sg.kernels()), (RasterKernels::Workgroup, RasterKernels::Subgroup));
+    let mut spec = SceneSpec::new(12, 3, SH3);
+    spec.log_scale = (-2.2, -1.0);
+    let small = random_scene(&mut rng, &spec);
+    let cam = default_camera(40, 24);
+    check_forward(&wg, &small, &cam, &[0.1, 0.5, 0.9], 3, "workgroup kernels");
+    check_gradients(&wg, &small, &cam, &[0.2, 0.3, 0.7], 3, &mut rng, &[], "workgroup kernels");
+
+    let mut spec = SceneSpec::new(2000, 3, SH3);
+    spec.opacity = (-4.0, 2.0);
+    let scene = random_scene(&mut rng, &spec);
+    let cam = default_camera(70, 45);
+    let grads = random_grads(&mut rng, 3, 70 * 45);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let a = gpu_run(&wg, &scene, &cam, &[0.3; 3], 3, Some(&grads));
+    let b = gpu_run(&sg, &scene, &cam, &[0.3; 3], 3, Some(&grads));
+    let b2 = gpu_run(&sg, &scene, &cam, &[0.3; 3], 3, Some(&grads));
+    assert_eq!(bits(&a.out), bits(&b.out), "the two forwards differ");
+    let (ga, gb, gb2) = (a.grads.unwrap(), b.grads.unwrap(), b2.grads.unwrap());
+    for (name, x, y, y2) in [
+        ("means", &ga.means, &gb.means, &gb2.means),
+        ("log_scales", &ga.log_scales, &gb.log_scales, &gb2.log_scales),
+        ("quats", &ga.quats, &gb.quats, &gb2.quats),
+        ("opacity", &ga.opacity, &gb.opacity, &gb2.opacity),
+        ("features", &ga.features, &gb.features, &gb2.features),
+    ] {
+        assert_eq!(bits(y), bits(y2), "{name}: subgroup backward not bit-identical run to run");
+        let norm = |v: &[f32]| v.iter().map(|&t| (t as f64).powi(2)).sum::<f64>().sqrt();
+        let diff: Vec<f32> = x.iter().zip(y.iter()).map(|(p, q)| p - q).collect();
+        let rel = norm(&diff) / norm(x).max(1e-30);
+        eprintln!("{name}: relative difference between the backwards {rel:.2e}");
+        assert!(norm(x) > 0.0 && rel < 1e-3, "{name}: backwards differ by {rel:.2e}");
+    }
     check_validation(ctx);
 }

@@ -64,8 +64,41 @@ const TILE: u32 = 16;
 /// Loop iterations per invocation we allow on devices with a loop limiter
 /// (lavapipe stops loops after 65,535).
 const LOOP_BUDGET: f64 = 50_000.0;
+/// Default spans are a multiple of this many splats.
+const SPAN_STEP: u32 = 32;
 /// Most feature channels a rasterizer takes.
 pub const MAX_CHANNELS: u32 = 32;
+
+/// How the per-tile forward and backward kernels map pixels to invocations.
+/// Both variants compute the same math and fill the same slots; the
+/// backward's per-splat sums are added in a different (fixed) order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RasterKernels {
+    /// 256 invocations per tile, one pixel each (GPUs). The forward stages
+    /// splats in shared memory; the backward's per-subgroup sums go through
+    /// shared memory and are added in subgroup order after a barrier.
+    Workgroup,
+    /// One subgroup per tile, 256 / subgroup-size pixels per invocation held
+    /// in registers (CPU drivers, where a workgroup's subgroups run as
+    /// coroutines on one thread and barriers and shared-memory traffic cost
+    /// ~3/4 of the Workgroup backward): splats are read directly, a splat's
+    /// gradient record is summed in registers, then one subgroupAdd, and
+    /// written to its slot; no shared memory, no barriers.
+    Subgroup,
+}
+
+impl RasterKernels {
+    /// `TGS_RASTER_KERNELS=workgroup|subgroup` if set (for measuring one
+    /// against the other), else Subgroup on CPU drivers and Workgroup elsewhere.
+    pub fn for_device(caps: &tgs_engine::Capabilities) -> RasterKernels {
+        match std::env::var("TGS_RASTER_KERNELS").as_deref() {
+            Ok("workgroup") => RasterKernels::Workgroup,
+            Ok("subgroup") => RasterKernels::Subgroup,
+            _ if caps.is_cpu() => RasterKernels::Subgroup,
+            _ => RasterKernels::Workgroup,
+        }
+    }
+}
 
 pub struct Rasterizer {
     ctx: Arc<Context>,
@@ -73,6 +106,7 @@ pub struct Rasterizer {
     features: Features,
     batch: u32,
     span: u32,
+    kernels: RasterKernels,
     sort: RadixSort,
     scan: PrefixSum,
     project: Kernel,
@@ -92,8 +126,15 @@ impl Rasterizer {
     }
 
     /// As [`Rasterizer::new`], with the splats-per-span length forced (a
-    /// multiple of 256; tests use it to exercise multi-span tiles cheaply).
+    /// multiple of 32; tests use it to exercise multi-span tiles cheaply).
+    /// On a device with a loop limiter it must not exceed the default span.
     pub fn with_span(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>) -> Result<Rasterizer> {
+        Self::with_options(ctx, channels, features, span, RasterKernels::for_device(ctx.caps()))
+    }
+
+    /// As [`Rasterizer::with_span`], with the backward kernel chosen (tests
+    /// run both on one device).
+    pub fn with_options(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>, kernels: RasterKernels) -> Result<Rasterizer> {
         if channels == 0 || channels > MAX_CHANNELS {
             bail!("rasterizer channels must be 1..={MAX_CHANNELS}, not {channels}");
         }
@@ -114,20 +155,45 @@ impl Rasterizer {
         if max_sg_count * batch * krec * 4 > caps.max_shared_memory {
             bail!("{channels} channels need {} bytes of shared memory in the backward; the device has {}", max_sg_count * krec * 4, caps.max_shared_memory);
         }
+        // The Subgroup backward's workgroup is exactly one subgroup.
+        let sg = caps.subgroup_size;
+        if kernels == RasterKernels::Subgroup && (caps.min_subgroup_size != caps.max_subgroup_size || sg == 0 || WG % sg != 0) {
+            bail!("the one-subgroup backward needs a fixed subgroup size dividing {WG}; {} has {}..={}", caps.device_name, caps.min_subgroup_size, caps.max_subgroup_size);
+        }
+        let ppt = WG / sg.max(1);
         let span = match span {
-            Some(s) if s == 0 || s % WG != 0 => bail!("span must be a positive multiple of {WG}, not {s}"),
+            Some(s) if s == 0 || s % SPAN_STEP != 0 => bail!("span must be a positive multiple of {SPAN_STEP}, not {s}"),
             Some(s) => s,
             None if caps.is_cpu() => {
-                // Loop iterations per splat in the forward and the backward.
+                // Loop iterations per splat in the forward and the backward
+                // (every loop counted, unrolled or not).
                 let ch = channels as f64;
-                let fwd = 2.0 + ch;
-                let bwd = 3.0 + 2.0 * ch + ((batch * krec).div_ceil(WG) as f64 * (1.0 + max_sg_count as f64) + 1.0) / batch as f64;
-                let s = (LOOP_BUDGET / fwd.max(bwd)) as u32 / WG * WG;
-                s.max(WG)
+                let fwd = match kernels {
+                    RasterKernels::Workgroup => 2.0 + ch,
+                    RasterKernels::Subgroup => ppt as f64 * (1.0 + ch) + ch + 2.0,
+                };
+                let bwd = match kernels {
+                    RasterKernels::Workgroup => 3.0 + 2.0 * ch + ((batch * krec).div_ceil(WG) as f64 * (1.0 + max_sg_count as f64) + 1.0) / batch as f64,
+                    RasterKernels::Subgroup => ppt as f64 * (1.0 + ch) + 3.0 * ch + 2.0,
+                };
+                let s = (LOOP_BUDGET / fwd.max(bwd)) as u32 / SPAN_STEP * SPAN_STEP;
+                s.max(SPAN_STEP)
             }
             None => u32::MAX / 2 / WG * WG,
         };
         let spec = [(0, WG), (1, min_sg), (4, channels), (5, batch)];
+        let push_bytes = std::mem::size_of::<Push>() as u32;
+        let (forward, backward) = match kernels {
+            RasterKernels::Workgroup => (
+                Kernel::new(ctx, &KernelDesc { name: "raster.forward", spirv: shaders::RASTER_FORWARD, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false })?,
+                Kernel::new(ctx, &KernelDesc { name: "raster.backward", spirv: shaders::RASTER_BACKWARD, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: true })?,
+            ),
+            RasterKernels::Subgroup => {
+                let spec = [(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)];
+                let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: true });
+                (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", shaders::RASTER_BACKWARD_SG)?)
+            }
+        };
         let k = |name, spirv, push_bytes, full| {
             Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full })
         };
@@ -138,6 +204,7 @@ impl Rasterizer {
             features,
             batch,
             span,
+            kernels,
             sort: RadixSort::new(ctx)?,
             scan: PrefixSum::new(ctx)?,
             project: k("raster.project", shaders::RASTER_PROJECT, push, false)?,
@@ -145,8 +212,8 @@ impl Rasterizer {
             emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
             plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
-            forward: k("raster.forward", shaders::RASTER_FORWARD, push, false)?,
-            backward: k("raster.backward", shaders::RASTER_BACKWARD, push, true)?,
+            forward,
+            backward,
             reduce: k("raster.reduce", shaders::RASTER_REDUCE, push, false)?,
         })
     }
@@ -157,6 +224,11 @@ impl Rasterizer {
     pub fn features(&self) -> Features {
         self.features
     }
+    /// Which tile kernels this rasterizer records.
+    pub fn kernels(&self) -> RasterKernels {
+        self.kernels
+    }
+
     /// Splats per span (tiles longer than this take several passes).
     pub fn span(&self) -> u32 {
         self.span

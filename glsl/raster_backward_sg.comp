@@ -1,0 +1,185 @@
+#version 460
+// Per-pixel 2DGS backward in ONE SUBGROUP per tile (for CPU drivers, where
+// a workgroup's subgroups run as coroutines on one thread and barriers and
+// shared-memory traffic dominate). The workgroup is one subgroup of WG
+// invocations; invocation l owns the PPT = 256 / WG pixels l, l + WG, ... of
+// the 16x16 tile and keeps their state in registers. Back to front, for each
+// splat every invocation sums its pixels' gradient records in pixel order,
+// one subgroupAdd per record entry sums the invocations, and one invocation
+// writes the intersection's own slot: no shared memory, no barriers, no
+// atomics, one writer per slot in a fixed order (bit-identical run to run).
+// The math per pixel is raster_backward.comp's (method-notes §1.7); spans
+// are processed last to first with (T, S) carried in `bstate`.
+#include "common.glsl"
+#include "raster_common.glsl"
+
+layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = 256
+
+layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
+layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
+layout(std430, binding = 2) readonly buffer Vals { uint vals[]; };
+layout(std430, binding = 3) readonly buffer Gid { uint gid[]; };
+layout(std430, binding = 4) readonly buffer ProjIn { float proj[]; };
+layout(std430, binding = 5) readonly buffer FeatIn { float pfeat[]; };
+layout(std430, binding = 6) readonly buffer Out { float outp[]; };
+layout(std430, binding = 7) readonly buffer FState { float fstate[]; };
+layout(std430, binding = 8) readonly buffer UState { uint ustate[]; };
+layout(std430, binding = 9) readonly buffer GradOut { float gout[]; };
+layout(std430, binding = 10) buffer BState { float bstate[]; };
+layout(std430, binding = 11) writeonly buffer Grads { float grads[]; };
+
+void main() {
+    uint tile = wg_linear();
+    if (tile >= pc.tiles_x * pc.tiles_y) {
+        return;
+    }
+    uvec2 range = ranges[tile];
+    uint start = range.x + pc.span_index * pc.span;
+    if (start >= range.y) {
+        return;
+    }
+    uint end = min(range.y, start + pc.span);
+    bool last_span = end >= range.y;
+    uint lid = gl_LocalInvocationID.x;
+    uint tx = tile % pc.tiles_x, ty = tile / pc.tiles_x;
+    uint plane = pc.width * pc.height;
+    const float DMDZ = FAR * NEAR / (FAR - NEAR);
+
+    // Per-pixel upstream gradients and forward state.
+    vec2 pfs[PPT];
+    bool ins[PPT];
+    uint pxs[PPT], lasts[PPT], meds[PPT];
+    float gCs[PPT * CH];
+    float gAs[PPT], gDs[PPT], gMeds[PPT], gDists[PPT], As[PPT], M1s[PPT], M2s[PPT], Ts[PPT], Ss[PPT];
+    vec3 gNs[PPT];
+    uint my_last = 0u;
+    for (uint k = 0u; k < PPT; k++) {
+        uint i = lid + k * WG;
+        uvec2 pix = uvec2(tx * TILE + (i % TILE), ty * TILE + (i / TILE));
+        bool inside = pix.x < pc.width && pix.y < pc.height;
+        uint px = inside ? pix.y * pc.width + pix.x : 0u;
+        pfs[k] = vec2(pix);
+        ins[k] = inside;
+        pxs[k] = px;
+        float bg_dot = 0.0;
+        for (uint c = 0u; c < CH; c++) {
+            float g = inside ? gout[c * plane + px] : 0.0;
+            gCs[k * CH + c] = g;
+            bg_dot += g * cam[20u + c];
+        }
+        float Tf = inside ? fstate[px] : 1.0;
+        gAs[k] = inside ? gout[P_ALPHA * plane + px] : 0.0;
+        gDs[k] = inside ? gout[P_DEPTH * plane + px] : 0.0;
+        gNs[k] = inside ? vec3(gout[P_NORMAL * plane + px], gout[(P_NORMAL + 1u) * plane + px], gout[(P_NORMAL + 2u) * plane + px]) : vec3(0.0);
+        gMeds[k] = inside ? gout[P_MEDIAN * plane + px] : 0.0;
+        gDists[k] = inside ? gout[P_DIST * plane + px] : 0.0;
+        M1s[k] = inside ? fstate[plane + px] : 0.0;
+        M2s[k] = inside ? fstate[2u * plane + px] : 0.0;
+        lasts[k] = inside ? ustate[px] : 0u;
+        meds[k] = inside ? ustate[plane + px] : 0xFFFFFFFFu;
+        As[k] = 1.0 - Tf;
+        Ts[k] = !inside ? 1.0 : (last_span ? Tf : bstate[px]);
+        Ss[k] = !inside ? 0.0 : (last_span ? Tf * bg_dot : bstate[plane + px]);
+        my_last = max(my_last, lasts[k]);
+    }
+
+    // No pixel of the tile blended anything past its last contributor.
+    uint tile_last = subgroupMax(my_last);
+    uint full_end = end;
+    end = min(end, max(tile_last, start));
+    // The skipped intersections still own their slots: zero them.
+    for (uint q = end + lid; q < full_end; q += WG) {
+        uint b = vals[q] * KREC;
+        for (uint r = 0u; r < KREC; r++) {
+            grads[b + r] = 0.0;
+        }
+    }
+
+    float feat[CH], dF[CH];
+    for (uint q1 = end; q1 > start; q1--) {
+        uint q = q1 - 1u;
+        uint g = gid[vals[q]];
+        uint o = 16u * g;
+        vec3 tu = vec3(proj[o], proj[o + 1u], proj[o + 2u]);
+        vec3 tv = vec3(proj[o + 3u], proj[o + 4u], proj[o + 5u]);
+        vec3 tw = vec3(proj[o + 6u], proj[o + 7u], proj[o + 8u]);
+        vec2 mu = vec2(proj[o + 9u], proj[o + 10u]);
+        vec3 nrm = vec3(proj[o + 11u], proj[o + 12u], proj[o + 13u]);
+        float op = proj[o + 14u];
+        for (uint c = 0u; c < CH; c++) {
+            feat[c] = pfeat[g * CH + c];
+            dF[c] = 0.0;
+        }
+        vec3 dTu = vec3(0.0), dTv = vec3(0.0), dTw = vec3(0.0), dn = vec3(0.0);
+        vec2 dmu = vec2(0.0);
+        float dO = 0.0;
+        for (uint k = 0u; k < PPT; k++) {
+            Hit h;
+            vec2 pf = pfs[k];
+            bool contrib = ins[k] && q < lasts[k] && intersect(tu, tv, tw, mu, pf, h);
+            float alpha = contrib ? min(ALPHA_MAX, op * h.g) : 0.0;
+            if (!(contrib && alpha >= ALPHA_MIN)) {
+                continue;
+            }
+            float T = Ts[k];
+            float Ti = T / (1.0 - alpha);
+            float w = alpha * Ti;
+            float m = ndc_depth(h.z);
+            float gDist = gDists[k], M1 = M1s[k], A = As[k];
+            float V = gAs[k] + gDs[k] * h.z + dot(gNs[k], nrm) + gDist * (m * m * A + M2s[k] - 2.0 * m * M1);
+            for (uint c = 0u; c < CH; c++) {
+                float gc = gCs[k * CH + c];
+                V += gc * feat[c];
+                dF[c] += w * gc;
+            }
+            float dAlpha = Ti * V - Ss[k] / (1.0 - alpha);
+            Ss[k] += w * V;
+            Ts[k] = Ti;
+            float dz = w * gDs[k] + gDist * 2.0 * w * (m * A - M1) * DMDZ / (h.z * h.z) + (q == meds[k] ? gMeds[k] : 0.0);
+            bool clamped = op * h.g > ALPHA_MAX;
+            float dG = clamped ? 0.0 : op * dAlpha;
+            dO += clamped ? 0.0 : h.g * dAlpha;
+            bool branch3 = h.rho3 <= h.rho2;
+            // z = Tw . (u, v, 1) depends on (u, v) in both branches.
+            vec2 gu = dz * tw.xy + (branch3 ? -dG * h.g * h.uv : vec2(0.0));
+            vec3 dp = vec3(gu / h.p.z, -(gu.x * h.uv.x + gu.y * h.uv.y) / h.p.z);
+            vec3 dhx = cross(h.hy, dp);
+            vec3 dhy = cross(dp, h.hx);
+            dTu -= dhx;
+            dTv -= dhy;
+            dTw += pf.x * dhx + pf.y * dhy + dz * vec3(h.uv, 1.0);
+            if (!branch3) {
+                dmu += -dG * h.g * FILTER_INV_SQUARE * (mu - pf);
+            }
+            dn += w * gNs[k];
+        }
+        // One subgroup is the whole tile: its sum is the splat's gradient.
+        dTu = subgroupAdd(dTu);
+        dTv = subgroupAdd(dTv);
+        dTw = subgroupAdd(dTw);
+        dmu = subgroupAdd(dmu);
+        dO = subgroupAdd(dO);
+        dn = subgroupAdd(dn);
+        for (uint c = 0u; c < CH; c++) {
+            dF[c] = subgroupAdd(dF[c]);
+        }
+        if (subgroupElect()) {
+            uint b = vals[q] * KREC;
+            grads[b + 0u] = dTu.x; grads[b + 1u] = dTu.y; grads[b + 2u] = dTu.z;
+            grads[b + 3u] = dTv.x; grads[b + 4u] = dTv.y; grads[b + 5u] = dTv.z;
+            grads[b + 6u] = dTw.x; grads[b + 7u] = dTw.y; grads[b + 8u] = dTw.z;
+            grads[b + 9u] = dmu.x; grads[b + 10u] = dmu.y;
+            grads[b + 11u] = dO;
+            grads[b + 12u] = dn.x; grads[b + 13u] = dn.y; grads[b + 14u] = dn.z;
+            for (uint c = 0u; c < CH; c++) {
+                grads[b + 15u + c] = dF[c];
+            }
+        }
+    }
+    for (uint k = 0u; k < PPT; k++) {
+        if (ins[k]) {
+            bstate[pxs[k]] = Ts[k];
+            bstate[plane + pxs[k]] = Ss[k];
+        }
+    }
+}
