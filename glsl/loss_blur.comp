@@ -36,10 +36,6 @@ void main() {
     uint pix = i % n;
     int x = int(pix % pc.width);
     int y = int(pix / pc.width);
-    float norm = 0.0;
-    for (int t = -SSIM_RADIUS; t <= SSIM_RADIUS; t++) {
-        norm += exp(-float(t * t) / (2.0 * SSIM_SIGMA * SSIM_SIGMA));
-    }
     float acc = 0.0;
     for (int t = -SSIM_RADIUS; t <= SSIM_RADIUS; t++) {
         int xx = pc.dir == 0u ? x + t : x;
@@ -47,8 +43,7 @@ void main() {
         if (xx < 0 || yy < 0 || xx >= int(pc.width) || yy >= int(pc.height)) {
             continue;
         }
-        float w = exp(-float(t * t) / (2.0 * SSIM_SIGMA * SSIM_SIGMA)) / norm;
-        acc += w * value(plane, uint(yy) * pc.width + uint(xx));
+        acc += SSIM_WEIGHTS[t + SSIM_RADIUS] * value(plane, uint(yy) * pc.width + uint(xx));
     }
     dst[plane * n + pix] = acc;
 }
