@@ -189,11 +189,21 @@ fn workgroup_and_subgroup_kernels_agree() {
         ("features", &ga.features, &gb.features, &gb2.features),
     ] {
         assert_eq!(bits(y), bits(y2), "{name}: subgroup backward not bit-identical run to run");
-        let norm = |v: &[f32]| v.iter().map(|&t| (t as f64).powi(2)).sum::<f64>().sqrt();
-        let diff: Vec<f32> = x.iter().zip(y.iter()).map(|(p, q)| p - q).collect();
-        let rel = norm(&diff) / norm(x).max(1e-30);
-        eprintln!("{name}: relative difference between the backwards {rel:.2e}");
-        assert!(norm(x) > 0.0 && rel < 1e-3, "{name}: backwards differ by {rel:.2e}");
+        // A few sums are ill-conditioned in f32 (large per-pixel terms that
+        // nearly cancel, e.g. a splat seen almost edge-on): any change of
+        // summation order moves them, as it moves the FD check's excluded
+        // pixels. Measured over 25 seeds: scales have 3-13 of 4,000 elements
+        // beyond 1e-4 relative and 0-7 beyond 1e-3, every other group none;
+        // a wrong kernel differs almost everywhere.
+        let rms = (x.iter().map(|&t| (t as f64).powi(2)).sum::<f64>() / x.len().max(1) as f64).sqrt();
+        let beyond = |tol: f64| (0..x.len()).filter(|&i| ((x[i] - y[i]).abs() as f64) > tol * (x[i].abs() + y[i].abs()) as f64 + 1e-6 * rms).collect::<Vec<_>>();
+        let (loose, tight) = (beyond(1e-3), beyond(1e-4));
+        eprintln!("{name}: of {} elements, {} differ by more than 1e-4 relative, {} by more than 1e-3", x.len(), tight.len(), loose.len());
+        for &i in loose.iter().take(3) {
+            eprintln!("   [{i}] workgroup {} subgroup {} (rms {rms:.3e})", x[i], y[i]);
+        }
+        assert!(rms > 0.0, "{name}: all zero");
+        assert!(loose.len() * 100 <= x.len() && tight.len() * 50 <= x.len(), "{name}: {} (1e-3) and {} (1e-4) of {} elements differ between the two backwards", loose.len(), tight.len(), x.len());
     }
     check_validation(ctx);
 }
