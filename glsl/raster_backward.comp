@@ -15,6 +15,7 @@
 // S_i = sum_{j>i} w_j V_j + T_final (g_C . background).
 #include "common.glsl"
 #include "raster_common.glsl"
+#include "raster_pixel_grad.glsl"
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
@@ -83,7 +84,6 @@ void main() {
         }
     }
     float A = 1.0 - Tf;
-    const float DMDZ = FAR * NEAR / (FAR - NEAR);
 
     // No pixel of the tile blended anything past its last contributor:
     // start from the largest one (the forward usually stops well before the
@@ -131,33 +131,19 @@ void main() {
             vec2 dmu = vec2(0.0);
             float dO = 0.0, w = 0.0;
             if (contrib) {
-                float Ti = T / (1.0 - alpha);
-                w = alpha * Ti;
                 float m = ndc_depth(h.z);
                 float V = gA + gD * h.z + dot(gN, nrm) + gDist * (m * m * A + M2 - 2.0 * m * M1);
                 for (uint c = 0u; c < CH; c++) {
                     V += gC[c] * pfeat[g * CH + c];
                 }
-                float dAlpha = Ti * V - S / (1.0 - alpha);
-                S += w * V;
-                T = Ti;
-                float dz = w * gD + gDist * 2.0 * w * (m * A - M1) * DMDZ / (h.z * h.z) + (q == med_i ? gMed : 0.0);
-                bool clamped = op * h.g > ALPHA_MAX;
-                float dG = clamped ? 0.0 : op * dAlpha;
-                dO = clamped ? 0.0 : h.g * dAlpha;
-                bool branch3 = h.rho3 <= h.rho2;
-                // z = Tw . (u, v, 1) depends on (u, v) in both branches.
-                vec2 gu = dz * tw.xy + (branch3 ? -dG * h.g * h.uv : vec2(0.0));
-                vec3 dp = vec3(gu / h.p.z, -(gu.x * h.uv.x + gu.y * h.uv.y) / h.p.z);
-                vec3 dhx = cross(h.hy, dp);
-                vec3 dhy = cross(dp, h.hx);
-                dTu = -dhx;
-                dTv = -dhy;
-                dTw = pf.x * dhx + pf.y * dhy + dz * vec3(h.uv, 1.0);
-                if (!branch3) {
-                    dmu = -dG * h.g * FILTER_INV_SQUARE * (mu - pf);
-                }
-                dn = w * gN;
+                PixelRec r = pixel_grad(h, alpha, op, tw, mu, pf, V, m, gD, gDist, gMed, gN, A, M1, q == med_i, T, S);
+                dTu = r.dTu;
+                dTv = r.dTv;
+                dTw = r.dTw;
+                dmu = r.dmu;
+                dO = r.dO;
+                dn = r.dn;
+                w = r.w;
             }
             // Sum over the subgroup; one partial per subgroup and splat.
             uint base = (gl_SubgroupID * BATCH + j) * KREC;

@@ -12,6 +12,7 @@
 // are processed last to first with (T, S) carried in `bstate`.
 #include "common.glsl"
 #include "raster_common.glsl"
+#include "raster_pixel_grad.glsl"
 
 layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = 256
 
@@ -43,7 +44,6 @@ void main() {
     uint lid = gl_LocalInvocationID.x;
     uint tx = tile % pc.tiles_x, ty = tile / pc.tiles_x;
     uint plane = pc.width * pc.height;
-    const float DMDZ = FAR * NEAR / (FAR - NEAR);
 
     // Per-pixel upstream gradients and forward state.
     vec2 pfs[PPT];
@@ -121,37 +121,21 @@ void main() {
             if (!(contrib && alpha >= ALPHA_MIN)) {
                 continue;
             }
-            float T = Ts[k];
-            float Ti = T / (1.0 - alpha);
-            float w = alpha * Ti;
             float m = ndc_depth(h.z);
-            float gDist = gDists[k], M1 = M1s[k], A = As[k];
-            float V = gAs[k] + gDs[k] * h.z + dot(gNs[k], nrm) + gDist * (m * m * A + M2s[k] - 2.0 * m * M1);
+            float V = gAs[k] + gDs[k] * h.z + dot(gNs[k], nrm) + gDists[k] * (m * m * As[k] + M2s[k] - 2.0 * m * M1s[k]);
             for (uint c = 0u; c < CH; c++) {
-                float gc = gCs[k * CH + c];
-                V += gc * feat[c];
-                dF[c] += w * gc;
+                V += gCs[k * CH + c] * feat[c];
             }
-            float dAlpha = Ti * V - Ss[k] / (1.0 - alpha);
-            Ss[k] += w * V;
-            Ts[k] = Ti;
-            float dz = w * gDs[k] + gDist * 2.0 * w * (m * A - M1) * DMDZ / (h.z * h.z) + (q == meds[k] ? gMeds[k] : 0.0);
-            bool clamped = op * h.g > ALPHA_MAX;
-            float dG = clamped ? 0.0 : op * dAlpha;
-            dO += clamped ? 0.0 : h.g * dAlpha;
-            bool branch3 = h.rho3 <= h.rho2;
-            // z = Tw . (u, v, 1) depends on (u, v) in both branches.
-            vec2 gu = dz * tw.xy + (branch3 ? -dG * h.g * h.uv : vec2(0.0));
-            vec3 dp = vec3(gu / h.p.z, -(gu.x * h.uv.x + gu.y * h.uv.y) / h.p.z);
-            vec3 dhx = cross(h.hy, dp);
-            vec3 dhy = cross(dp, h.hx);
-            dTu -= dhx;
-            dTv -= dhy;
-            dTw += pf.x * dhx + pf.y * dhy + dz * vec3(h.uv, 1.0);
-            if (!branch3) {
-                dmu += -dG * h.g * FILTER_INV_SQUARE * (mu - pf);
+            PixelRec r = pixel_grad(h, alpha, op, tw, mu, pf, V, m, gDs[k], gDists[k], gMeds[k], gNs[k], As[k], M1s[k], q == meds[k], Ts[k], Ss[k]);
+            for (uint c = 0u; c < CH; c++) {
+                dF[c] += r.w * gCs[k * CH + c];
             }
-            dn += w * gNs[k];
+            dTu += r.dTu;
+            dTv += r.dTv;
+            dTw += r.dTw;
+            dmu += r.dmu;
+            dO += r.dO;
+            dn += r.dn;
         }
         // One subgroup is the whole tile: its sum is the splat's gradient.
         dTu = subgroupAdd(dTu);

@@ -25,6 +25,7 @@ layout(std430, binding = 6) buffer Out { float outp[]; };
 layout(std430, binding = 7) buffer FState { float fstate[]; };
 layout(std430, binding = 8) buffer UState { uint ustate[]; };
 layout(std430, binding = 9) buffer Stats { uint stats[]; };
+#include "raster_pixel_blend.glsl"
 
 shared vec3 s_tu[256];
 shared vec3 s_tv[256];
@@ -56,28 +57,11 @@ void main() {
     uint px = pix.y * pc.width + pix.x;
     vec2 pf = vec2(pix);
 
+    bool resume = pc.span_index > 0u;
+    PixelState p = load_pixel(px, inside, resume);
     float acc[CH];
     for (uint c = 0u; c < CH; c++) {
-        acc[c] = 0.0;
-    }
-    float T = 1.0, D = 0.0, M1 = 0.0, M2 = 0.0, dist = 0.0, med = 0.0;
-    vec3 N = vec3(0.0);
-    uint last = 0u, med_i = 0xFFFFFFFFu;
-    bool done = !inside;
-    if (inside && pc.span_index > 0u) {
-        for (uint c = 0u; c < CH; c++) {
-            acc[c] = outp[c * plane + px];
-        }
-        D = outp[P_DEPTH * plane + px];
-        N = vec3(outp[P_NORMAL * plane + px], outp[(P_NORMAL + 1u) * plane + px], outp[(P_NORMAL + 2u) * plane + px]);
-        med = outp[P_MEDIAN * plane + px];
-        dist = outp[P_DIST * plane + px];
-        T = fstate[px];
-        M1 = fstate[plane + px];
-        M2 = fstate[2u * plane + px];
-        last = ustate[px];
-        med_i = ustate[plane + px];
-        done = ustate[2u * plane + px] != 0u;
+        acc[c] = inside && resume ? outp[c * plane + px] : 0.0;
     }
 
     for (uint b = start; b < end; b += 256u) {
@@ -94,7 +78,7 @@ void main() {
         }
         barrier();
         uint cnt = min(256u, end - b);
-        for (uint j = 0u; j < cnt && !done; j++) {
+        for (uint j = 0u; j < cnt && !p.done; j++) {
             Hit h;
             vec3 muo = s_muo[j];
             if (!intersect(s_tu[j], s_tv[j], s_tw[j], muo.xy, pf, h)) {
@@ -104,28 +88,17 @@ void main() {
             if (alpha < ALPHA_MIN) {
                 continue;
             }
-            float Tn = T * (1.0 - alpha);
+            float Tn = p.T * (1.0 - alpha);
             if (Tn < T_MIN) {
-                done = true;
+                p.done = true;
                 break;
             }
             uint g = s_g[j];
-            float w = alpha * T;
+            vec3 nrm = vec3(proj[16u * g + 11u], proj[16u * g + 12u], proj[16u * g + 13u]);
+            float w = blend(p, h, alpha, Tn, nrm, b + j);
             for (uint c = 0u; c < CH; c++) {
                 acc[c] += w * pfeat[g * CH + c];
             }
-            D += w * h.z;
-            N += w * vec3(proj[16u * g + 11u], proj[16u * g + 12u], proj[16u * g + 13u]);
-            float m = ndc_depth(h.z);
-            dist += w * (m * m * (1.0 - T) + M2 - 2.0 * m * M1);
-            M1 += w * m;
-            M2 += w * m * m;
-            if (T > 0.5) {
-                med = h.z;
-                med_i = b + j;
-            }
-            T = Tn;
-            last = b + j + 1u;
         }
     }
 
@@ -133,19 +106,7 @@ void main() {
         return;
     }
     for (uint c = 0u; c < CH; c++) {
-        outp[c * plane + px] = acc[c] + (last_span ? T * cam[20u + c] : 0.0);
+        outp[c * plane + px] = acc[c] + (last_span ? p.T * cam[20u + c] : 0.0);
     }
-    outp[P_ALPHA * plane + px] = 1.0 - T;
-    outp[P_DEPTH * plane + px] = D;
-    outp[P_NORMAL * plane + px] = N.x;
-    outp[(P_NORMAL + 1u) * plane + px] = N.y;
-    outp[(P_NORMAL + 2u) * plane + px] = N.z;
-    outp[P_MEDIAN * plane + px] = med;
-    outp[P_DIST * plane + px] = dist;
-    fstate[px] = T;
-    fstate[plane + px] = M1;
-    fstate[2u * plane + px] = M2;
-    ustate[px] = last;
-    ustate[plane + px] = med_i;
-    ustate[2u * plane + px] = done ? 1u : 0u;
+    store_pixel(px, p);
 }

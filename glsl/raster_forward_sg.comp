@@ -22,6 +22,7 @@ layout(std430, binding = 6) buffer Out { float outp[]; };
 layout(std430, binding = 7) buffer FState { float fstate[]; };
 layout(std430, binding = 8) buffer UState { uint ustate[]; };
 layout(std430, binding = 9) buffer Stats { uint stats[]; };
+#include "raster_pixel_blend.glsl"
 
 void main() {
     uint tile = wg_linear();
@@ -44,12 +45,11 @@ void main() {
 
     vec2 pfs[PPT];
     uint pxs[PPT];
-    bool ins[PPT], dones[PPT];
+    bool ins[PPT];
+    PixelState ps[PPT];
     float accs[PPT * CH];
-    float Ts[PPT], Ds[PPT], M1s[PPT], M2s[PPT], dists[PPT], meds[PPT];
-    vec3 Ns[PPT];
-    uint lasts[PPT], med_is[PPT];
     bool all_done = true;
+    bool resume = pc.span_index > 0u;
     for (uint k = 0u; k < PPT; k++) {
         uint i = lid + k * WG;
         uvec2 pix = uvec2(tx * TILE + (i % TILE), ty * TILE + (i / TILE));
@@ -58,21 +58,11 @@ void main() {
         pfs[k] = vec2(pix);
         pxs[k] = px;
         ins[k] = inside;
-        bool resume = inside && pc.span_index > 0u;
+        ps[k] = load_pixel(px, inside, resume);
         for (uint c = 0u; c < CH; c++) {
-            accs[k * CH + c] = resume ? outp[c * plane + px] : 0.0;
+            accs[k * CH + c] = inside && resume ? outp[c * plane + px] : 0.0;
         }
-        Ds[k] = resume ? outp[P_DEPTH * plane + px] : 0.0;
-        Ns[k] = resume ? vec3(outp[P_NORMAL * plane + px], outp[(P_NORMAL + 1u) * plane + px], outp[(P_NORMAL + 2u) * plane + px]) : vec3(0.0);
-        meds[k] = resume ? outp[P_MEDIAN * plane + px] : 0.0;
-        dists[k] = resume ? outp[P_DIST * plane + px] : 0.0;
-        Ts[k] = resume ? fstate[px] : 1.0;
-        M1s[k] = resume ? fstate[plane + px] : 0.0;
-        M2s[k] = resume ? fstate[2u * plane + px] : 0.0;
-        lasts[k] = resume ? ustate[px] : 0u;
-        med_is[k] = resume ? ustate[plane + px] : 0xFFFFFFFFu;
-        dones[k] = !inside || (resume && ustate[2u * plane + px] != 0u);
-        all_done = all_done && dones[k];
+        all_done = all_done && ps[k].done;
     }
 
     float feat[CH];
@@ -90,7 +80,7 @@ void main() {
         }
         all_done = true;
         for (uint k = 0u; k < PPT; k++) {
-            if (dones[k]) {
+            if (ps[k].done) {
                 continue;
             }
             Hit h;
@@ -100,30 +90,16 @@ void main() {
                 all_done = false;
                 continue;
             }
-            float T = Ts[k];
-            float Tn = T * (1.0 - alpha);
+            float Tn = ps[k].T * (1.0 - alpha);
             if (Tn < T_MIN) {
-                dones[k] = true;
+                ps[k].done = true;
                 continue;
             }
             all_done = false;
-            float w = alpha * T;
+            float w = blend(ps[k], h, alpha, Tn, nrm, q);
             for (uint c = 0u; c < CH; c++) {
                 accs[k * CH + c] += w * feat[c];
             }
-            Ds[k] += w * h.z;
-            Ns[k] += w * nrm;
-            float m = ndc_depth(h.z);
-            float M1 = M1s[k], M2 = M2s[k];
-            dists[k] += w * (m * m * (1.0 - T) + M2 - 2.0 * m * M1);
-            M1s[k] = M1 + w * m;
-            M2s[k] = M2 + w * m * m;
-            if (T > 0.5) {
-                meds[k] = h.z;
-                med_is[k] = q;
-            }
-            Ts[k] = Tn;
-            lasts[k] = q + 1u;
         }
     }
 
@@ -131,23 +107,9 @@ void main() {
         if (!ins[k]) {
             continue;
         }
-        uint px = pxs[k];
-        float T = Ts[k];
         for (uint c = 0u; c < CH; c++) {
-            outp[c * plane + px] = accs[k * CH + c] + (last_span ? T * cam[20u + c] : 0.0);
+            outp[c * plane + pxs[k]] = accs[k * CH + c] + (last_span ? ps[k].T * cam[20u + c] : 0.0);
         }
-        outp[P_ALPHA * plane + px] = 1.0 - T;
-        outp[P_DEPTH * plane + px] = Ds[k];
-        outp[P_NORMAL * plane + px] = Ns[k].x;
-        outp[(P_NORMAL + 1u) * plane + px] = Ns[k].y;
-        outp[(P_NORMAL + 2u) * plane + px] = Ns[k].z;
-        outp[P_MEDIAN * plane + px] = meds[k];
-        outp[P_DIST * plane + px] = dists[k];
-        fstate[px] = T;
-        fstate[plane + px] = M1s[k];
-        fstate[2u * plane + px] = M2s[k];
-        ustate[px] = lasts[k];
-        ustate[plane + px] = med_is[k];
-        ustate[2u * plane + px] = dones[k] ? 1u : 0u;
+        store_pixel(pxs[k], ps[k]);
     }
 }
