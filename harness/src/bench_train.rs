@@ -99,7 +99,7 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
     for _ in 0..profiled {
         let r = tr.step(true)?;
         all.push(r.timings);
-        intersections = tr.last_intersections();
+        intersections = tr.scattering.last_intersections();
     }
     let kernels = average(all);
     let stage = |s: &str| kernels.iter().filter(|k| stage_of(&k.name) == Some(s)).map(|k| k.ms).sum::<f64>();

@@ -14,6 +14,6 @@ pub use scan::{Count, PrefixSum, ScanScratch};
 pub use sort::{RadixSort, SortConfig, SortScratch};
 pub use util::Iota;
 pub mod raster;
-pub use raster::{RasterKernels, Camera, Features, Frame, Gaussians, HostGaussians, Plane, Rasterizer};
+pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, RasterKernels, Rasterizer};
 pub mod train;
 pub use train::{Adam, AdamGroup, DensifyParams, DensifyReport, Densifier, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};

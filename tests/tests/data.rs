@@ -367,7 +367,8 @@ fn hostile_inputs_are_refused_not_trained() {
     let c = colmap_fixture("colmap-emptypoints", false);
     let t = std::fs::read_to_string(c.join("sparse/0/images.txt")).unwrap().replace("1.0 2.0 -1\n", "\n");
     std::fs::write(c.join("sparse/0/images.txt"), t).unwrap();
-    assert_eq!(Dataset::load(&c, &opts).unwrap().train.len() + Dataset::load(&c, &opts).unwrap().test.len(), 9);
+    let ds = Dataset::load(&c, &opts).unwrap();
+    assert_eq!(ds.train.len() + ds.test.len(), 9);
 
     // A .npy shape whose byte size wraps.
     let d = blender_fixture("npy-shape", 4, 4);

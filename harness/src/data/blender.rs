@@ -162,7 +162,7 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
         let img_path = resolve(root, &f.file_path, "png");
         let image = read_rgb(&img_path, opts.background).with_context(what)?;
         let (w, h) = (image.width, image.height);
-        let small = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
+        let image = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
         let fx = match (fl_x, angle_x) {
             (Some(fx), _) => fx,
             (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),
@@ -197,7 +197,6 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
             }
             None => None,
         };
-        let image = small;
         let name = Path::new(&f.file_path).file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| format!("{split}_{i}"));
         views.push(View { name, camera: downscale_camera(&cam, opts.downscale), image, normals, mask });
     }

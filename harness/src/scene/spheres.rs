@@ -12,6 +12,7 @@ use crate::data::blender::gl_c2w_to_w2v;
 use crate::data::image_io::{write_png, ImageF};
 use crate::data::{Dataset, Points, View};
 use crate::export::ply::write_points;
+use super::trace::{cross, dot, hit_sphere, norm};
 use crate::train::rng::Rng;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
@@ -59,20 +60,6 @@ impl SpheresSpec {
     }
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-fn norm(a: [f64; 3]) -> [f64; 3] {
-    let l = dot(a, a).sqrt();
-    [a[0] / l, a[1] / l, a[2] / l]
-}
-
 /// Camera positions: a jittered Fibonacci spiral over the upper hemisphere.
 fn positions(n: u32, radius: f64, seed: u64) -> Vec<[f64; 3]> {
     let mut rng = Rng::new(seed);
@@ -109,14 +96,9 @@ fn render(c2w: &[[f64; 4]; 4], res: u32, fov_x: f64) -> ImageF {
             let mut best = f64::INFINITY;
             let mut col = [0.0; 3];
             for (c, r, rgb) in SPHERES {
-                let oc = sub(o, c);
-                let b = dot(d, oc);
-                let disc = b * b - (dot(oc, oc) - r * r);
-                if disc <= 0.0 {
-                    continue;
-                }
-                let t = -b - disc.sqrt();
-                if t <= 0.0 || t >= best {
+                // The camera is outside every sphere: the nearer hit is the entry.
+                let Some(&t) = hit_sphere(c, r, o, d).first() else { continue };
+                if t >= best {
                     continue;
                 }
                 best = t;

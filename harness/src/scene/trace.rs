@@ -176,7 +176,7 @@ impl Scene {
 }
 
 /// Ray parameters t > 0 where the ray meets the sphere, nearest first.
-fn hit_sphere(c: V3, r: f64, o: V3, d: V3) -> Vec<f64> {
+pub(crate) fn hit_sphere(c: V3, r: f64, o: V3, d: V3) -> Vec<f64> {
     let oc = sub(o, c);
     let b = dot(oc, d);
     let cc = dot(oc, oc) - r * r;

@@ -103,10 +103,11 @@ pub fn gaussians(h: &Header, arrays: &[Vec<f32>]) -> Result<HostGaussians> {
     Ok(g)
 }
 
-/// A trainer restored from a checkpoint on `data` (the same dataset). Every
-/// array must have exactly the length its header's Gaussian count implies.
-pub fn restore(ctx: &Arc<Context>, path: &Path, data: &Dataset) -> Result<Trainer> {
-    let (h, arrays) = read(path)?;
+/// A trainer restored from the checkpoint `path` on `data` (the same
+/// dataset), given its header and arrays as [`read`] returned them (the
+/// caller needs the header first, to find the dataset). Every array must
+/// have exactly the length its header's Gaussian count implies.
+pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f32>>), data: &Dataset) -> Result<Trainer> {
     let bad = |what: String| anyhow::anyhow!("{}: corrupt checkpoint ({what})", path.display());
     h.config.validate().map_err(|e| bad(format!("settings: {e:#}")))?;
     let k = (h.config.sh_degree + 1).pow(2);

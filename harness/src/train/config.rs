@@ -212,11 +212,15 @@ impl TrainConfig {
         if self.downscale == 0 {
             bail!("downscale must be at least 1");
         }
-        let lrs = [self.lr_means, self.lr_means_final, self.lr_features_dc, self.lr_features_rest, self.lr_opacity, self.lr_scales, self.lr_quats, self.adam_eps];
-        if lrs.iter().any(|v| *v < 0.0) {
-            bail!("learning rates and adam_eps must be non-negative");
-        }
         let non_negative = [
+            ("lr_means", self.lr_means),
+            ("lr_means_final", self.lr_means_final),
+            ("lr_features_dc", self.lr_features_dc),
+            ("lr_features_rest", self.lr_features_rest),
+            ("lr_opacity", self.lr_opacity),
+            ("lr_scales", self.lr_scales),
+            ("lr_quats", self.lr_quats),
+            ("adam_eps", self.adam_eps),
             ("lambda_normal", self.lambda_normal),
             ("lambda_dist", self.lambda_dist),
             ("densify_grad", self.densify_grad),

@@ -173,7 +173,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         if !ckpt.is_file() {
             bail!("{}: no checkpoint to resume from", ckpt.display());
         }
-        let (h, _) = checkpoint::read(&ckpt)?;
+        let (h, arrays) = checkpoint::read(&ckpt)?;
         let cfg = resume_config(a, &h.config)?;
         let dir = PathBuf::from(&h.dataset);
         if let Some(given) = &a.dataset {
@@ -183,14 +183,15 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             }
         }
         let data = load_dataset(&dir, &h.config)?;
-        let mut tr = checkpoint::restore(ctx, &ckpt, &data)?;
+        let dataset = h.dataset.clone();
+        let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
         if cfg.iterations < tr.iteration {
             bail!("--iterations {}: the checkpoint is already at iteration {}", cfg.iterations, tr.iteration);
         }
         tr.cfg = cfg;
         tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
         truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
-        (tr, data, h.dataset)
+        (tr, data, dataset)
     } else {
         if ckpt.is_file() {
             bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
@@ -358,8 +359,8 @@ fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
 /// Load a run directory's checkpoint with its dataset.
 pub fn open_run(ctx: &Arc<Context>, run: &Path) -> Result<(Trainer, Dataset)> {
     let ckpt = run.join(CHECKPOINT);
-    let (h, _) = checkpoint::read(&ckpt)?;
+    let (h, arrays) = checkpoint::read(&ckpt)?;
     let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
-    let tr = checkpoint::restore(ctx, &ckpt, &data)?;
+    let tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
     Ok((tr, data))
 }

@@ -195,11 +195,6 @@ impl Trainer {
         self.scattering.render(cam, sh, &self.background)
     }
 
-    /// Intersections (Gaussian, tile pairs) of the last view rendered.
-    pub fn last_intersections(&self) -> u32 {
-        self.scattering.last_intersections()
-    }
-
     /// Current Gaussians on the host.
     pub fn gaussians(&self) -> Result<HostGaussians> {
         self.scattering.set.params.download()

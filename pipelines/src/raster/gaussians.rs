@@ -96,13 +96,11 @@ impl Gaussians {
         }
         // The uploads below write every element.
         let g = Self::uninit(ctx, h.len() as u32, h.channels, h.coeffs)?;
-        {
-            g.means.upload(&h.means)?;
-            g.log_scales.upload(&h.log_scales)?;
-            g.quats.upload(&h.quats)?;
-            g.opacity.upload(&h.opacity)?;
-            g.features.upload(&h.features)?;
-        }
+        g.means.upload(&h.means)?;
+        g.log_scales.upload(&h.log_scales)?;
+        g.quats.upload(&h.quats)?;
+        g.opacity.upload(&h.opacity)?;
+        g.features.upload(&h.features)?;
         Ok(g)
     }
 

@@ -17,7 +17,7 @@ pub use gaussians::{Gaussians, HostGaussians};
 
 use crate::scan::{Count, PrefixSum, ScanScratch};
 use crate::shaders;
-use crate::sort::RadixSort;
+use crate::sort::{RadixSort, SortScratch};
 use anyhow::{bail, Context as _, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
@@ -99,6 +99,10 @@ impl RasterKernels {
         }
     }
 }
+
+/// A frame's per-intersection arrays: keys, values, Gaussian ids, tile-sort
+/// scratch, gradient records.
+type IntersectionBuffers = (Buffer<u32>, Buffer<u32>, Buffer<u32>, SortScratch, Buffer<f32>);
 
 pub struct Rasterizer {
     ctx: Arc<Context>,
@@ -182,22 +186,18 @@ impl Rasterizer {
             None => u32::MAX / 2 / WG * WG,
         };
         let spec = [(0, WG), (1, min_sg), (4, channels), (5, batch)];
-        let push_bytes = std::mem::size_of::<Push>() as u32;
-        let (forward, backward) = match kernels {
-            RasterKernels::Workgroup => (
-                Kernel::new(ctx, &KernelDesc { name: "raster.forward", spirv: shaders::RASTER_FORWARD, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false })?,
-                Kernel::new(ctx, &KernelDesc { name: "raster.backward", spirv: shaders::RASTER_BACKWARD, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: true })?,
-            ),
-            RasterKernels::Subgroup => {
-                let spec = [(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)];
-                let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: true });
-                (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", shaders::RASTER_BACKWARD_SG)?)
-            }
-        };
         let k = |name, spirv, push_bytes, full| {
             Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full })
         };
         let push = std::mem::size_of::<Push>() as u32;
+        let (forward, backward) = match kernels {
+            RasterKernels::Workgroup => (k("raster.forward", shaders::RASTER_FORWARD, push, false)?, k("raster.backward", shaders::RASTER_BACKWARD, push, true)?),
+            RasterKernels::Subgroup => {
+                let spec = [(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)];
+                let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes: push, subgroup_size: None, full_subgroups: true });
+                (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", shaders::RASTER_BACKWARD_SG)?)
+            }
+        };
         Ok(Rasterizer {
             ctx: ctx.clone(),
             channels,
@@ -273,10 +273,7 @@ impl Rasterizer {
         let pixels = (width * height) as usize;
         let planes = Plane::count(self.channels) as usize;
         let buf = |name: &str, len: usize| Buffer::<u32>::new(ctx, name, len);
-        // Intersection arrays: emission writes entries [0, count) and the
-        // backward every record of them (zeros past a tile's last
-        // contributor) before anything reads them.
-        let ibuf = |name: &str, len: usize| Buffer::<u32>::uninit(ctx, name, len);
+        let (isect_keys, isect_vals, isect_gid, tile_scratch, isect_grads) = self.intersection_buffers(capacity)?;
         let fbuf = |name: &str, len: usize| Buffer::<f32>::new(ctx, name, len);
         Ok(Frame {
             width,
@@ -300,17 +297,17 @@ impl Rasterizer {
             params: buf("raster.params", 4)?,
             args: buf("raster.args", 4)?,
             stats: buf("raster.stats", 2)?,
-            isect_keys: ibuf("raster.isect_keys", capacity as usize)?,
-            isect_vals: ibuf("raster.isect_vals", capacity as usize)?,
-            isect_gid: ibuf("raster.isect_gid", capacity as usize)?,
-            tile_scratch: self.sort.scratch(capacity)?,
+            isect_keys,
+            isect_vals,
+            isect_gid,
+            tile_scratch,
             ranges: buf("raster.ranges", 2 * tiles as usize)?,
             out: fbuf("raster.out", planes * pixels)?,
             grad_out: fbuf("raster.grad_out", planes * pixels)?,
             fstate: fbuf("raster.fstate", 3 * pixels)?,
             ustate: buf("raster.ustate", 3 * pixels)?,
             bstate: fbuf("raster.bstate", 2 * pixels)?,
-            isect_grads: Buffer::uninit(ctx, "raster.isect_grads", capacity as usize * self.record_len() as usize)?,
+            isect_grads,
             densify: fbuf("raster.densify", 2 * n)?,
             radii: fbuf("raster.radii", n)?,
         })
@@ -521,15 +518,24 @@ impl Rasterizer {
     }
 
     fn grow(&self, frame: &mut Frame, capacity: u32) -> Result<()> {
-        let ctx = &self.ctx;
-        // As in `frame`: written in full before they are read.
-        frame.isect_keys = Buffer::uninit(ctx, "raster.isect_keys", capacity as usize)?;
-        frame.isect_vals = Buffer::uninit(ctx, "raster.isect_vals", capacity as usize)?;
-        frame.isect_gid = Buffer::uninit(ctx, "raster.isect_gid", capacity as usize)?;
-        frame.tile_scratch = self.sort.scratch(capacity)?;
-        frame.isect_grads = Buffer::uninit(ctx, "raster.isect_grads", capacity as usize * self.record_len() as usize)?;
+        (frame.isect_keys, frame.isect_vals, frame.isect_gid, frame.tile_scratch, frame.isect_grads) = self.intersection_buffers(capacity)?;
         frame.capacity = capacity;
         Ok(())
+    }
+
+    /// The per-intersection arrays of a frame (keys, values, Gaussian ids,
+    /// tile-sort scratch, gradient records). Emission writes entries
+    /// [0, count) and the backward every record of them (zeros past a tile's
+    /// last contributor) before anything reads them, so they start undefined.
+    fn intersection_buffers(&self, capacity: u32) -> Result<IntersectionBuffers> {
+        let (ctx, cap) = (&self.ctx, capacity as usize);
+        Ok((
+            Buffer::uninit(ctx, "raster.isect_keys", cap)?,
+            Buffer::uninit(ctx, "raster.isect_vals", cap)?,
+            Buffer::uninit(ctx, "raster.isect_gid", cap)?,
+            self.sort.scratch(capacity)?,
+            Buffer::uninit(ctx, "raster.isect_grads", cap * self.record_len() as usize)?,
+        ))
     }
 
     /// Run the forward of one view to completion, growing `frame` and
