@@ -330,15 +330,20 @@ impl Rasterizer {
         }
     }
 
-    fn check_inputs(&self, g: &Gaussians, frame: &Frame) -> Result<()> {
-        if g.channels != self.channels || g.coeffs != self.features.coeffs() {
+    fn check_inputs(&self, g: &Gaussians, features: &Buffer<f32>, frame: &Frame) -> Result<()> {
+        let own = std::ptr::eq(features, &g.features);
+        let (channels, coeffs) = if own { (g.channels, g.coeffs) } else { (self.channels, self.features.coeffs()) };
+        if channels != self.channels || coeffs != self.features.coeffs() {
             bail!(
                 "Gaussian set has {} channels x {} coefficients; this rasterizer takes {} x {}",
-                g.channels,
-                g.coeffs,
+                channels,
+                coeffs,
                 self.channels,
                 self.features.coeffs()
             );
+        }
+        if features.len() < (channels * coeffs * g.n) as usize {
+            bail!("feature buffer '{}' has {} values; {} Gaussians x {} need {}", features.name(), features.len(), g.n, channels * coeffs, channels * coeffs * g.n);
         }
         if g.n > frame.max_gaussians {
             bail!("{} Gaussians exceed the frame's {} (make a larger frame)", g.n, frame.max_gaussians);
@@ -358,8 +363,8 @@ impl Rasterizer {
 
     /// Bindings 0..=5 of the project and reduce kernels: camera, then the
     /// Gaussian parameters.
-    fn param_bindings(frame: &Frame, g: &Gaussians) -> Vec<BufferBinding> {
-        vec![frame.cam.binding(), g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), g.features.binding()]
+    fn param_bindings(frame: &Frame, g: &Gaussians, features: &Buffer<f32>) -> Vec<BufferBinding> {
+        vec![frame.cam.binding(), g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), features.binding()]
     }
 
     /// Bindings 0..=8 of the per-tile forward and backward kernels.
@@ -380,7 +385,16 @@ impl Rasterizer {
     /// Record the forward pass of one view: outputs land in `frame.out`.
     /// `sh_degree` is the active SH degree (ignored for plain features).
     pub fn record_forward(&self, rec: &mut Recorder, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
-        self.check_inputs(g, frame)?;
+        self.record_forward_with(rec, g, &g.features, cam, background, sh_degree, frame)
+    }
+
+    /// As [`Rasterizer::record_forward`], with the per-Gaussian features
+    /// taken from `features` (this rasterizer's channels x coefficients per
+    /// Gaussian) instead of the set's own (features computed by another
+    /// kernel, e.g. the reflection colour).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_forward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
+        self.check_inputs(g, features, frame)?;
         cam.validate()?;
         if cam.width != frame.width || cam.height != frame.height {
             bail!("camera is {}x{} but the frame is {}x{}", cam.width, cam.height, frame.width, frame.height);
@@ -393,7 +407,7 @@ impl Rasterizer {
         rec.update(&frame.cam.binding(), bytemuck::cast_slice(&cam.pack(background)))?;
 
         let sc = rec.begin_scope("raster.project");
-        let mut bindings = Self::param_bindings(frame, g);
+        let mut bindings = Self::param_bindings(frame, g, features);
         bindings.extend([
             frame.proj.binding(),
             frame.pfeat.binding(),
@@ -459,8 +473,20 @@ impl Rasterizer {
     /// with the loss gradient of every output plane in `frame.grad_out`.
     /// Overwrites every gradient in `grads` (and `frame.densify`).
     pub fn record_backward(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
-        self.check_inputs(g, frame)?;
-        if grads.n != g.n || grads.channels != g.channels || grads.coeffs != g.coeffs {
+        if grads.channels != g.channels || grads.coeffs != g.coeffs {
+            bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
+        }
+        self.record_backward_with(rec, g, &g.features, grads, &grads.features, sh_degree, frame)
+    }
+
+    /// As [`Rasterizer::record_backward`] for a forward recorded with
+    /// [`Rasterizer::record_forward_with`]: the feature gradients go to
+    /// `d_features` (same layout as `features`), the geometry gradients to
+    /// `grads` (whose own feature buffer is left alone).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, grads: &Gaussians, d_features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<()> {
+        self.check_inputs(g, features, frame)?;
+        if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {
             bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
         }
         let push = self.push(g, frame, sh_degree);
@@ -474,7 +500,7 @@ impl Rasterizer {
             rec.end_scope(sc);
         }
         let sc = rec.begin_scope("raster.reduce");
-        let mut bindings = Self::param_bindings(frame, g);
+        let mut bindings = Self::param_bindings(frame, g, features);
         bindings.extend([
             frame.depth_ids.binding(),
             frame.offsets.binding(),
@@ -483,7 +509,7 @@ impl Rasterizer {
             grads.log_scales.binding(),
             grads.quats.binding(),
             grads.opacity.binding(),
-            grads.features.binding(),
+            d_features.binding(),
             frame.densify.binding(),
         ]);
         rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;

@@ -141,11 +141,24 @@ impl ImageLoss {
     /// Record the loss of `frame`'s render against `target` (`channels`
     /// planes of width x height, planar) and write `frame.grad_out`.
     pub fn record(&self, rec: &mut Recorder, frame: &Frame, target: &Buffer<f32>, cam: &Camera, w: &LossWeights, s: &mut LossScratch) -> Result<()> {
-        let (width, height, c) = (s.width, s.height, s.channels);
-        if frame.width != width || frame.height != height {
-            bail!("loss scratch is {width}x{height} but the render is {}x{}", frame.width, frame.height);
+        if frame.width != s.width || frame.height != s.height {
+            bail!("loss scratch is {}x{} but the render is {}x{}", s.width, s.height, frame.width, frame.height);
         }
+        self.record_planes(rec, &frame.out, &frame.grad_out, target, cam, w, s)
+    }
+
+    /// As [`ImageLoss::record`] on planes laid out as a render with
+    /// `s.channels` channels (`Plane` order) held in `out`, writing the
+    /// gradient of every plane to `grad_out` (e.g. a deferred composite
+    /// followed by another render's geometry planes).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_planes(&self, rec: &mut Recorder, out: &Buffer<f32>, grad_out: &Buffer<f32>, target: &Buffer<f32>, cam: &Camera, w: &LossWeights, s: &mut LossScratch) -> Result<()> {
+        let (width, height, c) = (s.width, s.height, s.channels);
         let n = width * height;
+        let need = (Plane::count(c) * n) as usize;
+        if out.len() < need || grad_out.len() < need {
+            bail!("loss planes '{}'/'{}' hold {}/{} values; {width}x{height} with {c} channels needs {need}", out.name(), grad_out.name(), out.len(), grad_out.len());
+        }
         if target.len() < (c * n) as usize {
             bail!("target '{}' has {} values; a {width}x{height} image with {c} channels needs {}", target.name(), target.len(), c * n);
         }
@@ -171,7 +184,7 @@ impl ImageLoss {
             plane_dist: Plane::Distortion.index(c),
             pad: 0,
         };
-        let (out, tgt) = (frame.out.binding(), target.binding());
+        let (out, tgt) = (out.binding(), target.binding());
         let sc = rec.begin_scope("loss.ssim");
         let blur = |rec: &mut Recorder, mode: u32, dir: u32, planes: u32, src: &Buffer<f32>, dst: &Buffer<f32>| {
             let p = Push { mode, dir, nplanes: planes, ..base };
@@ -188,9 +201,9 @@ impl ImageLoss {
         s.normal_on = w.normal != 0.0;
         let sc = rec.begin_scope("loss.grad");
         if s.normal_on {
-            rec.dispatch(&self.normal, &[out.clone(), s.normal.binding(), frame.grad_out.binding(), s.partials.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
+            rec.dispatch(&self.normal, &[out.clone(), s.normal.binding(), grad_out.binding(), s.partials.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
         }
-        rec.dispatch(&self.grad, &[out, tgt, s.a.binding(), s.normal.binding(), frame.grad_out.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
+        rec.dispatch(&self.grad, &[out, tgt, s.a.binding(), s.normal.binding(), grad_out.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
         rec.end_scope(sc);
         Ok(())
     }

@@ -1,0 +1,55 @@
+// Per-Gaussian reflection colour (paper eq. per_gauss_color, method-notes
+// §3.4): v = normalize(camera - p), n = t_w flipped to face the camera,
+// w = 2 (n.v) n - v, c = f0 * E(w) (or E(w) alone when the deferred pass
+// applies Schlick with the blended F0). Rasterized features per Gaussian:
+// [c (3), r, f0 (3, only with CH = 7)]. Material (the trainable block,
+// 4 floats per Gaussian): raw f0 (3), raw r (sigmoid activations).
+#ifndef TGS_COLOR_COMMON_GLSL
+#define TGS_COLOR_COMMON_GLSL
+#include "common.glsl"
+
+layout(push_constant) uniform Push {
+    uint n;        // Gaussians
+    uint channels; // rasterized features: 4 (c, r) or 7 (c, r, f0)
+    uint res;      // cube face size
+    uint schlick;  // 1: c = E(w) (Fresnel applied per pixel); 0: c = f0 E(w)
+    vec3 centre;   // camera centre, world space
+    uint pad;
+} pc;
+
+// Camera-facing world normal t_w of a normalized quaternion (r, x, y, z).
+vec3 quat_normal(vec4 q) {
+    float r = q.x, x = q.y, y = q.z, z = q.w;
+    return vec3(2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y));
+}
+
+struct ReflGeom {
+    vec4 q;      // normalized quaternion (0 when degenerate)
+    float qlen;  // |q_raw|
+    vec3 v;      // unit direction to the camera
+    float vlen;  // |camera - p|
+    vec3 n;      // unit normal facing the camera
+    float sgn;   // n = sgn * t_w
+    vec3 w;      // mirror direction
+};
+
+ReflGeom refl_geom(vec3 p, vec4 q_raw) {
+    ReflGeom g;
+    float qq = dot(q_raw, q_raw);
+    g.qlen = sqrt(qq);
+    g.q = (qq > 1e-30 && !isinf(qq)) ? q_raw / g.qlen : vec4(0.0);
+    vec3 t = quat_normal(g.q);
+    vec3 dv = pc.centre - p;
+    g.vlen = length(dv);
+    g.v = g.vlen > 1e-20 ? dv / g.vlen : vec3(0.0, 0.0, 1.0);
+    g.sgn = dot(t, g.v) < 0.0 ? -1.0 : 1.0;
+    g.n = g.sgn * t;
+    g.w = 2.0 * dot(g.n, g.v) * g.n - g.v;
+    return g;
+}
+
+float sigmoid(float x) {
+    return 1.0 / (1.0 + exp(-x));
+}
+
+#endif

@@ -1,0 +1,46 @@
+// Deferred shading of the two sets (paper eq. 6, 9; method-notes §3.2):
+//   I = (1 - R) I_scat + R I_refl,
+//   I_refl = A                      (Schlick off: A = sum w f0 E(w_i))
+//   I_refl = F(F0, cos) * A         (Schlick on:  A = sum w E(w_i)),
+//   F = F0 + (1 - F0) (1 - cos)^5,  F0 = sum w f0 / max(alpha_R, EPS),
+//   cos = clamp(n.v, 0, 1) with n the normalized blended normal of the
+//   reflection set and v the unit direction from the pixel to the camera.
+// R = sum w r is unnormalized (fades at coverage edges). The scattering
+// render's colour has its background blended in; the reflection render's
+// background is 0.
+//
+// Planes (width * height floats each): the scattering render's first 3;
+// the reflection render's CH features [A (3), R, F0 sum (3) if CH = 7],
+// alpha, depth, normal (3), median, distortion. The loss input has the
+// layout of a 3-channel render: the composite, then the reflection set's
+// alpha..distortion (so the image loss also computes its normal
+// consistency).
+#ifndef TGS_COMPOSITE_COMMON_GLSL
+#define TGS_COMPOSITE_COMMON_GLSL
+#include "common.glsl"
+
+layout(push_constant) uniform Push {
+    uint width;
+    uint height;
+    uint channels;   // reflection render's feature channels (4 or 7)
+    uint schlick;    // 1: Schlick Fresnel with the blended F0 (needs CH = 7)
+    float fx, fy, cx, cy;
+    uint scat_grad;  // backward: 1 also writes dL/dI_scat
+    uint pad0, pad1, pad2;
+} pc;
+
+const float F0_EPS = 1e-6;
+const float NORMAL_EPS = 1e-12;
+
+uint npix() {
+    return pc.width * pc.height;
+}
+
+// Unit direction from the pixel's surface point to the camera (view space;
+// pixel centres at integer coordinates as in the rasterizer).
+vec3 pixel_view_dir(uint pix) {
+    float x = float(pix % pc.width), y = float(pix / pc.width);
+    return -normalize(vec3((x - pc.cx) / pc.fx, (y - pc.cy) / pc.fy, 1.0));
+}
+
+#endif

@@ -1,0 +1,129 @@
+//! The learnable environment cube map of Stage II (method-notes §2.6):
+//! six faces (+X, -X, +Y, -Y, +Z, -Z) of `res` x `res` texels, three raw
+//! (pre-sigmoid) channels each, texel t = (face * res + row) * res + col at
+//! floats [3t, 3t + 3). Its GPU copy carries the gradient and Adam moments.
+
+use anyhow::{bail, Result};
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context};
+
+/// Largest face size (the texel index must fit the sort's keys and the
+/// per-texel reduction's loop budget comfortably).
+pub const MAX_ENV_RES: u32 = 1024;
+
+/// A cube map on the host.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HostEnvMap {
+    pub res: u32,
+    /// 6 * res * res * 3 raw texel values.
+    pub raw: Vec<f32>,
+}
+
+impl HostEnvMap {
+    /// Every texel at the raw value `raw` (0 = sigmoid 0.5, the default of
+    /// method-notes §3.7).
+    pub fn constant(res: u32, raw: f32) -> Result<HostEnvMap> {
+        check_res(res)?;
+        Ok(HostEnvMap { res, raw: vec![raw; texels(res) * 3] })
+    }
+
+    pub fn texels(&self) -> usize {
+        texels(self.res)
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        check_res(self.res)?;
+        if self.raw.len() != texels(self.res) * 3 {
+            bail!("environment map of face size {} needs {} values, has {}", self.res, texels(self.res) * 3, self.raw.len());
+        }
+        if let Some(i) = self.raw.iter().position(|v| !v.is_finite()) {
+            bail!("environment map value {i} is {}", self.raw[i]);
+        }
+        Ok(())
+    }
+
+    /// Activated colour (sigmoid) of texel (face, row, col).
+    pub fn texel_rgb(&self, face: u32, row: u32, col: u32) -> [f32; 3] {
+        let t = ((face * self.res + row) * self.res + col) as usize;
+        std::array::from_fn(|c| 1.0 / (1.0 + (-self.raw[3 * t + c]).exp()))
+    }
+
+    /// The map as a horizontal cross (4 res wide, 3 res high, RGB, row-major;
+    /// faces not in the cross are black):
+    /// ```text
+    ///        +Y
+    ///   -X   +Z   +X   -Z
+    ///        -Y
+    /// ```
+    /// (the layout of the usual OpenGL cube cross).
+    pub fn cross(&self) -> (u32, u32, Vec<[f32; 3]>) {
+        let r = self.res;
+        let (w, h) = (4 * r, 3 * r);
+        let mut img = vec![[0f32; 3]; (w * h) as usize];
+        // (face, cell x, cell y)
+        let cells = [(0u32, 2u32, 1u32), (1, 0, 1), (2, 1, 0), (3, 1, 2), (4, 1, 1), (5, 3, 1)];
+        for (face, cx, cy) in cells {
+            for row in 0..r {
+                for col in 0..r {
+                    img[((cy * r + row) * w + cx * r + col) as usize] = self.texel_rgb(face, row, col);
+                }
+            }
+        }
+        (w, h, img)
+    }
+}
+
+fn texels(res: u32) -> usize {
+    6 * res as usize * res as usize
+}
+
+fn check_res(res: u32) -> Result<()> {
+    if res == 0 || res > MAX_ENV_RES {
+        bail!("environment map face size must be 1..={MAX_ENV_RES}, not {res}");
+    }
+    Ok(())
+}
+
+/// A trainable cube map on the GPU: raw texels, their gradient, Adam moments.
+pub struct EnvMap {
+    pub res: u32,
+    pub params: Buffer<f32>,
+    pub grads: Buffer<f32>,
+    pub m: Buffer<f32>,
+    pub v: Buffer<f32>,
+}
+
+impl EnvMap {
+    pub fn upload(ctx: &Arc<Context>, h: &HostEnvMap) -> Result<EnvMap> {
+        h.validate()?;
+        let n = h.raw.len();
+        Ok(EnvMap {
+            res: h.res,
+            params: Buffer::from_slice(ctx, "env.params", &h.raw)?,
+            grads: Buffer::new(ctx, "env.grads", n)?,
+            m: Buffer::new(ctx, "env.adam_m", n)?,
+            v: Buffer::new(ctx, "env.adam_v", n)?,
+        })
+    }
+
+    pub fn texels(&self) -> u32 {
+        texels(self.res) as u32
+    }
+
+    /// Floats in each of the map's arrays.
+    pub fn len(&self) -> usize {
+        3 * texels(self.res)
+    }
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    pub fn download(&self) -> Result<HostEnvMap> {
+        Ok(HostEnvMap { res: self.res, raw: self.params.download_range(0, self.len())? })
+    }
+
+    /// The arrays a checkpoint stores, named, in a fixed order.
+    pub fn arrays(&self) -> [(&'static str, &Buffer<f32>); 3] {
+        [("env.param", &self.params), ("env.adam_m", &self.m), ("env.adam_v", &self.v)]
+    }
+}

@@ -1,0 +1,308 @@
+//! Stage II's kernels (paper §3.2–3.3, method-notes §3.2–3.4), GLSL in
+//! `glsl/reflection/`:
+//! - the per-Gaussian reflection colour c_i = f0_i E(w_i) from the learnable
+//!   cube map, forward and backward (to the material, the position, the
+//!   quaternion through the mirror direction, and the texels);
+//! - the texel gradients without atomics: every Gaussian writes its four
+//!   taps to its own slots, the slots are sorted by texel (the project's
+//!   stable radix sort) and summed per texel in a fixed order;
+//! - the deferred composite I = (1 - R) I_scat + R I_refl (Schlick Fresnel
+//!   with the blended F0 as a switch), forward and backward.
+//!
+//! The reflection set is a `TrainableSet` whose feature block is its
+//! material (raw f0 (3), raw r: [`MATERIAL`] floats); the rasterizer takes
+//! the colour kernel's output as its features (`Rasterizer::record_forward_with`).
+
+mod envmap;
+
+pub use envmap::{EnvMap, HostEnvMap, MAX_ENV_RES};
+
+use crate::raster::{Camera, Gaussians, Plane};
+use crate::scan::Count;
+use crate::shaders;
+use crate::sort::{RadixSort, SortScratch};
+use crate::train::{grid, kernel};
+use anyhow::{bail, Result};
+use bytemuck::{Pod, Zeroable};
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context, Kernel, Recorder};
+
+/// Material floats per reflection Gaussian: raw f0 (3), raw r.
+pub const MATERIAL: u32 = 4;
+/// Sorted texel slots per chunk in the two-pass texel reduction.
+const CHUNK: u32 = 128;
+
+/// How the reflection colour reaches the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fresnel {
+    /// c_i = f0_i E(w_i), I_refl = sum w c (the paper's Stage II colour,
+    /// eq. per_gauss_color): 4 rasterized channels (c, r).
+    Off,
+    /// c_i = E(w_i), I_refl = F(F0, cos) sum w c with Schlick's F and the
+    /// blended F0 = sum w f0 / alpha_R: 7 channels (c, r, f0 sum).
+    Schlick,
+}
+
+impl Fresnel {
+    /// Rasterized feature channels of the reflection set.
+    pub fn channels(self) -> u32 {
+        match self {
+            Fresnel::Off => 4,
+            Fresnel::Schlick => 7,
+        }
+    }
+    fn flag(self) -> u32 {
+        (self == Fresnel::Schlick) as u32
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ColorPush {
+    n: u32,
+    channels: u32,
+    res: u32,
+    schlick: u32,
+    centre: [f32; 3],
+    pad: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CompositePush {
+    width: u32,
+    height: u32,
+    channels: u32,
+    schlick: u32,
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+    scat_grad: u32,
+    pad: [u32; 3],
+}
+
+/// Working memory of the texel-gradient reduction for up to `capacity` Gaussians.
+pub struct TexelScratch {
+    capacity: u32,
+    keys: Buffer<u32>,
+    slots: Buffer<u32>,
+    grads: Buffer<f32>,
+    sort: SortScratch,
+    ranges: Buffer<u32>,
+    runs: Buffer<f32>,
+    count: Buffer<u32>,
+}
+
+pub struct ReflectionShading {
+    ctx: Arc<Context>,
+    sort: RadixSort,
+    color: Kernel,
+    color_backward: Kernel,
+    ranges: Kernel,
+    chunks: Kernel,
+    reduce: Kernel,
+    composite: Kernel,
+    composite_backward: Kernel,
+}
+
+impl ReflectionShading {
+    pub fn new(ctx: &Arc<Context>) -> Result<ReflectionShading> {
+        let cp = std::mem::size_of::<ColorPush>() as u32;
+        let kp = std::mem::size_of::<CompositePush>() as u32;
+        Ok(ReflectionShading {
+            ctx: ctx.clone(),
+            sort: RadixSort::new(ctx)?,
+            color: kernel(ctx, "refl.color", shaders::REFLECTION_COLOR, cp)?,
+            color_backward: kernel(ctx, "refl.color_backward", shaders::REFLECTION_COLOR_BACKWARD, cp)?,
+            ranges: kernel(ctx, "refl.texel_ranges", shaders::RASTER_RANGES, 0)?,
+            chunks: kernel(ctx, "refl.texel_chunks", shaders::REFLECTION_TEXEL_CHUNKS, 8)?,
+            reduce: kernel(ctx, "refl.texel_reduce", shaders::REFLECTION_TEXEL_REDUCE, 8)?,
+            composite: kernel(ctx, "refl.composite", shaders::REFLECTION_COMPOSITE, kp)?,
+            composite_backward: kernel(ctx, "refl.composite_backward", shaders::REFLECTION_COMPOSITE_BACKWARD, kp)?,
+        })
+    }
+
+    /// Texel-reduction memory for up to `capacity` Gaussians and `env`'s size.
+    pub fn texel_scratch(&self, env: &EnvMap, capacity: u32) -> Result<TexelScratch> {
+        let ctx = &self.ctx;
+        let cap = capacity.max(1);
+        let slots = 4 * cap as u64;
+        if slots > self.sort.max_keys() || 3 * slots * 4 > ctx.caps().max_storage_buffer_range {
+            bail!("{capacity} reflection Gaussians need {slots} texel slots; this device holds at most {}", self.sort.max_keys().min(ctx.caps().max_storage_buffer_range / 12));
+        }
+        // The per-texel pass loops over at most slots / CHUNK chunks.
+        if ctx.caps().is_cpu() && slots / CHUNK as u64 + CHUNK as u64 > 60_000 {
+            bail!("{capacity} reflection Gaussians exceed the per-invocation loop budget of a CPU driver");
+        }
+        let s = slots as usize;
+        Ok(TexelScratch {
+            capacity: cap,
+            // The colour backward writes every slot [0, 4n) before the sort.
+            keys: Buffer::uninit(ctx, "refl.tap_keys", s)?,
+            slots: Buffer::uninit(ctx, "refl.tap_slots", s)?,
+            grads: Buffer::uninit(ctx, "refl.tap_grads", 3 * s)?,
+            sort: self.sort.scratch(slots as u32)?,
+            ranges: Buffer::new(ctx, "refl.texel_ranges", 2 * env.texels() as usize)?,
+            runs: Buffer::uninit(ctx, "refl.texel_runs", 6 * (s.div_ceil(CHUNK as usize)))?,
+            count: Buffer::new(ctx, "refl.slot_count", 1)?,
+        })
+    }
+
+    fn color_push(g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel) -> ColorPush {
+        ColorPush { n: g.n, channels: fresnel.channels(), res: env.res, schlick: fresnel.flag(), centre: cam.centre(), pad: 0 }
+    }
+
+    fn check_set(g: &Gaussians, features: &Buffer<f32>, fresnel: Fresnel) -> Result<()> {
+        if g.channels != MATERIAL || g.coeffs != 1 {
+            bail!("a reflection set has {MATERIAL} material floats per Gaussian, not {} x {}", g.channels, g.coeffs);
+        }
+        if features.len() < (fresnel.channels() * g.n) as usize {
+            bail!("feature buffer '{}' holds {} values; {} Gaussians x {} channels need more", features.name(), features.len(), g.n, fresnel.channels());
+        }
+        Ok(())
+    }
+
+    /// Record the reflection colour of every Gaussian of `g` seen from `cam`
+    /// into `features` (`fresnel.channels()` per Gaussian).
+    pub fn record_color(&self, rec: &mut Recorder, g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel, features: &Buffer<f32>) -> Result<()> {
+        Self::check_set(g, features, fresnel)?;
+        if g.n == 0 {
+            return Ok(());
+        }
+        let p = Self::color_push(g, env, cam, fresnel);
+        let b = [g.means.binding(), g.quats.binding(), g.features.binding(), env.params.binding(), features.binding()];
+        rec.dispatch(&self.color, &b, bytemuck::bytes_of(&p), grid(&self.ctx, g.n))
+    }
+
+    /// Record the colour's backward: from `d_features` (the rasterizer's
+    /// feature gradients) to `grads.features` (material, overwritten),
+    /// `grads.means` and `grads.quats` (added to what the rasterizer's
+    /// backward wrote) and `env.grads` (overwritten).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_color_backward(&self, rec: &mut Recorder, g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel, d_features: &Buffer<f32>, grads: &Gaussians, s: &TexelScratch) -> Result<()> {
+        Self::check_set(g, d_features, fresnel)?;
+        if grads.n != g.n || grads.channels != MATERIAL {
+            bail!("reflection gradients ({} Gaussians) do not match the set ({})", grads.n, g.n);
+        }
+        if g.n > s.capacity {
+            bail!("{} reflection Gaussians exceed the texel scratch's {}", g.n, s.capacity);
+        }
+        if g.n == 0 {
+            rec.fill(&env.grads.binding(), 0)?;
+            return Ok(());
+        }
+        let p = Self::color_push(g, env, cam, fresnel);
+        let b = [
+            g.means.binding(),
+            g.quats.binding(),
+            g.features.binding(),
+            env.params.binding(),
+            d_features.binding(),
+            grads.means.binding(),
+            grads.quats.binding(),
+            grads.features.binding(),
+            s.keys.binding(),
+            s.slots.binding(),
+            s.grads.binding(),
+        ];
+        rec.dispatch(&self.color_backward, &b, bytemuck::bytes_of(&p), grid(&self.ctx, g.n))?;
+        self.record_texel_sum(rec, env, 4 * g.n, s)
+    }
+
+    /// Sort the first `slots` tap slots by texel and sum them per texel into `env.grads`.
+    fn record_texel_sum(&self, rec: &mut Recorder, env: &EnvMap, slots: u32, s: &TexelScratch) -> Result<()> {
+        let texels = env.texels();
+        let bits = 32 - (texels.max(2) - 1).leading_zeros();
+        let sc = rec.begin_scope("refl.texel_sort");
+        self.sort.record(rec, &s.keys, &s.slots, &Count::Host(slots), bits, &s.sort)?;
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("refl.texel_reduce");
+        rec.update(&s.count.binding(), bytemuck::bytes_of(&slots))?;
+        rec.fill(&s.ranges.binding(), 0)?;
+        rec.dispatch(&self.ranges, &[s.count.binding(), s.keys.binding(), s.ranges.binding()], &[], grid(&self.ctx, slots))?;
+        let chunks = slots.div_ceil(CHUNK);
+        rec.dispatch(&self.chunks, &[s.keys.binding(), s.slots.binding(), s.grads.binding(), s.runs.binding()], bytemuck::cast_slice(&[slots, CHUNK]), grid(&self.ctx, chunks))?;
+        rec.dispatch(
+            &self.reduce,
+            &[s.ranges.binding(), s.slots.binding(), s.grads.binding(), s.runs.binding(), env.grads.binding()],
+            bytemuck::cast_slice(&[texels, CHUNK]),
+            grid(&self.ctx, texels),
+        )?;
+        rec.end_scope(sc);
+        Ok(())
+    }
+
+    fn composite_push(cam: &Camera, fresnel: Fresnel, scat_grad: bool) -> CompositePush {
+        CompositePush {
+            width: cam.width,
+            height: cam.height,
+            channels: fresnel.channels(),
+            schlick: fresnel.flag(),
+            fx: cam.fx,
+            fy: cam.fy,
+            cx: cam.cx,
+            cy: cam.cy,
+            scat_grad: scat_grad as u32,
+            pad: [0; 3],
+        }
+    }
+
+    fn check_planes(cam: &Camera, bufs: &[(&Buffer<f32>, u32)]) -> Result<()> {
+        let n = cam.width as usize * cam.height as usize;
+        if n == 0 {
+            bail!("composite of an empty {}x{} image", cam.width, cam.height);
+        }
+        for (b, planes) in bufs {
+            if b.len() < *planes as usize * n {
+                bail!("'{}' holds {} values; {planes} planes of {}x{} need {}", b.name(), b.len(), cam.width, cam.height, *planes as usize * n);
+            }
+        }
+        Ok(())
+    }
+
+    /// Record the composite of a scattering render `scat` (colour in its
+    /// first 3 planes) and a reflection render `refl` (`fresnel.channels()`
+    /// feature channels, `Plane` order) into `loss_in`: the composite colour
+    /// followed by the reflection render's alpha..distortion planes, i.e. a
+    /// 3-channel render's layout, for `ImageLoss::record_planes`.
+    pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
+        let ch = fresnel.channels();
+        Self::check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_in, Plane::count(3))])?;
+        let p = Self::composite_push(cam, fresnel, false);
+        rec.dispatch(&self.composite, &[scat.binding(), refl.binding(), loss_in.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, cam.width * cam.height))
+    }
+
+    /// Record the composite's backward: `loss_grad` (gradient of every plane
+    /// of `loss_in`) to `refl_grad` (every plane of the reflection render,
+    /// overwritten) and, when given, `scat_grad` (the scattering colour's 3
+    /// planes, overwritten).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_composite_backward(
+        &self,
+        rec: &mut Recorder,
+        cam: &Camera,
+        fresnel: Fresnel,
+        scat: &Buffer<f32>,
+        refl: &Buffer<f32>,
+        loss_grad: &Buffer<f32>,
+        refl_grad: &Buffer<f32>,
+        scat_grad: Option<&Buffer<f32>>,
+    ) -> Result<()> {
+        let ch = fresnel.channels();
+        Self::check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_grad, Plane::count(3)), (refl_grad, Plane::count(ch))])?;
+        if let Some(s) = scat_grad {
+            Self::check_planes(cam, &[(s, 3)])?;
+        }
+        let p = Self::composite_push(cam, fresnel, scat_grad.is_some());
+        // Without a scattering gradient the binding is never written; bind
+        // the reflection gradient in its place.
+        let sg = scat_grad.unwrap_or(refl_grad);
+        rec.dispatch(
+            &self.composite_backward,
+            &[scat.binding(), refl.binding(), loss_grad.binding(), refl_grad.binding(), sg.binding()],
+            bytemuck::bytes_of(&p),
+            grid(&self.ctx, cam.width * cam.height),
+        )
+    }
+}
