@@ -20,6 +20,10 @@ pub struct ViewMetrics {
     pub psnr: f64,
     pub ssim: f64,
     pub normal_mae_deg: Option<f64>,
+    /// In Stage II: the scattering set's own normals (the field above uses
+    /// the reflection set's where it covers the pixel).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal_mae_scattering_deg: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -30,6 +34,8 @@ pub struct Metrics {
     pub psnr: f64,
     pub ssim: f64,
     pub normal_mae_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal_mae_scattering_deg: Option<f64>,
     pub per_view: Vec<ViewMetrics>,
 }
 
@@ -85,8 +91,12 @@ pub fn ssim(a: &[f32], b: &[f32], w: usize, h: usize, channels: usize) -> f64 {
 
 /// World-space unit normals (interleaved) of a render; zero where empty.
 pub fn world_normals(r: &Rendered, cam: &Camera) -> Vec<[f32; 3]> {
+    world_normals_of([r.plane(Plane::Normal(0)), r.plane(Plane::Normal(1)), r.plane(Plane::Normal(2))], cam)
+}
+
+/// Unit world-space normals from three view-space normal planes (zero where empty).
+pub fn world_normals_of([nx, ny, nz]: [&[f32]; 3], cam: &Camera) -> Vec<[f32; 3]> {
     let m = &cam.world_to_view;
-    let (nx, ny, nz) = (r.plane(Plane::Normal(0)), r.plane(Plane::Normal(1)), r.plane(Plane::Normal(2)));
     (0..nx.len())
         .map(|i| {
             let v = [nx[i], ny[i], nz[i]];
@@ -137,17 +147,20 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
         let rgb = &r.planes[..3 * w * h];
         let target = v.image.planar();
         let normals = world_normals(&r, &v.camera);
-        let m = ViewMetrics { name: v.name.clone(), psnr: psnr(rgb, &target), ssim: ssim(rgb, &target, w, h, 3), normal_mae_deg: normal_mae(&normals, v) };
+        let scat_mae = r.layers.as_ref().and_then(|l| normal_mae(&world_normals(&l.0, &v.camera), v));
+        let m = ViewMetrics { name: v.name.clone(), psnr: psnr(rgb, &target), ssim: ssim(rgb, &target, w, h, 3), normal_mae_deg: normal_mae(&normals, v), normal_mae_scattering_deg: scat_mae };
         if let Some(dir) = out {
-            write_outputs(dir, &v.name, &r, &normals)?;
+            write_outputs(dir, &v.name, &r, &normals, &v.camera)?;
         }
         per_view.push(m);
     }
     let k = per_view.len().max(1) as f64;
     let maes: Vec<f64> = per_view.iter().filter_map(|m| m.normal_mae_deg).collect();
+    let scat_maes: Vec<f64> = per_view.iter().filter_map(|m| m.normal_mae_scattering_deg).collect();
     Ok(Metrics {
+        normal_mae_scattering_deg: (!scat_maes.is_empty()).then(|| scat_maes.iter().sum::<f64>() / scat_maes.len() as f64),
         iteration: tr.iteration,
-        gaussians: tr.scattering.set.len(),
+        gaussians: tr.scattering.set.len() + tr.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0),
         views: per_view.len(),
         psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,
@@ -159,7 +172,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
 /// `NAME.png` (colour), `NAME_normal.png` (world normal * 0.5 + 0.5),
 /// `NAME_depth.exr` (expected depth, 0 where empty) and `NAME_depth.png`
 /// (normalised to the view's depth range).
-pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]]) -> Result<()> {
+pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]], cam: &Camera) -> Result<()> {
     let (w, h) = (r.width, r.height);
     let n = (w * h) as usize;
     write_png(&dir.join(format!("{name}.png")), &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]))?;
@@ -170,5 +183,34 @@ pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]])
     write_exr(&dir.join(format!("{name}_depth.exr")), &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
     let (lo, hi) = depth.iter().filter(|v| **v > 0.0).fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
     let scaled = depth.iter().map(|&v| if v > 0.0 && hi > lo { 1.0 - (v - lo) / (hi - lo) } else { 0.0 }).collect();
-    write_png(&dir.join(format!("{name}_depth.png")), &ImageF { width: w, height: h, channels: 1, data: scaled })
+    write_png(&dir.join(format!("{name}_depth.png")), &ImageF { width: w, height: h, channels: 1, data: scaled })?;
+    if let Some(l) = &r.layers {
+        write_layers(dir, name, &l.0, &l.1, cam)?;
+    }
+    Ok(())
+}
+
+/// Stage II layers of a test render: `NAME_scat.png` (I_scat),
+/// `NAME_refl.png` (I_refl = the rasterized reflection colour),
+/// `NAME_R.png` (reflectivity map), `NAME_F0.png` (blended F0, with
+/// Schlick), `NAME_normal_scat.png` and `NAME_normal_refl.png`.
+fn write_layers(dir: &Path, name: &str, scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Result<()> {
+    let (w, h) = (scat.width, scat.height);
+    let n = (w * h) as usize;
+    let png = |suffix: &str, channels: u32, data: &[f32]| write_png(&dir.join(format!("{name}_{suffix}.png")), &ImageF::from_planar(w, h, channels, data));
+    png("scat", 3, &scat.planes[..3 * n])?;
+    png("refl", 3, &refl.refl[..3 * n])?;
+    png("R", 1, &refl.refl[3 * n..4 * n])?;
+    let alpha = refl.refl_plane(Plane::Alpha);
+    if refl.channels == 7 {
+        let f0: Vec<f32> = (0..3 * n).map(|k| refl.refl[4 * n + k] / alpha[k % n].max(1e-6)).collect();
+        png("F0", 3, &f0)?;
+    }
+    let normal_png = |suffix: &str, normals: &[[f32; 3]]| {
+        let img = ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() };
+        write_png(&dir.join(format!("{name}_{suffix}.png")), &img)
+    };
+    normal_png("normal_scat", &world_normals(scat, cam))?;
+    let rn = [0, 1, 2].map(|k| refl.refl_plane(Plane::Normal(k)));
+    normal_png("normal_refl", &world_normals_of(rn, cam))
 }

@@ -94,7 +94,7 @@ pub fn render(ctx: &Arc<Context>, run: &Path, which: &str, frames: u32, out: &Pa
     let bar = indicatif::ProgressBar::new(cams.len() as u64);
     for (name, cam) in &cams {
         let r = tr.render(cam)?;
-        write_outputs(out, name, &r, &world_normals(&r, cam))?;
+        write_outputs(out, name, &r, &world_normals(&r, cam), cam)?;
         bar.inc(1);
     }
     bar.finish_and_clear();

@@ -13,7 +13,15 @@ use tgs_pipelines::HostGaussians;
 pub const THIN_LOG_SCALE: f32 = -13.8;
 
 pub fn write_splats(path: &Path, g: &HostGaussians) -> Result<()> {
+    write_splats_with(path, g, &[])
+}
+
+/// [`write_splats`] with extra per-splat float properties appended (name, one value per splat).
+pub fn write_splats_with(path: &Path, g: &HostGaussians, extra: &[(&str, Vec<f32>)]) -> Result<()> {
     g.validate()?;
+    if let Some((name, v)) = extra.iter().find(|(_, v)| v.len() != g.len()) {
+        bail!("PLY property '{name}' has {} values for {} splats", v.len(), g.len());
+    }
     let c = g.channels as usize;
     let k = g.coeffs as usize;
     if c != 3 {
@@ -31,8 +39,11 @@ pub fn write_splats(path: &Path, g: &HostGaussians) -> Result<()> {
     for p in ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"] {
         header += &format!("property float {p}\n");
     }
+    for (p, _) in extra {
+        header += &format!("property float {p}\n");
+    }
     header += "end_header\n";
-    let mut out = Vec::with_capacity(header.len() + g.len() * (17 + rest) * 4);
+    let mut out = Vec::with_capacity(header.len() + g.len() * (17 + rest + extra.len()) * 4);
     out.extend_from_slice(header.as_bytes());
     let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
     for i in 0..g.len() {
@@ -50,6 +61,7 @@ pub fn write_splats(path: &Path, g: &HostGaussians) -> Result<()> {
         put(g.log_scales[2 * i + 1]);
         put(THIN_LOG_SCALE);
         (0..4).for_each(|j| put(g.quats[4 * i + j]));
+        extra.iter().for_each(|(_, v)| put(v[i]));
     }
     super::atomic_write(path, &out)
 }
@@ -194,4 +206,22 @@ pub fn read_points(path: &Path) -> Result<Points> {
         });
     }
     Ok(pts)
+}
+
+/// The reflection set as a splat PLY: colour = f0 (as SH DC, so viewers show
+/// it), plus `f0_0..2` and `reflectivity` (activated, in [0, 1]).
+pub fn write_reflection_splats(path: &Path, g: &HostGaussians) -> Result<()> {
+    g.validate()?;
+    if g.channels != 4 || g.coeffs != 1 {
+        bail!("a reflection set has 4 material values per splat, not {} x {}", g.channels, g.coeffs);
+    }
+    let sig = |x: f32| 1.0 / (1.0 + (-x).exp());
+    let n = g.len();
+    let m = |c: usize| (0..n).map(|i| sig(g.features[4 * i + c])).collect::<Vec<f32>>();
+    let (f0, r) = ([m(0), m(1), m(2)], m(3));
+    const SH_C0: f32 = 0.282_094_8;
+    let features = (0..n).flat_map(|i| [0, 1, 2].map(|c| (f0[c][i] - 0.5) / SH_C0)).collect();
+    let base = HostGaussians { channels: 3, coeffs: 1, features, ..g.clone() };
+    let [a, b, c] = f0;
+    write_splats_with(path, &base, &[("f0_0", a), ("f0_1", b), ("f0_2", c), ("reflectivity", r)])
 }

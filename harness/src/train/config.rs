@@ -59,6 +59,84 @@ pub struct TrainConfig {
     pub test_interval: u32,
     /// Write a checkpoint every this many iterations (0: only at the end).
     pub checkpoint_interval: u32,
+    /// The stages to run, in order: "I" or "I,II".
+    pub stages: String,
+    /// Stage II settings (`[reflection]` in TOML, `--set reflection.KEY=V`).
+    pub reflection: ReflectionConfig,
+}
+
+/// Stage II: the reflection set and the environment map (method-notes §3.4, §3.7).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReflectionConfig {
+    pub iterations: u32,
+    /// "off": c = f0 E(w) (the paper's Stage II colour); "schlick": c = E(w)
+    /// and Schlick's F with the blended F0 per pixel.
+    pub fresnel: String,
+    /// Cube-map face size.
+    pub env_res: u32,
+    pub lr_env: f32,
+    pub lr_f0: f32,
+    pub lr_r: f32,
+    /// Initial f0 (all channels) and reflectivity r of every reflection Gaussian.
+    pub f0_init: f32,
+    pub r_init: f32,
+    /// Normal consistency on the reflection set.
+    pub lambda_normal: f32,
+    /// Prune reflection Gaussians below `prune_opacity` every this many iterations (0: never).
+    pub prune_interval: u32,
+    /// Stage II runs only when the Stage I residual's mean magnitude over
+    /// the training views' covered pixels reaches this (see `ResidualStats`).
+    pub min_residual: f32,
+}
+
+impl Default for ReflectionConfig {
+    fn default() -> Self {
+        ReflectionConfig {
+            iterations: 10_000,
+            fresnel: "off".into(),
+            env_res: 128,
+            lr_env: 0.01,
+            lr_f0: 0.0075,
+            lr_r: 0.005,
+            f0_init: 0.04,
+            r_init: 0.01,
+            lambda_normal: 0.05,
+            prune_interval: 100,
+            min_residual: 0.01,
+        }
+    }
+}
+
+impl ReflectionConfig {
+    pub fn fresnel(&self) -> Result<tgs_pipelines::Fresnel> {
+        match self.fresnel.as_str() {
+            "off" => Ok(tgs_pipelines::Fresnel::Off),
+            "schlick" => Ok(tgs_pipelines::Fresnel::Schlick),
+            f => bail!("reflection.fresnel must be 'off' or 'schlick', not '{f}'"),
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        self.fresnel()?;
+        if self.iterations == 0 {
+            bail!("reflection.iterations must be at least 1 (leave Stage II out with stages = \"I\")");
+        }
+        if self.env_res == 0 || self.env_res > tgs_pipelines::reflection::MAX_ENV_RES {
+            bail!("reflection.env_res must be 1..={}, not {}", tgs_pipelines::reflection::MAX_ENV_RES, self.env_res);
+        }
+        for (k, v) in [("f0_init", self.f0_init), ("r_init", self.r_init)] {
+            if !(v > 0.0 && v < 1.0) {
+                bail!("reflection.{k} must be in (0, 1), not {v}");
+            }
+        }
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual)] {
+            if v < 0.0 {
+                bail!("reflection.{k} must be non-negative, not {v}");
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for TrainConfig {
@@ -106,6 +184,8 @@ impl TrainConfig {
             holdout: 8,
             test_interval: 5000,
             checkpoint_interval: 5000,
+            stages: "I,II".into(),
+            reflection: ReflectionConfig::default(),
         }
     }
 
@@ -125,6 +205,7 @@ impl TrainConfig {
             max_gaussians: 200_000,
             test_interval: 1000,
             checkpoint_interval: 500,
+            reflection: ReflectionConfig { iterations: 1000, env_res: 64, prune_interval: 100, ..ReflectionConfig::default() },
             ..Self::paper()
         }
     }
@@ -156,19 +237,46 @@ impl TrainConfig {
 
     fn merge(&mut self, overlay: toml::Table) -> Result<()> {
         let mut base = toml::Table::try_from(&*self).context("serialising the config")?;
-        for (k, v) in overlay {
-            if !base.contains_key(&k) {
-                bail!("unknown setting '{k}'");
-            }
+        for (k, v) in flatten(&overlay) {
+            // `section.key` names a key of a section table.
+            let (table, key) = match k.split_once('.') {
+                Some((sec, key)) => match base.get_mut(sec) {
+                    Some(toml::Value::Table(t)) => (t, key.to_string()),
+                    _ => bail!("unknown setting '{k}'"),
+                },
+                None => (&mut base, k.clone()),
+            };
+            let Some(old) = table.get(&key) else { bail!("unknown setting '{k}'") };
             // Integers given for float settings are fine.
-            let v = match (&base[&k], v) {
+            let v = match (old, v) {
                 (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(i as f64),
+                (toml::Value::Table(_), _) => bail!("'{k}' is a section; set its keys ({k}.KEY)"),
                 (_, v) => v,
             };
-            base.insert(k, v);
+            table.insert(key, v);
         }
         *self = base.try_into().context("invalid setting")?;
         self.validate()
+    }
+
+    /// The stages to run, parsed from `stages`.
+    pub fn stage_list(&self) -> Result<Vec<&'static str>> {
+        let mut out = Vec::new();
+        for s in self.stages.split(',').map(str::trim) {
+            match s {
+                "I" | "II" => out.push(if s == "I" { "I" } else { "II" }),
+                _ => bail!("stages: unknown stage '{s}' (I, II; e.g. \"I,II\")"),
+            }
+        }
+        if out != ["I"] && out != ["I", "II"] {
+            bail!("stages must be \"I\" or \"I,II\", not \"{}\" (Stage II starts from a Stage I result; use --from RUN to reuse one)", self.stages);
+        }
+        Ok(out)
+    }
+
+    /// Whether Stage II is scheduled.
+    pub fn wants_reflection(&self) -> bool {
+        self.stage_list().map(|s| s.contains(&"II")).unwrap_or(false)
     }
 
     /// Whether the opacity reset follows iteration `it` (2DGS: every
@@ -188,7 +296,7 @@ impl TrainConfig {
         // Every float setting must be a number: NaN or infinity anywhere is
         // an error naming the key.
         let table = toml::Table::try_from(self).context("serialising the config")?;
-        for (k, v) in &table {
+        for (k, v) in &flatten(&table) {
             if let toml::Value::Float(f) = v {
                 if !f.is_finite() {
                     bail!("setting '{k}' is {f}; it must be a finite number");
@@ -240,6 +348,8 @@ impl TrainConfig {
             bail!("prune_opacity must be in [0, 1), not {}", self.prune_opacity);
         }
         self.background_rgb()?;
+        self.stage_list()?;
+        self.reflection.validate()?;
         Ok(())
     }
 
@@ -256,4 +366,16 @@ impl TrainConfig {
             }
         }
     }
+}
+
+/// A table's keys with section keys as `section.key` (one level).
+pub fn flatten(t: &toml::Table) -> Vec<(String, toml::Value)> {
+    let mut out = Vec::new();
+    for (k, v) in t {
+        match v {
+            toml::Value::Table(sub) => out.extend(sub.iter().map(|(k2, v2)| (format!("{k}.{k2}"), v2.clone()))),
+            v => out.push((k.clone(), v.clone())),
+        }
+    }
+    out
 }

@@ -5,6 +5,7 @@ pub mod config;
 pub mod init;
 pub mod rng;
 pub mod run;
+pub mod reflection;
 pub mod scattering;
 pub mod trainer;
 

@@ -9,7 +9,8 @@ use super::trainer::Trainer;
 use crate::data::{Dataset, LoadOptions};
 use crate::eval::{evaluate, Metrics};
 use crate::export::atomic_write;
-use crate::export::ply::write_splats;
+use crate::data::image_io::{write_exr, write_png, ImageF};
+use crate::export::ply::{write_reflection_splats, write_splats};
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -77,7 +78,7 @@ pub fn request_stop() {
 
 /// Settings a resumed run may change: they do not alter what was already
 /// trained (the schedule is a function of the iteration count).
-pub const RESUMABLE_SETTINGS: [&str; 3] = ["iterations", "test_interval", "checkpoint_interval"];
+pub const RESUMABLE_SETTINGS: [&str; 4] = ["iterations", "reflection.iterations", "test_interval", "checkpoint_interval"];
 
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
     let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
@@ -127,11 +128,11 @@ pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> 
         None => saved.clone(),
     };
     let cfg = apply_args(base, a)?;
-    let old = toml::Table::try_from(saved)?;
-    let new = toml::Table::try_from(&cfg)?;
+    let old: BTreeMap<String, toml::Value> = super::config::flatten(&toml::Table::try_from(saved)?).into_iter().collect();
+    let new = super::config::flatten(&toml::Table::try_from(&cfg)?);
     let conflicts: Vec<String> = new
         .iter()
-        .filter(|(k, v)| !RESUMABLE_SETTINGS.contains(&k.as_str()) && old.get(*k) != Some(v))
+        .filter(|(k, v)| !RESUMABLE_SETTINGS.contains(&k.as_str()) && old.get(k) != Some(v))
         .map(|(k, v)| format!("{k} = {} in the checkpoint, {} given", old.get(k).map(show).unwrap_or_default(), show(v)))
         .collect();
     if !conflicts.is_empty() {
@@ -236,7 +237,22 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let loop_start = Instant::now();
     let start_it = tr.iteration;
     let mut interrupted = false;
+    let mut stages: Vec<serde_json::Value> = read_stage_records(&a.out, a.resume);
+    let mut stage_start = Instant::now();
     while !tr.done() {
+        if tr.at_reflection_start() {
+            let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
+            if let Some(b) = &bar {
+                b.set_length(tr.schedule.total() as u64);
+                b.println(&msg);
+            } else if !a.quiet {
+                eprintln!("{msg}");
+            }
+            writeln!(log, "{}", json!({"iteration": tr.iteration, "stage": "II", "event": "begin", "reflection": tr.decision}))?;
+            stage_start = Instant::now();
+            atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
+            continue;
+        }
         let r = tr.step(a.profile)?;
         if !r.loss.is_finite() {
             checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str)?;
@@ -302,7 +318,18 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     }
     let train_s = loop_start.elapsed().as_secs_f64();
     write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
+    if let Some(m) = &tr.reflection {
+        write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
+        let env = m.env.download()?;
+        let (w, h, px) = env.cross();
+        let img = ImageF { width: w, height: h, channels: 3, data: px.into_iter().flatten().collect() };
+        write_exr(&a.out.join("envmap.exr"), &img)?;
+        write_png(&a.out.join("envmap.png"), &img)?;
+    }
     let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&a.out.join("renders/test")))?) };
+    let last_stage = tr.schedule.stages.last().map(|s| s.0).unwrap_or_default();
+    stages.retain(|s| s["stage"] != last_stage.name());
+    stages.push(stage_record(last_stage.name(), &tr, stage_start, metrics.as_ref()));
     let timings: BTreeMap<String, f64> = timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64)).collect();
     let doc = json!({
         "dataset": dataset_str,
@@ -314,6 +341,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         "first_loss": first_loss,
         "final_loss": last_loss,
         "test": metrics,
+        "stages": stages,
+        "reflection": tr.decision,
         "gpu_ms_per_iteration": if a.profile { json!(timings) } else { json!(null) },
     });
     atomic_write(&a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?.as_bytes())?;
@@ -331,6 +360,66 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         eprintln!("outputs in {}", a.out.display());
     }
     Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: start.elapsed().as_secs_f64() })
+}
+
+/// metrics.json's record of a finished stage.
+fn stage_record(stage: &str, tr: &Trainer, since: Instant, m: Option<&Metrics>) -> serde_json::Value {
+    let its = tr.schedule.stages.iter().find(|s| s.0.name() == stage).map(|s| s.1).unwrap_or(0);
+    let test = m.map(|m| json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg, "normal_mae_scattering_deg": m.normal_mae_scattering_deg}));
+    json!({"stage": stage, "iterations": its, "wall_s": since.elapsed().as_secs_f64(), "test": test})
+}
+
+/// The stage records of the run so far (kept in stages.json across a resume).
+fn read_stage_records(out: &Path, resume: bool) -> Vec<serde_json::Value> {
+    if !resume {
+        return Vec::new();
+    }
+    std::fs::read(out.join("stages.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default()
+}
+
+/// Close Stage I (its test metrics), measure the residual (maps written to
+/// OUT/residual/), and start Stage II or skip it. Returns the message.
+fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool) -> Result<String> {
+    let resumed = tr.reflection.is_some();
+    if !resumed {
+        let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&out.join("renders/stage1")))?) };
+        stages.retain(|s| s["stage"] != "I");
+        stages.push(stage_record("I", tr, since, m.as_ref()));
+        if !quiet {
+            eprintln!("Stage I done: measuring the residual of {} training views", data.train.len());
+        }
+    }
+    let dir = out.join("residual");
+    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
+    let d = tr.begin_reflection(|i, cam, r| {
+        if resumed {
+            return Ok(());
+        }
+        let n = (cam.width * cam.height) as usize;
+        let name = &names[i];
+        write_exr(&dir.join(format!("{name}.exr")), &ImageF::from_planar(cam.width, cam.height, 3, &r[..3 * n]))?;
+        // Heat map of mean |r|: 0 black, >= 0.25 white.
+        let heat: Vec<f32> = r[3 * n..4 * n].iter().map(|v| v / 0.25).collect();
+        write_png(&dir.join(format!("{name}.png")), &ImageF { width: cam.width, height: cam.height, channels: 1, data: heat })
+    })?;
+    Ok(if d.run {
+        format!(
+            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05): {} reflection Gaussians, {} iterations",
+            d.residual_mean,
+            d.threshold,
+            100.0 * d.residual_fraction_over_0_05,
+            d.reflection_gaussians,
+            tr.cfg.reflection.iterations
+        )
+    } else {
+        format!(
+            "Stage II skipped: the Stage I residual {:.4} is below reflection.min_residual {:.4} ({:.1}% of pixels above 0.05): the scene shows no view-dependent energy worth a reflection set",
+            d.residual_mean,
+            d.threshold,
+            100.0 * d.residual_fraction_over_0_05
+        )
+    })
 }
 
 /// Drop the log lines of iterations after `iteration` (those a killed run

@@ -19,6 +19,9 @@ pub struct Rendered {
     pub height: u32,
     /// Planes in the rasterizer's order (see `Plane`).
     pub planes: Vec<f32>,
+    /// In Stage II: the scattering render and the reflection render this
+    /// image was composited from.
+    pub layers: Option<Box<(Rendered, super::reflection::ReflRendered)>>,
 }
 
 impl Rendered {
@@ -165,7 +168,17 @@ impl ScatteringModel {
     pub fn render(&mut self, cam: &Camera, sh: u32, background: &[f32; 3]) -> Result<Rendered> {
         self.forward(cam, sh, background, false)?;
         let b = &self.sizes[&(cam.width, cam.height)];
-        Ok(Rendered { width: cam.width, height: cam.height, planes: b.frame.out.download()? })
+        Ok(Rendered { width: cam.width, height: cam.height, planes: b.frame.out.download()?, layers: None })
+    }
+
+    /// Render `cam` and copy its colour (3 planes, background blended in) into `dst`.
+    pub fn render_color_into(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], dst: &Buffer<f32>) -> Result<()> {
+        self.forward(cam, sh, background, false)?;
+        let b = &self.sizes[&(cam.width, cam.height)];
+        let mut rec = Recorder::new(&self.ctx)?;
+        rec.copy(&b.frame.out.binding(), &dst.binding(), 12 * b.frame.pixels() as u64)?;
+        rec.submit_and_wait()?;
+        Ok(())
     }
 
     /// Intersections (Gaussian, tile pairs) of the last view rendered.

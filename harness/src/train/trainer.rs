@@ -1,35 +1,57 @@
 //! The trainer: the loop and the schedule. It owns the training views, the
 //! view order, the iteration count and the stage schedule, and drives one
-//! model per stage (`scattering::ScatteringModel` for Stage I; the
-//! reflection set and the light field come as models beside it). Models
-//! never refer to the trainer: each step gets what it needs as arguments.
+//! model per stage (`scattering::ScatteringModel` for Stage I,
+//! `reflection::ReflectionModel` for Stage II; the light field comes next).
+//! Between the stages it computes the Stage I residual, decides whether
+//! the scene calls for Stage II, and caches the frozen scattering colour of
+//! every training view. Models never refer to the trainer: each step gets
+//! what it needs as arguments.
 
 use super::config::TrainConfig;
 use super::init::{gaussians_from_points, random_points};
 use super::rng::Rng;
+use super::reflection::{residual, ReflStepInput, ReflectionModel};
 use super::scattering::{ScatteringModel, StepInput};
 use crate::data::Dataset;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Timing};
-use tgs_pipelines::{Camera, HostGaussians, LossValues};
+use tgs_pipelines::{Camera, HostGaussians, LossValues, Plane, ReflectionShading};
 
+pub use super::reflection::ReflRendered;
 pub use super::scattering::Rendered;
 
-/// Training stages (paper §3–4). Only Stage I exists so far.
+/// Training stages (paper §3–4).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Stage {
     /// Stage I: the scattering set alone (2DGS).
     #[default]
     Scattering,
+    /// Stage II: reflection set + environment map over the frozen Stage I set.
+    Reflection,
 }
 
 impl Stage {
     pub fn name(self) -> &'static str {
         match self {
             Stage::Scattering => "I",
+            Stage::Reflection => "II",
         }
     }
+}
+
+/// The measured Stage I residual and what it decided (metrics.json's `reflection`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ReflDecision {
+    /// Mean over the training views of the per-pixel mean_c |I_gt - I_scat|.
+    pub residual_mean: f64,
+    /// Fraction of training pixels whose residual magnitude exceeds 0.05.
+    pub residual_fraction_over_0_05: f64,
+    /// The threshold on `residual_mean` (reflection.min_residual).
+    pub threshold: f64,
+    /// Whether Stage II ran.
+    pub run: bool,
+    pub reflection_gaussians: u32,
 }
 
 /// The stage schedule: each stage with its iteration count, run in order.
@@ -40,7 +62,21 @@ pub struct Schedule {
 
 impl Schedule {
     pub fn from_config(cfg: &TrainConfig) -> Schedule {
-        Schedule { stages: vec![(Stage::Scattering, cfg.iterations)] }
+        let mut stages = vec![(Stage::Scattering, cfg.iterations)];
+        if cfg.wants_reflection() {
+            stages.push((Stage::Reflection, cfg.reflection.iterations));
+        }
+        Schedule { stages }
+    }
+    /// First global iteration of `stage` minus one (its iterations are start+1..).
+    pub fn start_of(&self, stage: Stage) -> u32 {
+        self.stages.iter().take_while(|s| s.0 != stage).map(|s| s.1).sum()
+    }
+    /// Drop the stages after `stage` (a skipped Stage II).
+    pub fn end_after(&mut self, stage: Stage) {
+        if let Some(i) = self.stages.iter().position(|s| s.0 == stage) {
+            self.stages.truncate(i + 1);
+        }
     }
     pub fn total(&self) -> u32 {
         self.stages.iter().map(|s| s.1).sum()
@@ -78,6 +114,13 @@ pub struct Trainer {
     pub schedule: Schedule,
     /// Stage I's model: the scattering set.
     pub scattering: ScatteringModel,
+    /// Stage II's model, from the start of Stage II.
+    pub reflection: Option<ReflectionModel>,
+    /// The Stage I residual's measurement and the Stage II decision.
+    pub decision: Option<ReflDecision>,
+    /// The frozen scattering colour of every training view (Stage II).
+    scat_cache: Vec<Buffer<f32>>,
+    ctx: Arc<Context>,
     targets: Vec<Buffer<f32>>,
     cameras: Vec<Camera>,
     /// Completed iterations.
@@ -110,6 +153,10 @@ impl Trainer {
         Ok(Trainer {
             schedule: Schedule::from_config(&cfg),
             scattering: ScatteringModel::new(ctx, g, cfg.sh_degree, cfg.adam_eps)?,
+            reflection: None,
+            decision: None,
+            scat_cache: Vec::new(),
+            ctx: ctx.clone(),
             targets,
             cameras,
             iteration: 0,
@@ -149,10 +196,66 @@ impl Trainer {
         self.stack.pop().unwrap_or(0)
     }
 
+    /// Whether the next iteration starts Stage II (call
+    /// [`Trainer::begin_reflection`] first).
+    pub fn at_reflection_start(&self) -> bool {
+        self.scat_cache.is_empty() && matches!(self.schedule.at(self.iteration + 1), Some((Stage::Reflection, _)))
+    }
+
+    /// Between Stage I and II: render every training view with the frozen
+    /// scattering set (cached for Stage II), measure the residual
+    /// I_gt - I_scat on the GPU, and decide: below `reflection.min_residual`
+    /// the scene shows no view-dependent energy worth a reflection set and
+    /// the schedule ends after Stage I. `on_view(i, residual planes)` sees
+    /// every view's residual (4 planes: r, mean |r|) for saving.
+    pub fn begin_reflection(&mut self, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<ReflDecision> {
+        let shading = ReflectionShading::new(&self.ctx)?;
+        let sh = self.sh_degree(self.cfg.iterations);
+        let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
+        self.scat_cache.clear();
+        for (i, cam) in self.cameras.clone().iter().enumerate() {
+            let n = (cam.width * cam.height) as usize;
+            let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * n)?;
+            self.scattering.render_color_into(cam, sh, &self.background, &buf)?;
+            let r = residual(&self.ctx, &shading, &self.targets[i], &buf, n as u32)?;
+            let mag = &r[3 * n..4 * n];
+            sum += mag.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
+            over += mag.iter().filter(|&&v| v > 0.05).count();
+            pixels += n;
+            on_view(i, cam, &r)?;
+            self.scat_cache.push(buf);
+        }
+        let views = self.cameras.len().max(1);
+        let mut d = ReflDecision {
+            residual_mean: sum / views as f64,
+            residual_fraction_over_0_05: over as f64 / pixels.max(1) as f64,
+            threshold: self.cfg.reflection.min_residual as f64,
+            run: false,
+            reflection_gaussians: 0,
+        };
+        d.run = d.residual_mean >= d.threshold;
+        if d.run {
+            if self.reflection.is_none() {
+                let g = self.scattering.set.params.download()?;
+                let keep = vec![true; g.len()];
+                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, &g, &keep, &self.cfg.reflection, self.cfg.adam_eps)?);
+            }
+            d.reflection_gaussians = self.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0);
+        } else {
+            self.schedule.end_after(Stage::Scattering);
+            self.scat_cache.clear();
+        }
+        self.decision = Some(d.clone());
+        Ok(d)
+    }
+
     /// One training iteration.
     pub fn step(&mut self, profile: bool) -> Result<StepReport> {
         let it = self.iteration + 1;
-        let (stage, _) = self.schedule.at(it).context("training is already complete")?;
+        let (stage, stage_it) = self.schedule.at(it).context("training is already complete")?;
+        if stage == Stage::Reflection {
+            return self.step_reflection(it, stage_it, profile);
+        }
         // The reset that follows iteration it-1 runs here, at the start of
         // the next iteration (the same order of operations as 2DGS), so that
         // a test evaluation or checkpoint at it-1 sees the trained state.
@@ -173,7 +276,7 @@ impl Trainer {
             profile,
         };
         let out = match stage {
-            Stage::Scattering => self.scattering.step(&self.cfg, &input)?,
+            _ => self.scattering.step(&self.cfg, &input)?,
         };
         self.iteration = it;
         Ok(StepReport {
@@ -189,10 +292,57 @@ impl Trainer {
         })
     }
 
-    /// Render `cam` with the current Gaussians (all output planes).
+    fn step_reflection(&mut self, it: u32, stage_it: u32, profile: bool) -> Result<StepReport> {
+        let view = self.next_view();
+        let cam = self.cameras[view as usize];
+        let model = self.reflection.as_mut().context("Stage II has not begun (Trainer::begin_reflection)")?;
+        let scat = self.scat_cache.get(view as usize).context("the scattering colour cache is missing")?;
+        let input = ReflStepInput {
+            iteration: stage_it,
+            camera: &cam,
+            target: &self.targets[view as usize],
+            scat,
+            // The reflection geometry starts converged: positions move at
+            // Stage I's final rate (method-notes §3.7).
+            lr_means: self.cfg.lr_means_final * self.extent,
+            profile,
+        };
+        let out = model.step(&self.cfg, &input)?;
+        self.iteration = it;
+        Ok(StepReport {
+            iteration: it,
+            stage: Stage::Reflection,
+            view,
+            loss: out.loss,
+            values: out.values,
+            gaussians: model.set.len(),
+            densified: out.densified,
+            opacity_reset: false,
+            timings: out.timings,
+        })
+    }
+
+    /// Render `cam` with the current model: in Stage II the composite, with
+    /// the geometry planes of the reflection set where it covers a pixel
+    /// (alpha >= 0.5) and of the scattering set elsewhere, and both layers.
     pub fn render(&mut self, cam: &Camera) -> Result<Rendered> {
-        let sh = self.sh_degree(self.iteration);
-        self.scattering.render(cam, sh, &self.background)
+        let sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
+        let scat = self.scattering.render(cam, sh, &self.background)?;
+        let Some(model) = self.reflection.as_mut() else { return Ok(scat) };
+        let n = (cam.width * cam.height) as usize;
+        let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
+        let refl = model.render(cam, &colour)?;
+        let mut planes = scat.planes.clone();
+        planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
+        let ra = refl.refl_plane(Plane::Alpha);
+        for p in [Plane::Alpha, Plane::Depth, Plane::Normal(0), Plane::Normal(1), Plane::Normal(2), Plane::Median, Plane::Distortion] {
+            let k = p.index(3) as usize;
+            let src = refl.refl_plane(p);
+            for i in (0..n).filter(|&i| ra[i] >= 0.5) {
+                planes[k * n + i] = src[i];
+            }
+        }
+        Ok(Rendered { width: cam.width, height: cam.height, planes, layers: Some(Box::new((scat, refl))) })
     }
 
     /// Current Gaussians on the host.

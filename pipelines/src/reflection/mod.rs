@@ -104,6 +104,7 @@ pub struct ReflectionShading {
     reduce: Kernel,
     composite: Kernel,
     composite_backward: Kernel,
+    residual: Kernel,
 }
 
 impl ReflectionShading {
@@ -120,6 +121,7 @@ impl ReflectionShading {
             reduce: kernel(ctx, "refl.texel_reduce", shaders::REFLECTION_TEXEL_REDUCE, 8)?,
             composite: kernel(ctx, "refl.composite", shaders::REFLECTION_COMPOSITE, kp)?,
             composite_backward: kernel(ctx, "refl.composite_backward", shaders::REFLECTION_COMPOSITE_BACKWARD, kp)?,
+            residual: kernel(ctx, "refl.residual", shaders::REFLECTION_RESIDUAL, 4)?,
         })
     }
 
@@ -304,5 +306,17 @@ impl ReflectionShading {
             bytemuck::bytes_of(&p),
             grid(&self.ctx, cam.width * cam.height),
         )
+    }
+
+    /// Record the Stage I residual r = target - scat (3 planes each, `pixels`
+    /// per plane) into `residual`: r's 3 planes, then mean_c |r_c|.
+    pub fn record_residual(&self, rec: &mut Recorder, pixels: u32, target: &Buffer<f32>, scat: &Buffer<f32>, residual: &Buffer<f32>) -> Result<()> {
+        let n = pixels as usize;
+        for (b, planes) in [(target, 3), (scat, 3), (residual, 4)] {
+            if b.len() < planes * n {
+                bail!("'{}' holds {} values; {planes} planes of {pixels} pixels need {}", b.name(), b.len(), planes * n);
+            }
+        }
+        rec.dispatch(&self.residual, &[target.binding(), scat.binding(), residual.binding()], bytemuck::bytes_of(&pixels), grid(&self.ctx, pixels))
     }
 }

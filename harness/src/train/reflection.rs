@@ -1,0 +1,241 @@
+//! Stage II's model (paper §3.3, method-notes §3.4): the reflection set (2DGS
+//! geometry + raw f0 and r, a `TrainableSet` whose feature block is that
+//! material), the learnable cube map, and what trains them against the
+//! frozen Stage I render: per view, the reflection colour per Gaussian, the
+//! rasterization of [c, r (, f0)], the deferred composite with the cached
+//! scattering colour, L1 + D-SSIM on the composite with normal consistency
+//! on the reflection set, the backward through all of it, Adam, and
+//! prune-only density control. Never refers to the trainer.
+
+use super::config::{ReflectionConfig, TrainConfig};
+use super::scattering::StepOutput;
+use anyhow::{bail, Context as _, Result};
+use std::collections::HashMap;
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context, Recorder, Timing};
+use tgs_pipelines::reflection::{TexelScratch, MATERIAL};
+use tgs_pipelines::{
+    Adam, AdamGroup, Camera, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
+};
+
+/// What the trainer passes for one Stage II step.
+pub struct ReflStepInput<'a> {
+    /// Iteration within Stage II (1-based): the Adam step count.
+    pub iteration: u32,
+    pub camera: &'a Camera,
+    pub target: &'a Buffer<f32>,
+    /// The frozen scattering colour of this view (3 planes).
+    pub scat: &'a Buffer<f32>,
+    /// Position learning rate (already scaled by the extent).
+    pub lr_means: f32,
+    pub profile: bool,
+}
+
+/// A Stage II render of one view, downloaded.
+pub struct ReflRendered {
+    pub width: u32,
+    pub height: u32,
+    /// The composite colour (3 planes) followed by the reflection set's
+    /// alpha, depth, normal (3), median, distortion planes.
+    pub composite: Vec<f32>,
+    /// The reflection render: [A (3), R, F0 sum (3) with Schlick] then its
+    /// geometry planes (`Plane` order for `channels`).
+    pub refl: Vec<f32>,
+    pub channels: u32,
+}
+
+impl ReflRendered {
+    pub fn pixels(&self) -> usize {
+        (self.width * self.height) as usize
+    }
+    pub fn refl_plane(&self, p: Plane) -> &[f32] {
+        let n = self.pixels();
+        let i = p.index(self.channels) as usize;
+        &self.refl[i * n..(i + 1) * n]
+    }
+}
+
+struct ViewBuffers {
+    frame: Frame,
+    loss: LossScratch,
+    loss_in: Buffer<f32>,
+    loss_grad: Buffer<f32>,
+}
+
+pub struct ReflectionModel {
+    ctx: Arc<Context>,
+    raster: Rasterizer,
+    shading: ReflectionShading,
+    loss: ImageLoss,
+    adam: Adam,
+    densifier: Densifier,
+    pub fresnel: Fresnel,
+    pub set: TrainableSet,
+    pub env: EnvMap,
+    /// Rasterized features and their gradients (channels per Gaussian).
+    feat: Buffer<f32>,
+    dfeat: Buffer<f32>,
+    texels: TexelScratch,
+    sizes: HashMap<(u32, u32), ViewBuffers>,
+}
+
+fn logit(p: f32) -> f32 {
+    (p / (1.0 - p)).ln()
+}
+
+impl ReflectionModel {
+    /// A reflection set with the geometry of the given scattering Gaussians
+    /// (those with `keep[i]`), f0 and r at their initial values, and a
+    /// constant grey cube map (sigmoid 0.5).
+    pub fn from_scattering(ctx: &Arc<Context>, scat: &HostGaussians, keep: &[bool], rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
+        let mut h = HostGaussians::new(MATERIAL, 1);
+        let (f0, r) = (logit(rc.f0_init), logit(rc.r_init));
+        for i in (0..scat.len()).filter(|&i| keep[i]) {
+            let g = |v: &[f32], w: usize| -> Vec<f32> { v[w * i..w * (i + 1)].to_vec() };
+            h.push(g(&scat.means, 3).try_into().unwrap(), g(&scat.log_scales, 2).try_into().unwrap(), g(&scat.quats, 4).try_into().unwrap(), scat.opacity[i], &[f0, f0, f0, r]);
+        }
+        let env = HostEnvMap::constant(rc.env_res, 0.0)?;
+        Self::new(ctx, &h, &env, rc.fresnel()?, adam_eps)
+    }
+
+    pub fn new(ctx: &Arc<Context>, set: &HostGaussians, env: &HostEnvMap, fresnel: Fresnel, adam_eps: f32) -> Result<ReflectionModel> {
+        if set.channels != MATERIAL || set.coeffs != 1 {
+            bail!("a reflection set has {MATERIAL} material values per Gaussian, not {} x {}", set.channels, set.coeffs);
+        }
+        let shading = ReflectionShading::new(ctx)?;
+        let env = EnvMap::upload(ctx, env)?;
+        let n = set.len().max(1);
+        let ch = fresnel.channels() as usize;
+        Ok(ReflectionModel {
+            raster: Rasterizer::new(ctx, fresnel.channels(), Features::Plain)?,
+            loss: ImageLoss::new(ctx)?,
+            adam: Adam::new(ctx, adam_eps)?,
+            densifier: Densifier::new(ctx)?,
+            texels: shading.texel_scratch(&env, n as u32)?,
+            shading,
+            fresnel,
+            set: TrainableSet::new(ctx, set)?,
+            env,
+            // The colour kernel writes every Gaussian's features before the
+            // rasterizer reads them; the rasterizer's reduce writes the gradients.
+            feat: Buffer::uninit(ctx, "refl.features", ch * n)?,
+            dfeat: Buffer::uninit(ctx, "refl.d_features", ch * n)?,
+            sizes: HashMap::new(),
+            ctx: ctx.clone(),
+        })
+    }
+
+    fn view_buffers(&mut self, w: u32, h: u32) -> Result<()> {
+        let n = self.set.len();
+        let old = self.sizes.get(&(w, h)).map(|b| (b.frame.max_gaussians, b.frame.capacity));
+        if old.is_none_or(|(max_g, _)| max_g < n) {
+            let max_g = n + 1024;
+            let cap = old.map(|o| o.1).unwrap_or(0).max((2 * max_g).min(self.raster.max_capacity()));
+            let frame = self.raster.frame(w, h, max_g, cap)?;
+            let planes = (Plane::count(3) * w * h) as usize;
+            let vb = ViewBuffers {
+                frame,
+                loss: self.loss.scratch(w, h, 3)?,
+                loss_in: Buffer::new(&self.ctx, "refl.loss_in", planes)?,
+                loss_grad: Buffer::new(&self.ctx, "refl.loss_grad", planes)?,
+            };
+            self.sizes.insert((w, h), vb);
+        }
+        Ok(())
+    }
+
+    /// Colour + rasterization of `cam`, re-run until the frame fits.
+    fn forward(&mut self, cam: &Camera, profile: bool) -> Result<Vec<Timing>> {
+        self.view_buffers(cam.width, cam.height)?;
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
+        let bg = vec![0.0; self.fresnel.channels() as usize];
+        loop {
+            let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            let sc = rec.begin_scope("refl.color");
+            self.shading.record_color(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.feat)?;
+            rec.end_scope(sc);
+            self.raster.record_forward_with(&mut rec, &self.set.params, &self.feat, cam, &bg, 0, &b.frame)?;
+            let t = rec.submit_and_wait()?;
+            if self.raster.fit(&mut b.frame)? {
+                return Ok(t);
+            }
+        }
+    }
+
+    /// One Stage II step on one view; prunes when the schedule says so.
+    pub fn step(&mut self, cfg: &TrainConfig, x: &ReflStepInput) -> Result<StepOutput> {
+        let rc = &cfg.reflection;
+        let cam = x.camera;
+        let mut timings = self.forward(cam, x.profile)?;
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
+        let weights = LossWeights { ssim: cfg.lambda_ssim, normal: rc.lambda_normal, dist: 0.0 };
+        let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+        let sc = rec.begin_scope("refl.composite");
+        self.shading.record_composite(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_in)?;
+        rec.end_scope(sc);
+        self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
+        let sc = rec.begin_scope("refl.composite_backward");
+        self.shading.record_composite_backward(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, None)?;
+        rec.end_scope(sc);
+        self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
+        let sc = rec.begin_scope("refl.color_backward");
+        self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("adam");
+        let s = &self.set;
+        let n = s.len() as usize;
+        let it = x.iteration as u64;
+        let groups = [
+            (&s.params.means, &s.grads.means, &s.m.means, &s.v.means, 3 * n, AdamGroup::single(x.lr_means)),
+            (&s.params.log_scales, &s.grads.log_scales, &s.m.log_scales, &s.v.log_scales, 2 * n, AdamGroup::single(cfg.lr_scales)),
+            (&s.params.quats, &s.grads.quats, &s.m.quats, &s.v.quats, 4 * n, AdamGroup::single(cfg.lr_quats)),
+            (&s.params.opacity, &s.grads.opacity, &s.m.opacity, &s.v.opacity, n, AdamGroup::single(cfg.lr_opacity)),
+            // Material: f0 (3) at lr_f0, r at lr_r.
+            (&s.params.features, &s.grads.features, &s.m.features, &s.v.features, MATERIAL as usize * n, AdamGroup { lr: rc.lr_f0, lr_rest: rc.lr_r, stride: MATERIAL, split: 3 }),
+            (&self.env.params, &self.env.grads, &self.env.m, &self.env.v, self.env.len(), AdamGroup::single(rc.lr_env)),
+        ];
+        for (p, g, m, v, len, group) in groups {
+            self.adam.record(&mut rec, p, g, m, v, len, &group, it)?;
+        }
+        rec.end_scope(sc);
+        timings.extend(rec.submit_and_wait()?);
+        let values = b.loss.values()?;
+        let loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
+
+        let mut densified = None;
+        if rc.prune_interval > 0 && x.iteration % rc.prune_interval == 0 && x.iteration > 0 {
+            let p = DensifyParams {
+                grad_threshold: f32::INFINITY,
+                dense_scale: 0.0,
+                opacity_min: cfg.prune_opacity,
+                prune_big: false,
+                big_screen: f32::INFINITY,
+                big_world: f32::INFINITY,
+                grow: false,
+                seed: 0,
+            };
+            let r = self.densifier.densify(&mut self.set, &p)?;
+            densified = Some((r.before, r.after));
+        }
+        Ok(StepOutput { loss, values, densified, timings })
+    }
+
+    /// Render `cam` composited over the scattering colour `scat` (3 planes).
+    pub fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
+        self.forward(cam, false)?;
+        let b = &self.sizes[&(cam.width, cam.height)];
+        let mut rec = Recorder::new(&self.ctx)?;
+        self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
+        rec.submit_and_wait()?;
+        Ok(ReflRendered { width: cam.width, height: cam.height, composite: b.loss_in.download()?, refl: b.frame.out.download()?, channels: self.fresnel.channels() })
+    }
+}
+
+/// The Stage I residual of one view: 4 planes (r (3), mean_c |r_c|).
+pub fn residual(ctx: &Arc<Context>, shading: &ReflectionShading, target: &Buffer<f32>, scat: &Buffer<f32>, pixels: u32) -> Result<Vec<f32>> {
+    let out = Buffer::<f32>::new(ctx, "refl.residual", 4 * pixels as usize)?;
+    let mut rec = Recorder::new(ctx)?;
+    shading.record_residual(&mut rec, pixels, target, scat, &out)?;
+    rec.submit_and_wait()?;
+    out.download()
+}
