@@ -30,6 +30,19 @@ pub struct Header {
     pub coeffs: u32,
     pub extent: f32,
     pub arrays: Vec<(String, usize)>,
+    /// Stage II's state, when the run is in Stage II: its arrays follow the
+    /// scattering set's (reflection set in `TrainableSet::layout` order with
+    /// the prefix `refl.`, then the cube map's).
+    #[serde(default)]
+    pub reflection: Option<ReflHeader>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ReflHeader {
+    pub n: u32,
+    pub env_res: u32,
+    pub decision: super::trainer::ReflDecision,
+    pub arrays: Vec<(String, usize)>,
 }
 
 pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
@@ -47,7 +60,24 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
         coeffs: set.params.coeffs,
         extent: tr.extent,
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
+        reflection: None,
     };
+    let mut header = header;
+    // (buffer, values) of the Stage II arrays.
+    let mut refl_arrays = Vec::new();
+    if let (Some(m), Some(d)) = (&tr.reflection, &tr.decision) {
+        let rn = m.set.len() as usize;
+        let mut names = Vec::new();
+        for (name, buf, w) in m.set.arrays() {
+            names.push((format!("refl.{name}"), w * rn));
+            refl_arrays.push((buf, w * rn));
+        }
+        for (name, buf) in m.env.arrays() {
+            names.push((name.to_string(), m.env.len()));
+            refl_arrays.push((buf, m.env.len()));
+        }
+        header.reflection = Some(ReflHeader { n: m.set.len(), env_res: m.env.res, decision: d.clone(), arrays: names });
+    }
     let json = serde_json::to_vec(&header)?;
     crate::export::atomic_write_with(path, |f| {
         f.write_all(MAGIC)?;
@@ -55,6 +85,10 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
         f.write_all(&json)?;
         for (_, buf, w) in &arrays {
             let data = buf.download_range(0, w * n)?;
+            f.write_all(bytemuck::cast_slice(&data))?;
+        }
+        for (buf, len) in &refl_arrays {
+            let data = buf.download_range(0, *len)?;
             f.write_all(bytemuck::cast_slice(&data))?;
         }
         Ok(())
@@ -74,7 +108,8 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
     let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut at = 12 + hlen;
     let mut arrays = Vec::new();
-    for (name, len) in &header.arrays {
+    let refl = header.reflection.iter().flat_map(|r| r.arrays.iter());
+    for (name, len) in header.arrays.iter().chain(refl) {
         let b = len.checked_mul(4).and_then(|n| at.checked_add(n)).and_then(|end| bytes.get(at..end)).ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
         arrays.push(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect());
         at += 4 * len;
@@ -121,6 +156,8 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
         return Err(bad(format!("view {v} in the view order, the dataset has {} training views", data.train.len())));
     }
     let layout = TrainableSet::layout((h.channels * h.coeffs) as usize);
+    let mut arrays = arrays;
+    let refl_arrays = arrays.split_off(layout.len().min(arrays.len()));
     if layout.len() != arrays.len() {
         bail!("{}: {} arrays, this version of tgs expects {}", path.display(), arrays.len(), layout.len());
     }
@@ -144,8 +181,42 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
             buf.upload(data)?;
         }
     }
+    if let Some(r) = &h.reflection {
+        restore_reflection(&mut tr, r, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?;
+    } else if !refl_arrays.is_empty() {
+        return Err(bad(format!("{} arrays after the scattering set without a Stage II header", refl_arrays.len())));
+    }
     tr.iteration = h.iteration;
     tr.stack = h.stack;
     tr.extent = h.extent;
     Ok(tr)
+}
+
+fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
+    use tgs_pipelines::reflection::MATERIAL;
+    let layout: Vec<(String, usize)> = TrainableSet::layout(MATERIAL as usize).into_iter().map(|(n, w)| (format!("refl.{n}"), w)).collect();
+    let env_len = 18 * r.env_res as usize * r.env_res as usize;
+    let want: Vec<(String, usize)> = layout.iter().map(|(n, w)| (n.clone(), w * r.n as usize)).chain(["env.param", "env.adam_m", "env.adam_v"].map(|n| (n.to_string(), env_len))).collect();
+    if want != r.arrays || arrays.len() != want.len() {
+        bail!("arrays {:?} do not match the expected {:?}", r.arrays.iter().map(|a| &a.0).collect::<Vec<_>>(), want.iter().map(|a| &a.0).collect::<Vec<_>>());
+    }
+    for ((name, len), data) in want.iter().zip(&arrays) {
+        if data.len() != *len || data.iter().any(|v| !v.is_finite()) {
+            bail!("array '{name}' has {} values (expected {len}) or non-finite ones", data.len());
+        }
+    }
+    let g = HostGaussians { channels: MATERIAL, coeffs: 1, means: arrays[0].clone(), log_scales: arrays[1].clone(), quats: arrays[2].clone(), opacity: arrays[3].clone(), features: arrays[4].clone() };
+    let k = layout.len();
+    let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone() };
+    let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel()?, tr.cfg.adam_eps)?;
+    for ((_, buf, _), data) in m.set.arrays().iter().zip(&arrays) {
+        if !data.is_empty() {
+            buf.upload(data)?;
+        }
+    }
+    m.env.m.upload(&arrays[k + 1])?;
+    m.env.v.upload(&arrays[k + 2])?;
+    tr.reflection = Some(m);
+    tr.decision = Some(r.decision.clone());
+    Ok(())
 }

@@ -185,9 +185,14 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         let data = load_dataset(&dir, &h.config)?;
         let dataset = h.dataset.clone();
+        let h_stage1 = h.config.iterations;
         let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
-        if cfg.iterations < tr.iteration {
-            bail!("--iterations {}: the checkpoint is already at iteration {}", cfg.iterations, tr.iteration);
+        let total = super::trainer::Schedule::from_config(&cfg).total();
+        if total < tr.iteration || cfg.iterations < tr.iteration.min(h_stage1) {
+            bail!("{} iterations in all (Stage I {}): the checkpoint is already at iteration {}", total, cfg.iterations, tr.iteration);
+        }
+        if tr.iteration > h_stage1 && cfg.iterations != h_stage1 {
+            bail!("iterations {}: the run finished Stage I at {h_stage1} and is in Stage II; Stage I's length cannot change now", cfg.iterations);
         }
         tr.cfg = cfg;
         tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);

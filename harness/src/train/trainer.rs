@@ -168,6 +168,11 @@ impl Trainer {
         })
     }
 
+    /// The device context the models run on.
+    pub fn context(&self) -> Arc<Context> {
+        self.ctx.clone()
+    }
+
     pub fn done(&self) -> bool {
         self.iteration >= self.schedule.total()
     }
