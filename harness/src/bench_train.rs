@@ -82,6 +82,7 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
         densify_until: 0,
         test_interval: 0,
         checkpoint_interval: 0,
+        stages: "I".into(),
         ..TrainConfig::quick()
     };
     let mut tr = Trainer::new(ctx, cfg, &data)?;

@@ -30,6 +30,7 @@ fn scene() -> PathBuf {
 /// after 200 (only 100 follow). Test evaluations at 100 and 200.
 fn args(out: &Path) -> TrainArgs {
     let set = [
+        "stages=\"I\"",
         "iterations=300",
         "background=\"black\"",
         "sh_interval=40",

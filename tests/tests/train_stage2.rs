@@ -1,0 +1,77 @@
+//! End to end: Stage I then Stage II on the built-in tiny glass scene
+//! through the `tgs train` driver: the residual is measured and saved,
+//! Stage II runs, keeps the test PSNR, logs its stage, writes its outputs
+//! (layers, cube map, reflection PLY), and metrics.json records both
+//! stages and the decision; with a residual threshold above the measured
+//! residual, Stage II is skipped with the decision recorded.
+
+use std::path::{Path, PathBuf};
+use tgs::train::run::{train, TrainArgs};
+use tgs_tests::{check_validation, ctx_shared};
+
+fn scene() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("tgs-stage2-{}-scene", std::process::id()));
+    if !d.join("transforms_train.json").is_file() {
+        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &d, |_, _| {}).unwrap();
+    }
+    d
+}
+
+fn args(out: &Path, extra: &[&str]) -> TrainArgs {
+    let mut set: Vec<String> = ["stages=\"I,II\"", "iterations=300", "reflection.iterations=150", "test_interval=0", "checkpoint_interval=0"].iter().map(|s| s.to_string()).collect();
+    set.extend(extra.iter().map(|s| s.to_string()));
+    let _ = std::fs::remove_dir_all(out);
+    TrainArgs { dataset: Some(scene()), out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
+#[test]
+fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
+    let ctx = ctx_shared();
+    let out = std::env::temp_dir().join(format!("tgs-stage2-{}-run", std::process::id()));
+    let o = train(ctx, &args(&out, &[])).unwrap();
+    assert_eq!(o.iteration, 450);
+    let m = json(&out.join("metrics.json"));
+    let d = &m["reflection"];
+    assert_eq!(d["run"], true, "Stage II should run on the glass scene: {d}");
+    let residual = d["residual_mean"].as_f64().unwrap();
+    assert!(residual > 0.02 && residual.is_finite(), "glass residual {residual}");
+    let stages = m["stages"].as_array().unwrap();
+    assert_eq!(stages.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II"]);
+    let psnr = |i: usize| stages[i]["test"]["psnr"].as_f64().unwrap();
+    // Stage II starts from I = I_scat (r = 0.01) and may only add what the
+    // residual supports: the test PSNR must not drop.
+    assert!(psnr(1) > psnr(0) - 0.3, "Stage II test PSNR {} vs Stage I {}", psnr(1), psnr(0));
+    assert!(stages[1]["test"]["normal_mae_deg"].as_f64().unwrap().is_finite());
+    assert!(stages[1]["test"]["normal_mae_scattering_deg"].as_f64().unwrap().is_finite());
+    assert_eq!(m["test"]["psnr"], stages[1]["test"]["psnr"]);
+    // Outputs.
+    for f in ["envmap.exr", "envmap.png", "reflection.ply", "point_cloud.ply", "residual/r_0.exr", "residual/r_0.png", "renders/stage1/r_0.png"] {
+        assert!(out.join(f).is_file(), "missing {f}");
+    }
+    for suffix in ["", "_scat", "_refl", "_R", "_normal_refl", "_normal_scat"] {
+        assert!(out.join(format!("renders/test/r_0{suffix}.png")).is_file(), "missing test render r_0{suffix}.png");
+    }
+    let ply = std::fs::read(out.join("reflection.ply")).unwrap();
+    let header = String::from_utf8_lossy(&ply[..ply.len().min(2000)]).to_string();
+    assert!(header.contains("property float reflectivity") && header.contains("property float f0_2"), "reflection.ply header:\n{header}");
+    // The log names the stage of every iteration: 300 of I, 150 of II.
+    let log: Vec<serde_json::Value> = std::fs::read_to_string(out.join("log.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let count = |s: &str| log.iter().filter(|l| l["stage"] == s && l["loss"].is_number()).count();
+    assert_eq!((count("I"), count("II")), (300, 150));
+    assert!(log.iter().all(|l| l["loss"].as_f64().is_none_or(f64::is_finite)));
+
+    // The same run with the threshold above the measured residual skips Stage II.
+    let skip = format!("reflection.min_residual={}", residual * 1.5);
+    let o = train(ctx, &args(&out, &[&skip])).unwrap();
+    assert_eq!(o.iteration, 300);
+    let m = json(&out.join("metrics.json"));
+    assert_eq!(m["reflection"]["run"], false);
+    assert_eq!(m["stages"].as_array().unwrap().len(), 1);
+    assert!(!out.join("reflection.ply").exists() && !out.join("envmap.exr").exists());
+    let _ = std::fs::remove_dir_all(&out);
+    check_validation(ctx);
+}
