@@ -85,8 +85,9 @@ pub struct ReflectionConfig {
     pub lambda_normal: f32,
     /// Prune reflection Gaussians below `prune_opacity` every this many iterations (0: never).
     pub prune_interval: u32,
-    /// Stage II runs only when the Stage I residual's mean magnitude over
-    /// the training views' covered pixels reaches this (see `ResidualStats`).
+    /// Stage II runs only when the Stage I residual's mean magnitude
+    /// (mean over training views and pixels of mean_c |I_gt - I_scat|)
+    /// reaches this.
     pub min_residual: f32,
 }
 
@@ -103,7 +104,10 @@ impl Default for ReflectionConfig {
             r_init: 0.01,
             lambda_normal: 0.05,
             prune_interval: 100,
-            min_residual: 0.01,
+            // Measured (lavapipe, quick preset): converged glass 0.0118,
+            // diffuse spheres-128 0.0041; the geometric mean leaves a 1.7x
+            // margin on both sides.
+            min_residual: 0.007,
         }
     }
 }

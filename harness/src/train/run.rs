@@ -189,7 +189,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
         let total = super::trainer::Schedule::from_config(&cfg).total();
         if total < tr.iteration || cfg.iterations < tr.iteration.min(h_stage1) {
-            bail!("{} iterations in all (Stage I {}): the checkpoint is already at iteration {}", total, cfg.iterations, tr.iteration);
+            bail!("--iterations {} ({total} in all stages): the checkpoint is already at iteration {}", cfg.iterations, tr.iteration);
         }
         if tr.iteration > h_stage1 && cfg.iterations != h_stage1 {
             bail!("iterations {}: the run finished Stage I at {h_stage1} and is in Stage II; Stage I's length cannot change now", cfg.iterations);
