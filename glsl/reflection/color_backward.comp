@@ -7,10 +7,6 @@
 // for a sort by texel and a fixed-order per-texel sum (no atomics).
 #include "reflection/color_common.glsl"
 
-layout(std430, binding = 0) readonly buffer Means { float means[]; };
-layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };
-layout(std430, binding = 2) readonly buffer Material { float material[]; };
-layout(std430, binding = 3) readonly buffer Env { float env[]; };
 layout(std430, binding = 4) readonly buffer DFeat { float dfeat[]; };
 layout(std430, binding = 5) buffer GMeans { float g_means[]; };
 layout(std430, binding = 6) buffer GQuats { vec4 g_quats[]; };
@@ -18,7 +14,6 @@ layout(std430, binding = 7) writeonly buffer GMaterial { float g_material[]; };
 layout(std430, binding = 8) writeonly buffer TapKeys { uint tap_keys[]; };
 layout(std430, binding = 9) writeonly buffer TapSlots { uint tap_slots[]; };
 layout(std430, binding = 10) writeonly buffer TapGrads { float tap_grads[]; };
-#include "reflection/envmap.glsl"
 
 bool finite3(vec3 v) {
     return !any(isnan(v)) && !any(isinf(v));
@@ -29,13 +24,12 @@ void main() {
     if (i >= pc.n) {
         return;
     }
-    vec3 p = vec3(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);
-    ReflGeom g = refl_geom(p, quats[i]);
+    ReflGeom g = refl_geom(gaussian_mean(i), quats[i]);
     EnvTaps t = env_taps(g.w, pc.res);
     vec3 u = env_raw(t);
     vec3 e = sigmoid3(u);
-    vec3 f0 = vec3(sigmoid(material[4u * i]), sigmoid(material[4u * i + 1u]), sigmoid(material[4u * i + 2u]));
-    float r = sigmoid(material[4u * i + 3u]);
+    vec3 f0 = gaussian_f0(i);
+    float r = gaussian_r(i);
 
     uint b = pc.channels * i;
     vec3 dc = vec3(dfeat[b], dfeat[b + 1u], dfeat[b + 2u]);

@@ -52,4 +52,21 @@ float sigmoid(float x) {
     return 1.0 / (1.0 + exp(-x));
 }
 
+layout(std430, binding = 0) readonly buffer Means { float means[]; };
+layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };
+layout(std430, binding = 2) readonly buffer Material { float material[]; };
+layout(std430, binding = 3) readonly buffer Env { float env[]; };
+#include "reflection/envmap.glsl"
+
+vec3 gaussian_mean(uint i) {
+    return vec3(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);
+}
+// Activated f0 (3) and r of Gaussian i.
+vec3 gaussian_f0(uint i) {
+    return vec3(sigmoid(material[4u * i]), sigmoid(material[4u * i + 1u]), sigmoid(material[4u * i + 2u]));
+}
+float gaussian_r(uint i) {
+    return sigmoid(material[4u * i + 3u]);
+}
+
 #endif

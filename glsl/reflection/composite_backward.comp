@@ -5,8 +5,6 @@
 // scattering render's colour.
 #include "reflection/composite_common.glsl"
 
-layout(std430, binding = 0) readonly buffer Scat { float scat[]; };
-layout(std430, binding = 1) readonly buffer Refl { float refl[]; };
 layout(std430, binding = 2) readonly buffer LossGrad { float g_in[]; };
 layout(std430, binding = 3) writeonly buffer ReflGrad { float g_refl[]; };
 layout(std430, binding = 4) buffer ScatGrad { float g_scat[]; };
@@ -18,40 +16,31 @@ void main() {
         return;
     }
     uint ch = pc.channels;
-    float R = refl[3u * n + pix];
-    vec3 A = vec3(refl[pix], refl[n + pix], refl[2u * n + pix]);
-    vec3 S = vec3(scat[pix], scat[n + pix], scat[2u * n + pix]);
+    float R = refl_r(pix);
+    vec3 A = refl_colour(pix);
+    vec3 S = scat_colour(pix);
     vec3 dI = vec3(g_in[pix], g_in[n + pix], g_in[2u * n + pix]);
     float d_alpha = g_in[3u * n + pix];
     vec3 dN = vec3(g_in[5u * n + pix], g_in[6u * n + pix], g_in[7u * n + pix]);
     vec3 dA, dF0s = vec3(0.0);
     float dR;
     if (pc.schlick != 0u) {
-        float alpha = refl[ch * n + pix];
-        float ae = max(alpha, F0_EPS);
-        vec3 F0s = vec3(refl[4u * n + pix], refl[5u * n + pix], refl[6u * n + pix]);
-        vec3 F0 = F0s / ae;
-        vec3 N = vec3(refl[(ch + 2u) * n + pix], refl[(ch + 3u) * n + pix], refl[(ch + 4u) * n + pix]);
-        float len = length(N);
-        vec3 v = pixel_view_dir(pix);
-        float craw = len > NORMAL_EPS ? dot(N / len, v) : 1.0;
-        float c = clamp(craw, 0.0, 1.0);
-        float m = pow(1.0 - c, 5.0);
-        vec3 F = F0 + (1.0 - F0) * m;
+        Schlick s = schlick_terms(pix);
+        vec3 F = s.F;
         dA = R * F * dI;
         dR = dot(dI, F * A - S);
         vec3 dF = R * A * dI;
-        vec3 dF0 = dF * (1.0 - m);
-        dF0s = dF0 / ae;
-        if (alpha > F0_EPS) {
-            d_alpha -= dot(dF0, F0s) / (alpha * alpha);
+        vec3 dF0 = dF * (1.0 - s.m);
+        dF0s = dF0 / s.ae;
+        if (s.alpha > F0_EPS) {
+            d_alpha -= dot(dF0, s.F0s) / (s.alpha * s.alpha);
         }
-        float dm = dot(dF, 1.0 - F0);
-        if (len > NORMAL_EPS && craw > 0.0 && craw < 1.0) {
-            float dc = -5.0 * pow(1.0 - c, 4.0) * dm;
-            vec3 nh = N / len;
-            vec3 dnh = v * dc;
-            dN += (dnh - nh * dot(nh, dnh)) / len;
+        float dm = dot(dF, 1.0 - s.F0);
+        if (s.len > NORMAL_EPS && s.craw > 0.0 && s.craw < 1.0) {
+            float dc = -5.0 * pow(1.0 - s.craw, 4.0) * dm;
+            vec3 nh = s.N / s.len;
+            vec3 dnh = s.v * dc;
+            dN += (dnh - nh * dot(nh, dnh)) / s.len;
         }
     } else {
         dA = R * dI;

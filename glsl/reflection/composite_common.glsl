@@ -43,4 +43,50 @@ vec3 pixel_view_dir(uint pix) {
     return -normalize(vec3((x - pc.cx) / pc.fx, (y - pc.cy) / pc.fy, 1.0));
 }
 
+layout(std430, binding = 0) readonly buffer Scat { float scat[]; };
+layout(std430, binding = 1) readonly buffer Refl { float refl[]; };
+
+vec3 scat_colour(uint pix) {
+    uint n = npix();
+    return vec3(scat[pix], scat[n + pix], scat[2u * n + pix]);
+}
+// The blended reflection colour A and reflectivity R.
+vec3 refl_colour(uint pix) {
+    uint n = npix();
+    return vec3(refl[pix], refl[n + pix], refl[2u * n + pix]);
+}
+float refl_r(uint pix) {
+    return refl[3u * npix() + pix];
+}
+
+// Schlick's terms at a pixel (CH = 7).
+struct Schlick {
+    float alpha;  // alpha_R
+    float ae;     // max(alpha_R, F0_EPS)
+    vec3 F0s;     // sum w f0
+    vec3 F0;      // F0s / ae
+    vec3 N;       // blended normal (unnormalized)
+    float len;    // |N|
+    vec3 v;       // unit direction to the camera
+    float craw;   // n.v before the clamp (1 without a normal)
+    float m;      // (1 - clamp(craw, 0, 1))^5
+    vec3 F;       // F0 + (1 - F0) m
+};
+
+Schlick schlick_terms(uint pix) {
+    uint n = npix(), ch = pc.channels;
+    Schlick s;
+    s.alpha = refl[ch * n + pix];
+    s.ae = max(s.alpha, F0_EPS);
+    s.F0s = vec3(refl[4u * n + pix], refl[5u * n + pix], refl[6u * n + pix]);
+    s.F0 = s.F0s / s.ae;
+    s.N = vec3(refl[(ch + 2u) * n + pix], refl[(ch + 3u) * n + pix], refl[(ch + 4u) * n + pix]);
+    s.len = length(s.N);
+    s.v = pixel_view_dir(pix);
+    s.craw = s.len > NORMAL_EPS ? dot(s.N / s.len, s.v) : 1.0;
+    s.m = pow(1.0 - clamp(s.craw, 0.0, 1.0), 5.0);
+    s.F = s.F0 + (1.0 - s.F0) * s.m;
+    return s;
+}
+
 #endif

@@ -176,8 +176,7 @@ pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]],
     let (w, h) = (r.width, r.height);
     let n = (w * h) as usize;
     write_png(&dir.join(format!("{name}.png")), &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]))?;
-    let nimg = ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() };
-    write_png(&dir.join(format!("{name}_normal.png")), &nimg)?;
+    write_png(&dir.join(format!("{name}_normal.png")), &normal_image(w, h, normals))?;
     let (a, d) = (r.plane(Plane::Alpha), r.plane(Plane::Depth));
     let depth: Vec<f32> = (0..n).map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 }).collect();
     write_exr(&dir.join(format!("{name}_depth.exr")), &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
@@ -206,11 +205,13 @@ fn write_layers(dir: &Path, name: &str, scat: &Rendered, refl: &crate::train::tr
         let f0: Vec<f32> = (0..3 * n).map(|k| refl.refl[4 * n + k] / alpha[k % n].max(1e-6)).collect();
         png("F0", 3, &f0)?;
     }
-    let normal_png = |suffix: &str, normals: &[[f32; 3]]| {
-        let img = ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() };
-        write_png(&dir.join(format!("{name}_{suffix}.png")), &img)
-    };
+    let normal_png = |suffix: &str, normals: &[[f32; 3]]| write_png(&dir.join(format!("{name}_{suffix}.png")), &normal_image(w, h, normals));
     normal_png("normal_scat", &world_normals(scat, cam))?;
     let rn = [0, 1, 2].map(|k| refl.refl_plane(Plane::Normal(k)));
     normal_png("normal_refl", &world_normals_of(rn, cam))
+}
+
+/// World normals as an image (n * 0.5 + 0.5; black where empty).
+fn normal_image(w: u32, h: u32, normals: &[[f32; 3]]) -> ImageF {
+    ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() }
 }

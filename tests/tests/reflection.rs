@@ -53,6 +53,12 @@ fn random_gaussian(rng: &mut Rng, w: V3) -> ReflGaussian {
     g
 }
 
+/// The Gaussian as the GPU sees it (every value rounded to f32).
+fn round32(g: &ReflGaussian) -> ReflGaussian {
+    let r = |v: f64| v as f32 as f64;
+    ReflGaussian { p: g.p.map(r), q: g.q.map(r), material: g.material.map(r) }
+}
+
 fn random_dir(rng: &mut Rng) -> V3 {
     loop {
         let d = [uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0)];
@@ -139,7 +145,7 @@ fn color_matches_reference_on_axes_seams_corners_and_random_directions() {
             for (i, g) in gs.iter().enumerate() {
                 // The reference from the direction the f32 kernel sees (the
                 // quaternion rounded to f32) to keep ties on seams the same.
-                let g32 = ReflGaussian { p: g.p.map(|v| v as f32 as f64), q: g.q.map(|v| v as f32 as f64), material: g.material.map(|v| v as f32 as f64) };
+                let g32 = round32(g);
                 let centre = CENTRE.map(|v| v as f32 as f64);
                 let want = rr::color(&g32, &env, res, centre, fresnel == Fresnel::Schlick);
                 let got_i = &got[ch * i..ch * (i + 1)];
@@ -242,7 +248,7 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
     let ch = fresnel.channels() as usize;
     let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(rng, -1.0, 1.0)).collect();
     // The reference sees the f32-rounded inputs the GPU sees.
-    let gs: Vec<ReflGaussian> = gs.iter().map(|g| ReflGaussian { p: g.p.map(|v| v as f32 as f64), q: g.q.map(|v| v as f32 as f64), material: g.material.map(|v| v as f32 as f64) }).collect();
+    let gs: Vec<ReflGaussian> = gs.iter().map(round32).collect();
     let env: Vec<f64> = env.iter().map(|&v| v as f32 as f64).collect();
     let dfeat: Vec<f64> = dfeat.iter().map(|&v| v as f32 as f64).collect();
     let got = gpu_backward(&gs, &env, res, fresnel, &dfeat);
@@ -328,7 +334,7 @@ fn texel_gradients_sum_many_gaussians_per_texel_deterministically() {
     assert_eq!(a.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "texel gradients differ between identical runs");
     assert_eq!(a.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
     // Against central differences of the f64 reference.
-    let gs32: Vec<ReflGaussian> = gs.iter().map(|g| ReflGaussian { p: g.p.map(|v| v as f32 as f64), q: g.q.map(|v| v as f32 as f64), material: g.material.map(|v| v as f32 as f64) }).collect();
+    let gs32: Vec<ReflGaussian> = gs.iter().map(round32).collect();
     let env32: Vec<f64> = env.iter().map(|&v| v as f32 as f64).collect();
     for t in 0..env.len() {
         let h = 1e-6;

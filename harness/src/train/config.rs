@@ -268,7 +268,8 @@ impl TrainConfig {
         let mut out = Vec::new();
         for s in self.stages.split(',').map(str::trim) {
             match s {
-                "I" | "II" => out.push(if s == "I" { "I" } else { "II" }),
+                "I" => out.push("I"),
+                "II" => out.push("II"),
                 _ => bail!("stages: unknown stage '{s}' (I, II; e.g. \"I,II\")"),
             }
         }

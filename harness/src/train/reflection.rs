@@ -182,21 +182,18 @@ impl ReflectionModel {
         self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
         rec.end_scope(sc);
         let sc = rec.begin_scope("adam");
-        let s = &self.set;
-        let n = s.len() as usize;
-        let it = x.iteration as u64;
         let groups = [
-            (&s.params.means, &s.grads.means, &s.m.means, &s.v.means, 3 * n, AdamGroup::single(x.lr_means)),
-            (&s.params.log_scales, &s.grads.log_scales, &s.m.log_scales, &s.v.log_scales, 2 * n, AdamGroup::single(cfg.lr_scales)),
-            (&s.params.quats, &s.grads.quats, &s.m.quats, &s.v.quats, 4 * n, AdamGroup::single(cfg.lr_quats)),
-            (&s.params.opacity, &s.grads.opacity, &s.m.opacity, &s.v.opacity, n, AdamGroup::single(cfg.lr_opacity)),
+            AdamGroup::single(x.lr_means),
+            AdamGroup::single(cfg.lr_scales),
+            AdamGroup::single(cfg.lr_quats),
+            AdamGroup::single(cfg.lr_opacity),
             // Material: f0 (3) at lr_f0, r at lr_r.
-            (&s.params.features, &s.grads.features, &s.m.features, &s.v.features, MATERIAL as usize * n, AdamGroup { lr: rc.lr_f0, lr_rest: rc.lr_r, stride: MATERIAL, split: 3 }),
-            (&self.env.params, &self.env.grads, &self.env.m, &self.env.v, self.env.len(), AdamGroup::single(rc.lr_env)),
+            AdamGroup { lr: rc.lr_f0, lr_rest: rc.lr_r, stride: MATERIAL, split: 3 },
         ];
-        for (p, g, m, v, len, group) in groups {
-            self.adam.record(&mut rec, p, g, m, v, len, &group, it)?;
-        }
+        let it = x.iteration as u64;
+        self.adam.record_set(&mut rec, &self.set, &groups, it)?;
+        let e = &self.env;
+        self.adam.record(&mut rec, &e.params, &e.grads, &e.m, &e.v, e.len(), &AdamGroup::single(rc.lr_env), it)?;
         rec.end_scope(sc);
         timings.extend(rec.submit_and_wait()?);
         let values = b.loss.values()?;

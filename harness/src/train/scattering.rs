@@ -113,19 +113,15 @@ impl ScatteringModel {
             rec.end_scope(sc);
         }
         let sc = rec.begin_scope("adam");
-        let s = &self.set;
-        let n = s.len() as usize;
-        let k = s.params.coeffs;
+        let k = self.set.params.coeffs;
         let groups = [
-            (&s.params.means, &s.grads.means, &s.m.means, &s.v.means, 3 * n, AdamGroup::single(x.lr_means)),
-            (&s.params.log_scales, &s.grads.log_scales, &s.m.log_scales, &s.v.log_scales, 2 * n, AdamGroup::single(cfg.lr_scales)),
-            (&s.params.quats, &s.grads.quats, &s.m.quats, &s.v.quats, 4 * n, AdamGroup::single(cfg.lr_quats)),
-            (&s.params.opacity, &s.grads.opacity, &s.m.opacity, &s.v.opacity, n, AdamGroup::single(cfg.lr_opacity)),
-            (&s.params.features, &s.grads.features, &s.m.features, &s.v.features, 3 * k as usize * n, AdamGroup { lr: cfg.lr_features_dc, lr_rest: cfg.lr_features_rest, stride: 3 * k, split: 3 }),
+            AdamGroup::single(x.lr_means),
+            AdamGroup::single(cfg.lr_scales),
+            AdamGroup::single(cfg.lr_quats),
+            AdamGroup::single(cfg.lr_opacity),
+            AdamGroup { lr: cfg.lr_features_dc, lr_rest: cfg.lr_features_rest, stride: 3 * k, split: 3 },
         ];
-        for (p, g, m, v, len, group) in groups {
-            self.adam.record(&mut rec, p, g, m, v, len, &group, it as u64)?;
-        }
+        self.adam.record_set(&mut rec, &self.set, &groups, it as u64)?;
         rec.end_scope(sc);
         timings.extend(rec.submit_and_wait()?);
         let values = b.loss.values()?;

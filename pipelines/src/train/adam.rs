@@ -5,6 +5,7 @@ use crate::shaders;
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
+use super::TrainableSet;
 use tgs_engine::{Buffer, Context, Kernel, Recorder};
 
 /// One parameter group: a learning rate, or two (elements with index modulo
@@ -79,5 +80,25 @@ impl Adam {
             bc2: 1.0 - self.beta2.powf(t as f32),
         };
         rec.dispatch(&self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, n as u32))
+    }
+
+    /// Record step `t` over every parameter array of `set`, in its layout
+    /// order (means, log-scales, quaternions, opacity, features), each with
+    /// its group.
+    pub fn record_set(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64) -> Result<()> {
+        let n = set.len() as usize;
+        let f = (set.params.channels * set.params.coeffs) as usize;
+        let (p, g, m, v) = (&set.params, &set.grads, &set.m, &set.v);
+        let arrays = [
+            (&p.means, &g.means, &m.means, &v.means, 3 * n),
+            (&p.log_scales, &g.log_scales, &m.log_scales, &v.log_scales, 2 * n),
+            (&p.quats, &g.quats, &m.quats, &v.quats, 4 * n),
+            (&p.opacity, &g.opacity, &m.opacity, &v.opacity, n),
+            (&p.features, &g.features, &m.features, &v.features, f * n),
+        ];
+        for ((p, g, m, v, len), group) in arrays.into_iter().zip(groups) {
+            self.record(rec, p, g, m, v, len, group, t)?;
+        }
+        Ok(())
     }
 }
