@@ -25,7 +25,7 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Train a TransmissiveGS scene (Stage I so far) on a dataset directory
+    /// Train a TransmissiveGS scene (Stage I, then Stage II) on a dataset directory
     /// (Blender layout or COLMAP); without one, on the built-in scene.
     Train {
         /// Dataset directory (transforms_train.json or sparse/); default: the built-in scene, written to OUT/scene.
@@ -56,6 +56,13 @@ enum Cmd {
         /// --iterations and --set test_interval / checkpoint_interval).
         #[arg(long)]
         resume: bool,
+        /// Stages to run: I, or I,II (the default); with --from, II.
+        #[arg(long)]
+        stages: Option<String>,
+        /// Start Stage II from the finished Stage I of the run directory RUN
+        /// (its checkpoint), in a new --out, without training Stage I again.
+        #[arg(long, value_name = "RUN")]
+        from: Option<PathBuf>,
         /// Time every kernel of every iteration (GPU timestamps) into metrics.json.
         #[arg(long)]
         profile: bool,
@@ -180,7 +187,7 @@ fn context(cli: &Cli) -> Result<std::sync::Arc<Context>> {
 fn run(cli: Cli) -> Result<()> {
     match &cli.cmd {
         Cmd::Devices { json } => tgs::devices::run(*json),
-        Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, profile, quiet } => {
+        Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, stages, from, profile, quiet } => {
             let ctx = context(&cli)?;
             let args = TrainArgs {
                 dataset: dataset.clone(),
@@ -192,6 +199,8 @@ fn run(cli: Cli) -> Result<()> {
                 downscale: *downscale,
                 background: background.clone(),
                 resume: *resume,
+                stages: stages.clone(),
+                from: from.clone(),
                 profile: *profile,
                 quiet: *quiet,
             };

@@ -64,6 +64,54 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert_eq!((count("I"), count("II")), (300, 150));
     assert!(log.iter().all(|l| l["loss"].as_f64().is_none_or(f64::is_finite)));
 
+    // --from: Stage II started from a Stage I-only run in a new directory is
+    // the same Stage II, bit for bit, with the other run's Stage I record.
+    let stage1 = std::env::temp_dir().join(format!("tgs-stage2-{}-stage1", std::process::id()));
+    let a1 = args(&stage1, &["stages=\"I\""]);
+    assert_eq!(train(ctx, &a1).unwrap().iteration, 300);
+    let from = std::env::temp_dir().join(format!("tgs-stage2-{}-from", std::process::id()));
+    let _ = std::fs::remove_dir_all(&from);
+    let af = TrainArgs { dataset: None, out: from.clone(), preset: None, set: vec!["reflection.iterations=150".into(), "test_interval=0".into()], quiet: true, from: Some(stage1.clone()), ..Default::default() };
+    assert_eq!(train(ctx, &af).unwrap().iteration, 450);
+    for f in ["reflection.ply", "envmap.exr", "point_cloud.ply"] {
+        assert!(std::fs::read(out.join(f)).unwrap() == std::fs::read(from.join(f)).unwrap(), "{f} differs between I,II in one run and --from");
+    }
+    let mf = json(&from.join("metrics.json"));
+    assert_eq!(mf["stages"][1]["test"], stages[1]["test"]);
+    let m1 = json(&stage1.join("metrics.json"));
+    assert_eq!(mf["stages"][0]["wall_s"], m1["stages"][0]["wall_s"], "the Stage I record is the other run's");
+    assert!(mf["stages"][0]["from"].as_str().is_some_and(|f| f.ends_with(stage1.file_name().unwrap().to_str().unwrap())));
+    // What --from refuses, with the reason named.
+    let refused = |a: TrainArgs, words: &[&str]| {
+        let _ = std::fs::remove_dir_all(&a.out);
+        let e = format!("{:#}", train(ctx, &a).err().expect("should be refused"));
+        for w in words {
+            assert!(e.contains(w), "'{w}' not in: {e}");
+        }
+    };
+    refused(TrainArgs { set: vec!["lambda_ssim=0.3".into()], ..af.clone() }, &["lambda_ssim = 0.2 in the checkpoint, 0.3 given"]);
+    refused(TrainArgs { stages: Some("I".into()), ..af.clone() }, &["nothing to run"]);
+    refused(TrainArgs { from: Some(out.join("nowhere")), ..af.clone() }, &["nowhere", "checkpoint.bin"]);
+    refused(TrainArgs { resume: true, ..af.clone() }, &["--resume", "--from"]);
+    // An unfinished Stage I (interrupted at 300 of 400) is refused.
+    let unfinished = std::env::temp_dir().join(format!("tgs-stage2-{}-unfinished", std::process::id()));
+    let _ = std::fs::remove_dir_all(&unfinished);
+    std::fs::create_dir_all(&unfinished).unwrap();
+    let bytes = std::fs::read(stage1.join("checkpoint.bin")).unwrap();
+    let hlen = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
+    let mut header: serde_json::Value = serde_json::from_slice(&bytes[12..12 + hlen]).unwrap();
+    header["config"]["iterations"] = 400.into();
+    let hb = serde_json::to_vec(&header).unwrap();
+    let mut ck = bytes[..8].to_vec();
+    ck.extend((hb.len() as u32).to_le_bytes());
+    ck.extend(&hb);
+    ck.extend(&bytes[12 + hlen..]);
+    std::fs::write(unfinished.join("checkpoint.bin"), ck).unwrap();
+    refused(TrainArgs { from: Some(unfinished.clone()), ..af.clone() }, &["stopped at iteration 300 of 400", "--resume"]);
+    let _ = std::fs::remove_dir_all(&unfinished);
+    let _ = std::fs::remove_dir_all(&from);
+    let _ = std::fs::remove_dir_all(&stage1);
+
     // The same run with the threshold above the measured residual skips Stage II.
     let skip = format!("reflection.min_residual={}", residual * 1.5);
     let o = train(ctx, &args(&out, &[&skip])).unwrap();

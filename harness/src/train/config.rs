@@ -78,6 +78,10 @@ pub struct ReflectionConfig {
     pub lr_env: f32,
     pub lr_f0: f32,
     pub lr_r: f32,
+    /// Opacity of the reflection set. R = sum w r lets opacity and r trade
+    /// off; at Stage I's opacity rate (10x lr_r) opacity would do all of
+    /// it and prune the glass away, so it moves at r's pace.
+    pub lr_opacity: f32,
     /// Initial f0 (all channels) and reflectivity r of every reflection Gaussian.
     pub f0_init: f32,
     pub r_init: f32,
@@ -89,6 +93,17 @@ pub struct ReflectionConfig {
     /// (mean over training views and pixels of mean_c |I_gt - I_scat|)
     /// reaches this.
     pub min_residual: f32,
+    /// How the reflection set starts (method-notes §3.4): "copy" = the whole
+    /// converged Stage I set (the paper's words); "hull" = seeds on the
+    /// residual hull (train/seed.rs) plus the Stage I Gaussians inside it;
+    /// "copy+hull" = both.
+    pub init: String,
+    /// Residual hull: rays cast (at most one seed each) and the fraction of
+    /// the views seeing a point that must see residual there.
+    pub seed_rays: u32,
+    pub seed_agree: f32,
+    /// Initial opacity of a seed.
+    pub seed_opacity: f32,
 }
 
 impl Default for ReflectionConfig {
@@ -100,6 +115,7 @@ impl Default for ReflectionConfig {
             lr_env: 0.01,
             lr_f0: 0.0075,
             lr_r: 0.005,
+            lr_opacity: 0.005,
             f0_init: 0.04,
             r_init: 0.01,
             lambda_normal: 0.05,
@@ -108,6 +124,10 @@ impl Default for ReflectionConfig {
             // diffuse spheres-128 0.0041; the geometric mean leaves a 1.7x
             // margin on both sides.
             min_residual: 0.007,
+            init: "hull".into(),
+            seed_rays: 8192,
+            seed_agree: 0.9,
+            seed_opacity: 0.5,
         }
     }
 }
@@ -121,8 +141,25 @@ impl ReflectionConfig {
         }
     }
 
+    /// (copy the Stage I set, seed on the residual hull), from `init`.
+    pub fn init_parts(&self) -> Result<(bool, bool)> {
+        match self.init.as_str() {
+            "copy" => Ok((true, false)),
+            "hull" => Ok((false, true)),
+            "copy+hull" => Ok((true, true)),
+            i => bail!("reflection.init must be 'copy', 'hull' or 'copy+hull', not '{i}'"),
+        }
+    }
+
     fn validate(&self) -> Result<()> {
         self.fresnel()?;
+        self.init_parts()?;
+        if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
+            bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);
+        }
+        if !(self.seed_opacity > 0.0 && self.seed_opacity < 1.0) {
+            bail!("reflection.seed_opacity must be in (0, 1), not {}", self.seed_opacity);
+        }
         if self.iterations == 0 {
             bail!("reflection.iterations must be at least 1 (leave Stage II out with stages = \"I\")");
         }
@@ -134,7 +171,7 @@ impl ReflectionConfig {
                 bail!("reflection.{k} must be in (0, 1), not {v}");
             }
         }
-        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual)] {
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual)] {
             if v < 0.0 {
                 bail!("reflection.{k} must be non-negative, not {v}");
             }

@@ -7,6 +7,7 @@ pub mod rng;
 pub mod run;
 pub mod reflection;
 pub mod scattering;
+pub mod seed;
 pub mod trainer;
 
 pub use config::TrainConfig;

@@ -9,6 +9,7 @@
 
 use super::config::{ReflectionConfig, TrainConfig};
 use super::scattering::StepOutput;
+use super::seed::{quat_for_normal, Seed};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -85,14 +86,22 @@ fn logit(p: f32) -> f32 {
 
 impl ReflectionModel {
     /// A reflection set with the geometry of the given scattering Gaussians
-    /// (those with `keep[i]`), f0 and r at their initial values, and a
-    /// constant grey cube map (sigmoid 0.5).
-    pub fn from_scattering(ctx: &Arc<Context>, scat: &HostGaussians, keep: &[bool], rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
+    /// (those with `keep[i]`) followed by the residual-hull `seeds` (opacity
+    /// `seed_opacity`), f0 and r at their initial values, and a constant
+    /// grey cube map (sigmoid 0.5).
+    pub fn from_scattering(ctx: &Arc<Context>, scat: &HostGaussians, keep: &[bool], seeds: &[Seed], rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
         let mut h = HostGaussians::new(MATERIAL, 1);
         let (f0, r) = (logit(rc.f0_init), logit(rc.r_init));
-        for i in (0..scat.len()).filter(|&i| keep[i]) {
+        for i in (0..scat.len()).filter(|&i| keep.get(i) == Some(&true)) {
             let g = |v: &[f32], w: usize| -> Vec<f32> { v[w * i..w * (i + 1)].to_vec() };
             h.push(g(&scat.means, 3).try_into().unwrap(), g(&scat.log_scales, 2).try_into().unwrap(), g(&scat.quats, 4).try_into().unwrap(), scat.opacity[i], &[f0, f0, f0, r]);
+        }
+        for s in seeds {
+            let ls = s.scale.ln();
+            h.push(s.position, [ls, ls], quat_for_normal(s.normal), logit(rc.seed_opacity), &[f0, f0, f0, r]);
+        }
+        if h.len() == 0 {
+            bail!("the reflection set would be empty (reflection.init = '{}' found nothing to start from)", rc.init);
         }
         let env = HostEnvMap::constant(rc.env_res, 0.0)?;
         Self::new(ctx, &h, &env, rc.fresnel()?, adam_eps)
@@ -186,7 +195,7 @@ impl ReflectionModel {
             AdamGroup::single(x.lr_means),
             AdamGroup::single(cfg.lr_scales),
             AdamGroup::single(cfg.lr_quats),
-            AdamGroup::single(cfg.lr_opacity),
+            AdamGroup::single(rc.lr_opacity),
             // Material: f0 (3) at lr_f0, r at lr_r.
             AdamGroup { lr: rc.lr_f0, lr_rest: rc.lr_r, stride: MATERIAL, split: 3 },
         ];

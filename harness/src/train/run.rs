@@ -38,6 +38,11 @@ pub struct TrainArgs {
     /// `--background white|black|r,g,b` (the `background` setting).
     pub background: Option<String>,
     pub resume: bool,
+    /// `--stages I|I,II|II` (the `stages` setting; "II" only with `from`).
+    pub stages: Option<String>,
+    /// `--from RUN`: start Stage II from RUN's finished Stage I instead of
+    /// training Stage I again.
+    pub from: Option<PathBuf>,
     /// Collect per-kernel GPU timings for every iteration (timings.json).
     pub profile: bool,
     /// No progress bar or periodic lines.
@@ -94,6 +99,11 @@ fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainConfig> {
     for kv in &a.set {
         cfg.set(kv)?;
     }
+    if let Some(st) = &a.stages {
+        // With --from, Stage I comes from the other run: "II" means "I,II".
+        cfg.stages = if a.from.is_some() && st.trim() == "II" { "I,II".into() } else { st.clone() };
+        cfg.validate().with_context(|| format!("--stages '{st}'"))?;
+    }
     if let Some(d) = a.downscale {
         cfg.downscale = d;
         cfg.validate().with_context(|| format!("--downscale {d}"))?;
@@ -128,13 +138,7 @@ pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> 
         None => saved.clone(),
     };
     let cfg = apply_args(base, a)?;
-    let old: BTreeMap<String, toml::Value> = super::config::flatten(&toml::Table::try_from(saved)?).into_iter().collect();
-    let new = super::config::flatten(&toml::Table::try_from(&cfg)?);
-    let conflicts: Vec<String> = new
-        .iter()
-        .filter(|(k, v)| !RESUMABLE_SETTINGS.contains(&k.as_str()) && old.get(k) != Some(v))
-        .map(|(k, v)| format!("{k} = {} in the checkpoint, {} given", old.get(k).map(show).unwrap_or_default(), show(v)))
-        .collect();
+    let conflicts = changed_settings(saved, &cfg, |k| RESUMABLE_SETTINGS.contains(&k))?;
     if !conflicts.is_empty() {
         bail!(
             "--resume continues a run with the settings it was started with; these options change them:\n  {}\nonly {} may change when resuming (start a new run with another --out to train with other settings)",
@@ -143,6 +147,87 @@ pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> 
         );
     }
     Ok(cfg)
+}
+
+/// The settings of `new` that differ from `saved`, except those `free`
+/// lets change, as "key = old in the checkpoint, new given" lines.
+fn changed_settings(saved: &TrainConfig, new: &TrainConfig, free: impl Fn(&str) -> bool) -> Result<Vec<String>> {
+    let old: BTreeMap<String, toml::Value> = super::config::flatten(&toml::Table::try_from(saved)?).into_iter().collect();
+    let new = super::config::flatten(&toml::Table::try_from(new)?);
+    Ok(new
+        .iter()
+        .filter(|(k, v)| !free(k) && old.get(k) != Some(v))
+        .map(|(k, v)| format!("{k} = {} in the checkpoint, {} given", old.get(k).map(show).unwrap_or_default(), show(v)))
+        .collect())
+}
+
+/// Settings that only shape the stages after Stage I: `--from RUN` may
+/// change them (everything else trained RUN's Stage I and must stay).
+fn later_stage_setting(k: &str) -> bool {
+    k.starts_with("reflection.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
+}
+
+/// `--from RUN`: a trainer at the end of RUN's Stage I (its scattering set;
+/// any later stage of RUN is dropped), the dataset, its path, and RUN's
+/// Stage I record for metrics.json. RUN's settings are the base; options
+/// may change only the later stages' settings.
+fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer, Dataset, String, serde_json::Value)> {
+    let ckpt = run.join(CHECKPOINT);
+    if !ckpt.is_file() {
+        bail!("--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)", run.display());
+    }
+    let (mut h, mut arrays) = checkpoint::read(&ckpt)?;
+    if h.iteration < h.config.iterations {
+        bail!("--from {}: its Stage I stopped at iteration {} of {}; finish it first (tgs train --out {} --resume)", run.display(), h.iteration, h.config.iterations, run.display());
+    }
+    if a.preset.is_some() {
+        bail!("--from {}: the run's own settings are used (--preset would change how its Stage I was trained); change Stage II with --set reflection.KEY=VALUE", run.display());
+    }
+    let mut base = h.config.clone();
+    // A Stage I-only run: the stages after it are the default ones.
+    if base.stages.trim() == "I" {
+        base.stages = TrainConfig::default().stages;
+    }
+    let cfg = apply_args(base, a).with_context(|| format!("--from {}", run.display()))?;
+    let conflicts = changed_settings(&h.config, &cfg, later_stage_setting)?;
+    if !conflicts.is_empty() {
+        bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+    }
+    if !cfg.wants_reflection() {
+        bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
+    }
+    if let Some(given) = &a.dataset {
+        let same = std::fs::canonicalize(given).map(|g| g == Path::new(&h.dataset)).unwrap_or(false);
+        if !same {
+            bail!("--from {} trained on {}; {} was given (leave the dataset out)", run.display(), h.dataset, given.display());
+        }
+    }
+    let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("--from {}: loading its dataset {}", run.display(), h.dataset))?;
+    if let Some(r) = h.reflection.take() {
+        arrays.truncate(arrays.len().saturating_sub(r.arrays.len()));
+    }
+    let dataset = h.dataset.clone();
+    let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
+    tr.iteration = cfg.iterations;
+    tr.cfg = cfg;
+    tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
+    let abs = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
+    let mut rec = stage_records_of(run).into_iter().find(|s| s["stage"] == "I").unwrap_or_else(|| json!({"stage": "I"}));
+    rec["from"] = json!(abs.to_string_lossy());
+    Ok((tr, data, dataset, rec))
+}
+
+/// A finished run's stage records: stages.json (written when Stage II
+/// begins), else metrics.json's `stages`.
+fn stage_records_of(run: &Path) -> Vec<serde_json::Value> {
+    let read = |f: &str| std::fs::read(run.join(f)).ok().and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
+    if let Some(serde_json::Value::Array(v)) = read("stages.json") {
+        return v;
+    }
+    match read("metrics.json").map(|m| m["stages"].clone()) {
+        Some(serde_json::Value::Array(v)) => v,
+        _ => Vec::new(),
+    }
 }
 
 /// The dataset directory, writing the built-in scene first when none is given.
@@ -170,6 +255,11 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
     let ckpt = a.out.join(CHECKPOINT);
     let start = Instant::now();
+    if a.resume && a.from.is_some() {
+        bail!("--resume continues OUT's own run; --from starts a new one from another run's Stage I: give one of them");
+    }
+    // With --from: the other run's Stage I record (metrics.json `stages`).
+    let mut from_record: Option<serde_json::Value> = None;
     let (mut tr, data, dataset_str) = if a.resume {
         if !ckpt.is_file() {
             bail!("{}: no checkpoint to resume from", ckpt.display());
@@ -202,6 +292,11 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         if ckpt.is_file() {
             bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
         }
+        if let Some(run) = &a.from {
+            let (tr, data, dataset, stage1) = start_from(ctx, a, run)?;
+            from_record = Some(stage1);
+            (tr, data, dataset)
+        } else {
         let cfg = config_from_args(a)?;
         let dir = dataset_dir(a, a.quiet)?;
         let data = load_dataset(&dir, &cfg)?;
@@ -209,6 +304,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         // Absolute, so that --resume, eval and render work from any directory.
         let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
         (tr, data, abs.to_string_lossy().into_owned())
+        }
     };
     atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
     install_signal_handler();
@@ -243,6 +339,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let start_it = tr.iteration;
     let mut interrupted = false;
     let mut stages: Vec<serde_json::Value> = read_stage_records(&a.out, a.resume);
+    stages.extend(from_record);
     let mut stage_start = Instant::now();
     while !tr.done() {
         if tr.at_reflection_start() {
@@ -388,8 +485,16 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
     let resumed = tr.reflection.is_some();
     if !resumed {
         let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&out.join("renders/stage1")))?) };
+        // A Stage I taken from another run (--from) keeps that run's record
+        // (its wall time, where it came from); the test metrics are re-measured.
+        let from = stages.iter().find(|s| s["stage"] == "I").cloned();
         stages.retain(|s| s["stage"] != "I");
-        stages.push(stage_record("I", tr, since, m.as_ref()));
+        let mut rec = stage_record("I", tr, since, m.as_ref());
+        if let Some(f) = from {
+            rec["wall_s"] = f["wall_s"].clone();
+            rec["from"] = f["from"].clone();
+        }
+        stages.push(rec);
         if !quiet {
             eprintln!("Stage I done: measuring the residual of {} training views", data.train.len());
         }

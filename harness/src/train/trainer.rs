@@ -12,6 +12,7 @@ use super::init::{gaussians_from_points, random_points};
 use super::rng::Rng;
 use super::reflection::{residual, ReflStepInput, ReflectionModel};
 use super::scattering::{ScatteringModel, StepInput};
+use super::seed::{inside_residual_hull, residual_hull_seeds, SeedParams, SeedView};
 use crate::data::Dataset;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
@@ -52,6 +53,11 @@ pub struct ReflDecision {
     /// Whether Stage II ran.
     pub run: bool,
     pub reflection_gaussians: u32,
+    /// Of those: residual-hull seeds, and Stage I Gaussians copied.
+    #[serde(default)]
+    pub seeds: u32,
+    #[serde(default)]
+    pub copied: u32,
 }
 
 /// The stage schedule: each stage with its iteration count, run in order.
@@ -218,6 +224,9 @@ impl Trainer {
         let sh = self.sh_degree(self.cfg.iterations);
         let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
         self.scat_cache.clear();
+        // Per view: residual magnitude and Stage I surface depth (seeding).
+        let mut maps: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
+        let (_, hull) = self.cfg.reflection.init_parts()?;
         for (i, cam) in self.cameras.clone().iter().enumerate() {
             let n = (cam.width * cam.height) as usize;
             let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * n)?;
@@ -229,6 +238,11 @@ impl Trainer {
             pixels += n;
             on_view(i, cam, &r)?;
             self.scat_cache.push(buf);
+            if hull && self.reflection.is_none() {
+                let planes = self.scattering.render(cam, sh, &self.background)?.planes;
+                let k = Plane::Median.index(3) as usize;
+                maps.push((mag.to_vec(), planes[k * n..(k + 1) * n].to_vec()));
+            }
         }
         let views = self.cameras.len().max(1);
         let mut d = ReflDecision {
@@ -237,13 +251,27 @@ impl Trainer {
             threshold: self.cfg.reflection.min_residual as f64,
             run: false,
             reflection_gaussians: 0,
+            seeds: 0,
+            copied: 0,
         };
         d.run = d.residual_mean >= d.threshold;
         if d.run {
             if self.reflection.is_none() {
+                let rc = &self.cfg.reflection;
+                let (copy, hull) = rc.init_parts()?;
                 let g = self.scattering.set.params.download()?;
-                let keep = vec![true; g.len()];
-                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, &g, &keep, &self.cfg.reflection, self.cfg.adam_eps)?);
+                let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+                let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, ..SeedParams::default() };
+                let seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
+                let keep = if copy {
+                    vec![true; g.len()]
+                } else {
+                    let centres: Vec<[f32; 3]> = g.means.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+                    inside_residual_hull(&views, &centres, &p)
+                };
+                d.seeds = seeds.len() as u32;
+                d.copied = keep.iter().filter(|&&k| k).count() as u32;
+                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, &g, &keep, &seeds, rc, self.cfg.adam_eps)?);
             }
             d.reflection_gaussians = self.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0);
         } else {

@@ -1,0 +1,311 @@
+//! Residual-guided seeding of the reflection set (Stage II).
+//!
+//! Stage I leaves transmissive surfaces unoccupied: its Gaussians sit on the
+//! content seen through the glass, and the residual |I_gt - I_scat| marks
+//! where the glass is in every training view. A point on the transmissive
+//! surface projects onto residual in (nearly) every view that sees it in
+//! front of the Stage I surface; a point in open air in front of a diffuse
+//! surface does not. So the residual's multi-view intersection (a visual
+//! hull of the residual, carved only where a view sees the point in front of
+//! its Stage I depth) encloses the transmissive surface, and the first hull
+//! point along a residual pixel's ray lies on its front. Seeds are those
+//! first points; their normals are the local plane of neighbouring seeds
+//! (PCA), facing the camera that found them; their size is the seed
+//! spacing. Stage II then refines them by the reflection it has to explain.
+
+use tgs_pipelines::Camera;
+
+/// One training view as the seeding sees it.
+pub struct SeedView<'a> {
+    pub camera: Camera,
+    /// Per-pixel residual magnitude mean_c |I_gt - I_scat| (row-major).
+    pub residual: &'a [f32],
+    /// Per-pixel Stage I surface depth (view z; 0 or non-finite where no surface).
+    pub depth: &'a [f32],
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct SeedParams {
+    /// A pixel has residual when its box-blurred magnitude exceeds this.
+    pub threshold: f32,
+    /// Box-blur radius in pixels (the mask is then eroded by half of it).
+    pub blur: u32,
+    /// Fraction of the views that see a point in front of their Stage I
+    /// surface whose residual it must project onto.
+    pub agree: f32,
+    /// At most this many rays are cast (spread evenly over the views'
+    /// residual pixels); each gives at most one seed.
+    pub max_rays: u32,
+    /// Samples along a ray, uniform in depth from `near` x the far end.
+    pub steps: u32,
+}
+
+impl Default for SeedParams {
+    fn default() -> Self {
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128 }
+    }
+}
+
+/// A seed surfel: position, unit normal (facing its camera), isotropic scale.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Seed {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub scale: f32,
+}
+
+type V3 = [f64; 3];
+
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn normalize(a: V3) -> V3 {
+    let l = dot(a, a).sqrt();
+    if l > 0.0 && l.is_finite() { [a[0] / l, a[1] / l, a[2] / l] } else { [0.0, 0.0, 1.0] }
+}
+
+/// A view prepared for hull tests: its residual mask and depths.
+struct Prepared {
+    cam: Camera,
+    mask: Vec<bool>,
+    /// Stage I depth with "no surface" as infinity.
+    depth: Vec<f32>,
+}
+
+impl Prepared {
+    fn new(v: &SeedView, p: &SeedParams) -> Prepared {
+        let (w, h) = (v.camera.width as usize, v.camera.height as usize);
+        // Blur then threshold fills the gaps of a spotty residual but grows
+        // its region, by about half the blur radius at a residual a few
+        // times the threshold; eroding by that much brings the boundary back.
+        let blurred = box_blur(v.residual, w, h, p.blur as usize);
+        let grown: Vec<f32> = blurred.iter().map(|&b| (b > p.threshold) as u8 as f32).collect();
+        let r = p.blur as usize / 2;
+        let mask = if r == 0 { grown.iter().map(|&g| g > 0.5).collect() } else { box_blur(&grown, w, h, r).iter().map(|&m| m > 1.0 - 1e-4).collect() };
+        let depth = v.depth.iter().map(|&d| if d.is_finite() && d > 0.0 { d } else { f32::INFINITY }).collect();
+        Prepared { cam: v.camera, mask, depth }
+    }
+
+    /// View-space position of world point `x`.
+    fn to_view(&self, x: V3) -> V3 {
+        let m = &self.cam.world_to_view;
+        [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64)
+    }
+
+    /// The pixel `x` projects to, if it is in front of the camera and inside the image.
+    fn pixel(&self, x: V3) -> Option<(usize, f64)> {
+        let p = self.to_view(x);
+        if p[2] <= 1e-6 {
+            return None;
+        }
+        let c = &self.cam;
+        let u = (c.fx as f64 * p[0] / p[2] + c.cx as f64).round();
+        let v = (c.fy as f64 * p[1] / p[2] + c.cy as f64).round();
+        if u < 0.0 || v < 0.0 || u >= c.width as f64 || v >= c.height as f64 {
+            return None;
+        }
+        Some((v as usize * c.width as usize + u as usize, p[2]))
+    }
+
+    /// World point at pixel `i`, view depth `z`.
+    fn unproject(&self, i: usize, z: f64) -> V3 {
+        let c = &self.cam;
+        let (u, v) = ((i % c.width as usize) as f64, (i / c.width as usize) as f64);
+        let pv = [(u - c.cx as f64) / c.fx as f64 * z, (v - c.cy as f64) / c.fy as f64 * z, z];
+        // world = R^T (p_view - t)
+        let m = &c.world_to_view;
+        let d = [pv[0] - m[0][3] as f64, pv[1] - m[1][3] as f64, pv[2] - m[2][3] as f64];
+        [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
+    }
+}
+
+/// Box blur of radius `r` (mean over the window clipped to the image).
+fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    // Integral image in f64.
+    let mut s = vec![0.0f64; (w + 1) * (h + 1)];
+    for y in 0..h {
+        let mut row = 0.0;
+        for x in 0..w {
+            let v = img.get(y * w + x).copied().unwrap_or(0.0);
+            row += if v.is_finite() { v as f64 } else { 0.0 };
+            s[(y + 1) * (w + 1) + x + 1] = s[y * (w + 1) + x + 1] + row;
+        }
+    }
+    let mut out = vec![0.0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (x0, x1, y0, y1) = (x.saturating_sub(r), (x + r + 1).min(w), y.saturating_sub(r), (y + r + 1).min(h));
+            let sum = s[y1 * (w + 1) + x1] - s[y0 * (w + 1) + x1] - s[y1 * (w + 1) + x0] + s[y0 * (w + 1) + x0];
+            out[y * w + x] = (sum / ((x1 - x0) * (y1 - y0)) as f64) as f32;
+        }
+    }
+    out
+}
+
+/// Whether world point `x` is in the residual hull: at least 3 views see
+/// it in front of their Stage I surface (depth margin 2%), and at least
+/// `agree` of those see residual there.
+fn in_hull(views: &[Prepared], x: V3, agree: f32) -> bool {
+    in_hull_margin(views, x, agree, 0.98)
+}
+
+/// [`in_hull`] with a view counting when the point is nearer than
+/// `margin` x its Stage I depth.
+fn in_hull_margin(views: &[Prepared], x: V3, agree: f32, margin: f64) -> bool {
+    let (mut seen, mut hit) = (0u32, 0u32);
+    for v in views {
+        if let Some((i, z)) = v.pixel(x) {
+            if z < v.depth[i] as f64 * margin {
+                seen += 1;
+                hit += v.mask[i] as u32;
+            }
+        }
+    }
+    seen >= 3 && hit as f64 >= agree as f64 * seen as f64
+}
+
+/// Which of `points` (Stage I Gaussian centres, on its surfaces) lie in the
+/// residual hull, with a view counting when it sees the point at or in
+/// front of its Stage I surface (2% margin): surfaces Stage I did occupy
+/// but whose appearance every view contradicts (opaque reflectors).
+pub fn inside_residual_hull(views: &[SeedView], points: &[[f32; 3]], p: &SeedParams) -> Vec<bool> {
+    let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
+    points.iter().map(|x| in_hull_margin(&prepared, x.map(f64::from), p.agree, 1.02)).collect()
+}
+
+/// Seeds of the reflection set from the views' residuals and Stage I depths
+/// (see the module documentation). Deterministic; empty when no pixel has
+/// residual or fewer than 3 views agree anywhere.
+pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
+    let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
+    // The far end of a ray with no Stage I surface: the largest finite depth seen.
+    let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
+    let counts: Vec<usize> = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).collect();
+    let total: usize = counts.iter().sum();
+    if total == 0 || far <= 0.0 || p.steps == 0 {
+        return Vec::new();
+    }
+    let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
+    let mut found: Vec<(V3, usize)> = Vec::new();
+    let mut k = 0usize;
+    for (vi, v) in prepared.iter().enumerate() {
+        for i in (0..v.mask.len()).filter(|&i| v.mask[i]) {
+            k += 1;
+            if k % stride != 0 {
+                continue;
+            }
+            let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
+            let z_near = 0.05 * z_far;
+            for s in 0..p.steps {
+                let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
+                let x = v.unproject(i, z);
+                if in_hull(&prepared, x, p.agree) {
+                    found.push((x, vi));
+                    break;
+                }
+            }
+        }
+    }
+    surfels(&found, &prepared)
+}
+
+/// Normals (PCA of the 16 nearest seeds, facing the finding camera) and
+/// scales (root mean squared distance to the 3 nearest) of the found points.
+fn surfels(found: &[(V3, usize)], views: &[Prepared]) -> Vec<Seed> {
+    const K: usize = 16;
+    let mut out = Vec::with_capacity(found.len());
+    for (i, &(x, vi)) in found.iter().enumerate() {
+        let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (dot(sub(x, y), sub(x, y)), j)).collect();
+        let k = K.min(near.len());
+        if k > 0 {
+            near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+            near.truncate(k);
+            near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        }
+        let cam = views[vi].cam.centre().map(f64::from);
+        let to_cam = normalize(sub(cam, x));
+        let mut n = if k >= 3 { plane_normal(x, near.iter().map(|&(_, j)| found[j].0)) } else { to_cam };
+        if dot(n, to_cam) < 0.0 {
+            n = n.map(|c| -c);
+        }
+        let m = near.len().min(3);
+        let scale = if m > 0 { (near[..m].iter().map(|a| a.0).sum::<f64>() / m as f64).sqrt() } else { 0.0 };
+        out.push(Seed { position: x.map(|c| c as f32), normal: n.map(|c| c as f32), scale: scale.max(1e-4) as f32 });
+    }
+    out
+}
+
+/// Unit normal of the least-squares plane through `x` and `pts`: the
+/// eigenvector of the smallest eigenvalue of their covariance.
+fn plane_normal(x: V3, pts: impl Iterator<Item = V3>) -> V3 {
+    let all: Vec<V3> = std::iter::once(x).chain(pts).collect();
+    let n = all.len() as f64;
+    let mean = [0, 1, 2].map(|k| all.iter().map(|p| p[k]).sum::<f64>() / n);
+    let mut c = [[0.0f64; 3]; 3];
+    for p in &all {
+        let d = sub(*p, mean);
+        for r in 0..3 {
+            for s in 0..3 {
+                c[r][s] += d[r] * d[s];
+            }
+        }
+    }
+    let (vals, vecs) = jacobi_eigen(c);
+    let k = (0..3).min_by(|&a, &b| vals[a].total_cmp(&vals[b])).unwrap_or(2);
+    normalize([vecs[0][k], vecs[1][k], vecs[2][k]])
+}
+
+/// Eigenvalues and eigenvectors (columns) of a symmetric 3x3 matrix by
+/// cyclic Jacobi rotations.
+pub fn jacobi_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _ in 0..32 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        if off <= 1e-30 * (a[0][0].abs() + a[1][1].abs() + a[2][2].abs()).max(1e-300) {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q].abs() < 1e-300 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            // A <- J^T A J with J the rotation in the (p, q) plane.
+            for k in 0..3 {
+                let (akp, akq) = (a[k][p], a[k][q]);
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let (apk, aqk) = (a[p][k], a[q][k]);
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for row in v.iter_mut() {
+                let (vp, vq) = (row[p], row[q]);
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    ([a[0][0], a[1][1], a[2][2]], v)
+}
+
+/// The quaternion (r, x, y, z) of the shortest rotation taking +z to the
+/// unit vector `n`: a splat with it has normal t_w = n.
+pub fn quat_for_normal(n: [f32; 3]) -> [f32; 4] {
+    let n = normalize(n.map(f64::from));
+    if n[2] < -1.0 + 1e-9 {
+        return [0.0, 1.0, 0.0, 0.0];
+    }
+    // q = (1 + z.n, z x n) normalised, z x n = (-n_y, n_x, 0).
+    let q = [1.0 + n[2], -n[1], n[0], 0.0];
+    let l = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    q.map(|v| (v / l) as f32)
+}

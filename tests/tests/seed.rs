@@ -1,0 +1,182 @@
+//! Residual-guided seeding of the reflection set (harness/src/train/seed.rs),
+//! on the CPU: the geometry helpers against closed forms, and the residual
+//! hull on a synthetic glass sphere whose residual is exactly its
+//! silhouette (plus scattered noise), seen from a ring of cameras around
+//! an opaque ball inside it: the seeds must lie on the sphere's front with
+//! radial normals; no residual gives no seeds.
+
+use tgs::train::seed::{inside_residual_hull, jacobi_eigen, quat_for_normal, residual_hull_seeds, SeedParams, SeedView};
+use tgs_pipelines::Camera;
+use tgs_tests::{seed, Rng};
+
+type V3 = [f64; 3];
+
+fn uniform(r: &mut Rng) -> f64 {
+    (r.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+}
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn norm(a: V3) -> V3 {
+    let l = dot(a, a).sqrt();
+    a.map(|c| c / l)
+}
+
+/// Third column of the rotation of the unit quaternion (r, x, y, z).
+fn t_w(q: [f32; 4]) -> V3 {
+    let q = q.map(f64::from);
+    let l = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let [r, x, y, z] = q.map(|v| v / l);
+    [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)]
+}
+
+#[test]
+fn quaternion_for_a_normal_has_that_normal() {
+    let mut rng = Rng(seed("quaternion_for_a_normal_has_that_normal"));
+    let mut normals: Vec<V3> = vec![[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [1e-9, 0.0, -1.0]];
+    for _ in 0..200 {
+        normals.push(norm([uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5]));
+    }
+    for n in normals {
+        let q = quat_for_normal(n.map(|c| c as f32));
+        assert!(q.iter().all(|v| v.is_finite()), "{n:?} -> {q:?}");
+        let got = t_w(q);
+        let err = (0..3).map(|k| (got[k] - norm(n)[k]).abs()).fold(0.0, f64::max);
+        assert!(err < 1e-5, "normal {n:?}: quaternion {q:?} has t_w {got:?}");
+    }
+}
+
+#[test]
+fn jacobi_eigenpairs_of_symmetric_matrices() {
+    let mut rng = Rng(seed("jacobi_eigenpairs_of_symmetric_matrices"));
+    let mut cases = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], [[0.0; 3]; 3], [[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 0.0]]];
+    for _ in 0..100 {
+        let mut a = [[0.0; 3]; 3];
+        for r in 0..3 {
+            for c in r..3 {
+                a[r][c] = uniform(&mut rng) * 2.0 - 1.0;
+                a[c][r] = a[r][c];
+            }
+        }
+        cases.push(a);
+    }
+    for a in cases {
+        let (vals, vecs) = jacobi_eigen(a);
+        for k in 0..3 {
+            let v = [vecs[0][k], vecs[1][k], vecs[2][k]];
+            assert!((dot(v, v) - 1.0).abs() < 1e-9, "{a:?}: eigenvector {k} not unit");
+            for r in 0..3 {
+                let av = dot(a[r], v);
+                assert!((av - vals[k] * v[r]).abs() < 1e-9, "{a:?}: A v != lambda v for {k}");
+            }
+        }
+    }
+}
+
+const SPHERE_R: f64 = 0.5;
+const BALL_R: f64 = 0.2;
+const SIZE: u32 = 64;
+
+/// First positive t of the ray o + t d (d unit) on the sphere of radius r at the origin.
+fn hit(o: V3, d: V3, r: f64) -> Option<f64> {
+    let b = dot(o, d);
+    let c = dot(o, o) - r * r;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let t = -b - disc.sqrt();
+    (t > 0.0).then_some(t)
+}
+
+/// A ring of cameras around the origin, each view's residual (0.03 on the
+/// glass sphere's silhouette, plus 5% noise pixels elsewhere when `noise`)
+/// and Stage I depth (the opaque inner ball; none elsewhere).
+fn views(noise: bool, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let mut rng = Rng(7);
+    let (mut cams, mut res, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..24 {
+        let a = i as f64 * std::f64::consts::TAU / 24.0;
+        let h = if i % 2 == 0 { 0.4 } else { 1.0 };
+        let e = [3.0 * a.cos(), 3.0 * a.sin(), h];
+        let cam = Camera::look_at(e.map(|c| c as f32), [0.0; 3], [0.0, 0.0, 1.0], 0.7, SIZE, SIZE);
+        let m = cam.world_to_view;
+        let n = (SIZE * SIZE) as usize;
+        let (mut r, mut z) = (vec![0.0f32; n], vec![0.0f32; n]);
+        for p in 0..n {
+            let (u, v) = ((p as u32 % SIZE) as f64, (p as u32 / SIZE) as f64);
+            let dv = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
+            // World direction R^T d_view.
+            let d = norm([0, 1, 2].map(|j| (0..3).map(|k| m[k][j] as f64 * dv[k]).sum::<f64>()));
+            if glass && hit(e, d, SPHERE_R).is_some() {
+                r[p] = 0.03;
+            } else if noise && uniform(&mut rng) < 0.05 {
+                r[p] = 0.03;
+            }
+            if let Some(t) = hit(e, d, BALL_R) {
+                z[p] = (t / dot(dv, dv).sqrt()) as f32;
+            }
+        }
+        cams.push(cam);
+        res.push(r);
+        depth.push(z);
+    }
+    (cams, res, depth)
+}
+
+#[test]
+fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
+    let (cams, res, depth) = views(true, true);
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let p = SeedParams { max_rays: 3000, ..SeedParams::default() };
+    let seeds = residual_hull_seeds(&sv, &p);
+    assert!(seeds.len() > 1000, "{} seeds from 3000 rays", seeds.len());
+    let mut radial = Vec::new();
+    let mut off = Vec::new();
+    for s in &seeds {
+        let x = s.position.map(f64::from);
+        let r = dot(x, x).sqrt();
+        off.push(r - SPHERE_R);
+        let n = s.normal.map(f64::from);
+        assert!((dot(n, n) - 1.0).abs() < 1e-4 && s.scale > 0.0 && s.scale.is_finite(), "{s:?}");
+        radial.push(dot(n, x.map(|c| c / r)).clamp(-1.0, 1.0).acos().to_degrees());
+    }
+    off.sort_by(f64::total_cmp);
+    radial.sort_by(f64::total_cmp);
+    let pct = |v: &[f64], q: f64| v[((v.len() - 1) as f64 * q) as usize];
+    eprintln!("distance to the sphere: 5% {:.3} median {:.3} 95% {:.3}; normal error median {:.1} 90% {:.1} deg", pct(&off, 0.05), pct(&off, 0.5), pct(&off, 0.95), pct(&radial, 0.5), pct(&radial, 0.9));
+    // A visual hull encloses the surface: seeds are on or just outside it
+    // (never inside by more than the march step), mostly within 10% of its radius.
+    assert!(pct(&off, 0.01) > -0.03, "seeds inside the glass: {:.3}", pct(&off, 0.01));
+    assert!(pct(&off, 0.9) < 0.05, "90% of seeds within 0.05 of the glass: {:.3}", pct(&off, 0.9));
+    assert!(pct(&radial, 0.5) < 10.0 && pct(&radial, 0.9) < 25.0, "normals: median {:.1}, 90% {:.1} deg", pct(&radial, 0.5), pct(&radial, 0.9));
+    // Deterministic.
+    assert_eq!(seeds, residual_hull_seeds(&sv, &p));
+
+    // The inner ball (occupied by Stage I) is seen through residual in
+    // every view: inside; a point in open air beside the sphere is not.
+    let inside = inside_residual_hull(&sv, &[[BALL_R as f32, 0.0, 0.0], [0.0, 0.0, BALL_R as f32], [1.2, 0.0, 0.0], [0.0, -1.0, 0.8]], &p);
+    assert_eq!(inside, [true, true, false, false]);
+}
+
+#[test]
+fn no_residual_no_seeds() {
+    let (cams, res, depth) = views(true, false);
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    // Only scattered noise: blurred below the threshold everywhere.
+    assert!(residual_hull_seeds(&sv, &SeedParams::default()).is_empty());
+    // Nothing at all, one view, empty and 1-pixel images: no seeds, no panic.
+    let zero = vec![0.0f32; (SIZE * SIZE) as usize];
+    let sv0: Vec<SeedView> = cams.iter().map(|c| SeedView { camera: *c, residual: &zero, depth: &zero }).collect();
+    assert!(residual_hull_seeds(&sv0, &SeedParams::default()).is_empty());
+    let one = [1.0f32];
+    let tiny = Camera::look_at([3.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0], 0.7, 1, 1);
+    let sv1 = [SeedView { camera: tiny, residual: &one, depth: &one }];
+    assert!(residual_hull_seeds(&sv1, &SeedParams::default()).is_empty());
+    assert!(residual_hull_seeds(&[], &SeedParams::default()).is_empty());
+    // Residual everywhere, no Stage I surface anywhere: rays run to the
+    // largest depth seen (none: no seeds) without NaN.
+    let all = vec![1.0f32; (SIZE * SIZE) as usize];
+    let sv2: Vec<SeedView> = cams.iter().map(|c| SeedView { camera: *c, residual: &all, depth: &zero }).collect();
+    assert!(residual_hull_seeds(&sv2, &SeedParams::default()).is_empty());
+}
