@@ -24,6 +24,12 @@ pub struct ViewMetrics {
     /// the reflection set's where it covers the pixel).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_scattering_deg: Option<f64>,
+    /// In Stage II: the fraction of mask pixels the reflection set covers
+    /// (alpha >= 0.5), and the normal MAE on those pixels alone.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reflection_coverage: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal_mae_covered_deg: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -36,6 +42,10 @@ pub struct Metrics {
     pub normal_mae_deg: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_scattering_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reflection_coverage: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal_mae_covered_deg: Option<f64>,
     pub per_view: Vec<ViewMetrics>,
 }
 
@@ -114,11 +124,16 @@ pub fn world_normals_of([nx, ny, nz]: [&[f32]; 3], cam: &Camera) -> Vec<[f32; 3]
 
 /// Mean angular error (degrees) on mask pixels; None without a GT or mask pixels.
 pub fn normal_mae(normals: &[[f32; 3]], view: &View) -> Option<f64> {
+    normal_mae_where(normals, view, |_| true)
+}
+
+/// [`normal_mae`] on the mask pixels `i` with `keep(i)`.
+fn normal_mae_where(normals: &[[f32; 3]], view: &View, keep: impl Fn(usize) -> bool) -> Option<f64> {
     let (gt, mask) = (view.normals.as_ref()?, view.mask.as_ref()?);
     let mut sum = 0.0;
     let mut count = 0usize;
     for (i, &m) in mask.iter().enumerate() {
-        if !m {
+        if !m || !keep(i) {
             continue;
         }
         let g = &gt.data[3 * i..3 * i + 3];
@@ -148,23 +163,40 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
         let target = v.image.planar();
         let normals = world_normals(&r, &v.camera);
         let scat_mae = r.layers.as_ref().and_then(|l| normal_mae(&world_normals(&l.0, &v.camera), v));
-        let m = ViewMetrics { name: v.name.clone(), psnr: psnr(rgb, &target), ssim: ssim(rgb, &target, w, h, 3), normal_mae_deg: normal_mae(&normals, v), normal_mae_scattering_deg: scat_mae };
+        let covered = |i: usize| r.layers.as_ref().is_some_and(|l| l.1.refl_plane(Plane::Alpha)[i] >= 0.5);
+        let coverage = match (&r.layers, &v.mask) {
+            (Some(_), Some(mask)) if mask.iter().any(|&m| m) => Some((0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64 / mask.iter().filter(|&&m| m).count() as f64),
+            _ => None,
+        };
+        let m = ViewMetrics {
+            name: v.name.clone(),
+            psnr: psnr(rgb, &target),
+            ssim: ssim(rgb, &target, w, h, 3),
+            normal_mae_deg: normal_mae(&normals, v),
+            normal_mae_scattering_deg: scat_mae,
+            reflection_coverage: coverage,
+            normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
+        };
         if let Some(dir) = out {
             write_outputs(dir, &v.name, &r, &normals, &v.camera)?;
         }
         per_view.push(m);
     }
     let k = per_view.len().max(1) as f64;
-    let maes: Vec<f64> = per_view.iter().filter_map(|m| m.normal_mae_deg).collect();
-    let scat_maes: Vec<f64> = per_view.iter().filter_map(|m| m.normal_mae_scattering_deg).collect();
+    let mean_of = |f: fn(&ViewMetrics) -> Option<f64>| -> Option<f64> {
+        let v: Vec<f64> = per_view.iter().filter_map(f).collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
     Ok(Metrics {
-        normal_mae_scattering_deg: (!scat_maes.is_empty()).then(|| scat_maes.iter().sum::<f64>() / scat_maes.len() as f64),
+        normal_mae_scattering_deg: mean_of(|m| m.normal_mae_scattering_deg),
+        reflection_coverage: mean_of(|m| m.reflection_coverage),
+        normal_mae_covered_deg: mean_of(|m| m.normal_mae_covered_deg),
         iteration: tr.iteration,
         gaussians: tr.scattering.set.len() + tr.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0),
         views: per_view.len(),
         psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,
-        normal_mae_deg: (!maes.is_empty()).then(|| maes.iter().sum::<f64>() / maes.len() as f64),
+        normal_mae_deg: mean_of(|m| m.normal_mae_deg),
         per_view,
     })
 }

@@ -193,8 +193,8 @@ impl ReflectionModel {
         let sc = rec.begin_scope("adam");
         let groups = [
             AdamGroup::single(x.lr_means),
-            AdamGroup::single(cfg.lr_scales),
-            AdamGroup::single(cfg.lr_quats),
+            AdamGroup::single(rc.lr_scales),
+            AdamGroup::single(rc.lr_quats),
             AdamGroup::single(rc.lr_opacity),
             // Material: f0 (3) at lr_f0, r at lr_r.
             AdamGroup { lr: rc.lr_f0, lr_rest: rc.lr_r, stride: MATERIAL, split: 3 },

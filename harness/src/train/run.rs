@@ -385,7 +385,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let cfg = &tr.cfg;
         if cfg.test_interval > 0 && r.iteration % cfg.test_interval == 0 && r.iteration < total && !data.test.is_empty() {
             let m = evaluate(&mut tr, &data.test, None)?;
-            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg});
+            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg, "reflection_coverage": m.reflection_coverage, "normal_mae_covered_deg": m.normal_mae_covered_deg});
             if !tty && !a.quiet {
                 eprintln!("[{}] test PSNR {:.2} SSIM {:.4}", r.iteration, m.psnr, m.ssim);
             }
@@ -467,7 +467,10 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
 /// metrics.json's record of a finished stage.
 fn stage_record(stage: &str, tr: &Trainer, since: Instant, m: Option<&Metrics>) -> serde_json::Value {
     let its = tr.schedule.stages.iter().find(|s| s.0.name() == stage).map(|s| s.1).unwrap_or(0);
-    let test = m.map(|m| json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg, "normal_mae_scattering_deg": m.normal_mae_scattering_deg}));
+    let test = m.map(|m| {
+        json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg, "normal_mae_scattering_deg": m.normal_mae_scattering_deg,
+               "reflection_coverage": m.reflection_coverage, "normal_mae_covered_deg": m.normal_mae_covered_deg})
+    });
     json!({"stage": stage, "iterations": its, "wall_s": since.elapsed().as_secs_f64(), "test": test})
 }
 
@@ -515,11 +518,13 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
     })?;
     Ok(if d.run {
         format!(
-            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05): {} reflection Gaussians, {} iterations",
+            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I), {} iterations",
             d.residual_mean,
             d.threshold,
             100.0 * d.residual_fraction_over_0_05,
             d.reflection_gaussians,
+            d.seeds,
+            d.copied,
             tr.cfg.reflection.iterations
         )
     } else {

@@ -149,31 +149,16 @@ fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
 /// it in front of their Stage I surface (depth margin 2%), and at least
 /// `agree` of those see residual there.
 fn in_hull(views: &[Prepared], x: V3, agree: f32) -> bool {
-    in_hull_margin(views, x, agree, 0.98)
-}
-
-/// [`in_hull`] with a view counting when the point is nearer than
-/// `margin` x its Stage I depth.
-fn in_hull_margin(views: &[Prepared], x: V3, agree: f32, margin: f64) -> bool {
     let (mut seen, mut hit) = (0u32, 0u32);
     for v in views {
         if let Some((i, z)) = v.pixel(x) {
-            if z < v.depth[i] as f64 * margin {
+            if z < v.depth[i] as f64 * 0.98 {
                 seen += 1;
                 hit += v.mask[i] as u32;
             }
         }
     }
     seen >= 3 && hit as f64 >= agree as f64 * seen as f64
-}
-
-/// Which of `points` (Stage I Gaussian centres, on its surfaces) lie in the
-/// residual hull, with a view counting when it sees the point at or in
-/// front of its Stage I surface (2% margin): surfaces Stage I did occupy
-/// but whose appearance every view contradicts (opaque reflectors).
-pub fn inside_residual_hull(views: &[SeedView], points: &[[f32; 3]], p: &SeedParams) -> Vec<bool> {
-    let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
-    points.iter().map(|x| in_hull_margin(&prepared, x.map(f64::from), p.agree, 1.02)).collect()
 }
 
 /// Seeds of the reflection set from the views' residuals and Stage I depths

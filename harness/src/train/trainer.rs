@@ -12,7 +12,7 @@ use super::init::{gaussians_from_points, random_points};
 use super::rng::Rng;
 use super::reflection::{residual, ReflStepInput, ReflectionModel};
 use super::scattering::{ScatteringModel, StepInput};
-use super::seed::{inside_residual_hull, residual_hull_seeds, SeedParams, SeedView};
+use super::seed::{residual_hull_seeds, SeedParams, SeedView};
 use crate::data::Dataset;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
@@ -263,12 +263,7 @@ impl Trainer {
                 let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
                 let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, ..SeedParams::default() };
                 let seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
-                let keep = if copy {
-                    vec![true; g.len()]
-                } else {
-                    let centres: Vec<[f32; 3]> = g.means.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-                    inside_residual_hull(&views, &centres, &p)
-                };
+                let keep = vec![copy; g.len()];
                 d.seeds = seeds.len() as u32;
                 d.copied = keep.iter().filter(|&&k| k).count() as u32;
                 self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, &g, &keep, &seeds, rc, self.cfg.adam_eps)?);
