@@ -85,22 +85,24 @@ fn logit(p: f32) -> f32 {
 }
 
 impl ReflectionModel {
-    /// A reflection set with the geometry of the given scattering Gaussians
-    /// (those with `keep[i]`) followed by the residual-hull `seeds` (opacity
+    /// A reflection set with the geometry of the scattering Gaussians `copy`
+    /// (when given) followed by the residual-hull `seeds` (opacity
     /// `seed_opacity`), f0 and r at their initial values, and a constant
     /// grey cube map (sigmoid 0.5).
-    pub fn from_scattering(ctx: &Arc<Context>, scat: &HostGaussians, keep: &[bool], seeds: &[Seed], rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
+    pub fn from_scattering(ctx: &Arc<Context>, copy: Option<&HostGaussians>, seeds: &[Seed], rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
         let mut h = HostGaussians::new(MATERIAL, 1);
         let (f0, r) = (logit(rc.f0_init), logit(rc.r_init));
-        for i in (0..scat.len()).filter(|&i| keep.get(i) == Some(&true)) {
-            let g = |v: &[f32], w: usize| -> Vec<f32> { v[w * i..w * (i + 1)].to_vec() };
-            h.push(g(&scat.means, 3).try_into().unwrap(), g(&scat.log_scales, 2).try_into().unwrap(), g(&scat.quats, 4).try_into().unwrap(), scat.opacity[i], &[f0, f0, f0, r]);
+        if let Some(scat) = copy {
+            for i in 0..scat.len() {
+                let g = |v: &[f32], w: usize| -> Vec<f32> { v[w * i..w * (i + 1)].to_vec() };
+                h.push(g(&scat.means, 3).try_into().unwrap(), g(&scat.log_scales, 2).try_into().unwrap(), g(&scat.quats, 4).try_into().unwrap(), scat.opacity[i], &[f0, f0, f0, r]);
+            }
         }
         for s in seeds {
             let ls = s.scale.ln();
             h.push(s.position, [ls, ls], quat_for_normal(s.normal), logit(rc.seed_opacity), &[f0, f0, f0, r]);
         }
-        if h.len() == 0 {
+        if h.is_empty() {
             bail!("the reflection set would be empty (reflection.init = '{}' found nothing to start from)", rc.init);
         }
         let env = HostEnvMap::constant(rc.env_res, 0.0)?;

@@ -177,6 +177,14 @@ impl ScatteringModel {
         Ok(())
     }
 
+    /// One plane (`Plane` order, 3 colour channels) of the last render of
+    /// a `width` x `height` view, downloaded.
+    pub fn last_plane(&self, width: u32, height: u32, plane: Plane) -> Result<Vec<f32>> {
+        let b = self.sizes.get(&(width, height)).context("no render of this size yet")?;
+        let n = b.frame.pixels() as usize;
+        b.frame.out.download_range(plane.index(3) as usize * n, n)
+    }
+
     /// Intersections (Gaussian, tile pairs) of the last view rendered.
     pub fn last_intersections(&self) -> u32 {
         self.sizes.values().map(|b| b.frame.last_intersections).max().unwrap_or(0)

@@ -226,7 +226,7 @@ impl Trainer {
         self.scat_cache.clear();
         // Per view: residual magnitude and Stage I surface depth (seeding).
         let mut maps: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
-        let (_, hull) = self.cfg.reflection.init_parts()?;
+        let (copy, hull) = self.cfg.reflection.init_parts()?;
         for (i, cam) in self.cameras.clone().iter().enumerate() {
             let n = (cam.width * cam.height) as usize;
             let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * n)?;
@@ -239,9 +239,8 @@ impl Trainer {
             on_view(i, cam, &r)?;
             self.scat_cache.push(buf);
             if hull && self.reflection.is_none() {
-                let planes = self.scattering.render(cam, sh, &self.background)?.planes;
-                let k = Plane::Median.index(3) as usize;
-                maps.push((mag.to_vec(), planes[k * n..(k + 1) * n].to_vec()));
+                // The frame still holds this view's render.
+                maps.push((mag.to_vec(), self.scattering.last_plane(cam.width, cam.height, Plane::Median)?));
             }
         }
         let views = self.cameras.len().max(1);
@@ -258,15 +257,13 @@ impl Trainer {
         if d.run {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
-                let (copy, hull) = rc.init_parts()?;
-                let g = self.scattering.set.params.download()?;
+                let g = if copy { Some(self.scattering.set.params.download()?) } else { None };
                 let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
                 let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, ..SeedParams::default() };
                 let seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
-                let keep = vec![copy; g.len()];
                 d.seeds = seeds.len() as u32;
-                d.copied = keep.iter().filter(|&&k| k).count() as u32;
-                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, &g, &keep, &seeds, rc, self.cfg.adam_eps)?);
+                d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
+                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, g.as_ref(), &seeds, rc, self.cfg.adam_eps)?);
             }
             d.reflection_gaussians = self.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0);
         } else {
