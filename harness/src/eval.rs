@@ -14,11 +14,10 @@ use serde::Serialize;
 use std::path::Path;
 use tgs_pipelines::{Camera, Plane};
 
-#[derive(Clone, Debug, Serialize)]
-pub struct ViewMetrics {
-    pub name: String,
-    pub psnr: f64,
-    pub ssim: f64,
+/// Normal errors on the transmissive mask (degrees); None without a ground
+/// truth or mask pixels, and the Stage II ones before Stage II.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct NormalMetrics {
     pub normal_mae_deg: Option<f64>,
     /// In Stage II: the scattering set's own normals (the field above uses
     /// the reflection set's where it covers the pixel).
@@ -32,6 +31,31 @@ pub struct ViewMetrics {
     pub normal_mae_covered_deg: Option<f64>,
 }
 
+impl NormalMetrics {
+    /// Field by field, the mean over the views that have it.
+    fn mean<'a>(views: impl Iterator<Item = &'a NormalMetrics> + Clone) -> NormalMetrics {
+        let mean_of = |f: fn(&NormalMetrics) -> Option<f64>| -> Option<f64> {
+            let v: Vec<f64> = views.clone().filter_map(f).collect();
+            (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+        };
+        NormalMetrics {
+            normal_mae_deg: mean_of(|m| m.normal_mae_deg),
+            normal_mae_scattering_deg: mean_of(|m| m.normal_mae_scattering_deg),
+            reflection_coverage: mean_of(|m| m.reflection_coverage),
+            normal_mae_covered_deg: mean_of(|m| m.normal_mae_covered_deg),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ViewMetrics {
+    pub name: String,
+    pub psnr: f64,
+    pub ssim: f64,
+    #[serde(flatten)]
+    pub normals: NormalMetrics,
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct Metrics {
     pub iteration: u32,
@@ -39,13 +63,8 @@ pub struct Metrics {
     pub views: usize,
     pub psnr: f64,
     pub ssim: f64,
-    pub normal_mae_deg: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub normal_mae_scattering_deg: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub reflection_coverage: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub normal_mae_covered_deg: Option<f64>,
+    #[serde(flatten)]
+    pub normals: NormalMetrics,
     pub per_view: Vec<ViewMetrics>,
 }
 
@@ -172,10 +191,12 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
             name: v.name.clone(),
             psnr: psnr(rgb, &target),
             ssim: ssim(rgb, &target, w, h, 3),
-            normal_mae_deg: normal_mae(&normals, v),
-            normal_mae_scattering_deg: scat_mae,
-            reflection_coverage: coverage,
-            normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
+            normals: NormalMetrics {
+                normal_mae_deg: normal_mae(&normals, v),
+                normal_mae_scattering_deg: scat_mae,
+                reflection_coverage: coverage,
+                normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
+            },
         };
         if let Some(dir) = out {
             write_outputs(dir, &v.name, &r, &normals, &v.camera)?;
@@ -183,20 +204,13 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
         per_view.push(m);
     }
     let k = per_view.len().max(1) as f64;
-    let mean_of = |f: fn(&ViewMetrics) -> Option<f64>| -> Option<f64> {
-        let v: Vec<f64> = per_view.iter().filter_map(f).collect();
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-    };
     Ok(Metrics {
-        normal_mae_scattering_deg: mean_of(|m| m.normal_mae_scattering_deg),
-        reflection_coverage: mean_of(|m| m.reflection_coverage),
-        normal_mae_covered_deg: mean_of(|m| m.normal_mae_covered_deg),
+        normals: NormalMetrics::mean(per_view.iter().map(|m| &m.normals)),
         iteration: tr.iteration,
         gaussians: tr.scattering.set.len() + tr.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0),
         views: per_view.len(),
         psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,
-        normal_mae_deg: mean_of(|m| m.normal_mae_deg),
         per_view,
     })
 }

@@ -79,7 +79,7 @@ fn stage_one_trains_and_resumes_exactly() {
     let m = o.metrics.clone().expect("test metrics");
     let ds = Dataset::load(&scene(), &LoadOptions { background: [0.0; 3], ..Default::default() }).unwrap();
     let baseline = mean_colour_psnr(&ds);
-    eprintln!("test PSNR {:.2} dB (mean-colour baseline {baseline:.2} dB), SSIM {:.3}, normal MAE {:?}; loss {:.4} -> {:.4}", m.psnr, m.ssim, m.normal_mae_deg, o.first_loss.unwrap(), o.last_loss);
+    eprintln!("test PSNR {:.2} dB (mean-colour baseline {baseline:.2} dB), SSIM {:.3}, normal MAE {:?}; loss {:.4} -> {:.4}", m.psnr, m.ssim, m.normals.normal_mae_deg, o.first_loss.unwrap(), o.last_loss);
     // The log: one line per iteration; the loss of the last 20 well below the first 10.
     let log = log_lines(&full);
     assert_eq!(log.len(), 300);
@@ -103,7 +103,7 @@ fn stage_one_trains_and_resumes_exactly() {
     // camera-facing normals ~57°).
     assert!(m.psnr > psnr_at(100) + 2.0 && m.psnr > psnr_at(200), "final {:.2} dB after {:.2} at 100 and {:.2} at 200", m.psnr, psnr_at(100), psnr_at(200));
     assert!(m.psnr > baseline + 5.0, "test PSNR {:.2} vs mean-colour baseline {baseline:.2}", m.psnr);
-    let mae = m.normal_mae_deg.expect("normal MAE on the masks");
+    let mae = m.normals.normal_mae_deg.expect("normal MAE on the masks");
     assert!(mae.is_finite() && mae < 55.0, "normal MAE {mae:.2}°");
     // Outputs people open.
     let ply = tgs::export::ply::read_splats(&full.join("point_cloud.ply")).unwrap();

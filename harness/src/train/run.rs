@@ -260,6 +260,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     }
     // With --from: the other run's Stage I record (metrics.json `stages`).
     let mut from_record: Option<serde_json::Value> = None;
+    if !a.resume && ckpt.is_file() {
+        bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
+    }
     let (mut tr, data, dataset_str) = if a.resume {
         if !ckpt.is_file() {
             bail!("{}: no checkpoint to resume from", ckpt.display());
@@ -288,15 +291,11 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
         truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
         (tr, data, dataset)
+    } else if let Some(run) = &a.from {
+        let (tr, data, dataset, stage1) = start_from(ctx, a, run)?;
+        from_record = Some(stage1);
+        (tr, data, dataset)
     } else {
-        if ckpt.is_file() {
-            bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
-        }
-        if let Some(run) = &a.from {
-            let (tr, data, dataset, stage1) = start_from(ctx, a, run)?;
-            from_record = Some(stage1);
-            (tr, data, dataset)
-        } else {
         let cfg = config_from_args(a)?;
         let dir = dataset_dir(a, a.quiet)?;
         let data = load_dataset(&dir, &cfg)?;
@@ -304,7 +303,6 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         // Absolute, so that --resume, eval and render work from any directory.
         let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
         (tr, data, abs.to_string_lossy().into_owned())
-        }
     };
     atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
     install_signal_handler();
@@ -385,7 +383,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let cfg = &tr.cfg;
         if cfg.test_interval > 0 && r.iteration % cfg.test_interval == 0 && r.iteration < total && !data.test.is_empty() {
             let m = evaluate(&mut tr, &data.test, None)?;
-            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg, "reflection_coverage": m.reflection_coverage, "normal_mae_covered_deg": m.normal_mae_covered_deg});
+            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normals.normal_mae_deg, "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg});
             if !tty && !a.quiet {
                 eprintln!("[{}] test PSNR {:.2} SSIM {:.4}", r.iteration, m.psnr, m.ssim);
             }
@@ -450,7 +448,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     atomic_write(&a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?.as_bytes())?;
     if !a.quiet {
         if let Some(m) = &metrics {
-            let mae = m.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
+            let mae = m.normals.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
             eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{mae}", tr.iteration, tr.scattering.set.len(), m.psnr, m.ssim);
         }
         if a.profile {
@@ -468,8 +466,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
 fn stage_record(stage: &str, tr: &Trainer, since: Instant, m: Option<&Metrics>) -> serde_json::Value {
     let its = tr.schedule.stages.iter().find(|s| s.0.name() == stage).map(|s| s.1).unwrap_or(0);
     let test = m.map(|m| {
-        json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normal_mae_deg, "normal_mae_scattering_deg": m.normal_mae_scattering_deg,
-               "reflection_coverage": m.reflection_coverage, "normal_mae_covered_deg": m.normal_mae_covered_deg})
+        json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normals.normal_mae_deg, "normal_mae_scattering_deg": m.normals.normal_mae_scattering_deg,
+               "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg})
     });
     json!({"stage": stage, "iterations": its, "wall_s": since.elapsed().as_secs_f64(), "test": test})
 }
