@@ -19,3 +19,5 @@ pub mod train;
 pub use train::{Adam, AdamGroup, DensifyParams, DensifyReport, Densifier, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};
 pub mod reflection;
 pub use reflection::{EnvMap, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
+pub mod mlp;
+pub use mlp::{Mlp, MlpScratch, MlpShape};

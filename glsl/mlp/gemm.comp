@@ -1,0 +1,115 @@
+#version 460
+// The light-field MLP's one GEMM (pipelines/src/mlp): C = post(pre(A) B),
+// tiled through shared memory, one 32 x 32 tile of C per workgroup of 64
+// invocations, each owning a 4 x 4 block (rows ty + 8r, columns tx + 8c).
+// Every element of C is summed in increasing k by one invocation, so the
+// result does not depend on the subgroup size or the workgroup schedule.
+//
+// Elements: A(i, k) = a[a_off + i a_rs + k a_cs], B(k, j) likewise, with
+// optional implicit ones: A(i, a_ones_k) = 1 (the bias column of an
+// augmented input [X, 1]) and B(k, b_ones_j) = 1 (the column that turns a
+// weight gradient's last column into the bias gradient). pre: with a_deriv != 0, A is an output gradient dY and the
+// product uses dZ = dY * act'(Y), Y read at y_off + i y_rs + k y_cs
+// (1: ReLU, Y > 0; 2: sigmoid, Y (1 - Y)). post: c_act 1 ReLU, 2 sigmoid.
+//
+// The k range is split over workgroups in z: workgroup z sums
+// k in [z k_chunk, min((z + 1) k_chunk, kdim)) and writes its C at
+// c_off + z c_zstride (the weight gradients' per-chunk partials).
+#extension GL_EXT_control_flow_attributes : require
+
+layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
+
+layout(std430, binding = 0) readonly buffer A { float a[]; };
+layout(std430, binding = 1) readonly buffer B { float b[]; };
+layout(std430, binding = 2) readonly buffer Y { float y[]; };
+layout(std430, binding = 3) buffer C { float c[]; };
+
+layout(push_constant) uniform Push {
+    uint m, n, kdim, k_chunk;
+    uint a_off, a_rs, a_cs, a_ones_k;
+    uint b_off, b_rs, b_cs, b_ones_j;
+    uint y_off, y_rs, y_cs, a_deriv;
+    uint c_off, c_rs, c_zstride, c_act;
+} pc;
+
+const uint TM = 32u, TN = 32u, TK = 16u;
+const uint NONE = 0xffffffffu;
+
+shared float As[TK][TM];
+shared float Bs[TK][TN];
+
+float load_a(uint i, uint k) {
+    if (k == pc.a_ones_k) {
+        return 1.0;
+    }
+    float v = a[pc.a_off + i * pc.a_rs + k * pc.a_cs];
+    if (pc.a_deriv == 1u) {
+        v = y[pc.y_off + i * pc.y_rs + k * pc.y_cs] > 0.0 ? v : 0.0;
+    } else if (pc.a_deriv == 2u) {
+        float s = y[pc.y_off + i * pc.y_rs + k * pc.y_cs];
+        v *= s * (1.0 - s);
+    }
+    return v;
+}
+
+float load_b(uint k, uint j) {
+    if (j == pc.b_ones_j) {
+        return 1.0;
+    }
+    return b[pc.b_off + k * pc.b_rs + j * pc.b_cs];
+}
+
+void main() {
+    uint lid = gl_LocalInvocationID.x;
+    uint tx = lid % 8u, ty = lid / 8u;
+    uint i0 = gl_WorkGroupID.y * TM, j0 = gl_WorkGroupID.x * TN;
+    uint kbeg = gl_WorkGroupID.z * pc.k_chunk;
+    uint kend = min(kbeg + pc.k_chunk, pc.kdim);
+
+    float acc[4][4];
+    [[unroll]] for (uint r = 0u; r < 4u; r++) {
+        [[unroll]] for (uint q = 0u; q < 4u; q++) {
+            acc[r][q] = 0.0;
+        }
+    }
+    for (uint k0 = kbeg; k0 < kend; k0 += TK) {
+        // 64 invocations stage TK x 32 of A and of B, 8 elements each.
+        [[unroll]] for (uint e = 0u; e < 8u; e++) {
+            uint idx = lid + 64u * e;
+            uint kk = idx / TM, ii = idx % TM;
+            uint k = k0 + kk, i = i0 + ii, j = j0 + ii;
+            As[kk][ii] = (k < kend && i < pc.m) ? load_a(i, k) : 0.0;
+            Bs[kk][ii] = (k < kend && j < pc.n) ? load_b(k, j) : 0.0;
+        }
+        barrier();
+        [[unroll]] for (uint kk = 0u; kk < TK; kk++) {
+            float av[4], bv[4];
+            [[unroll]] for (uint r = 0u; r < 4u; r++) {
+                av[r] = As[kk][ty + 8u * r];
+                bv[r] = Bs[kk][tx + 8u * r];
+            }
+            [[unroll]] for (uint r = 0u; r < 4u; r++) {
+                [[unroll]] for (uint q = 0u; q < 4u; q++) {
+                    acc[r][q] += av[r] * bv[q];
+                }
+            }
+        }
+        barrier();
+    }
+    uint base = pc.c_off + gl_WorkGroupID.z * pc.c_zstride;
+    [[unroll]] for (uint r = 0u; r < 4u; r++) {
+        uint i = i0 + ty + 8u * r;
+        [[unroll]] for (uint q = 0u; q < 4u; q++) {
+            uint j = j0 + tx + 8u * q;
+            if (i < pc.m && j < pc.n) {
+                float v = acc[r][q];
+                if (pc.c_act == 1u) {
+                    v = max(v, 0.0);
+                } else if (pc.c_act == 2u) {
+                    v = 1.0 / (1.0 + exp(-v));
+                }
+                c[base + i * pc.c_rs + j] = v;
+            }
+        }
+    }
+}

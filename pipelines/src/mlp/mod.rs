@@ -1,0 +1,310 @@
+//! Stage III's reflection light field Phi(x, w) (paper §3.4, method-notes
+//! §3.5), GLSL in `glsl/mlp/`:
+//! - `encode`: the Fourier features gamma(x), gamma(w) of each sample;
+//! - `gemm`: one tiled GEMM for the three products of every layer (forward
+//!   with bias and activation; the input gradient dX = dZ W; the weight
+//!   gradient dW = dZ^T [X, 1] as per-chunk partials in their own slots);
+//! - `reduce`: the partials summed per parameter in a fixed order.
+//!
+//! No atomics: every output has one writer and a fixed summation order that
+//! depends on the sample count only, so gradients are bit-identical across
+//! reruns and subgroup sizes. The parameters are one flat vector (layer by
+//! layer, each [W | b] row-major, [`MlpShape::offset`]) that a single Adam
+//! dispatch updates.
+
+mod shape;
+
+pub use shape::{MlpShape, OUT, SAMPLE};
+
+use crate::shaders;
+use crate::train::{grid, kernel};
+use anyhow::{bail, Result};
+use bytemuck::{Pod, Zeroable};
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Recorder};
+
+/// GEMM tile (rows and columns of C per workgroup; glsl/mlp/gemm.comp).
+const TILE: u32 = 32;
+/// At most this many sample chunks hold weight-gradient partials.
+const MAX_CHUNKS: u32 = 16;
+/// Smallest chunk of samples per weight-gradient partial.
+const MIN_CHUNK: u32 = 256;
+const NONE: u32 = u32::MAX;
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Default)]
+struct GemmPush {
+    m: u32,
+    n: u32,
+    kdim: u32,
+    k_chunk: u32,
+    a_off: u32,
+    a_rs: u32,
+    a_cs: u32,
+    a_ones_k: u32,
+    b_off: u32,
+    b_rs: u32,
+    b_cs: u32,
+    b_ones_j: u32,
+    y_off: u32,
+    y_rs: u32,
+    y_cs: u32,
+    a_deriv: u32,
+    c_off: u32,
+    c_rs: u32,
+    c_zstride: u32,
+    c_act: u32,
+}
+
+const RELU: u32 = 1;
+const SIGMOID: u32 = 2;
+
+/// Chunk of samples per weight-gradient partial for `n` samples, and the
+/// number of chunks (at most [`MAX_CHUNKS`]).
+pub fn weight_chunks(n: u32) -> (u32, u32) {
+    let chunk = n.div_ceil(MAX_CHUNKS).next_multiple_of(16).max(MIN_CHUNK);
+    (chunk, n.div_ceil(chunk).max(1))
+}
+
+/// Activations and gradients of up to `capacity` samples.
+pub struct MlpScratch {
+    shape: MlpShape,
+    capacity: u32,
+    /// Inputs, [`SAMPLE`] floats per sample (normalized x, unit w); the caller writes them.
+    pub samples: Buffer<f32>,
+    /// Outputs, RGB per sample, after [`Mlp::record_forward`].
+    pub out: Buffer<f32>,
+    in0: Buffer<f32>,
+    cat: Buffer<f32>,
+    /// Hidden outputs by layer; the layer before the skip writes into `cat`.
+    hidden: Vec<Option<Buffer<f32>>>,
+    d: [Buffer<f32>; 2],
+    part: Buffer<f32>,
+}
+
+impl MlpScratch {
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+    pub fn shape(&self) -> MlpShape {
+        self.shape
+    }
+    /// Bytes of device memory held.
+    pub fn bytes(&self) -> u64 {
+        let mut b = self.samples.bytes() + self.out.bytes() + self.in0.bytes() + self.cat.bytes() + self.part.bytes();
+        b += self.hidden.iter().flatten().map(|h| h.bytes()).sum::<u64>();
+        b + self.d.iter().map(|d| d.bytes()).sum::<u64>()
+    }
+    /// gamma(x) per sample (row stride `dx`), after a forward.
+    pub fn first_input(&self) -> &Buffer<f32> {
+        &self.in0
+    }
+    /// The skip layer's input [h, gamma(x), gamma(w)] per sample (row
+    /// stride `cat_width`), after a forward.
+    pub fn skip_input(&self) -> &Buffer<f32> {
+        &self.cat
+    }
+    /// Layer `l`'s input buffer and row stride.
+    fn input(&self, l: u32) -> (&Buffer<f32>, u32) {
+        let s = &self.shape;
+        match l {
+            0 => (&self.in0, s.dx()),
+            l if l == s.skip => (&self.cat, s.cat_width()),
+            _ => (self.hidden[l as usize - 1].as_ref().expect("hidden layer buffer"), s.width),
+        }
+    }
+    /// Layer `l`'s output buffer and row stride.
+    fn output(&self, l: u32) -> (&Buffer<f32>, u32) {
+        let s = &self.shape;
+        if l == s.depth {
+            (&self.out, OUT)
+        } else if l + 1 == s.skip {
+            (&self.cat, s.cat_width())
+        } else {
+            (self.hidden[l as usize].as_ref().expect("hidden layer buffer"), s.width)
+        }
+    }
+}
+
+pub struct Mlp {
+    ctx: Arc<Context>,
+    gemm: Kernel,
+    encode: Kernel,
+    reduce: Kernel,
+}
+
+impl Mlp {
+    pub fn new(ctx: &Arc<Context>) -> Result<Mlp> {
+        let gemm = Kernel::new(
+            ctx,
+            &KernelDesc { name: "mlp.gemm", spirv: shaders::MLP_GEMM, spec: &[], push_bytes: std::mem::size_of::<GemmPush>() as u32, subgroup_size: None, full_subgroups: false },
+        )?;
+        Ok(Mlp { ctx: ctx.clone(), gemm, encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 16)?, reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 12)? })
+    }
+
+    /// Memory for up to `capacity` samples of `shape`.
+    pub fn scratch(&self, shape: MlpShape, capacity: u32) -> Result<MlpScratch> {
+        shape.validate()?;
+        let ctx = &self.ctx;
+        let cap = capacity.max(1);
+        let max = ctx.caps().max_storage_buffer_range / 4;
+        let widest = shape.cat_width().max(shape.dx()) as u64;
+        if cap as u64 * widest > max || MAX_CHUNKS as u64 * shape.params() as u64 > max {
+            bail!(
+                "a light field of {} x {} on {capacity} samples needs {} floats in one buffer; this device binds at most {max} (evaluate fewer pixels: a smaller image or a higher threshold)",
+                shape.depth,
+                shape.width,
+                (cap as u64 * widest).max(MAX_CHUNKS as u64 * shape.params() as u64)
+            );
+        }
+        let c = cap as usize;
+        let w = shape.width as usize;
+        let hidden = (0..shape.depth)
+            .map(|l| if l + 1 == shape.skip { Ok(None) } else { Buffer::uninit(ctx, &format!("mlp.h{l}"), c * w).map(Some) })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(MlpScratch {
+            shape,
+            capacity: cap,
+            samples: Buffer::uninit(ctx, "mlp.samples", c * SAMPLE as usize)?,
+            out: Buffer::uninit(ctx, "mlp.out", c * OUT as usize)?,
+            in0: Buffer::uninit(ctx, "mlp.in0", c * shape.dx() as usize)?,
+            cat: Buffer::uninit(ctx, "mlp.cat", c * shape.cat_width() as usize)?,
+            hidden,
+            d: [Buffer::uninit(ctx, "mlp.d0", c * w)?, Buffer::uninit(ctx, "mlp.d1", c * w)?],
+            part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
+        })
+    }
+
+    fn check(s: &MlpScratch, params: &Buffer<f32>, n: u32) -> Result<()> {
+        if n > s.capacity {
+            bail!("{n} light-field samples exceed the scratch's {}", s.capacity);
+        }
+        if params.len() < s.shape.params() as usize {
+            bail!("'{}' holds {} values; the light field has {} parameters", params.name(), params.len(), s.shape.params());
+        }
+        Ok(())
+    }
+
+    fn dispatch(&self, rec: &mut Recorder, p: &GemmPush, a: &Buffer<f32>, b: &Buffer<f32>, y: &Buffer<f32>, c: &Buffer<f32>, chunks: u32) -> Result<()> {
+        let groups = [p.n.div_ceil(TILE), p.m.div_ceil(TILE), chunks];
+        rec.dispatch(&self.gemm, &[a.binding(), b.binding(), y.binding(), c.binding()], bytemuck::bytes_of(p), groups)
+    }
+
+    /// Record Phi on the first `n` samples of `s.samples` into `s.out`.
+    pub fn record_forward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, s: &MlpScratch) -> Result<()> {
+        Self::check(s, params, n)?;
+        if n == 0 {
+            return Ok(());
+        }
+        let sh = s.shape;
+        let sc = rec.begin_scope("mlp.encode");
+        let push = [n, sh.levels_x, sh.levels_w, sh.width];
+        rec.dispatch(&self.encode, &[s.samples.binding(), s.in0.binding(), s.cat.binding()], bytemuck::cast_slice(&push), grid(&self.ctx, n))?;
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("mlp.forward");
+        for l in 0..sh.layers() {
+            let (x, k) = s.input(l);
+            let (out, ld) = s.output(l);
+            let p = GemmPush {
+                m: n,
+                n: sh.fan_out(l),
+                kdim: k + 1,
+                k_chunk: k + 1,
+                a_off: 0,
+                a_rs: k,
+                a_cs: 1,
+                a_ones_k: k,
+                b_off: sh.offset(l),
+                b_rs: 1,
+                b_cs: k + 1,
+                b_ones_j: NONE,
+                c_rs: ld,
+                c_act: if l == sh.depth { SIGMOID } else { RELU },
+                ..Default::default()
+            };
+            self.dispatch(rec, &p, x, params, x, out, 1)?;
+        }
+        rec.end_scope(sc);
+        Ok(())
+    }
+
+    /// Record the backward of the last [`Mlp::record_forward`] (same `n`,
+    /// same parameters): `d_out` (RGB per sample, dL/dPhi) to `grads`
+    /// (every parameter, overwritten). The inputs get no gradient (the
+    /// reflection geometry is frozen in Stage III).
+    pub fn record_backward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+        Self::check(s, params, n)?;
+        let sh = s.shape;
+        if grads.len() < sh.params() as usize {
+            bail!("'{}' holds {} values; the light field has {} parameters", grads.name(), grads.len(), sh.params());
+        }
+        if d_out.len() < (n * OUT) as usize {
+            bail!("'{}' holds {} values; {n} samples need {}", d_out.name(), d_out.len(), n * OUT);
+        }
+        if n == 0 {
+            rec.fill(&grads.slice(0, sh.params() as usize), 0)?;
+            return Ok(());
+        }
+        let (chunk, chunks) = weight_chunks(n);
+        let sc = rec.begin_scope("mlp.backward");
+        for l in (0..sh.layers()).rev() {
+            let (x, k) = s.input(l);
+            let (y, y_ld) = s.output(l);
+            // This layer's output gradient: d_out for the head, else the
+            // ping-pong buffer the layer above wrote (row stride width).
+            let (dy, d_ld) = if l == sh.depth { (d_out, OUT) } else { (&s.d[(l % 2) as usize], sh.width) };
+            let deriv = if l == sh.depth { SIGMOID } else { RELU };
+            let j = sh.fan_out(l);
+            // dW|db (J x (K + 1)) = dZ^T [X, 1], per chunk of samples.
+            let pw = GemmPush {
+                m: j,
+                n: k + 1,
+                kdim: n,
+                k_chunk: chunk,
+                a_rs: 1,
+                a_cs: d_ld,
+                a_ones_k: NONE,
+                b_rs: k,
+                b_cs: 1,
+                b_ones_j: k,
+                y_rs: 1,
+                y_cs: y_ld,
+                a_deriv: deriv,
+                c_off: sh.offset(l),
+                c_rs: k + 1,
+                c_zstride: sh.params(),
+                ..Default::default()
+            };
+            self.dispatch(rec, &pw, dy, x, y, &s.part, chunks)?;
+            if l > 0 {
+                // dH_{l-1} (n x width) = dZ W[:, :width] (the skip layer's
+                // encoded columns need no gradient).
+                let pd = GemmPush {
+                    m: n,
+                    n: sh.width,
+                    kdim: j,
+                    k_chunk: j,
+                    a_rs: d_ld,
+                    a_cs: 1,
+                    a_ones_k: NONE,
+                    b_off: sh.offset(l),
+                    b_rs: k + 1,
+                    b_cs: 1,
+                    b_ones_j: NONE,
+                    y_rs: y_ld,
+                    y_cs: 1,
+                    a_deriv: deriv,
+                    c_rs: sh.width,
+                    ..Default::default()
+                };
+                self.dispatch(rec, &pd, dy, params, y, &s.d[((l - 1) % 2) as usize], 1)?;
+            }
+        }
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("mlp.reduce");
+        let push = [sh.params(), chunks, sh.params()];
+        rec.dispatch(&self.reduce, &[s.part.binding(), grads.binding()], bytemuck::cast_slice(&push), grid(&self.ctx, sh.params()))?;
+        rec.end_scope(sc);
+        Ok(())
+    }
+}

@@ -1,0 +1,222 @@
+//! The light-field MLP (pipelines/src/mlp) against its f64 reference
+//! (tests/src/mlp_ref.rs): the Fourier encoding at L = 12 for |x| <= 1 and
+//! beyond, forward outputs and every parameter's gradient for small
+//! networks (sample counts not a multiple of the tile, one chunk and many)
+//! and the paper's 8 x 256 on a few samples; the reference's own gradient
+//! against central differences; no NaN/Inf with saturated heads and huge or
+//! denormal inputs; bit-identical reruns.
+
+use tgs_engine::{Buffer, Recorder};
+use tgs_pipelines::mlp::{weight_chunks, Mlp, MlpShape, OUT};
+use tgs_tests::mlp_ref;
+use tgs_tests::{check_validation, ctx_shared, seed, Rng};
+
+fn uni(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
+    lo + (hi - lo) * (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+}
+
+fn random_samples(rng: &mut Rng, n: usize, extent: f64) -> Vec<[f64; 6]> {
+    (0..n)
+        .map(|_| {
+            let mut w = [0.0; 3];
+            loop {
+                for c in &mut w {
+                    *c = uni(rng, -1.0, 1.0);
+                }
+                let l = w.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if l > 0.1 && l < 1.0 {
+                    w = w.map(|v| v / l);
+                    break;
+                }
+            }
+            let r = |v: f64| v as f32 as f64;
+            [r(uni(rng, -extent, extent)), r(uni(rng, -extent, extent)), r(uni(rng, -extent, extent)), r(w[0]), r(w[1]), r(w[2])]
+        })
+        .collect()
+}
+
+struct GpuRun {
+    out: Vec<f32>,
+    grads: Vec<f32>,
+}
+
+fn gpu(shape: MlpShape, params: &[f32], samples: &[[f64; 6]], d_out: &[[f64; 3]]) -> GpuRun {
+    let ctx = ctx_shared();
+    let mlp = Mlp::new(ctx).unwrap();
+    let n = samples.len() as u32;
+    let s = mlp.scratch(shape, n).unwrap();
+    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    if !flat.is_empty() {
+        s.samples.upload(&flat).unwrap();
+    }
+    let p = Buffer::from_slice(ctx, "params", params).unwrap();
+    let d: Vec<f32> = d_out.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    let d = Buffer::from_slice(ctx, "d_out", if d.is_empty() { &[0.0][..] } else { &d }).unwrap();
+    let g = Buffer::uninit(ctx, "grads", params.len()).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    mlp.record_forward(&mut rec, &p, n, &s).unwrap();
+    mlp.record_backward(&mut rec, &p, n, &d, &g, &s).unwrap();
+    rec.submit_and_wait().unwrap();
+    let out = if n > 0 { s.out.download_range(0, (n * OUT) as usize).unwrap() } else { vec![] };
+    let r = GpuRun { out, grads: g.download().unwrap() };
+    check_validation(ctx);
+    r
+}
+
+/// |gpu - ref| <= tol (scale + |ref|) for every element, scale the
+/// largest |ref|; returns the worst ratio.
+fn compare(what: &str, gpu: &[f32], reference: &[f64], tol: f64) -> f64 {
+    assert_eq!(gpu.len(), reference.len(), "{what}: lengths");
+    let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-30);
+    let mut worst = 0.0f64;
+    for (i, (g, r)) in gpu.iter().zip(reference).enumerate() {
+        assert!(g.is_finite(), "{what}[{i}] = {g}");
+        let e = (*g as f64 - r).abs() / (tol * (scale + r.abs()));
+        assert!(e <= 1.0, "{what}[{i}]: gpu {g} vs f64 {r} (scale {scale})");
+        worst = worst.max(e);
+    }
+    worst
+}
+
+fn check_network(shape: MlpShape, n: usize, extent: f64, rng: &mut Rng) {
+    let params: Vec<f32> = shape.init_params(rng.next_u64());
+    let p64: Vec<f64> = params.iter().map(|&v| v as f64).collect();
+    let samples = random_samples(rng, n, extent);
+    let d_out: Vec<[f64; 3]> = (0..n).map(|_| [0, 1, 2].map(|_| uni(rng, -1.0, 1.0) as f32 as f64)).collect();
+    let run = gpu(shape, &params, &samples, &d_out);
+    let out_ref: Vec<f64> = samples.iter().flat_map(|s| mlp_ref::forward(&shape, &p64, s).outputs.last().unwrap().clone()).collect();
+    compare(&format!("{shape:?} n={n} outputs"), &run.out, &out_ref, 2e-5);
+    let g_ref = mlp_ref::backward(&shape, &p64, &samples, &d_out);
+    compare(&format!("{shape:?} n={n} gradients"), &run.grads, &g_ref, 1e-4);
+}
+
+const SMALL: MlpShape = MlpShape { depth: 3, width: 5, skip: 1, levels_x: 2, levels_w: 1 };
+
+#[test]
+fn small_networks_match_reference() {
+    let mut rng = Rng(seed("mlp small"));
+    // 1 sample, a partial tile, several tiles; 2,000 samples make 8 weight chunks.
+    for n in [1, 37, 100] {
+        check_network(SMALL, n, 1.0, &mut rng);
+    }
+    assert!(weight_chunks(2000).1 > 4);
+    check_network(MlpShape { depth: 4, width: 40, skip: 2, levels_x: 6, levels_w: 4 }, 2000, 1.0, &mut rng);
+    // Width above one tile, skip right before the head.
+    check_network(MlpShape { depth: 2, width: 70, skip: 1, levels_x: 3, levels_w: 2 }, 65, 1.3, &mut rng);
+}
+
+#[test]
+fn paper_network_on_a_few_samples() {
+    let mut rng = Rng(seed("mlp paper"));
+    let shape = MlpShape::PAPER;
+    assert_eq!(shape.cat_width(), 256 + 75 + 75);
+    check_network(shape, 5, 1.0, &mut rng);
+}
+
+#[test]
+fn reference_gradient_matches_finite_differences() {
+    let mut rng = Rng(seed("mlp fd"));
+    let shape = SMALL;
+    let params: Vec<f64> = shape.init_params(rng.next_u64()).iter().map(|&v| v as f64).collect();
+    let samples = random_samples(&mut rng, 4, 1.0);
+    let d_out: Vec<[f64; 3]> = (0..4).map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0))).collect();
+    let loss = |p: &[f64]| -> f64 {
+        samples.iter().zip(&d_out).map(|(s, d)| mlp_ref::forward(&shape, p, s).outputs.last().unwrap().iter().zip(d).map(|(o, d)| o * d).sum::<f64>()).sum()
+    };
+    let g = mlp_ref::backward(&shape, &params, &samples, &d_out);
+    let h = 1e-6;
+    let mut checked = 0;
+    for i in 0..params.len() {
+        let mut p = params.clone();
+        p[i] += h;
+        let up = loss(&p);
+        p[i] -= 2.0 * h;
+        let fd = (up - loss(&p)) / (2.0 * h);
+        // A ReLU kink within h of a sample makes the difference one-sided.
+        assert!((fd - g[i]).abs() <= 1e-6 + 1e-5 * g[i].abs(), "param {i}: analytic {} vs fd {fd}", g[i]);
+        checked += 1;
+    }
+    assert_eq!(checked, shape.params() as usize);
+}
+
+#[test]
+fn encoding_at_twelve_levels_matches_f64() {
+    let ctx = ctx_shared();
+    let mlp = Mlp::new(ctx).unwrap();
+    let shape = MlpShape { depth: 2, width: 4, skip: 1, levels_x: 12, levels_w: 12 };
+    let mut rng = Rng(seed("mlp encode"));
+    let mut samples: Vec<[f64; 6]> = vec![
+        [1.0, -1.0, 0.0, 1.0, 0.0, 0.0],
+        [0.999_999_9, -0.999_999_9, 1e-40, 0.0, -1.0, 0.0],
+        [1.7, -2.3, 3.9, 0.0, 0.0, 1.0],
+        [0.5, 0.25, -0.125, 0.577_350_3, 0.577_350_3, -0.577_350_3],
+    ];
+    samples.extend(random_samples(&mut rng, 60, 1.0));
+    samples.extend(random_samples(&mut rng, 60, 4.0));
+    let samples: Vec<[f64; 6]> = samples.iter().map(|s| s.map(|v| v as f32 as f64)).collect();
+    let n = samples.len() as u32;
+    let s = mlp.scratch(shape, n).unwrap();
+    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    s.samples.upload(&flat).unwrap();
+    let p = Buffer::from_slice(ctx, "params", &shape.init_params(1)).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    mlp.record_forward(&mut rec, &p, n, &s).unwrap();
+    rec.submit_and_wait().unwrap();
+    let in0 = s.first_input().download_range(0, (n * shape.dx()) as usize).unwrap();
+    let cat = s.skip_input().download_range(0, (n * shape.cat_width()) as usize).unwrap();
+    let mut worst = 0.0f64;
+    for (i, smp) in samples.iter().enumerate() {
+        let gx = mlp_ref::encode([smp[0], smp[1], smp[2]], 12);
+        let gw = mlp_ref::encode([smp[3], smp[4], smp[5]], 12);
+        let row = &cat[i * shape.cat_width() as usize..(i + 1) * shape.cat_width() as usize];
+        for (f, r) in gx.iter().enumerate() {
+            let a = in0[i * shape.dx() as usize + f] as f64;
+            let b = row[shape.width as usize + f] as f64;
+            // f32 sin/cos of a reduced argument: absolute error ~1e-6
+            // (unreduced, sin(2^11 pi x) would be off by ~1e-3).
+            assert!((a - r).abs() < 2e-5 && (b - r).abs() < 2e-5, "sample {i} gamma(x)[{f}]: gpu {a} / {b} vs f64 {r} (x = {:?})", &smp[..3]);
+            worst = worst.max((a - r).abs());
+        }
+        for (f, r) in gw.iter().enumerate() {
+            let b = row[(shape.width + shape.dx()) as usize + f] as f64;
+            assert!((b - r).abs() < 2e-5, "sample {i} gamma(w)[{f}]: gpu {b} vs f64 {r}");
+        }
+    }
+    eprintln!("encoding: worst absolute error {worst:.2e}");
+    check_validation(ctx);
+}
+
+#[test]
+fn saturated_and_extreme_inputs_stay_finite() {
+    let mut rng = Rng(seed("mlp extreme"));
+    let shape = MlpShape { depth: 3, width: 24, skip: 2, levels_x: 12, levels_w: 4 };
+    // Large weights saturate the sigmoid head (outputs 0 and 1).
+    let params: Vec<f32> = shape.init_params(rng.next_u64()).iter().map(|v| v * 40.0).collect();
+    let samples: Vec<[f64; 6]> = vec![
+        [1e4, -1e4, 3e7, 1.0, 0.0, 0.0],
+        [1e-40, -1e-42, 0.0, 0.0, 1.0, 0.0],
+        [-1.0, 1.0, -1.0, 0.0, 0.0, -1.0],
+        [2.5, -7.75, 100.0, 0.6, 0.8, 0.0],
+    ];
+    let samples: Vec<[f64; 6]> = samples.iter().map(|s| s.map(|v| v as f32 as f64)).collect();
+    let d_out = vec![[1.0, -1.0, 0.5]; samples.len()];
+    let run = gpu(shape, &params, &samples, &d_out);
+    assert!(run.out.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)), "outputs {:?}", run.out);
+    assert!(run.out.iter().any(|&v| v == 0.0 || v == 1.0 || !(1e-6..=1.0 - 1e-6).contains(&v)), "the head did not saturate: {:?}", run.out);
+    assert!(run.grads.iter().all(|v| v.is_finite()), "non-finite gradient");
+}
+
+#[test]
+fn no_samples_and_bit_identical_reruns() {
+    let mut rng = Rng(seed("mlp determinism"));
+    let shape = MlpShape { depth: 4, width: 48, skip: 2, levels_x: 6, levels_w: 4 };
+    let params = shape.init_params(rng.next_u64());
+    let empty = gpu(shape, &params, &[], &[]);
+    assert!(empty.grads.iter().all(|&v| v == 0.0), "no samples must give zero gradients");
+    let samples = random_samples(&mut rng, 3001, 1.0);
+    let d_out: Vec<[f64; 3]> = (0..samples.len()).map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64)).collect();
+    let a = gpu(shape, &params, &samples, &d_out);
+    let b = gpu(shape, &params, &samples, &d_out);
+    assert!(a.out.iter().zip(&b.out).all(|(x, y)| x.to_bits() == y.to_bits()), "outputs differ between runs");
+    assert!(a.grads.iter().zip(&b.grads).all(|(x, y)| x.to_bits() == y.to_bits()), "gradients differ between runs");
+}
