@@ -1,7 +1,7 @@
 #version 460
 // The light-field MLP's one GEMM (pipelines/src/mlp): C = post(pre(A) B),
-// tiled through shared memory, one 32 x 32 tile of C per workgroup of 64
-// invocations, each owning a 4 x 4 block (rows ty + 8r, columns tx + 8c).
+// tiled through shared memory, one 8 RB x 8 RB tile of C per workgroup of
+// 64 invocations, each owning an RB x RB block (rows ty + 8r, columns tx + 8c).
 // Every element of C is summed in increasing k by one invocation, so the
 // result does not depend on the subgroup size or the workgroup schedule.
 //
@@ -18,6 +18,8 @@
 #extension GL_EXT_control_flow_attributes : require
 
 layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
+// Rows and columns of C per invocation (the tile is 8 RB x 8 RB).
+layout(constant_id = 3) const uint RB = 4;
 
 layout(std430, binding = 0) readonly buffer A { float a[]; };
 layout(std430, binding = 1) readonly buffer B { float b[]; };
@@ -32,7 +34,7 @@ layout(push_constant) uniform Push {
     uint c_off, c_rs, c_zstride, c_act;
 } pc;
 
-const uint TM = 32u, TN = 32u, TK = 16u;
+const uint TM = 8u * RB, TN = 8u * RB, TK = 16u;
 const uint NONE = 0xffffffffu;
 
 shared float As[TK][TM];
@@ -66,15 +68,15 @@ void main() {
     uint kbeg = gl_WorkGroupID.z * pc.k_chunk;
     uint kend = min(kbeg + pc.k_chunk, pc.kdim);
 
-    float acc[4][4];
-    [[unroll]] for (uint r = 0u; r < 4u; r++) {
-        [[unroll]] for (uint q = 0u; q < 4u; q++) {
+    float acc[RB][RB];
+    [[unroll]] for (uint r = 0u; r < RB; r++) {
+        [[unroll]] for (uint q = 0u; q < RB; q++) {
             acc[r][q] = 0.0;
         }
     }
     for (uint k0 = kbeg; k0 < kend; k0 += TK) {
-        // 64 invocations stage TK x 32 of A and of B, 8 elements each.
-        [[unroll]] for (uint e = 0u; e < 8u; e++) {
+        // 64 invocations stage TK x TM of A and of B.
+        [[unroll]] for (uint e = 0u; e < TK * TM / 64u; e++) {
             uint idx = lid + 64u * e;
             uint kk = idx / TM, ii = idx % TM;
             uint k = k0 + kk, i = i0 + ii, j = j0 + ii;
@@ -83,13 +85,13 @@ void main() {
         }
         barrier();
         [[unroll]] for (uint kk = 0u; kk < TK; kk++) {
-            float av[4], bv[4];
-            [[unroll]] for (uint r = 0u; r < 4u; r++) {
+            float av[RB], bv[RB];
+            [[unroll]] for (uint r = 0u; r < RB; r++) {
                 av[r] = As[kk][ty + 8u * r];
                 bv[r] = Bs[kk][tx + 8u * r];
             }
-            [[unroll]] for (uint r = 0u; r < 4u; r++) {
-                [[unroll]] for (uint q = 0u; q < 4u; q++) {
+            [[unroll]] for (uint r = 0u; r < RB; r++) {
+                [[unroll]] for (uint q = 0u; q < RB; q++) {
                     acc[r][q] += av[r] * bv[q];
                 }
             }
@@ -97,9 +99,9 @@ void main() {
         barrier();
     }
     uint base = pc.c_off + gl_WorkGroupID.z * pc.c_zstride;
-    [[unroll]] for (uint r = 0u; r < 4u; r++) {
+    [[unroll]] for (uint r = 0u; r < RB; r++) {
         uint i = i0 + ty + 8u * r;
-        [[unroll]] for (uint q = 0u; q < 4u; q++) {
+        [[unroll]] for (uint q = 0u; q < RB; q++) {
             uint j = j0 + tx + 8u * q;
             if (i < pc.m && j < pc.n) {
                 float v = acc[r][q];

@@ -2,6 +2,7 @@
 //! procedural scene and the benchmark code shared with `cargo bench`.
 
 pub mod bench;
+pub mod bench_mlp;
 pub mod bench_raster;
 pub mod bench_train;
 pub mod data;

@@ -166,6 +166,27 @@ enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// The light-field MLP (encode, forward, backward, reduce) on N random samples.
+    Mlp {
+        /// Network preset: paper (8 x 256, L 12) or small.
+        #[arg(long, default_value = "paper")]
+        preset: String,
+        /// Override the preset's hidden layers, width, skip layer or Fourier levels.
+        #[arg(long)]
+        depth: Option<u32>,
+        #[arg(long)]
+        width: Option<u32>,
+        #[arg(long)]
+        skip: Option<u32>,
+        #[arg(long)]
+        levels: Option<u32>,
+        #[arg(long, default_value_t = 4096)]
+        n: u32,
+        #[arg(long, default_value_t = 3)]
+        reps: u32,
+        #[arg(long)]
+        json: bool,
+    },
     /// Exclusive prefix sum of N u32.
     Scan {
         #[arg(long, default_value_t = 1 << 20)]
@@ -284,6 +305,23 @@ fn run(cli: Cli) -> Result<()> {
                         println!("{}", serde_json::to_string_pretty(&b)?);
                     } else {
                         tgs::bench_train::print_train(&b);
+                    }
+                }
+                Bench::Mlp { preset, depth, width, skip, levels, n, reps, json } => {
+                    let mut shape = tgs_pipelines::MlpShape::preset(preset)?;
+                    shape.depth = depth.unwrap_or(shape.depth);
+                    shape.width = width.unwrap_or(shape.width);
+                    shape.skip = skip.unwrap_or(shape.skip);
+                    if let Some(l) = levels {
+                        shape.levels_x = *l;
+                        shape.levels_w = *l;
+                    }
+                    let b = tgs::bench_mlp::mlp(&ctx, shape, *n, *reps)?;
+                    if *json {
+                        println!("{}", serde_json::to_string_pretty(&b)?);
+                    } else {
+                        println!("device: {}", b.device);
+                        tgs::bench_mlp::print_mlp(&b);
                     }
                 }
                 Bench::Scan { n, reps, json } => {

@@ -1,7 +1,8 @@
 //! The light-field MLP (pipelines/src/mlp) against its f64 reference
 //! (tests/src/mlp_ref.rs): the Fourier encoding at L = 12 for |x| <= 1 and
 //! beyond, forward outputs and every parameter's gradient for small
-//! networks (sample counts not a multiple of the tile, one chunk and many)
+//! networks (sample counts and widths not a multiple of any of the GEMM's
+//! tile sizes, one weight-gradient chunk and many)
 //! and the paper's 8 x 256 on a few samples; the reference's own gradient
 //! against central differences; no NaN/Inf with saturated heads and huge or
 //! denormal inputs; bit-identical reruns.
@@ -103,6 +104,8 @@ fn small_networks_match_reference() {
     check_network(MlpShape { depth: 4, width: 40, skip: 2, levels_x: 6, levels_w: 4 }, 2000, 1.0, &mut rng);
     // Width above one tile, skip right before the head.
     check_network(MlpShape { depth: 2, width: 70, skip: 1, levels_x: 3, levels_w: 2 }, 65, 1.3, &mut rng);
+    // The largest GEMM block (128-wide tiles) on partial tiles in every product.
+    check_network(MlpShape { depth: 3, width: 130, skip: 2, levels_x: 4, levels_w: 3 }, 300, 1.0, &mut rng);
 }
 
 #[test]

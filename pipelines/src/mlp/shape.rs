@@ -23,6 +23,19 @@ impl MlpShape {
     /// The paper's network: 8 x 256, skip at layer 5 (index 4), L = 12.
     pub const PAPER: MlpShape = MlpShape { depth: 8, width: 256, skip: 4, levels_x: 12, levels_w: 12 };
 
+    /// The cheaper network of the accuracy/time table: 4 x 64, skip at
+    /// layer 3, L = 8 for x and 4 for w (about 1/30 of the paper's work).
+    pub const SMALL: MlpShape = MlpShape { depth: 4, width: 64, skip: 2, levels_x: 8, levels_w: 4 };
+
+    /// A preset by name: "paper" or "small".
+    pub fn preset(name: &str) -> Result<MlpShape> {
+        match name {
+            "paper" => Ok(MlpShape::PAPER),
+            "small" => Ok(MlpShape::SMALL),
+            _ => bail!("unknown light-field preset '{name}' (paper, small)"),
+        }
+    }
+
     pub fn validate(&self) -> Result<()> {
         if self.depth < 2 || self.depth > 16 {
             bail!("light field depth {} is outside 2..=16", self.depth);
