@@ -21,3 +21,5 @@ pub mod reflection;
 pub use reflection::{EnvMap, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
 pub mod mlp;
 pub use mlp::{Mlp, MlpScratch, MlpShape};
+pub mod lightfield;
+pub use lightfield::{LightFieldShading, SampleScratch, ShadeParams};

@@ -5,6 +5,7 @@ pub mod raster_util;
 pub mod loss_ref;
 pub mod reflection_ref;
 pub mod mlp_ref;
+pub mod lightfield_ref;
 
 use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
