@@ -1,8 +1,9 @@
 // Stage III's deferred shading (paper eq. 9-10, method-notes §3.5):
 //   I = (1 - R) I_scat + R F(F0, cos) Phi(x_refl, w_r),
 // with Phi the light-field MLP evaluated only at the pixels whose R exceeds
-// a threshold (compacted into a sample list; the others get I_refl = 0,
-// at most threshold in the composite), F Schlick's
+// a threshold (compacted into a sample list). The other pixels show no
+// reflection: I = I_scat there, with no gradient to R or F0 (an error of
+// R |F Phi - I_scat| <= threshold), F Schlick's
 // F0 + (1 - F0)(1 - cos)^5 (or F0 alone with Schlick off), F0 = F0 sum /
 // max(alpha_R, F0_EPS), and R = sum w r unnormalized.
 //

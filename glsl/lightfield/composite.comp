@@ -16,10 +16,13 @@ void main() {
         return;
     }
     uint s = sample_of[pix];
-    vec3 P = s != NONE ? vec3(phi[3u * s], phi[3u * s + 1u], phi[3u * s + 2u]) : vec3(0.0);
-    float R = refl_r(pix);
     vec3 S = vec3(scat[pix], scat[n + pix], scat[2u * n + pix]);
-    vec3 I = (1.0 - R) * S + R * fresnel_terms(pix).F * P;
+    vec3 I = S;
+    if (s != NONE) {
+        vec3 P = vec3(phi[3u * s], phi[3u * s + 1u], phi[3u * s + 2u]);
+        float R = refl_r(pix);
+        I = (1.0 - R) * S + R * fresnel_terms(pix).F * P;
+    }
     loss_in[pix] = I.x;
     loss_in[n + pix] = I.y;
     loss_in[2u * n + pix] = I.z;

@@ -235,21 +235,25 @@ pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]],
     Ok(())
 }
 
-/// Stage II layers of a test render: `NAME_scat.png` (I_scat),
-/// `NAME_refl.png` (I_refl = the rasterized reflection colour),
-/// `NAME_R.png` (reflectivity map), `NAME_F0.png` (blended F0, with
-/// Schlick), `NAME_normal_scat.png` and `NAME_normal_refl.png`.
+/// Stage II / III layers of a test render: `NAME_scat.png` (I_scat),
+/// `NAME_refl.png` (I_refl: Stage II's rasterized reflection colour,
+/// Stage III's F Phi), `NAME_R.png` (reflectivity map), `NAME_F0.png`
+/// (blended F0, when the stage has it), `NAME_phi_mask.png` (Stage III:
+/// where Phi was evaluated), `NAME_normal_scat.png`, `NAME_normal_refl.png`.
 fn write_layers(dir: &Path, name: &str, scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Result<()> {
     let (w, h) = (scat.width, scat.height);
     let n = (w * h) as usize;
     let png = |suffix: &str, channels: u32, data: &[f32]| write_png(&dir.join(format!("{name}_{suffix}.png")), &ImageF::from_planar(w, h, channels, data));
     png("scat", 3, &scat.planes[..3 * n])?;
-    png("refl", 3, &refl.refl[..3 * n])?;
-    png("R", 1, &refl.refl[3 * n..4 * n])?;
+    png("refl", 3, refl.i_refl())?;
+    png("R", 1, refl.r())?;
     let alpha = refl.refl_plane(Plane::Alpha);
-    if refl.channels == 7 {
-        let f0: Vec<f32> = (0..3 * n).map(|k| refl.refl[4 * n + k] / alpha[k % n].max(1e-6)).collect();
+    if let Some(f0s) = refl.f0_sum() {
+        let f0: Vec<f32> = (0..3 * n).map(|k| f0s[k] / alpha[k % n].max(1e-6)).collect();
         png("F0", 3, &f0)?;
+    }
+    if let Some(p) = &refl.phi {
+        png("phi_mask", 1, &p.mask)?;
     }
     let normal_png = |suffix: &str, normals: &[[f32; 3]]| write_png(&dir.join(format!("{name}_{suffix}.png")), &normal_image(w, h, normals));
     normal_png("normal_scat", &world_normals(scat, cam))?;

@@ -72,6 +72,23 @@ pub fn schlick_m(cam: &Cam, x: f64, y: f64, p: &ReflPixel, schlick: bool) -> f64
     (1.0 - c.clamp(0.0, 1.0)).powi(5)
 }
 
+/// I = (1 - R) S + R F Phi with F = F0 + (1 - F0) m, F0 = F0 sum /
+/// max(alpha, 1e-6) where Phi was evaluated; I = S elsewhere.
+pub fn composite_at(p: &ReflPixel, m: f64, scat: V3, phi: Option<V3>) -> V3 {
+    match phi {
+        Some(phi) => composite(p, m, scat, phi),
+        None => scat,
+    }
+}
+
+/// Gradients of g . I where Phi was not evaluated: only dS = g.
+pub fn composite_grad_at(p: &ReflPixel, m: f64, scat: V3, phi: Option<V3>, g: V3) -> (V3, V3, f64, V3) {
+    match phi {
+        Some(phi) => composite_grad(p, m, scat, phi, g),
+        None => ([0.0; 3], [0.0; 3], 0.0, g),
+    }
+}
+
 /// I = (1 - R) S + R F Phi with F = F0 + (1 - F0) m, F0 = F0 sum / max(alpha, 1e-6).
 pub fn composite(p: &ReflPixel, m: f64, scat: V3, phi: V3) -> V3 {
     let ae = p.alpha.max(1e-6);

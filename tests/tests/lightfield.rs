@@ -2,7 +2,8 @@
 //! (tests/src/lightfield_ref.rs): the compacted sample list (ranks, count,
 //! x_refl and w_r; no pixel and every pixel evaluated; a pixel without a
 //! normal), the composite and its backward with and without Schlick
-//! (grazing and head-on views, no coverage, unevaluated pixels), the
+//! (grazing and head-on views, no coverage, unevaluated pixels showing
+//! the scattering colour alone), the
 //! reference's gradient against central differences, and the material
 //! sigmoid with its gradient.
 
@@ -185,17 +186,20 @@ fn composite_matches_reference_and_finite_differences() {
                 let (x, y) = ((i % w as usize) as f64, (i / w as usize) as f64);
                 let m = lr::schlick_m(&c, x, y, px_i, schlick);
                 let sm = so[i];
-                let ph = if sm != u32::MAX { [0, 1, 2].map(|k| phi[3 * sm as usize + k] as f64) } else { [0.0; 3] };
+                let evaluated = (sm != u32::MAX).then(|| [0, 1, 2].map(|k| phi[3 * sm as usize + k] as f64));
+                let ph = evaluated.unwrap_or([0.0; 3]);
                 let sc = [0, 1, 2].map(|k| scat[k * n + i] as f64);
                 let gi = [0, 1, 2].map(|k| g[k * n + i] as f64);
-                let want = lr::composite(px_i, m, sc, ph);
+                let want = lr::composite_at(px_i, m, sc, evaluated);
                 let tol = |r: f64| 2e-5 * (1.0 + r.abs());
                 for k in 0..3 {
                     let got = li[k * n + i] as f64;
                     assert!((got - want[k]).abs() < tol(want[k]), "schlick {schlick} pixel {i} I[{k}]: {got} vs {}", want[k]);
                 }
-                let (d_phi, d_f0s, d_r, d_s) = lr::composite_grad(px_i, m, sc, ph, gi);
-                // Central differences of g . I on the reference.
+                // The reference's gradient of the evaluated form (a random
+                // Phi where the pixel was not evaluated) against central
+                // differences of g . I.
+                let (e_phi, e_f0s, e_r, _) = lr::composite_grad(px_i, m, sc, ph, gi);
                 let gi_dot = |q: &ReflPixel, ph: [f64; 3], sc: [f64; 3]| -> f64 { lr::composite(q, m, sc, ph).iter().zip(gi).map(|(a, b)| a * b).sum() };
                 let hh = 1e-6;
                 let fd_r = {
@@ -204,19 +208,24 @@ fn composite_matches_reference_and_finite_differences() {
                     b.r -= hh;
                     (gi_dot(&a, ph, sc) - gi_dot(&b, ph, sc)) / (2.0 * hh)
                 };
-                assert!((fd_r - d_r).abs() < 1e-6 * (1.0 + d_r.abs()), "reference dR {d_r} vs fd {fd_r}");
+                assert!((fd_r - e_r).abs() < 1e-6 * (1.0 + e_r.abs()), "reference dR {e_r} vs fd {fd_r}");
                 for k in 0..3 {
                     let (mut a, mut b) = (*px_i, *px_i);
                     a.f0s[k] += hh;
                     b.f0s[k] -= hh;
                     let fd = (gi_dot(&a, ph, sc) - gi_dot(&b, ph, sc)) / (2.0 * hh);
-                    assert!((fd - d_f0s[k]).abs() < 1e-4 * (1.0 + d_f0s[k].abs()), "reference dF0s {} vs fd {fd}", d_f0s[k]);
-                    let mut pa = ph;
+                    assert!((fd - e_f0s[k]).abs() < 1e-4 * (1.0 + e_f0s[k].abs()), "reference dF0s {} vs fd {fd}", e_f0s[k]);
+                    let (mut pa, mut pb2) = (ph, ph);
                     pa[k] += hh;
-                    let mut pb2 = ph;
                     pb2[k] -= hh;
                     let fd = (gi_dot(px_i, pa, sc) - gi_dot(px_i, pb2, sc)) / (2.0 * hh);
-                    assert!((fd - d_phi[k]).abs() < 1e-6 * (1.0 + d_phi[k].abs()));
+                    assert!((fd - e_phi[k]).abs() < 1e-6 * (1.0 + e_phi[k].abs()));
+                }
+                // What the GPU must give: the evaluated form, or at a pixel
+                // without Phi I = S (gradient only to S).
+                let (d_phi, d_f0s, d_r, d_s) = lr::composite_grad_at(px_i, m, sc, evaluated, gi);
+                if evaluated.is_none() {
+                    assert!(d_r == 0.0 && d_f0s == [0.0; 3] && d_s == gi);
                 }
                 for k in 0..3 {
                     let got = rgv[k * n + i] as f64;

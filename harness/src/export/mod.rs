@@ -1,5 +1,6 @@
 //! Files a run writes for people and other tools: PLY splats and points,
 //! and the crash-safe way every run file is written.
+pub mod mlp;
 pub mod ply;
 
 use anyhow::{Context as _, Result};

@@ -35,6 +35,31 @@ pub struct Header {
     /// the prefix `refl.`, then the cube map's).
     #[serde(default)]
     pub reflection: Option<ReflHeader>,
+    /// Stage III's state, when the run is in Stage III: its arrays follow
+    /// the scattering set's (reflection set with the prefix `refl.`, then
+    /// the MLP's parameters and Adam moments).
+    #[serde(default)]
+    pub light_field: Option<LightFieldHeader>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct LightFieldHeader {
+    pub n: u32,
+    /// depth, width, skip, levels_x, levels_w.
+    pub shape: [u32; 5],
+    pub centre: [f32; 3],
+    pub half_extent: [f32; 3],
+    pub threshold: f32,
+    pub schlick: bool,
+    pub decision: super::trainer::ReflDecision,
+    pub arrays: Vec<(String, usize)>,
+}
+
+const MLP_ARRAYS: [&str; 3] = ["mlp.param", "mlp.adam_m", "mlp.adam_v"];
+
+fn refl_layout(n: u32) -> Vec<(String, usize)> {
+    use tgs_pipelines::reflection::MATERIAL;
+    TrainableSet::layout(MATERIAL as usize).into_iter().map(|(name, w)| (format!("refl.{name}"), w * n as usize)).collect()
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -61,6 +86,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
         extent: tr.extent,
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
         reflection: None,
+        light_field: None,
     };
     let mut header = header;
     // (buffer, values) of the Stage II arrays.
@@ -77,6 +103,30 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
             refl_arrays.push((buf, m.env.len()));
         }
         header.reflection = Some(ReflHeader { n: m.set.len(), env_res: m.env.res, decision: d.clone(), arrays: names });
+    }
+    if let (Some(m), Some(d)) = (&tr.light_field, &tr.decision) {
+        let rn = m.set.len() as usize;
+        let mut names = Vec::new();
+        for (name, buf, w) in m.set.arrays() {
+            names.push((format!("refl.{name}"), w * rn));
+            refl_arrays.push((buf, w * rn));
+        }
+        let p = m.net.shape.params() as usize;
+        for (name, buf) in MLP_ARRAYS.iter().zip([&m.net.params, &m.net.m, &m.net.v]) {
+            names.push((name.to_string(), p));
+            refl_arrays.push((buf, p));
+        }
+        let s = m.net.shape;
+        header.light_field = Some(LightFieldHeader {
+            n: m.set.len(),
+            shape: [s.depth, s.width, s.skip, s.levels_x, s.levels_w],
+            centre: m.shade.centre,
+            half_extent: m.shade.half_extent,
+            threshold: m.shade.threshold,
+            schlick: m.shade.schlick,
+            decision: d.clone(),
+            arrays: names,
+        });
     }
     let json = serde_json::to_vec(&header)?;
     crate::export::atomic_write_with(path, |f| {
@@ -108,7 +158,7 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
     let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut at = 12 + hlen;
     let mut arrays = Vec::new();
-    let refl = header.reflection.iter().flat_map(|r| r.arrays.iter());
+    let refl = header.reflection.iter().flat_map(|r| r.arrays.iter()).chain(header.light_field.iter().flat_map(|l| l.arrays.iter()));
     for (name, len) in header.arrays.iter().chain(refl) {
         let b = len.checked_mul(4).and_then(|n| at.checked_add(n)).and_then(|end| bytes.get(at..end)).ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
         arrays.push(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect());
@@ -181,10 +231,12 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
             buf.upload(data)?;
         }
     }
-    if let Some(r) = &h.reflection {
-        restore_reflection(&mut tr, r, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?;
-    } else if !refl_arrays.is_empty() {
-        return Err(bad(format!("{} arrays after the scattering set without a Stage II header", refl_arrays.len())));
+    match (&h.reflection, &h.light_field) {
+        (Some(r), None) => restore_reflection(&mut tr, r, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?,
+        (None, Some(l)) => restore_light_field(&mut tr, l, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?,
+        (Some(_), Some(_)) => return Err(bad("both a Stage II and a Stage III state".into())),
+        (None, None) if !refl_arrays.is_empty() => return Err(bad(format!("{} arrays after the scattering set without a Stage II or III header", refl_arrays.len()))),
+        (None, None) => {}
     }
     tr.iteration = h.iteration;
     tr.stack = h.stack;
@@ -192,19 +244,54 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     Ok(tr)
 }
 
-fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
-    use tgs_pipelines::reflection::MATERIAL;
-    let layout: Vec<(String, usize)> = TrainableSet::layout(MATERIAL as usize).into_iter().map(|(n, w)| (format!("refl.{n}"), w)).collect();
-    let env_len = 18 * r.env_res as usize * r.env_res as usize;
-    let want: Vec<(String, usize)> = layout.iter().map(|(n, w)| (n.clone(), w * r.n as usize)).chain(["env.param", "env.adam_m", "env.adam_v"].map(|n| (n.to_string(), env_len))).collect();
-    if want != r.arrays || arrays.len() != want.len() {
-        bail!("arrays {:?} do not match the expected {:?}", r.arrays.iter().map(|a| &a.0).collect::<Vec<_>>(), want.iter().map(|a| &a.0).collect::<Vec<_>>());
+/// Every array named and sized as `want`, all finite.
+fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], arrays: &[Vec<f32>]) -> Result<()> {
+    if want != have || arrays.len() != want.len() {
+        bail!("arrays {:?} do not match the expected {:?}", have.iter().map(|a| &a.0).collect::<Vec<_>>(), want.iter().map(|a| &a.0).collect::<Vec<_>>());
     }
-    for ((name, len), data) in want.iter().zip(&arrays) {
+    for ((name, len), data) in want.iter().zip(arrays) {
         if data.len() != *len || data.iter().any(|v| !v.is_finite()) {
             bail!("array '{name}' has {} values (expected {len}) or non-finite ones", data.len());
         }
     }
+    Ok(())
+}
+
+/// The reflection set of a Stage II or III state (its first arrays).
+fn reflection_set(tr: &Trainer, arrays: &[Vec<f32>]) -> Result<TrainableSet> {
+    use tgs_pipelines::reflection::MATERIAL;
+    let g = HostGaussians { channels: MATERIAL, coeffs: 1, means: arrays[0].clone(), log_scales: arrays[1].clone(), quats: arrays[2].clone(), opacity: arrays[3].clone(), features: arrays[4].clone() };
+    let set = TrainableSet::new(&tr.context(), &g)?;
+    for ((_, buf, _), data) in set.arrays().iter().zip(arrays) {
+        if !data.is_empty() {
+            buf.upload(data)?;
+        }
+    }
+    Ok(set)
+}
+
+fn restore_light_field(tr: &mut Trainer, l: &LightFieldHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
+    let [depth, width, skip, levels_x, levels_w] = l.shape;
+    let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
+    shape.validate()?;
+    let p = shape.params() as usize;
+    let want: Vec<(String, usize)> = refl_layout(l.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
+    check_arrays(&want, &l.arrays, &arrays)?;
+    let k = want.len() - 3;
+    let set = reflection_set(tr, &arrays)?;
+    let net = super::lightfield::MlpParams::new(&tr.context(), shape, &arrays[k], &arrays[k + 1], &arrays[k + 2])?;
+    let shade = tgs_pipelines::ShadeParams { centre: l.centre, half_extent: l.half_extent, threshold: l.threshold, schlick: l.schlick };
+    tr.light_field = Some(super::lightfield::LightFieldModel::new(&tr.context(), set, net, shade, tr.cfg.adam_eps)?);
+    tr.decision = Some(l.decision.clone());
+    Ok(())
+}
+
+fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
+    use tgs_pipelines::reflection::MATERIAL;
+    let layout = refl_layout(r.n);
+    let env_len = 18 * r.env_res as usize * r.env_res as usize;
+    let want: Vec<(String, usize)> = layout.iter().cloned().chain(["env.param", "env.adam_m", "env.adam_v"].map(|n| (n.to_string(), env_len))).collect();
+    check_arrays(&want, &r.arrays, &arrays)?;
     let g = HostGaussians { channels: MATERIAL, coeffs: 1, means: arrays[0].clone(), log_scales: arrays[1].clone(), quats: arrays[2].clone(), opacity: arrays[3].clone(), features: arrays[4].clone() };
     let k = layout.len();
     let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone() };

@@ -59,10 +59,82 @@ pub struct TrainConfig {
     pub test_interval: u32,
     /// Write a checkpoint every this many iterations (0: only at the end).
     pub checkpoint_interval: u32,
-    /// The stages to run, in order: "I" or "I,II".
+    /// The stages to run, in order: "I", "I,II" or "I,II,III".
     pub stages: String,
     /// Stage II settings (`[reflection]` in TOML, `--set reflection.KEY=V`).
     pub reflection: ReflectionConfig,
+    /// Stage III settings (`[light_field]`, `--set light_field.KEY=V`).
+    pub light_field: LightFieldConfig,
+}
+
+/// Stage III: the reflection light field MLP (paper §3.4, method-notes §3.5, §3.7).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LightFieldConfig {
+    pub iterations: u32,
+    /// Network: "paper" (8 x 256, skip at layer 5, L = 12) or "small"
+    /// (4 x 64, skip at layer 3, L = 8 / 4; about 1/25 of the work).
+    pub preset: String,
+    /// Adam learning rate of the MLP, exponential from `lr` to `lr_final`
+    /// over the stage (NeRF / Ref-GS: 5e-4 -> 5e-5).
+    pub lr: f32,
+    pub lr_final: f32,
+    /// Reflection material rates (the geometry is frozen).
+    pub lr_f0: f32,
+    pub lr_r: f32,
+    /// Phi is evaluated only at pixels whose R = sum w r exceeds this; the
+    /// others take I_refl = 0 (an error of at most this in the composite).
+    pub threshold: f32,
+    /// "schlick": I_refl = F(F0, cos) Phi (the paper's Stage III); "off": F0 Phi.
+    pub fresnel: String,
+    /// Train the scattering set too (the paper; no densification, positions
+    /// at Stage I's final rate); false keeps Stage I's result frozen.
+    pub train_scattering: bool,
+}
+
+impl Default for LightFieldConfig {
+    fn default() -> Self {
+        LightFieldConfig {
+            iterations: 20_000,
+            preset: "paper".into(),
+            lr: 5e-4,
+            lr_final: 5e-5,
+            lr_f0: 0.0075,
+            lr_r: 0.005,
+            threshold: 0.01,
+            fresnel: "schlick".into(),
+            train_scattering: true,
+        }
+    }
+}
+
+impl LightFieldConfig {
+    pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
+        tgs_pipelines::MlpShape::preset(&self.preset).context("light_field.preset")
+    }
+    pub fn schlick(&self) -> Result<bool> {
+        match self.fresnel.as_str() {
+            "schlick" => Ok(true),
+            "off" => Ok(false),
+            f => bail!("light_field.fresnel must be 'schlick' or 'off', not '{f}'"),
+        }
+    }
+    fn validate(&self) -> Result<()> {
+        self.shape()?;
+        self.schlick()?;
+        if self.iterations == 0 {
+            bail!("light_field.iterations must be at least 1 (leave Stage III out with stages = \"I,II\")");
+        }
+        for (k, v) in [("lr", self.lr), ("lr_final", self.lr_final), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r)] {
+            if v < 0.0 {
+                bail!("light_field.{k} must be non-negative, not {v}");
+            }
+        }
+        if !(0.0..1.0).contains(&self.threshold) {
+            bail!("light_field.threshold must be in [0, 1), not {}", self.threshold);
+        }
+        Ok(())
+    }
 }
 
 /// Stage II: the reflection set and the environment map (method-notes §3.4, §3.7).
@@ -240,8 +312,9 @@ impl TrainConfig {
             holdout: 8,
             test_interval: 5000,
             checkpoint_interval: 5000,
-            stages: "I,II".into(),
+            stages: "I,II,III".into(),
             reflection: ReflectionConfig::default(),
+            light_field: LightFieldConfig::default(),
         }
     }
 
@@ -262,6 +335,7 @@ impl TrainConfig {
             test_interval: 1000,
             checkpoint_interval: 500,
             reflection: ReflectionConfig { iterations: 1000, env_res: 64, prune_interval: 100, ..ReflectionConfig::default() },
+            light_field: LightFieldConfig { iterations: 1000, preset: "small".into(), ..LightFieldConfig::default() },
             ..Self::paper()
         }
     }
@@ -322,11 +396,12 @@ impl TrainConfig {
             match s {
                 "I" => out.push("I"),
                 "II" => out.push("II"),
-                _ => bail!("stages: unknown stage '{s}' (I, II; e.g. \"I,II\")"),
+                "III" => out.push("III"),
+                _ => bail!("stages: unknown stage '{s}' (I, II, III; e.g. \"I,II,III\")"),
             }
         }
-        if out != ["I"] && out != ["I", "II"] {
-            bail!("stages must be \"I\" or \"I,II\", not \"{}\" (Stage II starts from a Stage I result; use --from RUN to reuse one)", self.stages);
+        if out != ["I"] && out != ["I", "II"] && out != ["I", "II", "III"] {
+            bail!("stages must be \"I\", \"I,II\" or \"I,II,III\", not \"{}\" (each stage starts from the one before; use --from RUN to reuse a run's)", self.stages);
         }
         Ok(out)
     }
@@ -334,6 +409,11 @@ impl TrainConfig {
     /// Whether Stage II is scheduled.
     pub fn wants_reflection(&self) -> bool {
         self.stage_list().map(|s| s.contains(&"II")).unwrap_or(false)
+    }
+
+    /// Whether Stage III is scheduled.
+    pub fn wants_light_field(&self) -> bool {
+        self.stage_list().map(|s| s.contains(&"III")).unwrap_or(false)
     }
 
     /// Whether the opacity reset follows iteration `it` (2DGS: every
@@ -407,6 +487,7 @@ impl TrainConfig {
         self.background_rgb()?;
         self.stage_list()?;
         self.reflection.validate()?;
+        self.light_field.validate()?;
         Ok(())
     }
 

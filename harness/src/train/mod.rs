@@ -3,6 +3,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod init;
+pub mod lightfield;
 pub mod rng;
 pub mod run;
 pub mod reflection;

@@ -39,13 +39,45 @@ pub struct ReflRendered {
     /// The composite colour (3 planes) followed by the reflection set's
     /// alpha, depth, normal (3), median, distortion planes.
     pub composite: Vec<f32>,
-    /// The reflection render: [A (3), R, F0 sum (3) with Schlick] then its
-    /// geometry planes (`Plane` order for `channels`).
+    /// The reflection render: in Stage II [A (3), R, F0 sum (3) with
+    /// Schlick], in Stage III [F0 sum (3), R]; then its geometry planes
+    /// (`Plane` order for `channels`).
     pub refl: Vec<f32>,
     pub channels: u32,
+    /// Stage III's light-field layers (None in Stage II).
+    pub phi: Option<PhiLayers>,
+}
+
+/// What Stage III adds to a render.
+pub struct PhiLayers {
+    /// I_refl = F Phi per pixel (3 planes; 0 where Phi was not evaluated).
+    pub reflected: Vec<f32>,
+    /// 1 where Phi was evaluated (R > light_field.threshold), else 0.
+    pub mask: Vec<f32>,
 }
 
 impl ReflRendered {
+    /// I_refl (3 planes): Stage II's rasterized colour, Stage III's F Phi.
+    pub fn i_refl(&self) -> &[f32] {
+        match &self.phi {
+            Some(p) => &p.reflected,
+            None => &self.refl[..3 * self.pixels()],
+        }
+    }
+    /// R = sum w r (plane 3 in both stages).
+    pub fn r(&self) -> &[f32] {
+        let n = self.pixels();
+        &self.refl[3 * n..4 * n]
+    }
+    /// sum w f0 (3 planes) when this render has it.
+    pub fn f0_sum(&self) -> Option<&[f32]> {
+        let n = self.pixels();
+        match (&self.phi, self.channels) {
+            (Some(_), _) => Some(&self.refl[..3 * n]),
+            (None, 7) => Some(&self.refl[4 * n..7 * n]),
+            _ => None,
+        }
+    }
     pub fn pixels(&self) -> usize {
         (self.width * self.height) as usize
     }
@@ -235,7 +267,14 @@ impl ReflectionModel {
         let mut rec = Recorder::new(&self.ctx)?;
         self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
         rec.submit_and_wait()?;
-        Ok(ReflRendered { width: cam.width, height: cam.height, composite: b.loss_in.download()?, refl: b.frame.out.download()?, channels: self.fresnel.channels() })
+        Ok(ReflRendered { width: cam.width, height: cam.height, composite: b.loss_in.download()?, refl: b.frame.out.download()?, channels: self.fresnel.channels(), phi: None })
+    }
+}
+
+impl ReflectionModel {
+    /// The reflection set (Stage III keeps it, with its Adam moments).
+    pub fn into_set(self) -> TrainableSet {
+        self.set
     }
 }
 

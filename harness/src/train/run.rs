@@ -83,7 +83,7 @@ pub fn request_stop() {
 
 /// Settings a resumed run may change: they do not alter what was already
 /// trained (the schedule is a function of the iteration count).
-pub const RESUMABLE_SETTINGS: [&str; 4] = ["iterations", "reflection.iterations", "test_interval", "checkpoint_interval"];
+pub const RESUMABLE_SETTINGS: [&str; 5] = ["iterations", "reflection.iterations", "light_field.iterations", "test_interval", "checkpoint_interval"];
 
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
     let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
@@ -164,7 +164,7 @@ fn changed_settings(saved: &TrainConfig, new: &TrainConfig, free: impl Fn(&str) 
 /// Settings that only shape the stages after Stage I: `--from RUN` may
 /// change them (everything else trained RUN's Stage I and must stay).
 fn later_stage_setting(k: &str) -> bool {
-    k.starts_with("reflection.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
+    k.starts_with("reflection.") || k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
 }
 
 /// `--from RUN`: a trainer at the end of RUN's Stage I (its scattering set;
@@ -191,7 +191,7 @@ fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer,
     let cfg = apply_args(base, a).with_context(|| format!("--from {}", run.display()))?;
     let conflicts = changed_settings(&h.config, &cfg, later_stage_setting)?;
     if !conflicts.is_empty() {
-        bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+        bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
     }
     if !cfg.wants_reflection() {
         bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
@@ -353,6 +353,18 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
             continue;
         }
+        if tr.at_light_field_start() {
+            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
+            if let Some(b) = &bar {
+                b.println(&msg);
+            } else if !a.quiet {
+                eprintln!("{msg}");
+            }
+            writeln!(log, "{}", json!({"iteration": tr.iteration, "stage": "III", "event": "begin"}))?;
+            stage_start = Instant::now();
+            atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
+            continue;
+        }
         let r = tr.step(a.profile)?;
         if !r.loss.is_finite() {
             checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str)?;
@@ -376,6 +388,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         if r.opacity_reset {
             line["opacity_reset"] = json!(true);
+        }
+        if let Some(f) = tr.light_field.as_mut().and_then(|m| m.take_coverage()) {
+            line["phi_fraction"] = json!(f);
         }
         if let Some((b, a2)) = r.densified {
             line["densified"] = json!({"before": b, "after": a2});
@@ -418,6 +433,10 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     }
     let train_s = loop_start.elapsed().as_secs_f64();
     write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
+    if let Some(m) = &tr.light_field {
+        write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
+        crate::export::mlp::write(&a.out.join("light_field.safetensors"), &m.net.shape, &m.shade, &m.net.params.download()?)?;
+    }
     if let Some(m) = &tr.reflection {
         write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
         let env = m.env.download()?;
@@ -533,6 +552,34 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
             100.0 * d.residual_fraction_over_0_05
         )
     })
+}
+
+/// Between Stage II and III: Stage II's record (test metrics, renders in
+/// renders/stage2), then the light-field model.
+fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool) -> Result<String> {
+    if tr.reflection.is_some() {
+        let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&out.join("renders/stage2")))?) };
+        stages.retain(|s| s["stage"] != "II");
+        stages.push(stage_record("II", tr, since, m.as_ref()));
+        if !quiet {
+            eprintln!("Stage II done");
+        }
+    }
+    tr.begin_light_field()?;
+    let lf = &tr.cfg.light_field;
+    let m = tr.light_field.as_ref().context("Stage III model")?;
+    let s = &m.net.shape;
+    Ok(format!(
+        "Stage III: light field {} x {} (L {} / {}, {} parameters) on pixels with R > {}, {} iterations{}",
+        s.depth,
+        s.width,
+        s.levels_x,
+        s.levels_w,
+        s.params(),
+        lf.threshold,
+        lf.iterations,
+        if lf.train_scattering { "" } else { " (scattering set frozen)" }
+    ))
 }
 
 /// Drop the log lines of iterations after `iteration` (those a killed run

@@ -87,6 +87,44 @@ impl ScatteringModel {
         })
     }
 
+    /// Run the forward of `cam` until it fits its frame (Stage III drives
+    /// the scattering set through this, [`Self::frame_buffers`] and
+    /// [`Self::record_backward_external`]).
+    pub fn forward_view(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
+        self.forward(cam, sh, background, profile)
+    }
+
+    /// The last forward's output planes (colour first) and their gradient
+    /// buffer for a `width` x `height` view.
+    pub fn frame_buffers(&self, width: u32, height: u32) -> Result<(&Buffer<f32>, &Buffer<f32>)> {
+        let b = self.sizes.get(&(width, height)).context("no render of this size yet")?;
+        Ok((&b.frame.out, &b.frame.grad_out))
+    }
+
+    /// Record the backward of the last forward of `cam` from gradients a
+    /// later stage wrote into [`Self::frame_buffers`]' gradient planes, and
+    /// an Adam step (Stage I's rates, positions at `lr_means`; no
+    /// densification statistics).
+    pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, sh: u32, lr_means: f32, it: u32) -> Result<()> {
+        let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
+        self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+        let sc = rec.begin_scope("adam");
+        self.adam.record_set(rec, &self.set, &self.groups(cfg, lr_means), it as u64)?;
+        rec.end_scope(sc);
+        Ok(())
+    }
+
+    fn groups(&self, cfg: &TrainConfig, lr_means: f32) -> [AdamGroup; 5] {
+        let k = self.set.params.coeffs;
+        [
+            AdamGroup::single(lr_means),
+            AdamGroup::single(cfg.lr_scales),
+            AdamGroup::single(cfg.lr_quats),
+            AdamGroup::single(cfg.lr_opacity),
+            AdamGroup { lr: cfg.lr_features_dc, lr_rest: cfg.lr_features_rest, stride: 3 * k, split: 3 },
+        ]
+    }
+
     /// Run the forward of `cam` until it fits its frame.
     fn forward(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
@@ -103,6 +141,7 @@ impl ScatteringModel {
             dist: if it > cfg.dist_from { cfg.lambda_dist } else { 0.0 },
         };
         let stats = it < cfg.densify_until;
+        let groups = self.groups(cfg, x.lr_means);
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("view buffers missing after the forward")?;
         let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
         self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
@@ -113,14 +152,6 @@ impl ScatteringModel {
             rec.end_scope(sc);
         }
         let sc = rec.begin_scope("adam");
-        let k = self.set.params.coeffs;
-        let groups = [
-            AdamGroup::single(x.lr_means),
-            AdamGroup::single(cfg.lr_scales),
-            AdamGroup::single(cfg.lr_quats),
-            AdamGroup::single(cfg.lr_opacity),
-            AdamGroup { lr: cfg.lr_features_dc, lr_rest: cfg.lr_features_rest, stride: 3 * k, split: 3 },
-        ];
         self.adam.record_set(&mut rec, &self.set, &groups, it as u64)?;
         rec.end_scope(sc);
         timings.extend(rec.submit_and_wait()?);

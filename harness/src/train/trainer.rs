@@ -1,7 +1,8 @@
 //! The trainer: the loop and the schedule. It owns the training views, the
 //! view order, the iteration count and the stage schedule, and drives one
 //! model per stage (`scattering::ScatteringModel` for Stage I,
-//! `reflection::ReflectionModel` for Stage II; the light field comes next).
+//! `reflection::ReflectionModel` for Stage II, `lightfield::LightFieldModel`
+//! for Stage III).
 //! Between the stages it computes the Stage I residual, decides whether
 //! the scene calls for Stage II, and caches the frozen scattering colour of
 //! every training view. Models never refer to the trainer: each step gets
@@ -9,6 +10,7 @@
 
 use super::config::TrainConfig;
 use super::init::{gaussians_from_points, random_points};
+use super::lightfield::{normalization_box, LightFieldModel, LightFieldStepInput};
 use super::rng::Rng;
 use super::reflection::{residual, ReflStepInput, ReflectionModel};
 use super::scattering::{ScatteringModel, StepInput};
@@ -30,6 +32,8 @@ pub enum Stage {
     Scattering,
     /// Stage II: reflection set + environment map over the frozen Stage I set.
     Reflection,
+    /// Stage III: the reflection light field MLP (reflection geometry frozen).
+    LightField,
 }
 
 impl Stage {
@@ -37,6 +41,7 @@ impl Stage {
         match self {
             Stage::Scattering => "I",
             Stage::Reflection => "II",
+            Stage::LightField => "III",
         }
     }
 }
@@ -71,6 +76,9 @@ impl Schedule {
         let mut stages = vec![(Stage::Scattering, cfg.iterations)];
         if cfg.wants_reflection() {
             stages.push((Stage::Reflection, cfg.reflection.iterations));
+        }
+        if cfg.wants_light_field() {
+            stages.push((Stage::LightField, cfg.light_field.iterations));
         }
         Schedule { stages }
     }
@@ -120,8 +128,10 @@ pub struct Trainer {
     pub schedule: Schedule,
     /// Stage I's model: the scattering set.
     pub scattering: ScatteringModel,
-    /// Stage II's model, from the start of Stage II.
+    /// Stage II's model, from the start of Stage II to the start of Stage III.
     pub reflection: Option<ReflectionModel>,
+    /// Stage III's model, from the start of Stage III.
+    pub light_field: Option<LightFieldModel>,
     /// The Stage I residual's measurement and the Stage II decision.
     pub decision: Option<ReflDecision>,
     /// The frozen scattering colour of every training view (Stage II).
@@ -160,6 +170,7 @@ impl Trainer {
             schedule: Schedule::from_config(&cfg),
             scattering: ScatteringModel::new(ctx, g, cfg.sh_degree, cfg.adam_eps)?,
             reflection: None,
+            light_field: None,
             decision: None,
             scat_cache: Vec::new(),
             ctx: ctx.clone(),
@@ -274,12 +285,54 @@ impl Trainer {
         Ok(d)
     }
 
+    /// Whether the next iteration starts Stage III (call
+    /// [`Trainer::begin_light_field`] first).
+    pub fn at_light_field_start(&self) -> bool {
+        self.light_field.is_none() && matches!(self.schedule.at(self.iteration + 1), Some((Stage::LightField, _)))
+    }
+
+    /// Between Stage II and III: the reflection set (with its Adam moments)
+    /// moves to a light-field model with a fresh network; the environment
+    /// map is dropped. Positions are normalized by the reflection set's box.
+    pub fn begin_light_field(&mut self) -> Result<()> {
+        let refl = self.reflection.take().context("Stage III starts from Stage II's reflection set, and there is none")?;
+        let set = refl.into_set();
+        let (centre, half_extent) = normalization_box(&set.params.means.download()?);
+        let lf = &self.cfg.light_field;
+        let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick()? };
+        let net = LightFieldModel::init_net(&self.ctx, lf.shape()?, self.cfg.seed ^ 0x4c46)?;
+        self.light_field = Some(LightFieldModel::new(&self.ctx, set, net, shade, self.cfg.adam_eps)?);
+        if lf.train_scattering {
+            self.scat_cache.clear();
+        }
+        Ok(())
+    }
+
+    /// The frozen scattering colour of every training view (rendered again
+    /// after a resume).
+    fn ensure_scat_cache(&mut self) -> Result<()> {
+        if self.scat_cache.len() == self.cameras.len() {
+            return Ok(());
+        }
+        self.scat_cache.clear();
+        let sh = self.sh_degree(self.cfg.iterations);
+        for cam in self.cameras.clone() {
+            let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * (cam.width * cam.height) as usize)?;
+            self.scattering.render_color_into(&cam, sh, &self.background, &buf)?;
+            self.scat_cache.push(buf);
+        }
+        Ok(())
+    }
+
     /// One training iteration.
     pub fn step(&mut self, profile: bool) -> Result<StepReport> {
         let it = self.iteration + 1;
         let (stage, stage_it) = self.schedule.at(it).context("training is already complete")?;
         if stage == Stage::Reflection {
             return self.step_reflection(it, stage_it, profile);
+        }
+        if stage == Stage::LightField {
+            return self.step_light_field(it, stage_it, profile);
         }
         // The reset that follows iteration it-1 runs here, at the start of
         // the next iteration (the same order of operations as 2DGS), so that
@@ -347,16 +400,58 @@ impl Trainer {
         })
     }
 
-    /// Render `cam` with the current model: in Stage II the composite, with
+    fn step_light_field(&mut self, it: u32, stage_it: u32, profile: bool) -> Result<StepReport> {
+        let frozen = !self.cfg.light_field.train_scattering;
+        if frozen {
+            self.ensure_scat_cache()?;
+        }
+        let view = self.next_view();
+        let cam = self.cameras[view as usize];
+        let sh = self.sh_degree(self.cfg.iterations);
+        let model = self.light_field.as_mut().context("Stage III has not begun (Trainer::begin_light_field)")?;
+        let input = LightFieldStepInput {
+            iteration: stage_it,
+            global_iteration: it,
+            camera: &cam,
+            target: &self.targets[view as usize],
+            scat: if frozen { Some(&self.scat_cache[view as usize]) } else { None },
+            sh_degree: sh,
+            background: self.background,
+            // Positions at Stage I's final rate (method-notes §3.7).
+            lr_means: self.cfg.lr_means_final * self.extent,
+            profile,
+        };
+        let out = model.step(&self.cfg, &mut self.scattering, &input)?;
+        self.iteration = it;
+        Ok(StepReport {
+            iteration: it,
+            stage: Stage::LightField,
+            view,
+            loss: out.loss,
+            values: out.values,
+            gaussians: model.set.len(),
+            densified: None,
+            opacity_reset: false,
+            timings: out.timings,
+        })
+    }
+
+    /// Render `cam` with the current model: in Stages II and III the composite, with
     /// the geometry planes of the reflection set where it covers a pixel
     /// (alpha >= 0.5) and of the scattering set elsewhere, and both layers.
     pub fn render(&mut self, cam: &Camera) -> Result<Rendered> {
         let sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
         let scat = self.scattering.render(cam, sh, &self.background)?;
-        let Some(model) = self.reflection.as_mut() else { return Ok(scat) };
         let n = (cam.width * cam.height) as usize;
-        let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
-        let refl = model.render(cam, &colour)?;
+        let refl = if let Some(model) = self.light_field.as_mut() {
+            let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
+            model.render(cam, &colour)?
+        } else if let Some(model) = self.reflection.as_mut() {
+            let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
+            model.render(cam, &colour)?
+        } else {
+            return Ok(scat);
+        };
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
         let ra = refl.refl_plane(Plane::Alpha);

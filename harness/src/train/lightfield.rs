@@ -1,0 +1,330 @@
+//! Stage III's model (paper §3.4, method-notes §3.5): the reflection light
+//! field Phi(x, w), an MLP on Fourier features of the reflection point and
+//! direction, replacing Stage II's environment map. The reflection set's
+//! geometry is frozen (its material f0, r trains); the scattering set
+//! trains with it unless `light_field.train_scattering` is off. Per view:
+//! the reflection render of [F0 sum, R], the list of pixels with
+//! R > threshold (Phi runs on those only), the MLP, the composite
+//! I = (1 - R) S + R F Phi, L1 + D-SSIM, and the backward through all of
+//! it. Never refers to the trainer.
+
+use super::config::TrainConfig;
+use super::reflection::{PhiLayers, ReflRendered};
+use super::scattering::{ScatteringModel, StepOutput};
+use anyhow::{Context as _, Result};
+use std::collections::HashMap;
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context, Recorder, Timing};
+use tgs_pipelines::lightfield::{LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
+use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
+use tgs_pipelines::reflection::MATERIAL;
+use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
+
+/// What the trainer passes for one Stage III step.
+pub struct LightFieldStepInput<'a> {
+    /// Iteration within Stage III (1-based): the MLP's Adam step.
+    pub iteration: u32,
+    /// Global iteration: the scattering set's Adam step.
+    pub global_iteration: u32,
+    pub camera: &'a Camera,
+    pub target: &'a Buffer<f32>,
+    /// The frozen scattering colour of this view when the scattering set
+    /// does not train.
+    pub scat: Option<&'a Buffer<f32>>,
+    pub sh_degree: u32,
+    pub background: [f32; 3],
+    /// Scattering position rate (scaled by the extent).
+    pub lr_means: f32,
+    pub profile: bool,
+}
+
+struct ViewBuffers {
+    frame: Frame,
+    samples: SampleScratch,
+    loss: LossScratch,
+    loss_in: Buffer<f32>,
+    loss_grad: Buffer<f32>,
+}
+
+/// The MLP's parameters with their gradient and Adam moments.
+pub struct MlpParams {
+    pub shape: MlpShape,
+    pub params: Buffer<f32>,
+    pub grads: Buffer<f32>,
+    pub m: Buffer<f32>,
+    pub v: Buffer<f32>,
+}
+
+impl MlpParams {
+    pub fn new(ctx: &Arc<Context>, shape: MlpShape, params: &[f32], m: &[f32], v: &[f32]) -> Result<MlpParams> {
+        let n = shape.params() as usize;
+        for (what, a) in [("parameters", params), ("first moments", m), ("second moments", v)] {
+            if a.len() != n {
+                anyhow::bail!("light-field {what}: {} values for a network of {n}", a.len());
+            }
+        }
+        Ok(MlpParams {
+            shape,
+            params: Buffer::from_slice(ctx, "lf.params", params)?,
+            grads: Buffer::new(ctx, "lf.grads", n)?,
+            m: Buffer::from_slice(ctx, "lf.adam_m", m)?,
+            v: Buffer::from_slice(ctx, "lf.adam_v", v)?,
+        })
+    }
+}
+
+pub struct LightFieldModel {
+    ctx: Arc<Context>,
+    raster: Rasterizer,
+    shading: LightFieldShading,
+    mlp: Mlp,
+    loss: ImageLoss,
+    adam: Adam,
+    /// The reflection set (geometry frozen, material trained).
+    pub set: TrainableSet,
+    pub net: MlpParams,
+    /// Normalization box, threshold and Fresnel switch.
+    pub shade: ShadeParams,
+    feat: Buffer<f32>,
+    dfeat: Buffer<f32>,
+    scratch: Option<MlpScratch>,
+    d_phi: Option<Buffer<f32>>,
+    sizes: HashMap<(u32, u32), ViewBuffers>,
+    /// Samples evaluated and pixels seen since the last `take_coverage`.
+    evaluated: (u64, u64),
+}
+
+/// The box Phi's positions are normalized by: the reflection set's 1st-99th
+/// percentile per axis, widened by 10% (so that x_refl of the covered
+/// pixels lies mostly inside [-1, 1]^3).
+pub fn normalization_box(means: &[f32]) -> ([f32; 3], [f32; 3]) {
+    let n = means.len() / 3;
+    let mut centre = [0.0; 3];
+    let mut half = [1.0; 3];
+    if n == 0 {
+        return (centre, half);
+    }
+    for a in 0..3 {
+        let mut v: Vec<f32> = (0..n).map(|i| means[3 * i + a]).filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            continue;
+        }
+        v.sort_by(f32::total_cmp);
+        let q = |p: f64| v[((p * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
+        let (lo, hi) = (q(0.01), q(0.99));
+        centre[a] = 0.5 * (lo + hi);
+        half[a] = (0.55 * (hi - lo)).max(1e-3);
+    }
+    (centre, half)
+}
+
+impl LightFieldModel {
+    /// Stage III from the reflection set `set` (its Adam moments kept) and a
+    /// network `net`; `shade` fixes the normalization box.
+    pub fn new(ctx: &Arc<Context>, set: TrainableSet, net: MlpParams, shade: ShadeParams, adam_eps: f32) -> Result<LightFieldModel> {
+        let n = set.len().max(1) as usize;
+        let ch = CHANNELS as usize;
+        Ok(LightFieldModel {
+            raster: Rasterizer::new(ctx, CHANNELS, Features::Plain)?,
+            shading: LightFieldShading::new(ctx)?,
+            mlp: Mlp::new(ctx)?,
+            loss: ImageLoss::new(ctx)?,
+            adam: Adam::new(ctx, adam_eps)?,
+            set,
+            net,
+            shade,
+            feat: Buffer::uninit(ctx, "lf.features", ch * n)?,
+            dfeat: Buffer::uninit(ctx, "lf.d_features", ch * n)?,
+            scratch: None,
+            d_phi: None,
+            sizes: HashMap::new(),
+            evaluated: (0, 0),
+            ctx: ctx.clone(),
+        })
+    }
+
+    /// A fresh network of `shape` (PyTorch's default initialisation).
+    pub fn init_net(ctx: &Arc<Context>, shape: MlpShape, seed: u64) -> Result<MlpParams> {
+        let zeros = vec![0.0; shape.params() as usize];
+        MlpParams::new(ctx, shape, &shape.init_params(seed), &zeros, &zeros)
+    }
+
+    fn view_buffers(&mut self, w: u32, h: u32) -> Result<()> {
+        let pixels = w * h;
+        if self.scratch.as_ref().is_none_or(|s| s.capacity() < pixels) {
+            self.scratch = Some(self.mlp.scratch(self.net.shape, pixels)?);
+            self.d_phi = Some(Buffer::uninit(&self.ctx, "lf.d_phi", (OUT * pixels) as usize)?);
+        }
+        if !self.sizes.contains_key(&(w, h)) {
+            let n = self.set.len();
+            let max_g = n + 1024;
+            let frame = self.raster.frame(w, h, max_g, (2 * max_g).min(self.raster.max_capacity()))?;
+            let planes = (Plane::count(3) * pixels) as usize;
+            let vb = ViewBuffers {
+                frame,
+                samples: self.shading.sample_scratch(w, h)?,
+                loss: self.loss.scratch(w, h, 3)?,
+                loss_in: Buffer::new(&self.ctx, "lf.loss_in", planes)?,
+                loss_grad: Buffer::new(&self.ctx, "lf.loss_grad", planes)?,
+            };
+            self.sizes.insert((w, h), vb);
+        }
+        Ok(())
+    }
+
+    /// Reflection render + sample list of `cam`, re-run until the frame
+    /// fits; returns the number of samples.
+    fn forward(&mut self, cam: &Camera, profile: bool, timings: &mut Vec<Timing>) -> Result<u32> {
+        self.view_buffers(cam.width, cam.height)?;
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
+        let scratch = self.scratch.as_ref().context("light-field scratch")?;
+        let bg = [0.0; CHANNELS as usize];
+        loop {
+            let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            let sc = rec.begin_scope("lf.material");
+            self.shading.record_material(&mut rec, &self.set.params.features, self.set.len(), &self.feat)?;
+            rec.end_scope(sc);
+            self.raster.record_forward_with(&mut rec, &self.set.params, &self.feat, cam, &bg, 0, &b.frame)?;
+            let sc = rec.begin_scope("lf.samples");
+            self.shading.record_samples(&mut rec, cam, &self.shade, &b.frame.out, &b.samples, &scratch.samples)?;
+            rec.end_scope(sc);
+            timings.extend(rec.submit_and_wait()?);
+            if self.raster.fit(&mut b.frame)? {
+                break;
+            }
+        }
+        let count = b.samples.count.download()?[0];
+        self.evaluated.0 += count as u64;
+        self.evaluated.1 += (cam.width * cam.height) as u64;
+        Ok(count)
+    }
+
+    /// Fraction of pixels Phi was evaluated at since the last call.
+    pub fn take_coverage(&mut self) -> Option<f64> {
+        let (s, p) = std::mem::take(&mut self.evaluated);
+        (p > 0).then(|| s as f64 / p as f64)
+    }
+
+    /// The MLP's learning rate at Stage III iteration `it` of `total`.
+    pub fn lr(cfg: &TrainConfig, it: u32) -> f32 {
+        let lf = &cfg.light_field;
+        let t = (it as f64 / lf.iterations.max(1) as f64).clamp(0.0, 1.0);
+        let (a, b) = (lf.lr.max(1e-30) as f64, lf.lr_final.max(1e-30) as f64);
+        (a.ln() * (1.0 - t) + b.ln() * t).exp() as f32
+    }
+
+    /// One Stage III step on one view.
+    pub fn step(&mut self, cfg: &TrainConfig, scattering: &mut ScatteringModel, x: &LightFieldStepInput) -> Result<StepOutput> {
+        let cam = x.camera;
+        let mut timings = Vec::new();
+        let train_scat = x.scat.is_none();
+        if train_scat {
+            timings.extend(scattering.forward_view(cam, x.sh_degree, &x.background, x.profile)?);
+        }
+        let count = self.forward(cam, x.profile, &mut timings)?;
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
+        let scratch = self.scratch.as_ref().context("light-field scratch")?;
+        let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
+        let (scat, scat_grad) = match x.scat {
+            Some(s) => (s, None),
+            None => {
+                let (out, grad) = scattering.frame_buffers(cam.width, cam.height)?;
+                (out, Some(grad))
+            }
+        };
+        let weights = LossWeights { ssim: cfg.lambda_ssim, normal: 0.0, dist: 0.0 };
+        let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+        self.mlp.record_forward(&mut rec, &self.net.params, count, scratch)?;
+        let sc = rec.begin_scope("lf.composite");
+        self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
+        rec.end_scope(sc);
+        self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
+        let sc = rec.begin_scope("lf.composite_backward");
+        if let Some(g) = scat_grad {
+            // The composite writes the colour planes; the scattering
+            // geometry planes get no gradient in Stage III.
+            let n = (cam.width * cam.height) as usize;
+            rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
+        }
+        self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad)?;
+        rec.end_scope(sc);
+        self.mlp.record_backward(&mut rec, &self.net.params, count, d_phi, &self.net.grads, scratch)?;
+        self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
+        let sc = rec.begin_scope("lf.material_backward");
+        self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
+        rec.end_scope(sc);
+        if train_scat {
+            scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration)?;
+        }
+        let sc = rec.begin_scope("adam");
+        let lf = &cfg.light_field;
+        let it = x.iteration as u64;
+        let n = &self.net;
+        self.adam.record(&mut rec, &n.params, &n.grads, &n.m, &n.v, n.shape.params() as usize, &AdamGroup::single(Self::lr(cfg, x.iteration)), it)?;
+        // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
+        let s = &self.set;
+        let len = (MATERIAL * s.len()) as usize;
+        let group = AdamGroup { lr: lf.lr_f0, lr_rest: lf.lr_r, stride: MATERIAL, split: 3 };
+        self.adam.record(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, len, &group, it)?;
+        rec.end_scope(sc);
+        timings.extend(rec.submit_and_wait()?);
+        let values = b.loss.values()?;
+        let loss = values.photometric(cfg.lambda_ssim as f64);
+        Ok(StepOutput { loss, values, densified: None, timings })
+    }
+
+    /// Render `cam` composited over the scattering colour `scat` (3 planes).
+    pub fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
+        let mut timings = Vec::new();
+        let saved = self.evaluated;
+        let count = self.forward(cam, false, &mut timings)?;
+        self.evaluated = saved;
+        let b = &self.sizes[&(cam.width, cam.height)];
+        let scratch = self.scratch.as_ref().context("light-field scratch")?;
+        let mut rec = Recorder::new(&self.ctx)?;
+        self.mlp.record_forward(&mut rec, &self.net.params, count, scratch)?;
+        self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
+        rec.submit_and_wait()?;
+        let n = (cam.width * cam.height) as usize;
+        let composite = b.loss_in.download()?;
+        let refl = b.frame.out.download()?;
+        let sample_of = b.samples.sample_of.download()?;
+        let phi = if count > 0 { scratch.out.download_range(0, (OUT * count) as usize)? } else { Vec::new() };
+        // F Phi per pixel, from the composite's own terms: (I - (1 - R) S) / R.
+        let mut reflected = vec![0.0; 3 * n];
+        let mut mask = vec![0.0; n];
+        let alpha = &refl[CHANNELS as usize * n..(CHANNELS as usize + 1) * n];
+        for i in 0..n {
+            let s = sample_of[i];
+            if s == u32::MAX {
+                continue;
+            }
+            mask[i] = 1.0;
+            let f0 = |c: usize| refl[c * n + i] / alpha[i].max(1e-6);
+            let m = if self.shade.schlick {
+                let cos = pixel_cos(cam, i, &refl, n);
+                (1.0 - cos.clamp(0.0, 1.0)).powi(5)
+            } else {
+                0.0
+            };
+            for c in 0..3 {
+                let f = f0(c) + (1.0 - f0(c)) * m;
+                reflected[c * n + i] = f * phi[3 * s as usize + c];
+            }
+        }
+        Ok(ReflRendered { width: cam.width, height: cam.height, composite, refl, channels: CHANNELS, phi: Some(PhiLayers { reflected, mask }) })
+    }
+}
+
+/// n . v at pixel `i` of a reflection render (1 without a normal).
+fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
+    let (x, y) = ((i % cam.width as usize) as f32, (i / cam.width as usize) as f32);
+    let ray = [(x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0];
+    let l = (ray[0] * ray[0] + ray[1] * ray[1] + 1.0).sqrt();
+    let nn: Vec<f32> = (0..3).map(|k| refl[Plane::Normal(k).index(CHANNELS) as usize * n + i]).collect();
+    let nl = (nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2]).sqrt();
+    if nl <= 1e-12 {
+        return 1.0;
+    }
+    -(nn[0] * ray[0] + nn[1] * ray[1] + nn[2] * ray[2]) / (nl * l)
+}

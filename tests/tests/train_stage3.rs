@@ -1,0 +1,99 @@
+//! End to end: Stages I, II and III on the built-in tiny glass scene through
+//! the `tgs train` driver: Stage III's record in metrics.json, its log
+//! lines (stage, fraction of pixels the light field evaluated), its outputs
+//! (the MLP as safetensors that reads back, the evaluation mask, Stage II's
+//! renders kept), the test PSNR kept, and a run stopped inside Stage III and
+//! resumed ending bit-identical to the uninterrupted one (MLP weights and
+//! Adam moments, reflection material, scattering set).
+
+use std::path::{Path, PathBuf};
+use tgs::train::checkpoint;
+use tgs::train::run::{request_stop, train, TrainArgs};
+use tgs_tests::{check_validation, ctx_shared};
+
+fn scene() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("tgs-stage3-{}-scene", std::process::id()));
+    if !d.join("transforms_train.json").is_file() {
+        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &d, |_, _| {}).unwrap();
+    }
+    d
+}
+
+fn args(out: &Path) -> TrainArgs {
+    let set: Vec<String> = ["iterations=300", "reflection.iterations=100", "light_field.iterations=120", "test_interval=0", "checkpoint_interval=0"].iter().map(|s| s.to_string()).collect();
+    let _ = std::fs::remove_dir_all(out);
+    TrainArgs { dataset: Some(scene()), out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
+fn log_lines(out: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(out.join("log.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+#[test]
+fn stage_three_runs_on_glass_and_resumes_exactly() {
+    let ctx = ctx_shared();
+    let base = std::env::temp_dir().join(format!("tgs-stage3-{}", std::process::id()));
+    let full = base.join("full");
+    let o = train(ctx, &args(&full)).unwrap();
+    assert_eq!(o.iteration, 520);
+    let m = json(&full.join("metrics.json"));
+    let stages = m["stages"].as_array().unwrap();
+    assert_eq!(stages.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II", "III"]);
+    let psnr = |i: usize| stages[i]["test"]["psnr"].as_f64().unwrap();
+    assert!(psnr(2) > psnr(1) - 0.3, "Stage III test PSNR {} vs Stage II {}", psnr(2), psnr(1));
+    assert_eq!(stages[2]["iterations"], 120);
+    assert!(stages[2]["test"]["normal_mae_deg"].as_f64().unwrap().is_finite());
+    assert_eq!(m["test"]["psnr"], stages[2]["test"]["psnr"]);
+    // Log: Stage III lines with the fraction of pixels Phi ran on.
+    let lines = log_lines(&full);
+    let third: Vec<&serde_json::Value> = lines.iter().filter(|l| l["stage"] == "III" && l.get("loss").is_some()).collect();
+    assert_eq!(third.len(), 120);
+    for l in &third {
+        let f = l["phi_fraction"].as_f64().unwrap();
+        assert!(f > 0.0 && f <= 1.0, "phi_fraction {f}");
+        assert!(l["loss"].as_f64().unwrap().is_finite());
+    }
+    // Outputs: the network reads back as the quick preset's, with its box.
+    let (shape, shade, params) = tgs::export::mlp::read(&full.join("light_field.safetensors")).unwrap();
+    assert_eq!(shape, tgs_pipelines::MlpShape::SMALL);
+    assert!(params.iter().all(|v| v.is_finite()) && params.len() == shape.params() as usize);
+    assert!(shade.half_extent.iter().all(|&h| h > 0.0) && (shade.threshold - 0.01).abs() < 1e-9, "{shade:?}");
+    for f in ["reflection.ply", "point_cloud.ply", "renders/stage1/r_0.png", "renders/stage2/r_0.png", "renders/test/r_0_phi_mask.png", "renders/test/r_0_refl.png", "renders/test/r_0_F0.png"] {
+        assert!(full.join(f).is_file(), "missing {f}");
+    }
+    assert!(!full.join("envmap.exr").exists(), "Stage III drops the environment map");
+
+    // Stopped inside Stage III, then resumed: the same final state.
+    let part = base.join("part");
+    let a = args(&part);
+    let watch = part.join("log.jsonl");
+    let stopper = std::thread::spawn(move || loop {
+        let s = std::fs::read_to_string(&watch).unwrap_or_default();
+        if s.lines().filter(|l| l.contains("\"stage\":\"III\"") && l.contains("\"loss\"")).count() >= 40 {
+            request_stop();
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    });
+    let o = train(ctx, &a).unwrap();
+    stopper.join().unwrap();
+    assert!(o.interrupted && o.iteration > 440 && o.iteration < 520, "stopped at {}", o.iteration);
+    let o = train(ctx, &TrainArgs { resume: true, ..a }).unwrap();
+    assert_eq!((o.iteration, o.interrupted), (520, false));
+    let (ha, aa) = checkpoint::read(&full.join("checkpoint.bin")).unwrap();
+    let (hb, ab) = checkpoint::read(&part.join("checkpoint.bin")).unwrap();
+    assert_eq!((ha.iteration, ha.rng, &ha.stack), (hb.iteration, hb.rng, &hb.stack));
+    let names: Vec<&String> = ha.arrays.iter().chain(ha.light_field.as_ref().unwrap().arrays.iter()).map(|a| &a.0).collect();
+    assert!(names.iter().any(|n| *n == "mlp.adam_v"));
+    assert_eq!(aa.len(), ab.len());
+    for (name, (x, y)) in names.iter().zip(aa.iter().zip(&ab)) {
+        assert!(x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()), "{name} differs after resume");
+    }
+    let m2 = json(&part.join("metrics.json"));
+    assert_eq!(m2["test"]["psnr"], m["test"]["psnr"]);
+    check_validation(ctx);
+}
