@@ -56,11 +56,13 @@ enum Cmd {
         /// --iterations and --set test_interval / checkpoint_interval).
         #[arg(long)]
         resume: bool,
-        /// Stages to run: I, or I,II (the default); with --from, II.
+        /// Stages to run: I, I,II or I,II,III (the default); with --from,
+        /// the stages after Stage I (II or II,III).
         #[arg(long)]
         stages: Option<String>,
-        /// Start Stage II from the finished Stage I of the run directory RUN
-        /// (its checkpoint), in a new --out, without training Stage I again.
+        /// Start Stage II (and III) from the finished Stage I of the run
+        /// directory RUN (its checkpoint), in a new --out, without training
+        /// Stage I again.
         #[arg(long, value_name = "RUN")]
         from: Option<PathBuf>,
         /// Time every kernel of every iteration (GPU timestamps) into metrics.json.

@@ -16,7 +16,7 @@ pub use util::Iota;
 pub mod raster;
 pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, RasterKernels, Rasterizer};
 pub mod train;
-pub use train::{Adam, AdamGroup, DensifyParams, DensifyReport, Densifier, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};
+pub use train::{Adam, AdamGroup, DensifyParams, DensifyReport, Densifier, HfLoss, HfStats, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};
 pub mod reflection;
 pub use reflection::{EnvMap, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
 pub mod mlp;

@@ -109,3 +109,25 @@ pub fn loss(inp: &LossInput, planes: &[f64], alpha_det: &[f64]) -> (f64, [f64; 4
     let total = (1.0 - inp.ssim) * l1 + inp.ssim * (1.0 - s) + inp.normal * nt + inp.dist * dist;
     (total, [l1, mse, s, nt])
 }
+
+/// The high-frequency loss (method-notes §3.6) in f64: per pixel e = mean_c
+/// |x - y| (x, y planar RGB; selected on 3 e = sum_c |x - y|, summed in f32
+/// as the kernel does so that ties stay ties); tau = the ascending 3 e of
+/// rank floor(pct (n - 1)); returns (3 tau, count of e >= tau, their mean
+/// e, d mean / d x).
+pub fn hf_loss(x: &[f32], y: &[f32], n: usize, pct: f64) -> (f32, usize, f64, Vec<f64>) {
+    let e: Vec<f32> = (0..n).map(|i| (x[i] - y[i]).abs() + (x[n + i] - y[n + i]).abs() + (x[2 * n + i] - y[2 * n + i]).abs()).collect();
+    let mut sorted = e.clone();
+    sorted.sort_by(f32::total_cmp);
+    let tau = sorted[(pct * (n - 1) as f64).floor() as usize];
+    let sel: Vec<usize> = (0..n).filter(|&i| e[i] >= tau).collect();
+    let mean = sel.iter().map(|&i| e[i] as f64).sum::<f64>() / (3.0 * sel.len() as f64);
+    let mut g = vec![0.0; 3 * n];
+    for &i in &sel {
+        for c in 0..3 {
+            let d = x[c * n + i] as f64 - y[c * n + i] as f64;
+            g[c * n + i] = d.signum() * if d == 0.0 { 0.0 } else { 1.0 } / (3.0 * sel.len() as f64);
+        }
+    }
+    (tau, sel.len(), mean, g)
+}

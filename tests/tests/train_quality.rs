@@ -16,7 +16,7 @@ fn stage_two_lowers_glass_normal_error() {
     let ctx = ctx_shared();
     let out = std::env::temp_dir().join(format!("tgs-quality-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let set = ["reflection.iterations=200", "test_interval=0", "checkpoint_interval=0"].map(String::from).to_vec();
+    let set = ["stages=\"I,II\"", "reflection.iterations=200", "test_interval=0", "checkpoint_interval=0"].map(String::from).to_vec();
     // No dataset: the built-in glass scene, written to OUT/scene.
     let o = train(ctx, &TrainArgs { out: out.clone(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }).unwrap();
     assert_eq!(o.iteration, 3200);

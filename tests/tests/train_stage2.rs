@@ -73,7 +73,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert_eq!(train(ctx, &a1).unwrap().iteration, 300);
     let from = std::env::temp_dir().join(format!("tgs-stage2-{}-from", std::process::id()));
     let _ = std::fs::remove_dir_all(&from);
-    let af = TrainArgs { dataset: None, out: from.clone(), preset: None, set: vec!["reflection.iterations=150".into(), "test_interval=0".into()], quiet: true, from: Some(stage1.clone()), ..Default::default() };
+    let af = TrainArgs { dataset: None, out: from.clone(), preset: None, set: vec!["reflection.iterations=150".into(), "test_interval=0".into()], quiet: true, from: Some(stage1.clone()), stages: Some("II".into()), ..Default::default() };
     assert_eq!(train(ctx, &af).unwrap().iteration, 450);
     // (EXR chunks may be written in any order: the PNG is compared.)
     for f in ["reflection.ply", "envmap.png", "point_cloud.ply"] {

@@ -90,6 +90,9 @@ pub struct LightFieldConfig {
     /// Train the scattering set too (the paper; no densification, positions
     /// at Stage I's final rate); false keeps Stage I's result frozen.
     pub train_scattering: bool,
+    /// High-frequency loss weight and percentile (as in `[reflection]`).
+    pub lambda_hf: f32,
+    pub hf_percentile: f32,
 }
 
 impl Default for LightFieldConfig {
@@ -104,6 +107,8 @@ impl Default for LightFieldConfig {
             threshold: 0.01,
             fresnel: "schlick".into(),
             train_scattering: true,
+            lambda_hf: 0.1,
+            hf_percentile: 90.0,
         }
     }
 }
@@ -133,7 +138,7 @@ impl LightFieldConfig {
         if !(0.0..1.0).contains(&self.threshold) {
             bail!("light_field.threshold must be in [0, 1), not {}", self.threshold);
         }
-        Ok(())
+        check_hf("light_field", self.lambda_hf, self.hf_percentile)
     }
 }
 
@@ -189,6 +194,10 @@ pub struct ReflectionConfig {
     pub seed_agree: f32,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
+    /// High-frequency loss (method-notes §3.6): weight of the mean error of
+    /// the pixels at or above the `hf_percentile`-th percentile (0: off).
+    pub lambda_hf: f32,
+    pub hf_percentile: f32,
 }
 
 impl Default for ReflectionConfig {
@@ -215,6 +224,8 @@ impl Default for ReflectionConfig {
             seed_rays: 8192,
             seed_agree: 0.9,
             seed_opacity: 0.5,
+            lambda_hf: 0.1,
+            hf_percentile: 90.0,
         }
     }
 }
@@ -258,6 +269,7 @@ impl ReflectionConfig {
                 bail!("reflection.{k} must be in (0, 1), not {v}");
             }
         }
+        check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
         for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual)] {
             if v < 0.0 {
                 bail!("reflection.{k} must be non-negative, not {v}");
@@ -504,6 +516,16 @@ impl TrainConfig {
             }
         }
     }
+}
+
+fn check_hf(section: &str, lambda: f32, pct: f32) -> Result<()> {
+    if lambda < 0.0 {
+        bail!("{section}.lambda_hf must be non-negative, not {lambda}");
+    }
+    if !(0.0..=100.0).contains(&pct) {
+        bail!("{section}.hf_percentile must be in [0, 100], not {pct}");
+    }
+    Ok(())
 }
 
 /// A table's keys with section keys as `section.key` (one level).

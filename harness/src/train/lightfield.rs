@@ -18,7 +18,7 @@ use tgs_engine::{Buffer, Context, Recorder, Timing};
 use tgs_pipelines::lightfield::{LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::MATERIAL;
-use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, HfLoss, HfStats, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -79,6 +79,8 @@ pub struct LightFieldModel {
     shading: LightFieldShading,
     mlp: Mlp,
     loss: ImageLoss,
+    hf: HfLoss,
+    hf_stats: HfStats,
     adam: Adam,
     /// The reflection set (geometry frozen, material trained).
     pub set: TrainableSet,
@@ -124,7 +126,10 @@ impl LightFieldModel {
     pub fn new(ctx: &Arc<Context>, set: TrainableSet, net: MlpParams, shade: ShadeParams, adam_eps: f32) -> Result<LightFieldModel> {
         let n = set.len().max(1) as usize;
         let ch = CHANNELS as usize;
+        let hf = HfLoss::new(ctx)?;
         Ok(LightFieldModel {
+            hf_stats: hf.stats()?,
+            hf,
             raster: Rasterizer::new(ctx, CHANNELS, Features::Plain)?,
             shading: LightFieldShading::new(ctx)?,
             mlp: Mlp::new(ctx)?,
@@ -239,6 +244,12 @@ impl LightFieldModel {
         self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
         rec.end_scope(sc);
         self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
+        let lf = &cfg.light_field;
+        if lf.lambda_hf > 0.0 {
+            let sc = rec.begin_scope("loss.hf");
+            self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, lf.hf_percentile / 100.0, lf.lambda_hf, &b.loss_grad, &self.hf_stats)?;
+            rec.end_scope(sc);
+        }
         let sc = rec.begin_scope("lf.composite_backward");
         if let Some(g) = scat_grad {
             // The composite writes the colour planes; the scattering
@@ -257,7 +268,6 @@ impl LightFieldModel {
             scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration)?;
         }
         let sc = rec.begin_scope("adam");
-        let lf = &cfg.light_field;
         let it = x.iteration as u64;
         let n = &self.net;
         self.adam.record(&mut rec, &n.params, &n.grads, &n.m, &n.v, n.shape.params() as usize, &AdamGroup::single(Self::lr(cfg, x.iteration)), it)?;
@@ -269,7 +279,10 @@ impl LightFieldModel {
         rec.end_scope(sc);
         timings.extend(rec.submit_and_wait()?);
         let values = b.loss.values()?;
-        let loss = values.photometric(cfg.lambda_ssim as f64);
+        let mut loss = values.photometric(cfg.lambda_ssim as f64);
+        if lf.lambda_hf > 0.0 {
+            loss += lf.lambda_hf as f64 * self.hf_stats.values()?.2;
+        }
         Ok(StepOutput { loss, values, densified: None, timings })
     }
 

@@ -16,7 +16,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
 use tgs_pipelines::reflection::{TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamGroup, Camera, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
+    Adam, AdamGroup, Camera, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HfLoss, HfStats, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -100,6 +100,8 @@ pub struct ReflectionModel {
     raster: Rasterizer,
     shading: ReflectionShading,
     loss: ImageLoss,
+    hf: HfLoss,
+    hf_stats: HfStats,
     adam: Adam,
     densifier: Densifier,
     pub fresnel: Fresnel,
@@ -149,9 +151,12 @@ impl ReflectionModel {
         let env = EnvMap::upload(ctx, env)?;
         let n = set.len().max(1);
         let ch = fresnel.channels() as usize;
+        let hf = HfLoss::new(ctx)?;
         Ok(ReflectionModel {
             raster: Rasterizer::new(ctx, fresnel.channels(), Features::Plain)?,
             loss: ImageLoss::new(ctx)?,
+            hf_stats: hf.stats()?,
+            hf,
             adam: Adam::new(ctx, adam_eps)?,
             densifier: Densifier::new(ctx)?,
             texels: shading.texel_scratch(&env, n as u32)?,
@@ -217,6 +222,11 @@ impl ReflectionModel {
         self.shading.record_composite(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_in)?;
         rec.end_scope(sc);
         self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
+        if rc.lambda_hf > 0.0 {
+            let sc = rec.begin_scope("loss.hf");
+            self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, rc.hf_percentile / 100.0, rc.lambda_hf, &b.loss_grad, &self.hf_stats)?;
+            rec.end_scope(sc);
+        }
         let sc = rec.begin_scope("refl.composite_backward");
         self.shading.record_composite_backward(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, None)?;
         rec.end_scope(sc);
@@ -240,7 +250,10 @@ impl ReflectionModel {
         rec.end_scope(sc);
         timings.extend(rec.submit_and_wait()?);
         let values = b.loss.values()?;
-        let loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
+        let mut loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
+        if rc.lambda_hf > 0.0 {
+            loss += rc.lambda_hf as f64 * self.hf_stats.values()?.2;
+        }
 
         let mut densified = None;
         if rc.prune_interval > 0 && x.iteration % rc.prune_interval == 0 && x.iteration > 0 {

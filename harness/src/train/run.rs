@@ -38,7 +38,8 @@ pub struct TrainArgs {
     /// `--background white|black|r,g,b` (the `background` setting).
     pub background: Option<String>,
     pub resume: bool,
-    /// `--stages I|I,II|II` (the `stages` setting; "II" only with `from`).
+    /// `--stages I|I,II|I,II,III` (the `stages` setting; with `from`, the
+    /// stages after Stage I: "II" or "II,III").
     pub stages: Option<String>,
     /// `--from RUN`: start Stage II from RUN's finished Stage I instead of
     /// training Stage I again.
@@ -101,7 +102,8 @@ fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainConfig> {
     }
     if let Some(st) = &a.stages {
         // With --from, Stage I comes from the other run: "II" means "I,II".
-        cfg.stages = if a.from.is_some() && st.trim() == "II" { "I,II".into() } else { st.clone() };
+        let first = st.split(',').next().unwrap_or("").trim();
+        cfg.stages = if a.from.is_some() && first != "I" { format!("I,{}", st.trim()) } else { st.clone() };
         cfg.validate().with_context(|| format!("--stages '{st}'"))?;
     }
     if let Some(d) = a.downscale {

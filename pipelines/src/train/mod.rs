@@ -1,15 +1,18 @@
 //! Training kernels: the image loss (L1 + D-SSIM, normal consistency,
-//! distortion weight) forward and backward, the fused Adam step, and the
+//! distortion weight) forward and backward, the high-frequency loss, the
+//! fused Adam step, and the
 //! adaptive density control (statistics, clone/split/prune with scan
 //! compaction, opacity reset) on a trainable Gaussian set.
 
 mod adam;
 mod densify;
+mod hf;
 mod loss;
 mod set;
 
 pub use adam::{Adam, AdamGroup};
 pub use densify::{DensifyParams, DensifyReport, Densifier};
+pub use hf::{HfLoss, HfStats};
 pub use loss::{ImageLoss, LossScratch, LossValues, LossWeights};
 pub use set::TrainableSet;
 
