@@ -27,6 +27,8 @@ layout(push_constant) uniform Push {
     vec4 rot[3];      // world_to_view rows: xyz = R row, w = t
     vec4 centre;      // xyz: centre of the normalization box
     vec4 scale;       // xyz: 1 / half extent
+    uint max_samples; // the sample list's capacity (compact writes no more)
+    uint pad0, pad1, pad2;
 } pc;
 
 const uint CH = 4u;

@@ -2,7 +2,9 @@
 // The light field's sample list (lightfield/common.glsl): after the
 // exclusive scan of the per-pixel flags (R > threshold), every evaluated
 // pixel writes its sample (x_refl normalized, w_r) at its rank and records
-// the rank; the others record NONE. The last pixel writes the count.
+// the rank; the others record NONE. The last pixel writes the count (all
+// evaluated pixels, even beyond the list's capacity max_samples: the host
+// refuses such a view; ranks at or past it write nothing).
 #include "lightfield/common.glsl"
 
 layout(std430, binding = 1) readonly buffer Offsets { uint offsets[]; };
@@ -22,6 +24,10 @@ void main() {
         count[0] = o + (on ? 1u : 0u);
     }
     if (!on) {
+        sample_of[pix] = NONE;
+        return;
+    }
+    if (o >= pc.max_samples) {
         sample_of[pix] = NONE;
         return;
     }

@@ -85,17 +85,22 @@ struct Samples {
 }
 
 fn gpu_samples(cam: &Camera, refl: &[f32], p: &ShadeParams) -> Samples {
+    gpu_samples_cap(cam, refl, p, (cam.width * cam.height) as usize)
+}
+
+/// With room for `cap` samples.
+fn gpu_samples_cap(cam: &Camera, refl: &[f32], p: &ShadeParams, cap: usize) -> Samples {
     let ctx = ctx_shared();
     let lf = LightFieldShading::new(ctx).unwrap();
-    let n = (cam.width * cam.height) as usize;
     let s = lf.sample_scratch(cam.width, cam.height).unwrap();
     let rb = Buffer::from_slice(ctx, "refl", refl).unwrap();
-    let samples = Buffer::uninit(ctx, "samples", 6 * n).unwrap();
+    let samples = Buffer::uninit(ctx, "samples", 6 * cap).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
     lf.record_samples(&mut rec, cam, p, &rb, &s, &samples).unwrap();
     rec.submit_and_wait().unwrap();
     let count = s.count.download().unwrap()[0];
-    let out = Samples { sample_of: s.sample_of.download().unwrap(), count, samples: if count > 0 { samples.download_range(0, 6 * count as usize).unwrap() } else { vec![] } };
+    let kept = (count as usize).min(cap);
+    let out = Samples { sample_of: s.sample_of.download().unwrap(), count, samples: if kept > 0 { samples.download_range(0, 6 * kept).unwrap() } else { vec![] } };
     check_validation(ctx);
     out
 }
@@ -148,6 +153,12 @@ fn sample_list_when_no_pixel_and_every_pixel_reflects() {
     assert_eq!(all.count, 17 * 9);
     assert!(all.sample_of.iter().enumerate().all(|(i, &s)| s == i as u32));
     assert!(all.samples.iter().all(|v| v.is_finite()));
+    // A list with room for 10: the count still says how many reflect (the
+    // caller refuses the view), ranks past the room are not evaluated.
+    let capped = gpu_samples_cap(&cam, &planes(&px), &SHADE, 10);
+    assert_eq!(capped.count, 17 * 9);
+    assert!(capped.sample_of.iter().enumerate().all(|(i, &s)| if i < 10 { s == i as u32 } else { s == u32::MAX }));
+    assert_eq!(&capped.samples[..], &all.samples[..60]);
 }
 
 #[test]

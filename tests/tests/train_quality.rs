@@ -1,7 +1,9 @@
 //! End to end, the method's result: on the built-in glass scene (quick
-//! preset: Stage I 3,000 iterations, then 200 of Stage II), Stage II's
-//! residual-hull reflection set lowers the glass-mask normal MAE well below
-//! Stage I's and keeps the test PSNR. Measured on lavapipe (perf/RESULTS.md):
+//! preset: Stage I 3,000 iterations, then 200 of Stage II and 300 of Stage
+//! III), Stage II's residual-hull reflection set lowers the glass-mask
+//! normal MAE well below Stage I's and keeps the test PSNR; Stage III keeps
+//! both (its light field does not yet raise the PSNR here: +0.03 dB after
+//! 1,000 iterations, perf/RESULTS.md). Measured on lavapipe (perf/RESULTS.md):
 //! Stage I 63.1 degrees, PSNR 28.54; Stage II after 200 iterations 43.7
 //! degrees (0.69x), PSNR 28.42 in this test (28.56 through `--from` in a
 //! release build; 28.63 after the quick preset's 1,000). The thresholds
@@ -12,14 +14,14 @@ use tgs::train::run::{train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
 
 #[test]
-fn stage_two_lowers_glass_normal_error() {
+fn method_on_glass() {
     let ctx = ctx_shared();
     let out = std::env::temp_dir().join(format!("tgs-quality-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let set = ["stages=\"I,II\"", "reflection.iterations=200", "test_interval=0", "checkpoint_interval=0"].map(String::from).to_vec();
+    let set = ["reflection.iterations=200", "light_field.iterations=300", "test_interval=0", "checkpoint_interval=0"].map(String::from).to_vec();
     // No dataset: the built-in glass scene, written to OUT/scene.
     let o = train(ctx, &TrainArgs { out: out.clone(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }).unwrap();
-    assert_eq!(o.iteration, 3200);
+    assert_eq!(o.iteration, 3500);
     let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
     let s = &m["stages"];
     let get = |i: usize, k: &str| s[i]["test"][k].as_f64().unwrap_or_else(|| panic!("stage {i} {k}: {s}"));
@@ -30,6 +32,10 @@ fn stage_two_lowers_glass_normal_error() {
     assert!(get(1, "reflection_coverage") > 0.9);
     // The scattering set is frozen in Stage II: its own MAE is Stage I's.
     assert!((get(1, "normal_mae_scattering_deg") - mae1).abs() < 1e-9);
+    // Stage III: reflection geometry frozen (the same normals), the PSNR kept.
+    eprintln!("Stage III: MAE {:.2} PSNR {:.3}", get(2, "normal_mae_deg"), get(2, "psnr"));
+    assert!((get(2, "normal_mae_deg") - mae2).abs() < 1e-9);
+    assert!(get(2, "psnr") > get(1, "psnr") - 0.15, "Stage III PSNR {} vs Stage II {}", get(2, "psnr"), get(1, "psnr"));
     let _ = std::fs::remove_dir_all(&out);
     check_validation(ctx);
 }

@@ -4,7 +4,10 @@
 //! (the MLP as safetensors that reads back, the evaluation mask, Stage II's
 //! renders kept), the test PSNR kept, and a run stopped inside Stage III and
 //! resumed ending bit-identical to the uninterrupted one (MLP weights and
-//! Adam moments, reflection material, scattering set).
+//! Adam moments, reflection material, scattering set), and Stage III
+//! started from a finished Stage II run (`--from RUN --stages III`) ending
+//! bit-identical too, with its refusals; the scattering set frozen by
+//! default and trained with `light_field.train_scattering`.
 
 use std::path::{Path, PathBuf};
 use tgs::train::checkpoint;
@@ -66,6 +69,11 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
         assert!(full.join(f).is_file(), "missing {f}");
     }
     assert!(!full.join("envmap.exr").exists(), "Stage III drops the environment map");
+    // `tgs eval` from the checkpoint measures what training reported.
+    let (mut tr, data) = tgs::train::run::open_run(ctx, &full).unwrap();
+    let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
+    assert_eq!(Some(again.psnr), m["test"]["psnr"].as_f64(), "evaluation from the checkpoint differs");
+    drop(tr);
 
     // Stopped inside Stage III, then resumed: the same final state.
     let part = base.join("part");
@@ -95,5 +103,52 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     }
     let m2 = json(&part.join("metrics.json"));
     assert_eq!(m2["test"]["psnr"], m["test"]["psnr"]);
+
+    // Stage III from a finished Stage II run (--from RUN --stages III)
+    // continues exactly as the one run did.
+    let two = base.join("two");
+    let mut a2 = args(&two);
+    a2.set.push("stages=\"I,II\"".into());
+    assert_eq!(train(ctx, &a2).unwrap().iteration, 400);
+    // The scattering set stays as Stages I and II left it (train_scattering
+    // is off by default).
+    let (_, a_two) = checkpoint::read(&two.join("checkpoint.bin")).unwrap();
+    for k in 0..5 {
+        assert!(a_two[k].iter().zip(&aa[k]).all(|(p, q)| p.to_bits() == q.to_bits()) && a_two[k].len() == aa[k].len(), "scattering array {} moved in Stage III", names[k]);
+    }
+    let from = base.join("from");
+    let _ = std::fs::remove_dir_all(&from);
+    let af = TrainArgs { dataset: None, out: from.clone(), preset: None, set: vec!["light_field.iterations=120".into()], quiet: true, from: Some(two.clone()), stages: Some("III".into()), ..Default::default() };
+    assert_eq!(train(ctx, &af).unwrap().iteration, 520);
+    let (hc, ac) = checkpoint::read(&from.join("checkpoint.bin")).unwrap();
+    assert_eq!((ha.iteration, ha.rng), (hc.iteration, hc.rng));
+    for (name, (x, y)) in names.iter().zip(aa.iter().zip(&ac)) {
+        assert!(x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()), "{name} differs between --from --stages III and one run");
+    }
+    let mf = json(&from.join("metrics.json"));
+    let st = mf["stages"].as_array().unwrap();
+    assert_eq!(st.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II", "III"]);
+    assert!(st[0].get("from").is_some() && st[1].get("from").is_some() && st[2].get("from").is_none());
+    // Refused: Stage II not finished there, or a Stage II setting changed.
+    let refused = |a: TrainArgs, words: &[&str]| {
+        let e = format!("{:#}", train(ctx, &a).unwrap_err());
+        for w in words {
+            assert!(e.contains(w), "error '{e}' should mention '{w}'");
+        }
+    };
+    let _ = std::fs::remove_dir_all(&from);
+    refused(TrainArgs { from: Some(full.clone()), ..af.clone() }, &["finished Stage II", "520"]);
+    refused(TrainArgs { set: vec!["reflection.lr_r=0.01".into()], ..af.clone() }, &["reflection.lr_r", "light_field.*"]);
+
+    // The paper's joint training: the scattering set moves too.
+    let joint = base.join("joint");
+    let _ = std::fs::remove_dir_all(&joint);
+    let aj = TrainArgs { out: joint.clone(), set: vec!["light_field.iterations=30".into(), "light_field.train_scattering=true".into()], ..af.clone() };
+    assert_eq!(train(ctx, &aj).unwrap().iteration, 430);
+    let (_, a_joint) = checkpoint::read(&joint.join("checkpoint.bin")).unwrap();
+    assert!(a_joint.iter().flatten().all(|v| v.is_finite()));
+    assert!(a_joint[0].iter().zip(&a_two[0]).any(|(p, q)| p != q), "the scattering set did not train in Stage III");
+    let mj = json(&joint.join("metrics.json"));
+    assert!(mj["test"]["psnr"].as_f64().unwrap() > mj["stages"][1]["test"]["psnr"].as_f64().unwrap() - 1.0);
     check_validation(ctx);
 }

@@ -11,7 +11,7 @@
 use super::config::TrainConfig;
 use super::reflection::{PhiLayers, ReflRendered};
 use super::scattering::{ScatteringModel, StepOutput};
-use anyhow::{Context as _, Result};
+use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
@@ -156,9 +156,11 @@ impl LightFieldModel {
 
     fn view_buffers(&mut self, w: u32, h: u32) -> Result<()> {
         let pixels = w * h;
-        if self.scratch.as_ref().is_none_or(|s| s.capacity() < pixels) {
-            self.scratch = Some(self.mlp.scratch(self.net.shape, pixels)?);
-            self.d_phi = Some(Buffer::uninit(&self.ctx, "lf.d_phi", (OUT * pixels) as usize)?);
+        // One sample per pixel at most, and no more than one binding holds.
+        let cap = pixels.min(self.mlp.max_capacity(&self.net.shape));
+        if self.scratch.as_ref().is_none_or(|s| s.capacity() < cap) {
+            self.scratch = Some(self.mlp.scratch(self.net.shape, cap)?);
+            self.d_phi = Some(Buffer::uninit(&self.ctx, "lf.d_phi", (OUT * cap) as usize)?);
         }
         if !self.sizes.contains_key(&(w, h)) {
             let n = self.set.len();
@@ -199,6 +201,18 @@ impl LightFieldModel {
             }
         }
         let count = b.samples.count.download()?[0];
+        if count > scratch.capacity() {
+            let sh = &self.net.shape;
+            bail!(
+                "a {}x{} view has {count} pixels with R > {} (light_field.threshold); a {} x {} light field holds at most {} samples on this device: raise the threshold, use --downscale, or a smaller light_field.preset",
+                cam.width,
+                cam.height,
+                self.shade.threshold,
+                sh.depth,
+                sh.width,
+                scratch.capacity()
+            );
+        }
         self.evaluated.0 += count as u64;
         self.evaluated.1 += (cam.width * cam.height) as u64;
         Ok(count)

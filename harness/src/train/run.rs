@@ -102,8 +102,13 @@ fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainConfig> {
     }
     if let Some(st) = &a.stages {
         // With --from, Stage I comes from the other run: "II" means "I,II".
+        // "III" means "I,II,III" with RUN's Stage II kept (from_stage_two).
         let first = st.split(',').next().unwrap_or("").trim();
-        cfg.stages = if a.from.is_some() && first != "I" { format!("I,{}", st.trim()) } else { st.clone() };
+        cfg.stages = match (a.from.is_some(), first) {
+            (true, "III") => "I,II,III".into(),
+            (true, f) if f != "I" => format!("I,{}", st.trim()),
+            _ => st.clone(),
+        };
         cfg.validate().with_context(|| format!("--stages '{st}'"))?;
     }
     if let Some(d) = a.downscale {
@@ -169,11 +174,22 @@ fn later_stage_setting(k: &str) -> bool {
     k.starts_with("reflection.") || k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
 }
 
+/// `--from RUN --stages III`: Stage III starts from RUN's finished Stage II.
+fn from_stage_two(a: &TrainArgs) -> bool {
+    a.from.is_some() && a.stages.as_deref().is_some_and(|s| s.split(',').next().unwrap_or("").trim() == "III")
+}
+
+/// Settings `--from RUN --stages III` may change: only Stage III's.
+fn stage_three_setting(k: &str) -> bool {
+    k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
+}
+
 /// `--from RUN`: a trainer at the end of RUN's Stage I (its scattering set;
-/// any later stage of RUN is dropped), the dataset, its path, and RUN's
-/// Stage I record for metrics.json. RUN's settings are the base; options
-/// may change only the later stages' settings.
-fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer, Dataset, String, serde_json::Value)> {
+/// any later stage of RUN is dropped) or, with `--stages III`, at the end
+/// of RUN's Stage II (both sets), the dataset, its path, and RUN's records
+/// of the stages kept, for metrics.json. RUN's settings are the base;
+/// options may change only the later stages' settings.
+fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer, Dataset, String, Vec<serde_json::Value>)> {
     let ckpt = run.join(CHECKPOINT);
     if !ckpt.is_file() {
         bail!("--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)", run.display());
@@ -191,6 +207,22 @@ fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer,
         base.stages = TrainConfig::default().stages;
     }
     let cfg = apply_args(base, a).with_context(|| format!("--from {}", run.display()))?;
+    let keep_two = from_stage_two(a);
+    if keep_two {
+        let end = h.config.iterations + h.config.reflection.iterations;
+        if h.reflection.is_none() || h.iteration != end {
+            bail!(
+                "--from {} --stages III starts from that run's finished Stage II; it is at iteration {} (Stage II ends at {end}{})",
+                run.display(),
+                h.iteration,
+                if h.reflection.is_none() { ", and it holds no Stage II state" } else { "" }
+            );
+        }
+        let conflicts = changed_settings(&h.config, &cfg, stage_three_setting)?;
+        if !conflicts.is_empty() {
+            bail!("--from {} --stages III reuses that run's Stages I and II; these options would change how they were trained:\n  {}\nonly light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+        }
+    }
     let conflicts = changed_settings(&h.config, &cfg, later_stage_setting)?;
     if !conflicts.is_empty() {
         bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
@@ -205,18 +237,31 @@ fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer,
         }
     }
     let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("--from {}: loading its dataset {}", run.display(), h.dataset))?;
-    if let Some(r) = h.reflection.take() {
-        arrays.truncate(arrays.len().saturating_sub(r.arrays.len()));
+    if !keep_two {
+        if let Some(r) = h.reflection.take() {
+            arrays.truncate(arrays.len().saturating_sub(r.arrays.len()));
+        }
+        if let Some(l) = h.light_field.take() {
+            arrays.truncate(arrays.len().saturating_sub(l.arrays.len()));
+        }
     }
     let dataset = h.dataset.clone();
     let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
-    tr.iteration = cfg.iterations;
+    tr.iteration = if keep_two { cfg.iterations + cfg.reflection.iterations } else { cfg.iterations };
     tr.cfg = cfg;
     tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
     let abs = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
-    let mut rec = stage_records_of(run).into_iter().find(|s| s["stage"] == "I").unwrap_or_else(|| json!({"stage": "I"}));
-    rec["from"] = json!(abs.to_string_lossy());
-    Ok((tr, data, dataset, rec))
+    let kept: &[&str] = if keep_two { &["I", "II"] } else { &["I"] };
+    let records = stage_records_of(run);
+    let recs = kept
+        .iter()
+        .map(|st| {
+            let mut rec = records.iter().find(|s| s["stage"] == *st).cloned().unwrap_or_else(|| json!({"stage": st}));
+            rec["from"] = json!(abs.to_string_lossy());
+            rec
+        })
+        .collect();
+    Ok((tr, data, dataset, recs))
 }
 
 /// A finished run's stage records: stages.json (written when Stage II
@@ -260,8 +305,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     if a.resume && a.from.is_some() {
         bail!("--resume continues OUT's own run; --from starts a new one from another run's Stage I: give one of them");
     }
-    // With --from: the other run's Stage I record (metrics.json `stages`).
-    let mut from_record: Option<serde_json::Value> = None;
+    // With --from: the other run's records of the stages kept (metrics.json `stages`).
+    let mut from_record: Vec<serde_json::Value> = Vec::new();
     if !a.resume && ckpt.is_file() {
         bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
     }
@@ -294,8 +339,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
         (tr, data, dataset)
     } else if let Some(run) = &a.from {
-        let (tr, data, dataset, stage1) = start_from(ctx, a, run)?;
-        from_record = Some(stage1);
+        let (tr, data, dataset, kept) = start_from(ctx, a, run)?;
+        from_record = kept;
         (tr, data, dataset)
     } else {
         let cfg = config_from_args(a)?;
@@ -561,8 +606,16 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
 fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool) -> Result<String> {
     if tr.reflection.is_some() {
         let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&out.join("renders/stage2")))?) };
+        // A Stage II taken from another run (--from --stages III) keeps
+        // that run's record; the test metrics are re-measured.
+        let from = stages.iter().find(|s| s["stage"] == "II" && s.get("from").is_some()).cloned();
         stages.retain(|s| s["stage"] != "II");
-        stages.push(stage_record("II", tr, since, m.as_ref()));
+        let mut rec = stage_record("II", tr, since, m.as_ref());
+        if let Some(f) = from {
+            rec["wall_s"] = f["wall_s"].clone();
+            rec["from"] = f["from"].clone();
+        }
+        stages.push(rec);
         if !quiet {
             eprintln!("Stage II done");
         }

@@ -33,6 +33,8 @@ struct Push {
     rot: [[f32; 4]; 3],
     centre: [f32; 4],
     scale: [f32; 4],
+    max_samples: u32,
+    pad: [u32; 3],
 }
 
 /// What places a view's samples: the camera, the box mapped to [-1, 1]^3,
@@ -69,7 +71,7 @@ pub struct LightFieldShading {
     composite_backward: [Kernel; 2],
 }
 
-fn push(cam: &Camera, p: &ShadeParams) -> Push {
+fn push(cam: &Camera, p: &ShadeParams, max_samples: u32) -> Push {
     let m = &cam.world_to_view;
     let h = p.half_extent.map(|v| if v > 0.0 { 1.0 / v } else { 1.0 });
     Push {
@@ -84,6 +86,8 @@ fn push(cam: &Camera, p: &ShadeParams) -> Push {
         rot: *m,
         centre: [p.centre[0], p.centre[1], p.centre[2], 0.0],
         scale: [h[0], h[1], h[2], 0.0],
+        max_samples,
+        pad: [0; 3],
     }
 }
 
@@ -150,14 +154,16 @@ impl LightFieldShading {
     }
 
     /// Record the sample list of the reflection render `refl` (CHANNELS
-    /// features): `s.sample_of`, `s.count` and the samples (6 floats each,
-    /// at their rank) into `samples`, which must hold one per pixel.
+    /// features): `s.sample_of`, `s.count` (every pixel above the
+    /// threshold) and the samples (6 floats each, at their rank) into
+    /// `samples`, which holds `samples.len() / 6` of them: pixels ranked
+    /// beyond are not evaluated (the caller checks the count).
     pub fn record_samples(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, refl: &Buffer<f32>, s: &SampleScratch, samples: &Buffer<f32>) -> Result<()> {
         let n = Self::check_refl(cam, refl)?;
-        if s.pixels != n || samples.len() < 6 * n as usize {
-            bail!("sample scratch for {} pixels / '{}' of {} floats do not fit a {}x{} view", s.pixels, samples.name(), samples.len(), cam.width, cam.height);
+        if s.pixels != n {
+            bail!("sample scratch for {} pixels does not fit a {}x{} view", s.pixels, cam.width, cam.height);
         }
-        let pc = push(cam, p);
+        let pc = push(cam, p, (samples.len() / 6).min(u32::MAX as usize) as u32);
         let g = grid(&self.ctx, n);
         rec.dispatch(&self.mask, &[refl.binding(), s.flags.binding()], bytemuck::bytes_of(&pc), g)?;
         self.scan.record(rec, &s.flags, &s.flags, &Count::Host(n), &s.scan)?;
@@ -173,7 +179,7 @@ impl LightFieldShading {
         if scat.len() < 3 * n as usize || loss_in.len() < (Plane::count(3) * n) as usize || s.pixels != n {
             bail!("composite buffers do not fit a {}x{} view", cam.width, cam.height);
         }
-        let pc = push(cam, p);
+        let pc = push(cam, p, 0);
         let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_in.binding()];
         rec.dispatch(&self.composite, &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
@@ -203,7 +209,7 @@ impl LightFieldShading {
         if scat_grad.is_some_and(|g| g.len() < 3 * n as usize) {
             bail!("the scattering gradient does not fit a {}x{} view", cam.width, cam.height);
         }
-        let pc = push(cam, p);
+        let pc = push(cam, p, 0);
         let sg = scat_grad.unwrap_or(refl_grad);
         let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_grad.binding(), d_phi.binding(), refl_grad.binding(), sg.binding()];
         rec.dispatch(&self.composite_backward[scat_grad.is_some() as usize], &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))

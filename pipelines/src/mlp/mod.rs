@@ -152,6 +152,14 @@ impl Mlp {
         Ok(Mlp { ctx: ctx.clone(), gemm, encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 16)?, reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 12)? })
     }
 
+    /// The most samples one scratch of `shape` holds on this device (its
+    /// widest activation buffer within one storage-buffer binding).
+    pub fn max_capacity(&self, shape: &MlpShape) -> u32 {
+        let max = self.ctx.caps().max_storage_buffer_range / 4;
+        let widest = shape.cat_width().max(shape.dx()).max(1) as u64;
+        (max / widest).min(u32::MAX as u64) as u32
+    }
+
     /// Memory for up to `capacity` samples of `shape`.
     pub fn scratch(&self, shape: MlpShape, capacity: u32) -> Result<MlpScratch> {
         shape.validate()?;
@@ -161,7 +169,7 @@ impl Mlp {
         let widest = shape.cat_width().max(shape.dx()) as u64;
         if cap as u64 * widest > max || MAX_CHUNKS as u64 * shape.params() as u64 > max {
             bail!(
-                "a light field of {} x {} on {capacity} samples needs {} floats in one buffer; this device binds at most {max} (evaluate fewer pixels: a smaller image or a higher threshold)",
+                "a light field of {} x {} on {capacity} samples needs {} floats in one buffer; this device binds at most {max}",
                 shape.depth,
                 shape.width,
                 (cap as u64 * widest).max(MAX_CHUNKS as u64 * shape.params() as u64)
