@@ -36,9 +36,9 @@ const NONE: u32 = u32::MAX;
 
 /// Push constants of glsl/mlp/gemm.comp: C = pre(A) B with element (i, k)
 /// of A at a_off + i a_rs + k a_cs (column a_ones_k implicitly 1), B(k, j)
-/// likewise (column b_ones_j implicitly 1), C(i, j) at c_off + z c_zstride
-/// + i c_rs + j; the activation derivative (Y at y_off + i y_rs + k y_cs)
-/// multiplies A.
+/// likewise (column b_ones_j implicitly 1), C(i, j) at
+/// c_off + z c_zstride + i c_rs + j; the activation derivative (Y at
+/// y_off + i y_rs + k y_cs) multiplies A.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default)]
 struct Product {
