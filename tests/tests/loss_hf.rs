@@ -14,6 +14,13 @@ fn uni(rng: &mut Rng) -> f32 {
     (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32
 }
 
+/// A render and a target of `n` random RGB pixels (planar).
+fn random_pair(rng: &mut Rng, n: usize) -> (Vec<f32>, Vec<f32>) {
+    let x = (0..3 * n).map(|_| uni(rng)).collect();
+    let y = (0..3 * n).map(|_| uni(rng)).collect();
+    (x, y)
+}
+
 struct Out {
     tau: f32,
     count: u32,
@@ -55,8 +62,7 @@ fn check(x: &[f32], y: &[f32], n: usize, pct: f32, what: &str) {
 fn percentile_and_gradient_match_reference() {
     let mut rng = Rng(seed("hf"));
     for (n, pct) in [(1usize, 0.9f32), (7, 0.9), (257, 0.9), (4099, 0.9), (1000, 0.0), (1000, 1.0), (999, 0.5), (40_000, 0.95)] {
-        let x: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng)).collect();
-        let y: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng)).collect();
+        let (x, y) = random_pair(&mut rng, n);
         check(&x, &y, n, pct, &format!("random n={n} p={pct}"));
     }
     // Ties: errors on a coarse grid (many pixels share the percentile value).
@@ -74,8 +80,7 @@ fn percentile_and_gradient_match_reference() {
 fn reference_gradient_matches_finite_differences() {
     let mut rng = Rng(seed("hf fd"));
     let n = 200;
-    let x: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng)).collect();
-    let y: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng)).collect();
+    let (x, y) = random_pair(&mut rng, n);
     let (tau, _, _, g) = hf_loss(&x, &y, n, 0.9);
     let e = |i: usize| (x[i] - y[i]).abs() + (x[n + i] - y[n + i]).abs() + (x[2 * n + i] - y[2 * n + i]).abs();
     let h = 1e-3f32;
@@ -102,8 +107,7 @@ fn reference_gradient_matches_finite_differences() {
 fn reruns_are_bit_identical() {
     let mut rng = Rng(seed("hf determinism"));
     let n = 20_001;
-    let x: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng)).collect();
-    let y: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng)).collect();
+    let (x, y) = random_pair(&mut rng, n);
     let base = vec![0.0; 3 * n];
     let a = gpu(&x, &y, n, 0.9, 0.1, &base);
     let b = gpu(&x, &y, n, 0.9, 0.1, &base);

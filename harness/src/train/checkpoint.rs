@@ -92,12 +92,8 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
     // (buffer, values) of the Stage II arrays.
     let mut refl_arrays = Vec::new();
     if let (Some(m), Some(d)) = (&tr.reflection, &tr.decision) {
-        let rn = m.set.len() as usize;
         let mut names = Vec::new();
-        for (name, buf, w) in m.set.arrays() {
-            names.push((format!("refl.{name}"), w * rn));
-            refl_arrays.push((buf, w * rn));
-        }
+        push_reflection_set(&m.set, &mut names, &mut refl_arrays);
         for (name, buf) in m.env.arrays() {
             names.push((name.to_string(), m.env.len()));
             refl_arrays.push((buf, m.env.len()));
@@ -105,12 +101,8 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
         header.reflection = Some(ReflHeader { n: m.set.len(), env_res: m.env.res, decision: d.clone(), arrays: names });
     }
     if let (Some(m), Some(d)) = (&tr.light_field, &tr.decision) {
-        let rn = m.set.len() as usize;
         let mut names = Vec::new();
-        for (name, buf, w) in m.set.arrays() {
-            names.push((format!("refl.{name}"), w * rn));
-            refl_arrays.push((buf, w * rn));
-        }
+        push_reflection_set(&m.set, &mut names, &mut refl_arrays);
         let p = m.net.shape.params() as usize;
         for (name, buf) in MLP_ARRAYS.iter().zip([&m.net.params, &m.net.m, &m.net.v]) {
             names.push((name.to_string(), p));
@@ -146,6 +138,16 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
     .context("writing the checkpoint")
 }
 
+/// The reflection set's arrays (names prefixed `refl.`, lengths) and
+/// buffers, in `TrainableSet::layout` order.
+fn push_reflection_set<'a>(set: &'a TrainableSet, names: &mut Vec<(String, usize)>, bufs: &mut Vec<(&'a tgs_engine::Buffer<f32>, usize)>) {
+    let n = set.len() as usize;
+    for (name, buf, w) in set.arrays() {
+        names.push((format!("refl.{name}"), w * n));
+        bufs.push((buf, w * n));
+    }
+}
+
 /// Read a checkpoint's header and arrays.
 pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read the checkpoint", path.display()))?;
@@ -175,17 +177,33 @@ pub fn gaussians(h: &Header, arrays: &[Vec<f32>]) -> Result<HostGaussians> {
     if arrays.len() < 5 {
         bail!("checkpoint has {} arrays, expected at least 5", arrays.len());
     }
-    let g = HostGaussians {
-        channels: h.channels,
-        coeffs: h.coeffs,
+    let g = host_set(h.channels, h.coeffs, arrays);
+    g.validate()?;
+    Ok(g)
+}
+
+/// A host set from the first five arrays of a set's layout (parameters).
+fn host_set(channels: u32, coeffs: u32, arrays: &[Vec<f32>]) -> HostGaussians {
+    HostGaussians {
+        channels,
+        coeffs,
         means: arrays[0].clone(),
         log_scales: arrays[1].clone(),
         quats: arrays[2].clone(),
         opacity: arrays[3].clone(),
         features: arrays[4].clone(),
-    };
-    g.validate()?;
-    Ok(g)
+    }
+}
+
+/// Upload `arrays` (a set's arrays in `TrainableSet::layout` order, maybe
+/// followed by others) into `set`.
+fn upload_set(set: &TrainableSet, arrays: &[Vec<f32>]) -> Result<()> {
+    for ((_, buf, _), data) in set.arrays().iter().zip(arrays) {
+        if !data.is_empty() {
+            buf.upload(data)?;
+        }
+    }
+    Ok(())
 }
 
 /// A trainer restored from the checkpoint `path` on `data` (the same
@@ -225,12 +243,7 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     }
     let g = gaussians(&h, &arrays).map_err(|e| bad(format!("{e:#}")))?;
     let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
-    let bufs = tr.scattering.set.arrays();
-    for ((_, buf, _), data) in bufs.iter().zip(&arrays) {
-        if !data.is_empty() {
-            buf.upload(data)?;
-        }
-    }
+    upload_set(&tr.scattering.set, &arrays)?;
     match (&h.reflection, &h.light_field) {
         (Some(r), None) => restore_reflection(&mut tr, r, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?,
         (None, Some(l)) => restore_light_field(&mut tr, l, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?,
@@ -259,14 +272,8 @@ fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], arrays: &[Ve
 
 /// The reflection set of a Stage II or III state (its first arrays).
 fn reflection_set(tr: &Trainer, arrays: &[Vec<f32>]) -> Result<TrainableSet> {
-    use tgs_pipelines::reflection::MATERIAL;
-    let g = HostGaussians { channels: MATERIAL, coeffs: 1, means: arrays[0].clone(), log_scales: arrays[1].clone(), quats: arrays[2].clone(), opacity: arrays[3].clone(), features: arrays[4].clone() };
-    let set = TrainableSet::new(&tr.context(), &g)?;
-    for ((_, buf, _), data) in set.arrays().iter().zip(arrays) {
-        if !data.is_empty() {
-            buf.upload(data)?;
-        }
-    }
+    let set = TrainableSet::new(&tr.context(), &host_set(tgs_pipelines::reflection::MATERIAL, 1, arrays))?;
+    upload_set(&set, arrays)?;
     Ok(set)
 }
 
@@ -292,15 +299,11 @@ fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -
     let env_len = 18 * r.env_res as usize * r.env_res as usize;
     let want: Vec<(String, usize)> = layout.iter().cloned().chain(["env.param", "env.adam_m", "env.adam_v"].map(|n| (n.to_string(), env_len))).collect();
     check_arrays(&want, &r.arrays, &arrays)?;
-    let g = HostGaussians { channels: MATERIAL, coeffs: 1, means: arrays[0].clone(), log_scales: arrays[1].clone(), quats: arrays[2].clone(), opacity: arrays[3].clone(), features: arrays[4].clone() };
+    let g = host_set(MATERIAL, 1, &arrays);
     let k = layout.len();
     let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone() };
     let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel()?, tr.cfg.adam_eps)?;
-    for ((_, buf, _), data) in m.set.arrays().iter().zip(&arrays) {
-        if !data.is_empty() {
-            buf.upload(data)?;
-        }
-    }
+    upload_set(&m.set, &arrays)?;
     m.env.m.upload(&arrays[k + 1])?;
     m.env.v.upload(&arrays[k + 2])?;
     tr.reflection = Some(m);

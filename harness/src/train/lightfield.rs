@@ -213,8 +213,6 @@ impl LightFieldModel {
                 scratch.capacity()
             );
         }
-        self.evaluated.0 += count as u64;
-        self.evaluated.1 += (cam.width * cam.height) as u64;
         Ok(count)
     }
 
@@ -224,12 +222,10 @@ impl LightFieldModel {
         (p > 0).then(|| s as f64 / p as f64)
     }
 
-    /// The MLP's learning rate at Stage III iteration `it` of `total`.
+    /// The MLP's learning rate at Stage III iteration `it` (of `light_field.iterations`).
     pub fn lr(cfg: &TrainConfig, it: u32) -> f32 {
         let lf = &cfg.light_field;
-        let t = (it as f64 / lf.iterations.max(1) as f64).clamp(0.0, 1.0);
-        let (a, b) = (lf.lr.max(1e-30) as f64, lf.lr_final.max(1e-30) as f64);
-        (a.ln() * (1.0 - t) + b.ln() * t).exp() as f32
+        super::log_lerp(lf.lr, lf.lr_final, it as f64 / lf.iterations.max(1) as f64) as f32
     }
 
     /// One Stage III step on one view.
@@ -241,6 +237,8 @@ impl LightFieldModel {
             timings.extend(scattering.forward_view(cam, x.sh_degree, &x.background, x.profile)?);
         }
         let count = self.forward(cam, x.profile, &mut timings)?;
+        self.evaluated.0 += count as u64;
+        self.evaluated.1 += (cam.width * cam.height) as u64;
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
@@ -303,9 +301,7 @@ impl LightFieldModel {
     /// Render `cam` composited over the scattering colour `scat` (3 planes).
     pub fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
         let mut timings = Vec::new();
-        let saved = self.evaluated;
         let count = self.forward(cam, false, &mut timings)?;
-        self.evaluated = saved;
         let b = &self.sizes[&(cam.width, cam.height)];
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         let mut rec = Recorder::new(&self.ctx)?;
@@ -317,7 +313,7 @@ impl LightFieldModel {
         let refl = b.frame.out.download()?;
         let sample_of = b.samples.sample_of.download()?;
         let phi = if count > 0 { scratch.out.download_range(0, (OUT * count) as usize)? } else { Vec::new() };
-        // F Phi per pixel, from the composite's own terms: (I - (1 - R) S) / R.
+        // F Phi per pixel (the composite kernel's F, recomputed on the host).
         let mut reflected = vec![0.0; 3 * n];
         let mut mask = vec![0.0; n];
         let alpha = &refl[CHANNELS as usize * n..(CHANNELS as usize + 1) * n];

@@ -13,3 +13,10 @@ pub mod trainer;
 
 pub use config::TrainConfig;
 pub use trainer::{Schedule, Stage, StepReport, Trainer};
+
+/// A learning rate log-linear from `a` (t = 0) to `b` (t = 1), t clamped.
+pub(crate) fn log_lerp(a: f32, b: f32, t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    let (a, b) = (a.max(1e-30) as f64, b.max(1e-30) as f64);
+    (a.ln() * (1.0 - t) + b.ln() * t).exp()
+}

@@ -387,27 +387,24 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     stages.extend(from_record);
     let mut stage_start = Instant::now();
     while !tr.done() {
-        if tr.at_reflection_start() {
+        // Between stages: close the last one, start the next, say so.
+        let begun = if tr.at_reflection_start() {
             let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
+            Some((msg, json!({"iteration": tr.iteration, "stage": "II", "event": "begin", "reflection": tr.decision})))
+        } else if tr.at_light_field_start() {
+            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
+            Some((msg, json!({"iteration": tr.iteration, "stage": "III", "event": "begin"})))
+        } else {
+            None
+        };
+        if let Some((msg, event)) = begun {
             if let Some(b) = &bar {
                 b.set_length(tr.schedule.total() as u64);
                 b.println(&msg);
             } else if !a.quiet {
                 eprintln!("{msg}");
             }
-            writeln!(log, "{}", json!({"iteration": tr.iteration, "stage": "II", "event": "begin", "reflection": tr.decision}))?;
-            stage_start = Instant::now();
-            atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
-            continue;
-        }
-        if tr.at_light_field_start() {
-            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
-            if let Some(b) = &bar {
-                b.println(&msg);
-            } else if !a.quiet {
-                eprintln!("{msg}");
-            }
-            writeln!(log, "{}", json!({"iteration": tr.iteration, "stage": "III", "event": "begin"}))?;
+            writeln!(log, "{event}")?;
             stage_start = Instant::now();
             atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
             continue;
@@ -546,22 +543,30 @@ fn read_stage_records(out: &Path, resume: bool) -> Vec<serde_json::Value> {
     std::fs::read(out.join("stages.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default()
 }
 
+/// Close `stage`: its test metrics (renders in OUT/renders/RENDERS) into
+/// its record in `stages`. A stage taken
+/// from another run (--from) keeps that run's record (its wall time, where
+/// it came from); the test metrics are re-measured.
+fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, stage: &str, renders: &str) -> Result<()> {
+    let dir = out.join("renders").join(renders);
+    let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&dir))?) };
+    let from = stages.iter().find(|s| s["stage"] == stage && s.get("from").is_some()).cloned();
+    stages.retain(|s| s["stage"] != stage);
+    let mut rec = stage_record(stage, tr, since, m.as_ref());
+    if let Some(f) = from {
+        rec["wall_s"] = f["wall_s"].clone();
+        rec["from"] = f["from"].clone();
+    }
+    stages.push(rec);
+    Ok(())
+}
+
 /// Close Stage I (its test metrics), measure the residual (maps written to
 /// OUT/residual/), and start Stage II or skip it. Returns the message.
 fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool) -> Result<String> {
     let resumed = tr.reflection.is_some();
     if !resumed {
-        let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&out.join("renders/stage1")))?) };
-        // A Stage I taken from another run (--from) keeps that run's record
-        // (its wall time, where it came from); the test metrics are re-measured.
-        let from = stages.iter().find(|s| s["stage"] == "I").cloned();
-        stages.retain(|s| s["stage"] != "I");
-        let mut rec = stage_record("I", tr, since, m.as_ref());
-        if let Some(f) = from {
-            rec["wall_s"] = f["wall_s"].clone();
-            rec["from"] = f["from"].clone();
-        }
-        stages.push(rec);
+        close_stage(tr, data, out, stages, since, "I", "stage1")?;
         if !quiet {
             eprintln!("Stage I done: measuring the residual of {} training views", data.train.len());
         }
@@ -605,17 +610,7 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
 /// renders/stage2), then the light-field model.
 fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool) -> Result<String> {
     if tr.reflection.is_some() {
-        let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&out.join("renders/stage2")))?) };
-        // A Stage II taken from another run (--from --stages III) keeps
-        // that run's record; the test metrics are re-measured.
-        let from = stages.iter().find(|s| s["stage"] == "II" && s.get("from").is_some()).cloned();
-        stages.retain(|s| s["stage"] != "II");
-        let mut rec = stage_record("II", tr, since, m.as_ref());
-        if let Some(f) = from {
-            rec["wall_s"] = f["wall_s"].clone();
-            rec["from"] = f["from"].clone();
-        }
-        stages.push(rec);
+        close_stage(tr, data, out, stages, since, "II", "stage2")?;
         if !quiet {
             eprintln!("Stage II done");
         }

@@ -201,9 +201,7 @@ impl Trainer {
 
     /// Position learning rate at iteration `it`: log-linear over the stage, x extent.
     pub fn lr_means(&self, it: u32) -> f32 {
-        let t = (it as f64 / self.cfg.iterations.max(1) as f64).clamp(0.0, 1.0);
-        let (a, b) = (self.cfg.lr_means.max(1e-30) as f64, self.cfg.lr_means_final.max(1e-30) as f64);
-        ((a.ln() * (1.0 - t) + b.ln() * t).exp() * self.extent as f64) as f32
+        (super::log_lerp(self.cfg.lr_means, self.cfg.lr_means_final, it as f64 / self.cfg.iterations.max(1) as f64) * self.extent as f64) as f32
     }
 
     fn next_view(&mut self) -> u32 {
@@ -443,14 +441,13 @@ impl Trainer {
         let sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
         let scat = self.scattering.render(cam, sh, &self.background)?;
         let n = (cam.width * cam.height) as usize;
-        let refl = if let Some(model) = self.light_field.as_mut() {
-            let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
-            model.render(cam, &colour)?
-        } else if let Some(model) = self.reflection.as_mut() {
-            let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
-            model.render(cam, &colour)?
-        } else {
+        if self.light_field.is_none() && self.reflection.is_none() {
             return Ok(scat);
+        }
+        let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
+        let refl = match self.light_field.as_mut() {
+            Some(model) => model.render(cam, &colour)?,
+            None => self.reflection.as_mut().context("a Stage II model")?.render(cam, &colour)?,
         };
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);

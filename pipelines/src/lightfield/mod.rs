@@ -8,6 +8,7 @@
 //! - `composite` / `composite_backward`: I = (1 - R) I_scat + R F Phi.
 
 use crate::raster::{Camera, Plane};
+use crate::reflection::check_planes;
 use crate::scan::{Count, PrefixSum, ScanScratch};
 use crate::shaders;
 use crate::train::{grid, kernel, WG};
@@ -142,13 +143,13 @@ impl LightFieldShading {
         rec.dispatch(&self.material, &[material.binding(), d_feat.binding(), d_material.binding()], bytemuck::cast_slice(&[len, 1u32]), grid(&self.ctx, len.max(1)))
     }
 
-    fn check_refl(cam: &Camera, refl: &Buffer<f32>) -> Result<u32> {
+    /// The pixel count of `cam` after checking `bufs` (buffer, planes) and
+    /// that the sample scratch is this view's.
+    fn check(cam: &Camera, s: &SampleScratch, bufs: &[(&Buffer<f32>, u32)]) -> Result<u32> {
+        check_planes(cam, bufs)?;
         let n = cam.width * cam.height;
-        if n == 0 {
-            bail!("light-field shading of an empty {}x{} image", cam.width, cam.height);
-        }
-        if refl.len() < (Plane::count(CHANNELS) * n) as usize {
-            bail!("'{}' holds {} values; a {}x{} reflection render has {} planes", refl.name(), refl.len(), cam.width, cam.height, Plane::count(CHANNELS));
+        if s.pixels != n {
+            bail!("sample scratch for {} pixels does not fit a {}x{} view", s.pixels, cam.width, cam.height);
         }
         Ok(n)
     }
@@ -159,10 +160,7 @@ impl LightFieldShading {
     /// `samples`, which holds `samples.len() / 6` of them: pixels ranked
     /// beyond are not evaluated (the caller checks the count).
     pub fn record_samples(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, refl: &Buffer<f32>, s: &SampleScratch, samples: &Buffer<f32>) -> Result<()> {
-        let n = Self::check_refl(cam, refl)?;
-        if s.pixels != n {
-            bail!("sample scratch for {} pixels does not fit a {}x{} view", s.pixels, cam.width, cam.height);
-        }
+        let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS))])?;
         let pc = push(cam, p, (samples.len() / 6).min(u32::MAX as usize) as u32);
         let g = grid(&self.ctx, n);
         rec.dispatch(&self.mask, &[refl.binding(), s.flags.binding()], bytemuck::bytes_of(&pc), g)?;
@@ -175,10 +173,7 @@ impl LightFieldShading {
     /// the samples (3 floats each).
     #[allow(clippy::too_many_arguments)]
     pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, scat: &Buffer<f32>, refl: &Buffer<f32>, s: &SampleScratch, phi: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
-        let n = Self::check_refl(cam, refl)?;
-        if scat.len() < 3 * n as usize || loss_in.len() < (Plane::count(3) * n) as usize || s.pixels != n {
-            bail!("composite buffers do not fit a {}x{} view", cam.width, cam.height);
-        }
+        let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_in, Plane::count(3))])?;
         let pc = push(cam, p, 0);
         let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_in.binding()];
         rec.dispatch(&self.composite, &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
@@ -202,12 +197,9 @@ impl LightFieldShading {
         refl_grad: &Buffer<f32>,
         scat_grad: Option<&Buffer<f32>>,
     ) -> Result<()> {
-        let n = Self::check_refl(cam, refl)?;
-        if scat.len() < 3 * n as usize || loss_grad.len() < 3 * n as usize || refl_grad.len() < (Plane::count(CHANNELS) * n) as usize || s.pixels != n {
-            bail!("composite gradient buffers do not fit a {}x{} view", cam.width, cam.height);
-        }
-        if scat_grad.is_some_and(|g| g.len() < 3 * n as usize) {
-            bail!("the scattering gradient does not fit a {}x{} view", cam.width, cam.height);
+        let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_grad, 3), (refl_grad, Plane::count(CHANNELS))])?;
+        if let Some(g) = scat_grad {
+            check_planes(cam, &[(g, 3)])?;
         }
         let pc = push(cam, p, 0);
         let sg = scat_grad.unwrap_or(refl_grad);

@@ -27,6 +27,21 @@ use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Kernel, Recorder};
 
+/// Check that each buffer holds its number of `cam`-sized planes (and the
+/// image is not empty); shared by the deferred shading of Stages II and III.
+pub(crate) fn check_planes(cam: &Camera, bufs: &[(&Buffer<f32>, u32)]) -> Result<()> {
+    let n = cam.width as usize * cam.height as usize;
+    if n == 0 {
+        bail!("composite of an empty {}x{} image", cam.width, cam.height);
+    }
+    for (b, planes) in bufs {
+        if b.len() < *planes as usize * n {
+            bail!("'{}' holds {} values; {planes} planes of {}x{} need {}", b.name(), b.len(), cam.width, cam.height, *planes as usize * n);
+        }
+    }
+    Ok(())
+}
+
 /// Material floats per reflection Gaussian: raw f0 (3), raw r.
 pub const MATERIAL: u32 = 4;
 /// Sorted texel slots per chunk in the two-pass texel reduction.
@@ -250,19 +265,6 @@ impl ReflectionShading {
         }
     }
 
-    fn check_planes(cam: &Camera, bufs: &[(&Buffer<f32>, u32)]) -> Result<()> {
-        let n = cam.width as usize * cam.height as usize;
-        if n == 0 {
-            bail!("composite of an empty {}x{} image", cam.width, cam.height);
-        }
-        for (b, planes) in bufs {
-            if b.len() < *planes as usize * n {
-                bail!("'{}' holds {} values; {planes} planes of {}x{} need {}", b.name(), b.len(), cam.width, cam.height, *planes as usize * n);
-            }
-        }
-        Ok(())
-    }
-
     /// Record the composite of a scattering render `scat` (colour in its
     /// first 3 planes) and a reflection render `refl` (`fresnel.channels()`
     /// feature channels, `Plane` order) into `loss_in`: the composite colour
@@ -270,7 +272,7 @@ impl ReflectionShading {
     /// 3-channel render's layout, for `ImageLoss::record_planes`.
     pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
         let ch = fresnel.channels();
-        Self::check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_in, Plane::count(3))])?;
+        check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_in, Plane::count(3))])?;
         let p = Self::composite_push(cam, fresnel, false);
         rec.dispatch(&self.composite, &[scat.binding(), refl.binding(), loss_in.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, cam.width * cam.height))
     }
@@ -292,9 +294,9 @@ impl ReflectionShading {
         scat_grad: Option<&Buffer<f32>>,
     ) -> Result<()> {
         let ch = fresnel.channels();
-        Self::check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_grad, Plane::count(3)), (refl_grad, Plane::count(ch))])?;
+        check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_grad, Plane::count(3)), (refl_grad, Plane::count(ch))])?;
         if let Some(s) = scat_grad {
-            Self::check_planes(cam, &[(s, 3)])?;
+            check_planes(cam, &[(s, 3)])?;
         }
         let p = Self::composite_push(cam, fresnel, scat_grad.is_some());
         // Without a scattering gradient the binding is never written; bind
