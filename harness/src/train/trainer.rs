@@ -351,9 +351,7 @@ impl Trainer {
             extent: self.extent,
             profile,
         };
-        let out = match stage {
-            _ => self.scattering.step(&self.cfg, &input)?,
-        };
+        let out = self.scattering.step(&self.cfg, &input)?;
         self.iteration = it;
         Ok(StepReport {
             iteration: it,
