@@ -73,6 +73,7 @@ impl RawBuffer {
             unsafe { d.destroy_buffer(raw, None) };
             return Err(anyhow!("vkBindBufferMemory '{name}': {e}"));
         }
+        ctx.memory_allocated(alloc.size());
         Ok(Arc::new(RawBuffer { ctx: ctx.clone(), raw, alloc: Mutex::new(Some(alloc)), bytes, name: name.to_string() }))
     }
 
@@ -88,6 +89,7 @@ impl Drop for RawBuffer {
     fn drop(&mut self) {
         unsafe { self.ctx.device.destroy_buffer(self.raw, None) };
         if let Some(a) = self.alloc.get_mut().ok().and_then(|a| a.take()) {
+            self.ctx.memory_freed(a.size());
             if let Ok(mut al) = self.ctx.allocator.lock() {
                 let _ = al.free(a);
             }

@@ -8,6 +8,7 @@ use anyhow::{anyhow, bail, Context as _, Result};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Options for [`Context::new`].
@@ -43,6 +44,13 @@ pub struct AdoptInfo {
     pub enabled: EnabledFeatures,
 }
 
+/// Device memory held by a context's buffers, bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MemoryUse {
+    pub live_bytes: u64,
+    pub peak_bytes: u64,
+}
+
 /// A Vulkan device ready for compute. Share it as `Arc<Context>`.
 pub struct Context {
     pub(crate) entry: ash::Entry,
@@ -59,6 +67,8 @@ pub struct Context {
     validation: Arc<ValidationLog>,
     /// Fill buffers made with `Buffer::uninit` with 0xFFFFFFFF (NaN as f32).
     pub(crate) poison_uninit: std::sync::atomic::AtomicBool,
+    live_bytes: AtomicU64,
+    peak_bytes: AtomicU64,
 }
 
 pub(crate) fn load_entry() -> Result<ash::Entry> {
@@ -252,6 +262,8 @@ impl Context {
             debug,
             validation,
             poison_uninit: std::sync::atomic::AtomicBool::new(false),
+            live_bytes: AtomicU64::new(0),
+            peak_bytes: AtomicU64::new(0),
         }))
     }
 
@@ -292,6 +304,24 @@ impl Context {
     /// memory left there. Tests turn this on; it costs one fill per buffer.
     pub fn set_poison_uninit(&self, on: bool) {
         self.poison_uninit.store(on, std::sync::atomic::Ordering::SeqCst);
+    }
+
+    /// Bytes of device memory held by this context's buffers now, and the
+    /// most held at once since the context was made (or since
+    /// [`Context::reset_peak_memory`]).
+    pub fn memory_use(&self) -> MemoryUse {
+        MemoryUse { live_bytes: self.live_bytes.load(Ordering::SeqCst), peak_bytes: self.peak_bytes.load(Ordering::SeqCst) }
+    }
+    /// Start the peak over from what is held now.
+    pub fn reset_peak_memory(&self) {
+        self.peak_bytes.store(self.live_bytes.load(Ordering::SeqCst), Ordering::SeqCst);
+    }
+    pub(crate) fn memory_allocated(&self, bytes: u64) {
+        let live = self.live_bytes.fetch_add(bytes, Ordering::SeqCst) + bytes;
+        self.peak_bytes.fetch_max(live, Ordering::SeqCst);
+    }
+    pub(crate) fn memory_freed(&self, bytes: u64) {
+        self.live_bytes.fetch_sub(bytes, Ordering::SeqCst);
     }
 
     /// Validation errors reported so far (empty without the layer).

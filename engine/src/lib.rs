@@ -22,7 +22,7 @@ mod validation;
 pub use ash::vk;
 pub use buffer::{Buffer, BufferBinding};
 pub use caps::Capabilities;
-pub use context::{AdoptInfo, Context, ContextOptions, EnabledFeatures};
+pub use context::{AdoptInfo, Context, ContextOptions, EnabledFeatures, MemoryUse};
 pub use kernel::{Kernel, KernelDesc};
 pub use profiler::{summarize, Timing, TimingSummary};
 pub use recorder::{groups_2d, Recorder};

@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod bench_mlp;
 pub mod bench_raster;
+pub mod bench_stages;
 pub mod bench_train;
 pub mod data;
 pub mod devices;

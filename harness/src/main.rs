@@ -189,6 +189,26 @@ enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// Iterations of Stage I, II and III on a built-in scene: GPU ms per
+    /// kernel per stage, wall ms per iteration, memory.
+    Stages {
+        /// Built-in scene (tgs scene list).
+        #[arg(long, default_value = "glass")]
+        scene: String,
+        /// Untimed training iterations per stage before timing.
+        #[arg(long, default_value_t = 300)]
+        train: u32,
+        #[arg(long, default_value_t = 3)]
+        warmup: u32,
+        /// Timed iterations per stage.
+        #[arg(long, default_value_t = 10)]
+        iterations: u32,
+        /// Stage III network preset: small or paper.
+        #[arg(long, default_value = "small")]
+        mlp: String,
+        #[arg(long)]
+        json: bool,
+    },
     /// Exclusive prefix sum of N u32.
     Scan {
         #[arg(long, default_value_t = 1 << 20)]
@@ -324,6 +344,15 @@ fn run(cli: Cli) -> Result<()> {
                     } else {
                         println!("device: {}", b.device);
                         tgs::bench_mlp::print_mlp(&b);
+                    }
+                }
+                Bench::Stages { scene, train, warmup, iterations, mlp, json } => {
+                    let spec = tgs::bench_stages::StagesSpec { scene: scene.clone(), train: *train, warmup: *warmup, iterations: *iterations, mlp: mlp.clone() };
+                    let b = tgs::bench_stages::stages(&ctx, &spec)?;
+                    if *json {
+                        println!("{}", serde_json::to_string_pretty(&b)?);
+                    } else {
+                        tgs::bench_stages::print_stages(&b);
                     }
                 }
                 Bench::Scan { n, reps, json } => {

@@ -24,3 +24,37 @@ fn train_bench_reports_every_stage() {
     assert!(tgs::bench_train::train(ctx, 32, 300, 0, 0).is_err());
     check_validation(ctx);
 }
+
+/// `tgs bench stages` on the tiny glass scene: every stage runs, each
+/// reports its own kernels, the Gaussian counts stay fixed while timing,
+/// the memory counters move, and Stage III reports the fraction Φ ran on.
+#[test]
+fn stages_bench_reports_each_stage() {
+    let ctx = ctx_shared();
+    let spec = tgs::bench_stages::StagesSpec { scene: "glass-tiny".into(), train: 8, warmup: 1, iterations: 2, mlp: "small".into() };
+    let b = tgs::bench_stages::stages(ctx, &spec).unwrap();
+    assert_eq!((b.width, b.height, b.train_views), (48, 48, 16));
+    let names: Vec<&str> = b.stages.iter().map(|s| s.stage.as_str()).collect();
+    assert_eq!(names, ["I", "II", "III"], "skipped: {:?}", b.skipped);
+    let own = [("I", "raster.backward", "refl.color"), ("II", "refl.color_backward", "mlp.forward"), ("III", "mlp.backward", "refl.color")];
+    for (s, (stage, has, lacks)) in b.stages.iter().zip(own) {
+        assert!(s.wall_ms.is_finite() && s.wall_ms > 0.0 && s.wall_ms_best <= s.wall_ms, "{stage}: {s:?}");
+        assert!(s.memory_mib > 0.0 && s.peak_memory_mib >= s.memory_mib, "{stage}: {s:?}");
+        assert_eq!(s.switch_ms.is_some(), stage != "I");
+        assert_eq!(s.reflection_gaussians.is_some(), stage != "I");
+        assert_eq!(s.phi_fraction.is_some(), stage == "III");
+        if ctx.caps().timestamp_valid_bits > 0 {
+            assert!(s.kernels.iter().any(|k| k.name == has), "Stage {stage} has no {has}: {:?}", s.kernels);
+            assert!(!s.kernels.iter().any(|k| k.name == lacks), "Stage {stage} runs {lacks}");
+            let top: f64 = s.kernels.iter().filter(|k| !k.name.starts_with("sort.") && !k.name.starts_with("scan.")).map(|k| k.ms).sum();
+            assert!((s.gpu_ms - top).abs() < 1e-9 && s.gpu_ms > 0.0);
+        }
+    }
+    let f = b.stages[2].phi_fraction.unwrap();
+    assert!((0.0..=1.0).contains(&f), "{f}");
+    // Stage II's set carries over to Stage III unchanged (geometry frozen, no pruning).
+    assert_eq!(b.stages[1].reflection_gaussians, b.stages[2].reflection_gaussians);
+    assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { iterations: 0, ..spec.clone() }).is_err());
+    assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { scene: "nope".into(), ..spec }).is_err());
+    check_validation(ctx);
+}

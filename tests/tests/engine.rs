@@ -286,3 +286,20 @@ fn new_buffers_are_zero_even_on_reused_memory() {
     }
     check_validation(ctx);
 }
+
+/// The context counts the device memory its buffers hold, and the peak.
+#[test]
+fn memory_use_follows_buffers() {
+    let ctx = tgs_tests::ctx();
+    let before = ctx.memory_use();
+    let a = tgs_engine::Buffer::<f32>::new(&ctx, "test.memory", 1 << 20).unwrap();
+    let held = ctx.memory_use();
+    assert!(held.live_bytes >= before.live_bytes + (4 << 20), "{before:?} -> {held:?}");
+    assert!(held.peak_bytes >= held.live_bytes);
+    drop(a);
+    let after = ctx.memory_use();
+    assert_eq!(after.live_bytes, before.live_bytes);
+    assert_eq!(after.peak_bytes, held.peak_bytes);
+    ctx.reset_peak_memory();
+    assert_eq!(ctx.memory_use().peak_bytes, before.live_bytes);
+}

@@ -1,0 +1,215 @@
+//! Benchmark of all three training stages on a built-in scene: GPU ms per
+//! kernel per stage (timestamp queries), wall ms per iteration, device
+//! memory, device and driver. Shared by `tgs bench stages` and
+//! `cargo bench --bench stages`.
+//!
+//! The trainer runs the default schedule I → II → III on the scene with
+//! short stages: each stage first trains `train` iterations untimed (Stage I
+//! densifies during them and then stops, so the Gaussian count is fixed
+//! while timing), then `warmup` iterations, then `iterations` timed by wall
+//! clock, then up to 5 profiled ones. The stage switches (the residual of
+//! every training view and the seeding; the light-field model) are timed
+//! on their own. The per-iteration cost depends on the state training has
+//! reached (Gaussian counts, the fraction of pixels Φ evaluates), so both
+//! are reported beside the times.
+
+use crate::bench::{average, KernelTime};
+use crate::train::{Stage, TrainConfig, Trainer};
+use anyhow::{ensure, Context as _, Result};
+use serde::Serialize;
+use std::sync::Arc;
+use std::time::Instant;
+use tgs_engine::Context;
+
+/// What to run.
+#[derive(Clone, Debug)]
+pub struct StagesSpec {
+    /// A built-in scene (`tgs scene list`).
+    pub scene: String,
+    /// Untimed iterations per stage before timing.
+    pub train: u32,
+    pub warmup: u32,
+    /// Timed iterations per stage.
+    pub iterations: u32,
+    /// Stage III network preset (paper or small).
+    pub mlp: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StageTimes {
+    pub stage: String,
+    pub scattering_gaussians: u32,
+    /// Reflection-set Gaussians (Stages II and III).
+    pub reflection_gaussians: Option<u32>,
+    /// Fraction of pixels Φ was evaluated on (Stage III, profiled iterations).
+    pub phi_fraction: Option<f64>,
+    pub wall_ms: f64,
+    pub wall_ms_best: f64,
+    pub it_per_s: f64,
+    /// Sum of the top-level scopes (nested sort/scan passes not counted twice).
+    pub gpu_ms: f64,
+    /// Every timed scope, ms per iteration, in order of first appearance.
+    pub kernels: Vec<KernelTime>,
+    /// Wall ms of the switch into this stage (Stages II and III).
+    pub switch_ms: Option<f64>,
+    /// Device memory held by the engine at the end of the stage, and the
+    /// most held at once during it, MiB.
+    pub memory_mib: f64,
+    pub peak_memory_mib: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StagesBench {
+    pub device: String,
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    pub train_views: u32,
+    pub mlp: String,
+    pub train: u32,
+    pub warmup: u32,
+    pub iterations: u32,
+    pub stages: Vec<StageTimes>,
+    /// Stages the scene did not call for (Stage II skipped by the residual test).
+    pub skipped: Vec<String>,
+}
+
+/// Scopes nested inside other scopes (summed there already).
+fn nested(name: &str) -> bool {
+    name.starts_with("sort.") || name.starts_with("scan.")
+}
+
+fn mib(bytes: u64) -> f64 {
+    bytes as f64 / 1048576.0
+}
+
+pub fn stages(ctx: &Arc<Context>, spec: &StagesSpec) -> Result<StagesBench> {
+    ensure!(spec.iterations > 0, "--iterations must be at least 1");
+    let dir = std::env::temp_dir().join(format!("tgs-bench-scene-{}-{}", spec.scene, std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    crate::scene::make_named(&spec.scene, &dir, |_, _| {})?;
+    let result = run(ctx, spec, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<StagesBench> {
+    let mut cfg = TrainConfig::quick();
+    let profiled = spec.iterations.clamp(1, 5);
+    let per_stage = spec.train + spec.warmup + spec.iterations + profiled;
+    cfg.iterations = per_stage;
+    cfg.densify_until = spec.train.min(cfg.densify_until);
+    cfg.test_interval = 0;
+    cfg.checkpoint_interval = 0;
+    cfg.stages = "I,II,III".into();
+    cfg.reflection.iterations = per_stage;
+    cfg.light_field.iterations = per_stage;
+    cfg.light_field.preset = spec.mlp.clone();
+    let data = crate::train::run::load_dataset(dir, &cfg)?;
+    let cam = data.train.first().context("the scene has no training views")?.camera;
+    let mut tr = Trainer::new(ctx, cfg, &data)?;
+    let mut out = StagesBench {
+        device: ctx.caps().describe(),
+        scene: spec.scene.clone(),
+        width: cam.width,
+        height: cam.height,
+        train_views: data.train.len() as u32,
+        mlp: spec.mlp.clone(),
+        train: spec.train,
+        warmup: spec.warmup,
+        iterations: spec.iterations,
+        stages: Vec::new(),
+        skipped: Vec::new(),
+    };
+    for stage in [Stage::Scattering, Stage::Reflection, Stage::LightField] {
+        ctx.reset_peak_memory();
+        let t = Instant::now();
+        let switch_ms = match stage {
+            Stage::Scattering => None,
+            Stage::Reflection => {
+                if !tr.at_reflection_start() {
+                    break;
+                }
+                let d = tr.begin_reflection(|_, _, _| Ok(()))?;
+                if !d.run {
+                    out.skipped.extend(["II".to_string(), "III".to_string()]);
+                    break;
+                }
+                Some(t.elapsed().as_secs_f64() * 1e3)
+            }
+            Stage::LightField => {
+                if !tr.at_light_field_start() {
+                    break;
+                }
+                tr.begin_light_field()?;
+                Some(t.elapsed().as_secs_f64() * 1e3)
+            }
+        };
+        for _ in 0..spec.train + spec.warmup {
+            tr.step(false)?;
+        }
+        let mut walls = Vec::new();
+        for _ in 0..spec.iterations {
+            let t = Instant::now();
+            tr.step(false)?;
+            walls.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let mut all = Vec::new();
+        let mut phi = Vec::new();
+        for _ in 0..profiled {
+            let r = tr.step(true)?;
+            ensure!(r.stage == stage, "the schedule is at Stage {}, not {}", r.stage.name(), stage.name());
+            all.push(r.timings);
+            if let Some(f) = tr.light_field.as_mut().and_then(|m| m.take_coverage()) {
+                phi.push(f);
+            }
+        }
+        let kernels = average(all);
+        let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
+        let reflection_gaussians = match stage {
+            Stage::Scattering => None,
+            Stage::Reflection => tr.reflection.as_ref().map(|m| m.set.len()),
+            Stage::LightField => tr.light_field.as_ref().map(|m| m.set.len()),
+        };
+        let mem = ctx.memory_use();
+        out.stages.push(StageTimes {
+            stage: stage.name().into(),
+            scattering_gaussians: tr.scattering.set.len(),
+            reflection_gaussians,
+            phi_fraction: (!phi.is_empty()).then(|| phi.iter().sum::<f64>() / phi.len() as f64),
+            wall_ms,
+            wall_ms_best: walls.iter().copied().fold(f64::INFINITY, f64::min),
+            it_per_s: 1e3 / wall_ms,
+            gpu_ms: kernels.iter().filter(|k| !nested(&k.name)).map(|k| k.ms).sum(),
+            kernels,
+            switch_ms,
+            memory_mib: mib(mem.live_bytes),
+            peak_memory_mib: mib(mem.peak_bytes),
+        });
+    }
+    Ok(out)
+}
+
+pub fn print_stages(b: &StagesBench) {
+    println!("device: {}", b.device);
+    println!(
+        "stages on '{}' ({}x{}, {} training views), Stage III network '{}': per stage {} untimed, {} warm-up, {} timed iterations",
+        b.scene, b.width, b.height, b.train_views, b.mlp, b.train, b.warmup, b.iterations
+    );
+    for s in &b.stages {
+        let refl = s.reflection_gaussians.map(|n| format!(", {n} reflection")).unwrap_or_default();
+        let phi = s.phi_fraction.map(|f| format!(", Φ on {:.1}% of pixels", 100.0 * f)).unwrap_or_default();
+        let switch = s.switch_ms.map(|m| format!("; switch into it {m:.0} ms")).unwrap_or_default();
+        println!(
+            "Stage {}: {:.1} ms/iteration wall (best {:.1}), {:.2} it/s; GPU {:.1} ms; {} scattering Gaussians{refl}{phi}; memory {:.1} MiB (peak {:.1}){switch}",
+            s.stage, s.wall_ms, s.wall_ms_best, s.it_per_s, s.gpu_ms, s.scattering_gaussians, s.memory_mib, s.peak_memory_mib
+        );
+        for k in &s.kernels {
+            let indent = if nested(&k.name) { "      " } else { "    " };
+            println!("{indent}{:26} {:9.3} ms  ({} calls)", k.name, k.ms, k.calls);
+        }
+    }
+    for s in &b.skipped {
+        println!("Stage {s}: skipped (the scene's Stage I residual is below reflection.min_residual)");
+    }
+}
