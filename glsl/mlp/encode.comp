@@ -14,11 +14,15 @@
 layout(std430, binding = 0) readonly buffer Samples { float samples[]; };
 layout(std430, binding = 1) writeonly buffer In0 { float in0[]; };
 layout(std430, binding = 2) writeonly buffer Cat { float cat[]; };
+// With n_count != 0 only the first min(n, rows[0]) samples (a count a
+// kernel wrote).
+layout(std430, binding = 3) readonly buffer Rows { uint rows[]; };
 layout(push_constant) uniform Push {
     uint n;
     uint levels_x;
     uint levels_w;
     uint width;
+    uint n_count;
 } pc;
 
 const float PI = 3.14159265358979;
@@ -32,7 +36,8 @@ vec2 sincos_pi(float a, uint k) {
 
 void main() {
     uint s = wg_linear() * WG + gl_LocalInvocationID.x;
-    if (s >= pc.n) {
+    uint n = pc.n_count != 0u ? min(pc.n, rows[0]) : pc.n;
+    if (s >= n) {
         return;
     }
     uint dx = 3u + 6u * pc.levels_x, dw = 3u + 6u * pc.levels_w;

@@ -12,6 +12,11 @@
 // product uses dZ = dY * act'(Y), Y read at y_off + i y_rs + k y_cs
 // (1: ReLU, Y > 0; 2: sigmoid, Y (1 - Y)). post: c_act 1 ReLU, 2 sigmoid.
 //
+// Rows on the GPU: with m_count != 0, C has min(m, rows[0]) rows (a sample
+// count a kernel wrote, e.g. the light field's compacted list); the grid
+// covers m and workgroups past the count return at once, so the work
+// follows the count without the host reading it back.
+//
 // The k range is split over workgroups in z: workgroup z sums
 // k in [z k_chunk, min((z + 1) k_chunk, kdim)) and writes its C at
 // c_off + z c_zstride (the weight gradients' per-chunk partials).
@@ -25,6 +30,7 @@ layout(std430, binding = 0) readonly buffer A { float a[]; };
 layout(std430, binding = 1) readonly buffer B { float b[]; };
 layout(std430, binding = 2) readonly buffer Y { float y[]; };
 layout(std430, binding = 3) buffer C { float c[]; };
+layout(std430, binding = 4) readonly buffer Rows { uint rows[]; };
 
 layout(push_constant) uniform Push {
     uint m, n, kdim, k_chunk;
@@ -32,6 +38,7 @@ layout(push_constant) uniform Push {
     uint b_off, b_rs, b_cs, b_ones_j;
     uint y_off, y_rs, y_cs, a_deriv;
     uint c_off, c_rs, c_zstride, c_act;
+    uint m_count;
 } pc;
 
 const uint TM = 8u * RB, TN = 8u * RB, TK = 16u;
@@ -65,6 +72,11 @@ void main() {
     uint lid = gl_LocalInvocationID.x;
     uint tx = lid % 8u, ty = lid / 8u;
     uint i0 = gl_WorkGroupID.y * TM, j0 = gl_WorkGroupID.x * TN;
+    uint m = pc.m_count != 0u ? min(pc.m, rows[0]) : pc.m;
+    // Uniform per workgroup, before any barrier.
+    if (i0 >= m) {
+        return;
+    }
     uint kbeg = gl_WorkGroupID.z * pc.k_chunk;
     uint kend = min(kbeg + pc.k_chunk, pc.kdim);
 
@@ -80,7 +92,7 @@ void main() {
             uint idx = lid + 64u * e;
             uint kk = idx / TM, ii = idx % TM;
             uint k = k0 + kk, i = i0 + ii, j = j0 + ii;
-            As[kk][ii] = (k < kend && i < pc.m) ? load_a(i, k) : 0.0;
+            As[kk][ii] = (k < kend && i < m) ? load_a(i, k) : 0.0;
             Bs[kk][ii] = (k < kend && j < pc.n) ? load_b(k, j) : 0.0;
         }
         barrier();
@@ -103,7 +115,7 @@ void main() {
         uint i = i0 + ty + 8u * r;
         [[unroll]] for (uint q = 0u; q < RB; q++) {
             uint j = j0 + tx + 8u * q;
-            if (i < pc.m && j < pc.n) {
+            if (i < m && j < pc.n) {
                 float v = acc[r][q];
                 if (pc.c_act == 1u) {
                     v = max(v, 0.0);

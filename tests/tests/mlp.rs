@@ -223,3 +223,43 @@ fn no_samples_and_bit_identical_reruns() {
     assert!(a.out.iter().zip(&b.out).all(|(x, y)| x.to_bits() == y.to_bits()), "outputs differ between runs");
     assert!(a.grads.iter().zip(&b.grads).all(|(x, y)| x.to_bits() == y.to_bits()), "gradients differ between runs");
 }
+
+/// The forward with the sample count read on the GPU (the embedded light
+/// field): the first `count` outputs bit-equal the host-count forward's,
+/// nothing past the count is written, a count past the capacity is
+/// clamped to it, and a count of 0 writes nothing.
+#[test]
+fn forward_with_a_gpu_count_matches_and_stops_at_it() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("mlp counted"));
+    let shape = MlpShape { depth: 4, width: 48, skip: 2, levels_x: 6, levels_w: 4 };
+    let params = shape.init_params(rng.next_u64());
+    let cap = 700u32;
+    let samples = random_samples(&mut rng, cap as usize, 1.5);
+    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    let mlp = Mlp::new(ctx).unwrap();
+    let p = Buffer::from_slice(ctx, "params", &params).unwrap();
+    let host = {
+        let s = mlp.scratch(shape, cap).unwrap();
+        s.samples.upload(&flat).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        mlp.record_forward(&mut rec, &p, cap, &s).unwrap();
+        rec.submit_and_wait().unwrap();
+        s.out.download_range(0, (cap * OUT) as usize).unwrap()
+    };
+    const SENTINEL: f32 = -7.25;
+    for count in [0u32, 1, 63, 64, 65, 333, cap, cap + 500] {
+        let s = mlp.scratch(shape, cap).unwrap();
+        s.samples.upload(&flat).unwrap();
+        s.out.upload(&vec![SENTINEL; s.out.len()]).unwrap();
+        let c = Buffer::from_slice(ctx, "count", &[count]).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        mlp.record_forward_counted(&mut rec, &p, &c, &s).unwrap();
+        rec.submit_and_wait().unwrap();
+        let out = s.out.download_range(0, (cap * OUT) as usize).unwrap();
+        let k = (count.min(cap) * OUT) as usize;
+        assert!(out[..k].iter().zip(&host[..k]).all(|(a, b)| a.to_bits() == b.to_bits()), "count {count}: outputs differ from the host-count forward");
+        assert!(out[k..].iter().all(|&v| v == SENTINEL), "count {count}: wrote past the count");
+    }
+    check_validation(ctx);
+}

@@ -62,6 +62,8 @@ struct Product {
     c_rs: u32,
     c_zstride: u32,
     c_act: u32,
+    /// Rows from the GPU: m = min(m, rows[0]) (binding 4).
+    m_count: u32,
 }
 
 const RELU: u32 = 1;
@@ -149,7 +151,7 @@ impl Mlp {
             .iter()
             .map(|&b| Kernel::new(ctx, &KernelDesc { name: "mlp.gemm", spirv: shaders::MLP_GEMM, spec: &[(3, b)], push_bytes: push, subgroup_size: None, full_subgroups: false }))
             .collect::<Result<Vec<_>>>()?;
-        Ok(Mlp { ctx: ctx.clone(), gemm, encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 16)?, reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 12)? })
+        Ok(Mlp { ctx: ctx.clone(), gemm, encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 20)?, reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 12)? })
     }
 
     /// The most samples one scratch of `shape` holds on this device (its
@@ -203,23 +205,40 @@ impl Mlp {
         Ok(())
     }
 
-    fn dispatch(&self, rec: &mut Recorder, p: &Product, bufs: [&Buffer<f32>; 4], chunks: u32) -> Result<()> {
+    /// One GEMM; `rows` (binding 4) is read only with `p.m_count` set.
+    fn dispatch(&self, rec: &mut Recorder, p: &Product, bufs: [&Buffer<f32>; 4], chunks: u32, rows: Option<&Buffer<u32>>) -> Result<()> {
         let side = p.m.min(p.n).max(32);
         let k = BLOCKS.iter().rposition(|&rb| 8 * rb <= side).unwrap_or(0);
         let tile = 8 * BLOCKS[k];
-        rec.dispatch(&self.gemm[k], &bufs.map(|b| b.binding()), bytemuck::bytes_of(p), [p.n.div_ceil(tile), p.m.div_ceil(tile), chunks])
+        let [a, b, y, c] = bufs.map(|b| b.binding());
+        let r = rows.map(|r| r.binding()).unwrap_or_else(|| a.clone());
+        rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(tile), p.m.div_ceil(tile), chunks])
     }
 
     /// Record Phi on the first `n` samples of `s.samples` into `s.out`.
     pub fn record_forward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, s: &MlpScratch) -> Result<()> {
+        self.record_forward_rows(rec, params, n, None, s)
+    }
+
+    /// Record Phi on the first `count[0]` samples of `s.samples` (at most
+    /// the scratch's capacity), a count a kernel of the same recording
+    /// wrote: the host never reads it, and workgroups past it return at
+    /// once (the light field rendered inside a host's command buffer).
+    pub fn record_forward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, s: &MlpScratch) -> Result<()> {
+        self.record_forward_rows(rec, params, s.capacity, Some(count), s)
+    }
+
+    fn record_forward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, s: &MlpScratch) -> Result<()> {
         Self::check(s, params, n)?;
         if n == 0 {
             return Ok(());
         }
         let sh = s.shape;
+        let m_count = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.encode");
-        let push = [n, sh.levels_x, sh.levels_w, sh.width];
-        rec.dispatch(&self.encode, &[s.samples.binding(), s.in0.binding(), s.cat.binding()], bytemuck::cast_slice(&push), grid(&self.ctx, n))?;
+        let push = [n, sh.levels_x, sh.levels_w, sh.width, m_count];
+        let r = rows.map(|r| r.binding()).unwrap_or_else(|| s.samples.binding());
+        rec.dispatch(&self.encode, &[s.samples.binding(), s.in0.binding(), s.cat.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n))?;
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.forward");
         for l in 0..sh.layers() {
@@ -240,9 +259,10 @@ impl Mlp {
                 b_ones_j: NONE,
                 c_rs: ld,
                 c_act: if l == sh.depth { SIGMOID } else { RELU },
+                m_count,
                 ..Default::default()
             };
-            self.dispatch(rec, &p, [x, params, x, out], 1)?;
+            self.dispatch(rec, &p, [x, params, x, out], 1, rows)?;
         }
         rec.end_scope(sc);
         Ok(())
@@ -295,7 +315,7 @@ impl Mlp {
                 c_zstride: sh.params(),
                 ..Default::default()
             };
-            self.dispatch(rec, &pw, [dy, x, y, &s.part], chunks)?;
+            self.dispatch(rec, &pw, [dy, x, y, &s.part], chunks, None)?;
             if l > 0 {
                 // dH_{l-1} (n x width) = dZ W[:, :width] (the skip layer's
                 // encoded columns need no gradient).
@@ -317,7 +337,7 @@ impl Mlp {
                     c_rs: sh.width,
                         ..Default::default()
                 };
-                self.dispatch(rec, &pd, [dy, params, y, &s.d[((l - 1) % 2) as usize]], 1)?;
+                self.dispatch(rec, &pd, [dy, params, y, &s.d[((l - 1) % 2) as usize]], 1, None)?;
             }
         }
         rec.end_scope(sc);
