@@ -8,6 +8,7 @@ pub mod bench_stages;
 pub mod bench_train;
 pub mod data;
 pub mod devices;
+pub mod embed;
 pub mod eval;
 pub mod export;
 pub mod render;

@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests.
 
+pub mod host;
 pub mod raster_ref;
 pub mod raster_util;
 pub mod loss_ref;

@@ -2,7 +2,7 @@
 //! device, buffers over 128 MiB, profiling, and clear errors.
 
 use std::sync::Arc;
-use tgs_engine::{vk, AdoptInfo, Buffer, Context, ContextOptions, DeviceSelector, EnabledFeatures, Kernel, KernelDesc, Recorder};
+use tgs_engine::{vk, Buffer, Context, ContextOptions, DeviceSelector, Kernel, KernelDesc, Recorder};
 use tgs_pipelines::{shaders, Count, Iota, RadixSort};
 use tgs_tests::*;
 
@@ -44,51 +44,10 @@ fn validation_layer_is_active_and_catches_errors() {
     assert!(!ctx.validation_errors().is_empty(), "the validation hook did not report a deliberate error");
 }
 
-/// The host renderer's side: it creates instance, device and queue itself.
-struct Host {
-    entry: ash::Entry,
-    instance: ash::Instance,
-    pd: vk::PhysicalDevice,
-    device: ash::Device,
-    qf: u32,
-    queue: vk::Queue,
-}
-
-fn make_host() -> Host {
-    unsafe {
-        let entry = ash::Entry::load().unwrap();
-        let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
-        let instance = entry.create_instance(&vk::InstanceCreateInfo::default().application_info(&app), None).unwrap();
-        let pds = instance.enumerate_physical_devices().unwrap();
-        let pd = pds[0];
-        let qf = instance
-            .get_physical_device_queue_family_properties(pd)
-            .iter()
-            .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE))
-            .unwrap() as u32;
-        let prio = [1.0f32];
-        let qi = [vk::DeviceQueueCreateInfo::default().queue_family_index(qf).queue_priorities(&prio)];
-        let device = instance.create_device(pd, &vk::DeviceCreateInfo::default().queue_create_infos(&qi), None).unwrap();
-        let queue = device.get_device_queue(qf, 0);
-        Host { entry, instance, pd, device, qf, queue }
-    }
-}
-
 #[test]
 fn adopts_a_host_device_and_leaves_it_alive() {
-    let host = make_host();
-    let ctx = unsafe {
-        Context::adopt(AdoptInfo {
-            entry: host.entry.clone(),
-            instance: host.instance.handle(),
-            physical_device: host.pd,
-            device: host.device.handle(),
-            queue_family_index: host.qf,
-            queue: host.queue,
-            enabled: EnabledFeatures::default(), // the host enabled no optional features
-        })
-        .unwrap()
-    };
+    let host = tgs_tests::host::Host::new();
+    let ctx = host.adopt();
     assert!(!ctx.owns_device());
     assert!(!ctx.caps().buffer_device_address, "not enabled by the host, so not reported");
     let sort = RadixSort::new(&ctx).unwrap();

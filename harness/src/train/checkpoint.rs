@@ -310,3 +310,59 @@ fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -
     tr.decision = Some(r.decision.clone());
     Ok(())
 }
+
+/// The reflection layer a renderer needs from a checkpoint.
+pub enum RenderLayer {
+    /// A Stage I run: the scattering set alone.
+    Scattering,
+    /// Stage II: the reflection set and the environment map.
+    Env { set: HostGaussians, env: tgs_pipelines::HostEnvMap, fresnel: tgs_pipelines::Fresnel },
+    /// Stage III: the reflection set, the network and its shading.
+    LightField { set: HostGaussians, shape: tgs_pipelines::MlpShape, params: Vec<f32>, shade: tgs_pipelines::ShadeParams },
+}
+
+/// What rendering a checkpoint needs: the parameters only (no Adam moments,
+/// no dataset), checked as [`restore`] checks them.
+pub struct RenderState {
+    pub stage: &'static str,
+    pub scattering: HostGaussians,
+    pub layer: RenderLayer,
+}
+
+pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState> {
+    let layout = TrainableSet::layout((h.channels * h.coeffs) as usize);
+    if arrays.len() < layout.len() {
+        bail!("{} arrays, the scattering set alone has {}", arrays.len(), layout.len());
+    }
+    let refl = arrays.split_off(layout.len());
+    let have: Vec<(String, usize)> = h.arrays.clone();
+    let want: Vec<(String, usize)> = layout.iter().map(|(name, w)| (name.clone(), w * h.n as usize)).collect();
+    check_arrays(&want, &have, &arrays)?;
+    let scattering = gaussians(h, &arrays)?;
+    let (stage, layer) = match (&h.reflection, &h.light_field) {
+        (None, None) if refl.is_empty() => ("I", RenderLayer::Scattering),
+        (Some(r), None) => {
+            let env_len = 18 * r.env_res as usize * r.env_res as usize;
+            let want: Vec<(String, usize)> = refl_layout(r.n).into_iter().chain(["env.param", "env.adam_m", "env.adam_v"].map(|n| (n.to_string(), env_len))).collect();
+            check_arrays(&want, &r.arrays, &refl).context("Stage II state")?;
+            let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
+            set.validate()?;
+            let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[want.len() - 3].clone() };
+            ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel()? })
+        }
+        (None, Some(l)) => {
+            let [depth, width, skip, levels_x, levels_w] = l.shape;
+            let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
+            shape.validate()?;
+            let p = shape.params() as usize;
+            let want: Vec<(String, usize)> = refl_layout(l.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
+            check_arrays(&want, &l.arrays, &refl).context("Stage III state")?;
+            let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
+            set.validate()?;
+            let shade = tgs_pipelines::ShadeParams { centre: l.centre, half_extent: l.half_extent, threshold: l.threshold, schlick: l.schlick };
+            ("III", RenderLayer::LightField { set, shape, params: refl[want.len() - 3].clone(), shade })
+        }
+        _ => bail!("the arrays after the scattering set match neither a Stage II nor a Stage III state"),
+    };
+    Ok(RenderState { stage, scattering, layer })
+}

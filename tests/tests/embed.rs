@@ -1,0 +1,115 @@
+//! Embedding: a host application creates its own instance, device, queue,
+//! command buffers and output buffer; tgs adopts the device, loads a trained
+//! run of each stage (Stage I; Stage II with its environment map; Stage III
+//! with its light field) and records the deferred render into the host's
+//! command buffer, writing the host's buffer. The pixels equal `tgs
+//! render`'s (the trainer's render of the checkpoint) bit for bit.
+
+use std::path::{Path, PathBuf};
+use tgs::embed::SceneRenderer;
+use tgs::train::run::{train, TrainArgs};
+use tgs_engine::{BufferBinding, Recorder};
+use tgs_tests::ctx_shared;
+use tgs_tests::host::Host;
+
+fn base() -> PathBuf {
+    std::env::temp_dir().join(format!("tgs-embed-{}", std::process::id()))
+}
+
+fn args(out: &Path, set: &[&str], stages: &str, from: Option<&Path>) -> TrainArgs {
+    let _ = std::fs::remove_dir_all(out);
+    let scene = base().join("scene");
+    if !scene.join("transforms_train.json").is_file() {
+        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &scene, |_, _| {}).unwrap();
+    }
+    let mut set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+    set.extend(["test_interval=0", "checkpoint_interval=0"].map(String::from));
+    TrainArgs {
+        dataset: if from.is_some() { None } else { Some(scene) },
+        out: out.to_path_buf(),
+        preset: if from.is_some() { None } else { Some("quick".into()) },
+        set,
+        stages: Some(stages.into()),
+        from: from.map(Path::to_path_buf),
+        quiet: true,
+        ..Default::default()
+    }
+}
+
+/// Render every test camera of `run` in the host's command buffers and
+/// compare with the trainer's render of the same checkpoint.
+fn check_run(host: &Host, run: &Path, stage: &str) {
+    let ctx = host.adopt();
+    let mut scene = SceneRenderer::load(&ctx, run).unwrap();
+    assert_eq!(scene.stage, stage);
+    let cams = tgs::embed::run_cameras(run).unwrap();
+    assert_eq!(cams.len(), 4);
+    let (mut tr, _) = tgs::train::run::open_run(ctx_shared(), run).unwrap();
+    for (name, cam) in &cams {
+        let n = SceneRenderer::output_len(cam.width, cam.height);
+        let out = host.buffer(4 * n as u64);
+        let mut recordings = 0;
+        loop {
+            let mut rec = None;
+            host.submit(|cmd| {
+                let mut r = unsafe { Recorder::record_into(&ctx, cmd, 0) }.unwrap();
+                scene.record(&mut r, cam, &unsafe { BufferBinding::external(out.buffer, 0, out.bytes) }).unwrap();
+                r.finish().unwrap();
+                rec = Some(r);
+            });
+            drop(rec);
+            recordings += 1;
+            if scene.complete(cam).unwrap() {
+                break;
+            }
+            assert!(recordings < 4, "{name}: the frame never fitted");
+        }
+        if stage == "III" {
+            let k = scene.last_samples.unwrap();
+            assert!(k > 0 && (k as usize) < n / 3, "{name}: the light field ran on {k} of {} pixels", n / 3);
+        }
+        let got = host.read(&out);
+        host.free(out);
+        let want = tr.render(cam).unwrap().planes[..n].to_vec();
+        assert!(got.iter().all(|v| v.is_finite()), "{stage} {name}: NaN/Inf");
+        let diff = got.iter().zip(&want).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        assert_eq!(diff, 0, "Stage {stage} {name}: {diff} of {n} values differ from `tgs render`");
+        // The same through tgs's own queue, and again (bit-identical reruns).
+        assert!(scene.render(cam).unwrap().iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+    // A too-small output is refused before anything is recorded.
+    let (_, cam) = &cams[0];
+    let small = tgs_engine::Buffer::<f32>::new(&ctx, "small", 10).unwrap();
+    let mut rec = Recorder::new(&ctx).unwrap();
+    let e = scene.record(&mut rec, cam, &small.binding()).unwrap_err();
+    assert!(format!("{e:#}").contains("needs"), "{e:#}");
+}
+
+#[test]
+fn host_renders_each_stage_like_tgs_render() {
+    let host = Host::new();
+    let b = base();
+    let one = b.join("one");
+    train(ctx_shared(), &args(&one, &["iterations=150"], "I", None)).unwrap();
+    let two = b.join("two");
+    train(ctx_shared(), &args(&two, &["reflection.iterations=30"], "II", Some(&one))).unwrap();
+    let three = b.join("three");
+    train(ctx_shared(), &args(&three, &["light_field.iterations=30"], "III", Some(&two))).unwrap();
+    check_run(&host, &one, "I");
+    check_run(&host, &two, "II");
+    check_run(&host, &three, "III");
+
+    // Bad inputs name the file.
+    let ctx = host.adopt();
+    let e = SceneRenderer::load(&ctx, &b.join("missing")).err().unwrap();
+    assert!(format!("{e:#}").contains("missing"), "{e:#}");
+    let bad = b.join("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    let bytes = std::fs::read(three.join("checkpoint.bin")).unwrap();
+    std::fs::write(bad.join("checkpoint.bin"), &bytes[..bytes.len() - 8]).unwrap();
+    let e = SceneRenderer::load(&ctx, &bad).err().unwrap();
+    assert!(format!("{e:#}").contains("checkpoint.bin"), "{e:#}");
+    drop(ctx);
+    host.destroy();
+    let _ = std::fs::remove_dir_all(&b);
+}
