@@ -10,6 +10,7 @@ PKGS=(
   vulkan-tools                    # vulkaninfo, handy for diagnosing drivers
   libshaderc-dev glslang-dev spirv-tools   # static shaderc/glslang/SPIRV-Tools
   pkg-config
+  libfontconfig-dev libfreetype-dev fonts-dejavu-core   # text in the sweep's plots (plotters)
 )
 
 missing=()

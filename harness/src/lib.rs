@@ -13,4 +13,5 @@ pub mod eval;
 pub mod export;
 pub mod render;
 pub mod scene;
+pub mod sweep;
 pub mod train;

@@ -95,6 +95,25 @@ enum Cmd {
         #[command(subcommand)]
         what: SceneCmd,
     },
+    /// Train a grid of settings that trade accuracy for time: one row per
+    /// run in OUT/sweep.csv (settings, wall time, GPU ms per iteration, test
+    /// PSNR / SSIM / normal MAE per stage) and plots against wall time with
+    /// the Pareto front. Run it again to resume.
+    Sweep {
+        /// Dataset directory; default: the built-in scene, written to OUT/scene.
+        dataset: Option<PathBuf>,
+        #[arg(long)]
+        out: PathBuf,
+        /// Grid file (TOML: preset, mode, [base], [knobs]); default: the
+        /// built-in grid (`tgs sweep --print-grid` shows it).
+        #[arg(long)]
+        grid: Option<PathBuf>,
+        /// Print the built-in grid and exit.
+        #[arg(long)]
+        print_grid: bool,
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Time kernels with GPU timestamps.
     Bench {
         #[command(subcommand)]
@@ -288,6 +307,26 @@ fn run(cli: Cli) -> Result<()> {
                 Ok(())
             }
         },
+        Cmd::Sweep { dataset, out, grid, print_grid, quiet } => {
+            if *print_grid {
+                print!("{}", tgs::sweep::DEFAULT_GRID.trim_start());
+                return Ok(());
+            }
+            let ctx = context(&cli)?;
+            let a = tgs::sweep::SweepArgs { dataset: dataset.clone(), out: out.clone(), grid: grid.clone(), quiet: *quiet };
+            let o = tgs::sweep::sweep(&ctx, &a)?;
+            if o.interrupted {
+                eprintln!("sweep interrupted after {} new run(s); run the same command again to resume", o.trained);
+                std::process::exit(130);
+            }
+            eprintln!("sweep: {} runs ({} trained now); {} and plots in {}", o.rows.len(), o.trained, out.join("sweep.csv").display(), out.display());
+            let front = tgs::sweep::pareto(&o.rows, |r| r.psnr);
+            println!("{:48} {:>9} {:>8} {:>8} {:>9}  pareto", "run", "wall s", "PSNR", "SSIM", "MAE °");
+            for (i, r) in o.rows.iter().enumerate() {
+                println!("{:48} {:9.1} {:8.3} {:8.4} {:9.2}  {}", r.name, r.wall_s, r.psnr, r.ssim, r.normal_mae_deg, if front.contains(&i) { "*" } else { "" });
+            }
+            Ok(())
+        }
         Cmd::Bench { what } => {
             let ctx = context(&cli)?;
             match what {

@@ -15,6 +15,12 @@ pub struct Host {
     pub queue: vk::Queue,
 }
 
+impl Default for Host {
+    fn default() -> Host {
+        Host::new()
+    }
+}
+
 impl Host {
     pub fn new() -> Host {
         unsafe {

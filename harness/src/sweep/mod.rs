@@ -1,0 +1,383 @@
+//! `tgs sweep`: train a grid of settings that trade accuracy for time and
+//! tabulate what each costs and buys.
+//!
+//! A grid file (TOML) names a base (settings every run shares, as with
+//! `tgs train --set`) and knobs (each a setting with a list of values):
+//!
+//! ```toml
+//! preset = "quick"            # optional, as tgs train --preset
+//! mode = "one_at_a_time"      # or "product"
+//! [base]
+//! iterations = 1500
+//! [knobs]
+//! iterations = [500, 1500, 3000]
+//! "light_field.preset" = ["small", "paper"]
+//! ```
+//!
+//! `one_at_a_time` runs the base and then each knob value with the other
+//! knobs at the base (duplicates of the base run once); `product` runs
+//! every combination. Each run trains in `DIR/runs/NAME` with GPU
+//! timestamps on, and its row (settings, wall time, GPU ms per iteration,
+//! test PSNR / SSIM / normal MAE per stage) is added to `DIR/sweep.csv` as
+//! soon as it finishes; `DIR/psnr_vs_time.png` and `DIR/normal_mae_vs_time.png`
+//! are redrawn with the Pareto front marked. Running the same command again
+//! resumes: finished runs (in the CSV) are kept, an interrupted run is
+//! trained again from the start (so every wall time is one uninterrupted
+//! run's), the rest follow.
+
+mod plot;
+
+use crate::train::run::{train, TrainArgs};
+use anyhow::{bail, Context as _, Result};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tgs_engine::Context;
+
+/// The grid used when no file is given: the knobs the README's accuracy /
+/// time section discusses, one at a time around the quick preset.
+pub const DEFAULT_GRID: &str = r#"
+preset = "quick"
+mode = "one_at_a_time"
+[base]
+[knobs]
+iterations = [1000, 3000]
+"reflection.iterations" = [100, 300]
+"light_field.iterations" = [300, 1000]
+sh_degree = [1, 3]
+"reflection.env_res" = [32, 128]
+"light_field.preset" = ["small", "paper"]
+"light_field.lambda_hf" = [0.0, 0.1]
+"light_field.threshold" = [0.0, 0.01, 0.05]
+"#;
+
+/// Settings as (key, value), in order.
+pub type Settings = Vec<(String, toml::Value)>;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grid {
+    pub preset: String,
+    pub product: bool,
+    pub base: Settings,
+    pub knobs: Vec<(String, Vec<toml::Value>)>,
+}
+
+/// A value as `--set` takes it (TOML syntax).
+fn show(v: &toml::Value) -> String {
+    v.to_string()
+}
+
+impl Grid {
+    pub fn parse(text: &str, what: &str) -> Result<Grid> {
+        let t: toml::Table = toml::from_str(text).with_context(|| format!("{what}: not valid TOML"))?;
+        let mut g = Grid { preset: "quick".into(), product: false, base: Vec::new(), knobs: Vec::new() };
+        for (k, v) in &t {
+            match (k.as_str(), v) {
+                ("preset", toml::Value::String(s)) => g.preset = s.clone(),
+                ("mode", toml::Value::String(s)) => {
+                    g.product = match s.as_str() {
+                        "product" => true,
+                        "one_at_a_time" => false,
+                        _ => bail!("{what}: mode = \"{s}\": expected \"one_at_a_time\" or \"product\""),
+                    }
+                }
+                ("base", toml::Value::Table(b)) => g.base = crate::train::config::flatten(b),
+                ("knobs", toml::Value::Table(kn)) => {
+                    for (key, vals) in crate::train::config::flatten(kn) {
+                        match vals {
+                            toml::Value::Array(a) if !a.is_empty() => g.knobs.push((key, a)),
+                            _ => bail!("{what}: knob '{key}' must be a non-empty list of values"),
+                        }
+                    }
+                }
+                _ => bail!("{what}: unknown entry '{k}' (expected preset, mode, [base], [knobs])"),
+            }
+        }
+        if g.knobs.is_empty() {
+            bail!("{what}: no [knobs]: nothing to sweep");
+        }
+        Ok(g)
+    }
+
+    /// The runs: each a list of (key, value) overriding the base, named
+    /// after them ("base" for none). Each run's settings are checked.
+    pub fn runs(&self) -> Result<Vec<(String, Settings)>> {
+        let mut sets: Vec<Settings> = Vec::new();
+        if self.product {
+            sets.push(Vec::new());
+            for (k, vals) in &self.knobs {
+                sets = sets.iter().flat_map(|s| vals.iter().map(move |v| [s.clone(), vec![(k.clone(), v.clone())]].concat())).collect();
+            }
+        } else {
+            sets.push(Vec::new());
+            for (k, vals) in &self.knobs {
+                sets.extend(vals.iter().map(|v| vec![(k.clone(), v.clone())]));
+            }
+        }
+        let mut out: Vec<(String, Settings)> = Vec::new();
+        let mut seen: Vec<crate::train::TrainConfig> = Vec::new();
+        for s in sets {
+            let cfg = self.config(&s).with_context(|| format!("grid run {}", name_of(&s)))?;
+            // A knob value equal to the base's is the base run.
+            if seen.contains(&cfg) {
+                continue;
+            }
+            seen.push(cfg);
+            out.push((name_of(&s), s));
+        }
+        Ok(out)
+    }
+
+    fn set_args(&self, run: &[(String, toml::Value)]) -> Vec<String> {
+        self.base.iter().chain(run).map(|(k, v)| format!("{k}={}", show(v))).collect()
+    }
+
+    fn config(&self, run: &[(String, toml::Value)]) -> Result<crate::train::TrainConfig> {
+        let a = TrainArgs { preset: Some(self.preset.clone()), set: self.set_args(run), ..Default::default() };
+        crate::train::run::config_from_args(&a)
+    }
+}
+
+fn name_of(run: &[(String, toml::Value)]) -> String {
+    if run.is_empty() {
+        return "base".into();
+    }
+    run.iter().map(|(k, v)| format!("{k}={}", show(v).trim_matches('"'))).collect::<Vec<_>>().join(",")
+}
+
+/// A directory name for a run name.
+fn dir_name(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || "._-=,".contains(c) { c } else { '_' }).collect()
+}
+
+/// One run's row.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Row {
+    pub name: String,
+    pub settings: BTreeMap<String, String>,
+    pub wall_s: f64,
+    pub gpu_ms_per_iteration: f64,
+    pub iterations: u64,
+    /// stage -> (psnr, ssim, normal MAE), wall s.
+    pub stages: BTreeMap<String, ([f64; 3], f64)>,
+    /// The last stage's.
+    pub psnr: f64,
+    pub ssim: f64,
+    pub normal_mae_deg: f64,
+}
+
+const STAGES: [&str; 3] = ["I", "II", "III"];
+
+impl Row {
+    fn from_metrics(name: &str, settings: BTreeMap<String, String>, m: &serde_json::Value) -> Result<Row> {
+        let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+        let gpu = m["gpu_ms_per_iteration"].as_object().map(|k| k.iter().filter(|(n, _)| !n.starts_with("sort.") && !n.starts_with("scan.")).map(|(_, v)| f(v)).sum()).unwrap_or(f64::NAN);
+        let mut stages = BTreeMap::new();
+        for s in m["stages"].as_array().context("metrics.json has no stages")? {
+            let t = &s["test"];
+            stages.insert(s["stage"].as_str().unwrap_or("?").to_string(), ([f(&t["psnr"]), f(&t["ssim"]), f(&t["normal_mae_deg"])], f(&s["wall_s"])));
+        }
+        let t = &m["test"];
+        Ok(Row {
+            name: name.into(),
+            settings,
+            wall_s: f(&m["train_wall_s"]),
+            gpu_ms_per_iteration: gpu,
+            iterations: m["iterations"].as_u64().unwrap_or(0),
+            stages,
+            psnr: f(&t["psnr"]),
+            ssim: f(&t["ssim"]),
+            normal_mae_deg: f(&t["normal_mae_deg"]),
+        })
+    }
+}
+
+fn header(keys: &[String]) -> Vec<String> {
+    let mut h = vec!["run".to_string()];
+    h.extend(keys.iter().cloned());
+    h.extend(["wall_s", "gpu_ms_per_iteration", "total_iterations", "psnr", "ssim", "normal_mae_deg"].map(String::from));
+    for s in STAGES {
+        h.extend([format!("{s}_psnr"), format!("{s}_ssim"), format!("{s}_normal_mae_deg"), format!("{s}_wall_s")]);
+    }
+    h
+}
+
+/// A number as the shortest text that reads back to the same f64.
+fn num(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v}")
+    } else {
+        String::new()
+    }
+}
+
+/// CSV field: quoted when it holds a comma or a quote.
+fn field(s: &str) -> String {
+    if s.contains(',') || s.contains('"') {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn csv_line(r: &Row, keys: &[String]) -> String {
+    let mut v = vec![field(&r.name)];
+    v.extend(keys.iter().map(|k| field(r.settings.get(k).map(String::as_str).unwrap_or(""))));
+    v.extend([num(r.wall_s), num(r.gpu_ms_per_iteration), r.iterations.to_string(), num(r.psnr), num(r.ssim), num(r.normal_mae_deg)]);
+    for s in STAGES {
+        match r.stages.get(s) {
+            Some((t, w)) => v.extend([num(t[0]), num(t[1]), num(t[2]), num(*w)]),
+            None => v.extend(["", "", "", ""].map(String::from)),
+        }
+    }
+    v.join(",")
+}
+
+/// Split one CSV line (fields quoted as [`field`] writes them).
+fn split_csv(line: &str) -> Vec<String> {
+    let (mut out, mut cur, mut quoted, mut chars) = (Vec::new(), String::new(), false, line.chars().peekable());
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                cur.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => out.push(std::mem::take(&mut cur)),
+            (c, _) => cur.push(c),
+        }
+    }
+    out.push(cur);
+    out
+}
+
+/// The rows of an existing sweep.csv written with the same columns.
+fn read_csv(path: &Path, keys: &[String]) -> Result<Vec<Row>> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e).with_context(|| format!("{}: cannot read", path.display())),
+    };
+    let mut lines = text.lines();
+    let want = header(keys);
+    if lines.next().map(split_csv) != Some(want.clone()) {
+        bail!("{}: written by another grid (its columns differ); use another --out or remove it", path.display());
+    }
+    let p = |s: &String| s.parse::<f64>().unwrap_or(f64::NAN);
+    let mut rows = Vec::new();
+    for (i, line) in lines.enumerate() {
+        let v = split_csv(line);
+        if v.len() != want.len() {
+            bail!("{}: line {} has {} fields, expected {}", path.display(), i + 2, v.len(), want.len());
+        }
+        let k = keys.len();
+        let mut r = Row { name: v[0].clone(), ..Default::default() };
+        r.settings = keys.iter().cloned().zip(v[1..=k].iter().cloned()).filter(|(_, s)| !s.is_empty()).collect();
+        (r.wall_s, r.gpu_ms_per_iteration) = (p(&v[k + 1]), p(&v[k + 2]));
+        r.iterations = v[k + 3].parse().unwrap_or(0);
+        (r.psnr, r.ssim, r.normal_mae_deg) = (p(&v[k + 4]), p(&v[k + 5]), p(&v[k + 6]));
+        for (j, s) in STAGES.iter().enumerate() {
+            let b = k + 7 + 4 * j;
+            if !v[b].is_empty() {
+                r.stages.insert(s.to_string(), ([p(&v[b]), p(&v[b + 1]), p(&v[b + 2])], p(&v[b + 3])));
+            }
+        }
+        rows.push(r);
+    }
+    Ok(rows)
+}
+
+fn write_csv(path: &Path, rows: &[Row], keys: &[String]) -> Result<()> {
+    let mut s = header(keys).iter().map(|h| field(h)).collect::<Vec<_>>().join(",");
+    s.push('\n');
+    for r in rows {
+        s.push_str(&csv_line(r, keys));
+        s.push('\n');
+    }
+    crate::export::atomic_write(path, s.as_bytes())
+}
+
+pub struct SweepArgs {
+    pub dataset: Option<PathBuf>,
+    pub out: PathBuf,
+    pub grid: Option<PathBuf>,
+    pub quiet: bool,
+}
+
+/// What a sweep did.
+pub struct SweepOutcome {
+    pub rows: Vec<Row>,
+    /// Runs trained by this call (the others were in the CSV already).
+    pub trained: usize,
+    pub interrupted: bool,
+}
+
+pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
+    let grid = match &a.grid {
+        Some(p) => Grid::parse(&std::fs::read_to_string(p).with_context(|| format!("{}: cannot read the grid", p.display()))?, &p.display().to_string())?,
+        None => Grid::parse(DEFAULT_GRID, "the default grid")?,
+    };
+    let runs = grid.runs()?;
+    let keys: Vec<String> = grid.knobs.iter().map(|k| k.0.clone()).collect();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the sweep directory", a.out.display()))?;
+    let dataset = match &a.dataset {
+        Some(d) => d.clone(),
+        None => {
+            let d = a.out.join("scene");
+            if !d.join("transforms_train.json").is_file() {
+                let _ = std::fs::remove_dir_all(&d);
+                crate::scene::make(&crate::scene::spec(crate::train::run::DEFAULT_SCENE)?, &d, |_, _| {})?;
+            }
+            d
+        }
+    };
+    let csv = a.out.join("sweep.csv");
+    let mut rows = read_csv(&csv, &keys)?;
+    let mut trained = 0;
+    for (i, (name, set)) in runs.iter().enumerate() {
+        if rows.iter().any(|r| &r.name == name) {
+            continue;
+        }
+        if !a.quiet {
+            eprintln!("sweep: run {}/{}: {name}", i + 1, runs.len());
+        }
+        let dir = a.out.join("runs").join(dir_name(name));
+        // An interrupted run trains again from the start: its wall time is one run's.
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).with_context(|| format!("{}: cannot remove the unfinished run", dir.display()))?;
+        }
+        let args = TrainArgs { dataset: Some(dataset.clone()), out: dir.clone(), preset: Some(grid.preset.clone()), set: grid.set_args(set), profile: true, quiet: a.quiet, ..Default::default() };
+        let o = train(ctx, &args).with_context(|| format!("sweep run {name}"))?;
+        if o.interrupted {
+            return Ok(SweepOutcome { rows, trained, interrupted: true });
+        }
+        let m: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).with_context(|| format!("{}: no metrics.json", dir.display()))?)?;
+        let settings = set.iter().map(|(k, v)| (k.clone(), show(v).trim_matches('"').to_string())).collect();
+        rows.push(Row::from_metrics(name, settings, &m)?);
+        trained += 1;
+        write_csv(&csv, &rows, &keys)?;
+        plot::draw(&a.out, &rows)?;
+    }
+    write_csv(&csv, &rows, &keys)?;
+    plot::draw(&a.out, &rows)?;
+    Ok(SweepOutcome { rows, trained, interrupted: false })
+}
+
+/// Indices of the rows on the Pareto front of (wall time down, `score` up):
+/// no other row is at least as fast and at least as good, and strictly
+/// better in one. Sorted by wall time.
+pub fn pareto(rows: &[Row], score: impl Fn(&Row) -> f64) -> Vec<usize> {
+    let ok: Vec<usize> = (0..rows.len()).filter(|&i| rows[i].wall_s.is_finite() && score(&rows[i]).is_finite()).collect();
+    let mut front: Vec<usize> = ok
+        .iter()
+        .copied()
+        .filter(|&i| {
+            !ok.iter().any(|&j| {
+                let (a, b) = (&rows[j], &rows[i]);
+                j != i && a.wall_s <= b.wall_s && score(a) >= score(b) && (a.wall_s < b.wall_s || score(a) > score(b))
+            })
+        })
+        .collect();
+    front.sort_by(|&a, &b| rows[a].wall_s.total_cmp(&rows[b].wall_s));
+    front
+}
