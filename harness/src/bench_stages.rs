@@ -4,9 +4,10 @@
 //! `cargo bench --bench stages`.
 //!
 //! The trainer runs the default schedule I → II → III on the scene with
-//! short stages: each stage first trains `train` iterations untimed (Stage I
-//! densifies during them and then stops, so the Gaussian count is fixed
-//! while timing), then `warmup` iterations, then `iterations` timed by wall
+//! short stages: each stage first trains `train` iterations untimed
+//! (`train_light_field` for Stage III; Stage I densifies during them, when
+//! they reach the preset's densify_from, and then stops, so the Gaussian
+//! count is fixed while timing), then `warmup` iterations, then `iterations` timed by wall
 //! clock, then up to 5 profiled ones. The stage switches (the residual of
 //! every training view and the seeding; the light-field model) are timed
 //! on their own. The per-iteration cost depends on the state training has
@@ -26,8 +27,11 @@ use tgs_engine::Context;
 pub struct StagesSpec {
     /// A built-in scene (`tgs scene list`).
     pub scene: String,
-    /// Untimed iterations per stage before timing.
+    /// Untimed iterations of Stages I and II before timing.
     pub train: u32,
+    /// Untimed iterations of Stage III before timing (its iterations cost
+    /// up to 10x Stage I's with the paper network on a CPU driver).
+    pub train_light_field: u32,
     pub warmup: u32,
     /// Timed iterations per stage.
     pub iterations: u32,
@@ -67,6 +71,7 @@ pub struct StagesBench {
     pub train_views: u32,
     pub mlp: String,
     pub train: u32,
+    pub train_light_field: u32,
     pub warmup: u32,
     pub iterations: u32,
     pub stages: Vec<StageTimes>,
@@ -96,14 +101,15 @@ pub fn stages(ctx: &Arc<Context>, spec: &StagesSpec) -> Result<StagesBench> {
 fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<StagesBench> {
     let mut cfg = TrainConfig::quick();
     let profiled = spec.iterations.clamp(1, 5);
-    let per_stage = spec.train + spec.warmup + spec.iterations + profiled;
+    let timed = spec.warmup + spec.iterations + profiled;
+    let per_stage = spec.train + timed;
     cfg.iterations = per_stage;
     cfg.densify_until = spec.train.min(cfg.densify_until);
     cfg.test_interval = 0;
     cfg.checkpoint_interval = 0;
     cfg.stages = "I,II,III".into();
     cfg.reflection.iterations = per_stage;
-    cfg.light_field.iterations = per_stage;
+    cfg.light_field.iterations = spec.train_light_field + timed;
     cfg.light_field.preset = spec.mlp.clone();
     let data = crate::train::run::load_dataset(dir, &cfg)?;
     let cam = data.train.first().context("the scene has no training views")?.camera;
@@ -116,6 +122,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         train_views: data.train.len() as u32,
         mlp: spec.mlp.clone(),
         train: spec.train,
+        train_light_field: spec.train_light_field,
         warmup: spec.warmup,
         iterations: spec.iterations,
         stages: Vec::new(),
@@ -145,7 +152,8 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
                 Some(t.elapsed().as_secs_f64() * 1e3)
             }
         };
-        for _ in 0..spec.train + spec.warmup {
+        let untimed = if stage == Stage::LightField { spec.train_light_field } else { spec.train };
+        for _ in 0..untimed + spec.warmup {
             tr.step(false)?;
         }
         let mut walls = Vec::new();
@@ -193,8 +201,8 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
 pub fn print_stages(b: &StagesBench) {
     println!("device: {}", b.device);
     println!(
-        "stages on '{}' ({}x{}, {} training views), Stage III network '{}': per stage {} untimed, {} warm-up, {} timed iterations",
-        b.scene, b.width, b.height, b.train_views, b.mlp, b.train, b.warmup, b.iterations
+        "stages on '{}' ({}x{}, {} training views), Stage III network '{}': per stage {} untimed ({} in Stage III), {} warm-up, {} timed iterations",
+        b.scene, b.width, b.height, b.train_views, b.mlp, b.train, b.train_light_field, b.warmup, b.iterations
     );
     for s in &b.stages {
         let refl = s.reflection_gaussians.map(|n| format!(", {n} reflection")).unwrap_or_default();

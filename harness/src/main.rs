@@ -214,9 +214,12 @@ enum Bench {
         /// Built-in scene (tgs scene list).
         #[arg(long, default_value = "glass")]
         scene: String,
-        /// Untimed training iterations per stage before timing.
+        /// Untimed training iterations of Stages I and II before timing.
         #[arg(long, default_value_t = 300)]
         train: u32,
+        /// Untimed training iterations of Stage III before timing.
+        #[arg(long, default_value_t = 50)]
+        train_light_field: u32,
         #[arg(long, default_value_t = 3)]
         warmup: u32,
         /// Timed iterations per stage.
@@ -385,8 +388,8 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_mlp::print_mlp(&b);
                     }
                 }
-                Bench::Stages { scene, train, warmup, iterations, mlp, json } => {
-                    let spec = tgs::bench_stages::StagesSpec { scene: scene.clone(), train: *train, warmup: *warmup, iterations: *iterations, mlp: mlp.clone() };
+                Bench::Stages { scene, train, train_light_field, warmup, iterations, mlp, json } => {
+                    let spec = tgs::bench_stages::StagesSpec { scene: scene.clone(), train: *train, train_light_field: *train_light_field, warmup: *warmup, iterations: *iterations, mlp: mlp.clone() };
                     let b = tgs::bench_stages::stages(&ctx, &spec)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);

@@ -31,7 +31,7 @@ fn train_bench_reports_every_stage() {
 #[test]
 fn stages_bench_reports_each_stage() {
     let ctx = ctx_shared();
-    let spec = tgs::bench_stages::StagesSpec { scene: "glass-tiny".into(), train: 8, warmup: 1, iterations: 2, mlp: "small".into() };
+    let spec = tgs::bench_stages::StagesSpec { scene: "glass-tiny".into(), train: 8, train_light_field: 4, warmup: 1, iterations: 2, mlp: "small".into() };
     let b = tgs::bench_stages::stages(ctx, &spec).unwrap();
     assert_eq!((b.width, b.height, b.train_views), (48, 48, 16));
     let names: Vec<&str> = b.stages.iter().map(|s| s.stage.as_str()).collect();
