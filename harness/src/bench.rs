@@ -8,6 +8,13 @@ use std::time::Instant;
 use tgs_engine::{summarize, Buffer, Context, Recorder};
 use tgs_pipelines::{Count, PrefixSum, RadixSort, ScanScratch, SortConfig};
 
+/// Whether a timed scope runs inside another one (the sort and scan passes
+/// nest in the rasterizer's and the texel reduction's scopes): summing
+/// GPU time per iteration skips these.
+pub fn nested_scope(name: &str) -> bool {
+    name.starts_with("sort.") || name.starts_with("scan.")
+}
+
 /// Per-kernel GPU time, averaged over the timed repetitions.
 #[derive(Clone, Debug, Serialize)]
 pub struct KernelTime {

@@ -124,7 +124,7 @@ pub fn print_raster(b: &RasterBench) {
         b.gaussians, b.width, b.height, b.channels, b.intersections, b.spans, b.span, b.forward_ms, b.backward_ms, b.total_ms, b.wall_ms, b.intersections_per_s / 1e6, b.device
     );
     for k in &b.kernels {
-        let indent = if k.name.starts_with("sort.") || k.name.starts_with("scan.") { "      " } else { "    " };
+        let indent = if crate::bench::nested_scope(&k.name) { "      " } else { "    " };
         println!("{indent}{:<20} {:>10.3} ms  ({} calls)", k.name, k.ms, k.calls);
     }
 }

@@ -14,7 +14,7 @@
 //! reached (Gaussian counts, the fraction of pixels Φ evaluates), so both
 //! are reported beside the times.
 
-use crate::bench::{average, KernelTime};
+use crate::bench::{average, nested_scope, KernelTime};
 use crate::train::{Stage, TrainConfig, Trainer};
 use anyhow::{ensure, Context as _, Result};
 use serde::Serialize;
@@ -77,11 +77,6 @@ pub struct StagesBench {
     pub stages: Vec<StageTimes>,
     /// Stages the scene did not call for (Stage II skipped by the residual test).
     pub skipped: Vec<String>,
-}
-
-/// Scopes nested inside other scopes (summed there already).
-fn nested(name: &str) -> bool {
-    name.starts_with("sort.") || name.starts_with("scan.")
 }
 
 fn mib(bytes: u64) -> f64 {
@@ -188,7 +183,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
             wall_ms,
             wall_ms_best: walls.iter().copied().fold(f64::INFINITY, f64::min),
             it_per_s: 1e3 / wall_ms,
-            gpu_ms: kernels.iter().filter(|k| !nested(&k.name)).map(|k| k.ms).sum(),
+            gpu_ms: kernels.iter().filter(|k| !nested_scope(&k.name)).map(|k| k.ms).sum(),
             kernels,
             switch_ms,
             memory_mib: mib(mem.live_bytes),
@@ -213,7 +208,7 @@ pub fn print_stages(b: &StagesBench) {
             s.stage, s.wall_ms, s.wall_ms_best, s.it_per_s, s.gpu_ms, s.scattering_gaussians, s.memory_mib, s.peak_memory_mib
         );
         for k in &s.kernels {
-            let indent = if nested(&k.name) { "      " } else { "    " };
+            let indent = if nested_scope(&k.name) { "      " } else { "    " };
             println!("{indent}{:26} {:9.3} ms  ({} calls)", k.name, k.ms, k.calls);
         }
     }

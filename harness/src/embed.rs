@@ -61,7 +61,7 @@ pub struct SceneRenderer {
 
 fn frame_for(raster: &Rasterizer, n: u32, w: u32, h: u32) -> Result<Frame> {
     let max_g = n + 1024;
-    raster.frame(w, h, max_g, (2 * max_g).min(raster.max_capacity()))
+    raster.frame(w, h, max_g, raster.initial_capacity(max_g))
 }
 
 impl SceneRenderer {
@@ -73,7 +73,8 @@ impl SceneRenderer {
         let bad = |e: anyhow::Error| e.context(format!("{}: cannot render this checkpoint", path.display()));
         let state = checkpoint::render_state(&h, arrays).map_err(bad)?;
         let cfg = &h.config;
-        let sh_degree = (h.iteration.min(cfg.iterations) / cfg.sh_interval.max(1)).min(cfg.sh_degree);
+        // As the trainer renders a checkpoint (Trainer::render).
+        let sh_degree = cfg.sh_degree_at(h.iteration.min(cfg.iterations));
         let layer = match state.layer {
             checkpoint::RenderLayer::Scattering => None,
             checkpoint::RenderLayer::Env { set, env, fresnel } => {

@@ -171,7 +171,7 @@ const STAGES: [&str; 3] = ["I", "II", "III"];
 impl Row {
     fn from_metrics(name: &str, settings: BTreeMap<String, String>, m: &serde_json::Value) -> Result<Row> {
         let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
-        let gpu = m["gpu_ms_per_iteration"].as_object().map(|k| k.iter().filter(|(n, _)| !n.starts_with("sort.") && !n.starts_with("scan.")).map(|(_, v)| f(v)).sum()).unwrap_or(f64::NAN);
+        let gpu = m["gpu_ms_per_iteration"].as_object().map(|k| k.iter().filter(|(n, _)| !crate::bench::nested_scope(n)).map(|(_, v)| f(v)).sum()).unwrap_or(f64::NAN);
         let mut stages = BTreeMap::new();
         for s in m["stages"].as_array().context("metrics.json has no stages")? {
             let t = &s["test"];

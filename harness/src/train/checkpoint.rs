@@ -56,6 +56,40 @@ pub struct LightFieldHeader {
 }
 
 const MLP_ARRAYS: [&str; 3] = ["mlp.param", "mlp.adam_m", "mlp.adam_v"];
+const ENV_ARRAYS: [&str; 3] = ["env.param", "env.adam_m", "env.adam_v"];
+
+impl LightFieldHeader {
+    pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
+        let [depth, width, skip, levels_x, levels_w] = self.shape;
+        let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
+        shape.validate()?;
+        Ok(shape)
+    }
+    pub fn shade(&self) -> tgs_pipelines::ShadeParams {
+        tgs_pipelines::ShadeParams { centre: self.centre, half_extent: self.half_extent, threshold: self.threshold, schlick: self.schlick }
+    }
+    /// The arrays this state must hold (the reflection set's, then the
+    /// network's parameters and Adam moments), checked against `arrays`.
+    fn check(&self, shape: &tgs_pipelines::MlpShape, arrays: &[Vec<f32>]) -> Result<()> {
+        let p = shape.params() as usize;
+        let want: Vec<(String, usize)> = refl_layout(self.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
+        check_arrays(&want, &self.arrays, arrays)
+    }
+}
+
+impl ReflHeader {
+    /// The arrays this state must hold (the reflection set's, then the cube
+    /// map's texels and Adam moments), checked against `arrays`; returns the
+    /// index of the texels.
+    fn check(&self, arrays: &[Vec<f32>]) -> Result<usize> {
+        let layout = refl_layout(self.n);
+        let env_len = 18 * self.env_res as usize * self.env_res as usize;
+        let k = layout.len();
+        let want: Vec<(String, usize)> = layout.into_iter().chain(ENV_ARRAYS.map(|n| (n.to_string(), env_len))).collect();
+        check_arrays(&want, &self.arrays, arrays)?;
+        Ok(k)
+    }
+}
 
 fn refl_layout(n: u32) -> Vec<(String, usize)> {
     use tgs_pipelines::reflection::MATERIAL;
@@ -278,29 +312,20 @@ fn reflection_set(tr: &Trainer, arrays: &[Vec<f32>]) -> Result<TrainableSet> {
 }
 
 fn restore_light_field(tr: &mut Trainer, l: &LightFieldHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
-    let [depth, width, skip, levels_x, levels_w] = l.shape;
-    let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
-    shape.validate()?;
-    let p = shape.params() as usize;
-    let want: Vec<(String, usize)> = refl_layout(l.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
-    check_arrays(&want, &l.arrays, &arrays)?;
-    let k = want.len() - 3;
+    let shape = l.shape()?;
+    l.check(&shape, &arrays)?;
+    let k = arrays.len() - 3;
     let set = reflection_set(tr, &arrays)?;
     let net = super::lightfield::MlpParams::new(&tr.context(), shape, &arrays[k], &arrays[k + 1], &arrays[k + 2])?;
-    let shade = tgs_pipelines::ShadeParams { centre: l.centre, half_extent: l.half_extent, threshold: l.threshold, schlick: l.schlick };
-    tr.light_field = Some(super::lightfield::LightFieldModel::new(&tr.context(), set, net, shade, tr.cfg.adam_eps)?);
+    tr.light_field = Some(super::lightfield::LightFieldModel::new(&tr.context(), set, net, l.shade(), tr.cfg.adam_eps)?);
     tr.decision = Some(l.decision.clone());
     Ok(())
 }
 
 fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
     use tgs_pipelines::reflection::MATERIAL;
-    let layout = refl_layout(r.n);
-    let env_len = 18 * r.env_res as usize * r.env_res as usize;
-    let want: Vec<(String, usize)> = layout.iter().cloned().chain(["env.param", "env.adam_m", "env.adam_v"].map(|n| (n.to_string(), env_len))).collect();
-    check_arrays(&want, &r.arrays, &arrays)?;
+    let k = r.check(&arrays)?;
     let g = host_set(MATERIAL, 1, &arrays);
-    let k = layout.len();
     let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone() };
     let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel()?, tr.cfg.adam_eps)?;
     upload_set(&m.set, &arrays)?;
@@ -330,6 +355,7 @@ pub struct RenderState {
 }
 
 pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState> {
+    h.config.validate().context("settings")?;
     let layout = TrainableSet::layout((h.channels * h.coeffs) as usize);
     if arrays.len() < layout.len() {
         bail!("{} arrays, the scattering set alone has {}", arrays.len(), layout.len());
@@ -342,25 +368,19 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
     let (stage, layer) = match (&h.reflection, &h.light_field) {
         (None, None) if refl.is_empty() => ("I", RenderLayer::Scattering),
         (Some(r), None) => {
-            let env_len = 18 * r.env_res as usize * r.env_res as usize;
-            let want: Vec<(String, usize)> = refl_layout(r.n).into_iter().chain(["env.param", "env.adam_m", "env.adam_v"].map(|n| (n.to_string(), env_len))).collect();
-            check_arrays(&want, &r.arrays, &refl).context("Stage II state")?;
+            let k = r.check(&refl).context("Stage II state")?;
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
-            let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[want.len() - 3].clone() };
+            let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[k].clone() };
             ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel()? })
         }
         (None, Some(l)) => {
-            let [depth, width, skip, levels_x, levels_w] = l.shape;
-            let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
-            shape.validate()?;
-            let p = shape.params() as usize;
-            let want: Vec<(String, usize)> = refl_layout(l.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
-            check_arrays(&want, &l.arrays, &refl).context("Stage III state")?;
+            let shape = l.shape().context("Stage III state")?;
+            l.check(&shape, &refl).context("Stage III state")?;
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
-            let shade = tgs_pipelines::ShadeParams { centre: l.centre, half_extent: l.half_extent, threshold: l.threshold, schlick: l.schlick };
-            ("III", RenderLayer::LightField { set, shape, params: refl[want.len() - 3].clone(), shade })
+            let params = refl[refl.len() - 3].clone();
+            ("III", RenderLayer::LightField { set, shape, params, shade: l.shade() })
         }
         _ => bail!("the arrays after the scattering set match neither a Stage II nor a Stage III state"),
     };

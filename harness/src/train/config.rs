@@ -290,6 +290,11 @@ impl Default for TrainConfig {
 }
 
 impl TrainConfig {
+    /// Active SH degree at Stage I iteration `it` (one more every `sh_interval`).
+    pub fn sh_degree_at(&self, it: u32) -> u32 {
+        (it / self.sh_interval).min(self.sh_degree)
+    }
+
     /// The 2DGS schedule of method-notes §1.8–1.12 (30k iterations).
     pub fn paper() -> TrainConfig {
         TrainConfig {

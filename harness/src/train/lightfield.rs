@@ -165,7 +165,7 @@ impl LightFieldModel {
         if !self.sizes.contains_key(&(w, h)) {
             let n = self.set.len();
             let max_g = n + 1024;
-            let frame = self.raster.frame(w, h, max_g, (2 * max_g).min(self.raster.max_capacity()))?;
+            let frame = self.raster.frame(w, h, max_g, self.raster.initial_capacity(max_g))?;
             let planes = (Plane::count(3) * pixels) as usize;
             let vb = ViewBuffers {
                 frame,

@@ -178,7 +178,7 @@ impl ReflectionModel {
         let old = self.sizes.get(&(w, h)).map(|b| (b.frame.max_gaussians, b.frame.capacity));
         if old.is_none_or(|(max_g, _)| max_g < n) {
             let max_g = n + 1024;
-            let cap = old.map(|o| o.1).unwrap_or(0).max((2 * max_g).min(self.raster.max_capacity()));
+            let cap = old.map(|o| o.1).unwrap_or(0).max(self.raster.initial_capacity(max_g));
             let frame = self.raster.frame(w, h, max_g, cap)?;
             let planes = (Plane::count(3) * w * h) as usize;
             let vb = ViewBuffers {

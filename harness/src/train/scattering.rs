@@ -229,7 +229,7 @@ fn view_buffers<'a>(sizes: &'a mut HashMap<(u32, u32), ViewBuffers>, raster: &Ra
     if old.is_none_or(|(max_g, _)| max_g < n) {
         let old_cap = old.map(|o| o.1).unwrap_or(0);
         let max_g = n + n / 2 + 1024;
-        let cap = old_cap.max((2 * max_g).min(raster.max_capacity()));
+        let cap = old_cap.max(raster.initial_capacity(max_g));
         let frame = raster.frame(w, h, max_g, cap)?;
         let loss = loss.scratch(w, h, 3)?;
         sizes.insert((w, h), ViewBuffers { frame, loss });

@@ -196,7 +196,7 @@ impl Trainer {
 
     /// Active SH degree at iteration `it` (one more every `sh_interval`).
     pub fn sh_degree(&self, it: u32) -> u32 {
-        (it / self.cfg.sh_interval).min(self.cfg.sh_degree)
+        self.cfg.sh_degree_at(it)
     }
 
     /// Position learning rate at iteration `it`: log-linear over the stage, x extent.

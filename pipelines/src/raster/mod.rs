@@ -248,6 +248,13 @@ impl Rasterizer {
         by_grads.min(self.sort.max_keys()).min(u32::MAX as u64 / 2) as u32
     }
 
+    /// The intersection capacity a new frame for `max_gaussians` starts
+    /// with: two per Gaussian, within the device's limit ([`Rasterizer::fit`]
+    /// grows it when a view needs more).
+    pub fn initial_capacity(&self, max_gaussians: u32) -> u32 {
+        (2 * max_gaussians).min(self.max_capacity())
+    }
+
     /// Working memory for `width` x `height` views of up to `max_gaussians`
     /// Gaussians and `capacity` intersections (grown by [`Rasterizer::fit`]).
     pub fn frame(&self, width: u32, height: u32, max_gaussians: u32, capacity: u32) -> Result<Frame> {
