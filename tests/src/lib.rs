@@ -70,3 +70,12 @@ pub fn ctx_shared() -> &'static Arc<Context> {
     static CTX: std::sync::OnceLock<Arc<Context>> = std::sync::OnceLock::new();
     CTX.get_or_init(ctx)
 }
+
+/// The built-in `glass-tiny` scene in `dir`, written there unless a
+/// previous call of this test binary already did; returns `dir`.
+pub fn tiny_glass_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    if !dir.join("transforms_train.json").is_file() {
+        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), dir, |_, _| {}).unwrap();
+    }
+    dir.to_path_buf()
+}

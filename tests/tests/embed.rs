@@ -18,10 +18,7 @@ fn base() -> PathBuf {
 
 fn args(out: &Path, set: &[&str], stages: &str, from: Option<&Path>) -> TrainArgs {
     let _ = std::fs::remove_dir_all(out);
-    let scene = base().join("scene");
-    if !scene.join("transforms_train.json").is_file() {
-        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &scene, |_, _| {}).unwrap();
-    }
+    let scene = tgs_tests::tiny_glass_scene(&base().join("scene"));
     let mut set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
     set.extend(["test_interval=0", "checkpoint_interval=0"].map(String::from));
     TrainArgs {

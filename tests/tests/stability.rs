@@ -5,25 +5,17 @@
 //! on (R never above the threshold) training without NaN and without moving
 //! the network.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use tgs::train::checkpoint;
 use tgs::train::run::{train, TrainArgs};
 use tgs_tests::ctx_shared;
-
-fn scene(base: &Path) -> PathBuf {
-    let d = base.join("scene");
-    if !d.join("transforms_train.json").is_file() {
-        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &d, |_, _| {}).unwrap();
-    }
-    d
-}
 
 fn args(base: &Path, out: &str, set: &[&str]) -> TrainArgs {
     let out = base.join(out);
     let _ = std::fs::remove_dir_all(&out);
     let mut set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
     set.extend(["test_interval=0", "checkpoint_interval=0"].map(String::from));
-    TrainArgs { dataset: Some(scene(base)), out, preset: Some("quick".into()), set, quiet: true, ..Default::default() }
+    TrainArgs { dataset: Some(tgs_tests::tiny_glass_scene(&base.join("scene"))), out, preset: Some("quick".into()), set, quiet: true, ..Default::default() }
 }
 
 fn log(out: &Path) -> Vec<serde_json::Value> {

@@ -43,8 +43,7 @@ fn pareto_front_keeps_the_undominated_runs() {
 fn sweep_tabulates_plots_and_resumes() {
     let base = std::env::temp_dir().join(format!("tgs-sweep-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&base);
-    let scene = base.join("scene");
-    tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &scene, |_, _| {}).unwrap();
+    let scene = tgs_tests::tiny_glass_scene(&base.join("scene"));
     let grid = base.join("grid.toml");
     std::fs::write(
         &grid,

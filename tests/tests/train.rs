@@ -17,9 +17,7 @@ static DRIVER: Mutex<()> = Mutex::new(());
 fn scene() -> PathBuf {
     static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     DIR.get_or_init(|| {
-        let d = std::env::temp_dir().join(format!("tgs-train-{}-scene", std::process::id()));
-        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &d, |_, _| {}).unwrap();
-        d
+        tgs_tests::tiny_glass_scene(&std::env::temp_dir().join(format!("tgs-train-{}-scene", std::process::id())))
     })
     .clone()
 }

@@ -10,11 +10,7 @@ use tgs::train::run::{train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
 
 fn scene() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("tgs-stage2-{}-scene", std::process::id()));
-    if !d.join("transforms_train.json").is_file() {
-        tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &d, |_, _| {}).unwrap();
-    }
-    d
+    tgs_tests::tiny_glass_scene(&std::env::temp_dir().join(format!("tgs-stage2-{}-scene", std::process::id())))
 }
 
 fn args(out: &Path, extra: &[&str]) -> TrainArgs {

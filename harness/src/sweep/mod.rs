@@ -67,6 +67,11 @@ fn show(v: &toml::Value) -> String {
     v.to_string()
 }
 
+/// A value as run names and the CSV show it (strings unquoted).
+fn plain(v: &toml::Value) -> String {
+    show(v).trim_matches('"').to_string()
+}
+
 impl Grid {
     pub fn parse(text: &str, what: &str) -> Result<Grid> {
         let t: toml::Table = toml::from_str(text).with_context(|| format!("{what}: not valid TOML"))?;
@@ -102,14 +107,12 @@ impl Grid {
     /// The runs: each a list of (key, value) overriding the base, named
     /// after them ("base" for none). Each run's settings are checked.
     pub fn runs(&self) -> Result<Vec<(String, Settings)>> {
-        let mut sets: Vec<Settings> = Vec::new();
+        let mut sets: Vec<Settings> = vec![Vec::new()];
         if self.product {
-            sets.push(Vec::new());
             for (k, vals) in &self.knobs {
                 sets = sets.iter().flat_map(|s| vals.iter().map(move |v| [s.clone(), vec![(k.clone(), v.clone())]].concat())).collect();
             }
         } else {
-            sets.push(Vec::new());
             for (k, vals) in &self.knobs {
                 sets.extend(vals.iter().map(|v| vec![(k.clone(), v.clone())]));
             }
@@ -142,7 +145,7 @@ fn name_of(run: &[(String, toml::Value)]) -> String {
     if run.is_empty() {
         return "base".into();
     }
-    run.iter().map(|(k, v)| format!("{k}={}", show(v).trim_matches('"'))).collect::<Vec<_>>().join(",")
+    run.iter().map(|(k, v)| format!("{k}={}", plain(v))).collect::<Vec<_>>().join(",")
 }
 
 /// A directory name for a run name.
@@ -320,17 +323,8 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
     let runs = grid.runs()?;
     let keys: Vec<String> = grid.knobs.iter().map(|k| k.0.clone()).collect();
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the sweep directory", a.out.display()))?;
-    let dataset = match &a.dataset {
-        Some(d) => d.clone(),
-        None => {
-            let d = a.out.join("scene");
-            if !d.join("transforms_train.json").is_file() {
-                let _ = std::fs::remove_dir_all(&d);
-                crate::scene::make(&crate::scene::spec(crate::train::run::DEFAULT_SCENE)?, &d, |_, _| {})?;
-            }
-            d
-        }
-    };
+    // Without a dataset: the built-in scene, written once to OUT/scene as `tgs train` does.
+    let dataset = crate::train::run::dataset_dir(&TrainArgs { dataset: a.dataset.clone(), out: a.out.clone(), ..Default::default() }, a.quiet)?;
     let csv = a.out.join("sweep.csv");
     let mut rows = read_csv(&csv, &keys)?;
     let mut trained = 0;
@@ -352,14 +346,17 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
             return Ok(SweepOutcome { rows, trained, interrupted: true });
         }
         let m: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).with_context(|| format!("{}: no metrics.json", dir.display()))?)?;
-        let settings = set.iter().map(|(k, v)| (k.clone(), show(v).trim_matches('"').to_string())).collect();
+        let settings = set.iter().map(|(k, v)| (k.clone(), plain(v))).collect();
         rows.push(Row::from_metrics(name, settings, &m)?);
         trained += 1;
         write_csv(&csv, &rows, &keys)?;
         plot::draw(&a.out, &rows)?;
     }
-    write_csv(&csv, &rows, &keys)?;
-    plot::draw(&a.out, &rows)?;
+    if trained == 0 {
+        // Nothing new: the CSV and plots as the rows stand (drawn again if removed).
+        write_csv(&csv, &rows, &keys)?;
+        plot::draw(&a.out, &rows)?;
+    }
     Ok(SweepOutcome { rows, trained, interrupted: false })
 }
 
