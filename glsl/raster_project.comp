@@ -33,9 +33,9 @@ void main() {
     bool ok = project(p, ls, quats[g], opacity[g], pr);
     uvec4 rect = uvec4(0u);
     if (ok) {
-        rect = tile_rect(pr.s.mu, pr.radius);
+        rect = tile_rect(pixel_bounds(pr));
     }
-    uint count = (rect.z - rect.x) * (rect.w - rect.y);
+    uint count = rect.z > rect.x && rect.w > rect.y ? (rect.z - rect.x) * (rect.w - rect.y) : 0u;
     rects[g] = rect;
     tiles[g] = count;
     radii[g] = count > 0u ? pr.radius : 0.0;

@@ -81,11 +81,48 @@ bool project(vec3 p, vec2 log_s, vec4 q_raw, float o_raw, out Proj pr) {
     return finite3(pr.s.tu) && finite3(pr.s.tv) && finite3(pr.s.tw) && finite3(vec3(pr.s.mu, pr.radius)) && finite3(pr.s.n);
 }
 
-// Tile rectangle [x0, x1) x [y0, y1) of a projected splat, clamped to the grid.
-uvec4 tile_rect(vec2 mu, float r) {
+// Pixel-space bounds (lo.x, lo.y, hi.x, hi.y) of where the splat's alpha
+// o G can reach ALPHA_MIN, per axis (the blend skips every other pixel):
+// G = exp(-rho / 2) >= ALPHA_MIN / o needs rho <= k^2 = 2 ln(o / ALPHA_MIN),
+// and rho = min(rho3, rho2) is below k^2 inside the splat-plane ellipse
+// u^2 + v^2 <= k^2 (its screen box from the dual conic with t = (k^2, k^2,
+// -1), about its own centre) or inside the low-pass disc of radius
+// k / sqrt(FILTER_INV_SQUARE) about mu. So k is 3.33 at full opacity and
+// shrinks with it; o < ALPHA_MIN gives an empty box. An ellipse that reaches
+// the camera plane (d >= 0: unbounded on screen) keeps the 3-sigma square
+// box of pr.radius.
+vec4 pixel_bounds(Proj pr) {
+    float a = pr.s.o / ALPHA_MIN;
+    if (!(a >= 1.0)) {
+        return vec4(1.0, 1.0, 0.0, 0.0);
+    }
+    float k2 = 2.0 * log(a);
+    vec3 t = vec3(k2, k2, -1.0);
+    float d = dot(t, pr.s.tw * pr.s.tw);
+    if (d < 0.0) {
+        vec3 f = t / d;
+        vec2 c = vec2(dot(f, pr.s.tu * pr.s.tw), dot(f, pr.s.tv * pr.s.tw));
+        vec2 e = sqrt(max(vec2(0.0), c * c - vec2(dot(f, pr.s.tu * pr.s.tu), dot(f, pr.s.tv * pr.s.tv))));
+        float r2 = sqrt(k2 / FILTER_INV_SQUARE);
+        vec4 b = vec4(min(c - e, pr.s.mu - r2), max(c + e, pr.s.mu + r2));
+        if (finite3(b.xyz) && !isnan(b.w) && !isinf(b.w)) {
+            return b;
+        }
+    }
+    return vec4(pr.s.mu - pr.radius, pr.s.mu + pr.radius);
+}
+
+// Tile rectangle [x0, x1) x [y0, y1) of the pixels (centres at integers)
+// inside pixel bounds b, clamped to the grid; empty when no pixel is.
+uvec4 tile_rect(vec4 b) {
+    vec2 first = ceil(b.xy);
+    vec2 last = floor(b.zw);
+    if (any(greaterThan(first, last))) {
+        return uvec4(0u);
+    }
     vec2 grid = vec2(pc.tiles_x, pc.tiles_y);
-    vec2 lo = clamp(floor((mu - r) / float(TILE)), vec2(0.0), grid);
-    vec2 hi = clamp(floor((mu + r + float(TILE - 1u)) / float(TILE)), vec2(0.0), grid);
+    vec2 lo = clamp(floor(first / float(TILE)), vec2(0.0), grid);
+    vec2 hi = clamp(floor(last / float(TILE)) + 1.0, vec2(0.0), grid);
     return uvec4(uvec2(lo), uvec2(hi));
 }
 #endif

@@ -124,6 +124,9 @@ pub struct RefSplat {
     pub inner: [usize; 4],
     /// |cos| between the normal and the ray to the centre.
     pub cos_view: f64,
+    /// Screen radius: the 3-sigma box's larger half-extent, at least the
+    /// low-pass radius, rounded up (what densification sees).
+    pub radius: f64,
 }
 
 struct Cam64 {
@@ -199,8 +202,9 @@ fn perturb(sp: &RefSplat, pattern: u32, ulps: f64) -> (V3, V3, V3) {
     (e(sp.tu, 0), e(sp.tv, 1), e(sp.tw, 2))
 }
 
-/// Centre of the 3-sigma bounding box and its half-extent (at least the
-/// low-pass radius, before the ceiling); None for a singular conic.
+/// Centre of the 3-sigma bounding box (the low-pass filter's centre) and
+/// its half-extent (at least the low-pass radius, before the ceiling: the
+/// splat's screen radius); None for a singular conic.
 fn bbox(tu: V3, tv: V3, tw: V3) -> Option<([f64; 2], f64)> {
     let t = [9.0, 9.0, -1.0];
     let d = t[0] * tw[0] * tw[0] + t[1] * tw[1] * tw[1] + t[2] * tw[2] * tw[2];
@@ -215,10 +219,88 @@ fn bbox(tu: V3, tv: V3, tw: V3) -> Option<([f64; 2], f64)> {
     Some((mu, ex.max(ey).max(3.0 * 0.707106)))
 }
 
-fn rect_of(mu: [f64; 2], r: f64, tiles: [f64; 2]) -> [usize; 4] {
-    let lo = |m: f64, g: f64| ((m - r) / TILE).floor().clamp(0.0, g) as usize;
-    let hi = |m: f64, g: f64| ((m + r + TILE - 1.0) / TILE).floor().clamp(0.0, g) as usize;
-    [lo(mu[0], tiles[0]), lo(mu[1], tiles[1]), hi(mu[0], tiles[0]), hi(mu[1], tiles[1])]
+/// Squared cutoff k^2 = 2 ln(255 o) of the box where alpha = o G can reach
+/// 1/255; None when it cannot anywhere.
+fn cutoff2(o: f64) -> Option<f64> {
+    let a = o * 255.0;
+    (a >= 1.0).then(|| 2.0 * a.ln())
+}
+
+/// Pixel bounds [x_lo, y_lo, x_hi, y_hi] of where the splat can reach
+/// alpha 1/255 at squared cutoff k2 (raster_project.glsl `pixel_bounds`):
+/// the splat-plane ellipse of radius k (its screen box about its own centre)
+/// joined with the low-pass disc of radius k / sqrt(2) about mu; the square
+/// box of `radius` about mu when the ellipse reaches the camera plane.
+fn pixel_bounds(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius: f64, k2: f64) -> [f64; 4] {
+    let t = [k2, k2, -1.0];
+    let d = t[0] * tw[0] * tw[0] + t[1] * tw[1] * tw[1] + t[2] * tw[2] * tw[2];
+    if d < 0.0 {
+        let f = [t[0] / d, t[1] / d, t[2] / d];
+        let fdot = |a: V3, b: V3| f[0] * a[0] * b[0] + f[1] * a[1] * b[1] + f[2] * a[2] * b[2];
+        let c = [fdot(tu, tw), fdot(tv, tw)];
+        let e = [(c[0] * c[0] - fdot(tu, tu)).max(0.0).sqrt(), (c[1] * c[1] - fdot(tv, tv)).max(0.0).sqrt()];
+        let r2 = (k2 / 2.0).sqrt();
+        let b = [(c[0] - e[0]).min(mu[0] - r2), (c[1] - e[1]).min(mu[1] - r2), (c[0] + e[0]).max(mu[0] + r2), (c[1] + e[1]).max(mu[1] + r2)];
+        if b.iter().all(|v| v.is_finite()) {
+            return b;
+        }
+    }
+    [mu[0] - radius, mu[1] - radius, mu[0] + radius, mu[1] + radius]
+}
+
+/// Tile rectangle [x0, x1) x [y0, y1) of the pixels (centres at integers)
+/// inside bounds `b`, clamped to the grid; [0; 4] when no pixel is inside.
+fn rect_of(b: [f64; 4], tiles: [f64; 2]) -> [usize; 4] {
+    let first = [b[0].ceil(), b[1].ceil()];
+    let last = [b[2].floor(), b[3].floor()];
+    if first[0] > last[0] || first[1] > last[1] || b.iter().any(|v| v.is_nan()) {
+        return [0; 4];
+    }
+    let lo = |v: f64, g: f64| (v / TILE).floor().clamp(0.0, g) as usize;
+    let hi = |v: f64, g: f64| ((v / TILE).floor() + 1.0).clamp(0.0, g) as usize;
+    [lo(first[0], tiles[0]), lo(first[1], tiles[1]), hi(last[0], tiles[0]), hi(last[1], tiles[1])]
+}
+
+fn rect_empty(r: [usize; 4]) -> bool {
+    r[2] <= r[0] || r[3] <= r[1]
+}
+
+/// Every tile of rectangle `b` is in rectangle `a`.
+fn rect_contains(a: [usize; 4], b: [usize; 4]) -> bool {
+    rect_empty(b) || (!rect_empty(a) && a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3])
+}
+
+/// The splat's tile rectangle, and the smallest and largest rectangles that
+/// f32 rounding of its inputs (opacity, the bounds, the radius's ceiling)
+/// could give: (rect, inner, outer).
+fn rects(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 2]) -> ([usize; 4], [usize; 4], [usize; 4]) {
+    let radius = radius_raw.ceil();
+    let rect = match cutoff2(o) {
+        Some(k2) => rect_of(pixel_bounds(tu, tv, tw, mu, radius, k2), tiles),
+        None => [0; 4],
+    };
+    let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
+    let (mut lo, mut hi) = ([f64::INFINITY; 4], [f64::NEG_INFINITY; 4]);
+    let mut maybe_culled = false;
+    for dk in [-1.0, 0.0, 1.0] {
+        let Some(k2) = cutoff2(o * (1.0 + dk * 1e-6)) else {
+            maybe_culled = true;
+            continue;
+        };
+        let k2 = (k2 + dk * (2e-6 + 1e-6 * k2)).max(0.0);
+        for rr in [radius_raw * (1.0 - 1e-6), radius_raw * (1.0 + 1e-6)] {
+            let b = pixel_bounds(tu, tv, tw, mu, rr.max(3.0 * 0.707106).ceil(), k2);
+            let e = dl + 1e-6 * (b[2] - b[0]).abs().max((b[3] - b[1]).abs());
+            for i in 0..4 {
+                lo[i] = lo[i].min(b[i] - e);
+                hi[i] = hi[i].max(b[i] + e);
+            }
+        }
+    }
+    // outer: the lowest lower and highest upper bounds; inner: the reverse.
+    let outer = rect_of([lo[0], lo[1], hi[2], hi[3]], tiles);
+    let inner = if maybe_culled { [0; 4] } else { rect_of([hi[0], hi[1], lo[2], lo[3]], tiles) };
+    (rect, inner, outer)
 }
 
 fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat> {
@@ -259,31 +341,10 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
     if !all.into_iter().all(|v| v.is_finite()) {
         return None;
     }
-    let tiles = cam.tiles();
-    let rect = rect_of(mu, radius, tiles);
-    if rect[2] <= rect[0] || rect[3] <= rect[1] {
+    let o = 1.0 / (1.0 + (-s.opacity[g]).exp());
+    let (rect, inner, outer) = rects(tu, tv, tw, mu, radius_raw, o, cam.tiles());
+    if rect_empty(outer) {
         return None;
-    }
-    // Could f32 rounding move the rectangle (mu, or the radius's ceiling,
-    // near a boundary)? Tiles inside every perturbed rectangle are safe; the
-    // ones in some but not all are ambiguous.
-    let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
-    let mut variants = vec![rect];
-    for rr in [radius_raw * (1.0 - 1e-6), radius_raw * (1.0 + 1e-6)] {
-        variants.push(rect_of(mu, rr.max(3.0 * 0.707106).ceil(), tiles));
-    }
-    for dm in [-dl, dl] {
-        variants.push(rect_of([mu[0] + dm, mu[1] + dm], radius, tiles));
-    }
-    let mut outer = rect;
-    let mut inner = rect;
-    for v in &variants {
-        for k in 0..2 {
-            outer[k] = outer[k].min(v[k]);
-            inner[k] = inner[k].max(v[k]);
-            outer[k + 2] = outer[k + 2].max(v[k + 2]);
-            inner[k + 2] = inner[k + 2].min(v[k + 2]);
-        }
     }
     let ch = s.channels;
     let fb = g * s.coeffs * ch;
@@ -298,8 +359,7 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
         let nk = ((dg + 1) * (dg + 1)).min(s.coeffs);
         (0..ch).map(|c| (0.5 + (0..nk).map(|k| y[k] * s.features[fb + k * ch + c]).sum::<f64>()).max(0.0)).collect()
     };
-    let o = 1.0 / (1.0 + (-s.opacity[g]).exp());
-    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, cos_view: cosv.abs() / dot(pv, pv).sqrt(), feat })
+    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, cos_view: cosv.abs() / dot(pv, pv).sqrt(), feat, radius })
 }
 
 /// The reference render: planes in the GPU layout (CH features, alpha,
@@ -434,6 +494,20 @@ pub fn render_with_rects(s: &RefScene, cam: &Camera, background: &[f64], degree:
     RefRender { planes, ambiguous, tolerance, splats }
 }
 
+/// Tiles the splats of `s` that can reach alpha 1/255 would cover with a
+/// square box of their screen radius about mu (the 3-sigma binning 2DGS
+/// uses), summed: what the opacity-aware per-axis boxes are measured against.
+pub fn square_box_tiles(s: &RefScene, cam: &Camera, degree: u32) -> usize {
+    let c = Cam64::new(cam);
+    (0..s.len())
+        .filter_map(|g| project(s, g, &c, degree))
+        .map(|sp| {
+            let r = rect_of([sp.mu[0] - sp.radius, sp.mu[1] - sp.radius, sp.mu[0] + sp.radius, sp.mu[1] + sp.radius], c.tiles());
+            if rect_empty(r) { 0 } else { (r[2] - r[0]) * (r[3] - r[1]) }
+        })
+        .sum()
+}
+
 /// Gaussians whose GPU tile rectangle is not between the reference's inner
 /// and outer rectangles (or that one side culls and the other does not, with
 /// a rectangle that cannot be empty). Returns their indices.
@@ -451,8 +525,7 @@ pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) ->
             }
             Some(sp) if bbox_ill_conditioned(&sp, c.tiles()) => {}
             Some(sp) => {
-                let within = (0..2).all(|k| sp.outer[k] <= r[k] && r[k] <= sp.inner[k] && sp.inner[k + 2] <= r[k + 2] && r[k + 2] <= sp.outer[k + 2]);
-                if !within {
+                if !(rect_contains(sp.outer, r) && rect_contains(r, sp.inner)) {
                     bad.push(g);
                 }
             }
@@ -469,14 +542,14 @@ fn bbox_ill_conditioned(sp: &RefSplat, tiles: [f64; 2]) -> bool {
         return true; // seen edge-on: the bounding conic is degenerate
     }
     let w = sp.tw;
-    let d = 9.0 * (w[0] * w[0] + w[1] * w[1]) - w[2] * w[2];
-    if d.abs() < 1e-3 * (9.0 * (w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]) {
+    let near_zero = |k2: f64| (k2 * (w[0] * w[0] + w[1] * w[1]) - w[2] * w[2]).abs() < 1e-3 * (k2 * (w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]);
+    if near_zero(9.0) || cutoff2(sp.o).is_some_and(near_zero) {
         return true;
     }
     [0b101_010_101u32, 0b110_011_001, 0b011_100_110].iter().any(|&pattern| {
         let (tu, tv, tw) = perturb(sp, pattern, 2.0);
         match bbox(tu, tv, tw) {
-            Some((mu, r)) => !r.is_finite() || rect_of(mu, r.ceil(), tiles) != sp.rect,
+            Some((mu, r)) => !r.is_finite() || rects(tu, tv, tw, mu, r, sp.o, tiles).0 != sp.rect,
             None => true,
         }
     })
