@@ -1,11 +1,16 @@
 #version 460
+// variant: RECORDS_BDA
+#ifdef RECORDS_BDA
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+#endif
 // Per-pixel 2DGS backward without atomics (method-notes §1.7, vulkan-notes
 // §3.2). One 16x16 workgroup per tile walks the tile's splats back to front
 // (transmittance recovered by division, as in the reference). For each splat
 // every pixel forms its gradient record (KREC floats); the records are summed
 // over each subgroup (subgroupAdd), the per-subgroup partials go to shared
 // memory, and after a barrier they are summed in subgroup order and written
-// to the intersection's own slot grads[emission index]. Every slot is written
+// to the intersection's own slot RECORDS[emission index]. Every slot is written
 // by exactly one invocation, in a fixed order: bit-identical results run to
 // run. Spans are processed last to first (one pass each); per-pixel state
 // (T, S) is carried between passes in `bstate`.
@@ -28,7 +33,9 @@ layout(std430, binding = 7) readonly buffer FState { float fstate[]; };
 layout(std430, binding = 8) readonly buffer UState { uint ustate[]; };
 layout(std430, binding = 9) readonly buffer GradOut { float gout[]; };
 layout(std430, binding = 10) buffer BState { float bstate[]; };
-layout(std430, binding = 11) writeonly buffer Grads { float grads[]; };
+#define RECORDS_BINDING 11
+#define RECORDS_ACCESS writeonly
+#include "raster_records.glsl"
 
 shared float part[MAX_SG * BATCH * KREC];
 shared uint s_last[MAX_SG];
@@ -103,7 +110,7 @@ void main() {
     for (uint q = end + lid; q < full_end; q += WG) {
         uint b = vals[q] * KREC;
         for (uint k = 0u; k < KREC; k++) {
-            grads[b + k] = 0.0;
+            RECORDS[b + k] = 0.0;
         }
     }
 
@@ -183,7 +190,7 @@ void main() {
             for (uint s = 0u; s < gl_NumSubgroups; s++) {
                 sum += part[(s * BATCH + j) * KREC + k];
             }
-            grads[vals[bend - 1u - j] * KREC + k] = sum;
+            RECORDS[vals[bend - 1u - j] * KREC + k] = sum;
         }
         barrier();
         bend = bstart;

@@ -1,4 +1,9 @@
 #version 460
+// variant: RECORDS_BDA
+#ifdef RECORDS_BDA
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+#endif
 // Per-pixel 2DGS backward in ONE SUBGROUP per tile (for CPU drivers, where
 // a workgroup's subgroups run as coroutines on one thread and barriers and
 // shared-memory traffic dominate). The workgroup is one subgroup of WG
@@ -27,7 +32,9 @@ layout(std430, binding = 7) readonly buffer FState { float fstate[]; };
 layout(std430, binding = 8) readonly buffer UState { uint ustate[]; };
 layout(std430, binding = 9) readonly buffer GradOut { float gout[]; };
 layout(std430, binding = 10) buffer BState { float bstate[]; };
-layout(std430, binding = 11) writeonly buffer Grads { float grads[]; };
+#define RECORDS_BINDING 11
+#define RECORDS_ACCESS writeonly
+#include "raster_records.glsl"
 
 void main() {
     uint tile = wg_linear();
@@ -91,7 +98,7 @@ void main() {
     for (uint q = end + lid; q < full_end; q += WG) {
         uint b = vals[q] * KREC;
         for (uint r = 0u; r < KREC; r++) {
-            grads[b + r] = 0.0;
+            RECORDS[b + r] = 0.0;
         }
     }
 
@@ -149,14 +156,14 @@ void main() {
         }
         if (subgroupElect()) {
             uint b = vals[q] * KREC;
-            grads[b + 0u] = dTu.x; grads[b + 1u] = dTu.y; grads[b + 2u] = dTu.z;
-            grads[b + 3u] = dTv.x; grads[b + 4u] = dTv.y; grads[b + 5u] = dTv.z;
-            grads[b + 6u] = dTw.x; grads[b + 7u] = dTw.y; grads[b + 8u] = dTw.z;
-            grads[b + 9u] = dmu.x; grads[b + 10u] = dmu.y;
-            grads[b + 11u] = dO;
-            grads[b + 12u] = dn.x; grads[b + 13u] = dn.y; grads[b + 14u] = dn.z;
+            RECORDS[b + 0u] = dTu.x; RECORDS[b + 1u] = dTu.y; RECORDS[b + 2u] = dTu.z;
+            RECORDS[b + 3u] = dTv.x; RECORDS[b + 4u] = dTv.y; RECORDS[b + 5u] = dTv.z;
+            RECORDS[b + 6u] = dTw.x; RECORDS[b + 7u] = dTw.y; RECORDS[b + 8u] = dTw.z;
+            RECORDS[b + 9u] = dmu.x; RECORDS[b + 10u] = dmu.y;
+            RECORDS[b + 11u] = dO;
+            RECORDS[b + 12u] = dn.x; RECORDS[b + 13u] = dn.y; RECORDS[b + 14u] = dn.z;
             for (uint c = 0u; c < CH; c++) {
-                grads[b + 15u + c] = dF[c];
+                RECORDS[b + 15u + c] = dF[c];
             }
         }
     }

@@ -1,6 +1,11 @@
 #version 460
+// variant: RECORDS_BDA
+#ifdef RECORDS_BDA
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+#endif
 // One invocation per depth-ranked Gaussian r: sums its intersection records
-// grads[offsets[r] .. offsets[r+1]) in index order (fixed order, no atomics),
+// RECORDS[offsets[r] .. offsets[r+1]) in index order (fixed order, no atomics),
 // then applies the projection backward (method-notes §1.7, per-Gaussian
 // part) and writes the Gaussian's parameter gradients (overwriting), plus
 // the screen-space gradient used by densification (in NDC units, as 3DGS).
@@ -14,7 +19,9 @@ layout(std430, binding = 4) readonly buffer Opac { float opacity[]; };
 layout(std430, binding = 5) readonly buffer Feats { float feats[]; };
 layout(std430, binding = 6) readonly buffer Ids { uint ids[]; };
 layout(std430, binding = 7) readonly buffer Offsets { uint offsets[]; };
-layout(std430, binding = 8) readonly buffer Grads { float grads[]; };
+#define RECORDS_BINDING 8
+#define RECORDS_ACCESS readonly
+#include "raster_records.glsl"
 layout(std430, binding = 9) writeonly buffer GMeans { float g_means[]; };
 layout(std430, binding = 10) writeonly buffer GScales { float g_scales[]; };
 layout(std430, binding = 11) writeonly buffer GQuats { vec4 g_quats[]; };
@@ -54,14 +61,14 @@ void main() {
     }
     for (uint p = p0; p < p1; p++) {
         uint b = p * KREC;
-        dTu += vec3(grads[b], grads[b + 1u], grads[b + 2u]);
-        dTv += vec3(grads[b + 3u], grads[b + 4u], grads[b + 5u]);
-        dTw += vec3(grads[b + 6u], grads[b + 7u], grads[b + 8u]);
-        dmu += vec2(grads[b + 9u], grads[b + 10u]);
-        dO += grads[b + 11u];
-        dn += vec3(grads[b + 12u], grads[b + 13u], grads[b + 14u]);
+        dTu += vec3(RECORDS[b], RECORDS[b + 1u], RECORDS[b + 2u]);
+        dTv += vec3(RECORDS[b + 3u], RECORDS[b + 4u], RECORDS[b + 5u]);
+        dTw += vec3(RECORDS[b + 6u], RECORDS[b + 7u], RECORDS[b + 8u]);
+        dmu += vec2(RECORDS[b + 9u], RECORDS[b + 10u]);
+        dO += RECORDS[b + 11u];
+        dn += vec3(RECORDS[b + 12u], RECORDS[b + 13u], RECORDS[b + 14u]);
         for (uint c = 0u; c < CH; c++) {
-            df[c] += grads[b + 15u + c];
+            df[c] += RECORDS[b + 15u + c];
         }
     }
 

@@ -1,6 +1,8 @@
 //! Compiles every `glsl/*.comp` and `glsl/FAMILY/*.comp` to SPIR-V with
 //! shaderc (glslang) and generates `shaders.rs` embedding them (constants
 //! `STEM` and `FAMILY_STEM`). Includes are resolved against `glsl/`.
+//! A shader with a line `// variant: NAME` is compiled once more with the
+//! macro NAME defined, as `STEM_NAME`.
 //! Errors are reported as `glsl/FILE:LINE: message`.
 
 use std::fmt::Write as _;
@@ -32,34 +34,47 @@ fn main() {
         let name = rel.to_string_lossy().into_owned();
         let stem = rel.with_extension("").to_string_lossy().replace('/', "_");
         let source = std::fs::read_to_string(path).expect("reading shader");
-        let mut opts = shaderc::CompileOptions::new().unwrap();
-        opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
-        opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
-        opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
-        opts.set_generate_debug_info();
-        let dir = glsl.clone();
-        opts.set_include_callback(move |requested, _ty, requester, _depth| {
-            let p = resolve(&dir, requested, requester);
-            let content = std::fs::read_to_string(&p).map_err(|e| format!("cannot include {requested:?}: {e}"))?;
-            Ok(shaderc::ResolvedInclude { resolved_name: requested.to_string(), content })
-        });
-        match compiler.compile_into_spirv(&source, shaderc::ShaderKind::Compute, &name, "main", Some(&opts)) {
-            Ok(art) => {
-                if art.get_num_warnings() > 0 {
-                    for l in art.get_warning_messages().lines() {
-                        println!("cargo:warning=glsl/{l}");
-                    }
+        let variants = source.lines().filter_map(|l| l.trim().strip_prefix("// variant:")).map(|v| Some(v.trim().to_string()));
+        for variant in std::iter::once(None).chain(variants) {
+            let mut opts = shaderc::CompileOptions::new().unwrap();
+            opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
+            opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
+            opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
+            opts.set_generate_debug_info();
+            let stem = match &variant {
+                Some(v) => {
+                    opts.add_macro_definition(v, None);
+                    format!("{stem}_{}", v.to_lowercase())
                 }
-                let spv = out.join(format!("{stem}.spv"));
-                std::fs::write(&spv, art.as_binary_u8()).expect("writing SPIR-V");
-                writeln!(
-                    generated,
-                    "pub const {}: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.spv\"));",
-                    stem.to_uppercase()
-                )
-                .unwrap();
+                None => stem.clone(),
+            };
+            let dir = glsl.clone();
+            opts.set_include_callback(move |requested, _ty, requester, _depth| {
+                let p = resolve(&dir, requested, requester);
+                let content = std::fs::read_to_string(&p).map_err(|e| format!("cannot include {requested:?}: {e}"))?;
+                Ok(shaderc::ResolvedInclude { resolved_name: requested.to_string(), content })
+            });
+            match compiler.compile_into_spirv(&source, shaderc::ShaderKind::Compute, &name, "main", Some(&opts)) {
+                Ok(art) => {
+                    if art.get_num_warnings() > 0 {
+                        for l in art.get_warning_messages().lines() {
+                            println!("cargo:warning=glsl/{l}");
+                        }
+                    }
+                    let spv = out.join(format!("{stem}.spv"));
+                    std::fs::write(&spv, art.as_binary_u8()).expect("writing SPIR-V");
+                    writeln!(
+                        generated,
+                        "pub const {}: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.spv\"));",
+                        stem.to_uppercase()
+                    )
+                    .unwrap();
+                }
+                Err(e) => failures.push(match &variant {
+                    Some(v) => format!("{e}\n(variant {v})"),
+                    None => format!("{e}"),
+                }),
             }
-            Err(e) => failures.push(format!("{e}")),
         }
     }
     if !failures.is_empty() {

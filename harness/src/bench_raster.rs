@@ -31,6 +31,12 @@ pub struct RasterBench {
     /// Host-measured submit-to-completion, ms (best of reps).
     pub wall_ms: f64,
     pub intersections_per_s: f64,
+    /// How the backward reached the gradient records (binding or address).
+    pub records: String,
+    /// Device bytes per intersection of frame capacity, and the peak device
+    /// memory of the run (scene, gradients, frame), MiB.
+    pub bytes_per_intersection: u64,
+    pub peak_memory_mib: f64,
 }
 
 /// A deterministic synthetic scene: Gaussians in a box in front of the
@@ -58,6 +64,7 @@ pub fn bench_camera(width: u32, height: u32) -> Camera {
 
 pub fn raster(ctx: &Arc<Context>, n: u32, width: u32, height: u32, reps: u32) -> Result<RasterBench> {
     ensure!(reps > 0, "--reps must be at least 1");
+    ctx.reset_peak_memory();
     let rast = Rasterizer::new(ctx, 3, Features::Sh { degree: 3 })?;
     let host = synthetic_scene(n, 7);
     let g = Gaussians::upload(ctx, &host)?;
@@ -109,6 +116,9 @@ pub fn raster(ctx: &Arc<Context>, n: u32, width: u32, height: u32, reps: u32) ->
         intersections: isects,
         span: rast.span(),
         spans: frame.spans,
+        records: format!("{:?}", rast.records()).to_lowercase(),
+        bytes_per_intersection: rast.bytes_per_intersection(),
+        peak_memory_mib: ctx.memory_use().peak_bytes as f64 / 1048576.0,
         kernels,
         forward_ms,
         backward_ms,
@@ -120,8 +130,8 @@ pub fn raster(ctx: &Arc<Context>, n: u32, width: u32, height: u32, reps: u32) ->
 
 pub fn print_raster(b: &RasterBench) {
     println!(
-        "raster {} Gaussians at {}x{} (SH 3, C {}): {} intersections, {} span pass(es) of {}\n  forward {:.2} ms + backward {:.2} ms = {:.2} ms GPU ({:.2} ms wall), {:.2} M intersections/s  [{}]",
-        b.gaussians, b.width, b.height, b.channels, b.intersections, b.spans, b.span, b.forward_ms, b.backward_ms, b.total_ms, b.wall_ms, b.intersections_per_s / 1e6, b.device
+        "raster {} Gaussians at {}x{} (SH 3, C {}): {} intersections, {} span pass(es) of {}\n  forward {:.2} ms + backward {:.2} ms = {:.2} ms GPU ({:.2} ms wall), {:.2} M intersections/s  [{}]\n  device memory: peak {:.1} MiB; {} bytes per intersection of frame capacity (records by {})",
+        b.gaussians, b.width, b.height, b.channels, b.intersections, b.spans, b.span, b.forward_ms, b.backward_ms, b.total_ms, b.wall_ms, b.intersections_per_s / 1e6, b.device, b.peak_memory_mib, b.bytes_per_intersection, b.records
     );
     for k in &b.kernels {
         let indent = if crate::bench::nested_scope(&k.name) { "      " } else { "    " };

@@ -45,6 +45,12 @@ pub struct TrainBench {
     pub kernels: Vec<KernelTime>,
     /// Rasterized (Gaussian, tile) pairs of the last view.
     pub intersections: u32,
+    /// Device bytes per intersection of frame capacity (keys, values, ids,
+    /// tile-sort arrays, gradient record).
+    pub bytes_per_intersection: u64,
+    /// Peak device memory of the tgs context over the run (dataset images,
+    /// Gaussians, Adam state, frames), MiB.
+    pub peak_memory_mib: f64,
     /// Brush's time for this workload as timed on the reference machine
     /// (lavapipe, 2 cores; DEVELOPERS.md), when it is one of the two
     /// measured there. Not a measurement on this device.
@@ -85,6 +91,7 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
         stages: "I".into(),
         ..TrainConfig::quick()
     };
+    ctx.reset_peak_memory();
     let mut tr = Trainer::new(ctx, cfg, &data)?;
     for _ in 0..warmup {
         tr.step(false)?;
@@ -125,6 +132,8 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
         gpu_ms: forward_ms + loss_ms + backward_ms + adam_ms,
         kernels,
         intersections,
+        bytes_per_intersection: tr.scattering.rasterizer().bytes_per_intersection(),
+        peak_memory_mib: ctx.memory_use().peak_bytes as f64 / 1048576.0,
         brush_lavapipe_s: BRUSH_LAVAPIPE_S.iter().find(|(k, _)| *k == (res, points)).map(|(_, s)| *s),
     })
 }
@@ -144,6 +153,7 @@ pub fn print_train(b: &TrainBench) {
         b.adam_ms,
         b.gpu_ms
     );
+    println!("  device memory: peak {:.1} MiB; {} bytes per intersection of frame capacity", b.peak_memory_mib, b.bytes_per_intersection);
     if let Some(s) = b.brush_lavapipe_s {
         println!(
             "  Brush, as timed on the reference lavapipe machine (not here): {:.0} ms/iteration; ratio {:.2}x (goal 10x: {:.0} ms) holds only if this machine is as fast as that one",

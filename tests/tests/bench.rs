@@ -10,6 +10,9 @@ fn train_bench_reports_every_stage() {
     let b = tgs::bench_train::train(ctx, 32, 300, 0, 2).unwrap();
     assert_eq!((b.width, b.height, b.gaussians, b.views, b.iterations, b.warmup), (32, 32, 300, 20, 2, 3));
     assert!(b.intersections > 0);
+    // Keys, values, ids, two sort arrays and the 18-float record.
+    assert_eq!(b.bytes_per_intersection, 4 * (5 + 18));
+    assert!(b.peak_memory_mib > 0.0 && b.peak_memory_mib.is_finite());
     for (name, v) in [("wall", b.wall_ms), ("forward", b.forward_ms), ("loss", b.loss_ms), ("backward", b.backward_ms), ("adam", b.adam_ms)] {
         assert!(v.is_finite() && v >= 0.0, "{name}: {v}");
     }

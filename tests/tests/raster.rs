@@ -2,7 +2,7 @@
 //! finite differences of it (gradients), plus determinism, multi-span tiles
 //! and the hard cases. CI runs this at subgroup 8 and 4.
 
-use tgs_pipelines::{Features, RasterKernels, Rasterizer};
+use tgs_pipelines::{Features, RasterKernels, Rasterizer, RecordAccess};
 use tgs_tests::raster_ref::RefScene;
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
@@ -54,6 +54,40 @@ fn binning_drops_no_pixel_a_splat_reaches() {
         assert_eq!(binned, run.intersections as usize);
         assert!(culled > 0 && (0..scene.len()).all(|g| 1.0 / (1.0 + (-scene.opacity[g] as f64).exp()) >= 1.0 / 255.0 || run.rects[g][2] <= run.rects[g][0] || run.rects[g][3] <= run.rects[g][1]));
         assert!(run.intersections as usize * 10 < squares * 9, "{w}x{h}: {} intersections, 3-sigma squares {squares}", run.intersections);
+    }
+    check_validation(ctx);
+}
+
+/// The gradient records reached through a binding or by device address
+/// give bit-identical images and gradients (same kernels otherwise).
+#[test]
+fn records_by_binding_and_by_address_agree() {
+    let ctx = ctx_shared();
+    if !ctx.caps().buffer_device_address {
+        eprintln!("no buffer device address on this device: skipped");
+        return;
+    }
+    let mut rng = Rng(seed("records_by_binding_and_by_address_agree"));
+    let scene = random_scene(&mut rng, &SceneSpec::new(300, 3, SH3));
+    let cam = default_camera(70, 45);
+    let go = random_grads(&mut rng, 3, 70 * 45);
+    for kernels in [RasterKernels::Subgroup, RasterKernels::Workgroup] {
+        let runs: Vec<_> = [RecordAccess::Binding, RecordAccess::Address]
+            .map(|records| {
+                let rast = Rasterizer::with_records(ctx, 3, SH3, None, kernels, records).unwrap();
+                assert_eq!(rast.records(), records);
+                gpu_run(&rast, &scene, &cam, &[0.1, 0.5, 0.9], 3, Some(&go))
+            })
+            .into_iter()
+            .collect();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&runs[0].out), bits(&runs[1].out), "{kernels:?}: images differ");
+        let (a, b) = (runs[0].grads.as_ref().unwrap(), runs[1].grads.as_ref().unwrap());
+        assert!(a.means.iter().any(|v| *v != 0.0));
+        for (x, y) in [(&a.means, &b.means), (&a.log_scales, &b.log_scales), (&a.quats, &b.quats), (&a.opacity, &b.opacity), (&a.features, &b.features)] {
+            assert_eq!(bits(x), bits(y), "{kernels:?}: gradients differ");
+        }
+        assert_eq!(bits(&runs[0].densify), bits(&runs[1].densify));
     }
     check_validation(ctx);
 }

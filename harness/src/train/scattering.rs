@@ -216,6 +216,10 @@ impl ScatteringModel {
         b.frame.out.download_range(plane.index(3) as usize * n, n)
     }
 
+    pub fn rasterizer(&self) -> &Rasterizer {
+        &self.raster
+    }
+
     /// Intersections (Gaussian, tile pairs) of the last view rendered.
     pub fn last_intersections(&self) -> u32 {
         self.sizes.values().map(|b| b.frame.last_intersections).max().unwrap_or(0)

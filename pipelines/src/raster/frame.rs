@@ -85,6 +85,9 @@ pub struct Frame {
     pub(crate) ustate: Buffer<u32>,
     pub(crate) bstate: Buffer<f32>,
     pub(crate) isect_grads: Buffer<f32>,
+    /// The records' device address (two u32, low first) when the rasterizer
+    /// reaches them by address ([`super::RecordAccess::Address`]).
+    pub(crate) records_address: Option<Buffer<u32>>,
     /// Screen-space gradient per Gaussian (2 floats, NDC units) from the last backward.
     pub densify: Buffer<f32>,
     /// Screen radius in pixels per Gaussian from the last forward (0 = culled).

@@ -100,9 +100,40 @@ impl RasterKernels {
     }
 }
 
+/// How the tile backward and the reduce reach the per-intersection gradient
+/// records (15 + C floats per intersection, the largest per-intersection
+/// array by far).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecordAccess {
+    /// A storage binding: at most `maxStorageBufferRange` bytes (128 MiB on
+    /// lavapipe: 1.86M intersections of 3 channels).
+    Binding,
+    /// Through the buffer's device address (kept in a small bound buffer):
+    /// as many as one allocation holds. Needs `bufferDeviceAddress`.
+    Address,
+}
+
+impl RecordAccess {
+    /// `TGS_RASTER_RECORDS=binding|address` if set (address only where
+    /// possible), else Address where the binding range is the tighter limit
+    /// (lavapipe: 128 MiB against 2 GiB allocations) and the device has
+    /// buffer device addresses; Binding otherwise (most GPUs bind 4 GiB).
+    /// On lavapipe the two backwards time the same within noise.
+    pub fn for_device(caps: &tgs_engine::Capabilities) -> RecordAccess {
+        let address = caps.buffer_device_address;
+        match std::env::var("TGS_RASTER_RECORDS").as_deref() {
+            Ok("binding") => RecordAccess::Binding,
+            Ok("address") if address => RecordAccess::Address,
+            _ if address && caps.max_storage_buffer_range < caps.max_memory_allocation => RecordAccess::Address,
+            _ => RecordAccess::Binding,
+        }
+    }
+}
+
 /// A frame's per-intersection arrays: keys, values, Gaussian ids, tile-sort
-/// scratch, gradient records.
-type IntersectionBuffers = (Buffer<u32>, Buffer<u32>, Buffer<u32>, SortScratch, Buffer<f32>);
+/// scratch, gradient records, and (with [`RecordAccess::Address`]) the
+/// buffer holding the records' device address.
+type IntersectionBuffers = (Buffer<u32>, Buffer<u32>, Buffer<u32>, SortScratch, Buffer<f32>, Option<Buffer<u32>>);
 
 pub struct Rasterizer {
     ctx: Arc<Context>,
@@ -111,6 +142,7 @@ pub struct Rasterizer {
     batch: u32,
     span: u32,
     kernels: RasterKernels,
+    records: RecordAccess,
     sort: RadixSort,
     scan: PrefixSum,
     project: Kernel,
@@ -139,6 +171,15 @@ impl Rasterizer {
     /// As [`Rasterizer::with_span`], with the backward kernel chosen (tests
     /// run both on one device).
     pub fn with_options(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>, kernels: RasterKernels) -> Result<Rasterizer> {
+        Self::with_records(ctx, channels, features, span, kernels, RecordAccess::for_device(ctx.caps()))
+    }
+
+    /// As [`Rasterizer::with_options`], with the access to the gradient
+    /// records chosen (tests run both on one device).
+    pub fn with_records(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>, kernels: RasterKernels, records: RecordAccess) -> Result<Rasterizer> {
+        if records == RecordAccess::Address && !ctx.caps().buffer_device_address {
+            bail!("gradient records by device address need bufferDeviceAddress, which {} does not have enabled", ctx.caps().device_name);
+        }
         if channels == 0 || channels > MAX_CHANNELS {
             bail!("rasterizer channels must be 1..={MAX_CHANNELS}, not {channels}");
         }
@@ -190,14 +231,20 @@ impl Rasterizer {
             Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full })
         };
         let push = std::mem::size_of::<Push>() as u32;
+        let by_address = records == RecordAccess::Address;
         let (forward, backward) = match kernels {
-            RasterKernels::Workgroup => (k("raster.forward", shaders::RASTER_FORWARD, push, false)?, k("raster.backward", shaders::RASTER_BACKWARD, push, true)?),
+            RasterKernels::Workgroup => {
+                let bwd = if by_address { shaders::RASTER_BACKWARD_RECORDS_BDA } else { shaders::RASTER_BACKWARD };
+                (k("raster.forward", shaders::RASTER_FORWARD, push, false)?, k("raster.backward", bwd, push, true)?)
+            }
             RasterKernels::Subgroup => {
                 let spec = [(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)];
                 let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes: push, subgroup_size: None, full_subgroups: true });
-                (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", shaders::RASTER_BACKWARD_SG)?)
+                let bwd = if by_address { shaders::RASTER_BACKWARD_SG_RECORDS_BDA } else { shaders::RASTER_BACKWARD_SG };
+                (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", bwd)?)
             }
         };
+        let reduce = if by_address { shaders::RASTER_REDUCE_RECORDS_BDA } else { shaders::RASTER_REDUCE };
         Ok(Rasterizer {
             ctx: ctx.clone(),
             channels,
@@ -205,6 +252,7 @@ impl Rasterizer {
             batch,
             span,
             kernels,
+            records,
             sort: RadixSort::new(ctx)?,
             scan: PrefixSum::new(ctx)?,
             project: k("raster.project", shaders::RASTER_PROJECT, push, false)?,
@@ -214,7 +262,7 @@ impl Rasterizer {
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             forward,
             backward,
-            reduce: k("raster.reduce", shaders::RASTER_REDUCE, push, false)?,
+            reduce: k("raster.reduce", reduce, push, false)?,
         })
     }
 
@@ -227,6 +275,10 @@ impl Rasterizer {
     /// Which tile kernels this rasterizer records.
     pub fn kernels(&self) -> RasterKernels {
         self.kernels
+    }
+    /// How the backward reaches the gradient records.
+    pub fn records(&self) -> RecordAccess {
+        self.records
     }
 
     /// Splats per span (tiles longer than this take several passes).
@@ -242,9 +294,22 @@ impl Rasterizer {
         15 + self.channels
     }
 
+    /// Device bytes a frame holds per intersection of capacity: key, value,
+    /// Gaussian id, the tile sort's two ping-pong arrays, and the gradient
+    /// record (the sort's histograms are per workgroup, not counted).
+    pub fn bytes_per_intersection(&self) -> u64 {
+        4 * (5 + self.record_len() as u64)
+    }
+
     /// Largest intersection count a frame can hold on this device.
     pub fn max_capacity(&self) -> u32 {
-        let by_grads = self.ctx.caps().max_storage_buffer_range / (4 * self.record_len() as u64);
+        let caps = self.ctx.caps();
+        let record_bytes = 4 * self.record_len() as u64;
+        let by_grads = match self.records {
+            RecordAccess::Binding => caps.max_storage_buffer_range / record_bytes,
+            // Record floats are indexed with 32-bit integers.
+            RecordAccess::Address => (caps.max_memory_allocation / record_bytes).min(u32::MAX as u64 / self.record_len() as u64),
+        };
         by_grads.min(self.sort.max_keys()).min(u32::MAX as u64 / 2) as u32
     }
 
@@ -280,7 +345,7 @@ impl Rasterizer {
         let pixels = (width * height) as usize;
         let planes = Plane::count(self.channels) as usize;
         let buf = |name: &str, len: usize| Buffer::<u32>::new(ctx, name, len);
-        let (isect_keys, isect_vals, isect_gid, tile_scratch, isect_grads) = self.intersection_buffers(capacity)?;
+        let (isect_keys, isect_vals, isect_gid, tile_scratch, isect_grads, records_address) = self.intersection_buffers(capacity)?;
         let fbuf = |name: &str, len: usize| Buffer::<f32>::new(ctx, name, len);
         Ok(Frame {
             width,
@@ -315,6 +380,7 @@ impl Rasterizer {
             ustate: buf("raster.ustate", 3 * pixels)?,
             bstate: fbuf("raster.bstate", 2 * pixels)?,
             isect_grads,
+            records_address,
             densify: fbuf("raster.densify", 2 * n)?,
             radii: fbuf("raster.radii", n)?,
         })
@@ -499,7 +565,15 @@ impl Rasterizer {
         let push = self.push(g, frame, sh_degree);
         let tile_groups = groups_2d(frame.tiles(), self.max_x());
         let mut bindings = Self::tile_bindings(frame);
-        bindings.extend([frame.grad_out.binding(), frame.bstate.binding(), frame.isect_grads.binding()]);
+        let records = match &frame.records_address {
+            Some(a) => {
+                // Reached through its address, not bound: keep it alive.
+                rec.keep_alive(frame.isect_grads.binding());
+                a.binding()
+            }
+            None => frame.isect_grads.binding(),
+        };
+        bindings.extend([frame.grad_out.binding(), frame.bstate.binding(), records.clone()]);
         for k in (0..frame.spans).rev() {
             let p = Push { span_index: k, ..push };
             let sc = rec.begin_scope("raster.backward");
@@ -511,7 +585,7 @@ impl Rasterizer {
         bindings.extend([
             frame.depth_ids.binding(),
             frame.offsets.binding(),
-            frame.isect_grads.binding(),
+            records,
             grads.means.binding(),
             grads.log_scales.binding(),
             grads.quats.binding(),
@@ -551,23 +625,33 @@ impl Rasterizer {
     }
 
     fn grow(&self, frame: &mut Frame, capacity: u32) -> Result<()> {
-        (frame.isect_keys, frame.isect_vals, frame.isect_gid, frame.tile_scratch, frame.isect_grads) = self.intersection_buffers(capacity)?;
+        (frame.isect_keys, frame.isect_vals, frame.isect_gid, frame.tile_scratch, frame.isect_grads, frame.records_address) = self.intersection_buffers(capacity)?;
         frame.capacity = capacity;
         Ok(())
     }
 
     /// The per-intersection arrays of a frame (keys, values, Gaussian ids,
-    /// tile-sort scratch, gradient records). Emission writes entries
-    /// [0, count) and the backward every record of them (zeros past a tile's
-    /// last contributor) before anything reads them, so they start undefined.
+    /// tile-sort scratch, gradient records, their address). Emission writes
+    /// entries [0, count) and the backward every record of them (zeros past
+    /// a tile's last contributor) before anything reads them, so they start
+    /// undefined.
     fn intersection_buffers(&self, capacity: u32) -> Result<IntersectionBuffers> {
         let (ctx, cap) = (&self.ctx, capacity as usize);
+        let records = Buffer::uninit(ctx, "raster.isect_grads", cap * self.record_len() as usize)?;
+        let address = match self.records {
+            RecordAccess::Binding => None,
+            RecordAccess::Address => {
+                let a = records.device_address()?;
+                Some(Buffer::from_slice(ctx, "raster.records_address", &[a as u32, (a >> 32) as u32])?)
+            }
+        };
         Ok((
             Buffer::uninit(ctx, "raster.isect_keys", cap)?,
             Buffer::uninit(ctx, "raster.isect_vals", cap)?,
             Buffer::uninit(ctx, "raster.isect_gid", cap)?,
             self.sort.scratch(capacity)?,
-            Buffer::uninit(ctx, "raster.isect_grads", cap * self.record_len() as usize)?,
+            records,
+            address,
         ))
     }
 
