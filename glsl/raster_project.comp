@@ -35,7 +35,7 @@ void main() {
     if (ok) {
         rect = tile_rect(pixel_bounds(pr));
     }
-    uint count = rect.z > rect.x && rect.w > rect.y ? (rect.z - rect.x) * (rect.w - rect.y) : 0u;
+    uint count = (rect.z - rect.x) * (rect.w - rect.y);
     rects[g] = rect;
     tiles[g] = count;
     radii[g] = count > 0u ? pr.radius : 0.0;

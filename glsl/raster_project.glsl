@@ -105,7 +105,7 @@ vec4 pixel_bounds(Proj pr) {
         vec2 e = sqrt(max(vec2(0.0), c * c - vec2(dot(f, pr.s.tu * pr.s.tu), dot(f, pr.s.tv * pr.s.tv))));
         float r2 = sqrt(k2 / FILTER_INV_SQUARE);
         vec4 b = vec4(min(c - e, pr.s.mu - r2), max(c + e, pr.s.mu + r2));
-        if (finite3(b.xyz) && !isnan(b.w) && !isinf(b.w)) {
+        if (!any(isnan(b)) && !any(isinf(b))) {
             return b;
         }
     }

@@ -270,15 +270,19 @@ fn rect_contains(a: [usize; 4], b: [usize; 4]) -> bool {
     rect_empty(b) || (!rect_empty(a) && a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3])
 }
 
+/// The splat's tile rectangle (raster_project.glsl `tile_rect`).
+fn rect_at(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 2]) -> [usize; 4] {
+    match cutoff2(o) {
+        Some(k2) => rect_of(pixel_bounds(tu, tv, tw, mu, radius_raw.ceil(), k2), tiles),
+        None => [0; 4],
+    }
+}
+
 /// The splat's tile rectangle, and the smallest and largest rectangles that
 /// f32 rounding of its inputs (opacity, the bounds, the radius's ceiling)
 /// could give: (rect, inner, outer).
 fn rects(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 2]) -> ([usize; 4], [usize; 4], [usize; 4]) {
-    let radius = radius_raw.ceil();
-    let rect = match cutoff2(o) {
-        Some(k2) => rect_of(pixel_bounds(tu, tv, tw, mu, radius, k2), tiles),
-        None => [0; 4],
-    };
+    let rect = rect_at(tu, tv, tw, mu, radius_raw, o, tiles);
     let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
     let (mut lo, mut hi) = ([f64::INFINITY; 4], [f64::NEG_INFINITY; 4]);
     let mut maybe_culled = false;
@@ -549,7 +553,7 @@ fn bbox_ill_conditioned(sp: &RefSplat, tiles: [f64; 2]) -> bool {
     [0b101_010_101u32, 0b110_011_001, 0b011_100_110].iter().any(|&pattern| {
         let (tu, tv, tw) = perturb(sp, pattern, 2.0);
         match bbox(tu, tv, tw) {
-            Some((mu, r)) => !r.is_finite() || rects(tu, tv, tw, mu, r, sp.o, tiles).0 != sp.rect,
+            Some((mu, r)) => !r.is_finite() || rect_at(tu, tv, tw, mu, r, sp.o, tiles) != sp.rect,
             None => true,
         }
     })

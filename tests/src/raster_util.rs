@@ -52,6 +52,16 @@ pub fn random_scene(rng: &mut Rng, s: &SceneSpec) -> HostGaussians {
     h
 }
 
+/// The bit patterns of `v`, for bit-identity asserts.
+pub fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// The parameter (or gradient) arrays of a set by name, in layout order.
+pub fn named_arrays(g: &HostGaussians) -> [(&'static str, &[f32]); 5] {
+    [("means", &g.means), ("log_scales", &g.log_scales), ("quats", &g.quats), ("opacity", &g.opacity), ("features", &g.features)]
+}
+
 /// A camera 4 units from the origin in a general pose.
 pub fn default_camera(w: u32, h: u32) -> Camera {
     Camera::look_at([0.7, -0.5, -3.8], [0.05, 0.02, 0.0], [0.1, -1.0, 0.05], 0.9, w, h)

@@ -48,11 +48,13 @@ fn binning_drops_no_pixel_a_splat_reaches() {
         assert!(err <= 1.0, "{w}x{h}: the binned render differs from the unbinned reference: {at}");
         assert!(skipped * 100 <= pixels, "{w}x{h}: {skipped} of {pixels} pixels ambiguous");
         let squares = raster_ref::square_box_tiles(&ref_scene, &cam, 3);
-        let culled = (0..scene.len()).filter(|&g| 1.0 / (1.0 + (-scene.opacity[g] as f64).exp()) < 1.0 / 255.0).count();
-        let binned: usize = run.rects.iter().map(|r| if r[2] > r[0] && r[3] > r[1] { ((r[2] - r[0]) * (r[3] - r[1])) as usize } else { 0 }).sum();
+        let faint = |g: usize| 1.0 / (1.0 + (-scene.opacity[g] as f64).exp()) < 1.0 / 255.0;
+        let tiles_of = |r: &[u32; 4]| if r[2] > r[0] && r[3] > r[1] { ((r[2] - r[0]) * (r[3] - r[1])) as usize } else { 0 };
+        let culled = (0..scene.len()).filter(|&g| faint(g)).count();
+        let binned: usize = run.rects.iter().map(tiles_of).sum();
         eprintln!("{w}x{h}: {} intersections (3-sigma squares: {squares}); {culled} of {n} splats below alpha 1/255", run.intersections);
         assert_eq!(binned, run.intersections as usize);
-        assert!(culled > 0 && (0..scene.len()).all(|g| 1.0 / (1.0 + (-scene.opacity[g] as f64).exp()) >= 1.0 / 255.0 || run.rects[g][2] <= run.rects[g][0] || run.rects[g][3] <= run.rects[g][1]));
+        assert!(culled > 0 && (0..scene.len()).all(|g| !faint(g) || tiles_of(&run.rects[g]) == 0));
         assert!(run.intersections as usize * 10 < squares * 9, "{w}x{h}: {} intersections, 3-sigma squares {squares}", run.intersections);
     }
     check_validation(ctx);
@@ -80,12 +82,11 @@ fn records_by_binding_and_by_address_agree() {
             })
             .into_iter()
             .collect();
-        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&runs[0].out), bits(&runs[1].out), "{kernels:?}: images differ");
+            assert_eq!(bits(&runs[0].out), bits(&runs[1].out), "{kernels:?}: images differ");
         let (a, b) = (runs[0].grads.as_ref().unwrap(), runs[1].grads.as_ref().unwrap());
         assert!(a.means.iter().any(|v| *v != 0.0));
-        for (x, y) in [(&a.means, &b.means), (&a.log_scales, &b.log_scales), (&a.quats, &b.quats), (&a.opacity, &b.opacity), (&a.features, &b.features)] {
-            assert_eq!(bits(x), bits(y), "{kernels:?}: gradients differ");
+        for ((name, x), (_, y)) in named_arrays(a).into_iter().zip(named_arrays(b)) {
+            assert_eq!(bits(x), bits(y), "{kernels:?}: {name} gradients differ");
         }
         assert_eq!(bits(&runs[0].densify), bits(&runs[1].densify));
     }
@@ -170,7 +171,6 @@ fn backward_is_bit_identical_run_to_run() {
     let a = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     assert!(a.intersections > 2000, "scene too sparse: {} intersections", a.intersections);
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&a.out), bits(&b.out), "forward differs between runs");
     let (ga, gb) = (a.grads.unwrap(), b.grads.unwrap());
     for (name, x, y) in [
@@ -209,7 +209,6 @@ fn multi_span_tiles_match_single_span() {
     let b = gpu_run(&many, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     assert!(b.spans >= 4 && b.spans > a.spans, "expected more spans with the short span: {} vs {}", b.spans, a.spans);
     eprintln!("{} intersections, {} spans of {short} (default span {}: {})", b.intersections, b.spans, one.span(), a.spans);
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&a.out), bits(&b.out), "forward differs");
     let (ga, gb) = (a.grads.unwrap(), b.grads.unwrap());
     assert_eq!(bits(&ga.means), bits(&gb.means));
@@ -246,7 +245,6 @@ fn workgroup_and_subgroup_kernels_agree() {
     let scene = random_scene(&mut rng, &spec);
     let cam = default_camera(70, 45);
     let grads = random_grads(&mut rng, 3, 70 * 45);
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     let a = gpu_run(&wg, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b = gpu_run(&sg, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b2 = gpu_run(&sg, &scene, &cam, &[0.3; 3], 3, Some(&grads));
