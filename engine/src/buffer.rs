@@ -181,6 +181,9 @@ impl<T: Pod> Buffer<T> {
     pub fn raw(&self) -> vk::Buffer {
         self.inner.raw
     }
+    pub(crate) fn raw_arc(&self) -> &Arc<RawBuffer> {
+        &self.inner
+    }
     pub fn name(&self) -> &str {
         &self.inner.name
     }
@@ -258,5 +261,44 @@ impl<T: Pod> Buffer<T> {
         let mut out = vec![T::zeroed(); count];
         staging.with_mapped(|m| bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(m))?;
         Ok(out)
+    }
+}
+
+/// A host-visible buffer of `len` elements that a recording copies results
+/// into ([`Recorder::read_back`]); read it once that recording's submission
+/// has completed. A result that rides an existing submission this way costs
+/// no submission, staging allocation or wait of its own.
+pub struct Readback<T> {
+    inner: Arc<RawBuffer>,
+    len: usize,
+    _t: PhantomData<T>,
+}
+
+impl<T: Pod> Readback<T> {
+    /// `len` elements, zero until a recording copies into them.
+    pub fn new(ctx: &Arc<Context>, name: &str, len: usize) -> Result<Self> {
+        let bytes = (len.max(1) * std::mem::size_of::<T>()) as u64;
+        let inner = RawBuffer::new(ctx, name, bytes, MemoryLocation::GpuToCpu)?;
+        inner.with_mapped(|m| m.fill(0))?;
+        Ok(Readback { inner, len, _t: PhantomData })
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The elements as the last completed copy left them.
+    pub fn read(&self) -> Result<Vec<T>> {
+        let mut out = vec![T::zeroed(); self.len];
+        let n = std::mem::size_of_val(out.as_slice());
+        self.inner.with_mapped(|m| bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&m[..n]))?;
+        Ok(out)
+    }
+
+    pub(crate) fn raw(&self) -> &Arc<RawBuffer> {
+        &self.inner
     }
 }

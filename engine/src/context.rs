@@ -69,6 +69,9 @@ pub struct Context {
     pub(crate) poison_uninit: std::sync::atomic::AtomicBool,
     live_bytes: AtomicU64,
     peak_bytes: AtomicU64,
+    /// Command pools, descriptor pools and fences to hand out again.
+    pub(crate) spare: Mutex<crate::spare::Spare>,
+    submissions: AtomicU64,
 }
 
 pub(crate) fn load_entry() -> Result<ash::Entry> {
@@ -264,6 +267,8 @@ impl Context {
             poison_uninit: std::sync::atomic::AtomicBool::new(false),
             live_bytes: AtomicU64::new(0),
             peak_bytes: AtomicU64::new(0),
+            spare: Mutex::new(crate::spare::Spare::default()),
+            submissions: AtomicU64::new(0),
         }))
     }
 
@@ -332,8 +337,13 @@ impl Context {
     /// Submit a command buffer on the compute queue and wait for it.
     pub fn submit_and_wait(&self, cmd: vk::CommandBuffer) -> Result<()> {
         let d = &self.device;
+        self.submissions.fetch_add(1, Ordering::Relaxed);
         unsafe {
-            let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
+            let spare = self.spare.lock().ok().and_then(|mut s| s.take_fence());
+            let fence = match spare {
+                Some(f) => f,
+                None => d.create_fence(&vk::FenceCreateInfo::default(), None)?,
+            };
             let cmds = [cmd];
             let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
             let r = {
@@ -341,7 +351,14 @@ impl Context {
                 d.queue_submit(*q, &submit, fence)
             };
             let r = r.and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX));
-            d.destroy_fence(fence, None);
+            match (&r, self.spare.lock()) {
+                (Ok(()), Ok(mut s)) => s.give_fence(d, fence),
+                // A failed submission or wait may leave it pending: wait for the device first.
+                _ => {
+                    let _ = d.device_wait_idle();
+                    d.destroy_fence(fence, None);
+                }
+            }
             r.map_err(|e| match e {
                 vk::Result::ERROR_DEVICE_LOST => anyhow!(
                     "Vulkan device lost while running tgs kernels (a kernel faulted or ran too long; \
@@ -355,6 +372,17 @@ impl Context {
         }
     }
 
+    /// Submissions made through this context so far (each waited for).
+    pub fn submissions(&self) -> u64 {
+        self.submissions.load(Ordering::Relaxed)
+    }
+
+    /// Command pools, descriptor pools and fences held for reuse by later
+    /// recordings (bounded; see `Recorder`).
+    pub fn spare_objects(&self) -> (usize, usize, usize) {
+        self.spare.lock().map(|s| s.counts()).unwrap_or_default()
+    }
+
     pub fn wait_idle(&self) -> Result<()> {
         unsafe { self.device.device_wait_idle() }.context("vkDeviceWaitIdle")
     }
@@ -364,6 +392,9 @@ impl Drop for Context {
     fn drop(&mut self) {
         unsafe {
             let _ = self.device.device_wait_idle();
+            if let Ok(spare) = self.spare.get_mut() {
+                spare.destroy(&self.device);
+            }
             ManuallyDrop::drop(&mut self.allocator);
             if self.owns {
                 self.device.destroy_device(None);

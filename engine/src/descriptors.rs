@@ -1,5 +1,6 @@
 //! Descriptor handling, in one place: each dispatch gets a descriptor set from
-//! an arena owned by its recording, freed when the recording is dropped.
+//! an arena owned by its recording; its pools go back to the context, reset,
+//! when the recording is dropped.
 
 use crate::buffer::BufferBinding;
 use crate::context::Context;
@@ -23,7 +24,11 @@ impl DescriptorArena {
     fn new_pool(&mut self) -> Result<vk::DescriptorPool> {
         let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: BUFFERS_PER_POOL }];
         let info = vk::DescriptorPoolCreateInfo::default().max_sets(SETS_PER_POOL).pool_sizes(&sizes);
-        let pool = unsafe { self.ctx.device.create_descriptor_pool(&info, None) }?;
+        let spare = self.ctx.spare.lock().ok().and_then(|mut s| s.take_descriptor_pool());
+        let pool = match spare {
+            Some(p) => p,
+            None => unsafe { self.ctx.device.create_descriptor_pool(&info, None) }?,
+        };
         self.pools.push(pool);
         Ok(pool)
     }
@@ -84,8 +89,13 @@ impl DescriptorArena {
 
 impl Drop for DescriptorArena {
     fn drop(&mut self) {
+        // The recording that used these sets has completed (or never ran).
+        let mut spare = self.ctx.spare.lock();
         for p in self.pools.drain(..) {
-            unsafe { self.ctx.device.destroy_descriptor_pool(p, None) };
+            match spare.as_mut() {
+                Ok(s) => s.give_descriptor_pool(&self.ctx.device, p),
+                Err(_) => unsafe { self.ctx.device.destroy_descriptor_pool(p, None) },
+            }
         }
     }
 }

@@ -16,11 +16,12 @@ mod kernel;
 mod profiler;
 mod recorder;
 mod select;
+mod spare;
 mod spirv;
 mod validation;
 
 pub use ash::vk;
-pub use buffer::{Buffer, BufferBinding};
+pub use buffer::{Buffer, BufferBinding, Readback};
 pub use caps::Capabilities;
 pub use context::{AdoptInfo, Context, ContextOptions, EnabledFeatures, MemoryUse};
 pub use kernel::{Kernel, KernelDesc};

@@ -40,6 +40,8 @@ pub struct Recorder {
     profiler: Option<Profiler>,
     keep: Vec<Arc<dyn Any + Send + Sync>>,
     kernels: Vec<Kernel>,
+    /// A [`Recorder::read_back`] was recorded: end with a host-read barrier.
+    host_reads: bool,
 }
 
 impl Recorder {
@@ -56,29 +58,31 @@ impl Recorder {
 
     fn create(ctx: &Arc<Context>, max_scopes: u32) -> Result<Recorder> {
         let d = &ctx.device;
-        let pool = unsafe {
-            d.create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .queue_family_index(ctx.queue_family)
-                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
-                None,
-            )
-        }?;
-        let cmd = match unsafe {
-            d.allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1),
-            )
-        } {
-            Ok(c) => c[0],
-            Err(e) => {
-                unsafe { d.destroy_command_pool(pool, None) };
-                return Err(anyhow!("allocating a command buffer: {e}"));
+        let spare = ctx.spare.lock().ok().and_then(|mut s| s.take_commands());
+        let (pool, cmd) = match spare {
+            Some(pc) => pc,
+            None => {
+                let pool = unsafe { d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(ctx.queue_family), None) }?;
+                match unsafe {
+                    d.allocate_command_buffers(
+                        &vk::CommandBufferAllocateInfo::default()
+                            .command_pool(pool)
+                            .level(vk::CommandBufferLevel::PRIMARY)
+                            .command_buffer_count(1),
+                    )
+                } {
+                    Ok(c) => (pool, c[0]),
+                    Err(e) => {
+                        unsafe { d.destroy_command_pool(pool, None) };
+                        return Err(anyhow!("allocating a command buffer: {e}"));
+                    }
+                }
             }
         };
-        unsafe { d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT)) }?;
+        if let Err(e) = unsafe { d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT)) } {
+            unsafe { d.destroy_command_pool(pool, None) };
+            return Err(anyhow!("beginning a command buffer: {e}"));
+        }
         Self::assemble(ctx, pool, cmd, true, max_scopes)
     }
 
@@ -96,6 +100,7 @@ impl Recorder {
             profiler: None,
             keep: Vec::new(),
             kernels: Vec::new(),
+            host_reads: false,
         };
         if max_scopes > 0 {
             r.profiler = Profiler::new(ctx, max_scopes)?;
@@ -280,6 +285,21 @@ impl Recorder {
         Ok(())
     }
 
+    /// Copy elements `[start, start + dst.len())` of `src` into `dst`, to be
+    /// read on the host once this recording's submission has completed.
+    pub fn read_back<T: bytemuck::Pod>(&mut self, src: &crate::Buffer<T>, start: usize, dst: &crate::Readback<T>) -> Result<()> {
+        if start + dst.len() > src.len() {
+            bail!("read-back of [{start}, {}) from buffer '{}' of {}", start + dst.len(), src.name(), src.len());
+        }
+        if dst.is_empty() {
+            return Ok(());
+        }
+        let sz = std::mem::size_of::<T>() as u64;
+        self.copy_raw_at(src.raw_arc(), start as u64 * sz, dst.raw(), 0, dst.len() as u64 * sz)?;
+        self.host_reads = true;
+        Ok(())
+    }
+
     /// Keep a buffer alive until the recording is dropped (for buffers reached
     /// through device addresses rather than bindings).
     pub fn keep_alive(&mut self, b: BufferBinding) {
@@ -316,12 +336,12 @@ impl Recorder {
         if !self.owned {
             let mb = [vk::MemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)];
+                .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE | vk::AccessFlags::HOST_READ)];
             unsafe {
                 self.ctx.device.cmd_pipeline_barrier(
                     self.cmd,
                     vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::ALL_COMMANDS,
+                    vk::PipelineStageFlags::ALL_COMMANDS | vk::PipelineStageFlags::HOST,
                     vk::DependencyFlags::empty(),
                     &mb,
                     &[],
@@ -329,6 +349,12 @@ impl Recorder {
                 )
             };
         } else {
+            if self.host_reads {
+                let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::TRANSFER_WRITE).dst_access_mask(vk::AccessFlags::HOST_READ)];
+                unsafe {
+                    self.ctx.device.cmd_pipeline_barrier(self.cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::HOST, vk::DependencyFlags::empty(), &mb, &[], &[])
+                };
+            }
             unsafe { self.ctx.device.end_command_buffer(self.cmd) }?;
         }
         self.ended = true;
@@ -363,7 +389,10 @@ impl Drop for Recorder {
                     // Possibly handed to another queue: be safe.
                     let _ = self.ctx.device.device_wait_idle();
                 }
-                self.ctx.device.destroy_command_pool(self.pool, None);
+                match self.ctx.spare.lock() {
+                    Ok(mut s) => s.give_commands(&self.ctx.device, self.pool, self.cmd),
+                    Err(_) => self.ctx.device.destroy_command_pool(self.pool, None),
+                }
             }
         }
     }

@@ -33,6 +33,8 @@ pub struct TrainBench {
     pub wall_ms: f64,
     pub wall_ms_best: f64,
     pub it_per_s: f64,
+    /// Queue submissions (each waited for) per timed iteration.
+    pub submissions_per_iteration: f64,
     /// GPU ms per iteration by stage (from the profiled series): forward
     /// (projection, sorts, binning, rasterization), loss (SSIM + gradient
     /// planes), backward (rasterizer backward + per-Gaussian reduce), Adam.
@@ -62,7 +64,8 @@ pub struct TrainBench {
 fn stage_of(name: &str) -> Option<&'static str> {
     match name {
         "raster.backward" | "raster.reduce" => Some("backward"),
-        "adam" => Some("adam"),
+        // The gate decides whether Adam runs (one invocation).
+        "adam" | "raster.gate" => Some("adam"),
         "densify.stats" => Some("backward"),
         n if n.starts_with("loss.") => Some("loss"),
         n if n.starts_with("raster.") => Some("forward"),
@@ -97,11 +100,13 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
         tr.step(false)?;
     }
     let mut walls = Vec::new();
+    let submitted = ctx.submissions();
     for _ in 0..iterations {
         let t = Instant::now();
         tr.step(false)?;
         walls.push(t.elapsed().as_secs_f64() * 1e3);
     }
+    let submissions_per_iteration = (ctx.submissions() - submitted) as f64 / iterations as f64;
     let mut all = Vec::new();
     let mut intersections = 0;
     for _ in 0..profiled {
@@ -125,6 +130,7 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
         wall_ms,
         wall_ms_best: walls.iter().copied().fold(f64::INFINITY, f64::min),
         it_per_s: 1e3 / wall_ms,
+        submissions_per_iteration,
         forward_ms,
         loss_ms,
         backward_ms,
@@ -141,8 +147,8 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
 pub fn print_train(b: &TrainBench) {
     println!("device: {}", b.device);
     println!(
-        "train {}x{}, {} Gaussians, SH {}, {} views, {} intersections: {:.1} ms/iteration wall (best {:.1}), {:.2} it/s",
-        b.width, b.height, b.gaussians, b.sh_degree, b.views, b.intersections, b.wall_ms, b.wall_ms_best, b.it_per_s
+        "train {}x{}, {} Gaussians, SH {}, {} views, {} intersections: {:.1} ms/iteration wall (best {:.1}), {:.2} it/s, {:.2} submissions/iteration",
+        b.width, b.height, b.gaussians, b.sh_degree, b.views, b.intersections, b.wall_ms, b.wall_ms_best, b.it_per_s, b.submissions_per_iteration
     );
     println!(
         "  GPU ms/iteration: forward {:.1}, loss {:.1}, backward {:.1} ({:.2}x forward), Adam {:.1}; total {:.1}",

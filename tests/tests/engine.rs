@@ -262,3 +262,60 @@ fn memory_use_follows_buffers() {
     ctx.reset_peak_memory();
     assert_eq!(ctx.memory_use().peak_bytes, before.live_bytes);
 }
+
+/// A read-back rides its recording's submission: the host reads the copy
+/// once that submission completed, with no staging buffer or submission of
+/// its own; a range past the source is refused by name.
+#[test]
+fn read_backs_ride_their_submission() {
+    let ctx = ctx_shared();
+    let iota = Iota::new(ctx).unwrap();
+    let src = Buffer::<u32>::new(ctx, "test.readback_src", 1000).unwrap();
+    let back = tgs_engine::Readback::<u32>::new(ctx, "test.readback", 10).unwrap();
+    assert_eq!(back.read().unwrap(), vec![0; 10]);
+    for start in [0u32, 7] {
+        let mut rec = Recorder::new(ctx).unwrap();
+        iota.record(&mut rec, src.binding(), 1000, start).unwrap();
+        rec.read_back(&src, 990, &back).unwrap();
+        rec.submit_and_wait().unwrap();
+        assert_eq!(back.read().unwrap(), (990..1000).map(|i| i + start).collect::<Vec<_>>());
+    }
+    let err = Recorder::new(ctx).unwrap().read_back(&src, 995, &back).err().expect("a read-back past the end");
+    assert!(err.to_string().contains("test.readback_src"), "{err}");
+    check_validation(ctx);
+}
+
+/// Recordings hand their command pool, descriptor pools and fence back to
+/// the context, reset, and later recordings reuse them: a loop of
+/// submissions creates no Vulkan objects once warm, and reused descriptor
+/// sets bind what the new recording asks for.
+#[test]
+fn recordings_reuse_their_vulkan_objects() {
+    let ctx = tgs_tests::ctx();
+    let iota = Iota::new(&ctx).unwrap();
+    let bufs: Vec<Buffer<u32>> = (0..3).map(|i| Buffer::new(&ctx, &format!("test.reuse{i}"), 64).unwrap()).collect();
+    let mut counts = Vec::new();
+    for round in 0..60u32 {
+        let mut rec = Recorder::new(&ctx).unwrap();
+        // Many dispatches every tenth round.
+        let dispatches = if round % 10 == 0 { 300 } else { 3 };
+        for k in 0..dispatches {
+            iota.record(&mut rec, bufs[k % 3].binding(), 64, round * 1000 + k as u32).unwrap();
+        }
+        rec.submit_and_wait().unwrap();
+        let last = |k: usize| round * 1000 + (dispatches - 3 + k) as u32;
+        for (k, b) in bufs.iter().enumerate() {
+            assert_eq!(b.download().unwrap()[5], last(k) + 5, "round {round}, buffer {k}");
+        }
+        // A recording dropped unsubmitted gives its objects back too.
+        let mut dropped = Recorder::new(&ctx).unwrap();
+        iota.record(&mut dropped, bufs[0].binding(), 64, 0).unwrap();
+        drop(dropped);
+        counts.push(ctx.spare_objects());
+    }
+    let (c, d, f) = counts[counts.len() - 1];
+    assert!(c >= 1 && d >= 1 && f >= 1, "nothing is kept for reuse: {:?}", counts.last());
+    assert!(c <= 16 && d <= 64 && f <= 16, "the spare lists are unbounded: {:?}", counts.last());
+    assert_eq!(counts[25], counts[59], "objects accumulate from round to round");
+    check_validation(&ctx);
+}

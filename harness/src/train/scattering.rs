@@ -1,10 +1,11 @@
 //! Stage I's model: the scattering Gaussian set (2DGS surfels) with what
 //! trains it: the rasterizer, the image loss, Adam and density control.
 //! The trainer decides which view, which iteration and which settings; this
-//! model records the GPU work of one step (two submissions: the forward,
-//! grown and re-run if its frame overflowed, then loss + backward +
-//! densification statistics + Adam) and densifies when asked. It never
-//! refers to the trainer.
+//! model records the GPU work of one step (one submission: forward, loss,
+//! backward, densification statistics and Adam, the updates gated on the GPU
+//! by whether the view fitted its frame, the step re-run after the frame
+//! grew when it did not) and densifies when asked. It never refers to the
+//! trainer.
 
 use super::config::TrainConfig;
 use anyhow::{bail, Context as _, Result};
@@ -131,10 +132,13 @@ impl ScatteringModel {
         self.raster.forward(&self.set.params, cam, background, sh, &mut b.frame, profile)
     }
 
-    /// One training step on one view; densifies when `cfg`'s schedule says so.
+    /// One training step on one view, in one submission: forward, loss,
+    /// backward, densification statistics and Adam, the last two gated on
+    /// the GPU by whether the view fitted its frame; when it did not, nothing
+    /// was updated, the frame grows and the step runs again. Densifies when
+    /// `cfg`'s schedule says so (its own submissions).
     pub fn step(&mut self, cfg: &TrainConfig, x: &StepInput) -> Result<StepOutput> {
         let (it, cam, sh) = (x.iteration, x.camera, x.sh_degree);
-        let mut timings = self.forward(cam, sh, &x.background, x.profile)?;
         let weights = LossWeights {
             ssim: cfg.lambda_ssim,
             normal: if it > cfg.normal_from { cfg.lambda_normal } else { 0.0 },
@@ -142,20 +146,28 @@ impl ScatteringModel {
         };
         let stats = it < cfg.densify_until;
         let groups = self.groups(cfg, x.lr_means);
-        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("view buffers missing after the forward")?;
-        let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
-        self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
-        self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
-        if stats {
-            let sc = rec.begin_scope("densify.stats");
-            self.densifier.record_stats(&mut rec, &self.set, &b.frame)?;
+        let (timings, values) = loop {
+            let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
+            let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            self.raster.record_forward(&mut rec, &self.set.params, cam, &x.background, sh, &b.frame)?;
+            self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
+            self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+            let mut grids = self.adam.set_grids(&self.set).to_vec();
+            grids.push(self.densifier.stats_grid(&self.set));
+            let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
+            if stats {
+                let sc = rec.begin_scope("densify.stats");
+                self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, &args[5])?;
+                rec.end_scope(sc);
+            }
+            let sc = rec.begin_scope("adam");
+            self.adam.record_set_gated(&mut rec, &self.set, &groups, it as u64, &args[..5])?;
             rec.end_scope(sc);
-        }
-        let sc = rec.begin_scope("adam");
-        self.adam.record_set(&mut rec, &self.set, &groups, it as u64)?;
-        rec.end_scope(sc);
-        timings.extend(rec.submit_and_wait()?);
-        let values = b.loss.values()?;
+            let t = rec.submit_and_wait()?;
+            if self.raster.fit(&mut b.frame)? {
+                break (t, b.loss.values()?);
+            }
+        };
         let loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
 
         let mut densified = None;

@@ -8,7 +8,8 @@
 
 use crate::sort::SortScratch;
 use crate::scan::ScanScratch;
-use tgs_engine::Buffer;
+use tgs_engine::{Buffer, Readback};
+use anyhow::Result;
 
 /// Output planes, each `width * height` floats, in this order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -71,6 +72,10 @@ pub struct Frame {
     pub(crate) params: Buffer<u32>,
     pub(crate) args: Buffer<u32>,
     pub(crate) stats: Buffer<u32>,
+    /// `stats` as the last submitted forward left it (read by `fit`).
+    pub(crate) stats_host: Readback<u32>,
+    /// Indirect arguments written by `Rasterizer::record_fit_gate`.
+    pub(crate) gate: Buffer<u32>,
     pub(crate) isect_keys: Buffer<u32>,
     pub(crate) isect_vals: Buffer<u32>,
     pub(crate) isect_gid: Buffer<u32>,
@@ -95,6 +100,12 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// The indirect arguments the last `Rasterizer::record_fit_gate` wrote
+    /// (3 per gated dispatch), downloaded.
+    pub fn gate_args(&self) -> Result<Vec<u32>> {
+        self.gate.download()
+    }
+
     /// Tile rectangles [x0, y0, x1, y1) of the first `n` Gaussians from the
     /// last forward (empty for culled ones). One read-back, for inspection.
     pub fn download_rects(&self, n: usize) -> anyhow::Result<Vec<[u32; 4]>> {

@@ -21,7 +21,7 @@ use crate::sort::{RadixSort, SortScratch};
 use anyhow::{bail, Context as _, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use tgs_engine::{groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Recorder};
+use tgs_engine::{groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Readback, Recorder};
 
 /// How per-Gaussian features become the rasterized channels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,6 +60,8 @@ struct Push {
 }
 
 const WG: u32 = 256;
+/// Dispatches one [`Rasterizer::record_fit_gate`] can gate.
+pub const GATE_SLOTS: usize = 8;
 const TILE: u32 = 16;
 /// Loop iterations per invocation we allow on devices with a loop limiter
 /// (lavapipe stops loops after 65,535).
@@ -149,6 +151,7 @@ pub struct Rasterizer {
     gather: Kernel,
     emit: Kernel,
     plan: Kernel,
+    gate: Kernel,
     ranges: Kernel,
     forward: Kernel,
     backward: Kernel,
@@ -259,6 +262,7 @@ impl Rasterizer {
             gather: k("raster.gather", shaders::RASTER_GATHER, 4, false)?,
             emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
             plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
+            gate: Kernel::new(ctx, &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 112, subgroup_size: None, full_subgroups: false })?,
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             forward,
             backward,
@@ -369,6 +373,8 @@ impl Rasterizer {
             params: buf("raster.params", 4)?,
             args: buf("raster.args", 4)?,
             stats: buf("raster.stats", 2)?,
+            stats_host: Readback::new(ctx, "raster.stats_host", 2)?,
+            gate: buf("raster.gate", 3 * GATE_SLOTS)?,
             isect_keys,
             isect_vals,
             isect_gid,
@@ -539,7 +545,31 @@ impl Rasterizer {
             rec.dispatch(&self.forward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
-        Ok(())
+        // The total and the overflow flag ride this submission back to the host (`fit`).
+        rec.read_back(&frame.stats, 0, &frame.stats_host)
+    }
+
+    /// Record, after the forward of `frame` (same recording), indirect
+    /// arguments for up to [`GATE_SLOTS`] later dispatches: `grids[k]` when
+    /// the view fitted its frame, zero workgroups when it overflowed (see
+    /// [`Rasterizer::fit`]). Returns the argument slot of each grid, for
+    /// `Recorder::dispatch_indirect`. This is how one submission can hold a
+    /// whole training iteration: an overflowed view updates nothing, and the
+    /// host grows the frame and runs the iteration again.
+    pub fn record_fit_gate(&self, rec: &mut Recorder, frame: &Frame, grids: &[[u32; 3]]) -> Result<Vec<BufferBinding>> {
+        if grids.len() > GATE_SLOTS {
+            bail!("{} gated dispatches; the gate holds {GATE_SLOTS}", grids.len());
+        }
+        let mut push = [0u32; 28];
+        push[0] = frame.capacity;
+        push[1] = grids.len() as u32;
+        for (k, g) in grids.iter().enumerate() {
+            push[4 + 3 * k..7 + 3 * k].copy_from_slice(g);
+        }
+        let sc = rec.begin_scope("raster.gate");
+        rec.dispatch(&self.gate, &[frame.stats.binding(), frame.gate.binding()], bytemuck::cast_slice(&push), [1, 1, 1])?;
+        rec.end_scope(sc);
+        Ok((0..grids.len()).map(|k| frame.gate.slice(3 * k, 3)).collect())
     }
 
     /// Record the backward of the last forward on `frame` (same Gaussians),
@@ -598,11 +628,11 @@ impl Rasterizer {
         Ok(())
     }
 
-    /// After a recorded view ran: read the intersection total and the span
-    /// overflow flag back (8 bytes). Returns `true` when everything fitted;
+    /// After a recorded view's submission completed: read the intersection
+    /// total and the span overflow flag it brought back (no submission). Returns `true` when everything fitted;
     /// otherwise grows `frame` so that a re-run fits and returns `false`.
     pub fn fit(&self, frame: &mut Frame) -> Result<bool> {
-        let stats = frame.stats.download()?;
+        let stats = frame.stats_host.read()?;
         let (total, span_overflow) = (stats[0], stats[1] != 0);
         frame.last_intersections = total;
         let mut fits = true;

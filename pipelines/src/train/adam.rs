@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
 use super::TrainableSet;
-use tgs_engine::{Buffer, Context, Kernel, Recorder};
+use tgs_engine::{Buffer, BufferBinding, Context, Kernel, Recorder};
 
 /// One parameter group: a learning rate, or two (elements with index modulo
 /// `stride` below `split` use `lr`, the others `lr_rest`).
@@ -57,6 +57,18 @@ impl Adam {
     /// Record step `t` (1-based) over the first `n` elements.
     #[allow(clippy::too_many_arguments)]
     pub fn record(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64) -> Result<()> {
+        self.record_on(rec, param, grad, m, v, n, group, t, None)
+    }
+
+    /// The grid [`Adam::record`] dispatches for `n` elements.
+    pub fn grid(&self, n: usize) -> [u32; 3] {
+        grid(&self.ctx, n as u32)
+    }
+
+    /// As [`Adam::record`], with the workgroup counts read from `args`
+    /// (written on the GPU; zero groups skip the step).
+    #[allow(clippy::too_many_arguments)]
+    fn record_on(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64, args: Option<&BufferBinding>) -> Result<()> {
         if n == 0 {
             return Ok(());
         }
@@ -79,25 +91,48 @@ impl Adam {
             bc1: 1.0 - self.beta1.powf(t as f32),
             bc2: 1.0 - self.beta2.powf(t as f32),
         };
-        rec.dispatch(&self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, n as u32))
+        let bindings = [param.binding(), grad.binding(), m.binding(), v.binding()];
+        match args {
+            Some(a) => rec.dispatch_indirect(&self.kernel, &bindings, bytemuck::bytes_of(&p), a),
+            None => rec.dispatch(&self.kernel, &bindings, bytemuck::bytes_of(&p), grid(&self.ctx, n as u32)),
+        }
     }
 
-    /// Record step `t` over every parameter array of `set`, in its layout
-    /// order (means, log-scales, quaternions, opacity, features), each with
-    /// its group.
     pub fn record_set(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64) -> Result<()> {
+        self.record_set_on(rec, set, groups, t, None)
+    }
+
+    /// The grids of [`Adam::record_set`]'s five dispatches (means, scales,
+    /// rotations, opacity, features), for a gate (`Rasterizer::record_fit_gate`).
+    pub fn set_grids(&self, set: &TrainableSet) -> [[u32; 3]; 5] {
+        Self::arrays(set).map(|a| self.grid(a.4))
+    }
+
+    /// As [`Adam::record_set`], dispatch k taking its workgroup counts from
+    /// `args[k]` (see [`Adam::set_grids`]).
+    pub fn record_set_gated(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64, args: &[BufferBinding]) -> Result<()> {
+        if args.len() != 5 {
+            bail!("a gated Adam step over a Gaussian set needs 5 argument slots, got {}", args.len());
+        }
+        self.record_set_on(rec, set, groups, t, Some(args))
+    }
+
+    fn arrays(set: &TrainableSet) -> [(&Buffer<f32>, &Buffer<f32>, &Buffer<f32>, &Buffer<f32>, usize); 5] {
         let n = set.len() as usize;
         let f = (set.params.channels * set.params.coeffs) as usize;
         let (p, g, m, v) = (&set.params, &set.grads, &set.m, &set.v);
-        let arrays = [
+        [
             (&p.means, &g.means, &m.means, &v.means, 3 * n),
             (&p.log_scales, &g.log_scales, &m.log_scales, &v.log_scales, 2 * n),
             (&p.quats, &g.quats, &m.quats, &v.quats, 4 * n),
             (&p.opacity, &g.opacity, &m.opacity, &v.opacity, n),
             (&p.features, &g.features, &m.features, &v.features, f * n),
-        ];
-        for ((p, g, m, v, len), group) in arrays.into_iter().zip(groups) {
-            self.record(rec, p, g, m, v, len, group, t)?;
+        ]
+    }
+
+    fn record_set_on(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64, args: Option<&[BufferBinding]>) -> Result<()> {
+        for (k, ((p, g, m, v, len), group)) in Self::arrays(set).into_iter().zip(groups).enumerate() {
+            self.record_on(rec, p, g, m, v, len, group, t, args.map(|a| &a[k]))?;
         }
         Ok(())
     }

@@ -11,7 +11,7 @@ use crate::shaders;
 use anyhow::Result;
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use tgs_engine::{Buffer, Context, Kernel, Recorder};
+use tgs_engine::{Buffer, BufferBinding, Context, Kernel, Recorder};
 
 /// Thresholds of one densification step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,16 +76,30 @@ impl Densifier {
 
     /// Record the statistics update from the last forward/backward on `frame`.
     pub fn record_stats(&self, rec: &mut Recorder, set: &TrainableSet, frame: &Frame) -> Result<()> {
+        self.record_stats_on(rec, set, frame, None)
+    }
+
+    /// The grid of [`Densifier::record_stats`], for a gate.
+    pub fn stats_grid(&self, set: &TrainableSet) -> [u32; 3] {
+        grid(&self.ctx, set.len())
+    }
+
+    /// As [`Densifier::record_stats`], with the workgroup counts read from
+    /// `args` (see `Rasterizer::record_fit_gate`).
+    pub fn record_stats_gated(&self, rec: &mut Recorder, set: &TrainableSet, frame: &Frame, args: &BufferBinding) -> Result<()> {
+        self.record_stats_on(rec, set, frame, Some(args))
+    }
+
+    fn record_stats_on(&self, rec: &mut Recorder, set: &TrainableSet, frame: &Frame, args: Option<&BufferBinding>) -> Result<()> {
         let n = set.len();
         if n == 0 {
             return Ok(());
         }
-        rec.dispatch(
-            &self.stats,
-            &[frame.densify.binding(), frame.radii.binding(), set.accum.binding(), set.denom.binding(), set.max_radii.binding()],
-            bytemuck::bytes_of(&n),
-            grid(&self.ctx, n),
-        )
+        let bindings = [frame.densify.binding(), frame.radii.binding(), set.accum.binding(), set.denom.binding(), set.max_radii.binding()];
+        match args {
+            Some(a) => rec.dispatch_indirect(&self.stats, &bindings, bytemuck::bytes_of(&n), a),
+            None => rec.dispatch(&self.stats, &bindings, bytemuck::bytes_of(&n), grid(&self.ctx, n)),
+        }
     }
 
     /// Record the opacity reset: o <- min(o, cap), opacity moments zeroed.

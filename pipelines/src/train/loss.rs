@@ -11,7 +11,7 @@ use crate::shaders;
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use tgs_engine::{Buffer, Context, Kernel, Recorder};
+use tgs_engine::{Buffer, Context, Kernel, Readback, Recorder};
 
 /// Loss weights. The photometric term is (1 - ssim) L1 + ssim D-SSIM.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -86,14 +86,16 @@ pub struct LossScratch {
     normal: Buffer<f32>,
     /// 4 floats per workgroup: sums of L1, squared error, SSIM, normal term.
     pub partials: Buffer<f32>,
-    groups: u32,
+    /// `partials` as the last submitted recording of this loss left them.
+    partials_host: Readback<f32>,
     normal_on: bool,
 }
 
 impl LossScratch {
-    /// Read the partial sums of the last recorded loss back and average them.
+    /// Average the partial sums the last recorded loss brought back with its
+    /// submission (call after that submission completed; no GPU work).
     pub fn values(&self) -> Result<LossValues> {
-        let p = self.partials.download_range(0, 4 * self.groups as usize)?;
+        let p = self.partials_host.read()?;
         let mut s = [0f64; 4];
         for chunk in p.chunks(4) {
             for k in 0..4 {
@@ -133,7 +135,7 @@ impl ImageLoss {
             b: Buffer::new(&self.ctx, "loss.b", 5 * c * n)?,
             normal: Buffer::new(&self.ctx, "loss.normal", 6 * n)?,
             partials: Buffer::new(&self.ctx, "loss.partials", 4 * groups as usize)?,
-            groups,
+            partials_host: Readback::new(&self.ctx, "loss.partials_host", 4 * groups as usize)?,
             normal_on: false,
         })
     }
@@ -205,6 +207,6 @@ impl ImageLoss {
         }
         rec.dispatch(&self.grad, &[out, tgt, s.a.binding(), s.normal.binding(), grad_out.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
         rec.end_scope(sc);
-        Ok(())
+        rec.read_back(&s.partials, 0, &s.partials_host)
     }
 }

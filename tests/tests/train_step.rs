@@ -1,0 +1,109 @@
+//! A Stage I step is one submission: forward, loss, backward, densification
+//! statistics and Adam, the updates gated on the GPU by whether the view
+//! fitted its frame. A view that overflowed must change nothing before the
+//! host grows the frame and runs the step again.
+
+use tgs::train::init::{gaussians_from_points, random_points};
+use tgs::train::rng::Rng;
+use tgs::train::scattering::{ScatteringModel, StepInput};
+use tgs::train::TrainConfig;
+use tgs_engine::{Buffer, Recorder};
+use tgs_pipelines::{Camera, Features, HostGaussians, Rasterizer};
+use tgs_tests::{check_validation, ctx_shared};
+
+const SIZE: u32 = 128;
+
+/// `n` splats of radius ~0.35 in a cube of half-size 1: each covers most of
+/// a 128x128 view's 64 tiles, far more intersections than a first frame
+/// (twice the Gaussian budget) holds, and more splats per tile than one
+/// span pass takes.
+fn big_splats(n: u32) -> HostGaussians {
+    let mut rng = Rng::new(7);
+    let pts = random_points(n, 1.0, &mut rng);
+    let mut g = gaussians_from_points(&pts, 3, &mut rng);
+    g.log_scales.iter_mut().for_each(|s| *s = 0.35f32.ln());
+    g.opacity.iter_mut().for_each(|o| *o = -2.0);
+    g
+}
+
+fn camera() -> Camera {
+    Camera::look_at([0.0, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 0.9, SIZE, SIZE)
+}
+
+fn bits(set: &tgs_pipelines::TrainableSet) -> Vec<(String, Vec<u32>)> {
+    set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect()
+}
+
+#[test]
+fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
+    let ctx = ctx_shared();
+    let n = 3000;
+    let g = big_splats(n);
+    let cfg = TrainConfig::default();
+    let cam = camera();
+    let target: Vec<f32> = (0..3 * SIZE * SIZE).map(|i| 0.2 + 0.6 * ((i * 7919) % 1000) as f32 / 1000.0).collect();
+    let target = Buffer::from_slice(ctx, "target", &target).unwrap();
+    let input = StepInput { iteration: 1, camera: &cam, target: &target, sh_degree: 3, lr_means: 1e-3, background: [0.0; 3], extent: 2.0, profile: false };
+
+    // A: the step's first frame overflows; the GPU skips Adam and the
+    // statistics, the host grows the frame and runs the step again.
+    let mut a = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
+    let before = bits(&a.set);
+    let out_a = a.step(&cfg, &input).unwrap();
+    let first_capacity = a.rasterizer().initial_capacity(n + n / 2 + 1024);
+    assert!(a.last_intersections() > first_capacity, "the scene must overflow the first frame: {} intersections, capacity {first_capacity}", a.last_intersections());
+
+    // B: a render grew the frame first, so the same step fits at once.
+    let mut b = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
+    b.render(&cam, 3, &[0.0; 3]).unwrap();
+    let submitted = ctx.submissions();
+    let out_b = b.step(&cfg, &input).unwrap();
+    assert_eq!(ctx.submissions() - submitted, 1, "a step that fits is one submission (loss and frame statistics ride it back)");
+
+    let (after_a, after_b) = (bits(&a.set), bits(&b.set));
+    for ((name, x), (_, y)) in after_a.iter().zip(&after_b) {
+        assert!(x == y, "{name}: the overflowed-then-rerun step differs from a step that fitted (an update ran twice or not at all)");
+    }
+    assert_eq!(out_a.loss.to_bits(), out_b.loss.to_bits());
+    assert!(out_a.loss.is_finite() && out_a.loss > 0.0);
+    // One Adam step and one statistics update happened.
+    for name in ["param.means", "param.opacity", "adam_v.features", "stats.denom"] {
+        let (i, j) = (before.iter().position(|a| a.0 == name).unwrap(), after_a.iter().position(|a| a.0 == name).unwrap());
+        assert_ne!(before[i].1, after_a[j].1, "{name} did not change in the step");
+    }
+    let denom = a.set.denom.download().unwrap();
+    assert!(denom.iter().all(|&d| d == 0.0 || d == 1.0), "a Gaussian's statistics were counted twice: {:?}", denom.iter().fold(0f32, |m, &d| m.max(d)));
+    check_validation(ctx);
+}
+
+#[test]
+fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
+    let ctx = ctx_shared();
+    let n = 600;
+    let g = big_splats(n);
+    let raster = Rasterizer::new(ctx, 3, Features::Sh { degree: 3 }).unwrap();
+    let set = tgs_pipelines::Gaussians::upload(ctx, &g).unwrap();
+    let cam = camera();
+    let grids = [[3, 1, 1], [65535, 2, 1], [0, 1, 1], [1, 1, 1]];
+    for capacity in [64, 1 << 20] {
+        let mut frame = raster.frame(SIZE, SIZE, n, capacity).unwrap();
+        if capacity > 64 {
+            // Settle the span passes so that only the capacity decides.
+            raster.forward(&set, &cam, &[0.0; 3], 3, &mut frame, false).unwrap();
+        }
+        let mut rec = Recorder::new(ctx).unwrap();
+        raster.record_forward(&mut rec, &set, &cam, &[0.0; 3], 3, &frame).unwrap();
+        let slots = raster.record_fit_gate(&mut rec, &frame, &grids).unwrap();
+        rec.submit_and_wait().unwrap();
+        let fits = raster.fit(&mut frame).unwrap();
+        assert_eq!(fits, capacity > 64, "capacity {capacity}: {} intersections", frame.last_intersections);
+        for (k, s) in slots.iter().enumerate() {
+            assert_eq!((s.offset, s.range), (12 * k as u64, 12));
+        }
+        let args = frame.gate_args().unwrap();
+        let want: Vec<u32> = grids.iter().flat_map(|g| if fits { *g } else { [0; 3] }).collect();
+        assert_eq!(&args[..want.len()], &want[..], "capacity {capacity}");
+    }
+    assert!(raster.record_fit_gate(&mut Recorder::new(ctx).unwrap(), &raster.frame(SIZE, SIZE, n, 64).unwrap(), &[[1, 1, 1]; 9]).is_err());
+    check_validation(ctx);
+}
