@@ -85,6 +85,16 @@ impl RawBuffer {
     }
 }
 
+impl RawBuffer {
+    /// The first `count` elements of a host-mapped buffer.
+    fn read_mapped<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
+        let mut out = vec![T::zeroed(); count];
+        let n = std::mem::size_of_val(out.as_slice());
+        self.with_mapped(|m| bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&m[..n]))?;
+        Ok(out)
+    }
+}
+
 impl Drop for RawBuffer {
     fn drop(&mut self) {
         unsafe { self.ctx.device.destroy_buffer(self.raw, None) };
@@ -258,9 +268,7 @@ impl<T: Pod> Buffer<T> {
         let mut rec = Recorder::new(ctx)?;
         rec.copy_raw_at(&self.inner, start as u64 * sz, &staging, 0, bytes)?;
         rec.submit_and_wait().with_context(|| format!("downloading buffer '{}'", self.name()))?;
-        let mut out = vec![T::zeroed(); count];
-        staging.with_mapped(|m| bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(m))?;
-        Ok(out)
+        staging.read_mapped(count)
     }
 }
 
@@ -292,10 +300,7 @@ impl<T: Pod> Readback<T> {
 
     /// The elements as the last completed copy left them.
     pub fn read(&self) -> Result<Vec<T>> {
-        let mut out = vec![T::zeroed(); self.len];
-        let n = std::mem::size_of_val(out.as_slice());
-        self.inner.with_mapped(|m| bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&m[..n]))?;
-        Ok(out)
+        self.inner.read_mapped(self.len)
     }
 
     pub(crate) fn raw(&self) -> &Arc<RawBuffer> {

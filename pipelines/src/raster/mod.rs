@@ -62,6 +62,9 @@ struct Push {
 const WG: u32 = 256;
 /// Dispatches one [`Rasterizer::record_fit_gate`] can gate.
 pub const GATE_SLOTS: usize = 8;
+/// The gate's push constants: capacity, count, two pads, then x, y, z per
+/// slot (`glsl/raster_gate.comp`, whose array holds 3 x GATE_SLOTS).
+const GATE_PUSH_WORDS: usize = 4 + 3 * GATE_SLOTS;
 const TILE: u32 = 16;
 /// Loop iterations per invocation we allow on devices with a loop limiter
 /// (lavapipe stops loops after 65,535).
@@ -262,7 +265,7 @@ impl Rasterizer {
             gather: k("raster.gather", shaders::RASTER_GATHER, 4, false)?,
             emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
             plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
-            gate: Kernel::new(ctx, &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 112, subgroup_size: None, full_subgroups: false })?,
+            gate: Kernel::new(ctx, &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 4 * GATE_PUSH_WORDS as u32, subgroup_size: None, full_subgroups: false })?,
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             forward,
             backward,
@@ -560,7 +563,7 @@ impl Rasterizer {
         if grids.len() > GATE_SLOTS {
             bail!("{} gated dispatches; the gate holds {GATE_SLOTS}", grids.len());
         }
-        let mut push = [0u32; 28];
+        let mut push = [0u32; GATE_PUSH_WORDS];
         push[0] = frame.capacity;
         push[1] = grids.len() as u32;
         for (k, g) in grids.iter().enumerate() {
@@ -629,8 +632,9 @@ impl Rasterizer {
     }
 
     /// After a recorded view's submission completed: read the intersection
-    /// total and the span overflow flag it brought back (no submission). Returns `true` when everything fitted;
-    /// otherwise grows `frame` so that a re-run fits and returns `false`.
+    /// total and the span overflow flag it brought back (no submission).
+    /// Returns `true` when everything fitted; otherwise grows `frame` so that
+    /// a re-run fits and returns `false`.
     pub fn fit(&self, frame: &mut Frame) -> Result<bool> {
         let stats = frame.stats_host.read()?;
         let (total, span_overflow) = (stats[0], stats[1] != 0);

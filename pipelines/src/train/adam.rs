@@ -1,6 +1,6 @@
 //! Fused Adam (PyTorch form) over one parameter buffer per dispatch.
 
-use super::{grid, kernel};
+use super::{dispatch_items, grid, kernel};
 use crate::shaders;
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
@@ -23,6 +23,10 @@ impl AdamGroup {
         AdamGroup { lr, lr_rest: lr, stride: 1, split: 1 }
     }
 }
+
+/// One parameter array of a set: parameter, gradient, first and second
+/// moments, and its length in floats.
+type ParamArrays<'a> = (&'a Buffer<f32>, &'a Buffer<f32>, &'a Buffer<f32>, &'a Buffer<f32>, usize);
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -91,13 +95,12 @@ impl Adam {
             bc1: 1.0 - self.beta1.powf(t as f32),
             bc2: 1.0 - self.beta2.powf(t as f32),
         };
-        let bindings = [param.binding(), grad.binding(), m.binding(), v.binding()];
-        match args {
-            Some(a) => rec.dispatch_indirect(&self.kernel, &bindings, bytemuck::bytes_of(&p), a),
-            None => rec.dispatch(&self.kernel, &bindings, bytemuck::bytes_of(&p), grid(&self.ctx, n as u32)),
-        }
+        dispatch_items(rec, &self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), n as u32, args)
     }
 
+    /// Record step `t` over every parameter array of `set`, in its layout
+    /// order (means, log-scales, quaternions, opacity, features), each with
+    /// its group.
     pub fn record_set(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64) -> Result<()> {
         self.record_set_on(rec, set, groups, t, None)
     }
@@ -117,7 +120,7 @@ impl Adam {
         self.record_set_on(rec, set, groups, t, Some(args))
     }
 
-    fn arrays(set: &TrainableSet) -> [(&Buffer<f32>, &Buffer<f32>, &Buffer<f32>, &Buffer<f32>, usize); 5] {
+    fn arrays(set: &TrainableSet) -> [ParamArrays<'_>; 5] {
         let n = set.len() as usize;
         let f = (set.params.channels * set.params.coeffs) as usize;
         let (p, g, m, v) = (&set.params, &set.grads, &set.m, &set.v);

@@ -4,7 +4,7 @@
 //! bytes) comes back to the host, to size the new buffers.
 
 use super::set::TrainableSet;
-use super::{grid, kernel};
+use super::{dispatch_items, grid, kernel};
 use crate::raster::{Frame, Gaussians};
 use crate::scan::{Count, PrefixSum, ScanScratch};
 use crate::shaders;
@@ -96,10 +96,7 @@ impl Densifier {
             return Ok(());
         }
         let bindings = [frame.densify.binding(), frame.radii.binding(), set.accum.binding(), set.denom.binding(), set.max_radii.binding()];
-        match args {
-            Some(a) => rec.dispatch_indirect(&self.stats, &bindings, bytemuck::bytes_of(&n), a),
-            None => rec.dispatch(&self.stats, &bindings, bytemuck::bytes_of(&n), grid(&self.ctx, n)),
-        }
+        dispatch_items(rec, &self.stats, &bindings, bytemuck::bytes_of(&n), n, args)
     }
 
     /// Record the opacity reset: o <- min(o, cap), opacity moments zeroed.

@@ -16,13 +16,23 @@ pub use hf::{HfLoss, HfStats};
 pub use loss::{ImageLoss, LossScratch, LossValues, LossWeights};
 pub use set::TrainableSet;
 
-use tgs_engine::{groups_2d, Context};
+use tgs_engine::{groups_2d, BufferBinding, Context, Kernel, Recorder};
 
 pub(crate) const WG: u32 = 256;
 
 /// Grid of one invocation per item (2-D beyond the per-dimension limit).
 pub(crate) fn grid(ctx: &Context, items: u32) -> [u32; 3] {
     groups_2d(items.div_ceil(WG), ctx.caps().max_workgroup_count[0].min(65535))
+}
+
+/// Dispatch `kernel` over `items` invocations ([`grid`]), or with the
+/// workgroup counts read from `args` when the dispatch is gated
+/// (`Rasterizer::record_fit_gate`; zero groups skip it).
+pub(crate) fn dispatch_items(rec: &mut Recorder, kernel: &Kernel, bindings: &[BufferBinding], push: &[u8], items: u32, args: Option<&BufferBinding>) -> anyhow::Result<()> {
+    match args {
+        Some(a) => rec.dispatch_indirect(kernel, bindings, push, a),
+        None => rec.dispatch(kernel, bindings, push, grid(rec.context(), items)),
+    }
 }
 
 /// Linear workgroup count of [`grid`] (partial-sum slots).
