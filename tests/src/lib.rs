@@ -79,3 +79,49 @@ pub fn tiny_glass_scene(dir: &std::path::Path) -> std::path::PathBuf {
     }
     dir.to_path_buf()
 }
+
+/// A test's scratch directory, `<system temp>/tgs-<name>-<pid>`: emptied
+/// when made, removed when dropped (also when the test fails, as
+/// unwinding drops it), so test runs leave nothing behind.
+pub struct TempDir(std::path::PathBuf);
+
+impl TempDir {
+    /// The path, with nothing there yet.
+    pub fn new(name: &str) -> TempDir {
+        let d = std::env::temp_dir().join(format!("tgs-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        let _ = std::fs::remove_file(&d);
+        TempDir(d)
+    }
+
+    /// The path, created empty.
+    pub fn created(name: &str) -> TempDir {
+        let d = TempDir::new(name);
+        std::fs::create_dir_all(&d.0).unwrap();
+        d
+    }
+
+    pub fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for TempDir {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+        let _ = std::fs::remove_file(&self.0);
+    }
+}

@@ -3,17 +3,14 @@
 //! COLMAP text and binary models (pinhole conventions, the every-8th split),
 //! and every bad input stopping with an error that names the file.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use tgs::data::colmap::{parse_cameras_bin, parse_cameras_txt, parse_images_bin, parse_images_txt, parse_points_bin, parse_points_txt};
 use tgs::data::image_io::{write_exr, write_npy, ImageF};
 use tgs::data::{Dataset, LoadOptions};
 use tgs_pipelines::Camera;
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("tgs-data-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> tgs_tests::TempDir {
+    tgs_tests::TempDir::created(&format!("data-{name}"))
 }
 
 fn png_rgba(path: &Path, w: u32, h: u32, px: [u8; 4]) {
@@ -30,7 +27,7 @@ fn project(cam: &Camera, p: [f32; 3]) -> [f32; 2] {
 /// A camera at (0, -4, 0) looking at the origin along +y, z up (Blender c2w).
 const C2W: &str = "[[1,0,0,0],[0,0,-1,-4],[0,1,0,0],[0,0,0,1]]";
 
-fn blender_fixture(name: &str, w: u32, h: u32) -> PathBuf {
+fn blender_fixture(name: &str, w: u32, h: u32) -> tgs_tests::TempDir {
     let d = tmp(name);
     std::fs::create_dir_all(d.join("train")).unwrap();
     std::fs::create_dir_all(d.join("test")).unwrap();
@@ -211,7 +208,7 @@ fn write_binary_model(dir: &Path) {
     std::fs::write(dir.join("points3D.bin"), p).unwrap();
 }
 
-fn colmap_fixture(name: &str, binary: bool) -> PathBuf {
+fn colmap_fixture(name: &str, binary: bool) -> tgs_tests::TempDir {
     let d = tmp(name);
     std::fs::create_dir_all(d.join("images")).unwrap();
     for im in images() {
@@ -229,7 +226,7 @@ fn colmap_fixture(name: &str, binary: bool) -> PathBuf {
 fn colmap_text_and_binary_agree() {
     let t = colmap_fixture("colmap-txt", false);
     let b = colmap_fixture("colmap-bin", true);
-    let dir = |d: &PathBuf| d.join("sparse/0");
+    let dir = |d: &Path| d.join("sparse/0");
     assert_eq!(parse_cameras_txt(&std::fs::read_to_string(dir(&t).join("cameras.txt")).unwrap()).unwrap(), parse_cameras_bin(&std::fs::read(dir(&b).join("cameras.bin")).unwrap()).unwrap());
     assert_eq!(parse_images_txt(&std::fs::read_to_string(dir(&t).join("images.txt")).unwrap()).unwrap(), parse_images_bin(&std::fs::read(dir(&b).join("images.bin")).unwrap()).unwrap());
     let (pt, pb) = (parse_points_txt(&std::fs::read_to_string(dir(&t).join("points3D.txt")).unwrap()).unwrap(), parse_points_bin(&std::fs::read(dir(&b).join("points3D.bin")).unwrap()).unwrap());

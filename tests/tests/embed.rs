@@ -5,20 +5,17 @@
 //! command buffer, writing the host's buffer. The pixels equal `tgs
 //! render`'s (the trainer's render of the checkpoint) bit for bit.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use tgs::embed::SceneRenderer;
 use tgs::train::run::{train, TrainArgs};
 use tgs_engine::{BufferBinding, Recorder};
 use tgs_tests::ctx_shared;
 use tgs_tests::host::Host;
 
-fn base() -> PathBuf {
-    std::env::temp_dir().join(format!("tgs-embed-{}", std::process::id()))
-}
 
 fn args(out: &Path, set: &[&str], stages: &str, from: Option<&Path>) -> TrainArgs {
     let _ = std::fs::remove_dir_all(out);
-    let scene = tgs_tests::tiny_glass_scene(&base().join("scene"));
+    let scene = tgs_tests::tiny_glass_scene(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("embed-scene"));
     let mut set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
     set.extend(["test_interval=0", "checkpoint_interval=0"].map(String::from));
     TrainArgs {
@@ -85,7 +82,7 @@ fn check_run(host: &Host, run: &Path, stage: &str) {
 #[test]
 fn host_renders_each_stage_like_tgs_render() {
     let host = Host::new();
-    let b = base();
+    let b = tgs_tests::TempDir::new("embed");
     let one = b.join("one");
     train(ctx_shared(), &args(&one, &["iterations=150"], "I", None)).unwrap();
     let two = b.join("two");
@@ -108,5 +105,4 @@ fn host_renders_each_stage_like_tgs_render() {
     assert!(format!("{e:#}").contains("checkpoint.bin"), "{e:#}");
     drop(ctx);
     host.destroy();
-    let _ = std::fs::remove_dir_all(&b);
 }

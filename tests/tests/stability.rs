@@ -29,7 +29,7 @@ fn max_abs(v: &[f32]) -> f32 {
 
 #[test]
 fn long_run_of_every_stage_stays_finite_and_bounded() {
-    let base = std::env::temp_dir().join(format!("tgs-stability-{}", std::process::id()));
+    let base = tgs_tests::TempDir::new("stability");
     let a = args(&base, "long", &["iterations=1200", "reflection.iterations=400", "light_field.iterations=400"]);
     let out = a.out.clone();
     let o = train(ctx_shared(), &a).unwrap();
@@ -89,7 +89,7 @@ fn long_run_of_every_stage_stays_finite_and_bounded() {
 /// gradient reaches it), while the composite is the scattering colour.
 #[test]
 fn light_field_with_no_reflecting_pixel() {
-    let base = std::env::temp_dir().join(format!("tgs-stability-none-{}", std::process::id()));
+    let base = tgs_tests::TempDir::new("stability-none");
     let a = args(&base, "none", &["iterations=150", "reflection.iterations=20", "light_field.iterations=40", "light_field.threshold=0.9999"]);
     let out = a.out.clone();
     train(ctx_shared(), &a).unwrap();

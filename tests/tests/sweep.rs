@@ -41,8 +41,7 @@ fn pareto_front_keeps_the_undominated_runs() {
 
 #[test]
 fn sweep_tabulates_plots_and_resumes() {
-    let base = std::env::temp_dir().join(format!("tgs-sweep-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&base);
+    let base = tgs_tests::TempDir::new("sweep");
     let scene = tgs_tests::tiny_glass_scene(&base.join("scene"));
     let grid = base.join("grid.toml");
     std::fs::write(

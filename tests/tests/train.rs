@@ -17,7 +17,7 @@ static DRIVER: Mutex<()> = Mutex::new(());
 fn scene() -> PathBuf {
     static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     DIR.get_or_init(|| {
-        tgs_tests::tiny_glass_scene(&std::env::temp_dir().join(format!("tgs-train-{}-scene", std::process::id())))
+        tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("train-scene"))
     })
     .clone()
 }
@@ -68,7 +68,7 @@ fn mean_colour_psnr(ds: &Dataset) -> f64 {
 fn stage_one_trains_and_resumes_exactly() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
-    let base = std::env::temp_dir().join(format!("tgs-train-{}", std::process::id()));
+    let base = tgs_tests::TempDir::new("train");
 
     // Uninterrupted.
     let full = base.join("full");
@@ -199,7 +199,7 @@ fn no_schedule_ends_on_an_opacity_reset() {
 fn bad_settings_and_missing_checkpoints_are_reported() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
-    let out = std::env::temp_dir().join(format!("tgs-train-{}-bad", std::process::id()));
+    let out = tgs_tests::TempDir::new("train-bad");
     let fails = |a: TrainArgs, needles: &[&str]| {
         let e = format!("{:#}", train(ctx, &a).unwrap_err());
         for n in needles {
@@ -252,7 +252,7 @@ fn write_checkpoint(path: &Path, h: &checkpoint::Header, arrays: &[Vec<f32>]) {
 fn resume_refuses_conflicting_options_and_damaged_checkpoints() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
-    let out = std::env::temp_dir().join(format!("tgs-train-{}-resume", std::process::id()));
+    let out = tgs_tests::TempDir::new("train-resume");
     let mut a = args(&out);
     a.set.extend(["iterations=4", "test_interval=0"].map(String::from));
     train(ctx, &a).unwrap();
@@ -273,12 +273,11 @@ fn resume_refuses_conflicting_options_and_damaged_checkpoints() {
     refused(&|r| r.preset = Some("paper".into()), &["--resume", "densify_until"]);
     refused(&|r| r.downscale = Some(2), &["--resume", "downscale"]);
     refused(&|r| r.background = Some("white".into()), &["--resume", "background"]);
-    let toml = out.with_extension("toml");
+    let other = tgs_tests::TempDir::created("train-other");
+    let toml = other.join("resume.toml");
     std::fs::write(&toml, "lr_scales = 0.01\n").unwrap();
     refused(&|r| r.config = Some(toml.clone()), &["--resume", "lr_scales"]);
-    let other = std::env::temp_dir().join(format!("tgs-train-{}-other", std::process::id()));
-    std::fs::create_dir_all(&other).unwrap();
-    refused(&|r| r.dataset = Some(other.clone()), &["--resume", "dataset"]);
+    refused(&|r| r.dataset = Some(other.to_path_buf()), &["--resume", "dataset"]);
     refused(&|r| r.iterations = Some(2), &["--iterations 2", "iteration 4"]);
     // Nothing was changed by the refusals: the same dataset, a longer run,
     // other intervals.

@@ -16,11 +16,11 @@ use tgs_tests::{check_validation, ctx_shared};
 #[test]
 fn method_on_glass() {
     let ctx = ctx_shared();
-    let out = std::env::temp_dir().join(format!("tgs-quality-{}", std::process::id()));
+    let out = tgs_tests::TempDir::new("quality");
     let _ = std::fs::remove_dir_all(&out);
     let set = ["reflection.iterations=200", "light_field.iterations=300", "test_interval=0", "checkpoint_interval=0"].map(String::from).to_vec();
     // No dataset: the built-in glass scene, written to OUT/scene.
-    let o = train(ctx, &TrainArgs { out: out.clone(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }).unwrap();
+    let o = train(ctx, &TrainArgs { out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }).unwrap();
     assert_eq!(o.iteration, 3500);
     let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
     let s = &m["stages"];

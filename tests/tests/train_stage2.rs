@@ -10,7 +10,7 @@ use tgs::train::run::{train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
 
 fn scene() -> PathBuf {
-    tgs_tests::tiny_glass_scene(&std::env::temp_dir().join(format!("tgs-stage2-{}-scene", std::process::id())))
+    tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("stage2-scene"))
 }
 
 fn args(out: &Path, extra: &[&str]) -> TrainArgs {
@@ -27,7 +27,7 @@ fn json(path: &Path) -> serde_json::Value {
 #[test]
 fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let ctx = ctx_shared();
-    let out = std::env::temp_dir().join(format!("tgs-stage2-{}-run", std::process::id()));
+    let out = tgs_tests::TempDir::new("stage2-run");
     let o = train(ctx, &args(&out, &[])).unwrap();
     assert_eq!(o.iteration, 450);
     let m = json(&out.join("metrics.json"));
@@ -64,12 +64,12 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
 
     // --from: Stage II started from a Stage I-only run in a new directory is
     // the same Stage II, bit for bit, with the other run's Stage I record.
-    let stage1 = std::env::temp_dir().join(format!("tgs-stage2-{}-stage1", std::process::id()));
+    let stage1 = tgs_tests::TempDir::new("stage2-stage1");
     let a1 = args(&stage1, &["stages=\"I\""]);
     assert_eq!(train(ctx, &a1).unwrap().iteration, 300);
-    let from = std::env::temp_dir().join(format!("tgs-stage2-{}-from", std::process::id()));
+    let from = tgs_tests::TempDir::new("stage2-from");
     let _ = std::fs::remove_dir_all(&from);
-    let af = TrainArgs { dataset: None, out: from.clone(), preset: None, set: vec!["reflection.iterations=150".into(), "test_interval=0".into()], quiet: true, from: Some(stage1.clone()), stages: Some("II".into()), ..Default::default() };
+    let af = TrainArgs { dataset: None, out: from.to_path_buf(), preset: None, set: vec!["reflection.iterations=150".into(), "test_interval=0".into()], quiet: true, from: Some(stage1.to_path_buf()), stages: Some("II".into()), ..Default::default() };
     assert_eq!(train(ctx, &af).unwrap().iteration, 450);
     // (EXR chunks may be written in any order: the PNG is compared.)
     for f in ["reflection.ply", "envmap.png", "point_cloud.ply"] {
@@ -93,7 +93,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     refused(TrainArgs { from: Some(out.join("nowhere")), ..af.clone() }, &["nowhere", "checkpoint.bin"]);
     refused(TrainArgs { resume: true, ..af.clone() }, &["--resume", "--from"]);
     // An unfinished Stage I (interrupted at 300 of 400) is refused.
-    let unfinished = std::env::temp_dir().join(format!("tgs-stage2-{}-unfinished", std::process::id()));
+    let unfinished = tgs_tests::TempDir::new("stage2-unfinished");
     let _ = std::fs::remove_dir_all(&unfinished);
     std::fs::create_dir_all(&unfinished).unwrap();
     let bytes = std::fs::read(stage1.join("checkpoint.bin")).unwrap();
@@ -106,7 +106,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     ck.extend(&hb);
     ck.extend(&bytes[12 + hlen..]);
     std::fs::write(unfinished.join("checkpoint.bin"), ck).unwrap();
-    refused(TrainArgs { from: Some(unfinished.clone()), ..af.clone() }, &["stopped at iteration 300 of 400", "--resume"]);
+    refused(TrainArgs { from: Some(unfinished.to_path_buf()), ..af.clone() }, &["stopped at iteration 300 of 400", "--resume"]);
     let _ = std::fs::remove_dir_all(&unfinished);
     let _ = std::fs::remove_dir_all(&from);
     let _ = std::fs::remove_dir_all(&stage1);

@@ -15,7 +15,7 @@ use tgs::train::run::{request_stop, train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
 
 fn scene() -> PathBuf {
-    tgs_tests::tiny_glass_scene(&std::env::temp_dir().join(format!("tgs-stage3-{}-scene", std::process::id())))
+    tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("stage3-scene"))
 }
 
 fn args(out: &Path) -> TrainArgs {
@@ -35,7 +35,7 @@ fn log_lines(out: &Path) -> Vec<serde_json::Value> {
 #[test]
 fn stage_three_runs_on_glass_and_resumes_exactly() {
     let ctx = ctx_shared();
-    let base = std::env::temp_dir().join(format!("tgs-stage3-{}", std::process::id()));
+    let base = tgs_tests::TempDir::new("stage3");
     let full = base.join("full");
     let o = train(ctx, &args(&full)).unwrap();
     assert_eq!(o.iteration, 520);

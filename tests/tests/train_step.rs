@@ -1,9 +1,12 @@
 //! A Stage I step is one submission: forward, loss, backward, densification
 //! statistics and Adam, the updates gated on the GPU by whether the view
-//! fitted its frame. A view that overflowed must change nothing before the
-//! host grows the frame and runs the step again.
+//! fitted its frame; so is a Stage II step (colour, rasterization,
+//! composite, loss, backward, Adam on the set and the environment map). A
+//! view that overflowed must change nothing before the host grows the frame
+//! and runs the step again.
 
 use tgs::train::init::{gaussians_from_points, random_points};
+use tgs::train::reflection::{ReflStepInput, ReflectionModel};
 use tgs::train::rng::Rng;
 use tgs::train::scattering::{ScatteringModel, StepInput};
 use tgs::train::TrainConfig;
@@ -12,6 +15,10 @@ use tgs_pipelines::{Camera, Features, HostGaussians, Rasterizer};
 use tgs_tests::{check_validation, ctx_shared};
 
 const SIZE: u32 = 128;
+
+/// The context (and its submission count) is shared by the tests of this
+/// binary, two of which count submissions: one test at a time.
+static COUNTING: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// `n` splats of radius ~0.35 in a cube of half-size 1: each covers most of
 /// a 128x128 view's 64 tiles, far more intersections than a first frame
@@ -36,6 +43,7 @@ fn bits(set: &tgs_pipelines::TrainableSet) -> Vec<(String, Vec<u32>)> {
 
 #[test]
 fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
+    let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
     let n = 3000;
     let g = big_splats(n);
@@ -78,6 +86,7 @@ fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
 
 #[test]
 fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
+    let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
     let n = 600;
     let g = big_splats(n);
@@ -105,5 +114,61 @@ fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
         assert_eq!(&args[..want.len()], &want[..], "capacity {capacity}");
     }
     assert!(raster.record_fit_gate(&mut Recorder::new(ctx).unwrap(), &raster.frame(SIZE, SIZE, n, 64).unwrap(), &[[1, 1, 1]; 9]).is_err());
+    check_validation(ctx);
+}
+
+/// Every parameter and moment of a reflection model: its set and its
+/// environment map.
+fn reflection_bits(m: &ReflectionModel) -> Vec<(String, Vec<u32>)> {
+    let mut all = bits(&m.set);
+    let e = &m.env;
+    for (name, b) in [("env.params", &e.params), ("env.m", &e.m), ("env.v", &e.v)] {
+        all.push((name.to_string(), b.download().unwrap().iter().map(|v| v.to_bits()).collect()));
+    }
+    all
+}
+
+#[test]
+fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
+    let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());
+    let ctx = ctx_shared();
+    let g = big_splats(3000);
+    let mut cfg = TrainConfig::default();
+    // Schlick adds the F0 channels to the rasterized features.
+    cfg.reflection.fresnel = "schlick".into();
+    let cam = camera();
+    let pixels = (SIZE * SIZE) as usize;
+    let plane = |k: usize| -> Vec<f32> { (0..3 * pixels).map(|i| 0.1 + 0.8 * (((i + k) * 7919) % 1000) as f32 / 1000.0).collect() };
+    let target = Buffer::from_slice(ctx, "target", &plane(0)).unwrap();
+    let scat = Buffer::from_slice(ctx, "scat", &plane(311)).unwrap();
+    let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: &scat, lr_means: 1e-3, profile: false };
+    let model = || ReflectionModel::from_scattering(ctx, Some(&g), &[], &cfg.reflection, 1e-15).unwrap();
+
+    // A: the first frame overflows (more than one submission), nothing is
+    // updated, the frame grows and the step runs again.
+    let mut a = model();
+    let before = reflection_bits(&a);
+    let submitted = ctx.submissions();
+    let out_a = a.step(&cfg, &input).unwrap();
+    assert!(ctx.submissions() - submitted > 1, "the scene must overflow the first frame");
+
+    // B: a render grew the frame first; the same step is one submission.
+    let mut b = model();
+    b.render(&cam, &scat).unwrap();
+    let submitted = ctx.submissions();
+    let out_b = b.step(&cfg, &input).unwrap();
+    assert_eq!(ctx.submissions() - submitted, 1, "a Stage II step that fits is one submission (loss and high-frequency statistics ride it back)");
+
+    let (after_a, after_b) = (reflection_bits(&a), reflection_bits(&b));
+    for ((name, x), (_, y)) in after_a.iter().zip(&after_b) {
+        assert!(x == y, "{name}: the overflowed-then-rerun Stage II step differs from one that fitted");
+    }
+    assert_eq!(out_a.loss.to_bits(), out_b.loss.to_bits());
+    assert!(out_a.loss.is_finite() && out_a.loss > 0.0);
+    // Exactly one Adam step moved the geometry, the material and the map.
+    for name in ["param.means", "param.quats", "param.features", "adam_v.features", "env.params", "env.v"] {
+        let (i, j) = (before.iter().position(|a| a.0 == name).unwrap(), after_a.iter().position(|a| a.0 == name).unwrap());
+        assert_ne!(before[i].1, after_a[j].1, "{name} did not change in the step");
+    }
     check_validation(ctx);
 }

@@ -196,13 +196,9 @@ impl ReflectionModel {
     fn forward(&mut self, cam: &Camera, profile: bool) -> Result<Vec<Timing>> {
         self.view_buffers(cam.width, cam.height)?;
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-        let bg = vec![0.0; self.fresnel.channels() as usize];
         loop {
             let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
-            let sc = rec.begin_scope("refl.color");
-            self.shading.record_color(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.feat)?;
-            rec.end_scope(sc);
-            self.raster.record_forward_with(&mut rec, &self.set.params, &self.feat, cam, &bg, 0, &b.frame)?;
+            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let t = rec.submit_and_wait()?;
             if self.raster.fit(&mut b.frame)? {
                 return Ok(t);
@@ -210,31 +206,16 @@ impl ReflectionModel {
         }
     }
 
-    /// One Stage II step on one view; prunes when the schedule says so.
+    /// One Stage II step on one view, in one submission: colour,
+    /// rasterization, composite, loss, the backward through all of it and
+    /// Adam on the set and the environment map, the updates gated on the GPU
+    /// by whether the view fitted its frame (when it did not, nothing was
+    /// updated, the frame grows and the step runs again). Prunes when the
+    /// schedule says so (its own submissions).
     pub fn step(&mut self, cfg: &TrainConfig, x: &ReflStepInput) -> Result<StepOutput> {
         let rc = &cfg.reflection;
         let cam = x.camera;
-        let mut timings = self.forward(cam, x.profile)?;
-        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
         let weights = LossWeights { ssim: cfg.lambda_ssim, normal: rc.lambda_normal, dist: 0.0 };
-        let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
-        let sc = rec.begin_scope("refl.composite");
-        self.shading.record_composite(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_in)?;
-        rec.end_scope(sc);
-        self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
-        if rc.lambda_hf > 0.0 {
-            let sc = rec.begin_scope("loss.hf");
-            self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, rc.hf_percentile / 100.0, rc.lambda_hf, &b.loss_grad, &self.hf_stats)?;
-            rec.end_scope(sc);
-        }
-        let sc = rec.begin_scope("refl.composite_backward");
-        self.shading.record_composite_backward(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, None)?;
-        rec.end_scope(sc);
-        self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
-        let sc = rec.begin_scope("refl.color_backward");
-        self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
-        rec.end_scope(sc);
-        let sc = rec.begin_scope("adam");
         let groups = [
             AdamGroup::single(x.lr_means),
             AdamGroup::single(rc.lr_scales),
@@ -244,12 +225,40 @@ impl ReflectionModel {
             AdamGroup { lr: rc.lr_f0, lr_rest: rc.lr_r, stride: MATERIAL, split: 3 },
         ];
         let it = x.iteration as u64;
-        self.adam.record_set(&mut rec, &self.set, &groups, it)?;
-        let e = &self.env;
-        self.adam.record(&mut rec, &e.params, &e.grads, &e.m, &e.v, e.len(), &AdamGroup::single(rc.lr_env), it)?;
-        rec.end_scope(sc);
-        timings.extend(rec.submit_and_wait()?);
-        let values = b.loss.values()?;
+        let (timings, values) = loop {
+            self.view_buffers(cam.width, cam.height)?;
+            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
+            let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
+            let sc = rec.begin_scope("refl.composite");
+            self.shading.record_composite(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_in)?;
+            rec.end_scope(sc);
+            self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
+            if rc.lambda_hf > 0.0 {
+                let sc = rec.begin_scope("loss.hf");
+                self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, rc.hf_percentile / 100.0, rc.lambda_hf, &b.loss_grad, &self.hf_stats)?;
+                rec.end_scope(sc);
+            }
+            let sc = rec.begin_scope("refl.composite_backward");
+            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, None)?;
+            rec.end_scope(sc);
+            self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
+            let sc = rec.begin_scope("refl.color_backward");
+            self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
+            rec.end_scope(sc);
+            let e = &self.env;
+            let mut grids = self.adam.set_grids(&self.set).to_vec();
+            grids.push(self.adam.grid(e.len()));
+            let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
+            let sc = rec.begin_scope("adam");
+            self.adam.record_set_gated(&mut rec, &self.set, &groups, it, &args[..5])?;
+            self.adam.record_gated(&mut rec, &e.params, &e.grads, &e.m, &e.v, e.len(), &AdamGroup::single(rc.lr_env), it, &args[5])?;
+            rec.end_scope(sc);
+            let t = rec.submit_and_wait()?;
+            if self.raster.fit(&mut b.frame)? {
+                break (t, b.loss.values()?);
+            }
+        };
         let mut loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
         if rc.lambda_hf > 0.0 {
             loss += rc.lambda_hf as f64 * self.hf_stats.values()?.2;
@@ -289,6 +298,17 @@ impl ReflectionModel {
     pub fn into_set(self) -> TrainableSet {
         self.set
     }
+}
+
+/// Record the reflection colour of every Gaussian of `set` seen from `cam`
+/// and the rasterization of [colour, r (, f0)] into `frame`.
+#[allow(clippy::too_many_arguments)]
+fn record_forward(rec: &mut Recorder, shading: &ReflectionShading, raster: &Rasterizer, set: &TrainableSet, env: &EnvMap, cam: &Camera, fresnel: Fresnel, feat: &Buffer<f32>, frame: &Frame) -> Result<()> {
+    let sc = rec.begin_scope("refl.color");
+    shading.record_color(rec, &set.params, env, cam, fresnel, feat)?;
+    rec.end_scope(sc);
+    let bg = vec![0.0; fresnel.channels() as usize];
+    raster.record_forward_with(rec, &set.params, feat, cam, &bg, 0, frame)
 }
 
 /// The Stage I residual of one view: 4 planes (r (3), mean_c |r_c|).

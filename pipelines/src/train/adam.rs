@@ -64,6 +64,14 @@ impl Adam {
         self.record_on(rec, param, grad, m, v, n, group, t, None)
     }
 
+    /// As [`Adam::record`], the workgroup counts read from `args` (written
+    /// on the GPU from [`Adam::grid`], e.g. by `Rasterizer::record_fit_gate`;
+    /// zero groups skip the step).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_gated(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64, args: &BufferBinding) -> Result<()> {
+        self.record_on(rec, param, grad, m, v, n, group, t, Some(args))
+    }
+
     /// The grid [`Adam::record`] dispatches for `n` elements.
     pub fn grid(&self, n: usize) -> [u32; 3] {
         grid(&self.ctx, n as u32)

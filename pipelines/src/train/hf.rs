@@ -6,7 +6,7 @@ use super::{grid, kernel};
 use crate::shaders;
 use anyhow::{bail, Result};
 use std::sync::Arc;
-use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Recorder};
+use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Readback, Recorder};
 
 /// Selection workgroup size (glsl/loss_hf_select.comp's reduction tree).
 const SELECT_WG: u32 = 256;
@@ -17,16 +17,19 @@ pub struct HfLoss {
     grad: Kernel,
 }
 
-/// The selection's result: [3 tau, count, sum, mean].
+/// The selection's result: [3 tau, count, sum, mean], and its host copy
+/// that rides back with the submission that recorded the loss.
 pub struct HfStats {
     pub stats: Buffer<f32>,
+    stats_host: Readback<f32>,
 }
 
 impl HfStats {
     /// (3 tau: the threshold on the sum of the three channels' absolute
-    /// errors, count, mean error of the selected pixels) read back.
+    /// errors, count, mean error of the selected pixels) of the last
+    /// submitted [`HfLoss::record`] (no transfer of its own).
     pub fn values(&self) -> Result<(f32, u32, f64)> {
-        let s = self.stats.download()?;
+        let s = self.stats_host.read()?;
         Ok((s[0], s[1] as u32, s[3] as f64))
     }
 }
@@ -39,7 +42,7 @@ impl HfLoss {
     }
 
     pub fn stats(&self) -> Result<HfStats> {
-        Ok(HfStats { stats: Buffer::new(&self.ctx, "loss.hf_stats", 4)? })
+        Ok(HfStats { stats: Buffer::new(&self.ctx, "loss.hf_stats", 4)?, stats_host: Readback::new(&self.ctx, "loss.hf_stats_host", 4)? })
     }
 
     /// Record the loss of the colour planes of `render` (`pixels` per
@@ -64,6 +67,7 @@ impl HfLoss {
             bail!("the high-frequency loss of {pixels} pixels exceeds a CPU driver's per-invocation loop budget");
         }
         rec.dispatch(&self.select, &[render.binding(), target.binding(), s.stats.binding()], bytemuck::cast_slice(&[pixels, pct.to_bits()]), [1, 1, 1])?;
-        rec.dispatch(&self.grad, &[render.binding(), target.binding(), s.stats.binding(), grad.binding()], bytemuck::cast_slice(&[pixels, weight.to_bits()]), grid(&self.ctx, pixels))
+        rec.dispatch(&self.grad, &[render.binding(), target.binding(), s.stats.binding(), grad.binding()], bytemuck::cast_slice(&[pixels, weight.to_bits()]), grid(&self.ctx, pixels))?;
+        rec.read_back(&s.stats, 0, &s.stats_host)
     }
 }
