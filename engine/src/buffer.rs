@@ -83,9 +83,7 @@ impl RawBuffer {
         let slice = alloc.mapped_slice_mut().ok_or_else(|| anyhow!("staging buffer '{}' is not host-mapped", self.name))?;
         Ok(f(&mut slice[..self.bytes as usize]))
     }
-}
 
-impl RawBuffer {
     /// The first `count` elements of a host-mapped buffer.
     fn read_mapped<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
         let mut out = vec![T::zeroed(); count];

@@ -37,8 +37,26 @@ fn camera() -> Camera {
     Camera::look_at([0.0, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 0.9, SIZE, SIZE)
 }
 
-fn bits(set: &tgs_pipelines::TrainableSet) -> Vec<(String, Vec<u32>)> {
+type Bits = Vec<(String, Vec<u32>)>;
+
+fn bits(set: &tgs_pipelines::TrainableSet) -> Bits {
     set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect()
+}
+
+/// Model A's step overflowed, grew its frame and ran again; model B's fitted
+/// at once. Both must end bit-identical (no update ran twice or not at all)
+/// with the same loss, and the `changed` arrays must have moved from
+/// `before` (one update did run).
+fn assert_one_step(before: &Bits, (after_a, loss_a): (&Bits, f64), (after_b, loss_b): (&Bits, f64), changed: &[&str]) {
+    for ((name, x), (_, y)) in after_a.iter().zip(after_b) {
+        assert!(x == y, "{name}: the overflowed-then-rerun step differs from a step that fitted (an update ran twice or not at all)");
+    }
+    assert_eq!(loss_a.to_bits(), loss_b.to_bits());
+    assert!(loss_a.is_finite() && loss_a > 0.0);
+    for name in changed {
+        let (i, j) = (before.iter().position(|a| a.0 == *name).unwrap(), after_a.iter().position(|a| a.0 == *name).unwrap());
+        assert_ne!(before[i].1, after_a[j].1, "{name} did not change in the step");
+    }
 }
 
 #[test]
@@ -68,17 +86,8 @@ fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
     let out_b = b.step(&cfg, &input).unwrap();
     assert_eq!(ctx.submissions() - submitted, 1, "a step that fits is one submission (loss and frame statistics ride it back)");
 
-    let (after_a, after_b) = (bits(&a.set), bits(&b.set));
-    for ((name, x), (_, y)) in after_a.iter().zip(&after_b) {
-        assert!(x == y, "{name}: the overflowed-then-rerun step differs from a step that fitted (an update ran twice or not at all)");
-    }
-    assert_eq!(out_a.loss.to_bits(), out_b.loss.to_bits());
-    assert!(out_a.loss.is_finite() && out_a.loss > 0.0);
     // One Adam step and one statistics update happened.
-    for name in ["param.means", "param.opacity", "adam_v.features", "stats.denom"] {
-        let (i, j) = (before.iter().position(|a| a.0 == name).unwrap(), after_a.iter().position(|a| a.0 == name).unwrap());
-        assert_ne!(before[i].1, after_a[j].1, "{name} did not change in the step");
-    }
+    assert_one_step(&before, (&bits(&a.set), out_a.loss), (&bits(&b.set), out_b.loss), &["param.means", "param.opacity", "adam_v.features", "stats.denom"]);
     let denom = a.set.denom.download().unwrap();
     assert!(denom.iter().all(|&d| d == 0.0 || d == 1.0), "a Gaussian's statistics were counted twice: {:?}", denom.iter().fold(0f32, |m, &d| m.max(d)));
     check_validation(ctx);
@@ -119,7 +128,7 @@ fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
 
 /// Every parameter and moment of a reflection model: its set and its
 /// environment map.
-fn reflection_bits(m: &ReflectionModel) -> Vec<(String, Vec<u32>)> {
+fn reflection_bits(m: &ReflectionModel) -> Bits {
     let mut all = bits(&m.set);
     let e = &m.env;
     for (name, b) in [("env.params", &e.params), ("env.m", &e.m), ("env.v", &e.v)] {
@@ -159,16 +168,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     let out_b = b.step(&cfg, &input).unwrap();
     assert_eq!(ctx.submissions() - submitted, 1, "a Stage II step that fits is one submission (loss and high-frequency statistics ride it back)");
 
-    let (after_a, after_b) = (reflection_bits(&a), reflection_bits(&b));
-    for ((name, x), (_, y)) in after_a.iter().zip(&after_b) {
-        assert!(x == y, "{name}: the overflowed-then-rerun Stage II step differs from one that fitted");
-    }
-    assert_eq!(out_a.loss.to_bits(), out_b.loss.to_bits());
-    assert!(out_a.loss.is_finite() && out_a.loss > 0.0);
-    // Exactly one Adam step moved the geometry, the material and the map.
-    for name in ["param.means", "param.quats", "param.features", "adam_v.features", "env.params", "env.v"] {
-        let (i, j) = (before.iter().position(|a| a.0 == name).unwrap(), after_a.iter().position(|a| a.0 == name).unwrap());
-        assert_ne!(before[i].1, after_a[j].1, "{name} did not change in the step");
-    }
+    // One Adam step moved the geometry, the material and the map.
+    assert_one_step(&before, (&reflection_bits(&a), out_a.loss), (&reflection_bits(&b), out_b.loss), &["param.means", "param.quats", "param.features", "adam_v.features", "env.params", "env.v"]);
     check_validation(ctx);
 }

@@ -77,8 +77,7 @@ impl Adam {
         grid(&self.ctx, n as u32)
     }
 
-    /// As [`Adam::record`], with the workgroup counts read from `args`
-    /// (written on the GPU; zero groups skip the step).
+    /// The body of [`Adam::record`] (`args` None) and [`Adam::record_gated`].
     #[allow(clippy::too_many_arguments)]
     fn record_on(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64, args: Option<&BufferBinding>) -> Result<()> {
         if n == 0 {
