@@ -50,6 +50,15 @@ pub struct TrainConfig {
     /// Random initialisation when the dataset has no points: count and cube half-size.
     pub init_points: u32,
     pub init_half_extent: f32,
+    /// Random initialisation also places this fraction of `init_points`
+    /// in the far field the cameras see beyond the cube: along random
+    /// training-view rays, uniform in inverse depth out to `init_far_depth`
+    /// x the scene extent (0: the cube only). Without them a sky or a
+    /// floor that runs to the horizon has no Gaussians of its own, the cube's
+    /// Gaussians paint it view by view, and that misfit is what the Stage I
+    /// residual (and so the reflection set's seeding) then sees.
+    pub init_far_fraction: f32,
+    pub init_far_depth: f32,
     /// Background colour: "white", "black" or "r,g,b".
     pub background: String,
     pub downscale: u32,
@@ -328,6 +337,8 @@ impl TrainConfig {
             max_gaussians: 2_000_000,
             init_points: 100_000,
             init_half_extent: 1.3,
+            init_far_fraction: 0.2,
+            init_far_depth: 30.0,
             background: "white".into(),
             downscale: 1,
             holdout: 8,
@@ -491,13 +502,14 @@ impl TrainConfig {
             ("lambda_dist", self.lambda_dist),
             ("densify_grad", self.densify_grad),
             ("percent_dense", self.percent_dense),
+            ("init_far_fraction", self.init_far_fraction),
         ];
         for (k, v) in non_negative {
             if v < 0.0 {
                 bail!("{k} must be non-negative, not {v}");
             }
         }
-        for (k, v) in [("init_half_extent", self.init_half_extent), ("max_screen_size", self.max_screen_size), ("max_world_size", self.max_world_size)] {
+        for (k, v) in [("init_half_extent", self.init_half_extent), ("init_far_depth", self.init_far_depth), ("max_screen_size", self.max_screen_size), ("max_world_size", self.max_world_size)] {
             if v <= 0.0 {
                 bail!("{k} must be positive, not {v}");
             }

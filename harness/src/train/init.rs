@@ -6,7 +6,7 @@
 use super::rng::Rng;
 use crate::data::Points;
 use std::collections::HashMap;
-use tgs_pipelines::HostGaussians;
+use tgs_pipelines::{Camera, HostGaussians};
 
 pub const SH_C0: f32 = 0.282_094_8;
 
@@ -20,6 +20,58 @@ pub fn random_points(n: u32, half: f32, rng: &mut Rng) -> Points {
         p.colors.push(c);
     }
     p
+}
+
+/// `n` points in the far field of the training `cameras`, beyond the cube
+/// [-half, half]^3 that [`random_points`] fills: each on a random pixel's ray
+/// of a random view, at a view depth uniform in inverse depth between where
+/// the ray leaves the cube (the camera's distance to the origin for a ray
+/// that misses it) and `far`, so that near and far get as many points per
+/// pixel footprint. Colours as in [`random_points`]. Deterministic in `rng`.
+pub fn far_points(n: u32, cameras: &[Camera], half: f32, far: f32, rng: &mut Rng) -> Points {
+    let mut p = Points::default();
+    if cameras.is_empty() || !(far > 0.0) {
+        return p;
+    }
+    let mut tries = 0u64;
+    while p.positions.len() < n as usize && tries < 64 * n as u64 + 64 {
+        tries += 1;
+        let cam = &cameras[((rng.uniform() * cameras.len() as f32) as usize).min(cameras.len() - 1)];
+        let (u, v) = (rng.uniform() * cam.width as f32 - 0.5, rng.uniform() * cam.height as f32 - 0.5);
+        let (o, one) = (cam.centre(), cam.unproject(u, v, 1.0));
+        // Ray o + z d, z the view depth.
+        let d = [one[0] - o[0], one[1] - o[1], one[2] - o[2]];
+        let near = cube_exit(o, d, half).unwrap_or_else(|| (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt());
+        let r = rng.uniform();
+        if !(near > 0.0 && far > near) {
+            continue;
+        }
+        let z = 1.0 / (1.0 / far + r * (1.0 / near - 1.0 / far));
+        let x = [0, 1, 2].map(|k| o[k] + z * d[k]);
+        if x.iter().all(|c| c.abs() <= half) || x.iter().any(|c| !c.is_finite()) {
+            continue;
+        }
+        p.positions.push(x);
+        p.colors.push([0; 3].map(|_: i32| rng.uniform() / 255.0 * SH_C0 + 0.5));
+    }
+    p
+}
+
+/// Where the ray o + t d (t > 0) leaves the cube [-half, half]^3, if it meets it.
+fn cube_exit(o: [f32; 3], d: [f32; 3], half: f32) -> Option<f32> {
+    let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
+    for k in 0..3 {
+        if d[k] == 0.0 {
+            if o[k].abs() > half {
+                return None;
+            }
+            continue;
+        }
+        let (a, b) = ((-half - o[k]) / d[k], (half - o[k]) / d[k]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    (t0 <= t1 && t1.is_finite()).then_some(t1)
 }
 
 pub fn gaussians_from_points(points: &Points, sh_degree: u32, rng: &mut Rng) -> HostGaussians {

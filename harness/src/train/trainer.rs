@@ -9,7 +9,7 @@
 //! what it needs as arguments.
 
 use super::config::TrainConfig;
-use super::init::{gaussians_from_points, random_points};
+use super::init::{far_points, gaussians_from_points, random_points};
 use super::lightfield::{normalization_box, LightFieldModel, LightFieldStepInput};
 use super::rng::Rng;
 use super::reflection::{residual, ReflStepInput, ReflectionModel};
@@ -155,7 +155,16 @@ impl Trainer {
         let mut rng = Rng::new(cfg.seed);
         let points = match &data.points {
             Some(p) if !p.positions.is_empty() => p.clone(),
-            _ => random_points(cfg.init_points, cfg.init_half_extent, &mut rng),
+            _ => {
+                let mut p = random_points(cfg.init_points, cfg.init_half_extent, &mut rng);
+                let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
+                let (extent, _) = data.extent();
+                let n = (cfg.init_far_fraction as f64 * cfg.init_points as f64).round() as u32;
+                let far = far_points(n, &cams, cfg.init_half_extent, cfg.init_far_depth * extent, &mut rng);
+                p.positions.extend(far.positions);
+                p.colors.extend(far.colors);
+                p
+            }
         };
         let g = gaussians_from_points(&points, cfg.sh_degree, &mut rng);
         Self::with_gaussians(ctx, cfg, data, &g, rng)

@@ -63,6 +63,15 @@ impl Camera {
         c
     }
 
+    /// The world point at pixel coordinates (u, v) and view depth z:
+    /// R^T (p_view - t).
+    pub fn unproject(&self, u: f32, v: f32, z: f32) -> [f32; 3] {
+        let m = &self.world_to_view;
+        let p = [(u - self.cx) / self.fx * z, (v - self.cy) / self.fy * z, z];
+        let d = [p[0] - m[0][3], p[1] - m[1][3], p[2] - m[2][3]];
+        [0, 1, 2].map(|j| (0..3).map(|i| m[i][j] * d[i]).sum())
+    }
+
     pub fn validate(&self) -> Result<()> {
         let finite = [self.fx, self.fy, self.cx, self.cy].iter().chain(self.world_to_view.iter().flatten()).all(|v| v.is_finite());
         if !finite {

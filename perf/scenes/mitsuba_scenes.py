@@ -1,0 +1,261 @@
+#!/usr/bin/env python3
+"""Transmissive validation scenes rendered by an independent path tracer.
+
+Writes datasets in the format of ../shared/docs/dataset-format.md (the
+NeRF/Blender layout, test views with world-space normals of the first hit and
+a mask of pixels whose first hit is glass everywhere inside the pixel), with
+Mitsuba 3's path tracer and thin-dielectric glass, the way `lantern` was made.
+They are for checking that a setting tuned on the built-in scene and `lantern`
+carries over to other glass shapes; nothing in the tests depends on them.
+
+    python3 -m venv /tmp/mv && /tmp/mv/bin/pip install mitsuba numpy
+    /tmp/mv/bin/python perf/scenes/mitsuba_scenes.py --out /tmp/scenes [--scene globe] [--res 200] [--spp 128]
+
+Scenes (every one: checkered floor, a ring of checkered blocks outside the
+camera orbit for near-field reflections, a diffuse sphere and box in the
+middle, sun and sky):
+  globe    a thin glass sphere over the middle objects
+  pane     a vertical glass pane between the middle objects
+  diffuse  no glass at all (Stage II should skip it)
+
+Masks and normals are ray-cast here in numpy against the same primitives
+(16 stratified rays per pixel for the mask, the pixel centre for the normal),
+so they do not depend on the renderer's sampling.
+"""
+import argparse
+import json
+import math
+import os
+import time
+
+import numpy as np
+
+
+def translate_scale(t, s, rot_z_deg=0.0):
+    """4x4 to_world: scale, then rotate about z, then translate."""
+    a = math.radians(rot_z_deg)
+    r = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+    m = np.eye(4)
+    m[:3, :3] = r @ np.diag(np.broadcast_to(np.asarray(s, float), (3,)))
+    m[:3, 3] = t
+    return m
+
+
+class Prim:
+    """One shape: kind in sphere | cube | rectangle | cylinder (Mitsuba's unit shapes)."""
+
+    def __init__(self, kind, to_world, bsdf, glass=False):
+        self.kind, self.m, self.bsdf, self.glass = kind, to_world, bsdf, glass
+        self.inv = np.linalg.inv(to_world)
+
+    def mitsuba(self, mi):
+        return {"type": self.kind, "to_world": mi.ScalarTransform4f(self.m.tolist()), "bsdf": self.bsdf}
+
+    def intersect(self, o, d):
+        """Nearest t > 1e-6 (inf when missed) and world normals, for rays o + t d (N x 3)."""
+        lo = o @ self.inv[:3, :3].T + self.inv[:3, 3]
+        ld = d @ self.inv[:3, :3].T
+        n_local = np.zeros_like(lo)
+        inf = np.full(len(o), np.inf)
+        if self.kind == "sphere":
+            a = (ld * ld).sum(1)
+            b = 2 * (lo * ld).sum(1)
+            c = (lo * lo).sum(1) - 1
+            disc = b * b - 4 * a * c
+            ok = disc >= 0
+            sq = np.sqrt(np.where(ok, disc, 0))
+            t0 = (-b - sq) / (2 * a)
+            t1 = (-b + sq) / (2 * a)
+            t = np.where(ok & (t0 > 1e-6), t0, np.where(ok & (t1 > 1e-6), t1, inf))
+            n_local = lo + np.where(np.isfinite(t), t, 0)[:, None] * ld
+        elif self.kind == "rectangle":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = -lo[:, 2] / ld[:, 2]
+            p = lo + np.where(np.isfinite(t), t, 0)[:, None] * ld
+            ok = np.isfinite(t) & (t > 1e-6) & (np.abs(p[:, 0]) <= 1) & (np.abs(p[:, 1]) <= 1)
+            t = np.where(ok, t, inf)
+            n_local[:, 2] = 1
+        elif self.kind == "cube":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t1 = (-1 - lo) / ld
+                t2 = (1 - lo) / ld
+            tmin = np.nan_to_num(np.minimum(t1, t2), nan=-np.inf)
+            tmax = np.nan_to_num(np.maximum(t1, t2), nan=np.inf)
+            tn, tf = tmin.max(1), tmax.min(1)
+            ok = (tn <= tf) & (tf > 1e-6)
+            t = np.where(ok, np.where(tn > 1e-6, tn, tf), inf)
+            p = lo + np.where(np.isfinite(t), t, 0)[:, None] * ld
+            axis = np.abs(p).argmax(1)
+            n_local[np.arange(len(o)), axis] = np.sign(p[np.arange(len(o)), axis])
+        elif self.kind == "cylinder":  # radius 1, z in [0, 1], open
+            a = ld[:, 0] ** 2 + ld[:, 1] ** 2
+            b = 2 * (lo[:, 0] * ld[:, 0] + lo[:, 1] * ld[:, 1])
+            c = lo[:, 0] ** 2 + lo[:, 1] ** 2 - 1
+            disc = b * b - 4 * a * c
+            ok = (disc >= 0) & (a > 0)
+            sq = np.sqrt(np.where(ok, disc, 0))
+            t = inf.copy()
+            for sign in (1, -1):  # far root first, so the near one wins
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    tr = (-b - sign * sq) / (2 * np.where(a > 0, a, 1))
+                z = lo[:, 2] + tr * ld[:, 2]
+                good = ok & (tr > 1e-6) & (z >= 0) & (z <= 1) & (tr < t)
+                t = np.where(good, tr, t)
+            p = lo + np.where(np.isfinite(t), t, 0)[:, None] * ld
+            n_local[:, :2] = p[:, :2]
+        else:
+            raise ValueError(self.kind)
+        n = n_local @ self.inv[:3, :3]  # inverse transpose
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        return t, n
+
+
+def checker(mi, c0, c1, scale):
+    return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
+
+
+def build(mi, name):
+    glass = {"type": "thindielectric", "int_ior": 1.5}
+    prims = [Prim("rectangle", translate_scale([0, 0, 0], [200, 200, 1]), checker(mi, [0.75, 0.78, 0.72], [0.30, 0.42, 0.36], 400))]
+    palette = [([0.9, 0.2, 0.2], [0.95, 0.85, 0.2]), ([0.2, 0.4, 0.9], [0.9, 0.9, 0.9]), ([0.2, 0.75, 0.3], [0.9, 0.5, 0.1]),
+               ([0.8, 0.3, 0.8], [0.2, 0.8, 0.8]), ([0.95, 0.6, 0.1], [0.3, 0.2, 0.6]), ([0.1, 0.5, 0.5], [0.9, 0.8, 0.7])]
+    for k, (c0, c1) in enumerate(palette):
+        a = 2 * math.pi * (k + 0.25) / len(palette)
+        h = 0.6 + 0.3 * (k % 3)
+        prims.append(Prim("cube", translate_scale([6.0 * math.cos(a), 6.0 * math.sin(a), h], [0.5, 0.5, h], math.degrees(a)), checker(mi, c0, c1, 3)))
+    prims.append(Prim("sphere", translate_scale([0.25, -0.15, 0.35], 0.35), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
+    prims.append(Prim("cube", translate_scale([-0.3, 0.3, 0.4], [0.15, 0.15, 0.4], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
+    if name == "globe":
+        prims.append(Prim("sphere", translate_scale([0, 0, 0.95], 0.95), glass, glass=True))
+    elif name == "pane":
+        # A 2.4 x 1.4 pane standing upright between the two middle objects.
+        m = np.eye(4)
+        m[:3, :3] = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]]) @ np.diag([1.2, 0.7, 1.0])  # local x -> world y, local y -> world z, normal -> world x
+        m[:3, 3] = [0.0, 0.0, 0.7]
+        prims.append(Prim("rectangle", m, glass, glass=True))
+    elif name != "diffuse":
+        raise ValueError(f"unknown scene '{name}'")
+    return prims
+
+
+def c2w_look_at(o, target, up=(0.0, 0.0, 1.0)):
+    """Camera-to-world in the dataset's axes (x right, y up, looking along -z)."""
+    o, target, up = (np.asarray(v, float) for v in (o, target, up))
+    f = target - o
+    f /= np.linalg.norm(f)
+    r = np.cross(f, up)
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = r, u, -f, o
+    return m
+
+
+def cameras(n, offset, rng):
+    out = []
+    for i in range(n):
+        az = 2 * math.pi * ((i * 0.618034 + offset) % 1.0)
+        el = math.radians(rng.uniform(20, 50))
+        rad = rng.uniform(3.6, 4.4)
+        o = [rad * math.cos(el) * math.cos(az), rad * math.cos(el) * math.sin(az), rad * math.sin(el)]
+        out.append(c2w_look_at(o, [0, 0, 0.5]))
+    return out
+
+
+def rays(c2w, res, fov, sub):
+    """World rays through a sub x sub grid in every pixel (pixel-major order)."""
+    f = 0.5 * res / math.tan(0.5 * fov)
+    s = (np.arange(sub) + 0.5) / sub
+    px = np.arange(res)
+    u = (px[None, :, None, None] + s[None, None, None, :]).repeat(res, 0).repeat(sub, 2)
+    v = (px[:, None, None, None] + s[None, None, :, None]).repeat(res, 1).repeat(sub, 3)
+    d = np.stack([(u - 0.5 * res) / f, -(v - 0.5 * res) / f, -np.ones_like(u)], -1).reshape(-1, 3)
+    d = d @ c2w[:3, :3].T
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.broadcast_to(c2w[:3, 3], d.shape)
+    return o, d
+
+
+def first_hit(prims, o, d):
+    t = np.full(len(o), np.inf)
+    n = np.zeros_like(d)
+    g = np.zeros(len(o), bool)
+    for p in prims:
+        tp, np_ = p.intersect(o, d)
+        closer = tp < t
+        t = np.where(closer, tp, t)
+        n = np.where(closer[:, None], np_, n)
+        g = np.where(closer, p.glass, g)
+    return t, n, g
+
+
+def write_png(path, rgb8):
+    import zlib, struct
+    h, w, _ = rgb8.shape
+    raw = b"".join(b"\x00" + rgb8[y].tobytes() for y in range(h))
+    def chunk(t, data):
+        return struct.pack(">I", len(data)) + t + data + struct.pack(">I", zlib.crc32(t + data) & 0xFFFFFFFF)
+    with open(path, "wb") as fh:
+        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2 if rgb8.shape[2] == 3 else 0, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
+
+
+def srgb8(lin):
+    lin = np.clip(lin, 0, 1)
+    s = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.power(lin, 1 / 2.4) - 0.055)
+    return np.clip(np.round(s * 255), 0, 255).astype(np.uint8)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--scene", action="append", choices=["globe", "pane", "diffuse"])
+    ap.add_argument("--res", type=int, default=200)
+    ap.add_argument("--spp", type=int, default=128)
+    ap.add_argument("--train", type=int, default=60)
+    ap.add_argument("--test", type=int, default=12)
+    a = ap.parse_args()
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    fov = math.pi / 4
+    for name in a.scene or ["globe", "pane", "diffuse"]:
+        prims = build(mi, name)
+        scene_d = {"type": "scene", "integrator": {"type": "path", "max_depth": 12}, "sky": {"type": "sunsky", "sun_direction": [0.45, -0.35, 0.82], "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], 90)}}
+        for k, p in enumerate(prims):
+            scene_d[f"shape{k:02}"] = p.mitsuba(mi)
+        scene = mi.load_dict(scene_d)
+        root = os.path.join(a.out, name)
+        rng = np.random.default_rng({"globe": 1, "pane": 2, "diffuse": 3}[name])
+        for split, n, offset in (("train", a.train, 0.0), ("test", a.test, 0.37)):
+            os.makedirs(os.path.join(root, split), exist_ok=True)
+            frames = []
+            for i, c2w in enumerate(cameras(n, offset, rng)):
+                t0 = time.time()
+                o = c2w[:3, 3]
+                sensor = mi.load_dict({"type": "perspective", "fov": math.degrees(fov), "fov_axis": "x",
+                                       "to_world": mi.ScalarTransform4f().look_at(origin=o.tolist(), target=(o - c2w[:3, 2]).tolist(), up=c2w[:3, 1].tolist()),
+                                       "sampler": {"type": "independent", "sample_count": a.spp, "seed": 1000 * (split == "test") + i},
+                                       "film": {"type": "hdrfilm", "width": a.res, "height": a.res, "pixel_format": "rgb"}})
+                img = np.array(mi.render(scene, sensor=sensor, seed=i))[:, :, :3]
+                stem = f"{split}/r_{i}"
+                write_png(os.path.join(root, stem + ".png"), srgb8(img))
+                frame = {"file_path": "./" + stem, "transform_matrix": c2w.tolist()}
+                if split == "test":
+                    ro, rd = rays(c2w, a.res, fov, 1)
+                    t, nrm, _ = first_hit(prims, ro, rd)
+                    nrm = np.where((nrm * rd).sum(1, keepdims=True) > 0, -nrm, nrm)
+                    nrm[~np.isfinite(t)] = 0
+                    np.save(os.path.join(root, stem + "_normal.npy"), nrm.reshape(a.res, a.res, 3).astype(np.float32))
+                    ro, rd = rays(c2w, a.res, fov, 4)
+                    _, _, g = first_hit(prims, ro, rd)
+                    mask = g.reshape(a.res, a.res, 16).all(2)
+                    write_png(os.path.join(root, stem + "_mask.png"), (mask * 255).astype(np.uint8)[:, :, None])
+                    frame["normal_path"] = "./" + stem + "_normal.npy"
+                    frame["mask_path"] = "./" + stem + "_mask.png"
+                frames.append(frame)
+                print(f"{name} {stem}: {time.time() - t0:.1f} s", flush=True)
+            with open(os.path.join(root, f"transforms_{split}.json"), "w") as fh:
+                json.dump({"camera_angle_x": fov, "frames": frames}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,65 @@
+//! Initial points (harness/src/train/init.rs), on the CPU: the far-field
+//! points that random initialisation adds beyond its cube.
+
+use tgs::train::init::far_points;
+use tgs::train::rng::Rng;
+use tgs_pipelines::Camera;
+
+fn ring(n: usize, radius: f32, height: f32) -> Vec<Camera> {
+    (0..n)
+        .map(|i| {
+            let a = i as f32 / n as f32 * std::f32::consts::TAU;
+            Camera::look_at([radius * a.cos(), radius * a.sin(), height], [0.0, 0.0, 0.3], [0.0, 0.0, 1.0], 0.8, 48, 40)
+        })
+        .collect()
+}
+
+/// View-space position of `x` in `cam`.
+fn view(cam: &Camera, x: [f32; 3]) -> [f32; 3] {
+    let m = &cam.world_to_view;
+    [0, 1, 2].map(|r| m[r][0] * x[0] + m[r][1] * x[1] + m[r][2] * x[2] + m[r][3])
+}
+
+/// Whether `x` is in front of `cam`, inside its image, at most `far` deep.
+fn seen(cam: &Camera, x: [f32; 3], far: f32) -> bool {
+    let p = view(cam, x);
+    let (u, v) = (cam.fx * p[0] / p[2] + cam.cx, cam.fy * p[1] / p[2] + cam.cy);
+    p[2] > 0.0 && p[2] <= far * 1.0001 && u >= -0.51 && v >= -0.51 && u <= cam.width as f32 - 0.49 && v <= cam.height as f32 - 0.49
+}
+
+#[test]
+fn far_points_lie_beyond_the_cube_inside_the_views() {
+    let cams = ring(12, 4.0, 1.5);
+    let (half, far) = (1.3, 120.0);
+    let p = far_points(3000, &cams, half, far, &mut Rng::new(7));
+    assert_eq!(p.positions.len(), 3000);
+    assert_eq!(p.colors.len(), 3000);
+    let depth = |x: [f32; 3]| cams.iter().filter(|c| seen(c, x, far)).map(|c| view(c, x)[2]).fold(f32::INFINITY, f32::min);
+    let mut depths = Vec::new();
+    for (x, c) in p.positions.iter().zip(&p.colors) {
+        assert!(x.iter().any(|v| v.abs() > half), "{x:?} is inside the cube");
+        let d = depth(*x);
+        assert!(d.is_finite(), "{x:?} is in no view's frustum within depth {far}");
+        depths.push(d);
+        assert!(c.iter().all(|v| (0.5..0.5 + 1.0 / 255.0).contains(v)), "colour {c:?}");
+    }
+    // Uniform in inverse depth: as many points per unit of 1/z near as far,
+    // so most are near the scene and some reach far out.
+    depths.sort_by(f32::total_cmp);
+    let median = depths[depths.len() / 2];
+    // (Uniform in depth would put the median near far / 2.)
+    assert!(median < far / 8.0, "median depth {median}");
+    assert!(depths.iter().filter(|&&d| d > 30.0).count() > 30, "none far out: max {}", depths[depths.len() - 1]);
+    // Same generator state, same points.
+    assert_eq!(far_points(3000, &cams, half, far, &mut Rng::new(7)).positions, p.positions);
+}
+
+#[test]
+fn far_points_need_cameras_and_a_far_end() {
+    assert!(far_points(100, &[], 1.3, 100.0, &mut Rng::new(1)).positions.is_empty());
+    assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, 0.0, &mut Rng::new(1)).positions.is_empty());
+    // A far end nearer than the cube's far side: no ray has room, and the
+    // bounded retries end without points rather than looping.
+    assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, 2.0, &mut Rng::new(1)).positions.is_empty());
+    assert!(far_points(0, &ring(4, 4.0, 1.0), 1.3, 100.0, &mut Rng::new(1)).positions.is_empty());
+}
