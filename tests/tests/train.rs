@@ -218,6 +218,9 @@ fn bad_settings_and_missing_checkpoints_are_reported() {
     fails(with("lr_opacity=inf"), &["lr_opacity", "inf"]);
     fails(with("init_points=0"), &["init_points"]);
     fails(with("prune_opacity=1.5"), &["prune_opacity"]);
+    fails(with("init_far_fraction=-0.5"), &["init_far_fraction"]);
+    fails(with("init_far_fraction=1e9"), &["init_far_fraction"]);
+    fails(with("init_far_depth=0"), &["init_far_depth"]);
     fails(TrainArgs { downscale: Some(0), ..args(&out) }, &["--downscale 0"]);
     fails(TrainArgs { downscale: Some(1000), ..args(&out) }, &["--downscale 1000", "r_0.png"]);
     fails(TrainArgs { background: Some("purple".into()), ..args(&out) }, &["--background 'purple'"]);

@@ -502,7 +502,6 @@ impl TrainConfig {
             ("lambda_dist", self.lambda_dist),
             ("densify_grad", self.densify_grad),
             ("percent_dense", self.percent_dense),
-            ("init_far_fraction", self.init_far_fraction),
         ];
         for (k, v) in non_negative {
             if v < 0.0 {
@@ -513,6 +512,9 @@ impl TrainConfig {
             if v <= 0.0 {
                 bail!("{k} must be positive, not {v}");
             }
+        }
+        if !(0.0..=10.0).contains(&self.init_far_fraction) {
+            bail!("init_far_fraction must be in [0, 10] (a fraction of init_points), not {}", self.init_far_fraction);
         }
         if !(0.0..1.0).contains(&self.prune_opacity) {
             bail!("prune_opacity must be in [0, 1), not {}", self.prune_opacity);
