@@ -42,7 +42,7 @@ def translate_scale(t, s, rot_z_deg=0.0):
 
 
 class Prim:
-    """One shape: kind in sphere | cube | rectangle | cylinder (Mitsuba's unit shapes)."""
+    """One shape: kind in sphere | cube | rectangle (Mitsuba's unit shapes)."""
 
     def __init__(self, kind, to_world, bsdf, glass=False):
         self.kind, self.m, self.bsdf, self.glass = kind, to_world, bsdf, glass
@@ -87,22 +87,6 @@ class Prim:
             p = lo + np.where(np.isfinite(t), t, 0)[:, None] * ld
             axis = np.abs(p).argmax(1)
             n_local[np.arange(len(o)), axis] = np.sign(p[np.arange(len(o)), axis])
-        elif self.kind == "cylinder":  # radius 1, z in [0, 1], open
-            a = ld[:, 0] ** 2 + ld[:, 1] ** 2
-            b = 2 * (lo[:, 0] * ld[:, 0] + lo[:, 1] * ld[:, 1])
-            c = lo[:, 0] ** 2 + lo[:, 1] ** 2 - 1
-            disc = b * b - 4 * a * c
-            ok = (disc >= 0) & (a > 0)
-            sq = np.sqrt(np.where(ok, disc, 0))
-            t = inf.copy()
-            for sign in (1, -1):  # far root first, so the near one wins
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    tr = (-b - sign * sq) / (2 * np.where(a > 0, a, 1))
-                z = lo[:, 2] + tr * ld[:, 2]
-                good = ok & (tr > 1e-6) & (z >= 0) & (z <= 1) & (tr < t)
-                t = np.where(good, tr, t)
-            p = lo + np.where(np.isfinite(t), t, 0)[:, None] * ld
-            n_local[:, :2] = p[:, :2]
         else:
             raise ValueError(self.kind)
         n = n_local @ self.inv[:3, :3]  # inverse transpose
@@ -189,20 +173,10 @@ def first_hit(prims, o, d):
     return t, n, g
 
 
-def write_png(path, rgb8):
-    import zlib, struct
-    h, w, _ = rgb8.shape
-    raw = b"".join(b"\x00" + rgb8[y].tobytes() for y in range(h))
-    def chunk(t, data):
-        return struct.pack(">I", len(data)) + t + data + struct.pack(">I", zlib.crc32(t + data) & 0xFFFFFFFF)
-    with open(path, "wb") as fh:
-        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2 if rgb8.shape[2] == 3 else 0, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
-
-
-def srgb8(lin):
-    lin = np.clip(lin, 0, 1)
-    s = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.power(lin, 1 / 2.4) - 0.055)
-    return np.clip(np.round(s * 255), 0, 255).astype(np.uint8)
+def write_png(mi, path, image, srgb):
+    """8-bit PNG of a float image (sRGB-encoded when `srgb`), by Mitsuba's Bitmap."""
+    fmt = mi.Bitmap.PixelFormat.RGB if image.shape[2] == 3 else mi.Bitmap.PixelFormat.Y
+    mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)).convert(fmt, mi.Struct.Type.UInt8, srgb_gamma=srgb).write(path)
 
 
 def main():
@@ -237,7 +211,7 @@ def main():
                                        "film": {"type": "hdrfilm", "width": a.res, "height": a.res, "pixel_format": "rgb"}})
                 img = np.array(mi.render(scene, sensor=sensor, seed=i))[:, :, :3]
                 stem = f"{split}/r_{i}"
-                write_png(os.path.join(root, stem + ".png"), srgb8(img))
+                write_png(mi, os.path.join(root, stem + ".png"), img, True)
                 frame = {"file_path": "./" + stem, "transform_matrix": c2w.tolist()}
                 if split == "test":
                     ro, rd = rays(c2w, a.res, fov, 1)
@@ -248,7 +222,7 @@ def main():
                     ro, rd = rays(c2w, a.res, fov, 4)
                     _, _, g = first_hit(prims, ro, rd)
                     mask = g.reshape(a.res, a.res, 16).all(2)
-                    write_png(os.path.join(root, stem + "_mask.png"), (mask * 255).astype(np.uint8)[:, :, None])
+                    write_png(mi, os.path.join(root, stem + "_mask.png"), mask.astype(np.float32)[:, :, None], False)
                     frame["normal_path"] = "./" + stem + "_normal.npy"
                     frame["mask_path"] = "./" + stem + "_mask.png"
                 frames.append(frame)
