@@ -213,6 +213,6 @@ pub fn print_stages(b: &StagesBench) {
         }
     }
     for s in &b.skipped {
-        println!("Stage {s}: skipped (the scene's Stage I residual is below reflection.min_residual)");
+        println!("Stage {s}: skipped (the scene's Stage I residual is below reflection.min_residual, or does not change with the view enough for reflection.min_view_dependence)");
     }
 }

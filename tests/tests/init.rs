@@ -1,5 +1,5 @@
 //! Initial points (harness/src/train/init.rs), on the CPU: the far-field
-//! points that random initialisation adds beyond its cube.
+//! points that random initialisation adds beyond its cube and the cameras.
 
 use tgs::train::init::far_points;
 use tgs::train::rng::Rng;
@@ -28,16 +28,22 @@ fn seen(cam: &Camera, x: [f32; 3], far: f32) -> bool {
 }
 
 #[test]
-fn far_points_lie_beyond_the_cube_inside_the_views() {
+fn far_points_lie_beyond_the_cube_and_the_cameras_inside_the_views() {
     let cams = ring(12, 4.0, 1.5);
     let (half, far) = (1.3, 120.0);
-    let p = far_points(3000, &cams, half, far, &mut Rng::new(7));
+    // The camera sphere as Dataset::extent makes it: 1.1 x the cameras' reach.
+    let sphere = ([0.0, 0.0, 1.5], 4.4);
+    let p = far_points(3000, &cams, half, sphere, far, &mut Rng::new(7));
     assert_eq!(p.positions.len(), 3000);
     assert_eq!(p.colors.len(), 3000);
     let depth = |x: [f32; 3]| cams.iter().filter(|c| seen(c, x, far)).map(|c| view(c, x)[2]).fold(f32::INFINITY, f32::min);
     let mut depths = Vec::new();
     for (x, c) in p.positions.iter().zip(&p.colors) {
         assert!(x.iter().any(|v| v.abs() > half), "{x:?} is inside the cube");
+        // Nothing among the cameras: every point is farther from the ring's
+        // centre than any camera, so none sits in front of a view taken from it.
+        let r = (0..3).map(|k| (x[k] - sphere.0[k]).powi(2)).sum::<f32>().sqrt();
+        assert!(r >= 4.4 * 0.9999, "{x:?} is {r} from the centre, inside the camera sphere");
         let d = depth(*x);
         assert!(d.is_finite(), "{x:?} is in no view's frustum within depth {far}");
         depths.push(d);
@@ -51,15 +57,32 @@ fn far_points_lie_beyond_the_cube_inside_the_views() {
     assert!(median < far / 8.0, "median depth {median}");
     assert!(depths.iter().filter(|&&d| d > 30.0).count() > 30, "none far out: max {}", depths[depths.len() - 1]);
     // Same generator state, same points.
-    assert_eq!(far_points(3000, &cams, half, far, &mut Rng::new(7)).positions, p.positions);
+    assert_eq!(far_points(3000, &cams, half, sphere, far, &mut Rng::new(7)).positions, p.positions);
+}
+
+#[test]
+fn far_points_start_at_the_cube_when_the_cameras_are_inside_it() {
+    // Cameras inside a large cube: the cube's exit is the nearer bound, and
+    // a camera sphere smaller than the cube changes nothing.
+    let cams = ring(8, 1.0, 0.5);
+    let (half, far) = (3.0, 60.0);
+    let a = far_points(500, &cams, half, ([0.0, 0.0, 0.5], 1.1), far, &mut Rng::new(3));
+    let b = far_points(500, &cams, half, ([0.0, 0.0, 0.5], 0.0), far, &mut Rng::new(3));
+    assert_eq!(a.positions.len(), 500);
+    assert_eq!(a.positions, b.positions);
+    assert!(a.positions.iter().all(|x| x.iter().any(|v| v.abs() > half)));
 }
 
 #[test]
 fn far_points_need_cameras_and_a_far_end() {
-    assert!(far_points(100, &[], 1.3, 100.0, &mut Rng::new(1)).positions.is_empty());
-    assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, 0.0, &mut Rng::new(1)).positions.is_empty());
-    // A far end nearer than the cube's far side: no ray has room, and the
-    // bounded retries end without points rather than looping.
-    assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, 2.0, &mut Rng::new(1)).positions.is_empty());
-    assert!(far_points(0, &ring(4, 4.0, 1.0), 1.3, 100.0, &mut Rng::new(1)).positions.is_empty());
+    let s = ([0.0, 0.0, 1.0], 4.4);
+    assert!(far_points(100, &[], 1.3, s, 100.0, &mut Rng::new(1)).positions.is_empty());
+    assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, s, 0.0, &mut Rng::new(1)).positions.is_empty());
+    // A far end nearer than the cube's far side, or than the camera
+    // sphere's: no ray has room, and the bounded retries end without points
+    // rather than looping.
+    assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, s, 2.0, &mut Rng::new(1)).positions.is_empty());
+    // (A camera 4 from the centre of a sphere of radius 20 leaves it no nearer than 16.)
+    assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, (s.0, 20.0), 15.0, &mut Rng::new(1)).positions.is_empty());
+    assert!(far_points(0, &ring(4, 4.0, 1.0), 1.3, s, 100.0, &mut Rng::new(1)).positions.is_empty());
 }

@@ -2,8 +2,8 @@
 //! through the `tgs train` driver: the residual is measured and saved,
 //! Stage II runs, keeps the test PSNR, logs its stage, writes its outputs
 //! (layers, cube map, reflection PLY), and metrics.json records both
-//! stages and the decision; with a residual threshold above the measured
-//! residual, Stage II is skipped with the decision recorded.
+//! stages and the decision; with a residual or view-dependence threshold
+//! above the measured one, Stage II is skipped with the decision recorded.
 
 use std::path::{Path, PathBuf};
 use tgs::train::run::{train, TrainArgs};
@@ -35,6 +35,9 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert_eq!(d["run"], true, "Stage II should run on the glass scene: {d}");
     let residual = d["residual_mean"].as_f64().unwrap();
     assert!(residual > 0.02 && residual.is_finite(), "glass residual {residual}");
+    // The glass's residual changes with the view at a fixed surface point.
+    let vd = d["view_dependence"].as_f64().unwrap();
+    assert!(vd >= d["view_dependence_threshold"].as_f64().unwrap() && vd.is_finite() && d["view_dependence_samples"].as_u64().unwrap() > 1000, "{d}");
     let stages = m["stages"].as_array().unwrap();
     assert_eq!(stages.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II"]);
     let psnr = |i: usize| stages[i]["test"]["psnr"].as_f64().unwrap();
@@ -111,14 +114,17 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let _ = std::fs::remove_dir_all(&from);
     let _ = std::fs::remove_dir_all(&stage1);
 
-    // The same run with the threshold above the measured residual skips Stage II.
-    let skip = format!("reflection.min_residual={}", residual * 1.5);
-    let o = train(ctx, &args(&out, &[&skip])).unwrap();
-    assert_eq!(o.iteration, 300);
-    let m = json(&out.join("metrics.json"));
-    assert_eq!(m["reflection"]["run"], false);
-    assert_eq!(m["stages"].as_array().unwrap().len(), 1);
-    assert!(!out.join("reflection.ply").exists() && !out.join("envmap.exr").exists());
+    // The same run with either threshold above the measured value skips
+    // Stage II (the run is deterministic: the same residual is measured).
+    for skip in [format!("reflection.min_residual={}", residual * 1.5), format!("reflection.min_view_dependence={}", vd * 1.5)] {
+        let o = train(ctx, &args(&out, &[&skip])).unwrap();
+        assert_eq!(o.iteration, 300, "{skip}");
+        let m = json(&out.join("metrics.json"));
+        assert_eq!(m["reflection"]["run"], false, "{skip}");
+        assert_eq!(m["reflection"]["view_dependence"], d["view_dependence"], "{skip}");
+        assert_eq!(m["stages"].as_array().unwrap().len(), 1);
+        assert!(!out.join("reflection.ply").exists() && !out.join("envmap.exr").exists());
+    }
     let _ = std::fs::remove_dir_all(&out);
     check_validation(ctx);
 }

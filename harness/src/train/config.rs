@@ -51,9 +51,9 @@ pub struct TrainConfig {
     pub init_points: u32,
     pub init_half_extent: f32,
     /// Random initialisation also places this fraction of `init_points`
-    /// in the far field the cameras see beyond the cube: along random
-    /// training-view rays, uniform in inverse depth out to `init_far_depth`
-    /// x the scene extent (0: the cube only). Without them a sky or a
+    /// in the far field the cameras see beyond the cube and beyond the
+    /// camera sphere: along random training-view rays, uniform in inverse
+    /// depth out to `init_far_depth` x the scene extent (0: the cube only). Without them a sky or a
     /// floor that runs to the horizon has no Gaussians of its own, the cube's
     /// Gaussians paint it view by view, and that misfit is what the Stage I
     /// residual (and so the reflection set's seeding) then sees.
@@ -195,6 +195,10 @@ pub struct ReflectionConfig {
     /// (mean over training views and pixels of mean_c |I_gt - I_scat|)
     /// reaches this.
     pub min_residual: f32,
+    /// ... and only when the residual changes with the view: the mean
+    /// spread of the signed residual over the views that see the same
+    /// Stage I surface point (train/view_dependence.rs) reaches this.
+    pub min_view_dependence: f32,
     /// How the reflection set starts (method-notes §3.4): "copy" = the whole
     /// converged Stage I set (the paper's words); "hull" = seeds on the
     /// residual hull (train/seed.rs) only; "copy+hull" = both. Measured on
@@ -233,6 +237,7 @@ impl Default for ReflectionConfig {
             // diffuse spheres-128 0.0041; the geometric mean leaves a 1.7x
             // margin on both sides.
             min_residual: 0.007,
+            min_view_dependence: 0.0,
             init: "hull".into(),
             seed_rays: 8192,
             seed_agree: 0.9,
@@ -283,7 +288,7 @@ impl ReflectionConfig {
             }
         }
         check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
-        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual)] {
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual), ("min_view_dependence", self.min_view_dependence)] {
             if v < 0.0 {
                 bail!("reflection.{k} must be non-negative, not {v}");
             }

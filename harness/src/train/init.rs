@@ -22,13 +22,16 @@ pub fn random_points(n: u32, half: f32, rng: &mut Rng) -> Points {
     p
 }
 
-/// `n` points in the far field of the training `cameras`, beyond the cube
-/// [-half, half]^3 that [`random_points`] fills: each on a random pixel's ray
-/// of a random view, at a view depth uniform in inverse depth between where
-/// the ray leaves the cube (the camera's distance to the origin for a ray
-/// that misses it) and `far`, so that near and far get as many points per
-/// pixel footprint. Colours as in [`random_points`]. Deterministic in `rng`.
-pub fn far_points(n: u32, cameras: &[Camera], half: f32, far: f32, rng: &mut Rng) -> Points {
+/// `n` points in the far field of the training `cameras`: beyond the cube
+/// [-half, half]^3 that [`random_points`] fills and beyond the camera sphere
+/// `(centre, radius)` (the training cameras' extent), each on a random
+/// pixel's ray of a random view, at a view depth uniform in inverse depth
+/// between where the ray leaves both and `far`, so that near and far get as
+/// many points per pixel footprint. Nothing is placed among the cameras: a
+/// view on a ring of cameras sees the ring's far side as background, and
+/// Gaussians that paint it there sit in front of any new view taken from
+/// the ring. Colours as in [`random_points`]. Deterministic in `rng`.
+pub fn far_points(n: u32, cameras: &[Camera], half: f32, sphere: ([f32; 3], f32), far: f32, rng: &mut Rng) -> Points {
     let mut p = Points::default();
     if cameras.is_empty() || !(far > 0.0) {
         return p;
@@ -41,20 +44,37 @@ pub fn far_points(n: u32, cameras: &[Camera], half: f32, far: f32, rng: &mut Rng
         let (o, one) = (cam.centre(), cam.unproject(u, v, 1.0));
         // Ray o + z d, z the view depth.
         let d = [one[0] - o[0], one[1] - o[1], one[2] - o[2]];
-        let near = cube_exit(o, d, half).unwrap_or_else(|| (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt());
+        let cube = cube_exit(o, d, half).unwrap_or_else(|| (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt());
+        let near = sphere_exit(o, d, sphere).map_or(cube, |s| s.max(cube));
         let r = rng.uniform();
         if !(near > 0.0 && far > near) {
             continue;
         }
         let z = 1.0 / (1.0 / far + r * (1.0 / near - 1.0 / far));
         let x = [0, 1, 2].map(|k| o[k] + z * d[k]);
-        if x.iter().all(|c| c.abs() <= half) || x.iter().any(|c| !c.is_finite()) {
+        let inside = (0..3).map(|k| (x[k] - sphere.0[k]).powi(2)).sum::<f32>() < sphere.1 * sphere.1;
+        if inside || x.iter().all(|c| c.abs() <= half) || x.iter().any(|c| !c.is_finite()) {
             continue;
         }
         p.positions.push(x);
         p.colors.push([0; 3].map(|_: i32| rng.uniform() / 255.0 * SH_C0 + 0.5));
     }
     p
+}
+
+/// Where the ray o + t d (t > 0) leaves the sphere (centre, radius), if it meets it.
+fn sphere_exit(o: [f32; 3], d: [f32; 3], (c, r): ([f32; 3], f32)) -> Option<f32> {
+    let oc = [0, 1, 2].map(|k| (o[k] - c[k]) as f64);
+    let d = d.map(|v| v as f64);
+    let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    let b = oc[0] * d[0] + oc[1] * d[1] + oc[2] * d[2];
+    let q = oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - (r as f64) * (r as f64);
+    let disc = b * b - a * q;
+    if !(a > 0.0) || !(disc >= 0.0) {
+        return None;
+    }
+    let t = (-b + disc.sqrt()) / a;
+    (t > 0.0 && t.is_finite()).then_some(t as f32)
 }
 
 /// Where the ray o + t d (t > 0) leaves the cube [-half, half]^3, if it meets it.

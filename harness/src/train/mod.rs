@@ -10,6 +10,7 @@ pub mod reflection;
 pub mod scattering;
 pub mod seed;
 pub mod trainer;
+pub mod view_dependence;
 
 pub use config::TrainConfig;
 pub use trainer::{Schedule, Stage, StepReport, Trainer};

@@ -587,21 +587,31 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
     })?;
     Ok(if d.run {
         format!(
-            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I), {} iterations",
+            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I), {} iterations",
             d.residual_mean,
             d.threshold,
             100.0 * d.residual_fraction_over_0_05,
+            d.view_dependence,
+            d.view_dependence_threshold,
             d.reflection_gaussians,
             d.seeds,
             d.copied,
             tr.cfg.reflection.iterations
         )
-    } else {
+    } else if d.residual_mean < d.threshold {
         format!(
             "Stage II skipped: the Stage I residual {:.4} is below reflection.min_residual {:.4} ({:.1}% of pixels above 0.05): the scene shows no view-dependent energy worth a reflection set",
             d.residual_mean,
             d.threshold,
             100.0 * d.residual_fraction_over_0_05
+        )
+    } else {
+        format!(
+            "Stage II skipped: the Stage I residual {:.4} barely changes with the view (view dependence {:.4} over {} surface points, below reflection.min_view_dependence {:.4}): it is Stage I misfit, not reflection",
+            d.residual_mean,
+            d.view_dependence,
+            d.view_dependence_samples,
+            d.view_dependence_threshold
         )
     })
 }

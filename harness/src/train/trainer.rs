@@ -15,6 +15,7 @@ use super::rng::Rng;
 use super::reflection::{residual, ReflStepInput, ReflectionModel};
 use super::scattering::{ScatteringModel, StepInput};
 use super::seed::{residual_hull_seeds, SeedParams, SeedView};
+use super::view_dependence::{view_dependence, VdMap};
 use crate::data::Dataset;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
@@ -46,6 +47,11 @@ impl Stage {
     }
 }
 
+/// The view-dependence measure reduces each view to at most this many
+/// pixels a side and samples at most this many pixels in all.
+const VD_MAX_SIDE: u32 = 128;
+const VD_SAMPLES: usize = 1 << 16;
+
 /// The measured Stage I residual and what it decided (metrics.json's `reflection`).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ReflDecision {
@@ -55,6 +61,15 @@ pub struct ReflDecision {
     pub residual_fraction_over_0_05: f64,
     /// The threshold on `residual_mean` (reflection.min_residual).
     pub threshold: f64,
+    /// How much the residual changes with the view at a fixed Stage I
+    /// surface point (train/view_dependence.rs), over how many samples,
+    /// and its threshold (reflection.min_view_dependence).
+    #[serde(default)]
+    pub view_dependence: f64,
+    #[serde(default)]
+    pub view_dependence_samples: u64,
+    #[serde(default)]
+    pub view_dependence_threshold: f64,
     /// Whether Stage II ran.
     pub run: bool,
     pub reflection_gaussians: u32,
@@ -145,6 +160,8 @@ pub struct Trainer {
     /// Training views not yet used in this pass (popped from the back).
     pub stack: Vec<u32>,
     pub extent: f32,
+    /// The training cameras' mean: with `extent`, the camera sphere.
+    pub centre: [f32; 3],
     pub background: [f32; 3],
 }
 
@@ -158,9 +175,9 @@ impl Trainer {
             _ => {
                 let mut p = random_points(cfg.init_points, cfg.init_half_extent, &mut rng);
                 let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
-                let (extent, _) = data.extent();
+                let (extent, centre) = data.extent();
                 let n = (cfg.init_far_fraction as f64 * cfg.init_points as f64).round() as u32;
-                let far = far_points(n, &cams, cfg.init_half_extent, cfg.init_far_depth * extent, &mut rng);
+                let far = far_points(n, &cams, cfg.init_half_extent, (centre, extent), cfg.init_far_depth * extent, &mut rng);
                 p.positions.extend(far.positions);
                 p.colors.extend(far.colors);
                 p
@@ -174,7 +191,7 @@ impl Trainer {
         cfg.validate()?;
         let targets = data.train.iter().map(|v| Buffer::from_slice(ctx, "train.target", &v.image.planar())).collect::<Result<Vec<_>>>()?;
         let cameras = data.train.iter().map(|v| v.camera).collect();
-        let (extent, _) = data.extent();
+        let (extent, centre) = data.extent();
         Ok(Trainer {
             schedule: Schedule::from_config(&cfg),
             scattering: ScatteringModel::new(ctx, g, cfg.sh_degree, cfg.adam_eps)?,
@@ -189,6 +206,7 @@ impl Trainer {
             rng,
             stack: Vec::new(),
             extent,
+            centre,
             background: data.background,
             cfg,
         })
@@ -242,8 +260,10 @@ impl Trainer {
         let sh = self.sh_degree(self.cfg.iterations);
         let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
         self.scat_cache.clear();
-        // Per view: residual magnitude and Stage I surface depth (seeding).
+        // Per view: residual magnitude and Stage I surface depth (seeding),
+        // and both reduced for the view-dependence measure.
         let mut maps: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
+        let mut vd_maps: Vec<VdMap> = Vec::new();
         let (copy, hull) = self.cfg.reflection.init_parts()?;
         for (i, cam) in self.cameras.clone().iter().enumerate() {
             let n = (cam.width * cam.height) as usize;
@@ -256,22 +276,29 @@ impl Trainer {
             pixels += n;
             on_view(i, cam, &r)?;
             self.scat_cache.push(buf);
+            // The frame still holds this view's render.
+            let depth = self.scattering.last_plane(cam.width, cam.height, Plane::Median)?;
+            vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
             if hull && self.reflection.is_none() {
-                // The frame still holds this view's render.
-                maps.push((mag.to_vec(), self.scattering.last_plane(cam.width, cam.height, Plane::Median)?));
+                maps.push((mag.to_vec(), depth));
             }
         }
         let views = self.cameras.len().max(1);
+        let vd = view_dependence(&vd_maps, (self.centre, self.extent), VD_SAMPLES);
+        drop(vd_maps);
         let mut d = ReflDecision {
             residual_mean: sum / views as f64,
             residual_fraction_over_0_05: over as f64 / pixels.max(1) as f64,
             threshold: self.cfg.reflection.min_residual as f64,
+            view_dependence: vd.spread,
+            view_dependence_samples: vd.samples,
+            view_dependence_threshold: self.cfg.reflection.min_view_dependence as f64,
             run: false,
             reflection_gaussians: 0,
             seeds: 0,
             copied: 0,
         };
-        d.run = d.residual_mean >= d.threshold;
+        d.run = d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold;
         if d.run {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
