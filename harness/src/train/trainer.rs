@@ -48,8 +48,10 @@ impl Stage {
 }
 
 /// The view-dependence measure reduces each view to at most this many
-/// pixels a side and samples at most this many pixels in all.
-const VD_MAX_SIDE: u32 = 128;
+/// pixels a side (box-averaged: Monte Carlo noise in the images, which
+/// also spreads the residual across views, is then about as strong at any
+/// image size) and samples at most this many pixels in all.
+const VD_MAX_SIDE: u32 = 64;
 const VD_SAMPLES: usize = 1 << 16;
 
 /// The measured Stage I residual and what it decided (metrics.json's `reflection`).
