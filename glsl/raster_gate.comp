@@ -16,7 +16,7 @@ layout(push_constant) uniform Push {
     uint count;
     uint pad0;
     uint pad1;
-    uint grids[24];  // x, y, z of grid k at 3k (push constants are std430)
+    uint grids[24];  // x, y, z of grid k at 3k (push constants are std430); 3 x GATE_SLOTS (pipelines/src/raster/mod.rs, checked by a test)
 } pc;
 
 void main() {
