@@ -56,6 +56,12 @@ impl Recorder {
         Self::create(ctx, max_scopes)
     }
 
+    /// [`Recorder::with_profiling`] with 256 scopes when `profile`, else
+    /// [`Recorder::new`].
+    pub fn profiled_if(ctx: &Arc<Context>, profile: bool) -> Result<Recorder> {
+        Self::create(ctx, if profile { 256 } else { 0 })
+    }
+
     fn create(ctx: &Arc<Context>, max_scopes: u32) -> Result<Recorder> {
         let d = &ctx.device;
         let spare = ctx.spare.lock().ok().and_then(|mut s| s.take_commands());

@@ -187,7 +187,7 @@ impl LightFieldModel {
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         let bg = [0.0; CHANNELS as usize];
         loop {
-            let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
             let sc = rec.begin_scope("lf.material");
             self.shading.record_material(&mut rec, &self.set.params.features, self.set.len(), &self.feat)?;
             rec.end_scope(sc);
@@ -250,7 +250,7 @@ impl LightFieldModel {
             }
         };
         let weights = LossWeights { ssim: cfg.lambda_ssim, normal: 0.0, dist: 0.0 };
-        let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+        let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
         self.mlp.record_forward(&mut rec, &self.net.params, count, scratch)?;
         let sc = rec.begin_scope("lf.composite");
         self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;

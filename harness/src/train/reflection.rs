@@ -197,7 +197,7 @@ impl ReflectionModel {
         self.view_buffers(cam.width, cam.height)?;
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
         loop {
-            let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
             record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let t = rec.submit_and_wait()?;
             if self.raster.fit(&mut b.frame)? {
@@ -228,7 +228,7 @@ impl ReflectionModel {
         let (timings, values) = loop {
             self.view_buffers(cam.width, cam.height)?;
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-            let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let sc = rec.begin_scope("refl.composite");
             self.shading.record_composite(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_in)?;

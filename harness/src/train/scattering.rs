@@ -148,7 +148,7 @@ impl ScatteringModel {
         let groups = self.groups(cfg, x.lr_means);
         let (timings, values) = loop {
             let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
-            let mut rec = if x.profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             self.raster.record_forward(&mut rec, &self.set.params, cam, &x.background, sh, &b.frame)?;
             self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
             self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;

@@ -694,7 +694,7 @@ impl Rasterizer {
     /// (empty unless `profile`).
     pub fn forward(&self, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &mut Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
         loop {
-            let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+            let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
             self.record_forward(&mut rec, g, cam, background, sh_degree, frame)?;
             let t = rec.submit_and_wait()?;
             if self.fit(frame)? {
@@ -705,7 +705,7 @@ impl Rasterizer {
 
     /// Run the backward of the last [`Rasterizer::forward`] on `frame`.
     pub fn backward(&self, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
-        let mut rec = if profile { Recorder::with_profiling(&self.ctx, 256)? } else { Recorder::new(&self.ctx)? };
+        let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
         self.record_backward(&mut rec, g, grads, sh_degree, frame)?;
         rec.submit_and_wait()
     }
