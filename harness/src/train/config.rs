@@ -53,10 +53,12 @@ pub struct TrainConfig {
     /// Random initialisation also places this fraction of `init_points`
     /// in the far field the cameras see beyond the cube and beyond the
     /// camera sphere: along random training-view rays, uniform in inverse
-    /// depth out to `init_far_depth` x the scene extent (0: the cube only). Without them a sky or a
-    /// floor that runs to the horizon has no Gaussians of its own, the cube's
-    /// Gaussians paint it view by view, and that misfit is what the Stage I
-    /// residual (and so the reflection set's seeding) then sees.
+    /// depth out to `init_far_depth` x the scene extent (0: the cube only).
+    /// Without them a sky or a floor that runs to the horizon has no
+    /// Gaussians of its own, the cube's Gaussians paint it view by view,
+    /// and that misfit is what the Stage I residual (and so the reflection
+    /// set's seeding) then sees. None start among the cameras, where they
+    /// would sit in front of a held-out view taken from there.
     pub init_far_fraction: f32,
     pub init_far_depth: f32,
     /// Background colour: "white", "black" or "r,g,b".
@@ -195,9 +197,10 @@ pub struct ReflectionConfig {
     /// (mean over training views and pixels of mean_c |I_gt - I_scat|)
     /// reaches this.
     pub min_residual: f32,
-    /// ... and only when the residual changes with the view: the mean
-    /// spread of the signed residual over the views that see the same
-    /// Stage I surface point (train/view_dependence.rs) reaches this.
+    /// ... and only when the residual changes with the view: the median
+    /// over Stage I surface points of the spread of the signed residual
+    /// across the views that see the point (train/view_dependence.rs)
+    /// reaches this.
     pub min_view_dependence: f32,
     /// How the reflection set starts (method-notes §3.4): "copy" = the whole
     /// converged Stage I set (the paper's words); "hull" = seeds on the

@@ -300,7 +300,10 @@ impl Trainer {
             seeds: 0,
             copied: 0,
         };
-        d.run = d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold;
+        // A reflection set that exists (a resumed Stage II) was decided on
+        // when it was made; a run from before the view-dependence test must
+        // not end its Stage II halfway on resume.
+        d.run = self.reflection.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
         if d.run {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
