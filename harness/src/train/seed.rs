@@ -89,37 +89,39 @@ impl Prepared {
         Prepared { cam: v.camera, mask, depth }
     }
 
-    /// View-space position of world point `x`.
-    fn to_view(&self, x: V3) -> V3 {
-        let m = &self.cam.world_to_view;
-        [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64)
-    }
-
-    /// The pixel `x` projects to, if it is in front of the camera and inside the image.
     fn pixel(&self, x: V3) -> Option<(usize, f64)> {
-        let p = self.to_view(x);
-        if p[2] <= 1e-6 {
-            return None;
-        }
-        let c = &self.cam;
-        let u = (c.fx as f64 * p[0] / p[2] + c.cx as f64).round();
-        let v = (c.fy as f64 * p[1] / p[2] + c.cy as f64).round();
-        if u < 0.0 || v < 0.0 || u >= c.width as f64 || v >= c.height as f64 {
-            return None;
-        }
-        Some((v as usize * c.width as usize + u as usize, p[2]))
+        pixel_of(&self.cam, x)
     }
 
-    /// World point at pixel `i`, view depth `z`.
     fn unproject(&self, i: usize, z: f64) -> V3 {
-        let c = &self.cam;
-        let (u, v) = ((i % c.width as usize) as f64, (i / c.width as usize) as f64);
-        let pv = [(u - c.cx as f64) / c.fx as f64 * z, (v - c.cy as f64) / c.fy as f64 * z, z];
-        // world = R^T (p_view - t)
-        let m = &c.world_to_view;
-        let d = [pv[0] - m[0][3] as f64, pv[1] - m[1][3] as f64, pv[2] - m[2][3] as f64];
-        [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
+        unproject_pixel(&self.cam, i, z)
     }
+}
+
+/// The pixel (row-major index) world point `x` projects to in `cam`, and
+/// its view depth, if it is in front of the camera and inside the image.
+pub(crate) fn pixel_of(cam: &Camera, x: V3) -> Option<(usize, f64)> {
+    let m = &cam.world_to_view;
+    let p: V3 = [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64);
+    if !(p[2] > 1e-6) {
+        return None;
+    }
+    let u = (cam.fx as f64 * p[0] / p[2] + cam.cx as f64).round();
+    let v = (cam.fy as f64 * p[1] / p[2] + cam.cy as f64).round();
+    if !(u >= 0.0 && v >= 0.0 && u < cam.width as f64 && v < cam.height as f64) {
+        return None;
+    }
+    Some((v as usize * cam.width as usize + u as usize, p[2]))
+}
+
+/// The world point at pixel `i` (row-major) of `cam`, view depth `z`:
+/// R^T (p_view - t), in f64.
+pub(crate) fn unproject_pixel(cam: &Camera, i: usize, z: f64) -> V3 {
+    let (u, v) = ((i % cam.width as usize) as f64, (i / cam.width as usize) as f64);
+    let pv = [(u - cam.cx as f64) / cam.fx as f64 * z, (v - cam.cy as f64) / cam.fy as f64 * z, z];
+    let m = &cam.world_to_view;
+    let d = [pv[0] - m[0][3] as f64, pv[1] - m[1][3] as f64, pv[2] - m[2][3] as f64];
+    [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
 }
 
 /// Box blur of radius `r` (mean over the window clipped to the image).

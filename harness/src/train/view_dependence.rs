@@ -19,7 +19,9 @@
 //! depth errors at edges and Monte Carlo fireflies give a few samples large
 //! spreads on any scene).
 
+use super::seed::{pixel_of, unproject_pixel};
 use crate::data::downscale_camera;
+use crate::data::image_io::ImageF;
 use tgs_pipelines::Camera;
 
 /// One view's residual and depth, reduced so that its longer side is at
@@ -40,23 +42,14 @@ impl VdMap {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let f = camera.width.max(camera.height).div_ceil(max_side.max(1)).max(1);
         let cam = downscale_camera(camera, f);
-        let (cw, ch, f) = (cam.width as usize, cam.height as usize, f as usize);
+        // Box-averaged residual (a side that would round to 0 leaves an empty map).
         let n = w * h;
-        let mut res = vec![0.0f32; 3 * cw * ch];
+        let res = ImageF::from_planar(camera.width, camera.height, 3, &residual[..3 * n]).downscale(f).map(|r| r.planar()).unwrap_or_default();
+        let (cw, ch, f) = (cam.width as usize, cam.height as usize, f as usize);
         let mut dep = vec![0.0f32; cw * ch];
         for y in 0..ch {
             for x in 0..cw {
-                let i = y * cw + x;
-                for c in 0..3 {
-                    let mut s = 0.0f64;
-                    for yy in y * f..(y * f + f).min(h) {
-                        for xx in x * f..(x * f + f).min(w) {
-                            s += residual.get(c * n + yy * w + xx).copied().unwrap_or(0.0) as f64;
-                        }
-                    }
-                    res[c * cw * ch + i] = (s / (f * f) as f64) as f32;
-                }
-                dep[i] = depth.get((y * f + f / 2).min(h - 1) * w + (x * f + f / 2).min(w - 1)).copied().unwrap_or(0.0);
+                dep[y * cw + x] = depth.get((y * f + f / 2).min(h - 1) * w + (x * f + f / 2).min(w - 1)).copied().unwrap_or(0.0);
             }
         }
         VdMap { camera: cam, residual: res, depth: dep }
@@ -71,31 +64,6 @@ impl VdMap {
         (d.is_finite() && d > 0.0).then_some(d as f64)
     }
 
-    /// The pixel and view depth of world point `x`, if it is in front of
-    /// the camera and inside the image.
-    fn pixel(&self, x: [f64; 3]) -> Option<(usize, f64)> {
-        let m = &self.camera.world_to_view;
-        let p = [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64);
-        if !(p[2] > 1e-6) {
-            return None;
-        }
-        let c = &self.camera;
-        let u = (c.fx as f64 * p[0] / p[2] + c.cx as f64).round();
-        let v = (c.fy as f64 * p[1] / p[2] + c.cy as f64).round();
-        if !(u >= 0.0 && v >= 0.0 && u < c.width as f64 && v < c.height as f64) {
-            return None;
-        }
-        Some((v as usize * c.width as usize + u as usize, p[2]))
-    }
-
-    fn unproject(&self, i: usize, z: f64) -> [f64; 3] {
-        let c = &self.camera;
-        let (u, v) = ((i % c.width as usize) as f64, (i / c.width as usize) as f64);
-        let p = [(u - c.cx as f64) / c.fx as f64 * z, (v - c.cy as f64) / c.fy as f64 * z, z];
-        let m = &c.world_to_view;
-        let d = [p[0] - m[0][3] as f64, p[1] - m[1][3] as f64, p[2] - m[2][3] as f64];
-        [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
-    }
 }
 
 /// The measured view dependence of a residual.
@@ -129,13 +97,13 @@ pub fn view_dependence(views: &[VdMap], sphere: ([f32; 3], f32), max_samples: us
                 continue;
             }
             let Some(z) = a.depth_at(i) else { continue };
-            let x = a.unproject(i, z);
+            let x = unproject_pixel(&a.camera, i, z);
             if (0..3).map(|c| (x[c] - centre[c]).powi(2)).sum::<f64>() >= r2 {
                 continue;
             }
             vals.clear();
             for b in views {
-                let Some((j, zb)) = b.pixel(x) else { continue };
+                let Some((j, zb)) = pixel_of(&b.camera, x) else { continue };
                 let Some(db) = b.depth_at(j) else { continue };
                 if (db - zb).abs() <= 0.02 * zb {
                     let n = b.pixels();
