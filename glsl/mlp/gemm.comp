@@ -19,8 +19,13 @@
 //
 // The k range is split over workgroups in z: workgroup z sums
 // k in [z k_chunk, min((z + 1) k_chunk, kdim)) and writes its C at
-// c_off + z c_zstride (the weight gradients' per-chunk partials).
+// c_off + z c_zstride (the weight gradients' per-chunk partials). With
+// k_count != 0 the k range is the samples too: kdim = min(kdim, rows[0])
+// and k_chunk = weight_chunk(kdim) (mlp/chunks.glsl), the split the host
+// would choose for that count; workgroups past the last chunk return
+// (their partial slots are not summed).
 #extension GL_EXT_control_flow_attributes : require
+#include "mlp/chunks.glsl"
 
 layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
 // Rows and columns of C per invocation (the tile is 8 RB x 8 RB).
@@ -39,6 +44,7 @@ layout(push_constant) uniform Push {
     uint y_off, y_rs, y_cs, a_deriv;
     uint c_off, c_rs, c_zstride, c_act;
     uint m_count;
+    uint k_count;
 } pc;
 
 const uint TM = 8u * RB, TN = 8u * RB, TK = 16u;
@@ -77,8 +83,16 @@ void main() {
     if (i0 >= m) {
         return;
     }
-    uint kbeg = gl_WorkGroupID.z * pc.k_chunk;
-    uint kend = min(kbeg + pc.k_chunk, pc.kdim);
+    uint kdim = pc.kdim, k_chunk = pc.k_chunk;
+    if (pc.k_count != 0u) {
+        kdim = min(kdim, rows[0]);
+        k_chunk = weight_chunk(kdim);
+        if (gl_WorkGroupID.z >= weight_chunk_count(kdim)) {
+            return;
+        }
+    }
+    uint kbeg = gl_WorkGroupID.z * k_chunk;
+    uint kend = min(kbeg + k_chunk, kdim);
 
     float acc[RB][RB];
     [[unroll]] for (uint r = 0u; r < RB; r++) {

@@ -1,14 +1,19 @@
 #version 460
 // Sum of the weight gradients' per-chunk partials in a fixed order:
-// grad[i] = sum over z < chunks of part[z stride + i], z increasing.
+// grad[i] = sum over z < chunks of part[z stride + i], z increasing. With
+// counted != 0 the chunks are those of min(count[0], counted) samples
+// (mlp/chunks.glsl), a count a kernel of the same recording wrote.
 #include "common.glsl"
+#include "mlp/chunks.glsl"
 
 layout(std430, binding = 0) readonly buffer Part { float part[]; };
 layout(std430, binding = 1) writeonly buffer Grad { float grad[]; };
+layout(std430, binding = 2) readonly buffer Count { uint count[]; };
 layout(push_constant) uniform Push {
     uint n;
     uint chunks;
     uint stride;
+    uint counted;
 } pc;
 
 void main() {
@@ -16,8 +21,9 @@ void main() {
     if (i >= pc.n) {
         return;
     }
+    uint chunks = pc.counted != 0u ? weight_chunk_count(min(count[0], pc.counted)) : pc.chunks;
     float s = 0.0;
-    for (uint z = 0u; z < pc.chunks; z++) {
+    for (uint z = 0u; z < chunks; z++) {
         s += part[z * pc.stride + i];
     }
     grad[i] = s;

@@ -263,3 +263,57 @@ fn forward_with_a_gpu_count_matches_and_stops_at_it() {
     }
     check_validation(ctx);
 }
+
+/// The backward with the sample count read on the GPU (one submission per
+/// Stage III step): for counts that give one weight-gradient chunk, a
+/// partial last chunk, exact chunk multiples and the largest splits, the
+/// gradients are bit-identical to the host-count backward on the same
+/// samples (same chunks, same summation order), and a count of 0 gives
+/// zero gradients. Samples past the count hold garbage that must not leak.
+#[test]
+fn backward_with_a_gpu_count_is_bit_identical_to_the_host_count() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("mlp counted backward"));
+    let shape = MlpShape { depth: 3, width: 40, skip: 2, levels_x: 4, levels_w: 2 };
+    let params = shape.init_params(rng.next_u64());
+    let cap = 5000u32;
+    let samples = random_samples(&mut rng, cap as usize, 1.2);
+    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    let d_all: Vec<f32> = (0..OUT * cap).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
+    let mlp = Mlp::new(ctx).unwrap();
+    let p = Buffer::from_slice(ctx, "params", &params).unwrap();
+    let d = Buffer::from_slice(ctx, "d_out", &d_all).unwrap();
+    let grads = |count: u32, counted: bool| -> Vec<u32> {
+        // Host count: a scratch of exactly `count` samples; GPU count: the
+        // full capacity, the samples past the count as well.
+        let s = mlp.scratch(shape, if counted { cap } else { count.max(1) }).unwrap();
+        let k = if counted { cap } else { count } as usize;
+        if k > 0 {
+            s.samples.upload(&flat[..6 * k]).unwrap();
+        }
+        let g = Buffer::from_slice(ctx, "grads", &vec![f32::NAN; params.len()]).unwrap();
+        let c = Buffer::from_slice(ctx, "count", &[count]).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        if counted {
+            mlp.record_forward_counted(&mut rec, &p, &c, &s).unwrap();
+            mlp.record_backward_counted(&mut rec, &p, &c, &d, &g, &s).unwrap();
+        } else {
+            mlp.record_forward(&mut rec, &p, count, &s).unwrap();
+            mlp.record_backward(&mut rec, &p, count, &d, &g, &s).unwrap();
+        }
+        rec.submit_and_wait().unwrap();
+        g.download().unwrap().iter().map(|v| v.to_bits()).collect()
+    };
+    for count in [0u32, 1, 255, 256, 257, 1000, 4095, 4096, 4097, cap] {
+        let (chunk, chunks) = weight_chunks(count);
+        let host = grads(count, false);
+        let gpu = grads(count, true);
+        assert!(gpu.iter().all(|&b| f32::from_bits(b).is_finite()), "count {count}: non-finite gradient");
+        let diff = host.iter().zip(&gpu).filter(|(a, b)| a != b).count();
+        assert_eq!(diff, 0, "count {count} ({chunks} chunks of {chunk}): {diff} gradients differ from the host-count backward");
+        if count == 0 {
+            assert!(gpu.iter().all(|&b| f32::from_bits(b) == 0.0), "no samples must give zero gradients");
+        }
+    }
+    check_validation(ctx);
+}

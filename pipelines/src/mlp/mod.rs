@@ -64,13 +64,17 @@ struct Product {
     c_act: u32,
     /// Rows from the GPU: m = min(m, rows[0]) (binding 4).
     m_count: u32,
+    /// The summed dimension from the GPU: kdim = min(kdim, rows[0]), split
+    /// as [`weight_chunks`] would (k_chunk unused).
+    k_count: u32,
 }
 
 const RELU: u32 = 1;
 const SIGMOID: u32 = 2;
 
 /// Chunk of samples per weight-gradient partial for `n` samples, and the
-/// number of chunks (at most [`MAX_CHUNKS`]).
+/// number of chunks (at most [`MAX_CHUNKS`]). `glsl/mlp/chunks.glsl` is the
+/// same split for a count the GPU holds.
 pub fn weight_chunks(n: u32) -> (u32, u32) {
     let chunk = n.div_ceil(MAX_CHUNKS).next_multiple_of(16).max(MIN_CHUNK);
     (chunk, n.div_ceil(chunk).max(1))
@@ -151,7 +155,7 @@ impl Mlp {
             .iter()
             .map(|&b| Kernel::new(ctx, &KernelDesc { name: "mlp.gemm", spirv: shaders::MLP_GEMM, spec: &[(3, b)], push_bytes: push, subgroup_size: None, full_subgroups: false }))
             .collect::<Result<Vec<_>>>()?;
-        Ok(Mlp { ctx: ctx.clone(), gemm, encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 20)?, reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 12)? })
+        Ok(Mlp { ctx: ctx.clone(), gemm, encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 20)?, reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 16)? })
     }
 
     /// The most samples one scratch of `shape` holds on this device (its
@@ -273,6 +277,20 @@ impl Mlp {
     /// (every parameter, overwritten). The inputs get no gradient (the
     /// reflection geometry is frozen in Stage III).
     pub fn record_backward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+        self.record_backward_rows(rec, params, n, None, d_out, grads, s)
+    }
+
+    /// The backward of the last [`Mlp::record_forward_counted`], on the
+    /// first `count[0]` samples (at most the scratch's capacity), the host
+    /// never reading the count: the same products, chunks and summation
+    /// order as [`Mlp::record_backward`] with that count, so the gradients
+    /// are bit-identical to it.
+    pub fn record_backward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+        self.record_backward_rows(rec, params, s.capacity, Some(count), d_out, grads, s)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn record_backward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
         Self::check(s, params, n)?;
         let sh = s.shape;
         if grads.len() < sh.params() as usize {
@@ -285,7 +303,10 @@ impl Mlp {
             rec.fill(&grads.slice(0, sh.params() as usize), 0)?;
             return Ok(());
         }
-        let (chunk, chunks) = weight_chunks(n);
+        // Counted: every chunk the capacity could need is dispatched; those
+        // past the count's return at once.
+        let (chunk, chunks) = if rows.is_some() { (0, MAX_CHUNKS) } else { weight_chunks(n) };
+        let counted = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.backward");
         for l in (0..sh.layers()).rev() {
             let (x, k) = s.input(l);
@@ -313,9 +334,10 @@ impl Mlp {
                 c_off: sh.offset(l),
                 c_rs: k + 1,
                 c_zstride: sh.params(),
+                k_count: counted,
                 ..Default::default()
             };
-            self.dispatch(rec, &pw, [dy, x, y, &s.part], chunks, None)?;
+            self.dispatch(rec, &pw, [dy, x, y, &s.part], chunks, rows)?;
             if l > 0 {
                 // dH_{l-1} (n x width) = dZ W[:, :width] (the skip layer's
                 // encoded columns need no gradient).
@@ -326,7 +348,7 @@ impl Mlp {
                     k_chunk: j,
                     a_rs: d_ld,
                     a_cs: 1,
-                        a_ones_k: NONE,
+                    a_ones_k: NONE,
                     b_off: sh.offset(l),
                     b_rs: k + 1,
                     b_cs: 1,
@@ -335,15 +357,17 @@ impl Mlp {
                     y_cs: 1,
                     a_deriv: deriv,
                     c_rs: sh.width,
-                        ..Default::default()
+                    m_count: counted,
+                    ..Default::default()
                 };
-                self.dispatch(rec, &pd, [dy, params, y, &s.d[((l - 1) % 2) as usize]], 1, None)?;
+                self.dispatch(rec, &pd, [dy, params, y, &s.d[((l - 1) % 2) as usize]], 1, rows)?;
             }
         }
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.reduce");
-        let push = [sh.params(), chunks, sh.params()];
-        rec.dispatch(&self.reduce, &[s.part.binding(), grads.binding()], bytemuck::cast_slice(&push), grid(&self.ctx, sh.params()))?;
+        let push = [sh.params(), chunks, sh.params(), if rows.is_some() { n } else { 0 }];
+        let count = rows.map(|r| r.binding()).unwrap_or_else(|| grads.binding());
+        rec.dispatch(&self.reduce, &[s.part.binding(), grads.binding(), count], bytemuck::cast_slice(&push), grid(&self.ctx, sh.params()))?;
         rec.end_scope(sc);
         Ok(())
     }
