@@ -1,17 +1,21 @@
 //! A Stage I step is one submission: forward, loss, backward, densification
 //! statistics and Adam, the updates gated on the GPU by whether the view
 //! fitted its frame; so is a Stage II step (colour, rasterization,
-//! composite, loss, backward, Adam on the set and the environment map). A
-//! view that overflowed must change nothing before the host grows the frame
-//! and runs the step again.
+//! composite, loss, backward, Adam on the set and the environment map) and
+//! a Stage III step (reflection render, sample list, the MLP on the GPU's
+//! sample count, composite, losses, backward, Adam). A view that overflowed
+//! must change nothing before the host grows the frame and runs the step
+//! again.
 
 use tgs::train::init::{gaussians_from_points, random_points};
+use tgs::train::lightfield::{LightFieldModel, LightFieldStepInput};
 use tgs::train::reflection::{ReflStepInput, ReflectionModel};
 use tgs::train::rng::Rng;
 use tgs::train::scattering::{ScatteringModel, StepInput};
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Camera, Features, HostGaussians, Rasterizer};
+use tgs_pipelines::mlp::MlpShape;
+use tgs_pipelines::{Camera, Features, HostGaussians, Rasterizer, ShadeParams};
 use tgs_tests::{check_validation, ctx_shared};
 
 const SIZE: u32 = 128;
@@ -170,5 +174,68 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
 
     // One Adam step moved the geometry, the material and the map.
     assert_one_step(&before, (&reflection_bits(&a), out_a.loss), (&reflection_bits(&b), out_b.loss), &["param.means", "param.quats", "param.features", "adam_v.features", "env.params", "env.v"]);
+    check_validation(ctx);
+}
+
+/// Every parameter and moment of a Stage III model: the reflection set
+/// (material trained) and the light field's network.
+fn light_field_bits(m: &LightFieldModel) -> Bits {
+    let mut all = bits(&m.set);
+    let n = &m.net;
+    for (name, b) in [("net.params", &n.params), ("net.m", &n.m), ("net.v", &n.v)] {
+        all.push((name.to_string(), b.download().unwrap().iter().map(|v| v.to_bits()).collect()));
+    }
+    all
+}
+
+#[test]
+fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
+    let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());
+    let ctx = ctx_shared();
+    let g = big_splats(3000);
+    let mut cfg = TrainConfig::default();
+    cfg.light_field.lambda_hf = 0.1;
+    let cam = camera();
+    let pixels = (SIZE * SIZE) as usize;
+    let plane = |k: usize| -> Vec<f32> { (0..3 * pixels).map(|i| 0.1 + 0.8 * (((i + k) * 7919) % 1000) as f32 / 1000.0).collect() };
+    let target = Buffer::from_slice(ctx, "target", &plane(0)).unwrap();
+    let scat = Buffer::from_slice(ctx, "scat", &plane(311)).unwrap();
+    let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
+    let input = LightFieldStepInput { iteration: 1, global_iteration: 1, camera: &cam, target: &target, scat: Some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: false };
+    let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
+    let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true };
+    let model = || {
+        let set = ReflectionModel::from_scattering(ctx, Some(&g), &[], &cfg.reflection, 1e-15).unwrap().into_set();
+        LightFieldModel::new(ctx, set, LightFieldModel::init_net(ctx, shape, 5).unwrap(), shade, 1e-15).unwrap()
+    };
+
+    // A: the first frame overflows, nothing is updated, the frame grows
+    // and the step runs again.
+    let mut a = model();
+    let before = light_field_bits(&a);
+    let submitted = ctx.submissions();
+    let out_a = a.step(&cfg, &mut scattering, &input).unwrap();
+    assert!(ctx.submissions() - submitted > 1, "the scene must overflow the first frame");
+    let coverage = a.take_coverage().unwrap();
+    assert!(coverage > 0.1 && coverage <= 1.0, "Phi ran on {coverage} of the pixels");
+
+    // B: a render grew the frame first; the same step is one submission.
+    let mut b = model();
+    b.render(&cam, &scat).unwrap();
+    let submitted = ctx.submissions();
+    let out_b = b.step(&cfg, &mut scattering, &input).unwrap();
+    assert_eq!(ctx.submissions() - submitted, 1, "a Stage III step that fits is one submission (sample count, loss and statistics ride it back)");
+    assert_eq!(b.take_coverage(), Some(coverage));
+    assert_one_step(&before, (&light_field_bits(&a), out_a.loss), (&light_field_bits(&b), out_b.loss), &["param.features", "adam_v.features", "net.params", "net.v"]);
+
+    // C: the host reads the sample count first (three submissions: the
+    // forward, the count's download, the rest): the same step, bit for bit.
+    let mut c = model();
+    c.one_submission = false;
+    c.render(&cam, &scat).unwrap();
+    let submitted = ctx.submissions();
+    let out_c = c.step(&cfg, &mut scattering, &input).unwrap();
+    assert_eq!(ctx.submissions() - submitted, 3);
+    assert_one_step(&before, (&light_field_bits(&c), out_c.loss), (&light_field_bits(&b), out_b.loss), &[]);
     check_validation(ctx);
 }

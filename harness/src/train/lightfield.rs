@@ -14,7 +14,7 @@ use super::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
-use tgs_engine::{Buffer, Context, Recorder, Timing};
+use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::MATERIAL;
@@ -94,6 +94,12 @@ pub struct LightFieldModel {
     sizes: HashMap<(u32, u32), ViewBuffers>,
     /// Samples evaluated and pixels seen since the last `take_coverage`.
     evaluated: (u64, u64),
+    /// The sample count of the last one-submission step, ridden back.
+    count_host: Readback<u32>,
+    /// Steps may be one submission (see [`LightFieldModel::step`]); off,
+    /// the host reads every view's sample count first (the same results,
+    /// bit for bit: tests/tests/train_step.rs compares them).
+    pub one_submission: bool,
 }
 
 /// The box Phi's positions are normalized by: the reflection set's 1st-99th
@@ -144,6 +150,8 @@ impl LightFieldModel {
             d_phi: None,
             sizes: HashMap::new(),
             evaluated: (0, 0),
+            count_host: Readback::new(ctx, "lf.count_host", 1)?,
+            one_submission: true,
             ctx: ctx.clone(),
         })
     }
@@ -185,16 +193,9 @@ impl LightFieldModel {
         self.view_buffers(cam.width, cam.height)?;
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
-        let bg = [0.0; CHANNELS as usize];
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            let sc = rec.begin_scope("lf.material");
-            self.shading.record_material(&mut rec, &self.set.params.features, self.set.len(), &self.feat)?;
-            rec.end_scope(sc);
-            self.raster.record_forward_with(&mut rec, &self.set.params, &self.feat, cam, &bg, 0, &b.frame)?;
-            let sc = rec.begin_scope("lf.samples");
-            self.shading.record_samples(&mut rec, cam, &self.shade, &b.frame.out, &b.samples, &scratch.samples)?;
-            rec.end_scope(sc);
+            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
             timings.extend(rec.submit_and_wait()?);
             if self.raster.fit(&mut b.frame)? {
                 break;
@@ -228,7 +229,14 @@ impl LightFieldModel {
         super::log_lerp(lf.lr, lf.lr_final, it as f64 / lf.iterations.max(1) as f64) as f32
     }
 
-    /// One Stage III step on one view.
+    /// One Stage III step on one view. With the scattering set frozen (the
+    /// default) and room in the sample list for every pixel, the step is
+    /// one submission: the reflection render, the sample list, the MLP on
+    /// the GPU's sample count, the composite, the losses, the backward and
+    /// Adam (gated on the frame having fitted; a view that overflowed
+    /// updates nothing and runs again after its frame grew). Otherwise the
+    /// forward is its own submission: the scattering set's render, or the
+    /// sample count the host must check against the list's capacity.
     pub fn step(&mut self, cfg: &TrainConfig, scattering: &mut ScatteringModel, x: &LightFieldStepInput) -> Result<StepOutput> {
         let cam = x.camera;
         let mut timings = Vec::new();
@@ -236,12 +244,9 @@ impl LightFieldModel {
         if train_scat {
             timings.extend(scattering.forward_view(cam, x.sh_degree, &x.background, x.profile)?);
         }
-        let count = self.forward(cam, x.profile, &mut timings)?;
-        self.evaluated.0 += count as u64;
-        self.evaluated.1 += (cam.width * cam.height) as u64;
-        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
-        let scratch = self.scratch.as_ref().context("light-field scratch")?;
-        let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
+        self.view_buffers(cam.width, cam.height)?;
+        let room = self.scratch.as_ref().is_some_and(|s| s.capacity() >= cam.width * cam.height);
+        let host_count = if train_scat || !room || !self.one_submission { Some(self.forward(cam, x.profile, &mut timings)?) } else { None };
         let (scat, scat_grad) = match x.scat {
             Some(s) => (s, None),
             None => {
@@ -250,46 +255,80 @@ impl LightFieldModel {
             }
         };
         let weights = LossWeights { ssim: cfg.lambda_ssim, normal: 0.0, dist: 0.0 };
-        let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
-        self.mlp.record_forward(&mut rec, &self.net.params, count, scratch)?;
-        let sc = rec.begin_scope("lf.composite");
-        self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
-        rec.end_scope(sc);
-        self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
         let lf = &cfg.light_field;
-        if lf.lambda_hf > 0.0 {
-            let sc = rec.begin_scope("loss.hf");
-            self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, lf.hf_percentile / 100.0, lf.lambda_hf, &b.loss_grad, &self.hf_stats)?;
-            rec.end_scope(sc);
-        }
-        let sc = rec.begin_scope("lf.composite_backward");
-        if let Some(g) = scat_grad {
-            // The composite writes the colour planes; the scattering
-            // geometry planes get no gradient in Stage III.
-            let n = (cam.width * cam.height) as usize;
-            rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
-        }
-        self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad)?;
-        rec.end_scope(sc);
-        self.mlp.record_backward(&mut rec, &self.net.params, count, d_phi, &self.net.grads, scratch)?;
-        self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
-        let sc = rec.begin_scope("lf.material_backward");
-        self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
-        rec.end_scope(sc);
-        if train_scat {
-            scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration)?;
-        }
-        let sc = rec.begin_scope("adam");
         let it = x.iteration as u64;
-        let n = &self.net;
-        self.adam.record(&mut rec, &n.params, &n.grads, &n.m, &n.v, n.shape.params() as usize, &AdamGroup::single(Self::lr(cfg, x.iteration)), it)?;
+        let net_group = AdamGroup::single(Self::lr(cfg, x.iteration));
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
-        let s = &self.set;
-        let len = (MATERIAL * s.len()) as usize;
-        let group = AdamGroup { lr: lf.lr_f0, lr_rest: lf.lr_r, stride: MATERIAL, split: 3 };
-        self.adam.record(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, len, &group, it)?;
-        rec.end_scope(sc);
-        timings.extend(rec.submit_and_wait()?);
+        let material_len = (MATERIAL * self.set.len()) as usize;
+        let material_group = AdamGroup { lr: lf.lr_f0, lr_rest: lf.lr_r, stride: MATERIAL, split: 3 };
+        loop {
+            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
+            let scratch = self.scratch.as_ref().context("light-field scratch")?;
+            let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
+            let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
+            match host_count {
+                Some(n) => self.mlp.record_forward(&mut rec, &self.net.params, n, scratch)?,
+                None => {
+                    record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
+                    self.mlp.record_forward_counted(&mut rec, &self.net.params, &b.samples.count, scratch)?;
+                }
+            }
+            let sc = rec.begin_scope("lf.composite");
+            self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
+            rec.end_scope(sc);
+            self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
+            if lf.lambda_hf > 0.0 {
+                let sc = rec.begin_scope("loss.hf");
+                self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, lf.hf_percentile / 100.0, lf.lambda_hf, &b.loss_grad, &self.hf_stats)?;
+                rec.end_scope(sc);
+            }
+            let sc = rec.begin_scope("lf.composite_backward");
+            if let Some(g) = scat_grad {
+                // The composite writes the colour planes; the scattering
+                // geometry planes get no gradient in Stage III.
+                let n = (cam.width * cam.height) as usize;
+                rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
+            }
+            self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad)?;
+            rec.end_scope(sc);
+            match host_count {
+                Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
+                None => self.mlp.record_backward_counted(&mut rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
+            }
+            self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
+            let sc = rec.begin_scope("lf.material_backward");
+            self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
+            rec.end_scope(sc);
+            if train_scat {
+                scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration)?;
+            }
+            let (n, s) = (&self.net, &self.set);
+            let np = n.shape.params() as usize;
+            if host_count.is_some() {
+                let sc = rec.begin_scope("adam");
+                self.adam.record(&mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it)?;
+                self.adam.record(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, material_len, &material_group, it)?;
+                rec.end_scope(sc);
+            } else {
+                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.adam.grid(np), self.adam.grid(material_len)])?;
+                let sc = rec.begin_scope("adam");
+                self.adam.record_gated(&mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it, &args[0])?;
+                self.adam.record_gated(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, material_len, &material_group, it, &args[1])?;
+                rec.end_scope(sc);
+                rec.read_back(&b.samples.count, 0, &self.count_host)?;
+            }
+            timings.extend(rec.submit_and_wait()?);
+            if host_count.is_some() || self.raster.fit(&mut b.frame)? {
+                break;
+            }
+        }
+        let count = match host_count {
+            Some(n) => n,
+            None => self.count_host.read()?[0],
+        };
+        self.evaluated.0 += count as u64;
+        self.evaluated.1 += (cam.width * cam.height) as u64;
+        let b = &self.sizes[&(cam.width, cam.height)];
         let values = b.loss.values()?;
         let mut loss = values.photometric(cfg.lambda_ssim as f64);
         if lf.lambda_hf > 0.0 {
@@ -350,4 +389,18 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
         return 1.0;
     }
     -(nn[0] * ray[0] + nn[1] * ray[1] + nn[2] * ray[2]) / (nl * l)
+}
+
+/// Record the reflection set's material features, its rasterization into
+/// `b.frame` and the view's sample list (Phi's inputs, `b.samples.count`).
+#[allow(clippy::too_many_arguments)]
+fn record_forward(rec: &mut Recorder, shading: &LightFieldShading, raster: &Rasterizer, set: &TrainableSet, feat: &Buffer<f32>, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
+    let sc = rec.begin_scope("lf.material");
+    shading.record_material(rec, &set.params.features, set.len(), feat)?;
+    rec.end_scope(sc);
+    raster.record_forward_with(rec, &set.params, feat, cam, &[0.0; CHANNELS as usize], 0, &b.frame)?;
+    let sc = rec.begin_scope("lf.samples");
+    shading.record_samples(rec, cam, shade, &b.frame.out, &b.samples, &scratch.samples)?;
+    rec.end_scope(sc);
+    Ok(())
 }
