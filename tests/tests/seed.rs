@@ -3,7 +3,8 @@
 //! hull on a synthetic glass sphere whose residual is exactly its
 //! silhouette (plus scattered noise), seen from a ring of cameras around
 //! an opaque ball inside it: the seeds must lie on the sphere's front with
-//! radial normals; no residual gives no seeds.
+//! radial normals; no residual gives no seeds, and neither does residual
+//! over every view (glass that fills the frame: nothing is carved).
 
 use tgs::train::seed::{jacobi_eigen, quat_for_normal, residual_hull_seeds, SeedParams, SeedView};
 use tgs_pipelines::Camera;
@@ -175,4 +176,22 @@ fn no_residual_no_seeds() {
     let all = vec![1.0f32; (SIZE * SIZE) as usize];
     let sv2: Vec<SeedView> = cams.iter().map(|c| SeedView { camera: *c, residual: &all, depth: &zero }).collect();
     assert!(residual_hull_seeds(&sv2, &SeedParams::default()).is_empty());
+}
+
+/// Glass that fills every view (`lantern`): residual on every pixel, the
+/// opaque ball behind it. Every point between the cameras and the ball
+/// projects onto residual everywhere, so nothing is carved and no ray has
+/// evidence of where a surface starts: no seeds, rather than seeds at the
+/// near end of every ray.
+#[test]
+fn residual_over_every_view_seeds_nothing() {
+    let (cams, _, depth) = views(false, false);
+    let all = vec![0.03f32; (SIZE * SIZE) as usize];
+    let sv: Vec<SeedView> = cams.iter().zip(&depth).map(|(c, z)| SeedView { camera: *c, residual: &all, depth: z }).collect();
+    let p = SeedParams { max_rays: 2000, ..SeedParams::default() };
+    assert!(residual_hull_seeds(&sv, &p).is_empty());
+    // The silhouette case still seeds (its rays cross carved air first).
+    let (cams, res, depth) = views(false, true);
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    assert!(residual_hull_seeds(&sv, &p).len() > 500);
 }

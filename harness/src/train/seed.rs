@@ -8,10 +8,13 @@
 //! surface does not. So the residual's multi-view intersection (a visual
 //! hull of the residual, carved only where a view sees the point in front of
 //! its Stage I depth) encloses the transmissive surface, and the first hull
-//! point along a residual pixel's ray lies on its front. Seeds are those
-//! first points; their normals are the local plane of neighbouring seeds
-//! (PCA), facing the camera that found them; their size is the seed
-//! spacing. Stage II then refines them by the reflection it has to explain.
+//! point along a residual pixel's ray lies on its front, provided the ray
+//! met carved space first: where glass fills every view, the residual has no
+//! silhouette, nothing near the cameras is carved, and a ray that is inside
+//! the hull from its start says nothing about where the surface is. Seeds
+//! are the first hull points of rays that crossed carved space; their
+//! normals are the local plane of neighbouring seeds (PCA), facing the
+//! camera that found them; their size is the seed spacing. Stage II then refines them by the reflection it has to explain.
 
 use tgs_pipelines::Camera;
 
@@ -147,10 +150,9 @@ fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     out
 }
 
-/// Whether world point `x` is in the residual hull: at least 3 views see
-/// it in front of their Stage I surface (depth margin 2%), and at least
-/// `agree` of those see residual there.
-fn in_hull(views: &[Prepared], x: V3, agree: f32) -> bool {
+/// None: fewer than 3 views see `x` in front of their surface; else whether
+/// it is in the hull (false: carved by the views that see it).
+fn hull_test(views: &[Prepared], x: V3, agree: f32) -> Option<bool> {
     let (mut seen, mut hit) = (0u32, 0u32);
     for v in views {
         if let Some((i, z)) = v.pixel(x) {
@@ -160,12 +162,13 @@ fn in_hull(views: &[Prepared], x: V3, agree: f32) -> bool {
             }
         }
     }
-    seen >= 3 && hit as f64 >= agree as f64 * seen as f64
+    (seen >= 3).then(|| hit as f64 >= agree as f64 * seen as f64)
 }
 
 /// Seeds of the reflection set from the views' residuals and Stage I depths
 /// (see the module documentation). Deterministic; empty when no pixel has
-/// residual or fewer than 3 views agree anywhere.
+/// residual, fewer than 3 views agree anywhere, or no ray crosses carved
+/// space before the hull.
 pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
@@ -186,12 +189,22 @@ pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
             }
             let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
             let z_near = 0.05 * z_far;
+            // A ray that starts inside the hull has no evidence of where
+            // the surface begins (the residual covers what every view sees
+            // there): it seeds only after some of it was carved.
+            let mut carved = false;
             for s in 0..p.steps {
                 let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
                 let x = v.unproject(i, z);
-                if in_hull(&prepared, x, p.agree) {
-                    found.push((x, vi));
-                    break;
+                match hull_test(&prepared, x, p.agree) {
+                    Some(true) => {
+                        if carved {
+                            found.push((x, vi));
+                        }
+                        break;
+                    }
+                    Some(false) => carved = true,
+                    None => {}
                 }
             }
         }
