@@ -14,16 +14,16 @@
 //
 // Rows on the GPU: with m_count != 0, C has min(m, rows[0]) rows (a sample
 // count a kernel wrote, e.g. the light field's compacted list); the grid
-// covers m and workgroups past the count return at once, so the work
-// follows the count without the host reading it back.
+// covers m and workgroups past the count do no work, so the work follows
+// the count without the host reading it back.
 //
 // The k range is split over workgroups in z: workgroup z sums
 // k in [z k_chunk, min((z + 1) k_chunk, kdim)) and writes its C at
 // c_off + z c_zstride (the weight gradients' per-chunk partials). With
 // k_count != 0 the k range is the samples too: kdim = min(kdim, rows[0])
 // and k_chunk = weight_chunk(kdim) (mlp/chunks.glsl), the split the host
-// would choose for that count; workgroups past the last chunk return
-// (their partial slots are not summed).
+// would choose for that count; workgroups past the last chunk do no work
+// and write nothing (their partial slots are not summed).
 #extension GL_EXT_control_flow_attributes : require
 #include "mlp/chunks.glsl"
 
@@ -74,26 +74,37 @@ float load_b(uint k, uint j) {
     return b[pc.b_off + k * pc.b_rs + j * pc.b_cs];
 }
 
+// g's bits reversed within log2(n) bits (n a power of two).
+uint spread(uint g, uint n) {
+    return n <= 1u ? g : bitfieldReverse(g) >> (32u - uint(findMSB(n)));
+}
+
 void main() {
     uint lid = gl_LocalInvocationID.x;
     uint tx = lid % 8u, ty = lid / 8u;
-    uint i0 = gl_WorkGroupID.y * TM, j0 = gl_WorkGroupID.x * TN;
-    uint m = pc.m_count != 0u ? min(pc.m, rows[0]) : pc.m;
-    // Uniform per workgroup, before any barrier.
-    if (i0 >= m) {
-        return;
-    }
+    // Counted rows and chunks: the grid (a power of two along y and z) is
+    // walked in bit-reversed order, so that the busy workgroups (the first
+    // rows and chunks) spread over the grid. A driver that hands each thread
+    // a contiguous range of workgroups (llvmpipe does) then balances them;
+    // measured on lavapipe, 2 threads, 2,340 of 4,096 samples: 59 ms
+    // without against 36 ms with the host count).
+    uint row_tile = pc.m_count != 0u ? spread(gl_WorkGroupID.y, gl_NumWorkGroups.y) : gl_WorkGroupID.y;
+    uint zc = pc.k_count != 0u ? spread(gl_WorkGroupID.z, gl_NumWorkGroups.z) : gl_WorkGroupID.z;
+    uint i0 = row_tile * TM, j0 = gl_WorkGroupID.x * TN;
+    uint count = (pc.m_count | pc.k_count) != 0u ? rows[0] : 0u;
+    uint m = pc.m_count != 0u ? min(pc.m, count) : pc.m;
     uint kdim = pc.kdim, k_chunk = pc.k_chunk;
     if (pc.k_count != 0u) {
-        kdim = min(kdim, rows[0]);
+        kdim = min(kdim, count);
         k_chunk = weight_chunk(kdim);
-        if (gl_WorkGroupID.z >= weight_chunk_count(kdim)) {
-            return;
-        }
     }
-    uint kbeg = gl_WorkGroupID.z * k_chunk;
+    uint kbeg = zc * k_chunk;
     uint kend = min(kbeg + k_chunk, kdim);
-
+    // A workgroup past the rows or the chunks (uniform per workgroup) has
+    // nothing to do: an empty k range, and it writes nothing but chunk 0.
+    if (i0 >= m || (zc > 0u && kbeg >= kdim)) {
+        kend = kbeg;
+    }
     float acc[RB][RB];
     [[unroll]] for (uint r = 0u; r < RB; r++) {
         [[unroll]] for (uint q = 0u; q < RB; q++) {
@@ -124,7 +135,7 @@ void main() {
         }
         barrier();
     }
-    uint base = pc.c_off + gl_WorkGroupID.z * pc.c_zstride;
+    uint base = pc.c_off + zc * pc.c_zstride;
     [[unroll]] for (uint r = 0u; r < RB; r++) {
         uint i = i0 + ty + 8u * r;
         [[unroll]] for (uint q = 0u; q < RB; q++) {

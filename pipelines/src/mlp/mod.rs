@@ -28,8 +28,10 @@ use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Recorder};
 /// smaller side, up to 16 (measured on llvmpipe, 8 x 256 on 4,096 samples:
 /// blocks of 4 / 8 / 16 give 2.0 / 3.9 / 7.1 GFLOP/s forward).
 const BLOCKS: [u32; 3] = [4, 8, 16];
-/// At most this many sample chunks hold weight-gradient partials.
+/// At most this many sample chunks hold weight-gradient partials (a power
+/// of two: the counted backward walks them in bit-reversed order).
 const MAX_CHUNKS: u32 = 16;
+const _: () = assert!(MAX_CHUNKS.is_power_of_two());
 /// Smallest chunk of samples per weight-gradient partial.
 const MIN_CHUNK: u32 = 256;
 const NONE: u32 = u32::MAX;
@@ -216,7 +218,11 @@ impl Mlp {
         let tile = 8 * BLOCKS[k];
         let [a, b, y, c] = bufs.map(|b| b.binding());
         let r = rows.map(|r| r.binding()).unwrap_or_else(|| a.clone());
-        rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(tile), p.m.div_ceil(tile), chunks])
+        // Counted rows are walked in bit-reversed order over a power-of-two
+        // grid (glsl/mlp/gemm.comp `spread`); counted chunks are MAX_CHUNKS.
+        let row_tiles = p.m.div_ceil(tile);
+        let row_tiles = if p.m_count != 0 { row_tiles.next_power_of_two() } else { row_tiles };
+        rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(tile), row_tiles, chunks])
     }
 
     /// Record Phi on the first `n` samples of `s.samples` into `s.out`.
