@@ -232,8 +232,10 @@ impl Mlp {
 
     /// Record Phi on the first `count[0]` samples of `s.samples` (at most
     /// the scratch's capacity), a count a kernel of the same recording
-    /// wrote: the host never reads it, and workgroups past it return at
-    /// once (the light field rendered inside a host's command buffer).
+    /// wrote: the host never reads it (the light field rendered inside a
+    /// host's command buffer, or a Stage III step in one submission). The
+    /// grid covers the capacity; workgroups past the count skip their work,
+    /// and the busy ones are spread over the grid (glsl/mlp/gemm.comp).
     pub fn record_forward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, s: &MlpScratch) -> Result<()> {
         self.record_forward_rows(rec, params, s.capacity, Some(count), s)
     }
@@ -310,7 +312,7 @@ impl Mlp {
             return Ok(());
         }
         // Counted: every chunk the capacity could need is dispatched; those
-        // past the count's return at once.
+        // past the count's skip their work.
         let (chunk, chunks) = if rows.is_some() { (0, MAX_CHUNKS) } else { weight_chunks(n) };
         let counted = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.backward");
