@@ -162,7 +162,7 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32) -> Option<bool> {
             }
         }
     }
-    (seen >= 3).then(|| hit as f64 >= agree as f64 * seen as f64)
+    (seen >= 3).then_some(hit as f64 >= agree as f64 * seen as f64)
 }
 
 /// Seeds of the reflection set from the views' residuals and Stage I depths
