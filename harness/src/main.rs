@@ -123,7 +123,7 @@ enum Cmd {
 
 #[derive(Subcommand)]
 enum SceneCmd {
-    /// Write a built-in scene (glass, glass-tiny, spheres-128, spheres-256) as
+    /// Write a built-in scene (glass, glass-tiny, diffuse, spheres-128, spheres-256) as
     /// a dataset into a new or empty directory.
     Make {
         name: String,

@@ -22,11 +22,14 @@ pub struct SceneSpec {
     pub train: u32,
     pub test: u32,
     pub points: u32,
+    /// The glass sphere (false: the same room without it, a diffuse scene).
+    pub glass: bool,
 }
 
-pub const SCENES: [SceneSpec; 2] = [
-    SceneSpec { name: "glass", size: 64, train: 32, test: 8, points: 4000 },
-    SceneSpec { name: "glass-tiny", size: 48, train: 16, test: 4, points: 2000 },
+pub const SCENES: [SceneSpec; 3] = [
+    SceneSpec { name: "glass", size: 64, train: 32, test: 8, points: 4000, glass: true },
+    SceneSpec { name: "glass-tiny", size: 48, train: 16, test: 4, points: 2000, glass: true },
+    SceneSpec { name: "diffuse", size: 64, train: 32, test: 8, points: 4000, glass: false },
 ];
 
 pub fn spec(name: &str) -> Result<SceneSpec> {
@@ -154,7 +157,7 @@ pub fn write_new_dir(dir: &Path, fill: impl FnOnce(&Path) -> Result<()>) -> Resu
     crate::export::sync_dir(dir)
 }
 
-/// Write the built-in scene called `name` (`glass`, `glass-tiny`,
+/// Write the built-in scene called `name` (`glass`, `glass-tiny`, `diffuse`,
 /// `spheres-128`, `spheres-256`) into the new directory `dir`.
 pub fn make_named(name: &str, dir: &Path, progress: impl FnMut(u32, u32)) -> Result<()> {
     match spheres::SpheresSpec::named(name) {
@@ -173,7 +176,8 @@ pub fn list() -> Vec<String> {
 }
 
 fn write_dataset(spec: &SceneSpec, dir: &Path, mut progress: impl FnMut(u32, u32)) -> Result<()> {
-    let scene = Scene::new();
+    let mut scene = Scene::new();
+    scene.glass = spec.glass;
     let total = spec.train + spec.test;
     let mut done = 0;
     for (split, n, test) in [("train", spec.train, false), ("test", spec.test, true)] {

@@ -57,6 +57,8 @@ pub struct Scene {
     blocks: Vec<Box3>,
     inner_box: Box3,
     ball: (V3, f64),
+    /// Whether the glass sphere is there (without it: a diffuse scene).
+    pub glass: bool,
 }
 
 impl Default for Scene {
@@ -86,6 +88,7 @@ impl Scene {
             blocks,
             inner_box: Box3 { lo: [-0.38, -0.3, 0.05], hi: [-0.04, 0.04, 0.39], color: [0.15, 0.6, 0.55] },
             ball: ([0.18, 0.15, 0.33], 0.26),
+            glass: true,
         }
     }
 
@@ -138,7 +141,7 @@ impl Scene {
             let band = (((n[2] * 4.0).floor() as i64) & 1) as f64;
             take(Hit { t, p, n, mat: Material::Diffuse([0.9, 0.45 + 0.25 * band, 0.15]) });
         }
-        if glass {
+        if glass && self.glass {
             for t in hit_sphere(GLASS_C, GLASS_R, o, d) {
                 let p = add(o, mul(d, t));
                 take(Hit { t, p, n: norm(sub(p, GLASS_C)), mat: Material::Glass });
