@@ -1,8 +1,12 @@
 #version 460
 // Fused Adam step (PyTorch form) over one parameter buffer. Elements whose
 // index modulo `stride` is below `split` use lr_a, the others lr_b (the SH
-// DC and rest coefficients of a feature block). A non-finite gradient counts
-// as zero, so one bad pixel cannot poison the parameters or the moments.
+// DC and rest coefficients of a feature block). Only the first `active`
+// elements of each block of `stride` are stepped (invocation t: block
+// t / active, element t % active; n counts those): the SH coefficients of
+// degrees not yet active have zero gradients and would not move. A
+// non-finite gradient counts as zero, so one bad pixel cannot poison the
+// parameters or the moments.
 #include "common.glsl"
 
 layout(std430, binding = 0) buffer Param { float param[]; };
@@ -13,7 +17,7 @@ layout(push_constant) uniform Push {
     uint n;
     uint stride;
     uint split;
-    uint pad;
+    uint n_active;
     float lr_a;
     float lr_b;
     float beta1;
@@ -24,10 +28,11 @@ layout(push_constant) uniform Push {
 } pc;
 
 void main() {
-    uint i = wg_linear() * WG + gl_LocalInvocationID.x;
-    if (i >= pc.n) {
+    uint t = wg_linear() * WG + gl_LocalInvocationID.x;
+    if (t >= pc.n) {
         return;
     }
+    uint i = pc.n_active == pc.stride ? t : (t / pc.n_active) * pc.stride + t % pc.n_active;
     float g = grad[i];
     if (isnan(g) || isinf(g)) {
         g = 0.0;

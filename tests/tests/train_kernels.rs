@@ -10,7 +10,7 @@ fn adam_matches_f64_reference_and_ignores_non_finite_gradients() {
     let ctx = ctx_shared();
     let mut rng = Rng(seed("adam_matches_f64_reference"));
     let n = 1000;
-    let group = AdamGroup { lr: 0.01, lr_rest: 0.001, stride: 4, split: 1 };
+    let group = AdamGroup::split(0.01, 0.001, 4, 1);
     let adam = Adam::new(ctx, 1e-15).unwrap();
     let p0: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
     let (param, grad, m, v) = (Buffer::from_slice(ctx, "p", &p0).unwrap(), Buffer::<f32>::new(ctx, "g", n).unwrap(), Buffer::<f32>::new(ctx, "m", n).unwrap(), Buffer::<f32>::new(ctx, "v", n).unwrap());
@@ -185,5 +185,52 @@ fn opacity_reset_caps_opacity_and_clears_its_moments() {
     }
     assert!(set.m.opacity.download().unwrap().iter().chain(&set.v.opacity.download().unwrap()).all(|&x| x == 0.0));
     assert!(set.m.means.download().unwrap().iter().all(|&x| x == 1.0), "other moments untouched");
+    check_validation(ctx);
+}
+
+/// Adam on the first `active` elements of each block (the SH coefficients
+/// of the active degrees): the others are not touched, not even where their
+/// gradient is non-zero; and where their gradient is zero (inactive SH
+/// coefficients), the result equals stepping every element, bit for bit.
+#[test]
+fn adam_steps_only_the_active_elements_of_each_block() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("adam active"));
+    let (blocks, stride, active) = (777usize, 48u32, 12u32);
+    let n = blocks * stride as usize;
+    let adam = Adam::new(ctx, 1e-15).unwrap();
+    let p0: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let live = |i: usize| (i % stride as usize) < active as usize;
+    let grad_seed = rng.next_u64();
+    let run = |group: AdamGroup, zero_inactive: bool| -> [Vec<u32>; 3] {
+        let mut rng = Rng(grad_seed);
+        let bufs = [Buffer::from_slice(ctx, "p", &p0).unwrap(), Buffer::<f32>::new(ctx, "m", n).unwrap(), Buffer::<f32>::new(ctx, "v", n).unwrap()];
+        let grad = Buffer::<f32>::new(ctx, "g", n).unwrap();
+        for t in 1..=3u64 {
+            let g: Vec<f32> = (0..n).map(|i| if zero_inactive && !live(i) { 0.0 } else { rng.uniform(-1.0, 1.0) as f32 }).collect();
+            grad.upload(&g).unwrap();
+            let mut rec = Recorder::new(ctx).unwrap();
+            adam.record(&mut rec, &bufs[0], &grad, &bufs[1], &bufs[2], n, &group, t).unwrap();
+            rec.submit_and_wait().unwrap();
+        }
+        bufs.map(|b| b.download().unwrap().iter().map(|v| v.to_bits()).collect())
+    };
+    let all = AdamGroup::split(0.01, 0.001, stride, 3);
+    let some = AdamGroup { active, ..all };
+    assert_eq!(some.items(n), blocks * active as usize);
+    // Non-zero gradients everywhere: inactive elements keep their value and zero moments.
+    let [p, m, v] = run(some, false);
+    let [pa, ma, va] = run(all, false);
+    for i in 0..n {
+        if live(i) {
+            assert_eq!((p[i], m[i], v[i]), (pa[i], ma[i], va[i]), "active element {i} differs from stepping everything");
+        } else {
+            assert_eq!((p[i], m[i], v[i]), (p0[i].to_bits(), 0, 0), "inactive element {i} was stepped");
+        }
+    }
+    // Zero gradients where inactive: the same as stepping every element.
+    assert!(run(some, true) == run(all, true), "skipping zero-gradient elements changed the result");
+    // Blocks must be whole.
+    assert!(adam.record(&mut Recorder::new(ctx).unwrap(), &Buffer::<f32>::new(ctx, "p", 50).unwrap(), &Buffer::<f32>::new(ctx, "g", 50).unwrap(), &Buffer::<f32>::new(ctx, "m", 50).unwrap(), &Buffer::<f32>::new(ctx, "v", 50).unwrap(), 50, &some, 1).is_err());
     check_validation(ctx);
 }

@@ -128,3 +128,21 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let _ = std::fs::remove_dir_all(&out);
     check_validation(ctx);
 }
+
+/// A Stage I too short to carve any space (8 iterations): no ray reaches the
+/// residual hull through carved space, so the reflection set starts as a
+/// copy of the Stage I set (the paper's initialisation) rather than Stage II
+/// failing, and metrics.json says so.
+#[test]
+fn an_empty_residual_hull_falls_back_to_a_copy_of_stage_one() {
+    let ctx = ctx_shared();
+    let out = tgs_tests::TempDir::new("stage2-empty-hull");
+    let o = train(ctx, &args(&out, &["iterations=8", "reflection.iterations=4"])).unwrap();
+    assert_eq!(o.iteration, 12);
+    let m = json(&out.join("metrics.json"));
+    let d = &m["reflection"];
+    assert_eq!(d["run"], true, "{d}");
+    assert_eq!((d["seeds"].as_u64(), d["hull_empty"].as_bool()), (Some(0), Some(true)), "{d}");
+    assert!(d["copied"].as_u64().unwrap() > 100 && d["copied"] == d["reflection_gaussians"], "{d}");
+    assert!(m["test"]["psnr"].as_f64().unwrap().is_finite());
+}

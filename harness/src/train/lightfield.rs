@@ -260,7 +260,7 @@ impl LightFieldModel {
         let net_group = AdamGroup::single(Self::lr(cfg, x.iteration));
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
         let material_len = (MATERIAL * self.set.len()) as usize;
-        let material_group = AdamGroup { lr: lf.lr_f0, lr_rest: lf.lr_r, stride: MATERIAL, split: 3 };
+        let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
         loop {
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
             let scratch = self.scratch.as_ref().context("light-field scratch")?;

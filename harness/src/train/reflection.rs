@@ -222,7 +222,7 @@ impl ReflectionModel {
             AdamGroup::single(rc.lr_quats),
             AdamGroup::single(rc.lr_opacity),
             // Material: f0 (3) at lr_f0, r at lr_r.
-            AdamGroup { lr: rc.lr_f0, lr_rest: rc.lr_r, stride: MATERIAL, split: 3 },
+            AdamGroup::split(rc.lr_f0, rc.lr_r, MATERIAL, 3),
         ];
         let it = x.iteration as u64;
         let (timings, values) = loop {
@@ -247,7 +247,7 @@ impl ReflectionModel {
             self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
             rec.end_scope(sc);
             let e = &self.env;
-            let mut grids = self.adam.set_grids(&self.set).to_vec();
+            let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
             grids.push(self.adam.grid(e.len()));
             let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
             let sc = rec.begin_scope("adam");

@@ -587,7 +587,7 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
     })?;
     Ok(if d.run {
         format!(
-            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I), {} iterations",
+            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I{}), {} iterations",
             d.residual_mean,
             d.threshold,
             100.0 * d.residual_fraction_over_0_05,
@@ -596,6 +596,7 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
             d.reflection_gaussians,
             d.seeds,
             d.copied,
+            if d.hull_empty { ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's" } else { "" },
             tr.cfg.reflection.iterations
         )
     } else if d.residual_mean < d.threshold {

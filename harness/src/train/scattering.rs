@@ -110,19 +110,22 @@ impl ScatteringModel {
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
         self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
         let sc = rec.begin_scope("adam");
-        self.adam.record_set(rec, &self.set, &self.groups(cfg, lr_means), it as u64)?;
+        self.adam.record_set(rec, &self.set, &self.groups(cfg, lr_means, sh), it as u64)?;
         rec.end_scope(sc);
         Ok(())
     }
 
-    fn groups(&self, cfg: &TrainConfig, lr_means: f32) -> [AdamGroup; 5] {
+    /// Stage I's Adam groups at active SH degree `sh`: the coefficients of
+    /// higher degrees are not stepped (their gradients are zero until then).
+    fn groups(&self, cfg: &TrainConfig, lr_means: f32, sh: u32) -> [AdamGroup; 5] {
         let k = self.set.params.coeffs;
+        let active = (sh + 1) * (sh + 1);
         [
             AdamGroup::single(lr_means),
             AdamGroup::single(cfg.lr_scales),
             AdamGroup::single(cfg.lr_quats),
             AdamGroup::single(cfg.lr_opacity),
-            AdamGroup { lr: cfg.lr_features_dc, lr_rest: cfg.lr_features_rest, stride: 3 * k, split: 3 },
+            AdamGroup { active: 3 * active.min(k), ..AdamGroup::split(cfg.lr_features_dc, cfg.lr_features_rest, 3 * k, 3) },
         ]
     }
 
@@ -145,14 +148,14 @@ impl ScatteringModel {
             dist: if it > cfg.dist_from { cfg.lambda_dist } else { 0.0 },
         };
         let stats = it < cfg.densify_until;
-        let groups = self.groups(cfg, x.lr_means);
+        let groups = self.groups(cfg, x.lr_means, sh);
         let (timings, values) = loop {
             let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             self.raster.record_forward(&mut rec, &self.set.params, cam, &x.background, sh, &b.frame)?;
             self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
             self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
-            let mut grids = self.adam.set_grids(&self.set).to_vec();
+            let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
             grids.push(self.densifier.stats_grid(&self.set));
             let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
             if stats {

@@ -80,6 +80,10 @@ pub struct ReflDecision {
     pub seeds: u32,
     #[serde(default)]
     pub copied: u32,
+    /// The residual hull gave no seed, so the set started as a copy of
+    /// Stage I's (reflection.init = "hull").
+    #[serde(default)]
+    pub hull_empty: bool,
 }
 
 /// The stage schedule: each stage with its iteration count, run in order.
@@ -299,6 +303,7 @@ impl Trainer {
             reflection_gaussians: 0,
             seeds: 0,
             copied: 0,
+            hull_empty: false,
         };
         // A reflection set that exists (a resumed Stage II) was decided on
         // when it was made; a run from before the view-dependence test must
@@ -307,10 +312,14 @@ impl Trainer {
         if d.run {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
-                let g = if copy { Some(self.scattering.set.params.download()?) } else { None };
                 let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
                 let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, ..SeedParams::default() };
                 let seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
+                // No ray crossed carved space into the hull (e.g. a Stage I
+                // too short to carve anything): the paper's initialisation,
+                // a copy of the Stage I set, rather than no Stage II.
+                d.hull_empty = hull && seeds.is_empty();
+                let g = if copy || d.hull_empty { Some(self.scattering.set.params.download()?) } else { None };
                 d.seeds = seeds.len() as u32;
                 d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
                 self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, g.as_ref(), &seeds, rc, self.cfg.adam_eps)?);

@@ -9,18 +9,32 @@ use super::TrainableSet;
 use tgs_engine::{Buffer, BufferBinding, Context, Kernel, Recorder};
 
 /// One parameter group: a learning rate, or two (elements with index modulo
-/// `stride` below `split` use `lr`, the others `lr_rest`).
+/// `stride` below `split` use `lr`, the others `lr_rest`). Only the first
+/// `active` elements of each block of `stride` are stepped (the SH
+/// coefficients of degrees not yet active: their gradients are exactly
+/// zero, so their moments and values would not move anyway).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AdamGroup {
     pub lr: f32,
     pub lr_rest: f32,
     pub stride: u32,
     pub split: u32,
+    pub active: u32,
 }
 
 impl AdamGroup {
     pub fn single(lr: f32) -> AdamGroup {
-        AdamGroup { lr, lr_rest: lr, stride: 1, split: 1 }
+        AdamGroup { lr, lr_rest: lr, stride: 1, split: 1, active: 1 }
+    }
+
+    /// Two rates over blocks of `stride`, every element stepped.
+    pub fn split(lr: f32, lr_rest: f32, stride: u32, split: u32) -> AdamGroup {
+        AdamGroup { lr, lr_rest, stride, split, active: stride }
+    }
+
+    /// The elements stepped of an array of `len`.
+    pub fn items(&self, len: usize) -> usize {
+        if self.active >= self.stride { len } else { len / self.stride.max(1) as usize * self.active as usize }
     }
 }
 
@@ -34,7 +48,7 @@ struct Push {
     n: u32,
     stride: u32,
     split: u32,
-    pad: u32,
+    active: u32,
     lr_a: f32,
     lr_b: f32,
     beta1: f32,
@@ -86,14 +100,19 @@ impl Adam {
         if [grad.len(), m.len(), v.len(), param.len()].iter().any(|&l| l < n) {
             bail!("Adam on '{}': {n} elements but a buffer is shorter", param.name());
         }
-        if t == 0 || group.stride == 0 {
-            bail!("Adam step must be >= 1 and stride >= 1");
+        if t == 0 || group.stride == 0 || group.active == 0 {
+            bail!("Adam step must be >= 1, stride and active >= 1");
         }
+        let active = group.active.min(group.stride);
+        if active < group.stride && n % group.stride as usize != 0 {
+            bail!("Adam on '{}': {n} elements are not whole blocks of {}", param.name(), group.stride);
+        }
+        let items = group.items(n);
         let p = Push {
-            n: n as u32,
+            n: items as u32,
             stride: group.stride,
             split: group.split,
-            pad: 0,
+            active,
             lr_a: group.lr,
             lr_b: group.lr_rest,
             beta1: self.beta1,
@@ -102,7 +121,7 @@ impl Adam {
             bc1: 1.0 - self.beta1.powf(t as f32),
             bc2: 1.0 - self.beta2.powf(t as f32),
         };
-        dispatch_items(rec, &self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), n as u32, args)
+        dispatch_items(rec, &self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), items as u32, args)
     }
 
     /// Record step `t` over every parameter array of `set`, in its layout
@@ -113,9 +132,11 @@ impl Adam {
     }
 
     /// The grids of [`Adam::record_set`]'s five dispatches (means, scales,
-    /// rotations, opacity, features), for a gate (`Rasterizer::record_fit_gate`).
-    pub fn set_grids(&self, set: &TrainableSet) -> [[u32; 3]; 5] {
-        Self::arrays(set).map(|a| self.grid(a.4))
+    /// rotations, opacity, features) with `groups`, for a gate
+    /// (`Rasterizer::record_fit_gate`).
+    pub fn set_grids(&self, set: &TrainableSet, groups: &[AdamGroup; 5]) -> [[u32; 3]; 5] {
+        let arrays = Self::arrays(set);
+        std::array::from_fn(|k| self.grid(groups[k].items(arrays[k].4)))
     }
 
     /// As [`Adam::record_set`], dispatch k taking its workgroup counts from
