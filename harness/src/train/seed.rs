@@ -14,7 +14,8 @@
 //! the hull from its start says nothing about where the surface is. Seeds
 //! are the first hull points of rays that crossed carved space; their
 //! normals are the local plane of neighbouring seeds (PCA), facing the
-//! camera that found them; their size is the seed spacing. Stage II then refines them by the reflection it has to explain.
+//! camera that found them; their size is the seed spacing. Stage II then
+//! refines them by the reflection it has to explain.
 
 use tgs_pipelines::Camera;
 
