@@ -84,7 +84,9 @@ fn host_renders_each_stage_like_tgs_render() {
     let host = Host::new();
     let b = tgs_tests::TempDir::new("embed");
     let one = b.join("one");
-    train(ctx_shared(), &args(&one, &["iterations=150"], "I", None)).unwrap();
+    // 300 iterations: enough for the residual hull to seed the glass (a
+    // shorter Stage I carves nothing and Stage II copies the whole set).
+    train(ctx_shared(), &args(&one, &["iterations=300"], "I", None)).unwrap();
     let two = b.join("two");
     train(ctx_shared(), &args(&two, &["reflection.iterations=30"], "II", Some(&one))).unwrap();
     let three = b.join("three");
