@@ -72,8 +72,11 @@ pub fn ctx_shared() -> &'static Arc<Context> {
 }
 
 /// The built-in `glass-tiny` scene in `dir`, written there unless a
-/// previous call of this test binary already did; returns `dir`.
+/// previous call of this test binary already did; returns `dir`. Tests of
+/// one binary run in parallel: one writes the scene while the others wait.
 pub fn tiny_glass_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    static WRITING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = WRITING.lock().unwrap_or_else(|e| e.into_inner());
     if !dir.join("transforms_train.json").is_file() {
         tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), dir, |_, _| {}).unwrap();
     }
