@@ -435,17 +435,17 @@ fn spheres_scene_is_brushs_workload() {
 /// differ from the glass scene only there, and no test pixel is glass.
 #[test]
 fn diffuse_scene_is_the_glass_room_without_glass() {
-    use tgs::scene::trace::{Material, Scene, GLASS_C};
+    use tgs::scene::trace::{norm, sub, Material, Scene, GLASS_C};
     let glass = Scene::new();
     let mut diffuse = Scene::new();
     diffuse.glass = false;
     let e = [2.7, 0.0, 1.15];
-    let d = { let v = [GLASS_C[0] - e[0], GLASS_C[1] - e[1], GLASS_C[2] - e[2]]; let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(); v.map(|c| c / l) };
+    let d = norm(sub(GLASS_C, e));
     assert!(glass.intersect(e, d, f64::INFINITY, true).is_some_and(|h| h.mat == Material::Glass));
     assert!(diffuse.intersect(e, d, f64::INFINITY, true).is_some_and(|h| h.mat != Material::Glass));
     assert_ne!(glass.radiance(e, d, 6), diffuse.radiance(e, d, 6));
     // A ray that misses the sphere (the floor beside it) sees the same.
-    let d2 = { let v = [0.0 - e[0], 1.6 - e[1], 0.0 - e[2]]; let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(); v.map(|c| c / l) };
+    let d2 = norm(sub([0.0, 1.6, 0.0], e));
     assert_eq!(glass.radiance(e, d2, 6), diffuse.radiance(e, d2, 6));
     let spec = tgs::scene::spec("diffuse").unwrap();
     assert!(!spec.glass && spec.size == tgs::scene::spec("glass").unwrap().size);

@@ -224,6 +224,26 @@ fn no_samples_and_bit_identical_reruns() {
     assert!(a.grads.iter().zip(&b.grads).all(|(x, y)| x.to_bits() == y.to_bits()), "gradients differ between runs");
 }
 
+/// A network of `shape` with seeded parameters (uploaded as `p`) and
+/// `cap` random samples (flattened as the scratch holds them), for the
+/// tests of the GPU-count paths; `rng` continues the seeded stream.
+struct Counted {
+    mlp: Mlp,
+    params: Vec<f32>,
+    p: Buffer<f32>,
+    flat: Vec<f32>,
+    rng: Rng,
+}
+
+fn counted(name: &str, shape: MlpShape, cap: u32, extent: f64) -> Counted {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed(name));
+    let params = shape.init_params(rng.next_u64());
+    let samples = random_samples(&mut rng, cap as usize, extent);
+    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    Counted { mlp: Mlp::new(ctx).unwrap(), p: Buffer::from_slice(ctx, "params", &params).unwrap(), params, flat, rng }
+}
+
 /// The forward with the sample count read on the GPU (the embedded light
 /// field): the first `count` outputs bit-equal the host-count forward's,
 /// nothing past the count is written, a count past the capacity is
@@ -231,14 +251,9 @@ fn no_samples_and_bit_identical_reruns() {
 #[test]
 fn forward_with_a_gpu_count_matches_and_stops_at_it() {
     let ctx = ctx_shared();
-    let mut rng = Rng(seed("mlp counted"));
-    let shape = MlpShape { depth: 4, width: 48, skip: 2, levels_x: 6, levels_w: 4 };
-    let params = shape.init_params(rng.next_u64());
     let cap = 700u32;
-    let samples = random_samples(&mut rng, cap as usize, 1.5);
-    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
-    let mlp = Mlp::new(ctx).unwrap();
-    let p = Buffer::from_slice(ctx, "params", &params).unwrap();
+    let shape = MlpShape { depth: 4, width: 48, skip: 2, levels_x: 6, levels_w: 4 };
+    let Counted { mlp, p, flat, .. } = counted("mlp counted", shape, cap, 1.5);
     let host = {
         let s = mlp.scratch(shape, cap).unwrap();
         s.samples.upload(&flat).unwrap();
@@ -273,15 +288,10 @@ fn forward_with_a_gpu_count_matches_and_stops_at_it() {
 #[test]
 fn backward_with_a_gpu_count_is_bit_identical_to_the_host_count() {
     let ctx = ctx_shared();
-    let mut rng = Rng(seed("mlp counted backward"));
-    let shape = MlpShape { depth: 3, width: 40, skip: 2, levels_x: 4, levels_w: 2 };
-    let params = shape.init_params(rng.next_u64());
     let cap = 5000u32;
-    let samples = random_samples(&mut rng, cap as usize, 1.2);
-    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    let shape = MlpShape { depth: 3, width: 40, skip: 2, levels_x: 4, levels_w: 2 };
+    let Counted { mlp, p, flat, params, mut rng } = counted("mlp counted backward", shape, cap, 1.2);
     let d_all: Vec<f32> = (0..OUT * cap).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
-    let mlp = Mlp::new(ctx).unwrap();
-    let p = Buffer::from_slice(ctx, "params", &params).unwrap();
     let d = Buffer::from_slice(ctx, "d_out", &d_all).unwrap();
     let grads = |count: u32, counted: bool| -> Vec<u32> {
         // Host count: a scratch of exactly `count` samples; GPU count: the

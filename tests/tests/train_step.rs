@@ -43,8 +43,28 @@ fn camera() -> Camera {
 
 type Bits = Vec<(String, Vec<u32>)>;
 
+fn buffer_bits(b: &Buffer<f32>) -> Vec<u32> {
+    b.download().unwrap().iter().map(|v| v.to_bits()).collect()
+}
+
 fn bits(set: &tgs_pipelines::TrainableSet) -> Bits {
-    set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect()
+    set.arrays().into_iter().map(|(name, b, _)| (name, buffer_bits(b))).collect()
+}
+
+/// A model's bits: its Gaussian set's arrays, then the named `extra`
+/// buffers (an environment map's or a network's parameters and moments).
+fn model_bits(set: &tgs_pipelines::TrainableSet, extra: [(&str, &Buffer<f32>); 3]) -> Bits {
+    let mut all = bits(set);
+    all.extend(extra.map(|(name, b)| (name.to_string(), buffer_bits(b))));
+    all
+}
+
+/// A step's target and frozen scattering colour: two different patterns
+/// over the 3 colour planes of a SIZE x SIZE view.
+fn target_and_scat(ctx: &std::sync::Arc<tgs_engine::Context>) -> (Buffer<f32>, Buffer<f32>) {
+    let pixels = (SIZE * SIZE) as usize;
+    let plane = |k: usize| -> Vec<f32> { (0..3 * pixels).map(|i| 0.1 + 0.8 * (((i + k) * 7919) % 1000) as f32 / 1000.0).collect() };
+    (Buffer::from_slice(ctx, "target", &plane(0)).unwrap(), Buffer::from_slice(ctx, "scat", &plane(311)).unwrap())
 }
 
 /// Model A's step overflowed, grew its frame and ran again; model B's fitted
@@ -133,12 +153,8 @@ fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
 /// Every parameter and moment of a reflection model: its set and its
 /// environment map.
 fn reflection_bits(m: &ReflectionModel) -> Bits {
-    let mut all = bits(&m.set);
     let e = &m.env;
-    for (name, b) in [("env.params", &e.params), ("env.m", &e.m), ("env.v", &e.v)] {
-        all.push((name.to_string(), b.download().unwrap().iter().map(|v| v.to_bits()).collect()));
-    }
-    all
+    model_bits(&m.set, [("env.params", &e.params), ("env.m", &e.m), ("env.v", &e.v)])
 }
 
 #[test]
@@ -150,10 +166,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     // Schlick adds the F0 channels to the rasterized features.
     cfg.reflection.fresnel = "schlick".into();
     let cam = camera();
-    let pixels = (SIZE * SIZE) as usize;
-    let plane = |k: usize| -> Vec<f32> { (0..3 * pixels).map(|i| 0.1 + 0.8 * (((i + k) * 7919) % 1000) as f32 / 1000.0).collect() };
-    let target = Buffer::from_slice(ctx, "target", &plane(0)).unwrap();
-    let scat = Buffer::from_slice(ctx, "scat", &plane(311)).unwrap();
+    let (target, scat) = target_and_scat(ctx);
     let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: &scat, lr_means: 1e-3, profile: false };
     let model = || ReflectionModel::from_scattering(ctx, Some(&g), &[], &cfg.reflection, 1e-15).unwrap();
 
@@ -180,12 +193,8 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
 /// Every parameter and moment of a Stage III model: the reflection set
 /// (material trained) and the light field's network.
 fn light_field_bits(m: &LightFieldModel) -> Bits {
-    let mut all = bits(&m.set);
     let n = &m.net;
-    for (name, b) in [("net.params", &n.params), ("net.m", &n.m), ("net.v", &n.v)] {
-        all.push((name.to_string(), b.download().unwrap().iter().map(|v| v.to_bits()).collect()));
-    }
-    all
+    model_bits(&m.set, [("net.params", &n.params), ("net.m", &n.m), ("net.v", &n.v)])
 }
 
 #[test]
@@ -196,10 +205,7 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let mut cfg = TrainConfig::default();
     cfg.light_field.lambda_hf = 0.1;
     let cam = camera();
-    let pixels = (SIZE * SIZE) as usize;
-    let plane = |k: usize| -> Vec<f32> { (0..3 * pixels).map(|i| 0.1 + 0.8 * (((i + k) * 7919) % 1000) as f32 / 1000.0).collect() };
-    let target = Buffer::from_slice(ctx, "target", &plane(0)).unwrap();
-    let scat = Buffer::from_slice(ctx, "scat", &plane(311)).unwrap();
+    let (target, scat) = target_and_scat(ctx);
     let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
     let input = LightFieldStepInput { iteration: 1, global_iteration: 1, camera: &cam, target: &target, scat: Some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: false };
     let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
