@@ -1,9 +1,14 @@
 #version 460
-// One pass of the separable 11-tap Gaussian (sigma 1.5) of SSIM, zero padded
-// ("same" size). Mode 0 blurs, per colour channel c, the five products
-// (x, y, x^2, y^2, xy) of render x and target y into planes 5c..5c+4; mode 1
-// blurs `nplanes` planes of `src`. The Gaussian is symmetric, so the same pass
-// is its own adjoint (used for the SSIM backward).
+// The horizontal pass of SSIM's separable 11-tap Gaussian (sigma 1.5, zero
+// padded, "same" size); the vertical pass is summed where it is used
+// (loss_ssim for the moments, loss_grad for the coefficients). One
+// invocation per colour channel c and pixel, its taps loaded once:
+//   mode 0: the five products (x, y, x^2, y^2, xy) of render x and target y
+//           into planes 5c..5c+4;
+//   mode 1: planes 3c..3c+2 of `src` (the SSIM coefficients; the Gaussian is
+//           symmetric, so the same pass is its own adjoint).
+// Taps outside the image are not visited, so each sum runs over its valid
+// taps from left to right.
 #include "loss_common.glsl"
 
 layout(std430, binding = 0) readonly buffer Render { float render[]; };
@@ -11,39 +16,46 @@ layout(std430, binding = 1) readonly buffer Target { float target[]; };
 layout(std430, binding = 2) readonly buffer Src { float src[]; };
 layout(std430, binding = 3) writeonly buffer Dst { float dst[]; };
 
-float value(uint plane, uint pix) {
-    if (pc.mode == 1u) {
-        return src[plane * pixels() + pix];
-    }
-    uint c = plane / 5u;
-    uint k = plane % 5u;
-    float x = render[c * pixels() + pix];
-    float y = target[c * pixels() + pix];
-    if (k == 0u) return x;
-    if (k == 1u) return y;
-    if (k == 2u) return x * x;
-    if (k == 3u) return y * y;
-    return x * y;
-}
-
 void main() {
     uint i = wg_linear() * WG + gl_LocalInvocationID.x;
     uint n = pixels();
-    if (i >= n * pc.nplanes) {
+    if (i >= n * pc.channels) {
         return;
     }
-    uint plane = i / n;
+    uint c = i / n;
     uint pix = i % n;
     int x = int(pix % pc.width);
-    int y = int(pix / pc.width);
-    float acc = 0.0;
-    for (int t = -SSIM_RADIUS; t <= SSIM_RADIUS; t++) {
-        int xx = pc.dir == 0u ? x + t : x;
-        int yy = pc.dir == 0u ? y : y + t;
-        if (xx < 0 || yy < 0 || xx >= int(pc.width) || yy >= int(pc.height)) {
-            continue;
+    ivec2 t = ssim_taps(x, int(pc.width));
+    uint row = pix - uint(x);
+    if (pc.mode == 0u) {
+        float s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, s4 = 0.0;
+        for (int k = t.x; k <= t.y; k++) {
+            float w = SSIM_WEIGHTS[k + SSIM_RADIUS];
+            uint q = row + uint(x + k);
+            float a = render[c * n + q];
+            float b = target[c * n + q];
+            s0 += w * a;
+            s1 += w * b;
+            s2 += w * (a * a);
+            s3 += w * (b * b);
+            s4 += w * (a * b);
         }
-        acc += SSIM_WEIGHTS[t + SSIM_RADIUS] * value(plane, uint(yy) * pc.width + uint(xx));
+        dst[(5u * c + 0u) * n + pix] = s0;
+        dst[(5u * c + 1u) * n + pix] = s1;
+        dst[(5u * c + 2u) * n + pix] = s2;
+        dst[(5u * c + 3u) * n + pix] = s3;
+        dst[(5u * c + 4u) * n + pix] = s4;
+    } else {
+        float s0 = 0.0, s1 = 0.0, s2 = 0.0;
+        for (int k = t.x; k <= t.y; k++) {
+            float w = SSIM_WEIGHTS[k + SSIM_RADIUS];
+            uint q = row + uint(x + k);
+            s0 += w * src[(3u * c + 0u) * n + q];
+            s1 += w * src[(3u * c + 1u) * n + q];
+            s2 += w * src[(3u * c + 2u) * n + q];
+        }
+        dst[(3u * c + 0u) * n + pix] = s0;
+        dst[(3u * c + 1u) * n + pix] = s1;
+        dst[(3u * c + 2u) * n + pix] = s2;
     }
-    dst[plane * n + pix] = acc;
 }

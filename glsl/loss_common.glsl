@@ -8,14 +8,14 @@ layout(push_constant) uniform Push {
     uint width;
     uint height;
     uint channels;   // colour channels C (the first C planes of the render)
-    uint nplanes;    // planes processed by a blur
+    uint pad1;
     float fx, fy, cx, cy;
     float w_l1;      // (1 - lambda_ssim)
     float w_ssim;    // lambda_ssim
     float w_normal;  // lambda_normal (0: normal consistency off)
     float w_dist;    // lambda_dist
     uint mode;       // blur: 0 = products of render and target, 1 = planes
-    uint dir;        // blur: 0 = horizontal, 1 = vertical
+    uint pad0;
     uint plane_alpha;
     uint plane_depth;
     uint plane_normal;
@@ -37,6 +37,12 @@ const int SSIM_RADIUS = 5;
 const float SSIM_WEIGHTS[11] = float[11](
     1.028380084e-03, 7.598758135e-03, 3.600077213e-02, 1.093606895e-01, 2.130055377e-01, 2.660117249e-01,
     2.130055377e-01, 1.093606895e-01, 3.600077213e-02, 7.598758135e-03, 1.028380084e-03);
+
+// The taps k of the window centred at coordinate v on an axis of length len
+// that fall inside it: k in [lo, hi] (zero padding skips the others).
+ivec2 ssim_taps(int v, int len) {
+    return ivec2(max(-SSIM_RADIUS, -v), min(SSIM_RADIUS, len - 1 - v));
+}
 
 // Deterministic workgroup sum of one value per invocation (fixed tree order).
 shared float s_red[256];

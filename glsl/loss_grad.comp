@@ -2,7 +2,8 @@
 // Per pixel: the loss gradient of every render plane except the normals
 // (loss_normal writes those when normal consistency is on; zero otherwise).
 //   colour: (1 - lambda) sign(x - y) / (pixels C) + A + 2 x B + y C', with
-//           A, B, C' the blurred SSIM coefficients of loss_ssim;
+//           A, B, C' the blurred SSIM coefficients of loss_ssim (this
+//           kernel sums the blur's vertical pass over loss_blur's rows);
 //   alpha, depth: normal consistency through the expected depth D / alpha,
 //           gathered from the four neighbours' difference gradients;
 //   median: 0; distortion: lambda_dist / pixels.
@@ -10,7 +11,7 @@
 
 layout(std430, binding = 0) readonly buffer Render { float render[]; };
 layout(std430, binding = 1) readonly buffer Target { float target[]; };
-layout(std430, binding = 2) readonly buffer Coef { float coef[]; };
+layout(std430, binding = 2) readonly buffer CoefRows { float coef_rows[]; };
 layout(std430, binding = 3) readonly buffer Scratch { float scratch[]; };
 layout(std430, binding = 4) buffer GradOut { float grad_out[]; };
 
@@ -34,13 +35,22 @@ void main() {
         return;
     }
     float k1 = pc.w_l1 / (float(n) * float(pc.channels));
+    ivec2 t = ssim_taps(int(pix / pc.width), int(pc.height));
     for (uint c = 0u; c < pc.channels; c++) {
         float x = render[c * n + pix];
         float y = target[c * n + pix];
         float d = x - y;
         float g = k1 * (d > 0.0 ? 1.0 : (d < 0.0 ? -1.0 : 0.0));
         if (pc.w_ssim != 0.0) {
-            g += coef[(3u * c) * n + pix] + 2.0 * x * coef[(3u * c + 1u) * n + pix] + y * coef[(3u * c + 2u) * n + pix];
+            float a = 0.0, b = 0.0, cc = 0.0;
+            for (int k = t.x; k <= t.y; k++) {
+                float w = SSIM_WEIGHTS[k + SSIM_RADIUS];
+                uint q = uint(int(pix) + k * int(pc.width));
+                a += w * coef_rows[(3u * c + 0u) * n + q];
+                b += w * coef_rows[(3u * c + 1u) * n + q];
+                cc += w * coef_rows[(3u * c + 2u) * n + q];
+            }
+            g += a + 2.0 * x * b + y * cc;
         }
         grad_out[c * n + pix] = g;
     }

@@ -1,13 +1,15 @@
 #version 460
-// Per pixel: SSIM of every colour channel from the blurred moments, its
-// gradient coefficients with respect to the blurred x, x^2 and xy (scaled by
-// -lambda_ssim / (pixels * C), blurred again by the caller), and workgroup
-// partial sums of L1, squared error and SSIM (partials[4 * wg + 0..2]).
+// Per pixel: the vertical pass of the moments' blur (over loss_blur's
+// horizontal sums, valid taps top to bottom), SSIM of every colour channel
+// from them, its gradient coefficients with respect to the blurred x, x^2
+// and xy (scaled by -lambda_ssim / (pixels * C), blurred again by loss_blur
+// and loss_grad), and workgroup partial sums of L1, squared error and SSIM
+// (partials[4 * wg + 0..2]).
 #include "loss_common.glsl"
 
 layout(std430, binding = 0) readonly buffer Render { float render[]; };
 layout(std430, binding = 1) readonly buffer Target { float target[]; };
-layout(std430, binding = 2) readonly buffer Moments { float mom[]; };
+layout(std430, binding = 2) readonly buffer Rows { float rows[]; };
 layout(std430, binding = 3) writeonly buffer Coef { float coef[]; };
 layout(std430, binding = 4) writeonly buffer Partials { float partials[]; };
 
@@ -17,12 +19,19 @@ void main() {
     float l1 = 0.0, se = 0.0, ss = 0.0;
     if (pix < n) {
         float k = -pc.w_ssim / (float(n) * float(pc.channels));
+        int y = int(pix / pc.width);
+        ivec2 t = ssim_taps(y, int(pc.height));
         for (uint c = 0u; c < pc.channels; c++) {
-            float mx = mom[(5u * c + 0u) * n + pix];
-            float my = mom[(5u * c + 1u) * n + pix];
-            float exx = mom[(5u * c + 2u) * n + pix];
-            float eyy = mom[(5u * c + 3u) * n + pix];
-            float exy = mom[(5u * c + 4u) * n + pix];
+            float mx = 0.0, my = 0.0, exx = 0.0, eyy = 0.0, exy = 0.0;
+            for (int k = t.x; k <= t.y; k++) {
+                float w = SSIM_WEIGHTS[k + SSIM_RADIUS];
+                uint q = uint(int(pix) + k * int(pc.width));
+                mx += w * rows[(5u * c + 0u) * n + q];
+                my += w * rows[(5u * c + 1u) * n + q];
+                exx += w * rows[(5u * c + 2u) * n + q];
+                eyy += w * rows[(5u * c + 3u) * n + q];
+                exy += w * rows[(5u * c + 4u) * n + q];
+            }
             float sxx = exx - mx * mx;
             float syy = eyy - my * my;
             float sxy = exy - mx * my;

@@ -49,7 +49,7 @@ struct Push {
     width: u32,
     height: u32,
     channels: u32,
-    nplanes: u32,
+    pad1: u32,
     fx: f32,
     fy: f32,
     cx: f32,
@@ -59,7 +59,7 @@ struct Push {
     w_normal: f32,
     w_dist: f32,
     mode: u32,
-    dir: u32,
+    pad0: u32,
     plane_alpha: u32,
     plane_depth: u32,
     plane_normal: u32,
@@ -168,7 +168,7 @@ impl ImageLoss {
             width,
             height,
             channels: c,
-            nplanes: 0,
+            pad1: 0,
             fx: cam.fx,
             fy: cam.fy,
             cx: cam.cx,
@@ -178,7 +178,7 @@ impl ImageLoss {
             w_normal: w.normal,
             w_dist: w.dist,
             mode: 0,
-            dir: 0,
+            pad0: 0,
             plane_alpha: Plane::Alpha.index(c),
             plane_depth: Plane::Depth.index(c),
             plane_normal: Plane::Normal(0).index(c),
@@ -188,16 +188,18 @@ impl ImageLoss {
         };
         let (out, tgt) = (out.binding(), target.binding());
         let sc = rec.begin_scope("loss.ssim");
-        let blur = |rec: &mut Recorder, mode: u32, dir: u32, planes: u32, src: &Buffer<f32>, dst: &Buffer<f32>| {
-            let p = Push { mode, dir, nplanes: planes, ..base };
-            rec.dispatch(&self.blur, &[out.clone(), tgt.clone(), src.binding(), dst.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, planes * n))
+        // Horizontal passes in loss.blur (one invocation per channel and
+        // pixel), vertical ones summed by loss.ssim (moments) and loss.grad
+        // (coefficients): a then holds the rows of the moments, b the SSIM
+        // coefficients, a their rows.
+        let blur = |rec: &mut Recorder, mode: u32, src: &Buffer<f32>, dst: &Buffer<f32>| {
+            let p = Push { mode, ..base };
+            rec.dispatch(&self.blur, &[out.clone(), tgt.clone(), src.binding(), dst.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, c * n))
         };
-        blur(rec, 0, 0, 5 * c, &s.b, &s.a)?;
-        blur(rec, 1, 1, 5 * c, &s.a, &s.b)?;
-        rec.dispatch(&self.ssim, &[out.clone(), tgt.clone(), s.b.binding(), s.a.binding(), s.partials.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
+        blur(rec, 0, &s.b, &s.a)?;
+        rec.dispatch(&self.ssim, &[out.clone(), tgt.clone(), s.a.binding(), s.b.binding(), s.partials.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
         if w.ssim != 0.0 {
-            blur(rec, 1, 0, 3 * c, &s.a, &s.b)?;
-            blur(rec, 1, 1, 3 * c, &s.b, &s.a)?;
+            blur(rec, 1, &s.b, &s.a)?;
         }
         rec.end_scope(sc);
         s.normal_on = w.normal != 0.0;
