@@ -47,6 +47,17 @@ layout(push_constant) uniform Push {
     uint span;       // splats per span (tiles longer than this take several passes)
     uint span_index; // which span this pass handles
     uint spans;      // span passes recorded
+#ifdef ADAM
+    // The reduce with the Adam step fused (raster_reduce.comp, variant ADAM):
+    // rates of means, log-scales, rotations, opacity, features (the first
+    // `feat_split` of each Gaussian's features; the rest use lr_rest), the
+    // number of each Gaussian's features stepped, and Adam's constants
+    // (bc1 = 1 - beta1^t, bc2 = 1 - beta2^t).
+    float lr_means, lr_scales, lr_quats, lr_opacity, lr_feats, lr_rest;
+    uint feat_split;
+    uint feat_active;
+    float beta1, beta2, eps, bc1, bc2;
+#endif
 } pc;
 
 // Projected splat: what the rasterizer needs, 16 floats per Gaussian.

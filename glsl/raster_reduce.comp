@@ -1,5 +1,7 @@
 #version 460
 // variant: RECORDS_BDA
+// variant: ADAM
+// variant: ADAM RECORDS_BDA
 #ifdef RECORDS_BDA
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
@@ -9,27 +11,83 @@
 // then applies the projection backward (method-notes §1.7, per-Gaussian
 // part) and writes the Gaussian's parameter gradients (overwriting), plus
 // the screen-space gradient used by densification (in NDC units, as 3DGS).
+// Variant ADAM steps the Gaussian's parameters with Adam instead of writing
+// its gradients (bindings 9-13 then hold the first moments, 15-19 the
+// second ones; adam.comp's arithmetic, so the result is the same as this
+// kernel followed by adam.comp): one pass over the parameters fewer.
 #include "common.glsl"
 
+#ifdef ADAM
+#define PARAM_ACCESS
+#else
+#define PARAM_ACCESS readonly
+#endif
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
-layout(std430, binding = 1) readonly buffer Means { float means[]; };
-layout(std430, binding = 2) readonly buffer Scales { float log_scales[]; };
-layout(std430, binding = 3) readonly buffer Quats { vec4 quats[]; };
-layout(std430, binding = 4) readonly buffer Opac { float opacity[]; };
-layout(std430, binding = 5) readonly buffer Feats { float feats[]; };
+layout(std430, binding = 1) PARAM_ACCESS buffer Means { float means[]; };
+layout(std430, binding = 2) PARAM_ACCESS buffer Scales { float log_scales[]; };
+layout(std430, binding = 3) PARAM_ACCESS buffer Quats { vec4 quats[]; };
+layout(std430, binding = 4) PARAM_ACCESS buffer Opac { float opacity[]; };
+layout(std430, binding = 5) PARAM_ACCESS buffer Feats { float feats[]; };
 layout(std430, binding = 6) readonly buffer Ids { uint ids[]; };
 layout(std430, binding = 7) readonly buffer Offsets { uint offsets[]; };
 #define RECORDS_BINDING 8
 #define RECORDS_ACCESS readonly
 #include "raster_records.glsl"
+layout(std430, binding = 14) writeonly buffer Densify { vec2 densify[]; };
+
+#include "raster_project.glsl"
+
+#ifdef ADAM
+layout(std430, binding = 9) buffer M1Means { float m1_means[]; };
+layout(std430, binding = 10) buffer M1Scales { float m1_scales[]; };
+layout(std430, binding = 11) buffer M1Quats { float m1_quats[]; };
+layout(std430, binding = 12) buffer M1Opac { float m1_opacity[]; };
+layout(std430, binding = 13) buffer M1Feats { float m1_feats[]; };
+layout(std430, binding = 15) buffer M2Means { float m2_means[]; };
+layout(std430, binding = 16) buffer M2Scales { float m2_scales[]; };
+layout(std430, binding = 17) buffer M2Quats { float m2_quats[]; };
+layout(std430, binding = 18) buffer M2Opac { float m2_opacity[]; };
+layout(std430, binding = 19) buffer M2Feats { float m2_feats[]; };
+
+// adam.comp's step of parameter P with moments M, V, gradient G, rate LR.
+#define ADAM_STEP(P, M, V, G, LR) { \
+    float g_ = (G); \
+    if (isnan(g_) || isinf(g_)) { g_ = 0.0; } \
+    float m_ = pc.beta1 * M + (1.0 - pc.beta1) * g_; \
+    float v_ = pc.beta2 * V + (1.0 - pc.beta2) * g_ * g_; \
+    M = m_; \
+    V = v_; \
+    float d_ = sqrt(v_) / sqrt(pc.bc2) + pc.eps; \
+    P -= ((LR) / pc.bc1) * m_ / d_; }
+
+void put_mean(uint i, float g) { ADAM_STEP(means[i], m1_means[i], m2_means[i], g, pc.lr_means) }
+void put_scale(uint i, float g) { ADAM_STEP(log_scales[i], m1_scales[i], m2_scales[i], g, pc.lr_scales) }
+void put_quat(uint i, vec4 g) {
+    for (uint k = 0u; k < 4u; k++) {
+        ADAM_STEP(quats[i][k], m1_quats[4u * i + k], m2_quats[4u * i + k], g[k], pc.lr_quats)
+    }
+}
+void put_opacity(uint i, float g) { ADAM_STEP(opacity[i], m1_opacity[i], m2_opacity[i], g, pc.lr_opacity) }
+// Feature i of the Gaussian whose features start at fb.
+void put_feat(uint fb, uint i, float g) {
+    if (i < pc.feat_active) {
+        ADAM_STEP(feats[fb + i], m1_feats[fb + i], m2_feats[fb + i], g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
+    }
+}
+#else
 layout(std430, binding = 9) writeonly buffer GMeans { float g_means[]; };
 layout(std430, binding = 10) writeonly buffer GScales { float g_scales[]; };
 layout(std430, binding = 11) writeonly buffer GQuats { vec4 g_quats[]; };
 layout(std430, binding = 12) writeonly buffer GOpac { float g_opacity[]; };
 layout(std430, binding = 13) writeonly buffer GFeats { float g_feats[]; };
-layout(std430, binding = 14) writeonly buffer Densify { vec2 densify[]; };
 
-#include "raster_project.glsl"
+void put_mean(uint i, float g) { g_means[i] = g; }
+void put_scale(uint i, float g) { g_scales[i] = g; }
+void put_quat(uint i, vec4 g) { g_quats[i] = g; }
+void put_opacity(uint i, float g) { g_opacity[i] = g; }
+void put_feat(uint fb, uint i, float g) { g_feats[fb + i] = g; }
+#endif
+
 
 vec4 quat_rot_vjp(vec4 q, mat3 dR) {
     float r = q.x, x = q.y, y = q.z, z = q.w;
@@ -79,13 +137,13 @@ void main() {
     bool ok = p1 > p0 && project(p, ls, qr, opacity[g], pr);
     uint fb = g * pc.coeffs * CH;
     if (!ok) {
-        g_means[3u * g] = 0.0; g_means[3u * g + 1u] = 0.0; g_means[3u * g + 2u] = 0.0;
-        g_scales[2u * g] = 0.0; g_scales[2u * g + 1u] = 0.0;
-        g_quats[g] = vec4(0.0);
-        g_opacity[g] = 0.0;
+        put_mean(3u * g, 0.0); put_mean(3u * g + 1u, 0.0); put_mean(3u * g + 2u, 0.0);
+        put_scale(2u * g, 0.0); put_scale(2u * g + 1u, 0.0);
+        put_quat(g, vec4(0.0));
+        put_opacity(g, 0.0);
         densify[g] = vec2(0.0);
         for (uint i = 0u; i < pc.coeffs * CH; i++) {
-            g_feats[fb + i] = 0.0;
+            put_feat(fb, i, 0.0);
         }
         return;
     }
@@ -106,19 +164,19 @@ void main() {
     vec3 dmean = view_rot_t(vec3(dA0.z, dA1.z, dA2.z));
     vec3 d_tw = pr.sgn * view_rot_t(dn);
 
-    g_scales[2u * g] = dot(pr.rot[0], d_su_tu) * pr.scale.x;
-    g_scales[2u * g + 1u] = dot(pr.rot[1], d_sv_tv) * pr.scale.y;
+    put_scale(2u * g, dot(pr.rot[0], d_su_tu) * pr.scale.x);
+    put_scale(2u * g + 1u, dot(pr.rot[1], d_sv_tv) * pr.scale.y);
     float qlen = length(qr);
     vec4 qn = qr / qlen;
     vec4 dqn = quat_rot_vjp(qn, mat3(pr.scale.x * d_su_tu, pr.scale.y * d_sv_tv, d_tw));
-    g_quats[g] = (dqn - qn * dot(qn, dqn)) / qlen;
+    put_quat(g, (dqn - qn * dot(qn, dqn)) / qlen);
     // sigmoid'(x) = sigmoid(x) sigmoid(-x): 1 - o would cancel in f32 for
     // saturated opacities (1% error at x = 12).
-    g_opacity[g] = dO * s.o / (1.0 + exp(opacity[g]));
+    put_opacity(g, dO * s.o / (1.0 + exp(opacity[g])));
 
     if (pc.mode == 1u) {
         for (uint i = 0u; i < pc.coeffs * CH; i++) {
-            g_feats[fb + i] = i < CH ? df[i] : 0.0;
+            put_feat(fb, i, i < CH ? df[i] : 0.0);
         }
     } else {
         float Y[16];
@@ -129,7 +187,10 @@ void main() {
         sh_basis(dir, Y);
         sh_basis_grad(dir, dY);
         uint nk = active_coeffs();
-        vec3 ddir = vec3(0.0);
+        // precise: no fused multiply-adds into the direction gradient, so
+        // the ADAM variant (whose loop also steps the coefficients) rounds
+        // it as the plain reduce does.
+        precise vec3 ddir = vec3(0.0);
         for (uint c = 0u; c < CH; c++) {
             float v = 0.5;
             for (uint kk = 0u; kk < nk; kk++) {
@@ -138,17 +199,17 @@ void main() {
             float gc = v > 0.0 ? df[c] : 0.0;
             for (uint kk = 0u; kk < pc.coeffs; kk++) {
                 float coef = feats[fb + kk * CH + c];
-                g_feats[fb + kk * CH + c] = kk < nk ? Y[kk] * gc : 0.0;
                 if (kk < nk) {
                     ddir += gc * coef * dY[kk];
                 }
+                put_feat(fb, kk * CH + c, kk < nk ? Y[kk] * gc : 0.0);
             }
         }
         if (len > 0.0) {
             dmean += (ddir - dir * dot(dir, ddir)) / len;
         }
     }
-    g_means[3u * g] = dmean.x;
-    g_means[3u * g + 1u] = dmean.y;
-    g_means[3u * g + 2u] = dmean.z;
+    put_mean(3u * g, dmean.x);
+    put_mean(3u * g + 1u, dmean.y);
+    put_mean(3u * g + 2u, dmean.z);
 }

@@ -2,7 +2,8 @@
 //! shaderc (glslang) and generates `shaders.rs` embedding them (constants
 //! `STEM` and `FAMILY_STEM`). Includes are resolved against `glsl/`.
 //! A shader with a line `// variant: NAME` is compiled once more with the
-//! macro NAME defined, as `STEM_NAME`.
+//! macro NAME defined, as `STEM_NAME`; `// variant: A B` defines both, as
+//! `STEM_A_B`.
 //! Errors are reported as `glsl/FILE:LINE: message`.
 
 use std::fmt::Write as _;
@@ -43,8 +44,10 @@ fn main() {
             opts.set_generate_debug_info();
             let stem = match &variant {
                 Some(v) => {
-                    opts.add_macro_definition(v, None);
-                    format!("{stem}_{}", v.to_lowercase())
+                    for m in v.split_whitespace() {
+                        opts.add_macro_definition(m, None);
+                    }
+                    format!("{stem}_{}", v.split_whitespace().collect::<Vec<_>>().join("_").to_lowercase())
                 }
                 None => stem.clone(),
             };

@@ -30,6 +30,8 @@ pub struct Capabilities {
     pub max_workgroup_invocations: u32,
     pub max_workgroup_size: [u32; 3],
     pub max_push_constants: u32,
+    /// Storage buffers one compute shader may bind.
+    pub max_storage_buffers_per_stage: u32,
     pub max_memory_allocation: u64,
     pub min_storage_buffer_offset_alignment: u64,
     /// `bufferDeviceAddress` supported.
@@ -125,6 +127,7 @@ impl Capabilities {
             max_workgroup_invocations: props.limits.max_compute_work_group_invocations,
             max_workgroup_size: props.limits.max_compute_work_group_size,
             max_push_constants: props.limits.max_push_constants_size,
+            max_storage_buffers_per_stage: props.limits.max_per_stage_descriptor_storage_buffers,
             max_memory_allocation: maint3.max_memory_allocation_size,
             min_storage_buffer_offset_alignment: props.limits.min_storage_buffer_offset_alignment,
             buffer_device_address: f12.buffer_device_address == vk::TRUE,

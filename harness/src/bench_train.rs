@@ -37,12 +37,15 @@ pub struct TrainBench {
     pub submissions_per_iteration: f64,
     /// GPU ms per iteration by stage (from the profiled series): forward
     /// (projection, sorts, binning, rasterization), loss (SSIM + gradient
-    /// planes), backward (rasterizer backward + per-Gaussian reduce), Adam.
+    /// planes), backward (rasterizer backward + per-Gaussian reduce, with the
+    /// Adam step when `adam_fused`), Adam (its own pass, or only the gate).
     pub forward_ms: f64,
     pub loss_ms: f64,
     pub backward_ms: f64,
     pub adam_ms: f64,
     pub gpu_ms: f64,
+    /// Whether Adam ran inside the per-Gaussian reduce.
+    pub adam_fused: bool,
     /// Every timed scope (nested sort/scan passes included), ms per iteration.
     pub kernels: Vec<KernelTime>,
     /// Rasterized (Gaussian, tile) pairs of the last view.
@@ -74,8 +77,9 @@ fn stage_of(name: &str) -> Option<&'static str> {
 }
 
 /// Time `iterations` training iterations (after `warmup`) on the spheres
-/// scene at `res`² with `points` Gaussians.
-pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations: u32) -> Result<TrainBench> {
+/// scene at `res`² with `points` Gaussians, Adam fused into the reduce
+/// where the device can (`fuse_adam`) or in its own pass.
+pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations: u32, fuse_adam: bool) -> Result<TrainBench> {
     ensure!(iterations > 0, "--iterations must be at least 1");
     let spec = SpheresSpec { res, points, ..SpheresSpec::NAMED[0].1 };
     let data = spheres::dataset(&spec)?;
@@ -96,6 +100,8 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
     };
     ctx.reset_peak_memory();
     let mut tr = Trainer::new(ctx, cfg, &data)?;
+    tr.scattering.fuse_adam = fuse_adam;
+    let adam_fused = fuse_adam && tr.scattering.rasterizer().can_fuse_adam();
     for _ in 0..warmup {
         tr.step(false)?;
     }
@@ -136,6 +142,7 @@ pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations:
         backward_ms,
         adam_ms,
         gpu_ms: forward_ms + loss_ms + backward_ms + adam_ms,
+        adam_fused,
         kernels,
         intersections,
         bytes_per_intersection: tr.scattering.rasterizer().bytes_per_intersection(),
@@ -151,12 +158,14 @@ pub fn print_train(b: &TrainBench) {
         b.width, b.height, b.gaussians, b.sh_degree, b.views, b.intersections, b.wall_ms, b.wall_ms_best, b.it_per_s, b.submissions_per_iteration
     );
     println!(
-        "  GPU ms/iteration: forward {:.1}, loss {:.1}, backward {:.1} ({:.2}x forward), Adam {:.1}; total {:.1}",
+        "  GPU ms/iteration: forward {:.1}, loss {:.1}, backward {:.1} ({:.2}x forward{}), Adam {:.1}{}; total {:.1}",
         b.forward_ms,
         b.loss_ms,
         b.backward_ms,
         b.backward_ms / b.forward_ms.max(1e-9),
+        if b.adam_fused { "; Adam fused into its reduce" } else { "" },
         b.adam_ms,
+        if b.adam_fused { " (the gate)" } else { "" },
         b.gpu_ms
     );
     println!("  device memory: peak {:.1} MiB; {} bytes per intersection of frame capacity", b.peak_memory_mib, b.bytes_per_intersection);

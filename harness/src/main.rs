@@ -184,6 +184,10 @@ enum Bench {
         iterations: u32,
         #[arg(long, default_value_t = 3)]
         warmup: u32,
+        /// Step Adam in its own pass after the backward instead of fused
+        /// into the per-Gaussian reduce (the same parameters; for comparison).
+        #[arg(long)]
+        separate_adam: bool,
         #[arg(long)]
         json: bool,
     },
@@ -363,8 +367,8 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_raster::print_raster(&b);
                     }
                 }
-                Bench::Train { res, points, iterations, warmup, json } => {
-                    let b = tgs::bench_train::train(&ctx, *res, *points, *warmup, *iterations)?;
+                Bench::Train { res, points, iterations, warmup, separate_adam, json } => {
+                    let b = tgs::bench_train::train(&ctx, *res, *points, *warmup, *iterations, !*separate_adam)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);
                     } else {

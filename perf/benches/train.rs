@@ -17,7 +17,7 @@ fn main() -> anyhow::Result<()> {
             (true, _) => 5,
             (false, _) => 100,
         };
-        let b = tgs::bench_train::train(&ctx, res, points, 3, iterations)?;
+        let b = tgs::bench_train::train(&ctx, res, points, 3, iterations, true)?;
         tgs::bench_train::print_train(&b);
         runs.push(b);
     }

@@ -7,24 +7,32 @@ use tgs_tests::{check_validation, ctx_shared};
 #[test]
 fn train_bench_reports_every_stage() {
     let ctx = ctx_shared();
-    let b = tgs::bench_train::train(ctx, 32, 300, 0, 2).unwrap();
-    assert_eq!((b.width, b.height, b.gaussians, b.views, b.iterations, b.warmup), (32, 32, 300, 20, 2, 3));
-    assert!(b.intersections > 0);
-    // Keys, values, ids, two sort arrays and the 18-float record.
-    assert_eq!(b.bytes_per_intersection, 4 * (5 + 18));
-    assert!(b.peak_memory_mib > 0.0 && b.peak_memory_mib.is_finite());
-    for (name, v) in [("wall", b.wall_ms), ("forward", b.forward_ms), ("loss", b.loss_ms), ("backward", b.backward_ms), ("adam", b.adam_ms)] {
-        assert!(v.is_finite() && v >= 0.0, "{name}: {v}");
-    }
-    if ctx.caps().timestamp_valid_bits > 0 {
-        assert!(b.forward_ms > 0.0 && b.backward_ms > 0.0 && b.adam_ms > 0.0);
-        assert!((b.gpu_ms - (b.forward_ms + b.loss_ms + b.backward_ms + b.adam_ms)).abs() < 1e-9);
-        for k in ["raster.forward", "raster.backward", "raster.reduce", "loss.ssim", "adam"] {
-            assert!(b.kernels.iter().any(|t| t.name == k), "no timing for {k}");
+    for fuse in [true, false] {
+        let b = tgs::bench_train::train(ctx, 32, 300, 0, 2, fuse).unwrap();
+        assert_eq!((b.width, b.height, b.gaussians, b.views, b.iterations, b.warmup), (32, 32, 300, 20, 2, 3));
+        assert!(b.intersections > 0);
+        assert_eq!(b.adam_fused, fuse, "lavapipe can run the fused reduce");
+        // Keys, values, ids, two sort arrays and the 18-float record.
+        assert_eq!(b.bytes_per_intersection, 4 * (5 + 18));
+        assert!(b.peak_memory_mib > 0.0 && b.peak_memory_mib.is_finite());
+        for (name, v) in [("wall", b.wall_ms), ("forward", b.forward_ms), ("loss", b.loss_ms), ("backward", b.backward_ms), ("adam", b.adam_ms)] {
+            assert!(v.is_finite() && v >= 0.0, "{name}: {v}");
         }
+        if ctx.caps().timestamp_valid_bits > 0 {
+            assert!(b.forward_ms > 0.0 && b.backward_ms > 0.0 && b.adam_ms > 0.0);
+            assert!((b.gpu_ms - (b.forward_ms + b.loss_ms + b.backward_ms + b.adam_ms)).abs() < 1e-9);
+            let mut scopes = vec!["raster.forward", "raster.backward", "raster.reduce", "loss.ssim"];
+            if !fuse {
+                scopes.push("adam");
+            }
+            for k in scopes {
+                assert!(b.kernels.iter().any(|t| t.name == k), "no timing for {k}");
+            }
+            assert_eq!(b.kernels.iter().any(|t| t.name == "adam"), !fuse, "an Adam pass of its own only when not fused");
+        }
+        assert_eq!(b.brush_lavapipe_s, None);
     }
-    assert_eq!(b.brush_lavapipe_s, None);
-    assert!(tgs::bench_train::train(ctx, 32, 300, 0, 0).is_err());
+    assert!(tgs::bench_train::train(ctx, 32, 300, 0, 0, true).is_err());
     check_validation(ctx);
 }
 

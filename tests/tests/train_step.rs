@@ -117,6 +117,41 @@ fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
     check_validation(ctx);
 }
 
+/// Adam fused into the backward's per-Gaussian reduce steps the parameters
+/// exactly as the backward followed by Adam's own pass: over steps whose
+/// first view overflows its frame, at SH degree 0 (the higher coefficients
+/// are not stepped) and then 3, with densification statistics on.
+#[test]
+fn the_fused_adam_step_matches_the_separate_pass_bit_for_bit() {
+    let ctx = ctx_shared();
+    let g = big_splats(1500);
+    let cfg = TrainConfig::default();
+    let target: Vec<f32> = (0..3 * SIZE * SIZE).map(|i| 0.2 + 0.6 * ((i * 7919) % 1000) as f32 / 1000.0).collect();
+    let target = Buffer::from_slice(ctx, "target", &target).unwrap();
+    let mut fused = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
+    let mut separate = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
+    assert!(fused.rasterizer().can_fuse_adam(), "lavapipe can run the fused reduce");
+    separate.fuse_adam = false;
+    let before = bits(&fused.set);
+    for (it, sh) in [(1, 0), (2, 0), (3, 3), (4, 3)] {
+        let cam = Camera::look_at([0.3 * it as f32, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 0.9, SIZE, SIZE);
+        let input = StepInput { iteration: it, camera: &cam, target: &target, sh_degree: sh, lr_means: 1e-3, background: [0.0; 3], extent: 2.0, profile: false };
+        let (a, b) = (fused.step(&cfg, &input).unwrap(), separate.step(&cfg, &input).unwrap());
+        assert_eq!(a.loss.to_bits(), b.loss.to_bits(), "iteration {it}: loss");
+        for ((name, x), (_, y)) in bits(&fused.set).iter().zip(&bits(&separate.set)) {
+            assert!(x == y, "iteration {it}: {name} differs between the fused and the separate Adam step");
+        }
+    }
+    let after = bits(&fused.set);
+    let features = |b: &Bits| b.iter().find(|a| a.0 == "param.features").unwrap().1.clone();
+    assert_ne!(features(&before), features(&after));
+    for name in ["param.means", "param.log_scales", "param.quats", "param.opacity", "adam_m.features", "adam_v.quats", "stats.accum"] {
+        let (i, j) = (before.iter().position(|a| a.0 == name).unwrap(), after.iter().position(|a| a.0 == name).unwrap());
+        assert_ne!(before[i].1, after[j].1, "{name} did not change");
+    }
+    check_validation(ctx);
+}
+
 #[test]
 fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
     let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());

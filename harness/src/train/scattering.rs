@@ -73,6 +73,10 @@ pub struct ScatteringModel {
     pub set: TrainableSet,
     /// Frame and loss buffers per image size.
     sizes: HashMap<(u32, u32), ViewBuffers>,
+    /// Step with Adam fused into the backward's per-Gaussian reduce (on by
+    /// default where the device can; off: the backward writes gradients and
+    /// a separate Adam pass steps them, which gives the same parameters).
+    pub fuse_adam: bool,
 }
 
 impl ScatteringModel {
@@ -85,6 +89,7 @@ impl ScatteringModel {
             densifier: Densifier::new(ctx)?,
             set: TrainableSet::new(ctx, g)?,
             sizes: HashMap::new(),
+            fuse_adam: true,
         })
     }
 
@@ -149,23 +154,39 @@ impl ScatteringModel {
         };
         let stats = it < cfg.densify_until;
         let groups = self.groups(cfg, x.lr_means, sh);
+        let fused = self.fuse_adam && self.raster.can_fuse_adam();
         let (timings, values) = loop {
             let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             self.raster.record_forward(&mut rec, &self.set.params, cam, &x.background, sh, &b.frame)?;
             self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
-            self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
-            let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
-            grids.push(self.densifier.stats_grid(&self.set));
-            let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
-            if stats {
-                let sc = rec.begin_scope("densify.stats");
-                self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, &args[5])?;
+            if fused {
+                // The reduce steps the parameters itself: gate it, then the
+                // statistics (which read its screen-space gradients).
+                let grids = [self.raster.reduce_grid(self.set.len()), self.densifier.stats_grid(&self.set)];
+                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
+                let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
+                let s = &self.set;
+                self.raster.record_backward_adam(&mut rec, &s.params, &s.m, &s.v, &c, sh, &b.frame, Some(&args[0]))?;
+                if stats {
+                    let sc = rec.begin_scope("densify.stats");
+                    self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, &args[1])?;
+                    rec.end_scope(sc);
+                }
+            } else {
+                self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+                let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
+                grids.push(self.densifier.stats_grid(&self.set));
+                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
+                if stats {
+                    let sc = rec.begin_scope("densify.stats");
+                    self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, &args[5])?;
+                    rec.end_scope(sc);
+                }
+                let sc = rec.begin_scope("adam");
+                self.adam.record_set_gated(&mut rec, &self.set, &groups, it as u64, &args[..5])?;
                 rec.end_scope(sc);
             }
-            let sc = rec.begin_scope("adam");
-            self.adam.record_set_gated(&mut rec, &self.set, &groups, it as u64, &args[..5])?;
-            rec.end_scope(sc);
             let t = rec.submit_and_wait()?;
             if self.raster.fit(&mut b.frame)? {
                 break (t, b.loss.values()?);

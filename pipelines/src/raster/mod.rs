@@ -8,12 +8,14 @@
 //! checked afterwards by [`Rasterizer::fit`].
 
 mod camera;
+mod reduce_adam;
 mod frame;
 mod gaussians;
 
 pub use camera::Camera;
 pub use frame::{Frame, Plane};
 pub use gaussians::{Gaussians, HostGaussians};
+pub use reduce_adam::ReduceAdam;
 
 use crate::scan::{Count, PrefixSum, ScanScratch};
 use crate::shaders;
@@ -159,6 +161,8 @@ pub struct Rasterizer {
     forward: Kernel,
     backward: Kernel,
     reduce: Kernel,
+    /// The reduce with Adam fused (`reduce_adam.rs`), built on first use.
+    reduce_adam: std::sync::OnceLock<Kernel>,
 }
 
 impl Rasterizer {
@@ -270,6 +274,7 @@ impl Rasterizer {
             forward,
             backward,
             reduce: k("raster.reduce", reduce, push, false)?,
+            reduce_adam: std::sync::OnceLock::new(),
         })
     }
 
@@ -591,10 +596,34 @@ impl Rasterizer {
     /// `grads` (whose own feature buffer is left alone).
     #[allow(clippy::too_many_arguments)]
     pub fn record_backward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, grads: &Gaussians, d_features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<()> {
-        self.check_inputs(g, features, frame)?;
         if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {
             bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
         }
+        let records = self.record_tile_backward(rec, g, features, sh_degree, frame)?;
+        let sc = rec.begin_scope("raster.reduce");
+        let mut bindings = Self::param_bindings(frame, g, features);
+        bindings.extend([
+            frame.depth_ids.binding(),
+            frame.offsets.binding(),
+            records,
+            grads.means.binding(),
+            grads.log_scales.binding(),
+            grads.quats.binding(),
+            grads.opacity.binding(),
+            d_features.binding(),
+            frame.densify.binding(),
+        ]);
+        let push = self.push(g, frame, sh_degree);
+        rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
+        rec.end_scope(sc);
+        Ok(())
+    }
+
+    /// The per-tile part of the backward (every span, back to front): the
+    /// intersection gradient records. Returns the records' binding for the
+    /// per-Gaussian reduce.
+    fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<BufferBinding> {
+        self.check_inputs(g, features, frame)?;
         let push = self.push(g, frame, sh_degree);
         let tile_groups = groups_2d(frame.tiles(), self.max_x());
         let mut bindings = Self::tile_bindings(frame);
@@ -613,22 +642,7 @@ impl Rasterizer {
             rec.dispatch(&self.backward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
-        let sc = rec.begin_scope("raster.reduce");
-        let mut bindings = Self::param_bindings(frame, g, features);
-        bindings.extend([
-            frame.depth_ids.binding(),
-            frame.offsets.binding(),
-            records,
-            grads.means.binding(),
-            grads.log_scales.binding(),
-            grads.quats.binding(),
-            grads.opacity.binding(),
-            d_features.binding(),
-            frame.densify.binding(),
-        ]);
-        rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
-        rec.end_scope(sc);
-        Ok(())
+        Ok(records)
     }
 
     /// After a recorded view's submission completed: read the intersection

@@ -6,6 +6,7 @@ use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
 use super::TrainableSet;
+use crate::raster::ReduceAdam;
 use tgs_engine::{Buffer, BufferBinding, Context, Kernel, Recorder};
 
 /// One parameter group: a learning rate, or two (elements with index modulo
@@ -146,6 +147,39 @@ impl Adam {
             bail!("a gated Adam step over a Gaussian set needs 5 argument slots, got {}", args.len());
         }
         self.record_set_on(rec, set, groups, t, Some(args))
+    }
+
+    /// The constants of step `t` with `groups` for the reduce with Adam fused
+    /// (`Rasterizer::record_backward_adam`), which steps means, log-scales,
+    /// rotations and opacity at one rate each and the features in blocks of
+    /// the set's features per Gaussian.
+    pub fn reduce_constants(&self, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64) -> Result<ReduceAdam> {
+        if t == 0 {
+            bail!("Adam step must be >= 1");
+        }
+        if let Some(k) = groups[..4].iter().position(|g| g.stride != 1 || g.lr != g.lr_rest) {
+            bail!("the fused Adam step takes one rate for parameter array {k}, got {:?}", groups[k]);
+        }
+        let f = &groups[4];
+        let per = set.params.channels * set.params.coeffs;
+        if f.stride != per {
+            bail!("the fused Adam step takes the features in blocks of {per} per Gaussian, got {}", f.stride);
+        }
+        Ok(ReduceAdam {
+            lr_means: groups[0].lr,
+            lr_scales: groups[1].lr,
+            lr_quats: groups[2].lr,
+            lr_opacity: groups[3].lr,
+            lr_feats: f.lr,
+            lr_rest: f.lr_rest,
+            feat_split: f.split.min(per),
+            feat_active: f.active.min(per),
+            beta1: self.beta1,
+            beta2: self.beta2,
+            eps: self.eps,
+            bc1: 1.0 - self.beta1.powf(t as f32),
+            bc2: 1.0 - self.beta2.powf(t as f32),
+        })
     }
 
     fn arrays(set: &TrainableSet) -> [ParamArrays<'_>; 5] {

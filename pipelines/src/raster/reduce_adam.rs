@@ -1,0 +1,116 @@
+//! The backward with the Adam step fused into the per-Gaussian reduce
+//! (`glsl/raster_reduce.comp`, variant `ADAM`): each Gaussian's gradient is
+//! summed from its intersection records as in [`Rasterizer::record_backward`]
+//! and then steps its parameters and moments directly, instead of being
+//! written out for a separate Adam pass over every parameter array. The
+//! arithmetic is adam.comp's, so the result equals the backward followed by
+//! `Adam::record_set` (tests/tests/train_kernels.rs compares them bit for bit).
+
+use super::{Frame, Gaussians, Push, Rasterizer};
+use crate::shaders;
+use anyhow::{bail, Result};
+use bytemuck::{Pod, Zeroable};
+use tgs_engine::{BufferBinding, Kernel, KernelDesc, Recorder};
+
+/// Adam's rates and constants for [`Rasterizer::record_backward_adam`]
+/// (the push-constant tail of the `ADAM` variant, in its order).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ReduceAdam {
+    pub lr_means: f32,
+    pub lr_scales: f32,
+    pub lr_quats: f32,
+    pub lr_opacity: f32,
+    /// Rate of each Gaussian's first `feat_split` features (the SH DC terms).
+    pub lr_feats: f32,
+    /// Rate of its other features.
+    pub lr_rest: f32,
+    pub feat_split: u32,
+    /// Features stepped per Gaussian (those of the active SH degrees).
+    pub feat_active: u32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    /// 1 - beta1^t for step t.
+    pub bc1: f32,
+    /// 1 - beta2^t.
+    pub bc2: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct PushAdam {
+    base: Push,
+    adam: ReduceAdam,
+}
+
+/// Storage buffers the fused reduce binds.
+const BINDINGS: u32 = 20;
+
+impl Rasterizer {
+    /// Whether this device can run [`Rasterizer::record_backward_adam`]
+    /// (20 storage buffers in one shader and a 100-byte push constant).
+    pub fn can_fuse_adam(&self) -> bool {
+        let caps = self.ctx.caps();
+        caps.max_storage_buffers_per_stage >= BINDINGS && caps.max_push_constants as usize >= std::mem::size_of::<PushAdam>()
+    }
+
+    /// The workgroups of [`Rasterizer::record_backward_adam`]'s reduce for
+    /// `n` Gaussians (to gate it with [`Rasterizer::record_fit_gate`]).
+    pub fn reduce_grid(&self, n: u32) -> [u32; 3] {
+        self.groups(n)
+    }
+
+    /// Record the backward of the last forward on `frame` and an Adam step
+    /// of `g` with moments `m` and `v` (same layout as `g`), fused into the
+    /// per-Gaussian reduce; `frame.densify` is written as by
+    /// [`Rasterizer::record_backward`], no gradient buffer is. With `gate`
+    /// (a slot from [`Rasterizer::record_fit_gate`] holding
+    /// [`Rasterizer::reduce_grid`]) the reduce, and so the step, runs only
+    /// when the view fitted its frame.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, m: &Gaussians, v: &Gaussians, adam: &ReduceAdam, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
+        for (name, s) in [("first", m), ("second", v)] {
+            if s.n != g.n || s.channels != g.channels || s.coeffs != g.coeffs {
+                bail!("Adam's {name} moments ({} Gaussians, {} x {} features) do not match the Gaussian set ({}, {} x {})", s.n, s.channels, s.coeffs, g.n, g.channels, g.coeffs);
+            }
+        }
+        let per = g.channels * g.coeffs;
+        if adam.feat_active > per || adam.feat_split > per {
+            bail!("Adam steps {} features per Gaussian (rate split at {}); the set has {per}", adam.feat_active, adam.feat_split);
+        }
+        if !self.can_fuse_adam() {
+            bail!("{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)", self.ctx.caps().device_name, std::mem::size_of::<PushAdam>());
+        }
+        let kernel = self.reduce_adam_kernel()?;
+        let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame)?;
+        let sc = rec.begin_scope("raster.reduce");
+        let mut bindings = Self::param_bindings(frame, g, &g.features);
+        bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records]);
+        bindings.extend([m.means.binding(), m.log_scales.binding(), m.quats.binding(), m.opacity.binding(), m.features.binding()]);
+        bindings.push(frame.densify.binding());
+        bindings.extend([v.means.binding(), v.log_scales.binding(), v.quats.binding(), v.opacity.binding(), v.features.binding()]);
+        let push = PushAdam { base: self.push(g, frame, sh_degree), adam: *adam };
+        match gate {
+            Some(args) => rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(&push), args)?,
+            None => rec.dispatch(kernel, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?,
+        }
+        rec.end_scope(sc);
+        Ok(())
+    }
+
+    fn reduce_adam_kernel(&self) -> Result<&Kernel> {
+        if let Some(k) = self.reduce_adam.get() {
+            return Ok(k);
+        }
+        let spirv = match self.records {
+            super::RecordAccess::Address => shaders::RASTER_REDUCE_ADAM_RECORDS_BDA,
+            super::RecordAccess::Binding => shaders::RASTER_REDUCE_ADAM,
+        };
+        let min_sg = self.ctx.caps().min_subgroup_size.max(1);
+        let spec = [(0, super::WG), (1, min_sg), (4, self.channels), (5, self.batch)];
+        let push_bytes = std::mem::size_of::<PushAdam>() as u32;
+        let k = Kernel::new(&self.ctx, &KernelDesc { name: "raster.reduce_adam", spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false })?;
+        Ok(self.reduce_adam.get_or_init(|| k))
+    }
+}
