@@ -88,7 +88,6 @@ void put_opacity(uint i, float g) { g_opacity[i] = g; }
 void put_feat(uint fb, uint i, float g) { g_feats[fb + i] = g; }
 #endif
 
-
 vec4 quat_rot_vjp(vec4 q, mat3 dR) {
     float r = q.x, x = q.y, y = q.z, z = q.w;
     // dIJ = dL/dR[row I][column J]; GLSL indexes dR[column][row].

