@@ -160,31 +160,32 @@ impl ScatteringModel {
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             self.raster.record_forward(&mut rec, &self.set.params, cam, &x.background, sh, &b.frame)?;
             self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
-            if fused {
-                // The reduce steps the parameters itself: gate it, then the
-                // statistics (which read its screen-space gradients).
-                let grids = [self.raster.reduce_grid(self.set.len()), self.densifier.stats_grid(&self.set)];
-                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
+            // The gate's slots: what steps the parameters, then the
+            // densification statistics (which read the backward's
+            // screen-space gradients).
+            let stats_grid = self.densifier.stats_grid(&self.set);
+            let args = if fused {
+                // The reduce steps the parameters itself, so it is gated.
+                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.raster.reduce_grid(self.set.len()), stats_grid])?;
                 let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
                 let s = &self.set;
                 self.raster.record_backward_adam(&mut rec, &s.params, &s.m, &s.v, &c, sh, &b.frame, Some(&args[0]))?;
-                if stats {
-                    let sc = rec.begin_scope("densify.stats");
-                    self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, &args[1])?;
-                    rec.end_scope(sc);
-                }
+                args
             } else {
                 self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
                 let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
-                grids.push(self.densifier.stats_grid(&self.set));
-                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
-                if stats {
-                    let sc = rec.begin_scope("densify.stats");
-                    self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, &args[5])?;
-                    rec.end_scope(sc);
-                }
+                grids.push(stats_grid);
+                self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?
+            };
+            let (stats_arg, adam_args) = args.split_last().context("fit gate slots")?;
+            if stats {
+                let sc = rec.begin_scope("densify.stats");
+                self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, stats_arg)?;
+                rec.end_scope(sc);
+            }
+            if !fused {
                 let sc = rec.begin_scope("adam");
-                self.adam.record_set_gated(&mut rec, &self.set, &groups, it as u64, &args[..5])?;
+                self.adam.record_set_gated(&mut rec, &self.set, &groups, it as u64, adam_args)?;
                 rec.end_scope(sc);
             }
             let t = rec.submit_and_wait()?;
