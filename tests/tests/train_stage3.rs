@@ -7,7 +7,8 @@
 //! Adam moments, reflection material, scattering set), and Stage III
 //! started from a finished Stage II run (`--from RUN --stages III`) ending
 //! bit-identical too, with its refusals; the scattering set frozen by
-//! default and trained with `light_field.train_scattering`.
+//! default and trained with `light_field.train_scattering` (all of it, or
+//! its colour only with `light_field.scattering_params = "colour"`).
 
 use std::path::{Path, PathBuf};
 use tgs::train::checkpoint;
@@ -146,5 +147,22 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     assert!(a_joint[0].iter().zip(&a_two[0]).any(|(p, q)| p != q), "the scattering set did not train in Stage III");
     let mj = json(&joint.join("metrics.json"));
     assert!(mj["test"]["psnr"].as_f64().unwrap() > mj["stages"][1]["test"]["psnr"].as_f64().unwrap() - 1.0);
+
+    // Colour only: the SH colour and its Adam moments move; positions,
+    // scales, rotations, opacity and their moments stay bit-identical.
+    let colour = base.join("colour");
+    let _ = std::fs::remove_dir_all(&colour);
+    let mut set = aj.set.clone();
+    set.push("light_field.scattering_params=\"colour\"".into());
+    assert_eq!(train(ctx, &TrainArgs { out: colour.clone(), set: set.clone(), ..aj.clone() }).unwrap().iteration, 430);
+    let (hc, a_colour) = checkpoint::read(&colour.join("checkpoint.bin")).unwrap();
+    assert!(a_colour.iter().flatten().all(|v| v.is_finite()));
+    for (k, (name, _)) in hc.arrays.iter().enumerate().take(15) {
+        let same = a_colour[k].len() == a_two[k].len() && a_colour[k].iter().zip(&a_two[k]).all(|(p, q)| p.to_bits() == q.to_bits());
+        assert_eq!(same, !name.ends_with(".features"), "scattering array {name}: {}", if same { "did not train" } else { "moved though frozen" });
+    }
+    let _ = std::fs::remove_dir_all(&colour);
+    set.push("light_field.scattering_params=\"geometry\"".into());
+    refused(TrainArgs { out: colour.clone(), set, ..aj.clone() }, &["light_field.scattering_params", "geometry"]);
     check_validation(ctx);
 }

@@ -105,6 +105,11 @@ pub struct LightFieldConfig {
     /// (28.51 dB after 1,000 iterations against 28.66 with the Stage I set
     /// frozen, and half the speed).
     pub train_scattering: bool,
+    /// What of the scattering set trains when `train_scattering` is on:
+    /// "all" (geometry, opacity and colour) or "colour" (the SH colour only;
+    /// positions, scales, rotations and opacity keep Stage I's values and
+    /// Adam moments).
+    pub scattering_params: String,
     /// High-frequency loss weight and percentile (as in `[reflection]`).
     pub lambda_hf: f32,
     pub hf_percentile: f32,
@@ -122,6 +127,7 @@ impl Default for LightFieldConfig {
             threshold: 0.01,
             fresnel: "schlick".into(),
             train_scattering: false,
+            scattering_params: "all".into(),
             lambda_hf: 0.1,
             hf_percentile: 90.0,
         }
@@ -139,9 +145,19 @@ impl LightFieldConfig {
             f => bail!("light_field.fresnel must be 'schlick' or 'off', not '{f}'"),
         }
     }
+    /// Whether Stage III trains the scattering set's colour only (geometry
+    /// and opacity frozen); meaningful with `train_scattering`.
+    pub fn scattering_colour_only(&self) -> Result<bool> {
+        match self.scattering_params.as_str() {
+            "all" => Ok(false),
+            "colour" => Ok(true),
+            p => bail!("light_field.scattering_params must be 'all' or 'colour', not '{p}'"),
+        }
+    }
     fn validate(&self) -> Result<()> {
         self.shape()?;
         self.schlick()?;
+        self.scattering_colour_only()?;
         if self.iterations == 0 {
             bail!("light_field.iterations must be at least 1 (leave Stage III out with stages = \"I,II\")");
         }

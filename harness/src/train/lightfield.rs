@@ -256,6 +256,7 @@ impl LightFieldModel {
         };
         let weights = LossWeights { ssim: cfg.lambda_ssim, normal: 0.0, dist: 0.0 };
         let lf = &cfg.light_field;
+        let colour_only = lf.scattering_colour_only()?;
         let it = x.iteration as u64;
         let net_group = AdamGroup::single(Self::lr(cfg, x.iteration));
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
@@ -300,7 +301,7 @@ impl LightFieldModel {
             self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
             rec.end_scope(sc);
             if train_scat {
-                scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration)?;
+                scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration, colour_only)?;
             }
             let (n, s) = (&self.net, &self.set);
             let np = n.shape.params() as usize;

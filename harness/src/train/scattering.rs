@@ -110,12 +110,22 @@ impl ScatteringModel {
     /// Record the backward of the last forward of `cam` from gradients a
     /// later stage wrote into [`Self::frame_buffers`]' gradient planes, and
     /// an Adam step (Stage I's rates, positions at `lr_means`; no
-    /// densification statistics).
-    pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, sh: u32, lr_means: f32, it: u32) -> Result<()> {
+    /// densification statistics). With `colour_only` the step covers the
+    /// SH colour alone: the geometry and opacity, and their Adam moments,
+    /// stay as they are.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, sh: u32, lr_means: f32, it: u32, colour_only: bool) -> Result<()> {
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
         self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
         let sc = rec.begin_scope("adam");
-        self.adam.record_set(rec, &self.set, &self.groups(cfg, lr_means, sh), it as u64)?;
+        let groups = self.groups(cfg, lr_means, sh);
+        if colour_only {
+            let s = &self.set;
+            let len = (s.params.channels * s.params.coeffs * s.len()) as usize;
+            self.adam.record(rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, len, &groups[4], it as u64)?;
+        } else {
+            self.adam.record_set(rec, &self.set, &groups, it as u64)?;
+        }
         rec.end_scope(sc);
         Ok(())
     }
