@@ -6,9 +6,10 @@
 //! resumed ending bit-identical to the uninterrupted one (MLP weights and
 //! Adam moments, reflection material, scattering set), and Stage III
 //! started from a finished Stage II run (`--from RUN --stages III`) ending
-//! bit-identical too, with its refusals; the scattering set frozen by
-//! default and trained with `light_field.train_scattering` (all of it, or
-//! its colour only with `light_field.scattering_params = "colour"`).
+//! bit-identical too, with its refusals; the scattering set's colour
+//! trained by default (its geometry bit-identical), all of it with
+//! `light_field.scattering_params = "all"`, none with
+//! `light_field.train_scattering = false`.
 
 use std::path::{Path, PathBuf};
 use tgs::train::checkpoint;
@@ -107,11 +108,13 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     let mut a2 = args(&two);
     a2.set.push("stages=\"I,II\"".into());
     assert_eq!(train(ctx, &a2).unwrap().iteration, 400);
-    // The scattering set stays as Stages I and II left it (train_scattering
-    // is off by default).
-    let (_, a_two) = checkpoint::read(&two.join("checkpoint.bin")).unwrap();
-    for k in 0..5 {
-        assert!(a_two[k].iter().zip(&aa[k]).all(|(p, q)| p.to_bits() == q.to_bits()) && a_two[k].len() == aa[k].len(), "scattering array {} moved in Stage III", names[k]);
+    // By default Stage III trains the scattering set's colour only: the SH
+    // colour and its Adam moments move; positions, scales, rotations,
+    // opacity and their moments stay as Stages I and II left them.
+    let (h_two, a_two) = checkpoint::read(&two.join("checkpoint.bin")).unwrap();
+    for (k, (name, _)) in h_two.arrays.iter().enumerate().take(15) {
+        let same = aa[k].len() == a_two[k].len() && aa[k].iter().zip(&a_two[k]).all(|(p, q)| p.to_bits() == q.to_bits());
+        assert_eq!(same, !name.ends_with(".features"), "default Stage III: scattering array {name} {}", if same { "did not train" } else { "moved though frozen" });
     }
     let from = base.join("from");
     let _ = std::fs::remove_dir_all(&from);
@@ -140,7 +143,7 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     // The paper's joint training: the scattering set moves too.
     let joint = base.join("joint");
     let _ = std::fs::remove_dir_all(&joint);
-    let aj = TrainArgs { out: joint.clone(), set: vec!["light_field.iterations=30".into(), "light_field.train_scattering=true".into()], ..af.clone() };
+    let aj = TrainArgs { out: joint.clone(), set: vec!["light_field.iterations=30".into(), "light_field.scattering_params=\"all\"".into()], ..af.clone() };
     assert_eq!(train(ctx, &aj).unwrap().iteration, 430);
     let (_, a_joint) = checkpoint::read(&joint.join("checkpoint.bin")).unwrap();
     assert!(a_joint.iter().flatten().all(|v| v.is_finite()));
@@ -148,21 +151,17 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     let mj = json(&joint.join("metrics.json"));
     assert!(mj["test"]["psnr"].as_f64().unwrap() > mj["stages"][1]["test"]["psnr"].as_f64().unwrap() - 1.0);
 
-    // Colour only: the SH colour and its Adam moments move; positions,
-    // scales, rotations, opacity and their moments stay bit-identical.
-    let colour = base.join("colour");
-    let _ = std::fs::remove_dir_all(&colour);
-    let mut set = aj.set.clone();
-    set.push("light_field.scattering_params=\"colour\"".into());
-    assert_eq!(train(ctx, &TrainArgs { out: colour.clone(), set: set.clone(), ..aj.clone() }).unwrap().iteration, 430);
-    let (hc, a_colour) = checkpoint::read(&colour.join("checkpoint.bin")).unwrap();
-    assert!(a_colour.iter().flatten().all(|v| v.is_finite()));
-    for (k, (name, _)) in hc.arrays.iter().enumerate().take(15) {
-        let same = a_colour[k].len() == a_two[k].len() && a_colour[k].iter().zip(&a_two[k]).all(|(p, q)| p.to_bits() == q.to_bits());
-        assert_eq!(same, !name.ends_with(".features"), "scattering array {name}: {}", if same { "did not train" } else { "moved though frozen" });
+    // Frozen: every scattering array stays bit-identical.
+    let frozen = base.join("frozen");
+    let _ = std::fs::remove_dir_all(&frozen);
+    let mut set = vec!["light_field.iterations=30".to_string(), "light_field.train_scattering=false".into()];
+    assert_eq!(train(ctx, &TrainArgs { out: frozen.clone(), set: set.clone(), ..af.clone() }).unwrap().iteration, 430);
+    let (_, a_frozen) = checkpoint::read(&frozen.join("checkpoint.bin")).unwrap();
+    for (k, (name, _)) in h_two.arrays.iter().enumerate().take(15) {
+        assert!(a_frozen[k].len() == a_two[k].len() && a_frozen[k].iter().zip(&a_two[k]).all(|(p, q)| p.to_bits() == q.to_bits()), "scattering array {name} moved though the set is frozen");
     }
-    let _ = std::fs::remove_dir_all(&colour);
+    let _ = std::fs::remove_dir_all(&frozen);
     set.push("light_field.scattering_params=\"geometry\"".into());
-    refused(TrainArgs { out: colour.clone(), set, ..aj.clone() }, &["light_field.scattering_params", "geometry"]);
+    refused(TrainArgs { out: frozen.clone(), set, ..af.clone() }, &["light_field.scattering_params", "geometry"]);
     check_validation(ctx);
 }

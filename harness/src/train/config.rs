@@ -99,16 +99,17 @@ pub struct LightFieldConfig {
     /// "schlick": I_refl = F(F0, cos) Phi (the paper's Stage III); "off": F0 Phi.
     pub fresnel: String,
     /// Train the scattering set too (the paper's joint training; no
-    /// densification, positions at Stage I's final rate). Off by default:
-    /// measured on the built-in glass scene (perf/RESULTS.md), the joint
-    /// step fits the training views' transmitted detail and loses test PSNR
-    /// (28.51 dB after 1,000 iterations against 28.66 with the Stage I set
-    /// frozen, and half the speed).
+    /// densification, positions at Stage I's final rate), what of it
+    /// `scattering_params` says. On by default, its colour only.
     pub train_scattering: bool,
     /// What of the scattering set trains when `train_scattering` is on:
-    /// "all" (geometry, opacity and colour) or "colour" (the SH colour only;
-    /// positions, scales, rotations and opacity keep Stage I's values and
-    /// Adam moments).
+    /// "colour" (the SH colour only; positions, scales, rotations and
+    /// opacity keep Stage I's values and Adam moments; the default) or "all".
+    /// Measured (perf/RESULTS.md, quick preset, test PSNR after Stage III):
+    /// colour against frozen +0.06 dB on the built-in glass, +0.17 on
+    /// `lantern`, +0.10 on `pane`, normals unchanged, ~30% more time per
+    /// Stage III iteration; "all" fits the training views' transmitted
+    /// detail and lost 0.15 dB on the built-in glass.
     pub scattering_params: String,
     /// High-frequency loss weight and percentile (as in `[reflection]`).
     pub lambda_hf: f32,
@@ -126,8 +127,8 @@ impl Default for LightFieldConfig {
             lr_r: 0.005,
             threshold: 0.01,
             fresnel: "schlick".into(),
-            train_scattering: false,
-            scattering_params: "all".into(),
+            train_scattering: true,
+            scattering_params: "colour".into(),
             lambda_hf: 0.1,
             hf_percentile: 90.0,
         }
