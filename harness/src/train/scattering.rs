@@ -120,9 +120,7 @@ impl ScatteringModel {
         let sc = rec.begin_scope("adam");
         let groups = self.groups(cfg, lr_means, sh);
         if colour_only {
-            let s = &self.set;
-            let len = (s.params.channels * s.params.coeffs * s.len()) as usize;
-            self.adam.record(rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, len, &groups[4], it as u64)?;
+            self.adam.record_set_features(rec, &self.set, &groups[4], it as u64)?;
         } else {
             self.adam.record_set(rec, &self.set, &groups, it as u64)?;
         }

@@ -132,6 +132,13 @@ impl Adam {
         self.record_set_on(rec, set, groups, t, None)
     }
 
+    /// Record step `t` over `set`'s features (SH colour) alone, with `group`;
+    /// the other arrays and their moments are left as they are.
+    pub fn record_set_features(&self, rec: &mut Recorder, set: &TrainableSet, group: &AdamGroup, t: u64) -> Result<()> {
+        let (p, g, m, v, len) = Self::arrays(set)[4];
+        self.record_on(rec, p, g, m, v, len, group, t, None)
+    }
+
     /// The grids of [`Adam::record_set`]'s five dispatches (means, scales,
     /// rotations, opacity, features) with `groups`, for a gate
     /// (`Rasterizer::record_fit_gate`).
