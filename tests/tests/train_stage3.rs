@@ -6,7 +6,8 @@
 //! resumed ending bit-identical to the uninterrupted one (MLP weights and
 //! Adam moments, reflection material, scattering set), and Stage III
 //! started from a finished Stage II run (`--from RUN --stages III`) ending
-//! bit-identical too, with its refusals; the scattering set's colour
+//! bit-identical too, with its refusals, and from a finished three-stage
+//! run (its stage-end checkpoints); the scattering set's colour
 //! trained by default (its geometry bit-identical), all of it with
 //! `light_field.scattering_params = "all"`, none with
 //! `light_field.train_scattering = false`.
@@ -137,8 +138,34 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
             assert!(e.contains(w), "error '{e}' should mention '{w}'");
         }
     };
+    // A run that went on to Stage III keeps the states its stages ended
+    // with: Stage II from its Stage I is `two` again (not from the colour
+    // its Stage III trained), and Stage III from its Stage II is the one
+    // run again.
+    let again2 = base.join("again2");
+    let _ = std::fs::remove_dir_all(&again2);
+    let a_again2 = TrainArgs { out: again2.clone(), from: Some(full.clone()), stages: Some("II".into()), set: vec![], ..af.clone() };
+    assert_eq!(train(ctx, &a_again2).unwrap().iteration, 400);
+    let (_, a_re2) = checkpoint::read(&again2.join("checkpoint.bin")).unwrap();
+    assert_eq!(a_re2.len(), a_two.len());
+    for (k, (name, _)) in h_two.arrays.iter().chain(h_two.reflection.as_ref().unwrap().arrays.iter()).enumerate() {
+        assert!(bits(&a_re2[k]) == bits(&a_two[k]), "{name}: Stage II from a finished three-stage run differs from the Stage I + II run");
+    }
+    let again3 = base.join("again3");
+    let _ = std::fs::remove_dir_all(&again3);
+    assert_eq!(train(ctx, &TrainArgs { out: again3.clone(), from: Some(full.clone()), ..af.clone() }).unwrap().iteration, 520);
+    let (_, a_re3) = checkpoint::read(&again3.join("checkpoint.bin")).unwrap();
+    for (name, (x, y)) in names.iter().zip(aa.iter().zip(&a_re3)) {
+        assert!(bits(x) == bits(y), "{name} differs between --from a three-stage run --stages III and one run");
+    }
+    // Without those states (a run from before they were written) both are
+    // refused: its checkpoint holds neither stage's end.
+    let old = base.join("old");
+    std::fs::create_dir_all(&old).unwrap();
+    std::fs::copy(full.join("checkpoint.bin"), old.join("checkpoint.bin")).unwrap();
     let _ = std::fs::remove_dir_all(&from);
-    refused(TrainArgs { from: Some(full.clone()), ..af.clone() }, &["finished Stage II", "520"]);
+    refused(TrainArgs { from: Some(old.clone()), ..af.clone() }, &["finished Stage II", "520", "checkpoint-stage2.bin"]);
+    refused(TrainArgs { from: Some(old.clone()), out: from.clone(), ..a_again2.clone() }, &["trained the scattering set", "checkpoint-stage1.bin"]);
     refused(TrainArgs { set: vec!["reflection.lr_r=0.01".into()], ..af.clone() }, &["reflection.lr_r", "light_field.*"]);
 
     // The paper's joint training: the scattering set moves too.

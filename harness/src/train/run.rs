@@ -22,6 +22,12 @@ use std::time::Instant;
 use tgs_engine::Context;
 
 pub const CHECKPOINT: &str = "checkpoint.bin";
+/// The run's state at the end of Stage I and of Stage II, written as the
+/// next stage begins: `--from RUN` starts from them, since the later
+/// stages change what checkpoint.bin holds (Stage III trains the
+/// scattering set's colour by default).
+pub const STAGE_ONE_CHECKPOINT: &str = "checkpoint-stage1.bin";
+pub const STAGE_TWO_CHECKPOINT: &str = "checkpoint-stage2.bin";
 pub const DEFAULT_SCENE: &str = "glass";
 
 #[derive(Clone, Debug, Default)]
@@ -190,11 +196,20 @@ fn stage_three_setting(k: &str) -> bool {
 /// of the stages kept, for metrics.json. RUN's settings are the base;
 /// options may change only the later stages' settings.
 fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer, Dataset, String, Vec<serde_json::Value>)> {
-    let ckpt = run.join(CHECKPOINT);
+    let keep_two = from_stage_two(a);
+    // The state at the end of the stage kept, where the run went past it.
+    let snapshot = run.join(if keep_two { STAGE_TWO_CHECKPOINT } else { STAGE_ONE_CHECKPOINT });
+    let ckpt = if snapshot.is_file() { snapshot } else { run.join(CHECKPOINT) };
     if !ckpt.is_file() {
         bail!("--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)", run.display());
     }
     let (mut h, mut arrays) = checkpoint::read(&ckpt)?;
+    if !keep_two && h.light_field.is_some() && h.config.light_field.train_scattering {
+        bail!(
+            "--from {}: its Stage III trained the scattering set, and the run has no {STAGE_ONE_CHECKPOINT} (Stage I's own state; runs from before it was written lack it): train Stage I again",
+            run.display()
+        );
+    }
     if h.iteration < h.config.iterations {
         bail!("--from {}: its Stage I stopped at iteration {} of {}; finish it first (tgs train --out {} --resume)", run.display(), h.iteration, h.config.iterations, run.display());
     }
@@ -207,12 +222,11 @@ fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer,
         base.stages = TrainConfig::default().stages;
     }
     let cfg = apply_args(base, a).with_context(|| format!("--from {}", run.display()))?;
-    let keep_two = from_stage_two(a);
     if keep_two {
         let end = h.config.iterations + h.config.reflection.iterations;
         if h.reflection.is_none() || h.iteration != end {
             bail!(
-                "--from {} --stages III starts from that run's finished Stage II; it is at iteration {} (Stage II ends at {end}{})",
+                "--from {} --stages III starts from that run's finished Stage II; it is at iteration {} (Stage II ends at {end}{}) and has no {STAGE_TWO_CHECKPOINT}",
                 run.display(),
                 h.iteration,
                 if h.reflection.is_none() { ", and it holds no Stage II state" } else { "" }
@@ -389,9 +403,14 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     while !tr.done() {
         // Between stages: close the last one, start the next, say so.
         let begun = if tr.at_reflection_start() {
+            // Not on a resume inside Stage II (the cache is rebuilt then).
+            if tr.reflection.is_none() {
+                checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str)?;
+            }
             let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
             Some((msg, json!({"iteration": tr.iteration, "stage": "II", "event": "begin", "reflection": tr.decision})))
         } else if tr.at_light_field_start() {
+            checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str)?;
             let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
             Some((msg, json!({"iteration": tr.iteration, "stage": "III", "event": "begin"})))
         } else {
