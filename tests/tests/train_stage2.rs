@@ -6,7 +6,9 @@
 //! above the measured one, Stage II is skipped with the decision recorded.
 
 use std::path::{Path, PathBuf};
+use tgs::train::checkpoint;
 use tgs::train::run::{train, TrainArgs};
+use tgs_tests::raster_util::bits;
 use tgs_tests::{check_validation, ctx_shared};
 
 fn scene() -> PathBuf {
@@ -111,6 +113,47 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     std::fs::write(unfinished.join("checkpoint.bin"), ck).unwrap();
     refused(TrainArgs { from: Some(unfinished.to_path_buf()), ..af.clone() }, &["stopped at iteration 300 of 400", "--resume"]);
     let _ = std::fs::remove_dir_all(&unfinished);
+
+    // Stage II that trains the scattering colour too: the SH colour and
+    // its Adam moments move; positions, scales, rotations, opacity and
+    // their moments stay Stage I's. A rerun is bit-identical.
+    let colour = tgs_tests::TempDir::new("stage2-colour");
+    let mut ac = TrainArgs { out: colour.to_path_buf(), ..af.clone() };
+    ac.set.push("reflection.train_scattering=true".into());
+    let arrays = |dir: &Path| checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
+    let (h1, a1) = arrays(&stage1);
+    let mut runs = Vec::new();
+    for _ in 0..2 {
+        let _ = std::fs::remove_dir_all(&colour);
+        assert_eq!(train(ctx, &ac).unwrap().iteration, 450);
+        runs.push(arrays(&colour).1);
+    }
+    for (k, (name, _)) in h1.arrays.iter().enumerate() {
+        let same = bits(&a1[k]) == bits(&runs[0][k]);
+        assert_eq!(same, !name.ends_with(".features"), "Stage II colour training: scattering array {name} {}", if same { "did not train" } else { "moved though frozen" });
+    }
+    assert!(runs[0].iter().flatten().all(|v| v.is_finite()));
+    for (k, (x, y)) in runs[0].iter().zip(&runs[1]).enumerate() {
+        assert!(bits(x) == bits(y), "array {k} differs between two identical Stage II runs that train the scattering colour");
+    }
+    let mc = json(&colour.join("metrics.json"));
+    let pc = mc["stages"][1]["test"]["psnr"].as_f64().unwrap();
+    assert!(pc > psnr(0) - 0.3 && pc.is_finite(), "Stage II with colour training: test PSNR {pc} vs Stage I {}", psnr(0));
+    // --from that run starts from its Stage I (checkpoint-stage1.bin), not
+    // from the colour its Stage II trained: the frozen Stage II again.
+    let again = tgs_tests::TempDir::new("stage2-again");
+    let _ = std::fs::remove_dir_all(&again);
+    let mut aa = TrainArgs { out: again.to_path_buf(), from: Some(colour.to_path_buf()), ..af.clone() };
+    aa.set.push("reflection.train_scattering=false".into());
+    assert_eq!(train(ctx, &aa).unwrap().iteration, 450);
+    for f in ["reflection.ply", "point_cloud.ply"] {
+        assert!(std::fs::read(out.join(f)).unwrap() == std::fs::read(again.join(f)).unwrap(), "{f}: Stage II --from a run whose Stage II trained the colour differs from the Stage I + II run");
+    }
+    // Without that file (a run from before it was written) it is refused.
+    let _ = std::fs::remove_dir_all(&again);
+    std::fs::remove_file(colour.join("checkpoint-stage1.bin")).unwrap();
+    refused(TrainArgs { from: Some(colour.to_path_buf()), ..af.clone() }, &["Stage II trained the scattering set", "checkpoint-stage1.bin"]);
+    let _ = std::fs::remove_dir_all(&colour);
     let _ = std::fs::remove_dir_all(&from);
     let _ = std::fs::remove_dir_all(&stage1);
 

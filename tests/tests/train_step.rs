@@ -206,7 +206,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     cfg.reflection.fresnel = "schlick".into();
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
-    let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: &scat, lr_means: 1e-3, profile: false };
+    let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: Some(&scat), lr_means: 1e-3, profile: false };
     let model = || ReflectionModel::from_scattering(ctx, Some(&g), &[], &cfg.reflection, 1e-15).unwrap();
 
     // A: the first frame overflows (more than one submission), nothing is
@@ -214,14 +214,14 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     let mut a = model();
     let before = reflection_bits(&a);
     let submitted = ctx.submissions();
-    let out_a = a.step(&cfg, &input).unwrap();
+    let out_a = a.step(&cfg, &input, None).unwrap();
     assert!(ctx.submissions() - submitted > 1, "the scene must overflow the first frame");
 
     // B: a render grew the frame first; the same step is one submission.
     let mut b = model();
     b.render(&cam, &scat).unwrap();
     let submitted = ctx.submissions();
-    let out_b = b.step(&cfg, &input).unwrap();
+    let out_b = b.step(&cfg, &input, None).unwrap();
     assert_eq!(ctx.submissions() - submitted, 1, "a Stage II step that fits is one submission (loss and high-frequency statistics ride it back)");
 
     // One Adam step moved the geometry, the material and the map.

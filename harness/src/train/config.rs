@@ -235,6 +235,11 @@ pub struct ReflectionConfig {
     /// the pixels at or above the `hf_percentile`-th percentile (0: off).
     pub lambda_hf: f32,
     pub hf_percentile: f32,
+    /// Train the scattering set's SH colour in Stage II too (its geometry
+    /// and opacity stay Stage I's), against the composite, at Stage I's
+    /// colour rates: the reflection term then takes over the
+    /// view-dependent colour Stage I baked into the scattering set.
+    pub train_scattering: bool,
 }
 
 impl Default for ReflectionConfig {
@@ -273,6 +278,7 @@ impl Default for ReflectionConfig {
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,
+            train_scattering: false,
         }
     }
 }

@@ -8,7 +8,7 @@
 //! prune-only density control. Never refers to the trainer.
 
 use super::config::{ReflectionConfig, TrainConfig};
-use super::scattering::StepOutput;
+use super::scattering::{ScatteringModel, StepOutput};
 use super::seed::{quat_for_normal, Seed};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
@@ -25,11 +25,24 @@ pub struct ReflStepInput<'a> {
     pub iteration: u32,
     pub camera: &'a Camera,
     pub target: &'a Buffer<f32>,
-    /// The frozen scattering colour of this view (3 planes).
-    pub scat: &'a Buffer<f32>,
+    /// The frozen scattering colour of this view (3 planes); None when
+    /// the step trains the scattering colour ([`ScatTrain`]).
+    pub scat: Option<&'a Buffer<f32>>,
     /// Position learning rate (already scaled by the extent).
     pub lr_means: f32,
     pub profile: bool,
+}
+
+/// Stage II training the scattering set's SH colour too
+/// (`reflection.train_scattering`): its geometry, opacity and their Adam
+/// moments stay as Stage I left them.
+pub struct ScatTrain<'a> {
+    pub model: &'a mut ScatteringModel,
+    /// Stage I's final SH degree.
+    pub sh_degree: u32,
+    pub background: [f32; 3],
+    /// The global iteration: the scattering set's Adam step count.
+    pub global_iteration: u32,
 }
 
 /// A Stage II render of one view, downloaded.
@@ -212,9 +225,32 @@ impl ReflectionModel {
     /// by whether the view fitted its frame (when it did not, nothing was
     /// updated, the frame grows and the step runs again). Prunes when the
     /// schedule says so (its own submissions).
-    pub fn step(&mut self, cfg: &TrainConfig, x: &ReflStepInput) -> Result<StepOutput> {
+    ///
+    /// With `train` the scattering set's colour trains too: its forward and
+    /// this set's run first (their own submissions, so that the step's
+    /// submission fits its frame at once: the scattering set's Adam step in
+    /// it is not gated), and the composite's gradient to the scattering
+    /// colour flows back through its rasterizer to its SH coefficients.
+    pub fn step(&mut self, cfg: &TrainConfig, x: &ReflStepInput, train: Option<ScatTrain>) -> Result<StepOutput> {
         let rc = &cfg.reflection;
         let cam = x.camera;
+        let mut pre = Vec::new();
+        let scat_step = train.as_ref().map(|t| (t.sh_degree, t.global_iteration));
+        let scat_model: Option<&ScatteringModel> = match train {
+            Some(t) => {
+                pre.extend(t.model.forward_view(cam, t.sh_degree, &t.background, x.profile)?);
+                pre.extend(self.forward(cam, x.profile)?);
+                Some(&*t.model)
+            }
+            None => None,
+        };
+        let (scat, scat_grad) = match scat_model {
+            Some(m) => {
+                let (out, grad) = m.frame_buffers(cam.width, cam.height)?;
+                (out, Some(grad))
+            }
+            None => (x.scat.context("a frozen Stage II step needs the scattering colour")?, None),
+        };
         let weights = LossWeights { ssim: cfg.lambda_ssim, normal: rc.lambda_normal, dist: 0.0 };
         let groups = [
             AdamGroup::single(x.lr_means),
@@ -231,7 +267,7 @@ impl ReflectionModel {
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let sc = rec.begin_scope("refl.composite");
-            self.shading.record_composite(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_in)?;
+            self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
             rec.end_scope(sc);
             self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
             if rc.lambda_hf > 0.0 {
@@ -240,8 +276,17 @@ impl ReflectionModel {
                 rec.end_scope(sc);
             }
             let sc = rec.begin_scope("refl.composite_backward");
-            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, x.scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, None)?;
+            if let Some(g) = scat_grad {
+                // The composite writes the colour planes; the scattering
+                // geometry planes get no gradient.
+                let n = (cam.width * cam.height) as usize;
+                rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
+            }
+            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad)?;
             rec.end_scope(sc);
+            if let (Some(m), Some((sh, it))) = (scat_model, scat_step) {
+                m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
+            }
             self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
             let sc = rec.begin_scope("refl.color_backward");
             self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
@@ -258,7 +303,11 @@ impl ReflectionModel {
             if self.raster.fit(&mut b.frame)? {
                 break (t, b.loss.values()?);
             }
+            if scat_model.is_some() {
+                bail!("a Stage II step that trains the scattering colour overflowed the frame its own forward had just fitted");
+            }
         };
+        let timings = pre.into_iter().chain(timings).collect();
         let mut loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
         if rc.lambda_hf > 0.0 {
             loss += rc.lambda_hf as f64 * self.hf_stats.values()?.2;

@@ -204,10 +204,14 @@ fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer,
         bail!("--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)", run.display());
     }
     let (mut h, mut arrays) = checkpoint::read(&ckpt)?;
-    if !keep_two && h.light_field.is_some() && h.config.light_field.train_scattering {
+    // Past Stage I, a stage that trained the scattering set changed it.
+    let stage_two_trained = h.iteration > h.config.iterations && h.config.reflection.train_scattering;
+    let stage_three_trained = h.light_field.is_some() && h.config.light_field.train_scattering;
+    if !keep_two && (stage_two_trained || stage_three_trained) {
         bail!(
-            "--from {}: its Stage III trained the scattering set, and the run has no {STAGE_ONE_CHECKPOINT} (Stage I's own state; runs from before it was written lack it): train Stage I again",
-            run.display()
+            "--from {}: its Stage {} trained the scattering set, and the run has no {STAGE_ONE_CHECKPOINT} (Stage I's own state; runs from before it was written lack it): train Stage I again",
+            run.display(),
+            if stage_two_trained { "II" } else { "III" }
         );
     }
     if h.iteration < h.config.iterations {

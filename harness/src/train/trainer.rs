@@ -12,7 +12,7 @@ use super::config::TrainConfig;
 use super::init::{far_points, gaussians_from_points, random_points};
 use super::lightfield::{normalization_box, LightFieldModel, LightFieldStepInput};
 use super::rng::Rng;
-use super::reflection::{residual, ReflStepInput, ReflectionModel};
+use super::reflection::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::scattering::{ScatteringModel, StepInput};
 use super::seed::{residual_hull_seeds, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
@@ -350,7 +350,9 @@ impl Trainer {
         let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick()? };
         let net = LightFieldModel::init_net(&self.ctx, lf.shape()?, self.cfg.seed ^ 0x4c46)?;
         self.light_field = Some(LightFieldModel::new(&self.ctx, set, net, shade, self.cfg.adam_eps)?);
-        if lf.train_scattering {
+        // Stage III renders the scattering colour itself, or caches it
+        // again when Stage II changed it.
+        if lf.train_scattering || self.cfg.reflection.train_scattering {
             self.scat_cache.clear();
         }
         Ok(())
@@ -420,7 +422,10 @@ impl Trainer {
         let view = self.next_view();
         let cam = self.cameras[view as usize];
         let model = self.reflection.as_mut().context("Stage II has not begun (Trainer::begin_reflection)")?;
-        let scat = self.scat_cache.get(view as usize).context("the scattering colour cache is missing")?;
+        let train = self.cfg.reflection.train_scattering;
+        let scat = if train { None } else { Some(self.scat_cache.get(view as usize).context("the scattering colour cache is missing")?) };
+        let sh_degree = self.cfg.sh_degree_at(self.cfg.iterations);
+        let scat_train = train.then(|| ScatTrain { model: &mut self.scattering, sh_degree, background: self.background, global_iteration: it });
         let input = ReflStepInput {
             iteration: stage_it,
             camera: &cam,
@@ -431,7 +436,7 @@ impl Trainer {
             lr_means: self.cfg.lr_means_final * self.extent,
             profile,
         };
-        let out = model.step(&self.cfg, &input)?;
+        let out = model.step(&self.cfg, &input, scat_train)?;
         self.iteration = it;
         Ok(StepReport {
             iteration: it,
