@@ -168,6 +168,52 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     refused(TrainArgs { from: Some(old.clone()), out: from.clone(), ..a_again2.clone() }, &["trained the scattering set", "checkpoint-stage1.bin"]);
     refused(TrainArgs { set: vec!["reflection.lr_r=0.01".into()], ..af.clone() }, &["reflection.lr_r", "light_field.*"]);
 
+    // reflection.reseed: after Stage III, Stages II and III run again
+    // ("II.2", "III.2"), Stage II seeded afresh from the residual of the
+    // scattering set as Stage III left it. The first round is the one run's.
+    let rs = base.join("reseed");
+    let _ = std::fs::remove_dir_all(&rs);
+    let mut ar = TrainArgs { out: rs.clone(), ..af.clone() };
+    ar.set.push("reflection.reseed=true".into());
+    assert_eq!(train(ctx, &ar).unwrap().iteration, 740);
+    let mr = json(&rs.join("metrics.json"));
+    let st = mr["stages"].as_array().unwrap();
+    assert_eq!(st.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II", "III", "II.2", "III.2"]);
+    assert_eq!(st[2]["test"], stages[2]["test"], "the first round's Stage III is the one run's");
+    assert_eq!((st[3]["iterations"].as_u64(), st[4]["iterations"].as_u64()), (Some(100), Some(120)));
+    assert_eq!(mr["test"]["psnr"], st[4]["test"]["psnr"]);
+    assert!(st[3..].iter().all(|s| s["test"]["psnr"].as_f64().is_some_and(|p| p.is_finite() && p > psnr(0) - 1.0)), "{st:?}");
+    let d = &mr["reflection"];
+    // (On this tiny scene Stage III's colour leaves residual nearly
+    // everywhere, so no ray crosses carved space: the copy fallback.)
+    let n = |k: &str| d[k].as_u64().unwrap();
+    assert!(d["round"] == 2 && d["run"] == true && n("reflection_gaussians") > 0 && n("seeds") + n("copied") == n("reflection_gaussians"), "{d}");
+    assert_ne!(d["residual_mean"], m["reflection"]["residual_mean"], "the second round's residual is measured on the scattering set Stage III trained");
+    for f in ["residual/round2/r_0.exr", "renders/stage3/r_0.png", "renders/stage2.2/r_0.png", "reflection.ply", "light_field.safetensors"] {
+        assert!(rs.join(f).is_file(), "missing {f}");
+    }
+    let lines = log_lines(&rs);
+    let count = |s: &str| lines.iter().filter(|l| l["stage"] == s && l["loss"].as_f64().is_some_and(f64::is_finite)).count();
+    assert_eq!((count("III"), count("II.2"), count("III.2")), (120, 100, 120));
+    // The stage snapshots keep the first round's ends.
+    assert_eq!(checkpoint::read(&rs.join("checkpoint-stage2.bin")).unwrap().0.iteration, 400);
+    // A finished one-round run resumed with reflection.reseed on goes on
+    // into the second round and ends as the reseed run did, bit for bit.
+    let one = base.join("one");
+    let _ = std::fs::remove_dir_all(&one);
+    assert_eq!(train(ctx, &TrainArgs { out: one.clone(), ..af.clone() }).unwrap().iteration, 520);
+    let resume = TrainArgs { out: one.clone(), resume: true, from: None, stages: None, dataset: None, set: vec!["reflection.reseed=true".into()], ..af.clone() };
+    assert_eq!(train(ctx, &resume).unwrap().iteration, 740);
+    let (hr, ar_) = checkpoint::read(&rs.join("checkpoint.bin")).unwrap();
+    let (ho, ao) = checkpoint::read(&one.join("checkpoint.bin")).unwrap();
+    assert_eq!((hr.iteration, hr.rng, &hr.stack), (ho.iteration, ho.rng, &ho.stack));
+    assert_eq!(ar_.len(), ao.len());
+    for (k, (x, y)) in ar_.iter().zip(&ao).enumerate() {
+        assert!(bits(x) == bits(y), "array {k} differs between one reseed run and a finished run resumed with reflection.reseed");
+    }
+    let _ = std::fs::remove_dir_all(&one);
+    let _ = std::fs::remove_dir_all(&rs);
+
     // The paper's joint training: the scattering set moves too.
     let joint = base.join("joint");
     let _ = std::fs::remove_dir_all(&joint);

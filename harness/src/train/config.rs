@@ -240,6 +240,13 @@ pub struct ReflectionConfig {
     /// colour rates: the reflection term then takes over the
     /// view-dependent colour Stage I baked into the scattering set.
     pub train_scattering: bool,
+    /// After Stage III, run Stages II and III once more ("II.2", "III.2"),
+    /// Stage II seeded afresh from the residual of the scattering set as
+    /// Stage III left it: with its colour trained against the composite
+    /// (light_field.scattering_params = "colour"), that set no longer holds
+    /// the reflections Stage I baked into it, so the residual shows the
+    /// glass more cleanly. Needs Stage III; doubles Stages II and III.
+    pub reseed: bool,
 }
 
 impl Default for ReflectionConfig {
@@ -279,6 +286,7 @@ impl Default for ReflectionConfig {
             lambda_hf: 0.1,
             hf_percentile: 90.0,
             train_scattering: false,
+            reseed: false,
         }
     }
 }

@@ -90,7 +90,7 @@ pub fn request_stop() {
 
 /// Settings a resumed run may change: they do not alter what was already
 /// trained (the schedule is a function of the iteration count).
-pub const RESUMABLE_SETTINGS: [&str; 5] = ["iterations", "reflection.iterations", "light_field.iterations", "test_interval", "checkpoint_interval"];
+pub const RESUMABLE_SETTINGS: [&str; 6] = ["iterations", "reflection.iterations", "light_field.iterations", "reflection.reseed", "test_interval", "checkpoint_interval"];
 
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
     let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
@@ -187,7 +187,7 @@ fn from_stage_two(a: &TrainArgs) -> bool {
 
 /// Settings `--from RUN --stages III` may change: only Stage III's.
 fn stage_three_setting(k: &str) -> bool {
-    k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
+    k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval" | "reflection.reseed")
 }
 
 /// `--from RUN`: a trainer at the end of RUN's Stage I (its scattering set;
@@ -238,7 +238,7 @@ fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer,
         }
         let conflicts = changed_settings(&h.config, &cfg, stage_three_setting)?;
         if !conflicts.is_empty() {
-            bail!("--from {} --stages III reuses that run's Stages I and II; these options would change how they were trained:\n  {}\nonly light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+            bail!("--from {} --stages III reuses that run's Stages I and II; these options would change how they were trained:\n  {}\nonly light_field.*, reflection.reseed, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
         }
     }
     let conflicts = changed_settings(&h.config, &cfg, later_stage_setting)?;
@@ -406,17 +406,24 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let mut stage_start = Instant::now();
     while !tr.done() {
         // Between stages: close the last one, start the next, say so.
+        let (entry, label) = tr.next_entry();
+        let first_round = tr.schedule.round(entry) == 1;
         let begun = if tr.at_reflection_start() {
-            // Not on a resume inside Stage II (the cache is rebuilt then).
-            if tr.reflection.is_none() {
+            // Not on a resume inside Stage II (the cache is rebuilt then),
+            // nor as Stage II begins again (reflection.reseed).
+            if tr.reflection.is_none() && first_round {
                 checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str)?;
             }
-            let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
-            Some((msg, json!({"iteration": tr.iteration, "stage": "II", "event": "begin", "reflection": tr.decision})))
+            let prev = tr.schedule.label(entry.saturating_sub(1));
+            let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet, &prev)?;
+            Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin", "reflection": tr.decision})))
         } else if tr.at_light_field_start() {
-            checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str)?;
-            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet)?;
-            Some((msg, json!({"iteration": tr.iteration, "stage": "III", "event": "begin"})))
+            if first_round {
+                checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str)?;
+            }
+            let prev = tr.schedule.label(entry.saturating_sub(1));
+            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet, &prev)?;
+            Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin"})))
         } else {
             None
         };
@@ -447,7 +454,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let elapsed = loop_start.elapsed().as_secs_f64();
         let its = (r.iteration - start_it) as f64 / elapsed.max(1e-9);
         let mut line = json!({
-            "iteration": r.iteration, "stage": r.stage.name(), "view": r.view, "loss": r.loss, "l1": r.values.l1, "ssim": r.values.ssim,
+            "iteration": r.iteration, "stage": label, "view": r.view, "loss": r.loss, "l1": r.values.l1, "ssim": r.values.ssim,
             "psnr": r.values.psnr(), "gaussians": r.gaussians, "it_per_s": its, "elapsed_s": start.elapsed().as_secs_f64(),
         });
         if r.values.normal.is_finite() {
@@ -513,9 +520,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         write_png(&a.out.join("envmap.png"), &img)?;
     }
     let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&a.out.join("renders/test")))?) };
-    let last_stage = tr.schedule.stages.last().map(|s| s.0).unwrap_or_default();
-    stages.retain(|s| s["stage"] != last_stage.name());
-    stages.push(stage_record(last_stage.name(), &tr, stage_start, metrics.as_ref()));
+    let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
+    stages.retain(|s| s["stage"] != last_stage.as_str());
+    stages.push(stage_record(&last_stage, &tr, stage_start, metrics.as_ref()));
     let timings: BTreeMap<String, f64> = timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64)).collect();
     let doc = json!({
         "dataset": dataset_str,
@@ -550,7 +557,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
 
 /// metrics.json's record of a finished stage.
 fn stage_record(stage: &str, tr: &Trainer, since: Instant, m: Option<&Metrics>) -> serde_json::Value {
-    let its = tr.schedule.stages.iter().find(|s| s.0.name() == stage).map(|s| s.1).unwrap_or(0);
+    let its = tr.schedule.iterations_of(stage);
     let test = m.map(|m| {
         json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normals.normal_mae_deg, "normal_mae_scattering_deg": m.normals.normal_mae_scattering_deg,
                "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg})
@@ -564,6 +571,18 @@ fn read_stage_records(out: &Path, resume: bool) -> Vec<serde_json::Value> {
         return Vec::new();
     }
     std::fs::read(out.join("stages.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default()
+}
+
+/// Where a closed stage's test renders go: renders/stage1, stage2,
+/// stage3, and stage2.2 / stage3.2 for a second round.
+fn renders_dir(label: &str) -> String {
+    let (name, round) = label.split_once('.').map(|(n, r)| (n, format!(".{r}"))).unwrap_or((label, String::new()));
+    let n = match name {
+        "I" => "1",
+        "II" => "2",
+        _ => "3",
+    };
+    format!("stage{n}{round}")
 }
 
 /// Close `stage`: its test metrics (renders in OUT/renders/RENDERS) into
@@ -586,15 +605,17 @@ fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<se
 
 /// Close Stage I (its test metrics), measure the residual (maps written to
 /// OUT/residual/), and start Stage II or skip it. Returns the message.
-fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool) -> Result<String> {
+fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool, prev: &str) -> Result<String> {
     let resumed = tr.reflection.is_some();
+    let reseed = prev != "I";
     if !resumed {
-        close_stage(tr, data, out, stages, since, "I", "stage1")?;
+        close_stage(tr, data, out, stages, since, prev, &renders_dir(prev))?;
         if !quiet {
-            eprintln!("Stage I done: measuring the residual of {} training views", data.train.len());
+            eprintln!("Stage {prev} done: measuring the residual of {} training views", data.train.len());
         }
     }
-    let dir = out.join("residual");
+    // The second round's residual (reflection.reseed) beside the first's.
+    let dir = out.join(if reseed { "residual/round2" } else { "residual" });
     std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
     let d = tr.begin_reflection(|i, cam, r| {
@@ -610,7 +631,8 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
     })?;
     Ok(if d.run {
         format!(
-            "Stage II: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I{}), {} iterations",
+            "Stage {}: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I{}), {} iterations",
+            if reseed { "II.2, seeded again after Stage III" } else { "II" },
             d.residual_mean,
             d.threshold,
             100.0 * d.residual_fraction_over_0_05,
@@ -642,11 +664,11 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
 
 /// Between Stage II and III: Stage II's record (test metrics, renders in
 /// renders/stage2), then the light-field model.
-fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool) -> Result<String> {
+fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool, prev: &str) -> Result<String> {
     if tr.reflection.is_some() {
-        close_stage(tr, data, out, stages, since, "II", "stage2")?;
+        close_stage(tr, data, out, stages, since, prev, &renders_dir(prev))?;
         if !quiet {
-            eprintln!("Stage II done");
+            eprintln!("Stage {prev} done");
         }
     }
     tr.begin_light_field()?;
@@ -654,7 +676,8 @@ fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut 
     let m = tr.light_field.as_ref().context("Stage III model")?;
     let s = &m.net.shape;
     Ok(format!(
-        "Stage III: light field {} x {} (L {} / {}, {} parameters) on pixels with R > {}, {} iterations{}",
+        "Stage {}: light field {} x {} (L {} / {}, {} parameters) on pixels with R > {}, {} iterations{}",
+        tr.next_entry().1,
         s.depth,
         s.width,
         s.levels_x,

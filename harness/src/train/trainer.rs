@@ -74,6 +74,9 @@ pub struct ReflDecision {
     pub view_dependence_threshold: f64,
     /// Whether Stage II ran.
     pub run: bool,
+    /// 1, or 2 for the Stage II run again after Stage III (reflection.reseed).
+    #[serde(default)]
+    pub round: u32,
     pub reflection_gaussians: u32,
     /// Of those: residual-hull seeds, and Stage I Gaussians copied.
     #[serde(default)]
@@ -100,8 +103,40 @@ impl Schedule {
         }
         if cfg.wants_light_field() {
             stages.push((Stage::LightField, cfg.light_field.iterations));
+            if cfg.reflection.reseed {
+                stages.push((Stage::Reflection, cfg.reflection.iterations));
+                stages.push((Stage::LightField, cfg.light_field.iterations));
+            }
         }
         Schedule { stages }
+    }
+    /// The index in `stages` of global iteration `it` (1-based).
+    pub fn entry_at(&self, it: u32) -> Option<usize> {
+        let mut start = 0;
+        for (i, &(_, n)) in self.stages.iter().enumerate() {
+            if it > start && it <= start + n {
+                return Some(i);
+            }
+            start += n;
+        }
+        None
+    }
+    /// Entry `i`'s round: 1, or 2 for a stage run again (reflection.reseed).
+    pub fn round(&self, i: usize) -> u32 {
+        let s = self.stages.get(i).map(|e| e.0);
+        1 + self.stages[..i.min(self.stages.len())].iter().filter(|e| Some(e.0) == s).count() as u32
+    }
+    /// Entry `i`'s name in logs and metrics: "II", or "II.2" in round 2.
+    pub fn label(&self, i: usize) -> String {
+        let name = self.stages.get(i).map(|e| e.0.name()).unwrap_or("?");
+        match self.round(i) {
+            1 => name.to_string(),
+            r => format!("{name}.{r}"),
+        }
+    }
+    /// The iterations of the entry named `label`.
+    pub fn iterations_of(&self, label: &str) -> u32 {
+        (0..self.stages.len()).find(|&i| self.label(i) == label).map(|i| self.stages[i].1).unwrap_or(0)
     }
     /// First global iteration of `stage` minus one (its iterations are start+1..).
     pub fn start_of(&self, stage: Stage) -> u32 {
@@ -252,7 +287,16 @@ impl Trainer {
     /// Whether the next iteration starts Stage II (call
     /// [`Trainer::begin_reflection`] first).
     pub fn at_reflection_start(&self) -> bool {
-        self.scat_cache.is_empty() && matches!(self.schedule.at(self.iteration + 1), Some((Stage::Reflection, _)))
+        // A Stage II run again after Stage III starts while the light
+        // field is still there.
+        (self.scat_cache.is_empty() || self.light_field.is_some()) && matches!(self.schedule.at(self.iteration + 1), Some((Stage::Reflection, _)))
+    }
+
+    /// The entry of the schedule the next iteration belongs to, and its
+    /// name ("II", "II.2", ...).
+    pub fn next_entry(&self) -> (usize, String) {
+        let i = self.schedule.entry_at(self.iteration + 1).unwrap_or(self.schedule.stages.len().saturating_sub(1));
+        (i, self.schedule.label(i))
     }
 
     /// Between Stage I and II: render every training view with the frozen
@@ -265,6 +309,10 @@ impl Trainer {
         let shading = ReflectionShading::new(&self.ctx)?;
         let sh = self.sh_degree(self.cfg.iterations);
         let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
+        // Stage II again (reflection.reseed): the light field and its
+        // reflection set give way to a set seeded afresh.
+        let reseed = self.light_field.take().is_some();
+        let round = self.schedule.round(self.next_entry().0);
         self.scat_cache.clear();
         // Per view: residual magnitude and Stage I surface depth (seeding),
         // and both reduced for the view-dependence measure.
@@ -304,11 +352,18 @@ impl Trainer {
             seeds: 0,
             copied: 0,
             hull_empty: false,
+            round,
         };
         // A reflection set that exists (a resumed Stage II) was decided on
         // when it was made; a run from before the view-dependence test must
         // not end its Stage II halfway on resume.
-        d.run = self.reflection.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
+        // The second round runs whatever its residual: the first decided.
+        if let (Some(kept), true) = (&self.decision, self.reflection.is_some()) {
+            // A resumed Stage II keeps the decision (and seed counts) it
+            // was started with.
+            return Ok(kept.clone());
+        }
+        d.run = reseed || self.reflection.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
         if d.run {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
