@@ -235,17 +235,17 @@ impl ReflectionModel {
         let rc = &cfg.reflection;
         let cam = x.camera;
         let mut pre = Vec::new();
-        let scat_step = train.as_ref().map(|t| (t.sh_degree, t.global_iteration));
-        let scat_model: Option<&ScatteringModel> = match train {
+        // The trained scattering model, its SH degree and Adam step count.
+        let scat_model: Option<(&ScatteringModel, u32, u32)> = match train {
             Some(t) => {
                 pre.extend(t.model.forward_view(cam, t.sh_degree, &t.background, x.profile)?);
                 pre.extend(self.forward(cam, x.profile)?);
-                Some(&*t.model)
+                Some((&*t.model, t.sh_degree, t.global_iteration))
             }
             None => None,
         };
         let (scat, scat_grad) = match scat_model {
-            Some(m) => {
+            Some((m, ..)) => {
                 let (out, grad) = m.frame_buffers(cam.width, cam.height)?;
                 (out, Some(grad))
             }
@@ -284,7 +284,7 @@ impl ReflectionModel {
             }
             self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad)?;
             rec.end_scope(sc);
-            if let (Some(m), Some((sh, it))) = (scat_model, scat_step) {
+            if let Some((m, sh, it)) = scat_model {
                 m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
             }
             self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;

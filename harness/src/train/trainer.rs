@@ -153,14 +153,9 @@ impl Schedule {
     }
     /// The stage of global iteration `it` (1-based) and the iteration within it.
     pub fn at(&self, it: u32) -> Option<(Stage, u32)> {
-        let mut start = 0;
-        for &(s, n) in &self.stages {
-            if it > start && it <= start + n {
-                return Some((s, it - start));
-            }
-            start += n;
-        }
-        None
+        let i = self.entry_at(it)?;
+        let start: u32 = self.stages[..i].iter().map(|e| e.1).sum();
+        Some((self.stages[i].0, it - start))
     }
 }
 
@@ -337,6 +332,11 @@ impl Trainer {
                 maps.push((mag.to_vec(), depth));
             }
         }
+        // A resumed Stage II (its set exists) keeps the decision and seed
+        // counts it was started with; only the cache was needed.
+        if let (Some(kept), true) = (&self.decision, self.reflection.is_some()) {
+            return Ok(kept.clone());
+        }
         let views = self.cameras.len().max(1);
         let vd = view_dependence(&vd_maps, (self.centre, self.extent), VD_SAMPLES);
         drop(vd_maps);
@@ -354,15 +354,10 @@ impl Trainer {
             hull_empty: false,
             round,
         };
-        // A reflection set that exists (a resumed Stage II) was decided on
-        // when it was made; a run from before the view-dependence test must
-        // not end its Stage II halfway on resume.
-        // The second round runs whatever its residual: the first decided.
-        if let (Some(kept), true) = (&self.decision, self.reflection.is_some()) {
-            // A resumed Stage II keeps the decision (and seed counts) it
-            // was started with.
-            return Ok(kept.clone());
-        }
+        // A reflection set that exists (a resumed Stage II without a
+        // recorded decision) was decided on when it was made, and the
+        // second round (reflection.reseed) runs whatever its residual: the
+        // first decided.
         d.run = reseed || self.reflection.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
         if d.run {
             if self.reflection.is_none() {
@@ -480,7 +475,7 @@ impl Trainer {
         let train = self.cfg.reflection.train_scattering;
         let scat = if train { None } else { Some(self.scat_cache.get(view as usize).context("the scattering colour cache is missing")?) };
         let sh_degree = self.cfg.sh_degree_at(self.cfg.iterations);
-        let scat_train = train.then(|| ScatTrain { model: &mut self.scattering, sh_degree, background: self.background, global_iteration: it });
+        let scat_train = train.then_some(ScatTrain { model: &mut self.scattering, sh_degree, background: self.background, global_iteration: it });
         let input = ReflStepInput {
             iteration: stage_it,
             camera: &cam,
