@@ -114,6 +114,27 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     refused(TrainArgs { from: Some(unfinished.to_path_buf()), ..af.clone() }, &["stopped at iteration 300 of 400", "--resume"]);
     let _ = std::fs::remove_dir_all(&unfinished);
 
+    // The cube map started from the scene (reflection.env_init = scene):
+    // metrics.json records the box it was seen from, and after one step
+    // the map still holds the scene's colours (a grey start moves by at
+    // most lr_env); an unknown value is refused by name.
+    let scene_env = tgs_tests::TempDir::new("stage2-env-scene");
+    let ae = TrainArgs { out: scene_env.to_path_buf(), set: vec!["reflection.iterations=1".into(), "test_interval=0".into(), "reflection.env_init=scene".into()], ..af.clone() };
+    let _ = std::fs::remove_dir_all(&scene_env);
+    assert_eq!(train(ctx, &ae).unwrap().iteration, 301);
+    let me = json(&scene_env.join("metrics.json"));
+    let env_from = &me["reflection"]["env_from"];
+    let rendered = env_from["rendered"].as_u64().unwrap_or(0);
+    assert!(rendered > 0 && rendered < me["gaussians"].as_u64().unwrap(), "env_from {env_from}");
+    assert_eq!(me["reflection"]["seeds"], d["seeds"], "the same seeding");
+    let (he, env_arrays) = checkpoint::read(&scene_env.join("checkpoint.bin")).unwrap();
+    let k = he.arrays.len() + he.reflection.as_ref().unwrap().arrays.iter().position(|(n, _)| n == "env.param").unwrap();
+    let (lo, hi) = env_arrays[k].iter().fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    assert!(hi - lo > 1.0 && lo.is_finite() && hi.is_finite(), "raw texels span [{lo}, {hi}]: not the scene");
+    assert!(d.get("env_from").is_none(), "the grey default records no box: {d}");
+    refused(TrainArgs { set: vec!["reflection.env_init=white".into()], ..ae.clone() }, &["reflection.env_init", "white"]);
+    let _ = std::fs::remove_dir_all(&scene_env);
+
     // Stage II that trains the scattering colour too: the SH colour and
     // its Adam moments move; positions, scales, rotations, opacity and
     // their moments stay Stage I's. A rerun is bit-identical.

@@ -15,7 +15,7 @@ use tgs::train::scattering::{ScatteringModel, StepInput};
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::mlp::MlpShape;
-use tgs_pipelines::{Camera, Features, HostGaussians, Rasterizer, ShadeParams};
+use tgs_pipelines::{Camera, Features, HostEnvMap, HostGaussians, Rasterizer, ShadeParams};
 use tgs_tests::{check_validation, ctx_shared};
 
 const SIZE: u32 = 128;
@@ -207,7 +207,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
     let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: Some(&scat), lr_means: 1e-3, profile: false };
-    let model = || ReflectionModel::from_scattering(ctx, Some(&g), &[], &cfg.reflection, 1e-15).unwrap();
+    let model = || ReflectionModel::from_scattering(ctx, Some(&g), &[], HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(), &cfg.reflection, 1e-15).unwrap();
 
     // A: the first frame overflows (more than one submission), nothing is
     // updated, the frame grows and the step runs again.
@@ -250,7 +250,7 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
     let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true };
     let model = || {
-        let set = ReflectionModel::from_scattering(ctx, Some(&g), &[], &cfg.reflection, 1e-15).unwrap().into_set();
+        let set = ReflectionModel::from_scattering(ctx, Some(&g), &[], HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(), &cfg.reflection, 1e-15).unwrap().into_set();
         LightFieldModel::new(ctx, set, LightFieldModel::init_net(ctx, shape, 5).unwrap(), shade, 1e-15).unwrap()
     };
 

@@ -184,6 +184,10 @@ pub struct ReflectionConfig {
     pub fresnel: String,
     /// Cube-map face size.
     pub env_res: u32,
+    /// How the cube map starts: "grey" (every texel sigmoid 0.5,
+    /// method-notes §3.7) or "scene" (the scattering set rendered from the
+    /// reflection set's box, train/env_init.rs).
+    pub env_init: String,
     pub lr_env: f32,
     pub lr_f0: f32,
     pub lr_r: f32,
@@ -255,6 +259,7 @@ impl Default for ReflectionConfig {
             iterations: 10_000,
             fresnel: "off".into(),
             env_res: 128,
+            env_init: "grey".into(),
             lr_env: 0.01,
             lr_f0: 0.0075,
             lr_r: 0.005,
@@ -310,9 +315,19 @@ impl ReflectionConfig {
         }
     }
 
+    /// Whether the cube map starts from the scene (`env_init`).
+    pub fn env_from_scene(&self) -> Result<bool> {
+        match self.env_init.as_str() {
+            "grey" => Ok(false),
+            "scene" => Ok(true),
+            e => bail!("reflection.env_init must be 'grey' or 'scene', not '{e}'"),
+        }
+    }
+
     fn validate(&self) -> Result<()> {
         self.fresnel()?;
         self.init_parts()?;
+        self.env_from_scene()?;
         if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
             bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);
         }

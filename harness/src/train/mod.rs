@@ -2,6 +2,7 @@
 //! checkpoints, and the `tgs train` driver (progress, logs, outputs).
 pub mod checkpoint;
 pub mod config;
+pub mod env_init;
 pub mod init;
 pub mod lightfield;
 pub mod rng;

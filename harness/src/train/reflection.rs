@@ -134,9 +134,9 @@ fn logit(p: f32) -> f32 {
 impl ReflectionModel {
     /// A reflection set with the geometry of the scattering Gaussians `copy`
     /// (when given) followed by the residual-hull `seeds` (opacity
-    /// `seed_opacity`), f0 and r at their initial values, and a constant
-    /// grey cube map (sigmoid 0.5).
-    pub fn from_scattering(ctx: &Arc<Context>, copy: Option<&HostGaussians>, seeds: &[Seed], rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
+    /// `seed_opacity`), f0 and r at their initial values, and the cube map
+    /// `env`.
+    pub fn from_scattering(ctx: &Arc<Context>, copy: Option<&HostGaussians>, seeds: &[Seed], env: HostEnvMap, rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
         let mut h = HostGaussians::new(MATERIAL, 1);
         let (f0, r) = (logit(rc.f0_init), logit(rc.r_init));
         if let Some(scat) = copy {
@@ -152,7 +152,6 @@ impl ReflectionModel {
         if h.is_empty() {
             bail!("the reflection set would be empty (reflection.init = '{}' found nothing to start from)", rc.init);
         }
-        let env = HostEnvMap::constant(rc.env_res, 0.0)?;
         Self::new(ctx, &h, &env, rc.fresnel()?, adam_eps)
     }
 

@@ -11,6 +11,7 @@
 use super::config::TrainConfig;
 use super::init::{far_points, gaussians_from_points, random_points};
 use super::lightfield::{normalization_box, LightFieldModel, LightFieldStepInput};
+use super::env_init::{scene_env_map, EnvInit};
 use super::rng::Rng;
 use super::reflection::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::scattering::{ScatteringModel, StepInput};
@@ -20,7 +21,7 @@ use crate::data::Dataset;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Timing};
-use tgs_pipelines::{Camera, HostGaussians, LossValues, Plane, ReflectionShading};
+use tgs_pipelines::{Camera, HostEnvMap, HostGaussians, LossValues, Plane, ReflectionShading};
 
 pub use super::reflection::ReflRendered;
 pub use super::scattering::Rendered;
@@ -87,6 +88,10 @@ pub struct ReflDecision {
     /// Stage I's (reflection.init = "hull").
     #[serde(default)]
     pub hull_empty: bool,
+    /// The cube map started from the scene (reflection.env_init = "scene"):
+    /// the box it was rendered from and the Gaussians outside it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub env_from: Option<EnvInit>,
 }
 
 /// The stage schedule: each stage with its iteration count, run in order.
@@ -352,6 +357,7 @@ impl Trainer {
             seeds: 0,
             copied: 0,
             hull_empty: false,
+            env_from: None,
             round,
         };
         // A reflection set that exists (a resumed Stage II without a
@@ -372,7 +378,17 @@ impl Trainer {
                 let g = if copy || d.hull_empty { Some(self.scattering.set.params.download()?) } else { None };
                 d.seeds = seeds.len() as u32;
                 d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
-                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, g.as_ref(), &seeds, rc, self.cfg.adam_eps)?);
+                let env = if rc.env_from_scene()? {
+                    let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
+                    means.extend(seeds.iter().flat_map(|s| s.position));
+                    let scat = self.scattering.set.params.download()?;
+                    let (env, info) = scene_env_map(&self.ctx, &scat, sh, &self.background, &means, rc.env_res, self.cfg.adam_eps)?;
+                    d.env_from = Some(info);
+                    env
+                } else {
+                    HostEnvMap::constant(rc.env_res, 0.0)?
+                };
+                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, g.as_ref(), &seeds, env, rc, self.cfg.adam_eps)?);
             }
             d.reflection_gaussians = self.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0);
         } else {

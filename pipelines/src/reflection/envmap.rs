@@ -42,6 +42,23 @@ impl HostEnvMap {
         Ok(())
     }
 
+    /// The direction (not unit length; major axis component ±1) through the
+    /// centre of texel (face, row, col): face coordinates x = 2 (col + 0.5)
+    /// / res - 1, y likewise from the row, on the faces of method-notes §2.6
+    /// (the inverse of the lookup in glsl/reflection/).
+    pub fn texel_direction(res: u32, face: u32, row: u32, col: u32) -> [f32; 3] {
+        let s = 2.0 / res as f32;
+        let (x, y) = ((col as f32 + 0.5) * s - 1.0, (row as f32 + 0.5) * s - 1.0);
+        match face {
+            0 => [1.0, -y, -x],
+            1 => [-1.0, -y, x],
+            2 => [x, 1.0, y],
+            3 => [x, -1.0, -y],
+            4 => [x, -y, 1.0],
+            _ => [-x, -y, -1.0],
+        }
+    }
+
     /// Activated colour (sigmoid) of texel (face, row, col).
     pub fn texel_rgb(&self, face: u32, row: u32, col: u32) -> [f32; 3] {
         let t = ((face * self.res + row) * self.res + col) as usize;

@@ -1,0 +1,116 @@
+//! Stage II's environment map started from the scene (`reflection.env_init
+//! = "scene"`): what the glass reflects is the scene around it, and the
+//! scattering set Stage I trained is that scene. Each cube face is rendered
+//! with the scattering set from the centre of the reflection set's box,
+//! leaving out the Gaussians inside the box (the glass and what it holds,
+//! which the outside of the glass does not reflect), and each texel takes
+//! the colour along its direction. A grey map gives the normals no
+//! gradient until the map has learned something; this one makes a wrong
+//! normal fetch the wrong part of the scene from the first iteration.
+
+use super::lightfield::normalization_box;
+use super::scattering::ScatteringModel;
+use anyhow::{Context as _, Result};
+use std::sync::Arc;
+use tgs_engine::Context;
+use tgs_pipelines::{Camera, HostEnvMap, HostGaussians, Plane};
+
+/// Texel colours are clamped into (LO, 1 - LO) before the logit.
+const LO: f32 = 0.01;
+
+/// What [`scene_env_map`] used, for the log.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EnvInit {
+    pub centre: [f32; 3],
+    pub half_extent: [f32; 3],
+    /// Scattering Gaussians rendered (outside the box).
+    pub rendered: usize,
+}
+
+/// The scattering Gaussians of `scat` outside the box (centre, half).
+pub fn outside_box(scat: &HostGaussians, centre: [f32; 3], half: [f32; 3]) -> HostGaussians {
+    let mut h = HostGaussians::new(scat.channels, scat.coeffs);
+    let f = (scat.channels * scat.coeffs) as usize;
+    for i in 0..scat.len() {
+        let p: [f32; 3] = std::array::from_fn(|a| scat.means[3 * i + a]);
+        let inside = (0..3).all(|a| (p[a] - centre[a]).abs() <= half[a]);
+        if inside {
+            continue;
+        }
+        let ls = [scat.log_scales[2 * i], scat.log_scales[2 * i + 1]];
+        let q = std::array::from_fn(|k| scat.quats[4 * i + k]);
+        h.push(p, ls, q, scat.opacity[i], &scat.features[f * i..f * (i + 1)]);
+    }
+    h
+}
+
+/// The camera at `eye` that sees cube face `face` (90 degrees and a margin).
+fn face_camera(eye: [f32; 3], face: u32, px: u32) -> Camera {
+    let axis = match face {
+        0 => [1.0, 0.0, 0.0],
+        1 => [-1.0, 0.0, 0.0],
+        2 => [0.0, 1.0, 0.0],
+        3 => [0.0, -1.0, 0.0],
+        4 => [0.0, 0.0, 1.0],
+        _ => [0.0, 0.0, -1.0],
+    };
+    // Any up not along the axis: the projection below is generic.
+    let up = if face < 2 { [0.0, 1.0, 0.0] } else { [1.0, 0.0, 0.0] };
+    let target = [eye[0] + axis[0], eye[1] + axis[1], eye[2] + axis[2]];
+    // A 45-degree rotation of the face in the image would need tan = sqrt 2.
+    Camera::look_at(eye, target, up, 2.0 * 1.5f32.atan(), px, px)
+}
+
+/// Bilinear sample (pixel centres at integer coordinates, clamped) of
+/// three colour planes.
+fn sample(planes: [&[f32]; 3], w: u32, h: u32, u: f32, v: f32) -> [f32; 3] {
+    let u = u.clamp(0.0, (w - 1) as f32);
+    let v = v.clamp(0.0, (h - 1) as f32);
+    let (x0, y0) = (u.floor() as u32, v.floor() as u32);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let (fx, fy) = (u - x0 as f32, v - y0 as f32);
+    std::array::from_fn(|c| {
+        let p = planes[c];
+        let at = |x: u32, y: u32| p[(y * w + x) as usize];
+        (at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx) * (1.0 - fy) + (at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx) * fy
+    })
+}
+
+/// The cube map of face size `res` seen from the reflection set's box
+/// (`refl_means`) with the scattering Gaussians `scat` outside it, at SH
+/// degree `sh` over `background`.
+pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, background: &[f32; 3], refl_means: &[f32], res: u32, adam_eps: f32) -> Result<(HostEnvMap, EnvInit)> {
+    let (centre, half) = normalization_box(refl_means);
+    let outside = outside_box(scat, centre, half);
+    let info = EnvInit { centre, half_extent: half, rendered: outside.len() };
+    let mut env = HostEnvMap::constant(res, 0.0)?;
+    if outside.is_empty() {
+        return Ok((env, info));
+    }
+    // The set's own SH degree (its coefficient count); `sh` of it are active.
+    let degree = (1..=4).find(|d| d * d == scat.coeffs).context("the scattering set's SH coefficient count is not a square")? - 1;
+    let mut model = ScatteringModel::new(ctx, &outside, degree, adam_eps).context("the scattering set for the environment map")?;
+    // Render at least 64 pixels a side so that small maps still average a few.
+    let px = (res + res / 2).max(64);
+    for face in 0..6u32 {
+        let cam = face_camera(centre, face, px);
+        let r = model.render(&cam, sh, background).with_context(|| format!("rendering cube face {face} for the environment map"))?;
+        let planes = [r.plane(Plane::Feature(0)), r.plane(Plane::Feature(1)), r.plane(Plane::Feature(2))];
+        let m = &cam.world_to_view;
+        for row in 0..res {
+            for col in 0..res {
+                let d = HostEnvMap::texel_direction(res, face, row, col);
+                let v: [f32; 3] = std::array::from_fn(|k| m[k][0] * d[0] + m[k][1] * d[1] + m[k][2] * d[2]);
+                let (u, w) = (cam.fx * v[0] / v[2] + cam.cx, cam.fy * v[1] / v[2] + cam.cy);
+                let c = sample(planes, px, px, u, w);
+                let t = ((face * res + row) * res + col) as usize;
+                for (raw, v) in env.raw[3 * t..3 * t + 3].iter_mut().zip(c) {
+                    let p = v.clamp(LO, 1.0 - LO);
+                    *raw = (p / (1.0 - p)).ln();
+                }
+            }
+        }
+    }
+    env.validate()?;
+    Ok((env, info))
+}
