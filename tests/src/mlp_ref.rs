@@ -20,20 +20,33 @@ pub struct Trace {
     pub outputs: Vec<Vec<f64>>,
 }
 
-fn layer(shape: &MlpShape, params: &[f64], l: u32, x: &[f64]) -> Vec<f64> {
+/// Layer `l`'s pre-activations z = W x + b.
+fn pre_activations(shape: &MlpShape, params: &[f64], l: u32, x: &[f64]) -> Vec<f64> {
     let (k, j) = (shape.fan_in(l) as usize, shape.fan_out(l) as usize);
     let w = &params[shape.offset(l) as usize..];
     (0..j)
         .map(|r| {
             let row = &w[r * (k + 1)..(r + 1) * (k + 1)];
-            let z = row[k] + (0..k).map(|c| row[c] * x[c]).sum::<f64>();
-            if l == shape.depth {
-                1.0 / (1.0 + (-z).exp())
-            } else {
-                z.max(0.0)
-            }
+            row[k] + (0..k).map(|c| row[c] * x[c]).sum::<f64>()
         })
         .collect()
+}
+
+fn layer(shape: &MlpShape, params: &[f64], l: u32, x: &[f64]) -> Vec<f64> {
+    let z = pre_activations(shape, params, l, x);
+    if l == shape.depth {
+        z.iter().map(|z| 1.0 / (1.0 + (-z).exp())).collect()
+    } else {
+        z.iter().map(|z| z.max(0.0)).collect()
+    }
+}
+
+/// The smallest |z| over the hidden (ReLU) units of one sample. Within
+/// f32's rounding of 0, the GPU and this reference may take different
+/// sides of the kink, and the gradients then differ by a whole step.
+pub fn kink_margin(shape: &MlpShape, params: &[f64], sample: &[f64; 6]) -> f64 {
+    let t = forward(shape, params, sample);
+    (0..shape.depth).flat_map(|l| pre_activations(shape, params, l, &t.inputs[l as usize])).fold(f64::INFINITY, |m, z| m.min(z.abs()))
 }
 
 /// Phi(sample) with its trace; sample = (x normalized, w).
