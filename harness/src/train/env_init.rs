@@ -9,6 +9,7 @@
 //! normal fetch the wrong part of the scene from the first iteration.
 
 use super::lightfield::normalization_box;
+use super::logit;
 use super::scattering::ScatteringModel;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
@@ -46,14 +47,8 @@ pub fn outside_box(scat: &HostGaussians, centre: [f32; 3], half: [f32; 3]) -> Ho
 
 /// The camera at `eye` that sees cube face `face` (90 degrees and a margin).
 fn face_camera(eye: [f32; 3], face: u32, px: u32) -> Camera {
-    let axis = match face {
-        0 => [1.0, 0.0, 0.0],
-        1 => [-1.0, 0.0, 0.0],
-        2 => [0.0, 1.0, 0.0],
-        3 => [0.0, -1.0, 0.0],
-        4 => [0.0, 0.0, 1.0],
-        _ => [0.0, 0.0, -1.0],
-    };
+    // The face's axis: the direction through its centre (one texel a side).
+    let axis = HostEnvMap::texel_direction(1, face, 0, 0);
     // Any up not along the axis: the projection below is generic.
     let up = if face < 2 { [0.0, 1.0, 0.0] } else { [1.0, 0.0, 0.0] };
     let target = [eye[0] + axis[0], eye[1] + axis[1], eye[2] + axis[2]];
@@ -105,8 +100,7 @@ pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, backgrou
                 let c = sample(planes, px, px, u, w);
                 let t = ((face * res + row) * res + col) as usize;
                 for (raw, v) in env.raw[3 * t..3 * t + 3].iter_mut().zip(c) {
-                    let p = v.clamp(LO, 1.0 - LO);
-                    *raw = (p / (1.0 - p)).ln();
+                    *raw = logit(v.clamp(LO, 1.0 - LO));
                 }
             }
         }

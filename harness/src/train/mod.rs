@@ -22,3 +22,8 @@ pub(crate) fn log_lerp(a: f32, b: f32, t: f64) -> f64 {
     let (a, b) = (a.max(1e-30) as f64, b.max(1e-30) as f64);
     (a.ln() * (1.0 - t) + b.ln() * t).exp()
 }
+
+/// The inverse of the sigmoid: the raw value whose activation is `p`.
+pub(crate) fn logit(p: f32) -> f32 {
+    (p / (1.0 - p)).ln()
+}

@@ -8,6 +8,7 @@
 //! prune-only density control. Never refers to the trainer.
 
 use super::config::{ReflectionConfig, TrainConfig};
+use super::logit;
 use super::scattering::{ScatteringModel, StepOutput};
 use super::seed::{quat_for_normal, Seed};
 use anyhow::{bail, Context as _, Result};
@@ -127,9 +128,6 @@ pub struct ReflectionModel {
     sizes: HashMap<(u32, u32), ViewBuffers>,
 }
 
-fn logit(p: f32) -> f32 {
-    (p / (1.0 - p)).ln()
-}
 
 impl ReflectionModel {
     /// A reflection set with the geometry of the scattering Gaussians `copy`
