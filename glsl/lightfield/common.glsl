@@ -11,11 +11,6 @@
 // sigmoid of the material, rasterized), then alpha, depth (sum w z),
 // normal (3, view space, unnormalized), median, distortion.
 //
-// With a base map (env_res > 0, light_field.env_base) the reflected
-// radiance is P = Phi + E(w_r) - 1/2, E Stage II's cube map (frozen); so a
-// network whose head starts at 1/2 starts from Stage II's reflection. The
-// sample list holds each sample's base E - 1/2 (0 without a map).
-//
 // x_refl is the expected surface point (depth / alpha along the pixel's
 // ray) in world space, normalized as (x - centre) * scale; w_r is the view
 // ray mirrored about the normalized blended normal, in world space.
@@ -33,8 +28,7 @@ layout(push_constant) uniform Push {
     vec4 centre;      // xyz: centre of the normalization box
     vec4 scale;       // xyz: 1 / half extent
     uint max_samples; // the sample list's capacity (compact writes no more)
-    uint env_res;     // > 0: Phi adds to a frozen cube map's E(w_r) - 1/2
-    uint pad1, pad2;
+    uint pad0, pad1, pad2;
 } pc;
 
 const uint CH = 4u;

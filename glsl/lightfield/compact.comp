@@ -2,8 +2,7 @@
 // The light field's sample list (lightfield/common.glsl): after the
 // exclusive scan of the per-pixel flags (R > threshold), every evaluated
 // pixel writes its sample (x_refl normalized, w_r) at its rank and records
-// the rank and its base (E(w_r) - 1/2 with a base map, else 0); the
-// others record NONE. The last pixel writes the count (all
+// the rank; the others record NONE. The last pixel writes the count (all
 // evaluated pixels, even beyond the list's capacity max_samples: the host
 // refuses such a view; ranks at or past it write nothing).
 #include "lightfield/common.glsl"
@@ -12,9 +11,6 @@ layout(std430, binding = 1) readonly buffer Offsets { uint offsets[]; };
 layout(std430, binding = 2) writeonly buffer SampleOf { uint sample_of[]; };
 layout(std430, binding = 3) writeonly buffer Samples { float samples[]; };
 layout(std430, binding = 4) writeonly buffer Count { uint count[]; };
-layout(std430, binding = 5) readonly buffer Env { float env[]; };
-layout(std430, binding = 6) writeonly buffer Base { float base[]; };
-#include "reflection/envmap.glsl"
 
 void main() {
     uint pix = wg_linear() * WG + gl_LocalInvocationID.x;
@@ -55,8 +51,4 @@ void main() {
     samples[6u * o + 3u] = w.x;
     samples[6u * o + 4u] = w.y;
     samples[6u * o + 5u] = w.z;
-    vec3 b = pc.env_res > 0u ? sigmoid3(env_raw(env_taps(w, pc.env_res))) - 0.5 : vec3(0.0);
-    base[3u * o] = b.x;
-    base[3u * o + 1u] = b.y;
-    base[3u * o + 2u] = b.z;
 }

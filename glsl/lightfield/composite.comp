@@ -8,7 +8,6 @@ layout(std430, binding = 1) readonly buffer Scat { float scat[]; };
 layout(std430, binding = 2) readonly buffer SampleOf { uint sample_of[]; };
 layout(std430, binding = 3) readonly buffer Phi { float phi[]; };
 layout(std430, binding = 4) writeonly buffer LossIn { float loss_in[]; };
-layout(std430, binding = 5) readonly buffer Base { float base[]; };
 
 void main() {
     uint pix = wg_linear() * WG + gl_LocalInvocationID.x;
@@ -20,7 +19,7 @@ void main() {
     vec3 S = vec3(scat[pix], scat[n + pix], scat[2u * n + pix]);
     vec3 I = S;
     if (s != NONE) {
-        vec3 P = vec3(phi[3u * s], phi[3u * s + 1u], phi[3u * s + 2u]) + vec3(base[3u * s], base[3u * s + 1u], base[3u * s + 2u]);
+        vec3 P = vec3(phi[3u * s], phi[3u * s + 1u], phi[3u * s + 2u]);
         float R = refl_r(pix);
         I = (1.0 - R) * S + R * fresnel_terms(pix).F * P;
     }

@@ -2,8 +2,8 @@
 // Stage III composite, backward (lightfield/common.glsl): from the loss
 // gradient's colour planes g, at an evaluated pixel, to
 //   dPhi (per sample, its only writer)      = g R F,
-//   the reflection render's planes: dR      = sum_c g (F P - S),
-//                                   dF0 sum = g R P (1 - m) / ae,
+//   the reflection render's planes: dR      = sum_c g (F Phi - S),
+//                                   dF0 sum = g R Phi (1 - m) / ae,
 //     and 0 for alpha..distortion (the reflection geometry is frozen),
 //   and, when scat_grad is set, dI_scat     = g (1 - R);
 // at the other pixels (I = I_scat) dI_scat = g and the rest 0.
@@ -16,7 +16,6 @@ layout(std430, binding = 4) readonly buffer LossGrad { float lg[]; };
 layout(std430, binding = 5) writeonly buffer DPhi { float dphi[]; };
 layout(std430, binding = 6) writeonly buffer ReflGrad { float rg[]; };
 layout(std430, binding = 7) writeonly buffer ScatGrad { float sg[]; };
-layout(std430, binding = 8) readonly buffer Base { float base[]; };
 layout(constant_id = 3) const uint SCAT_GRAD = 0;
 
 void main() {
@@ -33,7 +32,7 @@ void main() {
     float dR = 0.0;
     if (s != NONE) {
         R = refl_r(pix);
-        vec3 P = vec3(phi[3u * s], phi[3u * s + 1u], phi[3u * s + 2u]) + vec3(base[3u * s], base[3u * s + 1u], base[3u * s + 2u]);
+        vec3 P = vec3(phi[3u * s], phi[3u * s + 1u], phi[3u * s + 2u]);
         Fresnel f = fresnel_terms(pix);
         vec3 d = g * R * f.F;
         dphi[3u * s] = d.x;

@@ -34,7 +34,7 @@ enum Layer {
     /// Stage II: reflection set coloured by the environment map.
     Env { set: Gaussians, env: EnvMap, fresnel: Fresnel, shading: ReflectionShading, raster: Rasterizer, feat: Buffer<f32> },
     /// Stage III: reflection set's material, Φ on the reflecting pixels.
-    Light { set: Gaussians, params: Buffer<f32>, shape: MlpShape, shade: ShadeParams, env: Option<Buffer<f32>>, shading: LightFieldShading, mlp: Mlp, raster: Rasterizer, feat: Buffer<f32> },
+    Light { set: Gaussians, params: Buffer<f32>, shape: MlpShape, shade: ShadeParams, shading: LightFieldShading, mlp: Mlp, raster: Rasterizer, feat: Buffer<f32> },
 }
 
 /// Per image size: both sets' frames, the sample list, the composite.
@@ -89,14 +89,13 @@ impl SceneRenderer {
                     fresnel,
                 })
             }
-            checkpoint::RenderLayer::LightField { set, shape, params, shade, env } => {
+            checkpoint::RenderLayer::LightField { set, shape, params, shade } => {
                 let n = set.len().max(1);
                 Some(Layer::Light {
                     set: Gaussians::upload(ctx, &set)?,
                     params: Buffer::from_slice(ctx, "embed.mlp_params", &params)?,
                     shape,
                     shade,
-                    env: if env.is_empty() { None } else { Some(Buffer::from_slice(ctx, "embed.lf_env", &env)?) },
                     shading: LightFieldShading::new(ctx)?,
                     mlp: Mlp::new(ctx)?,
                     raster: Rasterizer::new(ctx, tgs_pipelines::lightfield::CHANNELS, Features::Plain)?,
@@ -164,11 +163,11 @@ impl SceneRenderer {
                 shading.record_composite(rec, cam, *fresnel, &v.scat.out, &frame.out, comp)?;
                 comp
             }
-            (Some(Layer::Light { set, params, shade, env, shading, mlp, raster, feat, .. }), Some(frame), Some(comp)) => {
+            (Some(Layer::Light { set, params, shade, shading, mlp, raster, feat, .. }), Some(frame), Some(comp)) => {
                 let (samples, scratch) = v.samples.as_ref().context("light-field sample buffers")?;
                 shading.record_material(rec, &set.features, set.n, feat)?;
                 raster.record_forward_with(rec, set, feat, cam, &[0.0; tgs_pipelines::lightfield::CHANNELS as usize], 0, frame)?;
-                shading.record_samples(rec, cam, shade, &frame.out, samples, &scratch.samples, env.as_ref())?;
+                shading.record_samples(rec, cam, shade, &frame.out, samples, &scratch.samples)?;
                 mlp.record_forward_counted(rec, params, &samples.count, scratch)?;
                 shading.record_composite(rec, cam, shade, &v.scat.out, &frame.out, samples, &scratch.out, comp)?;
                 comp

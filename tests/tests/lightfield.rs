@@ -3,8 +3,7 @@
 //! x_refl and w_r; no pixel and every pixel evaluated; a pixel without a
 //! normal), the composite and its backward with and without Schlick
 //! (grazing and head-on views, no coverage, unevaluated pixels showing
-//! the scattering colour alone) and with a base cube map (P = Phi +
-//! E(w_r) - 1/2, E against the f64 cube lookup), the
+//! the scattering colour alone), the
 //! reference's gradient against central differences, and the material
 //! sigmoid with its gradient.
 
@@ -26,7 +25,7 @@ fn cam64(c: &Camera) -> Cam {
     Cam { rot: c.world_to_view.map(|r| r.map(|v| v as f64)), fx: c.fx as f64, fy: c.fy as f64, cx: c.cx as f64, cy: c.cy as f64 }
 }
 
-const SHADE: ShadeParams = ShadeParams { centre: [0.1, -0.3, 0.2], half_extent: [1.5, 0.75, 2.0], threshold: 0.05, schlick: true, env_res: 0 };
+const SHADE: ShadeParams = ShadeParams { centre: [0.1, -0.3, 0.2], half_extent: [1.5, 0.75, 2.0], threshold: 0.05, schlick: true };
 
 /// Random pixels (values already f32) with the special ones at the front:
 /// no coverage, no normal, a grazing normal, R exactly at the threshold.
@@ -97,7 +96,7 @@ fn gpu_samples_cap(cam: &Camera, refl: &[f32], p: &ShadeParams, cap: usize) -> S
     let rb = Buffer::from_slice(ctx, "refl", refl).unwrap();
     let samples = Buffer::uninit(ctx, "samples", 6 * cap).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    lf.record_samples(&mut rec, cam, p, &rb, &s, &samples, None).unwrap();
+    lf.record_samples(&mut rec, cam, p, &rb, &s, &samples).unwrap();
     rec.submit_and_wait().unwrap();
     let count = s.count.download().unwrap()[0];
     let kept = (count as usize).min(cap);
@@ -167,16 +166,12 @@ fn composite_matches_reference_and_finite_differences() {
     let ctx = ctx_shared();
     let lf = LightFieldShading::new(ctx).unwrap();
     let mut rng = Rng(seed("lf composite"));
-    for (schlick, env_res) in [(true, 0u32), (false, 0), (true, 3), (false, 1)] {
-        // A base map of raw texels in [-3, 3] (res 1: every tap a corner).
-        let env: Vec<f32> = (0..18 * env_res * env_res).map(|_| uni(&mut rng, -3.0, 3.0) as f32).collect();
-        let env64: Vec<f64> = env.iter().map(|&v| v as f64).collect();
-        let eb = (env_res > 0).then(|| Buffer::from_slice(ctx, "env", &env).unwrap());
+    for schlick in [true, false] {
         for (w, h) in [(11u32, 6u32), (1, 1)] {
             let cam = camera(w, h);
             let c = cam64(&cam);
             let n = (w * h) as usize;
-            let p = ShadeParams { schlick, env_res, ..SHADE };
+            let p = ShadeParams { schlick, ..SHADE };
             let px = pixels(&mut rng, &cam, 0.0);
             let refl = planes(&px);
             let s = lf.sample_scratch(w, h).unwrap();
@@ -193,27 +188,16 @@ fn composite_matches_reference_and_finite_differences() {
             let rg = Buffer::uninit(ctx, "refl_grad", Plane::count(CHANNELS) as usize * n).unwrap();
             let sg = Buffer::uninit(ctx, "scat_grad", 3 * n).unwrap();
             let mut rec = Recorder::new(ctx).unwrap();
-            lf.record_samples(&mut rec, &cam, &p, &rb, &s, &samples, eb.as_ref()).unwrap();
+            lf.record_samples(&mut rec, &cam, &p, &rb, &s, &samples).unwrap();
             lf.record_composite(&mut rec, &cam, &p, &sb, &rb, &s, &pb, &loss_in).unwrap();
             lf.record_composite_backward(&mut rec, &cam, &p, &sb, &rb, &s, &pb, &gb, &dphi, &rg, Some(&sg)).unwrap();
             rec.submit_and_wait().unwrap();
             let (li, dp, rgv, sgv, so) = (loss_in.download().unwrap(), dphi.download().unwrap(), rg.download().unwrap(), sg.download().unwrap(), s.sample_of.download().unwrap());
-            let base = s.base.download().unwrap();
-            let (centre, half) = (SHADE.centre.map(|v| v as f64), SHADE.half_extent.map(|v| v as f64));
             for (i, px_i) in px.iter().enumerate() {
                 let (x, y) = ((i % w as usize) as f64, (i / w as usize) as f64);
                 let m = lr::schlick_m(&c, x, y, px_i, schlick);
                 let sm = so[i];
-                // P = Phi + base, base = E(w_r) - 1/2 with a map, else 0.
-                let evaluated = (sm != u32::MAX).then(|| {
-                    let smp = lr::sample(&c, x, y, px_i, centre, half);
-                    let e = if env_res > 0 { tgs_tests::reflection_ref::env_lookup(&env64, env_res as usize, [smp[3], smp[4], smp[5]]).map(|v| v - 0.5) } else { [0.0; 3] };
-                    for k in 0..3 {
-                        let got = base[3 * sm as usize + k] as f64;
-                        assert!((got - e[k]).abs() < 2e-5, "env_res {env_res} pixel {i} base[{k}]: gpu {got} vs f64 {}", e[k]);
-                    }
-                    [0, 1, 2].map(|k| phi[3 * sm as usize + k] as f64 + e[k])
-                });
+                let evaluated = (sm != u32::MAX).then(|| [0, 1, 2].map(|k| phi[3 * sm as usize + k] as f64));
                 let ph = evaluated.unwrap_or([0.0; 3]);
                 let sc = [0, 1, 2].map(|k| scat[k * n + i] as f64);
                 let gi = [0, 1, 2].map(|k| g[k * n + i] as f64);
@@ -304,26 +288,5 @@ fn material_sigmoid_and_gradient() {
         let d = df[i] as f64 * s * (1.0 - s);
         assert!((dm[i] as f64 - d).abs() < 1e-6 * (1.0 + d.abs()) && dm[i].is_finite(), "material gradient {i}: {} vs {d}", dm[i]);
     }
-    check_validation(ctx);
-}
-
-#[test]
-fn base_map_of_the_wrong_size_is_refused() {
-    let ctx = ctx_shared();
-    let lf = LightFieldShading::new(ctx).unwrap();
-    let cam = camera(5, 4);
-    let s = lf.sample_scratch(5, 4).unwrap();
-    let rb = Buffer::from_slice(ctx, "refl", &vec![0f32; Plane::count(CHANNELS) as usize * 20]).unwrap();
-    let samples = Buffer::uninit(ctx, "samples", 6 * 20).unwrap();
-    let env = Buffer::from_slice(ctx, "env", &[0f32; 18 * 4]).unwrap();
-    let mut rec = Recorder::new(ctx).unwrap();
-    for (res, e) in [(2u32, None), (3, Some(&env))] {
-        let p = ShadeParams { env_res: res, ..SHADE };
-        let err = lf.record_samples(&mut rec, &cam, &p, &rb, &s, &samples, e).unwrap_err();
-        assert!(format!("{err:#}").contains("base cube map"), "{err:#}");
-    }
-    let p = ShadeParams { env_res: 2, ..SHADE };
-    lf.record_samples(&mut rec, &cam, &p, &rb, &s, &samples, Some(&env)).unwrap();
-    rec.submit_and_wait().unwrap();
     check_validation(ctx);
 }

@@ -248,10 +248,10 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
     let input = LightFieldStepInput { iteration: 1, global_iteration: 1, camera: &cam, target: &target, scat: Some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: false };
     let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
-    let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true, env_res: 0 };
+    let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true };
     let model = || {
         let set = ReflectionModel::from_scattering(ctx, Some(&g), &[], HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(), &cfg.reflection, 1e-15).unwrap().into_set();
-        LightFieldModel::new(ctx, set, LightFieldModel::init_net(ctx, shape, 5, false).unwrap(), shade, None, 1e-15).unwrap()
+        LightFieldModel::new(ctx, set, LightFieldModel::init_net(ctx, shape, 5).unwrap(), shade, 1e-15).unwrap()
     };
 
     // A: the first frame overflows, nothing is updated, the frame grows

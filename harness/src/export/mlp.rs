@@ -5,23 +5,16 @@
 //! [fan_out], f32 little-endian, L = 0..=depth (depth: the sigmoid head);
 //! `__metadata__` holds the shape (depth, width, skip, levels_x, levels_w)
 //! and the normalization box (centre, half_extent), threshold and Fresnel
-//! switch, so a renderer can evaluate Phi without the run's config. With
-//! `light_field.env_base` the reflected radiance is Phi + E(w_r) - 1/2:
-//! metadata `env_res` and tensor `env_base` [6, env_res, env_res, 3], the
-//! cube map's raw (pre-sigmoid) texels, faces +X, -X, +Y, -Y, +Z, -Z.
+//! switch, so a renderer can evaluate Phi without the run's config.
 
 use super::atomic_write_with;
 use anyhow::{bail, Context as _, Result};
 use std::path::Path;
 use tgs_pipelines::{MlpShape, ShadeParams};
 
-pub fn write(path: &Path, shape: &MlpShape, shade: &ShadeParams, params: &[f32], env: &[f32]) -> Result<()> {
+pub fn write(path: &Path, shape: &MlpShape, shade: &ShadeParams, params: &[f32]) -> Result<()> {
     if params.len() != shape.params() as usize {
         bail!("{}: {} parameters for a network of {}", path.display(), params.len(), shape.params());
-    }
-    let r = shade.env_res as usize;
-    if env.len() != 18 * r * r {
-        bail!("{}: {} base-map values for {r}² texels a face", path.display(), env.len());
     }
     let mut header = serde_json::Map::new();
     let mut data: Vec<u8> = Vec::with_capacity(4 * params.len());
@@ -40,11 +33,6 @@ pub fn write(path: &Path, shape: &MlpShape, shade: &ShadeParams, params: &[f32],
         }
         header.insert(format!("layers.{l}.bias"), serde_json::json!({"dtype": "F32", "shape": [j], "data_offsets": [begin, data.len()]}));
     }
-    if r > 0 {
-        let begin = data.len();
-        data.extend(env.iter().flat_map(|v| v.to_le_bytes()));
-        header.insert("env_base".into(), serde_json::json!({"dtype": "F32", "shape": [6, r, r, 3], "data_offsets": [begin, data.len()]}));
-    }
     let meta = |v: &[f32]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",");
     header.insert(
         "__metadata__".into(),
@@ -54,7 +42,6 @@ pub fn write(path: &Path, shape: &MlpShape, shade: &ShadeParams, params: &[f32],
             "levels_x": shape.levels_x.to_string(), "levels_w": shape.levels_w.to_string(),
             "centre": meta(&shade.centre), "half_extent": meta(&shade.half_extent),
             "threshold": shade.threshold.to_string(), "fresnel": if shade.schlick { "schlick" } else { "off" },
-            "env_res": shade.env_res.to_string(),
         }),
     );
     let mut json = serde_json::to_vec(&serde_json::Value::Object(header))?;
@@ -70,10 +57,9 @@ pub fn write(path: &Path, shape: &MlpShape, shade: &ShadeParams, params: &[f32],
     })
 }
 
-/// Read a file [`write`] wrote: the shape, the shading parameters, the
-/// flat parameter vector ([`MlpShape::offset`] layout) and the base map's
-/// raw texels (empty without one; files from before it have none).
-pub fn read(path: &Path) -> Result<(MlpShape, ShadeParams, Vec<f32>, Vec<f32>)> {
+/// Read a file [`write`] wrote: the shape, the shading parameters and the
+/// flat parameter vector ([`MlpShape::offset`] layout).
+pub fn read(path: &Path) -> Result<(MlpShape, ShadeParams, Vec<f32>)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     let bad = |why: String| anyhow::anyhow!("{}: not a tgs light-field file ({why})", path.display());
     if bytes.len() < 8 {
@@ -98,10 +84,6 @@ pub fn read(path: &Path) -> Result<(MlpShape, ShadeParams, Vec<f32>, Vec<f32>)> 
         half_extent: vec3("half_extent")?,
         threshold: meta["threshold"].as_str().and_then(|s| s.parse().ok()).ok_or_else(|| bad("metadata 'threshold'".into()))?,
         schlick: meta["fresnel"].as_str() == Some("schlick"),
-        env_res: match meta.get("env_res") {
-            None => 0,
-            Some(_) => num("env_res")?,
-        },
     };
     let tensor = |name: &str, len: usize| -> Result<Vec<f32>> {
         let t = &header[name];
@@ -122,7 +104,5 @@ pub fn read(path: &Path) -> Result<(MlpShape, ShadeParams, Vec<f32>, Vec<f32>)> 
             params[off + r * (k + 1) + k] = b[r];
         }
     }
-    let r = shade.env_res as usize;
-    let env = if r > 0 { tensor("env_base", 18 * r * r)? } else { Vec::new() };
-    Ok((shape, shade, params, env))
+    Ok((shape, shade, params))
 }

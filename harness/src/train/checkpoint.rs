@@ -37,8 +37,7 @@ pub struct Header {
     pub reflection: Option<ReflHeader>,
     /// Stage III's state, when the run is in Stage III: its arrays follow
     /// the scattering set's (reflection set with the prefix `refl.`, then
-    /// the MLP's parameters and Adam moments, then the base cube map's raw
-    /// texels when `env_res` > 0).
+    /// the MLP's parameters and Adam moments).
     #[serde(default)]
     pub light_field: Option<LightFieldHeader>,
 }
@@ -52,16 +51,12 @@ pub struct LightFieldHeader {
     pub half_extent: [f32; 3],
     pub threshold: f32,
     pub schlick: bool,
-    /// The base cube map's resolution (0: none; light_field.env_base).
-    #[serde(default)]
-    pub env_res: u32,
     pub decision: super::trainer::ReflDecision,
     pub arrays: Vec<(String, usize)>,
 }
 
 const MLP_ARRAYS: [&str; 3] = ["mlp.param", "mlp.adam_m", "mlp.adam_v"];
 const ENV_ARRAYS: [&str; 3] = ["env.param", "env.adam_m", "env.adam_v"];
-const LF_ENV: &str = "lf.env";
 
 impl LightFieldHeader {
     pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
@@ -71,23 +66,14 @@ impl LightFieldHeader {
         Ok(shape)
     }
     pub fn shade(&self) -> tgs_pipelines::ShadeParams {
-        tgs_pipelines::ShadeParams { centre: self.centre, half_extent: self.half_extent, threshold: self.threshold, schlick: self.schlick, env_res: self.env_res }
+        tgs_pipelines::ShadeParams { centre: self.centre, half_extent: self.half_extent, threshold: self.threshold, schlick: self.schlick }
     }
     /// The arrays this state must hold (the reflection set's, then the
-    /// network's parameters and Adam moments, then the base map's texels),
-    /// checked against `arrays`; returns the index of the parameters.
-    fn check(&self, shape: &tgs_pipelines::MlpShape, arrays: &[Vec<f32>]) -> Result<usize> {
+    /// network's parameters and Adam moments), checked against `arrays`.
+    fn check(&self, shape: &tgs_pipelines::MlpShape, arrays: &[Vec<f32>]) -> Result<()> {
         let p = shape.params() as usize;
-        let layout = refl_layout(self.n);
-        let k = layout.len();
-        let env = (self.env_res > 0).then(|| (LF_ENV.to_string(), 18 * self.env_res as usize * self.env_res as usize));
-        let want: Vec<(String, usize)> = layout.into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).chain(env).collect();
-        check_arrays(&want, &self.arrays, arrays)?;
-        Ok(k)
-    }
-    /// The base map's texels of a checked state.
-    fn env<'a>(&self, arrays: &'a [Vec<f32>]) -> Option<&'a [f32]> {
-        (self.env_res > 0).then(|| arrays[arrays.len() - 1].as_slice())
+        let want: Vec<(String, usize)> = refl_layout(self.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
+        check_arrays(&want, &self.arrays, arrays)
     }
 }
 
@@ -156,10 +142,6 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
             names.push((name.to_string(), p));
             refl_arrays.push((buf, p));
         }
-        if let Some(env) = &m.env {
-            names.push((LF_ENV.to_string(), env.len()));
-            refl_arrays.push((env, env.len()));
-        }
         let s = m.net.shape;
         header.light_field = Some(LightFieldHeader {
             n: m.set.len(),
@@ -168,7 +150,6 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
             half_extent: m.shade.half_extent,
             threshold: m.shade.threshold,
             schlick: m.shade.schlick,
-            env_res: m.shade.env_res,
             decision: d.clone(),
             arrays: names,
         });
@@ -332,10 +313,11 @@ fn reflection_set(tr: &Trainer, arrays: &[Vec<f32>]) -> Result<TrainableSet> {
 
 fn restore_light_field(tr: &mut Trainer, l: &LightFieldHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
     let shape = l.shape()?;
-    let k = l.check(&shape, &arrays)?;
+    l.check(&shape, &arrays)?;
+    let k = arrays.len() - 3;
     let set = reflection_set(tr, &arrays)?;
     let net = super::lightfield::MlpParams::new(&tr.context(), shape, &arrays[k], &arrays[k + 1], &arrays[k + 2])?;
-    tr.light_field = Some(super::lightfield::LightFieldModel::new(&tr.context(), set, net, l.shade(), l.env(&arrays), tr.cfg.adam_eps)?);
+    tr.light_field = Some(super::lightfield::LightFieldModel::new(&tr.context(), set, net, l.shade(), tr.cfg.adam_eps)?);
     tr.decision = Some(l.decision.clone());
     Ok(())
 }
@@ -360,9 +342,8 @@ pub enum RenderLayer {
     Scattering,
     /// Stage II: the reflection set and the environment map.
     Env { set: HostGaussians, env: tgs_pipelines::HostEnvMap, fresnel: tgs_pipelines::Fresnel },
-    /// Stage III: the reflection set, the network, its shading and its
-    /// base map's raw texels (empty without one).
-    LightField { set: HostGaussians, shape: tgs_pipelines::MlpShape, params: Vec<f32>, shade: tgs_pipelines::ShadeParams, env: Vec<f32> },
+    /// Stage III: the reflection set, the network and its shading.
+    LightField { set: HostGaussians, shape: tgs_pipelines::MlpShape, params: Vec<f32>, shade: tgs_pipelines::ShadeParams },
 }
 
 /// What rendering a checkpoint needs: the parameters only (no Adam moments,
@@ -395,11 +376,11 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
         }
         (None, Some(l)) => {
             let shape = l.shape().context("Stage III state")?;
-            let k = l.check(&shape, &refl).context("Stage III state")?;
+            l.check(&shape, &refl).context("Stage III state")?;
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
-            let env = l.env(&refl).unwrap_or_default().to_vec();
-            ("III", RenderLayer::LightField { set, shape, params: refl[k].clone(), shade: l.shade(), env })
+            let params = refl[refl.len() - 3].clone();
+            ("III", RenderLayer::LightField { set, shape, params, shade: l.shade() })
         }
         _ => bail!("the arrays after the scattering set match neither a Stage II nor a Stage III state"),
     };

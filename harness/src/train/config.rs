@@ -114,11 +114,6 @@ pub struct LightFieldConfig {
     /// High-frequency loss weight and percentile (as in `[reflection]`).
     pub lambda_hf: f32,
     pub hf_percentile: f32,
-    /// Keep Stage II's cube map E (frozen) under the light field:
-    /// P = Phi + E(w_r) - 1/2 with the network's last layer starting at
-    /// zero, so Stage III starts from Stage II's reflection and Phi learns
-    /// what the distant map cannot place (near-field parallax).
-    pub env_base: bool,
 }
 
 impl Default for LightFieldConfig {
@@ -136,7 +131,6 @@ impl Default for LightFieldConfig {
             scattering_params: "colour".into(),
             lambda_hf: 0.1,
             hf_percentile: 90.0,
-            env_base: false,
         }
     }
 }

@@ -85,10 +85,8 @@ pub struct LightFieldModel {
     /// The reflection set (geometry frozen, material trained).
     pub set: TrainableSet,
     pub net: MlpParams,
-    /// Normalization box, threshold, Fresnel switch and base map size.
+    /// Normalization box, threshold and Fresnel switch.
     pub shade: ShadeParams,
-    /// The base cube map's raw texels (frozen) when `shade.env_res` > 0.
-    pub env: Option<Buffer<f32>>,
     feat: Buffer<f32>,
     dfeat: Buffer<f32>,
     scratch: Option<MlpScratch>,
@@ -130,15 +128,9 @@ pub fn normalization_box(means: &[f32]) -> ([f32; 3], [f32; 3]) {
 
 impl LightFieldModel {
     /// Stage III from the reflection set `set` (its Adam moments kept) and a
-    /// network `net`; `shade` fixes the normalization box; `env`, the base
-    /// cube map's raw texels, is needed when `shade.env_res` > 0.
-    pub fn new(ctx: &Arc<Context>, set: TrainableSet, net: MlpParams, shade: ShadeParams, env: Option<&[f32]>, adam_eps: f32) -> Result<LightFieldModel> {
+    /// network `net`; `shade` fixes the normalization box.
+    pub fn new(ctx: &Arc<Context>, set: TrainableSet, net: MlpParams, shade: ShadeParams, adam_eps: f32) -> Result<LightFieldModel> {
         let n = set.len().max(1) as usize;
-        let env = match (shade.env_res, env) {
-            (0, _) => None,
-            (r, Some(e)) if e.len() == 18 * r as usize * r as usize => Some(Buffer::from_slice(ctx, "lf.env", e)?),
-            (r, e) => bail!("the light field's base map of {r}² texels a face needs {} raw values, has {}", 18 * r as usize * r as usize, e.map_or(0, |e| e.len())),
-        };
         let ch = CHANNELS as usize;
         let hf = HfLoss::new(ctx)?;
         Ok(LightFieldModel {
@@ -152,7 +144,6 @@ impl LightFieldModel {
             set,
             net,
             shade,
-            env,
             feat: Buffer::uninit(ctx, "lf.features", ch * n)?,
             dfeat: Buffer::uninit(ctx, "lf.d_features", ch * n)?,
             scratch: None,
@@ -165,16 +156,10 @@ impl LightFieldModel {
         })
     }
 
-    /// A fresh network of `shape` (PyTorch's default initialisation); with
-    /// `zero_head` its last layer is zero, so Phi starts at 1/2 everywhere
-    /// (P = E, Stage II's reflection, with a base map).
-    pub fn init_net(ctx: &Arc<Context>, shape: MlpShape, seed: u64, zero_head: bool) -> Result<MlpParams> {
+    /// A fresh network of `shape` (PyTorch's default initialisation).
+    pub fn init_net(ctx: &Arc<Context>, shape: MlpShape, seed: u64) -> Result<MlpParams> {
         let zeros = vec![0.0; shape.params() as usize];
-        let mut params = shape.init_params(seed);
-        if zero_head {
-            params[shape.offset(shape.layers() - 1) as usize..].fill(0.0);
-        }
-        MlpParams::new(ctx, shape, &params, &zeros, &zeros)
+        MlpParams::new(ctx, shape, &shape.init_params(seed), &zeros, &zeros)
     }
 
     fn view_buffers(&mut self, w: u32, h: u32) -> Result<()> {
@@ -210,7 +195,7 @@ impl LightFieldModel {
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, self.env.as_ref(), b, scratch)?;
+            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
             timings.extend(rec.submit_and_wait()?);
             if self.raster.fit(&mut b.frame)? {
                 break;
@@ -285,7 +270,7 @@ impl LightFieldModel {
             match host_count {
                 Some(n) => self.mlp.record_forward(&mut rec, &self.net.params, n, scratch)?,
                 None => {
-                    record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, self.env.as_ref(), b, scratch)?;
+                    record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
                     self.mlp.record_forward_counted(&mut rec, &self.net.params, &b.samples.count, scratch)?;
                 }
             }
@@ -367,11 +352,8 @@ impl LightFieldModel {
         let composite = b.loss_in.download()?;
         let refl = b.frame.out.download()?;
         let sample_of = b.samples.sample_of.download()?;
-        let (phi, base) = match count {
-            0 => (Vec::new(), Vec::new()),
-            c => (scratch.out.download_range(0, (OUT * c) as usize)?, b.samples.base.download_range(0, (OUT * c) as usize)?),
-        };
-        // F P per pixel (the composite kernel's F, recomputed on the host).
+        let phi = if count > 0 { scratch.out.download_range(0, (OUT * count) as usize)? } else { Vec::new() };
+        // F Phi per pixel (the composite kernel's F, recomputed on the host).
         let mut reflected = vec![0.0; 3 * n];
         let mut mask = vec![0.0; n];
         let alpha = &refl[CHANNELS as usize * n..(CHANNELS as usize + 1) * n];
@@ -390,8 +372,7 @@ impl LightFieldModel {
             };
             for c in 0..3 {
                 let f = f0(c) + (1.0 - f0(c)) * m;
-                let k = 3 * s as usize + c;
-                reflected[c * n + i] = f * (phi[k] + base[k]);
+                reflected[c * n + i] = f * phi[3 * s as usize + c];
             }
         }
         Ok(ReflRendered { width: cam.width, height: cam.height, composite, refl, channels: CHANNELS, phi: Some(PhiLayers { reflected, mask }) })
@@ -414,13 +395,13 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
 /// Record the reflection set's material features, its rasterization into
 /// `b.frame` and the view's sample list (Phi's inputs, `b.samples.count`).
 #[allow(clippy::too_many_arguments)]
-fn record_forward(rec: &mut Recorder, shading: &LightFieldShading, raster: &Rasterizer, set: &TrainableSet, feat: &Buffer<f32>, cam: &Camera, shade: &ShadeParams, env: Option<&Buffer<f32>>, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
+fn record_forward(rec: &mut Recorder, shading: &LightFieldShading, raster: &Rasterizer, set: &TrainableSet, feat: &Buffer<f32>, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
     let sc = rec.begin_scope("lf.material");
     shading.record_material(rec, &set.params.features, set.len(), feat)?;
     rec.end_scope(sc);
     raster.record_forward_with(rec, &set.params, feat, cam, &[0.0; CHANNELS as usize], 0, &b.frame)?;
     let sc = rec.begin_scope("lf.samples");
-    shading.record_samples(rec, cam, shade, &b.frame.out, &b.samples, &scratch.samples, env)?;
+    shading.record_samples(rec, cam, shade, &b.frame.out, &b.samples, &scratch.samples)?;
     rec.end_scope(sc);
     Ok(())
 }

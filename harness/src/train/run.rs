@@ -509,11 +509,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
     if let Some(m) = &tr.light_field {
         write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
-        let env = match &m.env {
-            Some(e) => e.download()?,
-            None => Vec::new(),
-        };
-        crate::export::mlp::write(&a.out.join("light_field.safetensors"), &m.net.shape, &m.shade, &m.net.params.download()?, &env)?;
+        crate::export::mlp::write(&a.out.join("light_field.safetensors"), &m.net.shape, &m.shade, &m.net.params.download()?)?;
     }
     if let Some(m) = &tr.reflection {
         write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;

@@ -410,14 +410,12 @@ impl Trainer {
     /// map is dropped. Positions are normalized by the reflection set's box.
     pub fn begin_light_field(&mut self) -> Result<()> {
         let refl = self.reflection.take().context("Stage III starts from Stage II's reflection set, and there is none")?;
-        let lf = &self.cfg.light_field;
-        let env = if lf.env_base { Some(refl.env.download()?) } else { None };
         let set = refl.into_set();
         let (centre, half_extent) = normalization_box(&set.params.means.download()?);
-        let env_res = env.as_ref().map_or(0, |e| e.res);
-        let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick()?, env_res };
-        let net = LightFieldModel::init_net(&self.ctx, lf.shape()?, self.cfg.seed ^ 0x4c46, lf.env_base)?;
-        self.light_field = Some(LightFieldModel::new(&self.ctx, set, net, shade, env.as_ref().map(|e| e.raw.as_slice()), self.cfg.adam_eps)?);
+        let lf = &self.cfg.light_field;
+        let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick()? };
+        let net = LightFieldModel::init_net(&self.ctx, lf.shape()?, self.cfg.seed ^ 0x4c46)?;
+        self.light_field = Some(LightFieldModel::new(&self.ctx, set, net, shade, self.cfg.adam_eps)?);
         // Stage III renders the scattering colour itself, or caches it
         // again when Stage II changed it.
         if lf.train_scattering || self.cfg.reflection.train_scattering {

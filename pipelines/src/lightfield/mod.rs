@@ -5,10 +5,7 @@
 //! - `mask` + the project's prefix sum + `compact`: the list of pixels whose
 //!   R exceeds a threshold, each with its sample (x_refl normalized, w_r),
 //!   so that the MLP runs on those pixels only;
-//! - `composite` / `composite_backward`: I = (1 - R) I_scat + R F P, with
-//!   P = Phi, or P = Phi + E(w_r) - 1/2 with a frozen base cube map E
-//!   (`ShadeParams::env_res` > 0: Stage II's map, so that a network whose
-//!   head starts at 1/2 starts from Stage II's reflection).
+//! - `composite` / `composite_backward`: I = (1 - R) I_scat + R F Phi.
 
 use crate::raster::{Camera, Plane};
 use crate::reflection::check_planes;
@@ -38,8 +35,7 @@ struct Push {
     centre: [f32; 4],
     scale: [f32; 4],
     max_samples: u32,
-    env_res: u32,
-    pad: [u32; 2],
+    pad: [u32; 3],
 }
 
 /// What places a view's samples: the camera, the box mapped to [-1, 1]^3,
@@ -53,8 +49,6 @@ pub struct ShadeParams {
     /// Phi is evaluated where R > threshold.
     pub threshold: f32,
     pub schlick: bool,
-    /// Resolution of the base cube map P adds to Phi (0: none, P = Phi).
-    pub env_res: u32,
 }
 
 /// Per-frame-size memory of the sample list.
@@ -66,8 +60,6 @@ pub struct SampleScratch {
     pub sample_of: Buffer<u32>,
     /// The number of samples, after [`LightFieldShading::record_samples`].
     pub count: Buffer<u32>,
-    /// Per sample (3 floats, at its rank): the base E(w_r) - 1/2 (0 without a map).
-    pub base: Buffer<f32>,
 }
 
 pub struct LightFieldShading {
@@ -96,8 +88,7 @@ fn push(cam: &Camera, p: &ShadeParams, max_samples: u32) -> Push {
         centre: [p.centre[0], p.centre[1], p.centre[2], 0.0],
         scale: [h[0], h[1], h[2], 0.0],
         max_samples,
-        env_res: p.env_res,
-        pad: [0; 2],
+        pad: [0; 3],
     }
 }
 
@@ -131,7 +122,6 @@ impl LightFieldShading {
             scan: ScanScratch::new(&self.ctx, n as u32)?,
             sample_of: Buffer::uninit(&self.ctx, "lf.sample_of", n)?,
             count: Buffer::new(&self.ctx, "lf.count", 1)?,
-            base: Buffer::uninit(&self.ctx, "lf.base", 3 * n)?,
         })
     }
 
@@ -168,23 +158,14 @@ impl LightFieldShading {
     /// features): `s.sample_of`, `s.count` (every pixel above the
     /// threshold) and the samples (6 floats each, at their rank) into
     /// `samples`, which holds `samples.len() / 6` of them: pixels ranked
-    /// beyond are not evaluated (the caller checks the count). With
-    /// `p.env_res` > 0, `env` is the base cube map's raw texels
-    /// (18 env_res² floats) and `s.base` gets each sample's E(w_r) - 1/2.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_samples(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, refl: &Buffer<f32>, s: &SampleScratch, samples: &Buffer<f32>, env: Option<&Buffer<f32>>) -> Result<()> {
+    /// beyond are not evaluated (the caller checks the count).
+    pub fn record_samples(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, refl: &Buffer<f32>, s: &SampleScratch, samples: &Buffer<f32>) -> Result<()> {
         let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS))])?;
-        let env = match (p.env_res, env) {
-            (0, _) => refl,
-            (r, Some(e)) if e.len() == 18 * r as usize * r as usize => e,
-            (r, e) => bail!("a base cube map of {r}² texels a face needs {} raw values; given {:?}", 18 * r as usize * r as usize, e.map(|e| e.len())),
-        };
         let pc = push(cam, p, (samples.len() / 6).min(u32::MAX as usize) as u32);
         let g = grid(&self.ctx, n);
         rec.dispatch(&self.mask, &[refl.binding(), s.flags.binding()], bytemuck::bytes_of(&pc), g)?;
         self.scan.record(rec, &s.flags, &s.flags, &Count::Host(n), &s.scan)?;
-        let b = [refl.binding(), s.flags.binding(), s.sample_of.binding(), samples.binding(), s.count.binding(), env.binding(), s.base.binding()];
-        rec.dispatch(&self.compact, &b, bytemuck::bytes_of(&pc), g)
+        rec.dispatch(&self.compact, &[refl.binding(), s.flags.binding(), s.sample_of.binding(), samples.binding(), s.count.binding()], bytemuck::bytes_of(&pc), g)
     }
 
     /// Record the composite into `loss_in` (3-channel render layout) from
@@ -194,7 +175,7 @@ impl LightFieldShading {
     pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, scat: &Buffer<f32>, refl: &Buffer<f32>, s: &SampleScratch, phi: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
         let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_in, Plane::count(3))])?;
         let pc = push(cam, p, 0);
-        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_in.binding(), s.base.binding()];
+        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_in.binding()];
         rec.dispatch(&self.composite, &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
 
@@ -222,7 +203,7 @@ impl LightFieldShading {
         }
         let pc = push(cam, p, 0);
         let sg = scat_grad.unwrap_or(refl_grad);
-        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_grad.binding(), d_phi.binding(), refl_grad.binding(), sg.binding(), s.base.binding()];
+        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_grad.binding(), d_phi.binding(), refl_grad.binding(), sg.binding()];
         rec.dispatch(&self.composite_backward[scat_grad.is_some() as usize], &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
 }
