@@ -318,3 +318,29 @@ fn resume_refuses_conflicting_options_and_damaged_checkpoints() {
     refused(&|_| {}, &["checkpoint.bin", "view 999"]);
     check_validation(ctx);
 }
+
+/// `--from RUN` names the later-stage settings it takes from RUN that
+/// differ from today's defaults (a run from before a default changed keeps
+/// its value), but not those given now, nor Stage I's, nor, for
+/// `--stages III`, Stage II's.
+#[test]
+fn from_names_inherited_settings_that_differ_from_the_defaults() {
+    use tgs::train::run::inherited_settings;
+    let mut saved = TrainConfig::preset("quick").unwrap();
+    assert!(inherited_settings(&saved, &saved, false).unwrap().is_empty(), "a run with today's defaults inherits nothing to report");
+    saved.light_field.train_scattering = false;
+    saved.reflection.env_init = "scene".into();
+    saved.reflection.lr_r = 0.25;
+    saved.light_field.lr_f0 = 0.5;
+    saved.lr_opacity = 0.5;
+    let mut cfg = saved.clone();
+    cfg.light_field.lr_f0 = 0.0075;
+    let got = inherited_settings(&saved, &cfg, false).unwrap();
+    assert_eq!(got, ["light_field.train_scattering = false (default true)", "reflection.env_init = \"scene\" (default \"grey\")", "reflection.lr_r = 0.25 (default 0.005)"]);
+    let got = inherited_settings(&saved, &cfg, true).unwrap();
+    assert_eq!(got, ["light_field.train_scattering = false (default true)"]);
+    // A setting whose presets differ is named with both.
+    saved.light_field.iterations = 77;
+    let got = inherited_settings(&saved, &saved, true).unwrap();
+    assert!(got.contains(&"light_field.iterations = 77 (default 1000 quick, 20000 paper)".to_string()), "{got:?}");
+}

@@ -190,6 +190,29 @@ fn stage_three_setting(k: &str) -> bool {
     k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval" | "reflection.reseed")
 }
 
+/// The later-stage settings a `--from` run takes from RUN unchanged
+/// (`saved` RUN's, `cfg` the new run's) where they differ from this
+/// version's defaults in both presets, as "key = value (default ...)"
+/// lines: a run written before a default changed keeps its old value, and
+/// the user should see that rather than assume today's default. With
+/// `stage_three` (`--stages III`) only Stage III's settings are listed (the
+/// others cannot change).
+pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, stage_three: bool) -> Result<Vec<String>> {
+    let flat = |c: &TrainConfig| -> Result<BTreeMap<String, toml::Value>> { Ok(super::config::flatten(&toml::Table::try_from(c)?).into_iter().collect()) };
+    let (old, new) = (flat(saved)?, flat(cfg)?);
+    let presets = [flat(&TrainConfig::preset("quick")?)?, flat(&TrainConfig::preset("paper")?)?];
+    let later = |k: &str| k.starts_with("light_field.") || (!stage_three && k.starts_with("reflection."));
+    Ok(new
+        .iter()
+        .filter(|(k, v)| later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
+        .map(|(k, v)| {
+            let d: Vec<String> = presets.iter().map(|p| p.get(k).map(show).unwrap_or_else(|| "none".into())).collect();
+            let d = if d[0] == d[1] { d[0].clone() } else { format!("{} quick, {} paper", d[0], d[1]) };
+            format!("{k} = {} (default {d})", show(v))
+        })
+        .collect())
+}
+
 /// `--from RUN`: a trainer at the end of RUN's Stage I (its scattering set;
 /// any later stage of RUN is dropped) or, with `--stages III`, at the end
 /// of RUN's Stage II (both sets), the dataset, its path, and RUN's records
@@ -247,6 +270,10 @@ fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer,
     }
     if !cfg.wants_reflection() {
         bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
+    }
+    let inherited = inherited_settings(&h.config, &cfg, keep_two)?;
+    if !a.quiet && !inherited.is_empty() {
+        eprintln!("--from {}: these settings are that run's, not today's defaults (change them with --set KEY=VALUE):\n  {}", run.display(), inherited.join("\n  "));
     }
     if let Some(given) = &a.dataset {
         let same = std::fs::canonicalize(given).map(|g| g == Path::new(&h.dataset)).unwrap_or(false);
