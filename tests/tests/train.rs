@@ -339,6 +339,11 @@ fn from_names_inherited_settings_that_differ_from_the_defaults() {
     assert_eq!(got, ["light_field.train_scattering = false (default true)", "reflection.env_init = \"scene\" (default \"grey\")", "reflection.lr_r = 0.25 (default 0.005)"]);
     let got = inherited_settings(&saved, &cfg, true).unwrap();
     assert_eq!(got, ["light_field.train_scattering = false (default true)"]);
+    // Stage III's settings only when Stage III runs.
+    cfg.stages = "I,II".into();
+    let got = inherited_settings(&saved, &cfg, false).unwrap();
+    assert_eq!(got, ["reflection.env_init = \"scene\" (default \"grey\")", "reflection.lr_r = 0.25 (default 0.005)"]);
+    cfg.stages = saved.stages.clone();
     // A setting whose presets differ is named with both.
     saved.light_field.iterations = 77;
     let got = inherited_settings(&saved, &saved, true).unwrap();

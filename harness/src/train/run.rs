@@ -162,14 +162,19 @@ pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> 
     Ok(cfg)
 }
 
+/// Every setting by its dotted key.
+fn settings(c: &TrainConfig) -> Result<BTreeMap<String, toml::Value>> {
+    Ok(super::config::flatten(&toml::Table::try_from(c)?).into_iter().collect())
+}
+
 /// The settings of `new` that differ from `saved`, except those `free`
 /// lets change, as "key = old in the checkpoint, new given" lines.
 fn changed_settings(saved: &TrainConfig, new: &TrainConfig, free: impl Fn(&str) -> bool) -> Result<Vec<String>> {
-    let old: BTreeMap<String, toml::Value> = super::config::flatten(&toml::Table::try_from(saved)?).into_iter().collect();
-    let new = super::config::flatten(&toml::Table::try_from(new)?);
+    let old = settings(saved)?;
+    let new = settings(new)?;
     Ok(new
         .iter()
-        .filter(|(k, v)| !free(k) && old.get(k) != Some(v))
+        .filter(|(k, v)| !free(k) && old.get(*k) != Some(*v))
         .map(|(k, v)| format!("{k} = {} in the checkpoint, {} given", old.get(k).map(show).unwrap_or_default(), show(v)))
         .collect())
 }
@@ -196,12 +201,11 @@ fn stage_three_setting(k: &str) -> bool {
 /// lines: a run written before a default changed keeps its old value, and
 /// the user should see that rather than assume today's default. With
 /// `stage_three` (`--stages III`) only Stage III's settings are listed (the
-/// others cannot change).
+/// others cannot change), and Stage III's only when it runs.
 pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, stage_three: bool) -> Result<Vec<String>> {
-    let flat = |c: &TrainConfig| -> Result<BTreeMap<String, toml::Value>> { Ok(super::config::flatten(&toml::Table::try_from(c)?).into_iter().collect()) };
-    let (old, new) = (flat(saved)?, flat(cfg)?);
-    let presets = [flat(&TrainConfig::preset("quick")?)?, flat(&TrainConfig::preset("paper")?)?];
-    let later = |k: &str| k.starts_with("light_field.") || (!stage_three && k.starts_with("reflection."));
+    let (old, new) = (settings(saved)?, settings(cfg)?);
+    let presets = [settings(&TrainConfig::preset("quick")?)?, settings(&TrainConfig::preset("paper")?)?];
+    let later = |k: &str| (cfg.wants_light_field() && k.starts_with("light_field.")) || (!stage_three && k.starts_with("reflection."));
     Ok(new
         .iter()
         .filter(|(k, v)| later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
