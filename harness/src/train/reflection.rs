@@ -128,7 +128,6 @@ pub struct ReflectionModel {
     sizes: HashMap<(u32, u32), ViewBuffers>,
 }
 
-
 impl ReflectionModel {
     /// A reflection set with the geometry of the scattering Gaussians `copy`
     /// (when given) followed by the residual-hull `seeds` (opacity

@@ -200,12 +200,15 @@ fn stage_three_setting(k: &str) -> bool {
 /// version's defaults in both presets, as "key = value (default ...)"
 /// lines: a run written before a default changed keeps its old value, and
 /// the user should see that rather than assume today's default. With
-/// `stage_three` (`--stages III`) only Stage III's settings are listed (the
-/// others cannot change), and Stage III's only when it runs.
+/// `stage_three` (`--stages III`) only those that may still change are
+/// listed (Stage III's and `reflection.reseed`), and Stage III's only when
+/// it runs.
 pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, stage_three: bool) -> Result<Vec<String>> {
     let (old, new) = (settings(saved)?, settings(cfg)?);
     let presets = [settings(&TrainConfig::preset("quick")?)?, settings(&TrainConfig::preset("paper")?)?];
-    let later = |k: &str| (cfg.wants_light_field() && k.starts_with("light_field.")) || (!stage_three && k.starts_with("reflection."));
+    // What this `--from` may change (the refusals' own lists), of the stages' settings.
+    let may_change: fn(&str) -> bool = if stage_three { stage_three_setting } else { later_stage_setting };
+    let later = |k: &str| may_change(k) && (k.starts_with("reflection.") || (cfg.wants_light_field() && k.starts_with("light_field.")));
     Ok(new
         .iter()
         .filter(|(k, v)| later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
