@@ -6,7 +6,7 @@
 //! radial normals; no residual gives no seeds, and neither does residual
 //! over every view (glass that fills the frame: nothing is carved).
 
-use tgs::train::seed::{jacobi_eigen, quat_for_normal, residual_hull_seeds, SeedParams, SeedView};
+use tgs::train::seed::{jacobi_eigen, quat_for_normal, residual_hull_seeds, SeedNormal, SeedParams, SeedView};
 use tgs_pipelines::Camera;
 use tgs_tests::{seed, Rng};
 
@@ -17,6 +17,9 @@ fn uniform(r: &mut Rng) -> f64 {
 }
 fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 fn norm(a: V3) -> V3 {
     let l = dot(a, a).sqrt();
@@ -129,7 +132,8 @@ fn views(noise: bool, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>
 fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     let (cams, res, depth) = views(true, true);
     let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-    let p = SeedParams { max_rays: 3000, ..SeedParams::default() };
+    // On this ideal hull the seeds' plane is the sphere's tangent plane.
+    let p = SeedParams { max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
     let seeds = residual_hull_seeds(&sv, &p);
     assert!(seeds.len() > 1000, "{} seeds from 3000 rays", seeds.len());
     let mut radial = Vec::new();
@@ -154,6 +158,26 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     // Deterministic.
     assert_eq!(seeds, residual_hull_seeds(&sv, &p));
 
+    // The default normal faces the camera whose ray found the seed: the
+    // same seeds, each normal the unit direction to one of the cameras
+    // (and not to the same one for all).
+    let pv = SeedParams { normal: SeedNormal::View, ..p };
+    let view = residual_hull_seeds(&sv, &pv);
+    assert_eq!(view.len(), seeds.len());
+    let mut used = std::collections::BTreeSet::new();
+    for (v, s) in view.iter().zip(&seeds) {
+        assert_eq!((v.position, v.scale), (s.position, s.scale));
+        let n = v.normal.map(f64::from);
+        let x = v.position.map(f64::from);
+        let best = cams.iter().enumerate().map(|(i, c)| {
+            let d = sub(c.centre().map(f64::from), x);
+            (dot(n, d) / dot(d, d).sqrt(), i)
+        }).max_by(|a, b| a.0.total_cmp(&b.0)).unwrap();
+        assert!(best.0 > 1.0 - 1e-5, "seed normal {n:?} faces no camera (best cosine {})", best.0);
+        used.insert(best.1);
+    }
+    assert!(used.len() > 1, "every seed faces one camera");
+    assert_eq!(view, residual_hull_seeds(&sv, &pv));
 }
 
 #[test]

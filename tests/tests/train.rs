@@ -221,6 +221,7 @@ fn bad_settings_and_missing_checkpoints_are_reported() {
     fails(with("init_far_fraction=-0.5"), &["init_far_fraction"]);
     fails(with("init_far_fraction=1e9"), &["init_far_fraction"]);
     fails(with("init_far_depth=0"), &["init_far_depth"]);
+    fails(with("reflection.seed_normal=\"pca\""), &["reflection.seed_normal", "pca"]);
     fails(TrainArgs { downscale: Some(0), ..args(&out) }, &["--downscale 0"]);
     fails(TrainArgs { downscale: Some(1000), ..args(&out) }, &["--downscale 1000", "r_0.png"]);
     fails(TrainArgs { background: Some("purple".into()), ..args(&out) }, &["--background 'purple'"]);

@@ -13,9 +13,20 @@
 //! silhouette, nothing near the cameras is carved, and a ray that is inside
 //! the hull from its start says nothing about where the surface is. Seeds
 //! are the first hull points of rays that crossed carved space; their
-//! normals are the local plane of neighbouring seeds (PCA), facing the
-//! camera that found them; their size is the seed spacing. Stage II then
-//! refines them by the reflection it has to explain.
+//! normals face the camera that found them (or, with [`SeedNormal::Plane`],
+//! are the local plane of neighbouring seeds, PCA, turned to that camera);
+//! their size is the seed spacing. Stage II then refines them by the
+//! reflection it has to explain.
+//!
+//! Why the camera and not the plane: on an ideal hull the seeds lie on the
+//! surface and their plane is its tangent plane (the synthetic sphere in
+//! `tests/tests/seed.rs`: median error under 10 degrees), but the hull of a
+//! real Stage I residual places seeds with a depth noise comparable to
+//! their spacing, and the plane through 16 of them is then close to a
+//! random direction. Measured after Stage II (perf/RESULTS.md, fifteenth
+//! session): glass normal MAE with plane normals 45.1 / 60.7 / 65.8 degrees
+//! on the built-in glass / `lantern` / `pane`, with camera-facing normals
+//! 40.2 / 47.7 / 46.4.
 
 use tgs_pipelines::Camera;
 
@@ -42,11 +53,25 @@ pub struct SeedParams {
     pub max_rays: u32,
     /// Samples along a ray, uniform in depth from `near` x the far end.
     pub steps: u32,
+    /// How a seed's normal is chosen.
+    pub normal: SeedNormal,
+}
+
+/// A seed's normal (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SeedNormal {
+    /// The unit direction from the seed to the centre of the camera whose
+    /// ray found it.
+    View,
+    /// The least-squares plane of the seed and its 16 nearest seeds,
+    /// turned to face that camera (the camera direction with fewer than 3
+    /// neighbours).
+    Plane,
 }
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128 }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::View }
     }
 }
 
@@ -210,12 +235,12 @@ pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
             }
         }
     }
-    surfels(&found, &prepared)
+    surfels(&found, &prepared, p.normal)
 }
 
-/// Normals (PCA of the 16 nearest seeds, facing the finding camera) and
-/// scales (root mean squared distance to the 3 nearest) of the found points.
-fn surfels(found: &[(V3, usize)], views: &[Prepared]) -> Vec<Seed> {
+/// Normals (`normal`, facing the finding camera) and scales (root mean
+/// squared distance to the 3 nearest) of the found points.
+fn surfels(found: &[(V3, usize)], views: &[Prepared], normal: SeedNormal) -> Vec<Seed> {
     const K: usize = 16;
     let mut out = Vec::with_capacity(found.len());
     for (i, &(x, vi)) in found.iter().enumerate() {
@@ -228,7 +253,10 @@ fn surfels(found: &[(V3, usize)], views: &[Prepared]) -> Vec<Seed> {
         }
         let cam = views[vi].cam.centre().map(f64::from);
         let to_cam = normalize(sub(cam, x));
-        let mut n = if k >= 3 { plane_normal(x, near.iter().map(|&(_, j)| found[j].0)) } else { to_cam };
+        let mut n = match normal {
+            SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
+            _ => to_cam,
+        };
         if dot(n, to_cam) < 0.0 {
             n = n.map(|c| -c);
         }
