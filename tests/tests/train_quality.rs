@@ -1,14 +1,16 @@
 //! End to end, the method's result: on the built-in glass scene (quick
 //! preset: Stage I 3,000 iterations, then 200 of Stage II and 300 of Stage
 //! III), Stage II's residual-hull reflection set lowers the glass-mask
-//! normal MAE well below Stage I's and keeps the test PSNR; Stage III keeps
-//! both (its light field does not yet raise the PSNR here: +0.03 dB after
-//! 1,000 iterations, perf/RESULTS.md). Measured on lavapipe (perf/RESULTS.md):
-//! Stage I 63.1 degrees, PSNR 28.54; Stage II after 200 iterations 43.7
-//! degrees (0.69x), PSNR 28.42 in this test (28.56 through `--from` in a
-//! release build; 28.63 after the quick preset's 1,000). The thresholds
-//! leave margin for other drivers' rounding. About 4 minutes on lavapipe: scripts/test.sh runs it
-//! once, not again at subgroup size 4 (it tests the method, not a kernel).
+//! normal MAE well below Stage I's and keeps the test PSNR; Stage III
+//! keeps the normals and raises the PSNR over this short Stage II.
+//! Measured on lavapipe (perf/RESULTS.md, fifteenth session): Stage I
+//! 64.1 degrees, PSNR 28.502; Stage II 42.4 degrees (0.66x), PSNR 28.341;
+//! Stage III PSNR 28.741 (+0.40 over Stage II; after the quick preset's
+//! 1,000 Stage II iterations Stage II itself ends near 28.63 and Stage
+//! III's margin over it is smaller). The thresholds leave margin for
+//! other drivers' rounding. About 4 minutes on an idle lavapipe:
+//! scripts/test.sh runs it once, not again at subgroup size 4 (it tests
+//! the method, not a kernel).
 
 use tgs::train::run::{train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
@@ -32,10 +34,10 @@ fn method_on_glass() {
     assert!(get(1, "reflection_coverage") > 0.9);
     // The scattering set is frozen in Stage II: its own MAE is Stage I's.
     assert!((get(1, "normal_mae_scattering_deg") - mae1).abs() < 1e-9);
-    // Stage III: reflection geometry frozen (the same normals), the PSNR kept.
+    // Stage III: reflection geometry frozen (the same normals), the PSNR raised.
     eprintln!("Stage III: MAE {:.2} PSNR {:.3}", get(2, "normal_mae_deg"), get(2, "psnr"));
     assert!((get(2, "normal_mae_deg") - mae2).abs() < 1e-9);
-    assert!(get(2, "psnr") > get(1, "psnr") - 0.15, "Stage III PSNR {} vs Stage II {}", get(2, "psnr"), get(1, "psnr"));
+    assert!(get(2, "psnr") > get(1, "psnr") + 0.2, "Stage III PSNR {} vs Stage II {}", get(2, "psnr"), get(1, "psnr"));
     let _ = std::fs::remove_dir_all(&out);
     check_validation(ctx);
 }
