@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tgs::data::{Dataset, LoadOptions};
 use tgs::train::checkpoint;
+use tgs::train::config::ReflectionConfig;
+use tgs::train::seed::SeedNormal;
 use tgs::train::TrainConfig;
 use tgs::train::run::{request_stop, train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
@@ -196,6 +198,15 @@ fn no_schedule_ends_on_an_opacity_reset() {
 }
 
 #[test]
+fn seed_normal_names() {
+    for (name, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient)] {
+        let rc = ReflectionConfig { seed_normal: name.into(), ..Default::default() };
+        assert_eq!(rc.seed_normal().unwrap(), want, "reflection.seed_normal = \"{name}\"");
+    }
+    assert!(ReflectionConfig::default().seed_normal().unwrap() == SeedNormal::View);
+}
+
+#[test]
 fn bad_settings_and_missing_checkpoints_are_reported() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
@@ -221,7 +232,7 @@ fn bad_settings_and_missing_checkpoints_are_reported() {
     fails(with("init_far_fraction=-0.5"), &["init_far_fraction"]);
     fails(with("init_far_fraction=1e9"), &["init_far_fraction"]);
     fails(with("init_far_depth=0"), &["init_far_depth"]);
-    fails(with("reflection.seed_normal=\"pca\""), &["reflection.seed_normal", "pca"]);
+    fails(with("reflection.seed_normal=\"pca\""), &["reflection.seed_normal", "pca", "'gradient'"]);
     fails(TrainArgs { downscale: Some(0), ..args(&out) }, &["--downscale 0"]);
     fails(TrainArgs { downscale: Some(1000), ..args(&out) }, &["--downscale 1000", "r_0.png"]);
     fails(TrainArgs { background: Some("purple".into()), ..args(&out) }, &["--background 'purple'"]);
