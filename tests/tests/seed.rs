@@ -128,6 +128,18 @@ fn views(noise: bool, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>
     (cams, res, depth)
 }
 
+/// Each seed's angle in degrees between its normal and the sphere's radial
+/// direction at its position, sorted.
+fn radial_error(set: &[Seed]) -> Vec<f64> {
+    let mut e: Vec<f64> = set.iter().map(|s| {
+        let x = s.position.map(f64::from);
+        let r = dot(x, x).sqrt();
+        dot(s.normal.map(f64::from), x.map(|c| c / r)).clamp(-1.0, 1.0).acos().to_degrees()
+    }).collect();
+    e.sort_by(f64::total_cmp);
+    e
+}
+
 #[test]
 fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     let (cams, res, depth) = views(true, true);
@@ -136,18 +148,15 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     let p = SeedParams { max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
     let seeds = residual_hull_seeds(&sv, &p);
     assert!(seeds.len() > 1000, "{} seeds from 3000 rays", seeds.len());
-    let mut radial = Vec::new();
     let mut off = Vec::new();
     for s in &seeds {
         let x = s.position.map(f64::from);
-        let r = dot(x, x).sqrt();
-        off.push(r - SPHERE_R);
+        off.push(dot(x, x).sqrt() - SPHERE_R);
         let n = s.normal.map(f64::from);
         assert!((dot(n, n) - 1.0).abs() < 1e-4 && s.scale > 0.0 && s.scale.is_finite(), "{s:?}");
-        radial.push(dot(n, x.map(|c| c / r)).clamp(-1.0, 1.0).acos().to_degrees());
     }
     off.sort_by(f64::total_cmp);
-    radial.sort_by(f64::total_cmp);
+    let radial = radial_error(&seeds);
     let pct = |v: &[f64], q: f64| v[((v.len() - 1) as f64 * q) as usize];
     eprintln!("distance to the sphere: 5% {:.3} median {:.3} 95% {:.3}; normal error median {:.1} 90% {:.1} deg", pct(&off, 0.05), pct(&off, 0.5), pct(&off, 0.95), pct(&radial, 0.5), pct(&radial, 0.9));
     // A visual hull encloses the surface: seeds are on or just outside it
@@ -157,6 +166,7 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     assert!(pct(&radial, 0.5) < 10.0 && pct(&radial, 0.9) < 25.0, "normals: median {:.1}, 90% {:.1} deg", pct(&radial, 0.5), pct(&radial, 0.9));
     // Deterministic.
     assert_eq!(seeds, residual_hull_seeds(&sv, &p));
+
     // The default normal faces the camera whose ray found the seed: the
     // same seeds, each normal the unit direction to one of the cameras
     // (and not to the same one for all).
@@ -185,15 +195,6 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     let pg = SeedParams { normal: SeedNormal::Gradient, ..p };
     let grad = residual_hull_seeds(&sv, &pg);
     assert_eq!(grad.len(), seeds.len());
-    let radial_error = |set: &[Seed]| {
-        let mut e: Vec<f64> = set.iter().map(|s| {
-            let x = s.position.map(f64::from);
-            let r = dot(x, x).sqrt();
-            dot(s.normal.map(f64::from), x.map(|c| c / r)).clamp(-1.0, 1.0).acos().to_degrees()
-        }).collect();
-        e.sort_by(f64::total_cmp);
-        e
-    };
     let (eg, ev) = (radial_error(&grad), radial_error(&view));
     for (g, s) in grad.iter().zip(&seeds) {
         assert_eq!((g.position, g.scale), (s.position, s.scale));

@@ -203,7 +203,7 @@ fn seed_normal_names() {
         let rc = ReflectionConfig { seed_normal: name.into(), ..Default::default() };
         assert_eq!(rc.seed_normal().unwrap(), want, "reflection.seed_normal = \"{name}\"");
     }
-    assert!(ReflectionConfig::default().seed_normal().unwrap() == SeedNormal::View);
+    assert_eq!(ReflectionConfig::default().seed_normal().unwrap(), SeedNormal::View);
 }
 
 #[test]

@@ -139,13 +139,10 @@ impl Prepared {
     /// `soft` sampled bilinearly at the projection of `x` (0 outside the
     /// image or behind the camera).
     fn soft_at(&self, x: V3) -> f64 {
-        let p = to_view(&self.cam, x);
-        if !(p[2] > 1e-6) {
+        let Some((u, v, _)) = image_point(&self.cam, x) else {
             return 0.0;
-        }
+        };
         let (w, h) = (self.cam.width as usize, self.cam.height as usize);
-        let u = self.cam.fx as f64 * p[0] / p[2] + self.cam.cx as f64;
-        let v = self.cam.fy as f64 * p[1] / p[2] + self.cam.cy as f64;
         if !(u > -1.0 && v > -1.0 && u < w as f64 && v < h as f64) {
             return 0.0;
         }
@@ -160,6 +157,12 @@ impl Prepared {
         pixel_of(&self.cam, x)
     }
 
+    /// The pixel `x` projects to, if this view sees it in front of its
+    /// Stage I surface (the views that take part in the hull test).
+    fn in_front(&self, x: V3) -> Option<usize> {
+        self.pixel(x).and_then(|(i, z)| (z < self.depth[i] as f64 * 0.98).then_some(i))
+    }
+
     fn unproject(&self, i: usize, z: f64) -> V3 {
         unproject_pixel(&self.cam, i, z)
     }
@@ -168,22 +171,23 @@ impl Prepared {
 /// The pixel (row-major index) world point `x` projects to in `cam`, and
 /// its view depth, if it is in front of the camera and inside the image.
 pub(crate) fn pixel_of(cam: &Camera, x: V3) -> Option<(usize, f64)> {
-    let p = to_view(cam, x);
-    if !(p[2] > 1e-6) {
-        return None;
-    }
-    let u = (cam.fx as f64 * p[0] / p[2] + cam.cx as f64).round();
-    let v = (cam.fy as f64 * p[1] / p[2] + cam.cy as f64).round();
+    let (u, v, z) = image_point(cam, x)?;
+    let (u, v) = (u.round(), v.round());
     if !(u >= 0.0 && v >= 0.0 && u < cam.width as f64 && v < cam.height as f64) {
         return None;
     }
-    Some((v as usize * cam.width as usize + u as usize, p[2]))
+    Some((v as usize * cam.width as usize + u as usize, z))
 }
 
-/// World point `x` in `cam`'s view space, in f64.
-fn to_view(cam: &Camera, x: V3) -> V3 {
+/// The unrounded pixel coordinates (pixel centres at integers) and view
+/// depth of world point `x` in `cam`, if it is in front of the camera; in f64.
+fn image_point(cam: &Camera, x: V3) -> Option<(f64, f64, f64)> {
     let m = &cam.world_to_view;
-    [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64)
+    let p: V3 = [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64);
+    if !(p[2] > 1e-6) {
+        return None;
+    }
+    Some((cam.fx as f64 * p[0] / p[2] + cam.cx as f64, cam.fy as f64 * p[1] / p[2] + cam.cy as f64, p[2]))
 }
 
 /// The world point at pixel `i` (row-major) of `cam`, view depth `z`:
@@ -224,11 +228,9 @@ fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
 fn hull_test(views: &[Prepared], x: V3, agree: f32) -> Option<bool> {
     let (mut seen, mut hit) = (0u32, 0u32);
     for v in views {
-        if let Some((i, z)) = v.pixel(x) {
-            if z < v.depth[i] as f64 * 0.98 {
-                seen += 1;
-                hit += v.mask[i] as u32;
-            }
+        if let Some(i) = v.in_front(x) {
+            seen += 1;
+            hit += v.mask[i] as u32;
         }
     }
     (seen >= 3).then_some(hit as f64 >= agree as f64 * seen as f64)
@@ -332,7 +334,7 @@ pub const GRADIENT_MIN: f64 = 3.0;
 /// views that see `x` in front of their Stage I surface; None where the
 /// field is flat (see [`GRADIENT_MIN`]).
 fn field_normal(x: V3, views: &[Prepared], finder: &Prepared) -> Option<V3> {
-    let seeing: Vec<&Prepared> = views.iter().filter(|v| v.pixel(x).is_some_and(|(i, z)| z < v.depth[i] as f64 * 0.98)).collect();
+    let seeing: Vec<&Prepared> = views.iter().filter(|v| v.in_front(x).is_some()).collect();
     let z = finder.pixel(x)?.1;
     let h = gradient_pixels(finder.cam.width as usize) as f64 * z / finder.cam.fx as f64;
     let field = |p: V3| seeing.iter().map(|v| v.soft_at(p)).sum::<f64>();
