@@ -2,7 +2,8 @@
 //! method-notes §5: renders clamped to [0, 1], 11x11 Gaussian SSIM with zero
 //! padding, per-image values averaged), and where the dataset has normals
 //! and transmissive masks, the mean angular error (degrees) of the rendered
-//! normal on mask pixels (a mask pixel the render leaves empty counts 90°).
+//! normal on mask pixels (a mask pixel the render leaves empty counts 90°),
+//! next to the error of a normal that faces each pixel's camera ray.
 //! Also writes the renders: colour PNG, world normals PNG, depth EXR + PNG.
 
 use crate::data::image_io::{write_exr, write_png, ImageF};
@@ -29,6 +30,12 @@ pub struct NormalMetrics {
     pub reflection_coverage: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_covered_deg: Option<f64>,
+    /// The MAE, on the same mask pixels, of a normal facing each pixel's
+    /// camera ray ([`ray_facing_normals`]): what a normal that knows
+    /// nothing of the surface scores. Normals carry surface information
+    /// only as far as their MAE is below this.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal_mae_ray_facing_deg: Option<f64>,
 }
 
 impl NormalMetrics {
@@ -43,6 +50,7 @@ impl NormalMetrics {
             normal_mae_scattering_deg: mean_of(|m| m.normal_mae_scattering_deg),
             reflection_coverage: mean_of(|m| m.reflection_coverage),
             normal_mae_covered_deg: mean_of(|m| m.normal_mae_covered_deg),
+            normal_mae_ray_facing_deg: mean_of(|m| m.normal_mae_ray_facing_deg),
         }
     }
 }
@@ -141,6 +149,23 @@ pub fn world_normals_of([nx, ny, nz]: [&[f32]; 3], cam: &Camera) -> Vec<[f32; 3]
         .collect()
 }
 
+/// Unit world-space normals facing each pixel's camera ray: pixel `i`'s
+/// normal points from its pixel centre's ray back to the camera.
+pub fn ray_facing_normals(cam: &Camera) -> Vec<[f32; 3]> {
+    let m = &cam.world_to_view;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    (0..w * h)
+        .map(|i| {
+            let (u, v) = ((i % w) as f64, (i / w) as f64);
+            let d = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
+            // world = -R^T d, normalised
+            let n = [0, 1, 2].map(|j| -(0..3).map(|k| m[k][j] as f64 * d[k]).sum::<f64>());
+            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            n.map(|c| (c / l) as f32)
+        })
+        .collect()
+}
+
 /// Mean angular error (degrees) on mask pixels; None without a GT or mask pixels.
 pub fn normal_mae(normals: &[[f32; 3]], view: &View) -> Option<f64> {
     normal_mae_where(normals, view, |_| true)
@@ -196,6 +221,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
                 normal_mae_scattering_deg: scat_mae,
                 reflection_coverage: coverage,
                 normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
+                normal_mae_ray_facing_deg: v.normals.as_ref().and_then(|_| normal_mae(&ray_facing_normals(&v.camera), v)),
             },
         };
         if let Some(dir) = out {

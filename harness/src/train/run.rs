@@ -594,7 +594,8 @@ fn stage_record(stage: &str, tr: &Trainer, since: Instant, m: Option<&Metrics>) 
     let its = tr.schedule.iterations_of(stage);
     let test = m.map(|m| {
         json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normals.normal_mae_deg, "normal_mae_scattering_deg": m.normals.normal_mae_scattering_deg,
-               "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg})
+               "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg,
+               "normal_mae_ray_facing_deg": m.normals.normal_mae_ray_facing_deg})
     });
     json!({"stage": stage, "iterations": its, "wall_s": since.elapsed().as_secs_f64(), "test": test})
 }

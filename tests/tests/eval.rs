@@ -1,0 +1,73 @@
+//! The evaluation's normal errors on hand-made views: the reference normal
+//! that faces each pixel's camera ray, and the MAE it scores against a wall
+//! facing the camera (computed here independently, in f64).
+
+use tgs::data::image_io::ImageF;
+use tgs::data::View;
+use tgs::eval::{normal_mae, ray_facing_normals};
+use tgs_pipelines::Camera;
+
+fn camera(w: u32, h: u32) -> Camera {
+    Camera::look_at([1.0, -2.0, 1.5], [0.2, 0.3, 0.4], [0.0, 0.0, 1.0], 0.9, w, h)
+}
+
+fn view(cam: Camera, normals: Vec<f32>) -> View {
+    let n = (cam.width * cam.height) as usize;
+    View {
+        name: "v".into(),
+        camera: cam,
+        image: ImageF::new(cam.width, cam.height, 3),
+        normals: Some(ImageF { width: cam.width, height: cam.height, channels: 3, data: normals }),
+        mask: Some(vec![true; n]),
+    }
+}
+
+fn unit(a: [f64; 3]) -> [f64; 3] {
+    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    a.map(|c| c / l)
+}
+
+#[test]
+fn ray_facing_normals_point_back_along_each_pixel_ray() {
+    for (w, h) in [(7, 5), (1, 1), (16, 9)] {
+        let cam = camera(w, h);
+        let c = cam.centre().map(f64::from);
+        let n = ray_facing_normals(&cam);
+        assert_eq!(n.len(), (w * h) as usize);
+        for (i, ni) in n.iter().enumerate() {
+            // The pixel centre's point at depth 3 lies along -n from the camera.
+            let p = cam.unproject((i as u32 % w) as f32, (i as u32 / w) as f32, 3.0).map(f64::from);
+            let ray = unit([p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
+            let d: f64 = (0..3).map(|k| ray[k] * ni[k] as f64).sum();
+            assert!((d + 1.0).abs() < 1e-5, "{w}x{h} pixel {i}: n {ni:?} against ray {ray:?}");
+        }
+    }
+    // The middle pixel of an odd-sized image looks along the optical axis.
+    let cam = camera(7, 5);
+    let axis = unit([0.2 - 1.0, 0.3 + 2.0, 0.4 - 1.5]);
+    let mid = ray_facing_normals(&cam)[2 * 7 + 3];
+    assert!((0..3).all(|k| (mid[k] as f64 + axis[k]).abs() < 1e-5), "{mid:?} vs {axis:?}");
+}
+
+#[test]
+fn ray_facing_mae_against_a_wall_is_the_mean_off_axis_angle() {
+    let (w, h) = (16u32, 9u32);
+    let cam = camera(w, h);
+    // Against themselves: zero.
+    let own: Vec<f32> = ray_facing_normals(&cam).into_iter().flatten().collect();
+    let zero = normal_mae(&ray_facing_normals(&cam), &view(cam, own)).unwrap();
+    assert!(zero < 0.05, "{zero}");
+    // Against a wall facing the camera: each pixel's angle to the axis.
+    let axis = unit([0.2 - 1.0, 0.3 + 2.0, 0.4 - 1.5]);
+    let wall: Vec<f32> = (0..w * h).flat_map(|_| axis.map(|c| -c as f32)).collect();
+    let f = cam.fx as f64;
+    let expect = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f64 - (w as f64 - 1.0) * 0.5, (i / w) as f64 - (h as f64 - 1.0) * 0.5);
+            ((x * x + y * y).sqrt() / f).atan().to_degrees()
+        })
+        .sum::<f64>()
+        / (w * h) as f64;
+    let got = normal_mae(&ray_facing_normals(&cam), &view(cam, wall)).unwrap();
+    assert!(expect > 5.0 && (got - expect).abs() < 0.01, "ray-facing MAE {got:.4} against {expect:.4} degrees");
+}
