@@ -152,18 +152,11 @@ pub fn world_normals_of([nx, ny, nz]: [&[f32]; 3], cam: &Camera) -> Vec<[f32; 3]
 /// Unit world-space normals facing each pixel's camera ray: pixel `i`'s
 /// normal points from its pixel centre's ray back to the camera.
 pub fn ray_facing_normals(cam: &Camera) -> Vec<[f32; 3]> {
-    let m = &cam.world_to_view;
-    let (w, h) = (cam.width as usize, cam.height as usize);
-    (0..w * h)
-        .map(|i| {
-            let (u, v) = ((i % w) as f64, (i / w) as f64);
-            let d = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
-            // world = -R^T d, normalised
-            let n = [0, 1, 2].map(|j| -(0..3).map(|k| m[k][j] as f64 * d[k]).sum::<f64>());
-            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            n.map(|c| (c / l) as f32)
-        })
-        .collect()
+    // In view space the ray through pixel (u, v) is ((u - cx) / fx, (v - cy) / fy, 1).
+    let (w, n) = (cam.width as usize, (cam.width * cam.height) as usize);
+    let nx: Vec<f32> = (0..n).map(|i| -((i % w) as f32 - cam.cx) / cam.fx).collect();
+    let ny: Vec<f32> = (0..n).map(|i| -((i / w) as f32 - cam.cy) / cam.fy).collect();
+    world_normals_of([&nx, &ny, &vec![-1.0; n]], cam)
 }
 
 /// Mean angular error (degrees) on mask pixels; None without a GT or mask pixels.
