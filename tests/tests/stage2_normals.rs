@@ -113,7 +113,8 @@ fn set_with(s: &Scene, normals: &[V3], radius: f64) -> HostGaussians {
     h
 }
 
-/// Mean angle (degrees) between the set's normals and the true ones.
+/// Mean angle (degrees) between the set's normals and the true ones, sign
+/// ignored (the kernels turn every normal to face the camera).
 fn mae(h: &HostGaussians, s: &Scene) -> f64 {
     let e: f64 = s.points.iter().enumerate().map(|(i, n)| dot(normal_of(&h.quats[4 * i..4 * i + 4]), *n).abs().min(1.0).acos().to_degrees()).sum();
     e / s.points.len() as f64
@@ -124,10 +125,10 @@ struct Outcome {
     after: f64,
 }
 
-/// The training view of `cam`: the splats of `geometry` rasterized with
+/// The training views of `cams`: the splats of `geometry` rasterized with
 /// the colours the splats of `truth` (true normals) fetch from `env`,
 /// composited over `scat`.
-fn target(ctx: &Arc<Context>, truth: &HostGaussians, geometry: &HostGaussians, env: &HostEnvMap, cam: &Camera, scat: &Buffer<f32>) -> Buffer<f32> {
+fn targets(ctx: &Arc<Context>, truth: &HostGaussians, geometry: &HostGaussians, env: &HostEnvMap, cams: &[Camera], scat: &Buffer<f32>) -> Vec<Buffer<f32>> {
     let fresnel = Fresnel::Off;
     let ch = fresnel.channels();
     let shading = ReflectionShading::new(ctx).unwrap();
@@ -136,18 +137,24 @@ fn target(ctx: &Arc<Context>, truth: &HostGaussians, geometry: &HostGaussians, e
     let env = EnvMap::upload(ctx, env).unwrap();
     let n = geometry.n;
     let feat = Buffer::<f32>::new(ctx, "test.features", ch as usize * n as usize).unwrap();
-    let mut frame = raster.frame(cam.width, cam.height, n, raster.initial_capacity(n)).unwrap();
-    let out = Buffer::<f32>::new(ctx, "test.target", (Plane::count(3) * cam.width * cam.height) as usize).unwrap();
-    loop {
-        let mut rec = Recorder::new(ctx).unwrap();
-        shading.record_color(&mut rec, &truth, &env, cam, fresnel, &feat).unwrap();
-        raster.record_forward_with(&mut rec, &geometry, &feat, cam, &vec![0.0; ch as usize], 0, &frame).unwrap();
-        shading.record_composite(&mut rec, cam, fresnel, scat, &frame.out, &out).unwrap();
-        rec.submit_and_wait().unwrap();
-        if raster.fit(&mut frame).unwrap() {
-            return out;
+    let background = vec![0.0; ch as usize];
+    let mut out = Vec::new();
+    for cam in cams {
+        let mut frame = raster.frame(cam.width, cam.height, n, raster.initial_capacity(n)).unwrap();
+        let img = Buffer::<f32>::new(ctx, "test.target", (Plane::count(3) * cam.width * cam.height) as usize).unwrap();
+        loop {
+            let mut rec = Recorder::new(ctx).unwrap();
+            shading.record_color(&mut rec, &truth, &env, cam, fresnel, &feat).unwrap();
+            raster.record_forward_with(&mut rec, &geometry, &feat, cam, &background, 0, &frame).unwrap();
+            shading.record_composite(&mut rec, cam, fresnel, scat, &frame.out, &img).unwrap();
+            rec.submit_and_wait().unwrap();
+            if raster.fit(&mut frame).unwrap() {
+                break;
+            }
         }
+        out.push(img);
     }
+    out
 }
 
 /// One experiment: the splats' normals tilted by `tilt_deg`, their centres
@@ -191,7 +198,7 @@ fn run(ctx: &Arc<Context>, x: &Setup) -> Outcome {
     let before = mae(&start, &s);
     let true_set = set_with(&s, &truth, 1.0);
     let geometry = if colours_only { &start } else { &true_set };
-    let targets: Vec<Buffer<f32>> = s.cams.iter().map(|c| target(ctx, &true_set, geometry, &env, c, &scat)).collect();
+    let targets = targets(ctx, &true_set, geometry, &env, &s.cams, &scat);
     let grey = HostEnvMap::constant(env_res, 0.0).unwrap();
     let mut model = ReflectionModel::new(ctx, &start, if env_known { &env } else { &grey }, Fresnel::Off, 1e-15).unwrap();
     let mut cfg = TrainConfig::quick();

@@ -183,7 +183,12 @@ pub struct ReflectionConfig {
     /// "off": c = f0 E(w) (the paper's Stage II colour); "schlick": c = E(w)
     /// and Schlick's F with the blended F0 per pixel.
     pub fresnel: String,
-    /// Cube-map face size.
+    /// Cube-map face size. The quick preset's 16 (it was 64): a finer map
+    /// memorises each training sample's colour as texel noise and leaves
+    /// test views worse; measured after Stage II, 16 against 64: +0.20 dB
+    /// on `lantern`, +0.04 `pane`, +0.01 built-in glass, +0.004 `globe`,
+    /// and after Stage III within 0.006 dB (perf/RESULTS.md, eighteenth
+    /// session). The paper preset keeps the 128.
     pub env_res: u32,
     /// How the cube map starts: "grey" (every texel sigmoid 0.5,
     /// method-notes §3.7) or "scene" (the scattering set rendered from the
@@ -459,7 +464,7 @@ impl TrainConfig {
             max_gaussians: 200_000,
             test_interval: 1000,
             checkpoint_interval: 500,
-            reflection: ReflectionConfig { iterations: 1000, env_res: 64, prune_interval: 100, ..ReflectionConfig::default() },
+            reflection: ReflectionConfig { iterations: 1000, env_res: 16, prune_interval: 100, ..ReflectionConfig::default() },
             light_field: LightFieldConfig { iterations: 1000, preset: "small".into(), ..LightFieldConfig::default() },
             ..Self::paper()
         }
