@@ -28,6 +28,15 @@ impl SceneSpec {
     }
 }
 
+/// A splat's normal t_w: the third column of the rotation of its
+/// quaternion (r, x, y, z), normalised first.
+pub fn splat_normal(q: [f32; 4]) -> [f64; 3] {
+    let q = q.map(f64::from);
+    let l = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let [r, x, y, z] = q.map(|v| v / l);
+    [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)]
+}
+
 pub fn random_quat(rng: &mut Rng) -> [f32; 4] {
     [0; 4].map(|_| rng.uniform(-1.0, 1.0) as f32)
 }

@@ -8,6 +8,7 @@
 
 use tgs::train::seed::{jacobi_eigen, quat_for_normal, residual_hull_seeds, Seed, SeedNormal, SeedParams, SeedView};
 use tgs_pipelines::Camera;
+use tgs_tests::raster_util::splat_normal;
 use tgs_tests::{seed, Rng};
 
 type V3 = [f64; 3];
@@ -26,14 +27,6 @@ fn norm(a: V3) -> V3 {
     a.map(|c| c / l)
 }
 
-/// Third column of the rotation of the unit quaternion (r, x, y, z).
-fn t_w(q: [f32; 4]) -> V3 {
-    let q = q.map(f64::from);
-    let l = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let [r, x, y, z] = q.map(|v| v / l);
-    [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)]
-}
-
 #[test]
 fn quaternion_for_a_normal_has_that_normal() {
     let mut rng = Rng(seed("quaternion_for_a_normal_has_that_normal"));
@@ -44,7 +37,7 @@ fn quaternion_for_a_normal_has_that_normal() {
     for n in normals {
         let q = quat_for_normal(n.map(|c| c as f32));
         assert!(q.iter().all(|v| v.is_finite()), "{n:?} -> {q:?}");
-        let got = t_w(q);
+        let got = splat_normal(q);
         let err = (0..3).map(|k| (got[k] - norm(n)[k]).abs()).fold(0.0, f64::max);
         assert!(err < 1e-5, "normal {n:?}: quaternion {q:?} has t_w {got:?}");
     }

@@ -14,6 +14,7 @@ use tgs::train::seed::quat_for_normal;
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Context, Recorder};
 use tgs_pipelines::{Camera, EnvMap, Features, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, Rasterizer, ReflectionShading};
+use tgs_tests::raster_util::splat_normal;
 use tgs_tests::{check_validation, ctx_shared, Rng};
 
 type V3 = [f64; 3];
@@ -28,18 +29,8 @@ fn cross(a: V3, b: V3) -> V3 {
 fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
-fn uni(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
-    lo + (hi - lo) * (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-}
 fn logit(p: f64) -> f32 {
     (p / (1.0 - p)).ln() as f32
-}
-
-/// The unit normal (the splat's local +z) of quaternion (r, x, y, z).
-fn normal_of(q: &[f32]) -> V3 {
-    let l = q.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();
-    let [w, x, y, z] = [q[0], q[1], q[2], q[3]].map(|v| v as f64 / l);
-    [2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)]
 }
 
 /// A smooth but everywhere-varying sky: each channel a different low-order
@@ -98,7 +89,7 @@ fn scene(views: usize, points: usize, side: u32) -> Scene {
 
 /// Turn `n` by `angle` about a random axis perpendicular to it.
 fn tilt(rng: &mut Rng, n: V3, angle: f64) -> V3 {
-    let r = norm([uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0)]);
+    let r = norm([0; 3].map(|_| rng.uniform(-1.0, 1.0)));
     // A unit vector perpendicular to n, and n turned towards it.
     let t = norm(cross(cross(n, r), n));
     norm(std::array::from_fn(|k| n[k] * angle.cos() + t[k] * angle.sin()))
@@ -116,7 +107,7 @@ fn set_with(s: &Scene, normals: &[V3], radius: f64) -> HostGaussians {
 /// Mean angle (degrees) between the set's normals and the true ones, sign
 /// ignored (the kernels turn every normal to face the camera).
 fn mae(h: &HostGaussians, s: &Scene) -> f64 {
-    let e: f64 = s.points.iter().enumerate().map(|(i, n)| dot(normal_of(&h.quats[4 * i..4 * i + 4]), *n).abs().min(1.0).acos().to_degrees()).sum();
+    let e: f64 = s.points.iter().enumerate().map(|(i, n)| dot(splat_normal(std::array::from_fn(|k| h.quats[4 * i + k])), *n).abs().min(1.0).acos().to_degrees()).sum();
     e / s.points.len() as f64
 }
 
