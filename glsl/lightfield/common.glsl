@@ -28,7 +28,8 @@ layout(push_constant) uniform Push {
     vec4 centre;      // xyz: centre of the normalization box
     vec4 scale;       // xyz: 1 / half extent
     uint max_samples; // the sample list's capacity (compact writes no more)
-    uint pad0, pad1, pad2;
+    float r_prior;    // composite backward: added to dL/dR at every pixel
+    uint pad1, pad2;
 } pc;
 
 const uint CH = 4u;

@@ -6,7 +6,8 @@
 //                                   dF0 sum = g R Phi (1 - m) / ae,
 //     and 0 for alpha..distortion (the reflection geometry is frozen),
 //   and, when scat_grad is set, dI_scat     = g (1 - R);
-// at the other pixels (I = I_scat) dI_scat = g and the rest 0.
+// at the other pixels (I = I_scat) dI_scat = g and the rest 0; pc.r_prior
+// is added to dR at every pixel (a penalty on the mean of R).
 #include "lightfield/common.glsl"
 
 layout(std430, binding = 1) readonly buffer Scat { float scat[]; };
@@ -44,7 +45,7 @@ void main() {
     rg[pix] = dF0s.x;
     rg[n + pix] = dF0s.y;
     rg[2u * n + pix] = dF0s.z;
-    rg[3u * n + pix] = dR;
+    rg[3u * n + pix] = dR + pc.r_prior;
     for (uint k = 0u; k < 7u; k++) {
         rg[(CH + k) * n + pix] = 0.0;
     }

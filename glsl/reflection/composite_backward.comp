@@ -2,7 +2,8 @@
 // Deferred composite, backward: from the loss gradient of the loss input
 // (composite colour + the reflection set's alpha..distortion planes) to the
 // reflection render's planes (all written) and, with scat_grad, to the
-// scattering render's colour.
+// scattering render's colour. pc.r_prior is added to dL/dR everywhere (a
+// penalty on the mean of R).
 #include "reflection/composite_common.glsl"
 
 layout(std430, binding = 2) readonly buffer LossGrad { float g_in[]; };
@@ -49,7 +50,7 @@ void main() {
     g_refl[pix] = dA.x;
     g_refl[n + pix] = dA.y;
     g_refl[2u * n + pix] = dA.z;
-    g_refl[3u * n + pix] = dR;
+    g_refl[3u * n + pix] = dR + pc.r_prior;
     if (ch == 7u) {
         g_refl[4u * n + pix] = dF0s.x;
         g_refl[5u * n + pix] = dF0s.y;

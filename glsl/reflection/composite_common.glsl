@@ -26,7 +26,8 @@ layout(push_constant) uniform Push {
     uint schlick;    // 1: Schlick Fresnel with the blended F0 (needs CH = 7)
     float fx, fy, cx, cy;
     uint scat_grad;  // backward: 1 also writes dL/dI_scat
-    uint pad0, pad1, pad2;
+    float r_prior;   // backward: added to dL/dR at every pixel
+    uint pad1, pad2;
 } pc;
 
 const float F0_EPS = 1e-6;

@@ -180,6 +180,9 @@ fn composite_matches_reference_and_finite_differences() {
             let scat: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng, 0.0, 1.0) as f32).collect();
             let phi: Vec<f32> = (0..3 * n).map(|_| uni(&mut rng, 0.0, 1.0) as f32).collect();
             let g: Vec<f32> = (0..10 * n).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
+            // A penalty r_prior * R per pixel: its gradient joins dR at
+            // every pixel, evaluated or not.
+            let r_prior = uni(&mut rng, 0.1, 0.5) as f32;
             let sb = Buffer::from_slice(ctx, "scat", &scat).unwrap();
             let pb = Buffer::from_slice(ctx, "phi", &phi).unwrap();
             let gb = Buffer::from_slice(ctx, "loss_grad", &g).unwrap();
@@ -190,7 +193,7 @@ fn composite_matches_reference_and_finite_differences() {
             let mut rec = Recorder::new(ctx).unwrap();
             lf.record_samples(&mut rec, &cam, &p, &rb, &s, &samples).unwrap();
             lf.record_composite(&mut rec, &cam, &p, &sb, &rb, &s, &pb, &loss_in).unwrap();
-            lf.record_composite_backward(&mut rec, &cam, &p, &sb, &rb, &s, &pb, &gb, &dphi, &rg, Some(&sg)).unwrap();
+            lf.record_composite_backward(&mut rec, &cam, &p, &sb, &rb, &s, &pb, &gb, &dphi, &rg, Some(&sg), r_prior).unwrap();
             rec.submit_and_wait().unwrap();
             let (li, dp, rgv, sgv, so) = (loss_in.download().unwrap(), dphi.download().unwrap(), rg.download().unwrap(), sg.download().unwrap(), s.sample_of.download().unwrap());
             for (i, px_i) in px.iter().enumerate() {
@@ -249,6 +252,7 @@ fn composite_matches_reference_and_finite_differences() {
                     }
                 }
                 let got = rgv[3 * n + i] as f64;
+                let d_r = d_r + r_prior as f64;
                 assert!((got - d_r).abs() < tol(d_r), "schlick {schlick} pixel {i} dR: {got} vs {d_r}");
                 for k in 4..Plane::count(CHANNELS) as usize {
                     assert_eq!(rgv[k * n + i], 0.0, "frozen geometry planes get no gradient");

@@ -453,7 +453,7 @@ fn planes(px: &[CompositePixel], fresnel: Fresnel, extra: &mut Rng) -> (Vec<f32>
     (scat, refl)
 }
 
-fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_in: &[f32]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_in: &[f32], r_prior: f32) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let n = (cam.width * cam.height) as usize;
@@ -465,7 +465,7 @@ fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_i
     let gs = Buffer::<f32>::new(ctx, "test.scat_grad", 3 * n).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
     shading.record_composite(&mut rec, cam, fresnel, &s, &r, &li).unwrap();
-    shading.record_composite_backward(&mut rec, cam, fresnel, &s, &r, &gi, &gr, Some(&gs)).unwrap();
+    shading.record_composite_backward(&mut rec, cam, fresnel, &s, &r, &gi, &gr, Some(&gs), r_prior).unwrap();
     rec.submit_and_wait().unwrap();
     (li.download().unwrap(), gr.download().unwrap(), gs.download().unwrap())
 }
@@ -497,7 +497,9 @@ fn composite_matches_reference_and_finite_differences() {
                 })
                 .collect();
             let g_in: Vec<f32> = (0..10 * n).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
-            let (li, gr, gs) = gpu_composite(&cam, fresnel, &scat, &refl, &g_in);
+            // The loss also holds r_prior * R per pixel (a penalty on R's mean).
+            let r_prior = uni(&mut rng, 0.1, 0.5) as f32;
+            let (li, gr, gs) = gpu_composite(&cam, fresnel, &scat, &refl, &g_in, r_prior);
             for (name, v) in [("composite", &li), ("reflection gradient", &gr), ("scattering gradient", &gs)] {
                 assert!(v.iter().all(|x| x.is_finite()), "{fresnel:?} {w}x{h}: non-finite {name}");
             }
@@ -513,14 +515,14 @@ fn composite_matches_reference_and_finite_differences() {
                 // Gradients: d(sum_c g_c I_c)/d(input) by central differences.
                 let loss = |p: &CompositePixel| {
                     let v = rr::composite(p, schlick);
-                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>()
+                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>() + r_prior as f64 * p.r
                 };
-                let h = 1e-7;
+                let step = 1e-7;
                 let fd = |f: &dyn Fn(&mut CompositePixel, f64)| {
                     let (mut a, mut b) = (px[i], px[i]);
-                    f(&mut a, h);
-                    f(&mut b, -h);
-                    (loss(&a) - loss(&b)) / (2.0 * h)
+                    f(&mut a, step);
+                    f(&mut b, -step);
+                    (loss(&a) - loss(&b)) / (2.0 * step)
                 };
                 let mut checks: Vec<(String, f64, f32)> = Vec::new();
                 for c in 0..3 {

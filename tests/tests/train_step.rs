@@ -12,6 +12,7 @@ use tgs::train::lightfield::{LightFieldModel, LightFieldStepInput};
 use tgs::train::reflection::{ReflStepInput, ReflectionModel};
 use tgs::train::rng::Rng;
 use tgs::train::scattering::{ScatteringModel, StepInput};
+use tgs::train::config::LightFieldConfig;
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::mlp::MlpShape;
@@ -204,6 +205,8 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     let mut cfg = TrainConfig::default();
     // Schlick adds the F0 channels to the rasterized features.
     cfg.reflection.fresnel = "schlick".into();
+    // The penalty on R rides the same submission.
+    cfg.reflection.lambda_r = 0.5;
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
     let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: Some(&scat), lr_means: 1e-3, profile: false };
@@ -243,6 +246,9 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let g = big_splats(3000);
     let mut cfg = TrainConfig::default();
     cfg.light_field.lambda_hf = 0.1;
+    // The penalty on R rides the same submission (its R plane comes back
+    // with the losses).
+    cfg.light_field.lambda_r = 0.5;
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
     let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
@@ -266,10 +272,18 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
 
     // B: a render grew the frame first; the same step is one submission.
     let mut b = model();
-    b.render(&cam, &scat).unwrap();
+    let r = b.render(&cam, &scat).unwrap();
+    let n = (cam.width * cam.height) as usize;
+    let mean_r = r.refl[3 * n..4 * n].iter().map(|&x| x as f64).sum::<f64>() / n as f64;
     let submitted = ctx.submissions();
     let out_b = b.step(&cfg, &mut scattering, &input).unwrap();
     assert_eq!(ctx.submissions() - submitted, 1, "a Stage III step that fits is one submission (sample count, loss and statistics ride it back)");
+    // The same step without the penalty: the loss is lambda_r * mean R lower.
+    let mut d = model();
+    let cfg_d = TrainConfig { light_field: LightFieldConfig { lambda_r: 0.0, ..cfg.light_field.clone() }, ..cfg.clone() };
+    let out_d = d.step(&cfg_d, &mut scattering, &input).unwrap();
+    let want = 0.5 * mean_r;
+    assert!(mean_r > 0.01 && ((out_b.loss - out_d.loss) - want).abs() < 1e-6, "the penalty added {} to the loss, not lambda_r * mean R = {want}", out_b.loss - out_d.loss);
     assert_eq!(b.take_coverage(), Some(coverage));
     assert_one_step(&before, (&light_field_bits(&a), out_a.loss), (&light_field_bits(&b), out_b.loss), &["param.features", "adam_v.features", "net.params", "net.v"]);
 

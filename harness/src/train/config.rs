@@ -87,6 +87,10 @@ pub struct LightFieldConfig {
     /// Network: "paper" (8 x 256, skip at layer 5, L = 12) or "small"
     /// (4 x 64, skip at layer 3, L = 8 / 4; about 1/25 of the work).
     pub preset: String,
+    /// Fourier octaves of gamma(x) and gamma(w); 0 keeps the preset's
+    /// (paper 12 / 12, small 8 / 4).
+    pub levels_x: u32,
+    pub levels_w: u32,
     /// Adam learning rate of the MLP, exponential from `lr` to `lr_final`
     /// over the stage (NeRF / Ref-GS: 5e-4 -> 5e-5).
     pub lr: f32,
@@ -115,6 +119,8 @@ pub struct LightFieldConfig {
     /// High-frequency loss weight and percentile (as in `[reflection]`).
     pub lambda_hf: f32,
     pub hf_percentile: f32,
+    /// Penalty on the mean of R (as in `[reflection]`).
+    pub lambda_r: f32,
 }
 
 impl Default for LightFieldConfig {
@@ -122,6 +128,8 @@ impl Default for LightFieldConfig {
         LightFieldConfig {
             iterations: 20_000,
             preset: "paper".into(),
+            levels_x: 0,
+            levels_w: 0,
             lr: 5e-4,
             lr_final: 5e-5,
             lr_f0: 0.0075,
@@ -132,13 +140,22 @@ impl Default for LightFieldConfig {
             scattering_params: "colour".into(),
             lambda_hf: 0.1,
             hf_percentile: 90.0,
+            lambda_r: 0.0,
         }
     }
 }
 
 impl LightFieldConfig {
     pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
-        tgs_pipelines::MlpShape::preset(&self.preset).context("light_field.preset")
+        let mut shape = tgs_pipelines::MlpShape::preset(&self.preset).context("light_field.preset")?;
+        if self.levels_x > 0 {
+            shape.levels_x = self.levels_x;
+        }
+        if self.levels_w > 0 {
+            shape.levels_w = self.levels_w;
+        }
+        shape.validate().context("light_field.levels_x / levels_w")?;
+        Ok(shape)
     }
     pub fn schlick(&self) -> Result<bool> {
         match self.fresnel.as_str() {
@@ -163,8 +180,8 @@ impl LightFieldConfig {
         if self.iterations == 0 {
             bail!("light_field.iterations must be at least 1 (leave Stage III out with stages = \"I,II\")");
         }
-        for (k, v) in [("lr", self.lr), ("lr_final", self.lr_final), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r)] {
-            if v < 0.0 {
+        for (k, v) in [("lr", self.lr), ("lr_final", self.lr_final), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lambda_r", self.lambda_r)] {
+            if !(v >= 0.0 && v.is_finite()) {
                 bail!("light_field.{k} must be non-negative, not {v}");
             }
         }
@@ -262,6 +279,9 @@ pub struct ReflectionConfig {
     /// the pixels at or above the `hf_percentile`-th percentile (0: off).
     pub lambda_hf: f32,
     pub hf_percentile: f32,
+    /// Weight of a penalty on the mean of R = sum w r over the pixels
+    /// (0: off), which pulls r down where the reflection term buys nothing.
+    pub lambda_r: f32,
     /// Train the scattering set's SH colour in Stage II too (its geometry
     /// and opacity stay Stage I's), against the composite, at Stage I's
     /// colour rates: the reflection term then takes over the
@@ -314,6 +334,7 @@ impl Default for ReflectionConfig {
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,
+            lambda_r: 0.0,
             train_scattering: false,
             reseed: false,
         }
@@ -381,6 +402,9 @@ impl ReflectionConfig {
             }
         }
         check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
+        if !(self.lambda_r >= 0.0 && self.lambda_r.is_finite()) {
+            bail!("reflection.lambda_r must be non-negative, not {}", self.lambda_r);
+        }
         for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual), ("min_view_dependence", self.min_view_dependence)] {
             if v < 0.0 {
                 bail!("reflection.{k} must be non-negative, not {v}");

@@ -44,6 +44,8 @@ struct ViewBuffers {
     loss: LossScratch,
     loss_in: Buffer<f32>,
     loss_grad: Buffer<f32>,
+    /// The R plane, brought back with the step when `lambda_r` > 0.
+    r_host: Readback<f32>,
 }
 
 /// The MLP's parameters with their gradient and Adam moments.
@@ -181,6 +183,7 @@ impl LightFieldModel {
                 loss: self.loss.scratch(w, h, 3)?,
                 loss_in: Buffer::new(&self.ctx, "lf.loss_in", planes)?,
                 loss_grad: Buffer::new(&self.ctx, "lf.loss_grad", planes)?,
+                r_host: Readback::new(&self.ctx, "lf.r_host", (w * h) as usize)?,
             };
             self.sizes.insert((w, h), vb);
         }
@@ -290,8 +293,12 @@ impl LightFieldModel {
                 let n = (cam.width * cam.height) as usize;
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
-            self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad)?;
+            let r_prior = cfg.light_field.lambda_r / (cam.width * cam.height) as f32;
+            self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
+            if lf.lambda_r > 0.0 {
+                rec.read_back(&b.frame.out, 3 * (cam.width * cam.height) as usize, &b.r_host)?;
+            }
             match host_count {
                 Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
                 None => self.mlp.record_backward_counted(&mut rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
@@ -334,6 +341,9 @@ impl LightFieldModel {
         let mut loss = values.photometric(cfg.lambda_ssim as f64);
         if lf.lambda_hf > 0.0 {
             loss += lf.lambda_hf as f64 * self.hf_stats.values()?.2;
+        }
+        if lf.lambda_r > 0.0 {
+            loss += lf.lambda_r as f64 * super::mean(&b.r_host.read()?);
         }
         Ok(StepOutput { loss, values, densified: None, timings })
     }

@@ -23,6 +23,11 @@ pub(crate) fn log_lerp(a: f32, b: f32, t: f64) -> f64 {
     (a.ln() * (1.0 - t) + b.ln() * t).exp()
 }
 
+/// The mean of `v` in f64, summed in order (0 when empty).
+pub(crate) fn mean(v: &[f32]) -> f64 {
+    v.iter().map(|&x| x as f64).sum::<f64>() / v.len().max(1) as f64
+}
+
 /// The inverse of the sigmoid: the raw value whose activation is `p`.
 pub(crate) fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()

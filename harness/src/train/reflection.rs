@@ -14,7 +14,7 @@ use super::seed::{quat_for_normal, Seed};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
-use tgs_engine::{Buffer, Context, Recorder, Timing};
+use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::reflection::{TexelScratch, MATERIAL};
 use tgs_pipelines::{
     Adam, AdamGroup, Camera, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HfLoss, HfStats, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
@@ -107,6 +107,8 @@ struct ViewBuffers {
     loss: LossScratch,
     loss_in: Buffer<f32>,
     loss_grad: Buffer<f32>,
+    /// The R plane, brought back with the step when `lambda_r` > 0.
+    r_host: Readback<f32>,
 }
 
 pub struct ReflectionModel {
@@ -195,6 +197,7 @@ impl ReflectionModel {
                 loss: self.loss.scratch(w, h, 3)?,
                 loss_in: Buffer::new(&self.ctx, "refl.loss_in", planes)?,
                 loss_grad: Buffer::new(&self.ctx, "refl.loss_grad", planes)?,
+                r_host: Readback::new(&self.ctx, "refl.r_host", (w * h) as usize)?,
             };
             self.sizes.insert((w, h), vb);
         }
@@ -278,8 +281,12 @@ impl ReflectionModel {
                 let n = (cam.width * cam.height) as usize;
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
-            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad)?;
+            let r_prior = rc.lambda_r / (cam.width * cam.height) as f32;
+            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
+            if rc.lambda_r > 0.0 {
+                rec.read_back(&b.frame.out, 3 * (cam.width * cam.height) as usize, &b.r_host)?;
+            }
             if let Some((m, sh, it)) = scat_model {
                 m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
             }
@@ -307,6 +314,9 @@ impl ReflectionModel {
         let mut loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
         if rc.lambda_hf > 0.0 {
             loss += rc.lambda_hf as f64 * self.hf_stats.values()?.2;
+        }
+        if rc.lambda_r > 0.0 {
+            loss += rc.lambda_r as f64 * super::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
         }
 
         let mut densified = None;

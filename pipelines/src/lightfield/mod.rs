@@ -35,7 +35,8 @@ struct Push {
     centre: [f32; 4],
     scale: [f32; 4],
     max_samples: u32,
-    pad: [u32; 3],
+    r_prior: f32,
+    pad: [u32; 2],
 }
 
 /// What places a view's samples: the camera, the box mapped to [-1, 1]^3,
@@ -72,7 +73,7 @@ pub struct LightFieldShading {
     composite_backward: [Kernel; 2],
 }
 
-fn push(cam: &Camera, p: &ShadeParams, max_samples: u32) -> Push {
+fn push(cam: &Camera, p: &ShadeParams, max_samples: u32, r_prior: f32) -> Push {
     let m = &cam.world_to_view;
     let h = p.half_extent.map(|v| if v > 0.0 { 1.0 / v } else { 1.0 });
     Push {
@@ -88,7 +89,8 @@ fn push(cam: &Camera, p: &ShadeParams, max_samples: u32) -> Push {
         centre: [p.centre[0], p.centre[1], p.centre[2], 0.0],
         scale: [h[0], h[1], h[2], 0.0],
         max_samples,
-        pad: [0; 3],
+        r_prior,
+        pad: [0; 2],
     }
 }
 
@@ -161,7 +163,7 @@ impl LightFieldShading {
     /// beyond are not evaluated (the caller checks the count).
     pub fn record_samples(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, refl: &Buffer<f32>, s: &SampleScratch, samples: &Buffer<f32>) -> Result<()> {
         let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS))])?;
-        let pc = push(cam, p, (samples.len() / 6).min(u32::MAX as usize) as u32);
+        let pc = push(cam, p, (samples.len() / 6).min(u32::MAX as usize) as u32, 0.0);
         let g = grid(&self.ctx, n);
         rec.dispatch(&self.mask, &[refl.binding(), s.flags.binding()], bytemuck::bytes_of(&pc), g)?;
         self.scan.record(rec, &s.flags, &s.flags, &Count::Host(n), &s.scan)?;
@@ -174,7 +176,7 @@ impl LightFieldShading {
     #[allow(clippy::too_many_arguments)]
     pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, scat: &Buffer<f32>, refl: &Buffer<f32>, s: &SampleScratch, phi: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
         let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_in, Plane::count(3))])?;
-        let pc = push(cam, p, 0);
+        let pc = push(cam, p, 0, 0.0);
         let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_in.binding()];
         rec.dispatch(&self.composite, &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
@@ -182,6 +184,8 @@ impl LightFieldShading {
     /// Record the composite's backward: `loss_grad` (colour planes) to
     /// `d_phi` (per sample), `refl_grad` (every plane of the reflection
     /// render, overwritten) and, when given, `scat_grad` (3 planes).
+    /// `r_prior` is added to dL/dR at every pixel, evaluated or not (the
+    /// gradient of `lambda * mean(R)` is `lambda / pixels`).
     #[allow(clippy::too_many_arguments)]
     pub fn record_composite_backward(
         &self,
@@ -196,12 +200,13 @@ impl LightFieldShading {
         d_phi: &Buffer<f32>,
         refl_grad: &Buffer<f32>,
         scat_grad: Option<&Buffer<f32>>,
+        r_prior: f32,
     ) -> Result<()> {
         let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_grad, 3), (refl_grad, Plane::count(CHANNELS))])?;
         if let Some(g) = scat_grad {
             check_planes(cam, &[(g, 3)])?;
         }
-        let pc = push(cam, p, 0);
+        let pc = push(cam, p, 0, r_prior);
         let sg = scat_grad.unwrap_or(refl_grad);
         let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_grad.binding(), d_phi.binding(), refl_grad.binding(), sg.binding()];
         rec.dispatch(&self.composite_backward[scat_grad.is_some() as usize], &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))

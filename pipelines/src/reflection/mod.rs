@@ -94,7 +94,9 @@ struct CompositePush {
     cx: f32,
     cy: f32,
     scat_grad: u32,
-    pad: [u32; 3],
+    /// Backward: added to dL/dR at every pixel.
+    r_prior: f32,
+    pad: [u32; 2],
 }
 
 /// Working memory of the texel-gradient reduction for up to `capacity` Gaussians.
@@ -250,7 +252,7 @@ impl ReflectionShading {
         Ok(())
     }
 
-    fn composite_push(cam: &Camera, fresnel: Fresnel, scat_grad: bool) -> CompositePush {
+    fn composite_push(cam: &Camera, fresnel: Fresnel, scat_grad: bool, r_prior: f32) -> CompositePush {
         CompositePush {
             width: cam.width,
             height: cam.height,
@@ -261,7 +263,8 @@ impl ReflectionShading {
             cx: cam.cx,
             cy: cam.cy,
             scat_grad: scat_grad as u32,
-            pad: [0; 3],
+            r_prior,
+            pad: [0; 2],
         }
     }
 
@@ -273,14 +276,15 @@ impl ReflectionShading {
     pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
         let ch = fresnel.channels();
         check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_in, Plane::count(3))])?;
-        let p = Self::composite_push(cam, fresnel, false);
+        let p = Self::composite_push(cam, fresnel, false, 0.0);
         rec.dispatch(&self.composite, &[scat.binding(), refl.binding(), loss_in.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, cam.width * cam.height))
     }
 
     /// Record the composite's backward: `loss_grad` (gradient of every plane
     /// of `loss_in`) to `refl_grad` (every plane of the reflection render,
     /// overwritten) and, when given, `scat_grad` (the scattering colour's 3
-    /// planes, overwritten).
+    /// planes, overwritten). `r_prior` is added to dL/dR at every pixel: the
+    /// gradient of a penalty `lambda * mean(R)` is `lambda / pixels`.
     #[allow(clippy::too_many_arguments)]
     pub fn record_composite_backward(
         &self,
@@ -292,13 +296,14 @@ impl ReflectionShading {
         loss_grad: &Buffer<f32>,
         refl_grad: &Buffer<f32>,
         scat_grad: Option<&Buffer<f32>>,
+        r_prior: f32,
     ) -> Result<()> {
         let ch = fresnel.channels();
         check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_grad, Plane::count(3)), (refl_grad, Plane::count(ch))])?;
         if let Some(s) = scat_grad {
             check_planes(cam, &[(s, 3)])?;
         }
-        let p = Self::composite_push(cam, fresnel, scat_grad.is_some());
+        let p = Self::composite_push(cam, fresnel, scat_grad.is_some(), r_prior);
         // Without a scattering gradient the binding is never written; bind
         // the reflection gradient in its place.
         let sg = scat_grad.unwrap_or(refl_grad);
