@@ -239,6 +239,9 @@ fn bad_settings_and_missing_checkpoints_are_reported() {
     fails(with("init_far_fraction=1e9"), &["init_far_fraction"]);
     fails(with("init_far_depth=0"), &["init_far_depth"]);
     fails(with("reflection.seed_normal=\"pca\""), &["reflection.seed_normal", "pca", "'gradient'"]);
+    fails(with("reflection.lambda_r=-1"), &["reflection.lambda_r", "-1"]);
+    fails(with("light_field.lambda_r=nan"), &["light_field.lambda_r", "NaN"]);
+    fails(with("light_field.levels_x=17"), &["light_field.levels_x", "17"]);
     fails(TrainArgs { downscale: Some(0), ..args(&out) }, &["--downscale 0"]);
     fails(TrainArgs { downscale: Some(1000), ..args(&out) }, &["--downscale 1000", "r_0.png"]);
     fails(TrainArgs { background: Some("purple".into()), ..args(&out) }, &["--background 'purple'"]);
