@@ -182,7 +182,7 @@ impl LightFieldConfig {
         }
         for (k, v) in [("lr", self.lr), ("lr_final", self.lr_final), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lambda_r", self.lambda_r)] {
             if !(v >= 0.0 && v.is_finite()) {
-                bail!("light_field.{k} must be non-negative, not {v}");
+                bail!("light_field.{k} must be non-negative and finite, not {v}");
             }
         }
         if !(0.0..1.0).contains(&self.threshold) {
@@ -406,11 +406,14 @@ impl ReflectionConfig {
             }
         }
         check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
-        if !(self.lambda_r >= 0.0 && self.lambda_r.is_finite()) {
-            bail!("reflection.lambda_r must be non-negative, not {}", self.lambda_r);
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r)] {
+            if !(v >= 0.0 && v.is_finite()) {
+                bail!("reflection.{k} must be non-negative and finite, not {v}");
+            }
         }
-        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("min_residual", self.min_residual), ("min_view_dependence", self.min_view_dependence)] {
-            if v < 0.0 {
+        // Thresholds may be infinite (never run Stage II), not NaN.
+        for (k, v) in [("min_residual", self.min_residual), ("min_view_dependence", self.min_view_dependence)] {
+            if !(v >= 0.0) {
                 bail!("reflection.{k} must be non-negative, not {v}");
             }
         }
@@ -668,8 +671,8 @@ impl TrainConfig {
 }
 
 fn check_hf(section: &str, lambda: f32, pct: f32) -> Result<()> {
-    if lambda < 0.0 {
-        bail!("{section}.lambda_hf must be non-negative, not {lambda}");
+    if !(lambda >= 0.0 && lambda.is_finite()) {
+        bail!("{section}.lambda_hf must be non-negative and finite, not {lambda}");
     }
     if !(0.0..=100.0).contains(&pct) {
         bail!("{section}.hf_percentile must be in [0, 100], not {pct}");

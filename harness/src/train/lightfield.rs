@@ -293,7 +293,7 @@ impl LightFieldModel {
                 let n = (cam.width * cam.height) as usize;
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
-            let r_prior = cfg.light_field.lambda_r / (cam.width * cam.height) as f32;
+            let r_prior = lf.lambda_r / (cam.width * cam.height) as f32;
             self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if lf.lambda_r > 0.0 {
