@@ -6,7 +6,9 @@
 //! sphere. `Setup` holds the knobs behind the measurements in
 //! perf/RESULTS.md (eighteenth session): the tilt, the splats' distance
 //! from the sphere, the map (true and fixed, or grey and trained), the
-//! rotation rate, normal consistency.
+//! rotation rate, normal consistency. On the same scene the last test
+//! checks the penalty on R (`reflection.lambda_r`): in the loss, and
+//! pulling R down.
 
 use std::sync::Arc;
 use tgs::train::reflection::{ReflStepInput, ReflectionModel};
