@@ -274,7 +274,7 @@ fn a_penalty_on_r_joins_the_loss_and_lowers_r() {
         cfg.reflection.prune_interval = 0;
         let mean_r = |model: &mut ReflectionModel, v: usize| {
             let r = model.render(&s.cams[v], &scat).unwrap();
-            r.refl[3 * n_px..4 * n_px].iter().map(|&x| x as f64).sum::<f64>() / n_px as f64
+            r.r().iter().map(|&x| x as f64).sum::<f64>() / n_px as f64
         };
         let r_first = mean_r(&mut model, view_of(1));
         let mut first_loss = f64::NAN;

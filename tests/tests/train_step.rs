@@ -274,7 +274,7 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let mut b = model();
     let r = b.render(&cam, &scat).unwrap();
     let n = (cam.width * cam.height) as usize;
-    let mean_r = r.refl[3 * n..4 * n].iter().map(|&x| x as f64).sum::<f64>() / n as f64;
+    let mean_r = r.r().iter().map(|&x| x as f64).sum::<f64>() / n as f64;
     let submitted = ctx.submissions();
     let out_b = b.step(&cfg, &mut scattering, &input).unwrap();
     assert_eq!(ctx.submissions() - submitted, 1, "a Stage III step that fits is one submission (sample count, loss and statistics ride it back)");

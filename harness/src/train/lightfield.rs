@@ -297,7 +297,7 @@ impl LightFieldModel {
             self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if lf.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, 3 * (cam.width * cam.height) as usize, &b.r_host)?;
+                rec.read_back(&b.frame.out, super::reflection::R_PLANE * (cam.width * cam.height) as usize, &b.r_host)?;
             }
             match host_count {
                 Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,

@@ -46,6 +46,10 @@ pub struct ScatTrain<'a> {
     pub global_iteration: u32,
 }
 
+/// The plane of R = sum w r in the reflection render, in both stages
+/// (Stage II: [A (3), R, ...], Stage III: [F0 sum (3), R]).
+pub(crate) const R_PLANE: usize = 3;
+
 /// A Stage II render of one view, downloaded.
 pub struct ReflRendered {
     pub width: u32,
@@ -78,10 +82,10 @@ impl ReflRendered {
             None => &self.refl[..3 * self.pixels()],
         }
     }
-    /// R = sum w r (plane 3 in both stages).
+    /// R = sum w r.
     pub fn r(&self) -> &[f32] {
         let n = self.pixels();
-        &self.refl[3 * n..4 * n]
+        &self.refl[R_PLANE * n..(R_PLANE + 1) * n]
     }
     /// sum w f0 (3 planes) when this render has it.
     pub fn f0_sum(&self) -> Option<&[f32]> {
@@ -285,7 +289,7 @@ impl ReflectionModel {
             self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if rc.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, 3 * (cam.width * cam.height) as usize, &b.r_host)?;
+                rec.read_back(&b.frame.out, R_PLANE * (cam.width * cam.height) as usize, &b.r_host)?;
             }
             if let Some((m, sh, it)) = scat_model {
                 m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
