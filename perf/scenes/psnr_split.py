@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Test PSNR of a run's renders, split into the glass mask and the rest.
+
+Issue 12 asks what the reflection term gains; this says where. For each test
+view of a Blender-format dataset with `test/NAME_mask.png`, it compares the
+render `RENDERS/NAME.png` (a run's `renders/stage1`, `renders/stage2` or
+`renders/test`) with the ground truth, both at the run's resolution:
+
+    python3 perf/scenes/psnr_split.py DATASET --downscale 4 RUN/renders/stage1 RUN/renders/test
+
+The ground truth is box-downscaled by `--downscale` (RGBA over a white
+background, as `tgs train`'s default), the mask likewise, a pixel counting as
+glass when all its sub-pixels are. Errors are pooled over the views, so the
+"all" figure is not metrics.json's mean of per-view PSNRs; the renders are
+8-bit PNGs. Needs numpy and Pillow.
+"""
+import argparse
+import glob
+import os
+import sys
+
+import numpy as np
+from PIL import Image
+
+
+def load_rgb(path):
+    try:
+        im = np.asarray(Image.open(path)).astype(np.float64) / 255
+    except OSError as e:
+        sys.exit(f"{path}: cannot read the image ({e})")
+    if im.ndim == 2:
+        im = np.repeat(im[..., None], 3, axis=-1)
+    if im.shape[-1] == 4:
+        im = im[..., :3] * im[..., 3:] + (1 - im[..., 3:])
+    return im[..., :3]
+
+
+def box_down(a, f):
+    h, w = a.shape[0] // f, a.shape[1] // f
+    return a[: h * f, : w * f].reshape(h, f, w, f, *a.shape[2:]).mean(axis=(1, 3))
+
+
+def psnr(errors):
+    return -10 * np.log10(np.concatenate(errors).mean())
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("dataset", help="Blender-format dataset with test/NAME_mask.png")
+    ap.add_argument("renders", nargs="+", help="folders holding NAME.png per test view")
+    ap.add_argument("--downscale", type=int, default=1, help="the run's --downscale")
+    a = ap.parse_args()
+    if a.downscale < 1:
+        sys.exit(f"--downscale must be at least 1, not {a.downscale}")
+    masks = sorted(glob.glob(os.path.join(a.dataset, "test", "*_mask.png")))
+    if not masks:
+        sys.exit(f"{a.dataset}/test: no NAME_mask.png")
+    names = [os.path.basename(p)[: -len("_mask.png")] for p in masks]
+    for run in a.renders:
+        glass, rest = [], []
+        for n in names:
+            gt = box_down(load_rgb(os.path.join(a.dataset, "test", n + ".png")), a.downscale)
+            m = np.asarray(Image.open(os.path.join(a.dataset, "test", n + "_mask.png")).convert("L")) > 127
+            m = box_down(m.astype(np.float64), a.downscale) > 0.999
+            r = load_rgb(os.path.join(run, n + ".png"))
+            if r.shape != gt.shape:
+                sys.exit(f"{run}/{n}.png is {r.shape[1]}x{r.shape[0]}, the downscaled truth {gt.shape[1]}x{gt.shape[0]}: check --downscale")
+            e = ((r - gt) ** 2).mean(axis=-1)
+            glass.append(e[m])
+            rest.append(e[~m])
+        print(f"{run}: glass {psnr(glass):.3f} dB ({sum(map(len, glass))} px), rest {psnr(rest):.3f} dB, all {psnr(glass + rest):.3f}")
+
+
+if __name__ == "__main__":
+    main()
