@@ -25,7 +25,7 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Train a TransmissiveGS scene (Stage I, then Stage II) on a dataset directory
+    /// Train a TransmissiveGS scene (Stages I, II and III, or those --stages names) on a dataset directory
     /// (Blender layout or COLMAP); without one, on the built-in scene.
     Train {
         /// Dataset directory (transforms_train.json or sparse/); default: the built-in scene, written to OUT/scene.

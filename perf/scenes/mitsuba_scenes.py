@@ -18,6 +18,12 @@ middle, sun and sky):
   pane     a vertical glass pane between the middle objects
   diffuse  no glass at all (Stage II should skip it)
 
+`--no-reflection` renders the same scenes (same cameras, same sampler seeds)
+with the glass's reflection weighted by zero (thin-dielectric
+`specular_reflectance` 0: the transmitted light is unchanged) into
+`NAME_norefl`: the ground truth a perfect reflection model would leave for
+the scattering set, for measuring what a reflection model can gain at most.
+
 Masks and normals are ray-cast here in numpy against the same primitives
 (16 stratified rays per pixel for the mask, the pixel centre for the normal),
 so they do not depend on the renderer's sampling.
@@ -98,8 +104,10 @@ def checker(mi, c0, c1, scale):
     return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
 
 
-def build(mi, name):
+def build(mi, name, reflection=True):
     glass = {"type": "thindielectric", "int_ior": 1.5}
+    if not reflection:
+        glass["specular_reflectance"] = 0.0
     prims = [Prim("rectangle", translate_scale([0, 0, 0], [200, 200, 1]), checker(mi, [0.75, 0.78, 0.72], [0.30, 0.42, 0.36], 400))]
     palette = [([0.9, 0.2, 0.2], [0.95, 0.85, 0.2]), ([0.2, 0.4, 0.9], [0.9, 0.9, 0.9]), ([0.2, 0.75, 0.3], [0.9, 0.5, 0.1]),
                ([0.8, 0.3, 0.8], [0.2, 0.8, 0.8]), ([0.95, 0.6, 0.1], [0.3, 0.2, 0.6]), ([0.1, 0.5, 0.5], [0.9, 0.8, 0.7])]
@@ -187,17 +195,18 @@ def main():
     ap.add_argument("--spp", type=int, default=128)
     ap.add_argument("--train", type=int, default=60)
     ap.add_argument("--test", type=int, default=12)
+    ap.add_argument("--no-reflection", action="store_true", help="glass transmits only; writes NAME_norefl")
     a = ap.parse_args()
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     fov = math.pi / 4
     for name in a.scene or ["globe", "pane", "diffuse"]:
-        prims = build(mi, name)
+        prims = build(mi, name, not a.no_reflection)
         scene_d = {"type": "scene", "integrator": {"type": "path", "max_depth": 12}, "sky": {"type": "sunsky", "sun_direction": [0.45, -0.35, 0.82], "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], 90)}}
         for k, p in enumerate(prims):
             scene_d[f"shape{k:02}"] = p.mitsuba(mi)
         scene = mi.load_dict(scene_d)
-        root = os.path.join(a.out, name)
+        root = os.path.join(a.out, name + ("_norefl" if a.no_reflection else ""))
         rng = np.random.default_rng({"globe": 1, "pane": 2, "diffuse": 3}[name])
         for split, n, offset in (("train", a.train, 0.0), ("test", a.test, 0.37)):
             os.makedirs(os.path.join(root, split), exist_ok=True)
