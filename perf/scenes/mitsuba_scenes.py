@@ -20,9 +20,12 @@ middle, sun and sky):
 
 `--no-reflection` renders the same scenes (same cameras, same sampler seeds)
 with the glass's reflection weighted by zero (thin-dielectric
-`specular_reflectance` 0: the transmitted light is unchanged) into
-`NAME_norefl`: the ground truth a perfect reflection model would leave for
-the scattering set, for measuring what a reflection model can gain at most.
+`specular_reflectance` 0: the transmitted light is unchanged in
+expectation) into `NAME_norefl`: the ground truth a perfect reflection
+model would leave for the scattering set, for measuring what a reflection
+model can gain at most. Mitsuba still picks the reflection lobe with
+probability R at a glass hit and then returns nothing, so the glass carries
+somewhat more Monte Carlo noise than in `NAME`.
 
 Masks and normals are ray-cast here in numpy against the same primitives
 (16 stratified rays per pixel for the mask, the pixel centre for the normal),
@@ -235,7 +238,7 @@ def main():
                     frame["normal_path"] = "./" + stem + "_normal.npy"
                     frame["mask_path"] = "./" + stem + "_mask.png"
                 frames.append(frame)
-                print(f"{name} {stem}: {time.time() - t0:.1f} s", flush=True)
+                print(f"{os.path.basename(root)} {stem}: {time.time() - t0:.1f} s", flush=True)
             with open(os.path.join(root, f"transforms_{split}.json"), "w") as fh:
                 json.dump({"camera_angle_x": fov, "frames": frames}, fh, indent=1)
 
