@@ -55,13 +55,16 @@ def main():
     masks = sorted(glob.glob(os.path.join(a.dataset, "test", "*_mask.png")))
     if not masks:
         sys.exit(f"{a.dataset}/test: no NAME_mask.png")
-    names = [os.path.basename(p)[: -len("_mask.png")] for p in masks]
+    # The truth and the masks, read and downscaled once for every render folder.
+    views = []
+    for p in masks:
+        n = os.path.basename(p)[: -len("_mask.png")]
+        gt = box_down(load_rgb(os.path.join(a.dataset, "test", n + ".png")), a.downscale)
+        m = box_down((np.asarray(Image.open(p).convert("L")) > 127).astype(np.float64), a.downscale) > 0.999
+        views.append((n, gt, m))
     for run in a.renders:
         glass, rest = [], []
-        for n in names:
-            gt = box_down(load_rgb(os.path.join(a.dataset, "test", n + ".png")), a.downscale)
-            m = np.asarray(Image.open(os.path.join(a.dataset, "test", n + "_mask.png")).convert("L")) > 127
-            m = box_down(m.astype(np.float64), a.downscale) > 0.999
+        for n, gt, m in views:
             r = load_rgb(os.path.join(run, n + ".png"))
             if r.shape != gt.shape:
                 sys.exit(f"{run}/{n}.png is {r.shape[1]}x{r.shape[0]}, the downscaled truth {gt.shape[1]}x{gt.shape[0]}: check --downscale")
