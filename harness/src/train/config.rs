@@ -263,6 +263,10 @@ pub struct ReflectionConfig {
     /// the views seeing a point that must see residual there.
     pub seed_rays: u32,
     pub seed_agree: f32,
+    /// Residual hull: a point also needs more agreeing views than masks
+    /// placed at random would give it this often (binomial tail at the
+    /// masks' mean coverage; 1: no test; train/seed.rs `min_hits`).
+    pub seed_significance: f32,
     /// A seed's normal: "view" (towards the camera whose ray found it) or
     /// "plane" (the plane of its neighbouring seeds). Measured after Stage
     /// II (perf/RESULTS.md, quick preset), glass normal MAE plane -> view:
@@ -341,6 +345,7 @@ impl Default for ReflectionConfig {
             init: "hull".into(),
             seed_rays: 8192,
             seed_agree: 0.9,
+            seed_significance: 1e-3,
             seed_normal: "view".into(),
             seed_opacity: 0.5,
             lambda_hf: 0.1,
@@ -397,6 +402,9 @@ impl ReflectionConfig {
         self.seed_normal()?;
         if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
             bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);
+        }
+        if !(self.seed_significance > 0.0 && self.seed_significance <= 1.0) {
+            bail!("reflection.seed_significance must be in (0, 1], not {}", self.seed_significance);
         }
         if !(self.seed_opacity > 0.0 && self.seed_opacity < 1.0) {
             bail!("reflection.seed_opacity must be in (0, 1), not {}", self.seed_opacity);

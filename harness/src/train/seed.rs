@@ -60,6 +60,10 @@ pub struct SeedParams {
     pub steps: u32,
     /// How a seed's normal is chosen.
     pub normal: SeedNormal,
+    /// A point is in the hull only if its hits would be this unlikely
+    /// from masks placed at random (one-sided binomial tail at the views'
+    /// mean mask coverage; 1: no test). See [`min_hits`].
+    pub significance: f64,
 }
 
 /// A seed's normal (see the module documentation).
@@ -85,7 +89,7 @@ pub enum SeedNormal {
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::View }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::View, significance: 1e-6 }
     }
 }
 
@@ -223,9 +227,11 @@ fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     out
 }
 
-/// None: fewer than 3 views see `x` in front of their surface; else whether
-/// it is in the hull (false: carved by the views that see it).
-fn hull_test(views: &[Prepared], x: V3, agree: f32) -> Option<bool> {
+/// None: fewer than 3 views see `x` in front of their surface, or they
+/// agree but too few of them to tell the agreement from chance
+/// (`min_hits`, indexed by the views that see it); else whether it is in
+/// the hull (false: carved by the views that see it).
+fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Option<bool> {
     let (mut seen, mut hit) = (0u32, 0u32);
     for v in views {
         if let Some(i) = v.in_front(x) {
@@ -233,7 +239,54 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32) -> Option<bool> {
             hit += v.mask[i] as u32;
         }
     }
-    (seen >= 3).then_some(hit as f64 >= agree as f64 * seen as f64)
+    if seen < 3 {
+        return None;
+    }
+    if (hit as f64) < agree as f64 * seen as f64 {
+        return Some(false);
+    }
+    (hit >= min_hits[seen as usize]).then_some(true)
+}
+
+/// For each number of views n in 0..=`views`, the fewest hits k whose
+/// one-sided binomial tail P(X >= k | n, `coverage`) is at most `alpha`
+/// (n + 1 where none is): a point seen by n views whose residual masks
+/// cover a fraction `coverage` of their pixels lands on residual in k of
+/// them that often by chance alone. Where the residual covers most of
+/// every image (path-tracing noise, a textured floor), a point seen by a
+/// handful of views near the cameras passes 0.9 agreement by chance, and
+/// it lies in front of everything the other rays would find.
+pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
+    let p = coverage.clamp(0.0, 1.0);
+    (0..=views)
+        .map(|n| {
+            if alpha >= 1.0 || p <= 0.0 {
+                return 0;
+            }
+            if p >= 1.0 {
+                return n as u32 + 1;
+            }
+            // ln C(n, j) + j ln p + (n - j) ln(1 - p), summed from j = n down.
+            let ln_pmf = |j: usize| ln_choose(n, j) + j as f64 * p.ln() + (n - j) as f64 * (1.0 - p).ln();
+            let mut tail = 0.0f64;
+            let mut k = n + 1;
+            for j in (0..=n).rev() {
+                let t = tail + ln_pmf(j).exp();
+                if t > alpha {
+                    break;
+                }
+                tail = t;
+                k = j;
+            }
+            k as u32
+        })
+        .collect()
+}
+
+/// ln C(n, k) by summed logarithms (n is a view count: small).
+fn ln_choose(n: usize, k: usize) -> f64 {
+    let k = k.min(n - k);
+    (0..k).map(|i| ((n - i) as f64).ln() - ((i + 1) as f64).ln()).sum()
 }
 
 /// Seeds of the reflection set from the views' residuals and Stage I depths
@@ -249,6 +302,8 @@ pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
     if total == 0 || far <= 0.0 || p.steps == 0 {
         return Vec::new();
     }
+    let pixels: usize = prepared.iter().map(|v| v.mask.len()).sum();
+    let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
     let mut found: Vec<(V3, usize)> = Vec::new();
     let mut k = 0usize;
@@ -267,7 +322,7 @@ pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
             for s in 0..p.steps {
                 let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
                 let x = v.unproject(i, z);
-                match hull_test(&prepared, x, p.agree) {
+                match hull_test(&prepared, x, p.agree, &min_hits) {
                     Some(true) => {
                         if carved {
                             found.push((x, vi));

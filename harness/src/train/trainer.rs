@@ -369,7 +369,7 @@ impl Trainer {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
                 let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-                let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal()?, ..SeedParams::default() };
+                let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal()?, significance: rc.seed_significance as f64, ..SeedParams::default() };
                 let seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
                 // No ray crossed carved space into the hull (e.g. a Stage I
                 // too short to carve anything): the paper's initialisation,
