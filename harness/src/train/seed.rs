@@ -11,7 +11,12 @@
 //! point along a residual pixel's ray lies on its front, provided the ray
 //! met carved space first: where glass fills every view, the residual has no
 //! silhouette, nothing near the cameras is carved, and a ray that is inside
-//! the hull from its start says nothing about where the surface is. Seeds
+//! the hull from its start says nothing about where the surface is. Nor
+//! does a point whose agreement chance explains: where noise and texture
+//! put residual on most pixels, a point near the cameras that few views
+//! see lands on residual in 90% of them by chance, so a hull point also
+//! needs a binomial tail at the masks' coverage below
+//! [`SeedParams::significance`] ([`min_hits`]). Seeds
 //! are the first hull points of rays that crossed carved space; their
 //! normals face the camera that found them (or, with [`SeedNormal::Plane`],
 //! are the local plane of neighbouring seeds, PCA, and with
