@@ -240,6 +240,8 @@ fn bad_settings_and_missing_checkpoints_are_reported() {
     fails(with("init_far_depth=0"), &["init_far_depth"]);
     fails(with("reflection.seed_normal=\"pca\""), &["reflection.seed_normal", "pca", "'gradient'"]);
     fails(with("reflection.lambda_r=-1"), &["reflection.lambda_r", "-1"]);
+    fails(with("reflection.seed_significance=0"), &["reflection.seed_significance", "0"]);
+    fails(with("reflection.seed_significance=nan"), &["reflection.seed_significance", "NaN"]);
     fails(with("reflection.lr_env=nan"), &["reflection.lr_env", "NaN"]);
     fails(with("reflection.min_residual=nan"), &["reflection.min_residual", "NaN"]);
     fails(with("light_field.lambda_hf=nan"), &["light_field.lambda_hf", "NaN"]);
