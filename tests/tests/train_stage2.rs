@@ -114,6 +114,24 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     refused(TrainArgs { from: Some(unfinished.to_path_buf()), ..af.clone() }, &["stopped at iteration 300 of 400", "--resume"]);
     let _ = std::fs::remove_dir_all(&unfinished);
 
+    // No hull point can beat chance at 1e-38 (a tail that small needs
+    // hundreds of views): the seeds are then the hull's without the test,
+    // the same set as with the test off, and metrics.json says so.
+    let seeding = |significance: &str| {
+        let dir = tgs_tests::TempDir::new(&format!("stage2-significance-{significance}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        let a = TrainArgs { out: dir.to_path_buf(), set: vec!["reflection.iterations=1".into(), "test_interval=0".into(), format!("reflection.seed_significance={significance}")], ..af.clone() };
+        assert_eq!(train(ctx, &a).unwrap().iteration, 301);
+        let r = (json(&dir.join("metrics.json"))["reflection"].clone(), std::fs::read(dir.join("reflection.ply")).unwrap());
+        let _ = std::fs::remove_dir_all(&dir);
+        r
+    };
+    let ((off, off_ply), (never, never_ply)) = (seeding("1"), seeding("1e-38"));
+    eprintln!("seeds: {} without the test, {} at 1e-38, {} at the default", off["seeds"], never["seeds"], d["seeds"]);
+    assert_eq!((off["significance_dropped"].as_bool(), never["significance_dropped"].as_bool()), (Some(false), Some(true)), "{off}\n{never}");
+    assert!(off["seeds"].as_u64().unwrap() > 100 && never["seeds"] == off["seeds"] && never["hull_empty"] == false, "{off}\n{never}");
+    assert!(off_ply == never_ply, "the fallback seeds differ from the hull without the test");
+
     // The cube map started from the scene (reflection.env_init = scene):
     // metrics.json records the box it was seen from, and after one step
     // the map still holds the scene's colours (a grey start moves by at

@@ -676,7 +676,13 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
             d.reflection_gaussians,
             d.seeds,
             d.copied,
-            if d.hull_empty { ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's" } else { "" },
+            if d.hull_empty {
+                ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's"
+            } else if d.significance_dropped {
+                ": no hull point beat chance at reflection.seed_significance, so the seeds come from the hull without that test"
+            } else {
+                ""
+            },
             tr.cfg.reflection.iterations
         )
     } else if d.residual_mean < d.threshold {

@@ -88,6 +88,11 @@ pub struct ReflDecision {
     /// Stage I's (reflection.init = "hull").
     #[serde(default)]
     pub hull_empty: bool,
+    /// No hull point beat chance at reflection.seed_significance (too few
+    /// views, or residual over most of every image), so the seeds come
+    /// from the hull without that test.
+    #[serde(default)]
+    pub significance_dropped: bool,
     /// The cube map started from the scene (reflection.env_init = "scene"):
     /// the box it was rendered from and the Gaussians outside it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -357,6 +362,7 @@ impl Trainer {
             seeds: 0,
             copied: 0,
             hull_empty: false,
+            significance_dropped: false,
             env_from: None,
             round,
         };
@@ -370,7 +376,15 @@ impl Trainer {
                 let rc = &self.cfg.reflection;
                 let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
                 let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal()?, significance: rc.seed_significance as f64, ..SeedParams::default() };
-                let seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
+                let mut seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
+                // Where no point can beat chance (with 16 views whose
+                // masks cover 80% of the pixels, not even all of them
+                // agreeing can), the hull without the test: the seeds it
+                // gave before the test existed, not none.
+                if hull && seeds.is_empty() && p.significance < 1.0 {
+                    seeds = residual_hull_seeds(&views, &SeedParams { significance: 1.0, ..p });
+                    d.significance_dropped = !seeds.is_empty();
+                }
                 // No ray crossed carved space into the hull (e.g. a Stage I
                 // too short to carve anything): the paper's initialisation,
                 // a copy of the Stage I set, rather than no Stage II.
