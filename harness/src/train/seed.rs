@@ -263,6 +263,11 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Option<
 /// it lies in front of everything the other rays would find.
 pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
     let p = coverage.clamp(0.0, 1.0);
+    // ln n! for n in 0..=views: the whole table is O(views^2) at worst.
+    let ln_fact: Vec<f64> = std::iter::once(0.0).chain((1..=views).scan(0.0f64, |acc, i| {
+        *acc += (i as f64).ln();
+        Some(*acc)
+    })).collect();
     (0..=views)
         .map(|n| {
             if alpha >= 1.0 || p <= 0.0 {
@@ -272,7 +277,7 @@ pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
                 return n as u32 + 1;
             }
             // ln C(n, j) + j ln p + (n - j) ln(1 - p), summed from j = n down.
-            let ln_pmf = |j: usize| ln_choose(n, j) + j as f64 * p.ln() + (n - j) as f64 * (1.0 - p).ln();
+            let ln_pmf = |j: usize| ln_fact[n] - ln_fact[j] - ln_fact[n - j] + j as f64 * p.ln() + (n - j) as f64 * (1.0 - p).ln();
             let mut tail = 0.0f64;
             let mut k = n + 1;
             for j in (0..=n).rev() {
@@ -286,12 +291,6 @@ pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
             k as u32
         })
         .collect()
-}
-
-/// ln C(n, k) by summed logarithms (n is a view count: small).
-fn ln_choose(n: usize, k: usize) -> f64 {
-    let k = k.min(n - k);
-    (0..k).map(|i| ((n - i) as f64).ln() - ((i + 1) as f64).ln()).sum()
 }
 
 /// Seeds of the reflection set from the views' residuals and Stage I depths
