@@ -66,7 +66,7 @@ pub struct TrainConfig {
     /// went 28.08 -> 28.62 dB from 0.2 to 1.0; on a path-traced pane 26.86
     /// -> 29.62 at 0.5). Twenty-first session, 1.0 -> 2.0, means over three
     /// seeds: `lantern` 28.62 -> 28.81, `pane` 29.40 -> 30.14 (its worst
-    /// seed 28.53 -> 30.10), `globe` (two seeds) +0.8; at 4.0 `lantern`
+    /// seed 28.53 -> 30.10), `globe` 26.85 -> 27.15; at 4.0 `lantern`
     /// falls back to 28.70 (one seed) and Stage I starts with 50k.
     pub init_far_fraction: f32,
     pub init_far_depth: f32,
