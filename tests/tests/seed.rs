@@ -237,7 +237,10 @@ fn residual_over_every_view_seeds_nothing() {
     let (cams, _, depth) = views(0.0, false);
     let all = vec![0.03f32; (SIZE * SIZE) as usize];
     let sv: Vec<SeedView> = cams.iter().zip(&depth).map(|(c, z)| SeedView { camera: *c, residual: &all, depth: z }).collect();
-    let p = SeedParams { max_rays: 2000, ..SeedParams::default() };
+    // Without the significance test, which alone would empty this hull
+    // (masks that cover every pixel make no agreement significant): the
+    // carving is what is tested here.
+    let p = SeedParams { max_rays: 2000, significance: 1.0, ..SeedParams::default() };
     assert!(residual_hull_seeds(&sv, &p).is_empty());
     // The silhouette case still seeds (its rays cross carved air first).
     let (cams, res, depth) = views(0.0, true);
