@@ -163,10 +163,25 @@ fn stage_one_trains_and_resumes_exactly() {
     }
     extra += "{\"iterat";
     std::fs::write(part.join("log.jsonl"), extra).unwrap();
+    // The interruption saved the run's clocks with its checkpoint.
+    let clock: serde_json::Value = serde_json::from_slice(&std::fs::read(part.join("checkpoint-time.json")).unwrap()).unwrap();
+    assert_eq!(clock["iteration"], stopped);
+    let before = |k: &str| clock[k].as_f64().unwrap_or_else(|| panic!("checkpoint-time.json: no {k}: {clock}"));
+    assert!(before("stage_s") > 0.0 && before("train_s") >= before("stage_s") && before("total_s") >= before("train_s"), "{clock}");
     let o = train(ctx, &TrainArgs { resume: true, ..a }).unwrap();
     assert_eq!((o.iteration, o.interrupted), (300, false));
-    let its: Vec<u64> = log_lines(&part).iter().map(|l| l["iteration"].as_u64().unwrap()).collect();
+    let log = log_lines(&part);
+    let its: Vec<u64> = log.iter().map(|l| l["iteration"].as_u64().unwrap()).collect();
     assert_eq!(its, (1..=300).collect::<Vec<u64>>(), "log after resume");
+    // Wall times go on from the interrupted run's: the resumed process's
+    // own loop (its log's elapsed_s span) comes on top of them.
+    let elapsed = |it: u32| log[it as usize - 1]["elapsed_s"].as_f64().unwrap();
+    assert!(elapsed(stopped + 1) >= before("total_s"), "elapsed_s restarted: {} after {}", elapsed(stopped + 1), before("total_s"));
+    let resumed_loop = elapsed(300) - elapsed(stopped + 1);
+    let mp: serde_json::Value = serde_json::from_slice(&std::fs::read(part.join("metrics.json")).unwrap()).unwrap();
+    let stage_wall = mp["stages"][0]["wall_s"].as_f64().unwrap();
+    assert!(stage_wall >= before("stage_s") + resumed_loop, "Stage I wall {stage_wall} s: not {} s before the interruption + {resumed_loop} s after", before("stage_s"));
+    assert!(mp["train_wall_s"].as_f64().unwrap() >= before("train_s") + resumed_loop && mp["total_wall_s"].as_f64().unwrap() >= elapsed(300), "{mp}");
     let (ha, aa) = checkpoint::read(&full.join("checkpoint.bin")).unwrap();
     let (hb, ab) = checkpoint::read(&part.join("checkpoint.bin")).unwrap();
     assert_eq!((ha.iteration, ha.n, ha.rng, &ha.stack), (hb.iteration, hb.n, hb.rng, &hb.stack));

@@ -206,6 +206,12 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
         assert_eq!(m["reflection"]["view_dependence"], d["view_dependence"], "{skip}");
         assert_eq!(m["stages"].as_array().unwrap().len(), 1);
         assert!(!out.join("reflection.ply").exists() && !out.join("envmap.exr").exists());
+        // Stage I's record keeps Stage I's time (not the moments after the skip).
+        let elapsed: Vec<f64> = std::fs::read_to_string(out.join("log.jsonl")).unwrap().lines().filter_map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["elapsed_s"].as_f64()).collect();
+        assert_eq!(elapsed.len(), 300);
+        let span = elapsed[299] - elapsed[0];
+        let wall = m["stages"][0]["wall_s"].as_f64().unwrap();
+        assert!(wall >= span && wall <= m["total_wall_s"].as_f64().unwrap(), "{skip}: Stage I wall {wall} s, its iterations span {span} s");
     }
     let _ = std::fs::remove_dir_all(&out);
     check_validation(ctx);

@@ -1,6 +1,7 @@
 //! Training: configuration, initialisation, the stage-scheduled trainer,
 //! checkpoints, and the `tgs train` driver (progress, logs, outputs).
 pub mod checkpoint;
+pub mod clock;
 pub mod config;
 pub mod env_init;
 pub mod init;

@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
+use super::clock::{Before, Clocks};
 use tgs_engine::Context;
 
 pub const CHECKPOINT: &str = "checkpoint.bin";
@@ -437,7 +438,10 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let mut interrupted = false;
     let mut stages: Vec<serde_json::Value> = read_stage_records(&a.out, a.resume);
     stages.extend(from_record);
-    let mut stage_start = Instant::now();
+    let before = if a.resume { Before::read(&a.out, tr.iteration) } else { Before::default() };
+    let mut clocks = Clocks::new(start, before);
+    // Set when a skipped Stage II closed the last stage for good.
+    let mut last_closed = false;
     while !tr.done() {
         // Between stages: close the last one, start the next, say so.
         let (entry, label) = tr.next_entry();
@@ -449,14 +453,14 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
                 checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str)?;
             }
             let prev = tr.schedule.label(entry.saturating_sub(1));
-            let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet, &prev)?;
+            let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
             Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin", "reflection": tr.decision})))
         } else if tr.at_light_field_start() {
             if first_round {
                 checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str)?;
             }
             let prev = tr.schedule.label(entry.saturating_sub(1));
-            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, stage_start, a.quiet, &prev)?;
+            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
             Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin"})))
         } else {
             None
@@ -469,7 +473,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
                 eprintln!("{msg}");
             }
             writeln!(log, "{event}")?;
-            stage_start = Instant::now();
+            clocks.next_stage();
+            last_closed = tr.done();
             atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
             continue;
         }
@@ -489,7 +494,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let its = (r.iteration - start_it) as f64 / elapsed.max(1e-9);
         let mut line = json!({
             "iteration": r.iteration, "stage": label, "view": r.view, "loss": r.loss, "l1": r.values.l1, "ssim": r.values.ssim,
-            "psnr": r.values.psnr(), "gaussians": r.gaussians, "it_per_s": its, "elapsed_s": start.elapsed().as_secs_f64(),
+            "psnr": r.values.psnr(), "gaussians": r.gaussians, "it_per_s": its, "elapsed_s": clocks.total_s(),
         });
         if r.values.normal.is_finite() {
             line["normal"] = json!(r.values.normal);
@@ -523,6 +528,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let ck = tr.cfg.checkpoint_interval;
         if ck > 0 && r.iteration % ck == 0 && r.iteration < total {
             checkpoint::save(&tr, &ckpt, &dataset_str)?;
+            clocks.save(&a.out, tr.iteration)?;
         }
         if INTERRUPTED.load(Ordering::SeqCst) {
             interrupted = true;
@@ -533,13 +539,14 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         b.finish();
     }
     checkpoint::save(&tr, &ckpt, &dataset_str)?;
+    clocks.save(&a.out, tr.iteration)?;
     if interrupted {
         if !a.quiet {
             eprintln!("stopped at iteration {}; checkpoint {}; continue with --resume", tr.iteration, ckpt.display());
         }
-        return Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics: None, wall_s: start.elapsed().as_secs_f64() });
+        return Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics: None, wall_s: clocks.total_s() });
     }
-    let train_s = loop_start.elapsed().as_secs_f64();
+    let train_s = clocks.train_s();
     write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
     if let Some(m) = &tr.light_field {
         write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
@@ -554,9 +561,11 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         write_png(&a.out.join("envmap.png"), &img)?;
     }
     let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&a.out.join("renders/test")))?) };
-    let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
-    stages.retain(|s| s["stage"] != last_stage.as_str());
-    stages.push(stage_record(&last_stage, &tr, stage_start, metrics.as_ref()));
+    if !last_closed {
+        let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
+        stages.retain(|s| s["stage"] != last_stage.as_str());
+        stages.push(stage_record(&last_stage, &tr, clocks.stage_s(), metrics.as_ref()));
+    }
     let timings: BTreeMap<String, f64> = timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64)).collect();
     let doc = json!({
         "dataset": dataset_str,
@@ -564,7 +573,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         "iterations": tr.iteration,
         "gaussians": tr.scattering.set.len(),
         "train_wall_s": train_s,
-        "total_wall_s": start.elapsed().as_secs_f64(),
+        "total_wall_s": clocks.total_s(),
         "first_loss": first_loss,
         "final_loss": last_loss,
         "test": metrics,
@@ -586,18 +595,18 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         eprintln!("outputs in {}", a.out.display());
     }
-    Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: start.elapsed().as_secs_f64() })
+    Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: clocks.total_s() })
 }
 
 /// metrics.json's record of a finished stage.
-fn stage_record(stage: &str, tr: &Trainer, since: Instant, m: Option<&Metrics>) -> serde_json::Value {
+fn stage_record(stage: &str, tr: &Trainer, wall_s: f64, m: Option<&Metrics>) -> serde_json::Value {
     let its = tr.schedule.iterations_of(stage);
     let test = m.map(|m| {
         json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normals.normal_mae_deg, "normal_mae_scattering_deg": m.normals.normal_mae_scattering_deg,
                "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg,
                "normal_mae_ray_facing_deg": m.normals.normal_mae_ray_facing_deg})
     });
-    json!({"stage": stage, "iterations": its, "wall_s": since.elapsed().as_secs_f64(), "test": test})
+    json!({"stage": stage, "iterations": its, "wall_s": wall_s, "test": test})
 }
 
 /// The stage records of the run so far (kept in stages.json across a resume).
@@ -624,12 +633,12 @@ fn renders_dir(label: &str) -> String {
 /// its record in `stages`. A stage taken
 /// from another run (--from) keeps that run's record (its wall time, where
 /// it came from); the test metrics are re-measured.
-fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, stage: &str, renders: &str) -> Result<()> {
+fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str, renders: &str) -> Result<()> {
     let dir = out.join("renders").join(renders);
     let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&dir))?) };
     let from = stages.iter().find(|s| s["stage"] == stage && s.get("from").is_some()).cloned();
     stages.retain(|s| s["stage"] != stage);
-    let mut rec = stage_record(stage, tr, since, m.as_ref());
+    let mut rec = stage_record(stage, tr, clock.stage_s(), m.as_ref());
     if let Some(f) = from {
         rec["wall_s"] = f["wall_s"].clone();
         rec["from"] = f["from"].clone();
@@ -640,11 +649,11 @@ fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<se
 
 /// Close Stage I (its test metrics), measure the residual (maps written to
 /// OUT/residual/), and start Stage II or skip it. Returns the message.
-fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool, prev: &str) -> Result<String> {
+fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
     let resumed = tr.reflection.is_some();
     let reseed = prev != "I";
     if !resumed {
-        close_stage(tr, data, out, stages, since, prev, &renders_dir(prev))?;
+        close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
         if !quiet {
             eprintln!("Stage {prev} done: measuring the residual of {} training views", data.train.len());
         }
@@ -705,9 +714,9 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
 
 /// Between Stage II and III: Stage II's record (test metrics, renders in
 /// renders/stage2), then the light-field model.
-fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, since: Instant, quiet: bool, prev: &str) -> Result<String> {
+fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
     if tr.reflection.is_some() {
-        close_stage(tr, data, out, stages, since, prev, &renders_dir(prev))?;
+        close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
         if !quiet {
             eprintln!("Stage {prev} done");
         }
