@@ -6,7 +6,7 @@
 //! radial normals; no residual gives no seeds, and neither does residual
 //! over every view (glass that fills the frame: nothing is carved).
 
-use tgs::train::seed::{jacobi_eigen, min_hits, quat_for_normal, residual_hull_seeds, Seed, SeedNormal, SeedParams, SeedView};
+use tgs::train::seed::{hull_seeding, jacobi_eigen, min_hits, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView};
 use tgs_pipelines::Camera;
 use tgs_tests::raster_util::splat_normal;
 use tgs_tests::{seed, Rng};
@@ -309,4 +309,12 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     assert!(near(&default) > 2.0 * near(&loose), "default {:.2} against {:.2} without", near(&default), near(&loose));
     assert!(tight.len() > 300 && near(&tight) > 0.75, "at 1e-8: {} seeds, {:.2} on the glass", tight.len(), near(&tight));
     assert_eq!(tight, at(1e-8));
+    // Stage II's seeding (one march for both hulls): the test's seeds where
+    // any point beats chance; where none can (1e-300 needs more than 48
+    // views), the hull's without the test, and it says so.
+    let seeding = |a: f64| hull_seeding(&sv, &SeedParams { significance: a, ..base });
+    assert_eq!(seeding(1e-8), HullSeeding { seeds: tight.clone(), significance_dropped: false });
+    assert_eq!(seeding(1.0), HullSeeding { seeds: loose.clone(), significance_dropped: false });
+    assert!(at(1e-300).is_empty(), "1e-300 is beaten by chance with 48 views");
+    assert_eq!(seeding(1e-300), HullSeeding { seeds: loose, significance_dropped: true });
 }

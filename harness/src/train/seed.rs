@@ -16,7 +16,9 @@
 //! put residual on most pixels, a point near the cameras that few views
 //! see lands on residual in 90% of them by chance, so a hull point also
 //! needs a binomial tail at the masks' coverage below
-//! [`SeedParams::significance`] ([`min_hits`]). Seeds
+//! [`SeedParams::significance`] ([`min_hits`]); where no point can
+//! pass it, Stage II's [`hull_seeding`] takes the hull without it, found
+//! in the same march. Seeds
 //! are the first hull points of rays that crossed carved space; their
 //! normals face the camera that found them (or, with [`SeedNormal::Plane`],
 //! are the local plane of neighbouring seeds, PCA, and with
@@ -232,11 +234,19 @@ fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     out
 }
 
-/// None: fewer than 3 views see `x` in front of their surface, or they
-/// agree but too few of them to tell the agreement from chance
-/// (`min_hits`, indexed by the views that see it); else whether it is in
-/// the hull (false: carved by the views that see it).
-fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Option<bool> {
+/// What the views that see a point in front of their Stage I surface say of it.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Verdict {
+    /// Fewer than 3 views see it so.
+    Unseen,
+    /// Fewer than `agree` of them see residual there: carved.
+    Carved,
+    /// Enough agree; `significant`: also more than chance explains
+    /// (`min_hits`, indexed by the views that see it).
+    Agrees { significant: bool },
+}
+
+fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict {
     let (mut seen, mut hit) = (0u32, 0u32);
     for v in views {
         if let Some(i) = v.in_front(x) {
@@ -245,12 +255,12 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Option<
         }
     }
     if seen < 3 {
-        return None;
+        Verdict::Unseen
+    } else if (hit as f64) < agree as f64 * seen as f64 {
+        Verdict::Carved
+    } else {
+        Verdict::Agrees { significant: hit >= min_hits[seen as usize] }
     }
-    if (hit as f64) < agree as f64 * seen as f64 {
-        return Some(false);
-    }
-    (hit >= min_hits[seen as usize]).then_some(true)
 }
 
 /// For each number of views n in 0..=`views`, the fewest hits k whose
@@ -295,21 +305,55 @@ pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
 
 /// Seeds of the reflection set from the views' residuals and Stage I depths
 /// (see the module documentation). Deterministic; empty when no pixel has
-/// residual, fewer than 3 views agree anywhere, or no ray crosses carved
-/// space before the hull.
+/// residual, fewer than 3 views agree anywhere, no point beats chance
+/// ([`SeedParams::significance`]), or no ray crosses carved space before
+/// the hull.
 pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
+    let found = march(&prepared, p);
+    surfels(&found.significant, &prepared, p.normal)
+}
+
+/// The reflection set's seeds as Stage II takes them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HullSeeding {
+    pub seeds: Vec<Seed>,
+    /// No hull point beat chance, so the seeds are the hull's without the
+    /// significance test.
+    pub significance_dropped: bool,
+}
+
+/// [`residual_hull_seeds`], except where no point can beat chance (with
+/// 16 views whose masks cover 80% of the pixels not even all of them
+/// agreeing can): there the seeds of the hull without the test (what
+/// seeding gave before the test existed), not none. One march finds both.
+pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
+    let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
+    let found = march(&prepared, p);
+    let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
+    let chosen = if dropped { &found.agreeing } else { &found.significant };
+    HullSeeding { seeds: surfels(chosen, &prepared, p.normal), significance_dropped: dropped }
+}
+
+/// Per ray, the first hull point after carved space: with the significance
+/// test, and without it. Each with the view whose ray found it.
+struct Found {
+    significant: Vec<(V3, usize)>,
+    agreeing: Vec<(V3, usize)>,
+}
+
+fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
+    let mut found = Found { significant: Vec::new(), agreeing: Vec::new() };
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
     let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
     let counts: Vec<usize> = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).collect();
     let total: usize = counts.iter().sum();
     if total == 0 || far <= 0.0 || p.steps == 0 {
-        return Vec::new();
+        return found;
     }
     let pixels: usize = prepared.iter().map(|v| v.mask.len()).sum();
     let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
-    let mut found: Vec<(V3, usize)> = Vec::new();
     let mut k = 0usize;
     for (vi, v) in prepared.iter().enumerate() {
         for i in (0..v.mask.len()).filter(|&i| v.mask[i]) {
@@ -321,25 +365,33 @@ pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
             let z_near = 0.05 * z_far;
             // A ray that starts inside the hull has no evidence of where
             // the surface begins (the residual covers what every view sees
-            // there): it seeds only after some of it was carved.
-            let mut carved = false;
+            // there): it seeds only after some of it was carved. A point
+            // that agrees by chance alone is neither hull nor carved: the
+            // test's march goes on through it, the plain one stops there.
+            let (mut carved, mut agreed) = (false, false);
             for s in 0..p.steps {
                 let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
                 let x = v.unproject(i, z);
-                match hull_test(&prepared, x, p.agree, &min_hits) {
-                    Some(true) => {
-                        if carved {
-                            found.push((x, vi));
+                match hull_test(prepared, x, p.agree, &min_hits) {
+                    Verdict::Agrees { significant } => {
+                        if !agreed && carved {
+                            found.agreeing.push((x, vi));
                         }
-                        break;
+                        agreed = true;
+                        if significant {
+                            if carved {
+                                found.significant.push((x, vi));
+                            }
+                            break;
+                        }
                     }
-                    Some(false) => carved = true,
-                    None => {}
+                    Verdict::Carved => carved = true,
+                    Verdict::Unseen => {}
                 }
             }
         }
     }
-    surfels(&found, &prepared, p.normal)
+    found
 }
 
 /// Normals (`normal`, facing the finding camera) and scales (root mean

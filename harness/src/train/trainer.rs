@@ -15,7 +15,7 @@ use super::env_init::{scene_env_map, EnvInit};
 use super::rng::Rng;
 use super::reflection::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::scattering::{ScatteringModel, StepInput};
-use super::seed::{residual_hull_seeds, SeedParams, SeedView};
+use super::seed::{hull_seeding, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
 use crate::data::Dataset;
 use anyhow::{Context as _, Result};
@@ -376,15 +376,13 @@ impl Trainer {
                 let rc = &self.cfg.reflection;
                 let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
                 let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal()?, significance: rc.seed_significance as f64, ..SeedParams::default() };
-                let mut seeds = if hull { residual_hull_seeds(&views, &p) } else { Vec::new() };
-                // Where no point can beat chance (with 16 views whose
-                // masks cover 80% of the pixels, not even all of them
-                // agreeing can), the hull without the test: the seeds it
-                // gave before the test existed, not none.
-                if hull && seeds.is_empty() && p.significance < 1.0 {
-                    seeds = residual_hull_seeds(&views, &SeedParams { significance: 1.0, ..p });
-                    d.significance_dropped = !seeds.is_empty();
-                }
+                let seeds = if hull {
+                    let h = hull_seeding(&views, &p);
+                    d.significance_dropped = h.significance_dropped;
+                    h.seeds
+                } else {
+                    Vec::new()
+                };
                 // No ray crossed carved space into the hull (e.g. a Stage I
                 // too short to carve anything): the paper's initialisation,
                 // a copy of the Stage I set, rather than no Stage II.
