@@ -1,7 +1,10 @@
 //! Initial points (harness/src/train/init.rs), on the CPU: the far-field
-//! points that random initialisation adds beyond its cube and the cameras.
+//! points that random initialisation adds beyond its cube and the cameras,
+//! and the neighbour distances that size the initial Gaussians
+//! (harness/src/train/knn.rs).
 
-use tgs::train::init::far_points;
+use tgs::train::init::{far_points, random_points};
+use tgs::train::knn::knn3_mean_sq;
 use tgs::train::rng::Rng;
 use tgs_pipelines::Camera;
 
@@ -85,4 +88,45 @@ fn far_points_need_cameras_and_a_far_end() {
     // (A camera 4 from the centre of a sphere of radius 20 leaves it no nearer than 16.)
     assert!(far_points(100, &ring(4, 4.0, 1.0), 1.3, (s.0, 20.0), 15.0, &mut Rng::new(1)).positions.is_empty());
     assert!(far_points(0, &ring(4, 4.0, 1.0), 1.3, s, 100.0, &mut Rng::new(1)).positions.is_empty());
+}
+
+/// The mean of the 3 smallest squared distances to the other points, by
+/// brute force, summed as `knn3_mean_sq` sums them (ascending).
+fn knn3_brute(pts: &[[f32; 3]]) -> Vec<f32> {
+    (0..pts.len())
+        .map(|i| {
+            let mut d: Vec<f32> = (0..pts.len()).filter(|&j| j != i).map(|j| (0..3).map(|k| (pts[i][k] - pts[j][k]).powi(2)).sum::<f32>()).collect();
+            d.sort_by(|a, b| a.total_cmp(b));
+            d.truncate(3);
+            if d.is_empty() { 1e-7 } else { d.iter().sum::<f32>() / d.len() as f32 }
+        })
+        .collect()
+}
+
+/// Exact against brute force, bit for bit, on what random initialisation
+/// makes (a dense cube inside a far field 30 units out, which made the old
+/// uniform grid quadratic), on duplicates, a line, a plane, and on 0 to 4
+/// points.
+#[test]
+fn nearest_neighbour_distances_are_exact() {
+    let cams = ring(8, 3.0, 1.0);
+    let mut rng = Rng::new(7);
+    let mut pts = random_points(1500, 1.3, &mut rng).positions;
+    pts.extend(far_points(3000, &cams, 1.3, ([0.0, 0.0, 0.3], 3.5), 30.0, &mut rng).positions);
+    // Duplicates: the nearest distance 0, and ties at every rank.
+    pts.extend(pts[..200].to_vec());
+    pts.extend(std::iter::repeat_n([0.25f32, -0.5, 0.75], 40));
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&knn3_mean_sq(&pts)), bits(&knn3_brute(&pts)), "cube + far field + duplicates");
+    let line: Vec<[f32; 3]> = (0..500).map(|i| [0.1 * (i % 37) as f32, 2.0, -1.0]).collect();
+    assert_eq!(bits(&knn3_mean_sq(&line)), bits(&knn3_brute(&line)), "points on a line, repeated");
+    let plane: Vec<[f32; 3]> = (0..900).map(|i| [(i % 30) as f32 * 0.01, (i / 30) as f32 * 0.013, 5.0]).collect();
+    assert_eq!(bits(&knn3_mean_sq(&plane)), bits(&knn3_brute(&plane)), "a grid in a plane");
+    let same = vec![[1.0f32, 1.0, 1.0]; 100];
+    assert!(knn3_mean_sq(&same).iter().all(|&d| d == 0.0), "identical points");
+    for n in 0..5 {
+        let few = &pts[..n];
+        assert_eq!(bits(&knn3_mean_sq(few)), bits(&knn3_brute(few)), "{n} points");
+    }
+    assert_eq!(knn3_mean_sq(&pts[..1]), vec![1e-7]);
 }

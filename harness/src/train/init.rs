@@ -5,7 +5,7 @@
 
 use super::rng::Rng;
 use crate::data::Points;
-use std::collections::HashMap;
+use super::knn::knn3_mean_sq;
 use tgs_pipelines::{Camera, HostGaussians};
 
 pub const SH_C0: f32 = 0.282_094_8;
@@ -111,67 +111,3 @@ pub fn gaussians_from_points(points: &Points, sh_degree: u32, rng: &mut Rng) -> 
     g
 }
 
-/// Mean squared distance of each point to its 3 nearest others (exact, on a
-/// uniform grid sized for ~2 points per cell).
-pub fn knn3_mean_sq(pts: &[[f32; 3]]) -> Vec<f32> {
-    let n = pts.len();
-    if n < 2 {
-        return vec![1e-7; n];
-    }
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for p in pts {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let vol: f32 = (0..3).map(|k| (hi[k] - lo[k]).max(1e-6)).product();
-    let cell = (2.0 * vol / n as f32).cbrt().max(1e-6);
-    let key = |p: &[f32; 3]| -> [i64; 3] { [0, 1, 2].map(|k| ((p[k] - lo[k]) / cell).floor() as i64) };
-    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
-    for (i, p) in pts.iter().enumerate() {
-        grid.entry(key(p)).or_default().push(i as u32);
-    }
-    let dims = [0, 1, 2].map(|k| ((hi[k] - lo[k]) / cell).floor() as i64 + 1);
-    let max_ring = dims.iter().copied().max().unwrap_or(1);
-    let mut out = Vec::with_capacity(n);
-    for (i, p) in pts.iter().enumerate() {
-        let c = key(p);
-        let mut best = [f32::INFINITY; 3];
-        let mut ring = 0i64;
-        loop {
-            for dx in -ring..=ring {
-                for dy in -ring..=ring {
-                    for dz in -ring..=ring {
-                        if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
-                            continue;
-                        }
-                        if let Some(list) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
-                            for &j in list {
-                                if j as usize == i {
-                                    continue;
-                                }
-                                let q = &pts[j as usize];
-                                let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
-                                if d < best[2] {
-                                    best[2] = d;
-                                    best.sort_by(|a, b| a.partial_cmp(b).unwrap());
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-            // Every point outside the searched rings is at least ring * cell away.
-            let reach = ring as f32 * cell;
-            if (best[2].is_finite() && best[2] <= reach * reach) || ring > max_ring {
-                break;
-            }
-            ring += 1;
-        }
-        let found: Vec<f32> = best.iter().copied().filter(|d| d.is_finite()).collect();
-        out.push(if found.is_empty() { 1e-7 } else { found.iter().sum::<f32>() / found.len() as f32 });
-    }
-    out
-}

@@ -5,6 +5,7 @@ pub mod clock;
 pub mod config;
 pub mod env_init;
 pub mod init;
+pub mod knn;
 pub mod lightfield;
 pub mod rng;
 pub mod run;
