@@ -7,6 +7,7 @@ use tgs::train::init::{far_points, random_points};
 use tgs::train::knn::knn3_mean_sq;
 use tgs::train::rng::Rng;
 use tgs_pipelines::Camera;
+use tgs_tests::raster_util::bits;
 
 fn ring(n: usize, radius: f32, height: f32) -> Vec<Camera> {
     (0..n)
@@ -116,7 +117,6 @@ fn nearest_neighbour_distances_are_exact() {
     // Duplicates: the nearest distance 0, and ties at every rank.
     pts.extend(pts[..200].to_vec());
     pts.extend(std::iter::repeat_n([0.25f32, -0.5, 0.75], 40));
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&knn3_mean_sq(&pts)), bits(&knn3_brute(&pts)), "cube + far field + duplicates");
     let line: Vec<[f32; 3]> = (0..500).map(|i| [0.1 * (i % 37) as f32, 2.0, -1.0]).collect();
     assert_eq!(bits(&knn3_mean_sq(&line)), bits(&knn3_brute(&line)), "points on a line, repeated");

@@ -440,6 +440,11 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     stages.extend(from_record);
     let before = if a.resume { Before::read(&a.out, tr.iteration) } else { Before::default() };
     let mut clocks = Clocks::new(start, before);
+    // checkpoint.bin and, beside it, the clocks at its iteration.
+    let save_run = |tr: &Trainer, clocks: &Clocks| -> Result<()> {
+        checkpoint::save(tr, &ckpt, &dataset_str)?;
+        clocks.save(&a.out, tr.iteration)
+    };
     // Set when a skipped Stage II closed the last stage for good.
     let mut last_closed = false;
     while !tr.done() {
@@ -527,8 +532,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         let ck = tr.cfg.checkpoint_interval;
         if ck > 0 && r.iteration % ck == 0 && r.iteration < total {
-            checkpoint::save(&tr, &ckpt, &dataset_str)?;
-            clocks.save(&a.out, tr.iteration)?;
+            save_run(&tr, &clocks)?;
         }
         if INTERRUPTED.load(Ordering::SeqCst) {
             interrupted = true;
@@ -538,8 +542,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     if let Some(b) = &bar {
         b.finish();
     }
-    checkpoint::save(&tr, &ckpt, &dataset_str)?;
-    clocks.save(&a.out, tr.iteration)?;
+    save_run(&tr, &clocks)?;
     if interrupted {
         if !a.quiet {
             eprintln!("stopped at iteration {}; checkpoint {}; continue with --resume", tr.iteration, ckpt.display());
