@@ -318,3 +318,21 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     assert!(at(1e-300).is_empty(), "1e-300 is beaten by chance with 48 views");
     assert_eq!(seeding(1e-300), HullSeeding { seeds: loose, significance_dropped: true });
 }
+
+/// The march and the normals run on threads, each on a contiguous run of
+/// rays or seeds: the seeds must be the same, bit for bit and in order, at
+/// any thread count, for every kind of normal (the gradient and the plane
+/// read every view and every other seed).
+#[test]
+fn seeds_are_the_same_at_any_thread_count() {
+    let (cams, res, depth) = ring(24, 0.1, true);
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    for normal in [SeedNormal::View, SeedNormal::Plane, SeedNormal::Gradient] {
+        let at = |threads: usize| hull_seeding(&sv, &SeedParams { max_rays: 1500, normal, threads, ..SeedParams::default() });
+        let one = at(1);
+        assert!(one.seeds.len() > 200, "{normal:?}: {} seeds", one.seeds.len());
+        for threads in [2, 3, 7, 0] {
+            assert_eq!(at(threads), one, "{normal:?}: {threads} threads against 1");
+        }
+    }
+}

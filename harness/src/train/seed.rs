@@ -71,6 +71,11 @@ pub struct SeedParams {
     /// from masks placed at random (one-sided binomial tail at the views'
     /// mean mask coverage; 1: no test). See [`min_hits`].
     pub significance: f64,
+    /// Threads for the march and the normals (0: every core the process
+    /// may use). The seeds are the same, bit for bit, at any count: the
+    /// rays and seeds are split into contiguous runs whose results are
+    /// joined in order.
+    pub threads: usize,
 }
 
 /// A seed's normal (see the module documentation).
@@ -96,7 +101,7 @@ pub enum SeedNormal {
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::View, significance: 1e-6 }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::View, significance: 1e-6, threads: 0 }
     }
 }
 
@@ -311,7 +316,7 @@ pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
 pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
     let found = march(&prepared, p);
-    surfels(&found.significant, &prepared, p.normal)
+    surfels(&found.significant, &prepared, p.normal, p.threads)
 }
 
 /// The reflection set's seeds as Stage II takes them.
@@ -332,7 +337,7 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let found = march(&prepared, p);
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
     let chosen = if dropped { &found.agreeing } else { &found.significant };
-    HullSeeding { seeds: surfels(chosen, &prepared, p.normal), significance_dropped: dropped }
+    HullSeeding { seeds: surfels(chosen, &prepared, p.normal, p.threads), significance_dropped: dropped }
 }
 
 /// Per ray, the first hull point after carved space: with the significance
@@ -346,82 +351,106 @@ fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
     let mut found = Found { significant: Vec::new(), agreeing: Vec::new() };
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
     let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
-    let counts: Vec<usize> = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).collect();
-    let total: usize = counts.iter().sum();
+    let total: usize = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).sum();
     if total == 0 || far <= 0.0 || p.steps == 0 {
         return found;
     }
     let pixels: usize = prepared.iter().map(|v| v.mask.len()).sum();
     let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
+    // Every `stride`-th residual pixel over the views, in view order.
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
-    let mut k = 0usize;
-    for (vi, v) in prepared.iter().enumerate() {
-        for i in (0..v.mask.len()).filter(|&i| v.mask[i]) {
-            k += 1;
-            if k % stride != 0 {
-                continue;
-            }
-            let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
-            let z_near = 0.05 * z_far;
-            // A ray that starts inside the hull has no evidence of where
-            // the surface begins (the residual covers what every view sees
-            // there): it seeds only after some of it was carved. A point
-            // that agrees by chance alone is neither hull nor carved: the
-            // test's march goes on through it, the plain one stops there.
-            let (mut carved, mut agreed) = (false, false);
-            for s in 0..p.steps {
-                let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
-                let x = v.unproject(i, z);
-                match hull_test(prepared, x, p.agree, &min_hits) {
-                    Verdict::Agrees { significant } => {
-                        if !agreed && carved {
-                            found.agreeing.push((x, vi));
-                        }
-                        agreed = true;
-                        if significant {
-                            if carved {
-                                found.significant.push((x, vi));
-                            }
-                            break;
-                        }
+    let rays: Vec<(usize, usize)> = prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
+    for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits)) {
+        found.significant.extend(part.significant);
+        found.agreeing.extend(part.agreeing);
+    }
+    found
+}
+
+/// [`march`] along `rays` (view, pixel), in order.
+fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32]) -> Found {
+    let mut found = Found { significant: Vec::new(), agreeing: Vec::new() };
+    for &(vi, i) in rays {
+        let v = &prepared[vi];
+        let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
+        let z_near = 0.05 * z_far;
+        // A ray that starts inside the hull has no evidence of where
+        // the surface begins (the residual covers what every view sees
+        // there): it seeds only after some of it was carved. A point
+        // that agrees by chance alone is neither hull nor carved: the
+        // test's march goes on through it, the plain one stops there.
+        let (mut carved, mut agreed) = (false, false);
+        for s in 0..p.steps {
+            let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
+            let x = v.unproject(i, z);
+            match hull_test(prepared, x, p.agree, min_hits) {
+                Verdict::Agrees { significant } => {
+                    if !agreed && carved {
+                        found.agreeing.push((x, vi));
                     }
-                    Verdict::Carved => carved = true,
-                    Verdict::Unseen => {}
+                    agreed = true;
+                    if significant {
+                        if carved {
+                            found.significant.push((x, vi));
+                        }
+                        break;
+                    }
                 }
+                Verdict::Carved => carved = true,
+                Verdict::Unseen => {}
             }
         }
     }
     found
 }
 
+/// `f` over contiguous runs of `items` on up to `threads` scoped threads
+/// (0: the available parallelism), the results in the runs' order: the
+/// same as `f(items)` split at the run boundaries, whatever the count.
+fn in_parallel<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&[T]) -> R + Sync) -> Vec<R> {
+    let threads = if threads == 0 { std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) } else { threads };
+    let runs = threads.clamp(1, items.len().max(1));
+    if runs == 1 {
+        return vec![f(items)];
+    }
+    let size = items.len().div_ceil(runs);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = items.chunks(size).map(|c| scope.spawn(|| f(c))).collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
+    })
+}
+
 /// Normals (`normal`, facing the finding camera) and scales (root mean
 /// squared distance to the 3 nearest) of the found points.
-fn surfels(found: &[(V3, usize)], views: &[Prepared], normal: SeedNormal) -> Vec<Seed> {
+fn surfels(found: &[(V3, usize)], views: &[Prepared], normal: SeedNormal, threads: usize) -> Vec<Seed> {
+    let index: Vec<usize> = (0..found.len()).collect();
+    in_parallel(&index, threads, |run| run.iter().map(|&i| surfel(found, i, views, normal)).collect::<Vec<Seed>>()).concat()
+}
+
+/// [`surfels`] for `found[i]`.
+fn surfel(found: &[(V3, usize)], i: usize, views: &[Prepared], normal: SeedNormal) -> Seed {
     const K: usize = 16;
-    let mut out = Vec::with_capacity(found.len());
-    for (i, &(x, vi)) in found.iter().enumerate() {
-        let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (dot(sub(x, y), sub(x, y)), j)).collect();
-        let k = K.min(near.len());
-        if k > 0 {
-            near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-            near.truncate(k);
-            near.sort_by(|a, b| a.0.total_cmp(&b.0));
-        }
-        let cam = views[vi].cam.centre().map(f64::from);
-        let to_cam = normalize(sub(cam, x));
-        let mut n = match normal {
-            SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
-            SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
-            _ => to_cam,
-        };
-        if dot(n, to_cam) < 0.0 {
-            n = n.map(|c| -c);
-        }
-        let m = near.len().min(3);
-        let scale = if m > 0 { (near[..m].iter().map(|a| a.0).sum::<f64>() / m as f64).sqrt() } else { 0.0 };
-        out.push(Seed { position: x.map(|c| c as f32), normal: n.map(|c| c as f32), scale: scale.max(1e-4) as f32 });
+    let (x, vi) = found[i];
+    let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (dot(sub(x, y), sub(x, y)), j)).collect();
+    let k = K.min(near.len());
+    if k > 0 {
+        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+        near.truncate(k);
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
-    out
+    let cam = views[vi].cam.centre().map(f64::from);
+    let to_cam = normalize(sub(cam, x));
+    let mut n = match normal {
+        SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
+        SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
+        _ => to_cam,
+    };
+    if dot(n, to_cam) < 0.0 {
+        n = n.map(|c| -c);
+    }
+    let m = near.len().min(3);
+    let scale = if m > 0 { (near[..m].iter().map(|a| a.0).sum::<f64>() / m as f64).sqrt() } else { 0.0 };
+    Seed { position: x.map(|c| c as f32), normal: n.map(|c| c as f32), scale: scale.max(1e-4) as f32 }
 }
 
 /// [`SeedNormal::Gradient`]'s blur radius and half-step, in pixels: a
