@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tgs::data::{Dataset, LoadOptions};
 use tgs::train::checkpoint;
-use tgs::train::config::ReflectionConfig;
+use tgs::train::config::{paper_schedule_note, ReflectionConfig};
 use tgs::train::seed::SeedNormal;
 use tgs::train::TrainConfig;
 use tgs::train::run::{request_stop, train, TrainArgs};
@@ -216,6 +216,28 @@ fn no_schedule_ends_on_an_opacity_reset() {
     // Even a minimum of 0 keeps the last iteration free of a reset.
     let cfg = TrainConfig { iterations: 1000, opacity_reset_min_after: 0, ..TrainConfig::quick() };
     assert!(!cfg.opacity_reset_after(1000, true) && cfg.opacity_reset_after(300, true));
+}
+
+/// `--preset paper` on a dataset far smaller than its schedule was made
+/// for gets a note naming the sizes; the quick preset, and a dataset of the
+/// schedule's size, do not.
+#[test]
+fn paper_preset_notes_small_datasets() {
+    let views = |n: usize, w: u32, h: u32| vec![(w, h); n];
+    let built_in = paper_schedule_note("paper", &views(32, 64, 64)).expect("the built-in glass is small for the paper schedule");
+    assert!(built_in.contains("32 views at 64x64") && built_in.contains("0.13 M"), "{built_in}");
+    let lantern = paper_schedule_note("paper", &views(60, 200, 200)).expect("lantern at 200x200");
+    assert!(lantern.contains("60 views at 200x200") && lantern.contains("2.40 M"), "{lantern}");
+    let mut mixed = views(10, 100, 100);
+    mixed.push((50, 40));
+    let mixed = paper_schedule_note("paper", &mixed).expect("mixed sizes");
+    assert!(mixed.contains("11 views (0.10 M)"), "{mixed}");
+    assert!(paper_schedule_note("paper", &[]).is_some());
+    assert_eq!(paper_schedule_note("quick", &views(32, 64, 64)), None);
+    assert_eq!(paper_schedule_note("paper", &views(100, 800, 800)), None);
+    // The boundary: an eighth of the schedule's pixels.
+    assert_eq!(paper_schedule_note("paper", &views(50, 400, 400)), None);
+    assert!(paper_schedule_note("paper", &views(49, 400, 400)).is_some());
 }
 
 #[test]

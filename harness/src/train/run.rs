@@ -4,7 +4,7 @@
 //! (point_cloud.ply, test renders, metrics.json).
 
 use super::checkpoint;
-use super::config::TrainConfig;
+use super::config::{paper_schedule_note, TrainConfig};
 use super::trainer::Trainer;
 use crate::data::{Dataset, LoadOptions};
 use crate::eval::{evaluate, Metrics};
@@ -419,6 +419,10 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     } else {
         None
     };
+    let note = if a.resume { None } else { a.preset.as_deref().and_then(|p| paper_schedule_note(p, &data.train.iter().map(|v| (v.camera.width, v.camera.height)).collect::<Vec<_>>())) };
+    if let (Some(n), false) = (&note, a.quiet) {
+        eprintln!("tgs: {n}");
+    }
     if !a.quiet {
         eprintln!(
             "training on {} ({} train / {} test views, {}) with {} Gaussians on {}",
