@@ -1,9 +1,11 @@
 //! Training: configuration, initialisation, the stage-scheduled trainer,
 //! checkpoints, and the `tgs train` driver (progress, logs, outputs).
+pub mod args;
 pub mod checkpoint;
 pub mod clock;
 pub mod config;
 pub mod env_init;
+pub mod from;
 pub mod init;
 pub mod knn;
 pub mod lightfield;

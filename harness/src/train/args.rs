@@ -1,0 +1,98 @@
+//! The settings of a `tgs train` run: a preset with the config file,
+//! `--set` and the flags on top, and the settings a resumed run keeps.
+
+use super::config::{flatten, TrainConfig};
+use super::run::TrainArgs;
+use anyhow::{bail, Context as _, Result};
+use std::collections::BTreeMap;
+
+/// Settings a resumed run may change: they do not alter what was already
+/// trained (the schedule is a function of the iteration count).
+pub const RESUMABLE_SETTINGS: [&str; 6] = ["iterations", "reflection.iterations", "light_field.iterations", "reflection.reseed", "test_interval", "checkpoint_interval"];
+
+pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
+    let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
+    apply_args(cfg, a)
+}
+
+/// Overlay the config file, `--set`, `--downscale`, `--background` and
+/// `--iterations` (in that order) on `cfg`.
+pub(crate) fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainConfig> {
+    if let Some(p) = &a.config {
+        cfg.merge_toml_file(p)?;
+    }
+    for kv in &a.set {
+        cfg.set(kv)?;
+    }
+    if let Some(st) = &a.stages {
+        // With --from, Stage I comes from the other run: "II" means "I,II".
+        // "III" means "I,II,III" with RUN's Stage II kept (from_stage_two).
+        let first = st.split(',').next().unwrap_or("").trim();
+        cfg.stages = match (a.from.is_some(), first) {
+            (true, "III") => "I,II,III".into(),
+            (true, f) if f != "I" => format!("I,{}", st.trim()),
+            _ => st.clone(),
+        };
+        cfg.validate().with_context(|| format!("--stages '{st}'"))?;
+    }
+    if let Some(d) = a.downscale {
+        cfg.downscale = d;
+        cfg.validate().with_context(|| format!("--downscale {d}"))?;
+    }
+    if let Some(b) = &a.background {
+        cfg.background = b.clone();
+        cfg.validate().with_context(|| format!("--background '{b}'"))?;
+    }
+    if let Some(n) = a.iterations {
+        cfg.iterations = n;
+        cfg.validate().with_context(|| format!("--iterations {n}"))?;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// A setting's value as the user typed it (settings are f32: no f64 digits).
+pub(crate) fn show(v: &toml::Value) -> String {
+    match v {
+        toml::Value::Float(f) => format!("{}", *f as f32),
+        v => v.to_string(),
+    }
+}
+
+/// The settings of a resumed run: the checkpoint's, with the options given
+/// now applied on top (a `--preset` replaces them all). Any difference
+/// outside [`RESUMABLE_SETTINGS`] would silently train another model than
+/// the one checkpointed, so it is refused with the key and both values.
+pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> {
+    let base = match &a.preset {
+        Some(p) => TrainConfig::preset(p)?,
+        None => saved.clone(),
+    };
+    let cfg = apply_args(base, a)?;
+    let conflicts = changed_settings(saved, &cfg, |k| RESUMABLE_SETTINGS.contains(&k))?;
+    if !conflicts.is_empty() {
+        bail!(
+            "--resume continues a run with the settings it was started with; these options change them:\n  {}\nonly {} may change when resuming (start a new run with another --out to train with other settings)",
+            conflicts.join("\n  "),
+            RESUMABLE_SETTINGS.join(", ")
+        );
+    }
+    Ok(cfg)
+}
+
+/// Every setting by its dotted key.
+pub(crate) fn settings(c: &TrainConfig) -> Result<BTreeMap<String, toml::Value>> {
+    Ok(flatten(&toml::Table::try_from(c)?).into_iter().collect())
+}
+
+/// The settings of `new` that differ from `saved`, except those `free`
+/// lets change, as "key = old in the checkpoint, new given" lines.
+pub(crate) fn changed_settings(saved: &TrainConfig, new: &TrainConfig, free: impl Fn(&str) -> bool) -> Result<Vec<String>> {
+    let old = settings(saved)?;
+    let new = settings(new)?;
+    Ok(new
+        .iter()
+        .filter(|(k, v)| !free(k) && old.get(*k) != Some(*v))
+        .map(|(k, v)| format!("{k} = {} in the checkpoint, {} given", old.get(k).map(show).unwrap_or_default(), show(v)))
+        .collect())
+}
