@@ -71,6 +71,8 @@ pub struct Context {
     peak_bytes: AtomicU64,
     /// Command pools, descriptor pools and fences to hand out again.
     pub(crate) spare: Mutex<crate::spare::Spare>,
+    /// Every pipeline built on this context ([`crate::Kernel::new`]).
+    pub(crate) pipelines: Mutex<crate::kernel::Pipelines>,
     submissions: AtomicU64,
 }
 
@@ -268,6 +270,7 @@ impl Context {
             live_bytes: AtomicU64::new(0),
             peak_bytes: AtomicU64::new(0),
             spare: Mutex::new(crate::spare::Spare::default()),
+            pipelines: Mutex::new(Default::default()),
             submissions: AtomicU64::new(0),
         }))
     }
@@ -377,6 +380,13 @@ impl Context {
         self.submissions.load(Ordering::Relaxed)
     }
 
+    /// Distinct pipelines built on this context so far: [`crate::Kernel::new`]
+    /// builds each once and returns it again for the same SPIR-V,
+    /// specialization constants, push-constant size and subgroup requests.
+    pub fn pipelines_built(&self) -> usize {
+        self.pipelines.lock().map(|p| p.len()).unwrap_or_default()
+    }
+
     /// Command pools, descriptor pools and fences held for reuse by later
     /// recordings (bounded; see `Recorder`).
     pub fn spare_objects(&self) -> (usize, usize, usize) {
@@ -394,6 +404,9 @@ impl Drop for Context {
             let _ = self.device.device_wait_idle();
             if let Ok(spare) = self.spare.get_mut() {
                 spare.destroy(&self.device);
+            }
+            if let Ok(built) = self.pipelines.get_mut() {
+                crate::kernel::destroy_pipelines(&self.device, built);
             }
             ManuallyDrop::drop(&mut self.allocator);
             if self.owns {

@@ -1,9 +1,18 @@
 //! Compute pipelines: SPIR-V + specialization constants + push constants.
+//!
+//! A context builds each distinct pipeline once: [`Kernel::new`] with the
+//! same SPIR-V, specialization constants, push-constant size and subgroup
+//! requests returns the pipeline built before (a driver compiles SPIR-V to
+//! machine code when a pipeline is created: 200 ms for the rasterizer's
+//! backward on llvmpipe, and the trainer's stages, their rasterizers and
+//! the tests build the same ones many times). The pipelines live as long
+//! as the context: a run builds a few dozen distinct ones.
 
 use crate::context::Context;
 use crate::spirv;
 use anyhow::{bail, Context as _, Result};
 use ash::vk;
+use std::collections::HashMap;
 use std::sync::Arc;
 
 /// What a kernel is built from.
@@ -23,7 +32,43 @@ pub struct KernelDesc<'a> {
     pub full_subgroups: bool,
 }
 
+/// What makes two kernels the same pipeline (all of [`KernelDesc`] but
+/// the name).
+#[derive(Clone, PartialEq, Eq, Hash)]
+pub(crate) struct PipelineKey {
+    spirv: Vec<u8>,
+    spec: Vec<(u32, u32)>,
+    push_bytes: u32,
+    subgroup_size: Option<u32>,
+    full_subgroups: bool,
+}
+
+/// A pipeline the context built, with its layouts; destroyed with the
+/// context ([`destroy_pipelines`]).
+#[derive(Clone, Copy)]
+pub(crate) struct Pipeline {
+    pipeline: vk::Pipeline,
+    layout: vk::PipelineLayout,
+    set_layout: vk::DescriptorSetLayout,
+    bindings: usize,
+}
+
+/// The pipelines a context built, by what they were built from.
+pub(crate) type Pipelines = HashMap<PipelineKey, Pipeline>;
+
+/// Destroy every pipeline of `built` (the context is being dropped and the
+/// device is idle).
+pub(crate) unsafe fn destroy_pipelines(d: &ash::Device, built: &mut Pipelines) {
+    for (_, p) in built.drain() {
+        d.destroy_pipeline(p.pipeline, None);
+        d.destroy_pipeline_layout(p.layout, None);
+        d.destroy_descriptor_set_layout(p.set_layout, None);
+    }
+}
+
 pub(crate) struct KernelInner {
+    /// Keeps the context, which owns the pipeline, alive.
+    #[allow(dead_code)]
     ctx: Arc<Context>,
     pub(crate) name: String,
     pub(crate) pipeline: vk::Pipeline,
@@ -40,7 +85,33 @@ pub struct Kernel {
 }
 
 impl Kernel {
+    /// The kernel of `desc`: the context's pipeline for it, built now if
+    /// this context has not built it before.
     pub fn new(ctx: &Arc<Context>, desc: &KernelDesc) -> Result<Kernel> {
+        let key = PipelineKey { spirv: desc.spirv.to_vec(), spec: desc.spec.to_vec(), push_bytes: desc.push_bytes, subgroup_size: desc.subgroup_size, full_subgroups: desc.full_subgroups };
+        let mut built = ctx.pipelines.lock().map_err(|_| anyhow::anyhow!("kernel '{}': the context's pipeline table is poisoned", desc.name))?;
+        let p = match built.get(&key) {
+            Some(p) => *p,
+            None => {
+                let p = Self::build(ctx, desc)?;
+                built.insert(key, p);
+                p
+            }
+        };
+        Ok(Kernel {
+            inner: Arc::new(KernelInner {
+                ctx: ctx.clone(),
+                name: desc.name.to_string(),
+                pipeline: p.pipeline,
+                layout: p.layout,
+                set_layout: p.set_layout,
+                bindings: p.bindings,
+                push_bytes: desc.push_bytes,
+            }),
+        })
+    }
+
+    fn build(ctx: &Arc<Context>, desc: &KernelDesc) -> Result<Pipeline> {
         let name = desc.name;
         let words = spirv::words(desc.spirv).with_context(|| format!("kernel '{name}'"))?;
         let bindings = spirv::binding_count(&words);
@@ -120,36 +191,20 @@ impl Kernel {
                     bail!("creating compute pipeline '{name}': {e}");
                 }
             };
-            Ok(Kernel {
-                inner: Arc::new(KernelInner {
-                    ctx: ctx.clone(),
-                    name: name.to_string(),
-                    pipeline,
-                    layout,
-                    set_layout,
-                    bindings,
-                    push_bytes: desc.push_bytes,
-                }),
-            })
+            Ok(Pipeline { pipeline, layout, set_layout, bindings })
         }
     }
 
     pub fn name(&self) -> &str {
         &self.inner.name
     }
+    /// The Vulkan pipeline (the context's; kernels of the same pipeline
+    /// share it).
+    pub fn pipeline(&self) -> vk::Pipeline {
+        self.inner.pipeline
+    }
     /// Number of storage-buffer bindings the shader declares.
     pub fn bindings(&self) -> usize {
         self.inner.bindings
-    }
-}
-
-impl Drop for KernelInner {
-    fn drop(&mut self) {
-        let d = &self.ctx.device;
-        unsafe {
-            d.destroy_pipeline(self.pipeline, None);
-            d.destroy_pipeline_layout(self.layout, None);
-            d.destroy_descriptor_set_layout(self.set_layout, None);
-        }
     }
 }

@@ -319,3 +319,62 @@ fn recordings_reuse_their_vulkan_objects() {
     assert_eq!(counts[25], counts[59], "objects accumulate from round to round");
     check_validation(&ctx);
 }
+
+fn iota_desc<'a>(name: &'a str, spec: &'a [(u32, u32)], push_bytes: u32) -> KernelDesc<'a> {
+    KernelDesc { name, spirv: shaders::UTIL_IOTA, spec, push_bytes, subgroup_size: None, full_subgroups: false }
+}
+
+/// `window[i] = start + i` with the iota kernel `k` (workgroups of 256).
+fn run_iota(ctx: &Arc<Context>, k: &Kernel, n: u32, start: u32) -> Vec<u32> {
+    let buf = Buffer::<u32>::new(ctx, "test.pipeline_iota", n as usize).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    rec.dispatch(k, &[buf.binding()], bytemuck::cast_slice(&[n, start]), [n.div_ceil(256), 1, 1]).unwrap();
+    rec.submit_and_wait().unwrap();
+    buf.download().unwrap()
+}
+
+/// A context builds each distinct pipeline once: the same SPIR-V,
+/// specialization constants and push-constant size under another name
+/// reuse it, it outlives the kernels that asked for it, and a change in
+/// any of them builds another.
+#[test]
+fn pipelines_are_built_once_per_context() {
+    let ctx = tgs_tests::ctx();
+    assert_eq!(ctx.pipelines_built(), 0);
+    let sg = ctx.caps().min_subgroup_size.max(1);
+    let spec = [(0, 256), (1, sg), (2, 1)];
+    let a = Kernel::new(&ctx, &iota_desc("test.a", &spec, 8)).unwrap();
+    assert_eq!(ctx.pipelines_built(), 1);
+    let b = Kernel::new(&ctx, &iota_desc("test.b", &spec, 8)).unwrap();
+    assert_eq!(ctx.pipelines_built(), 1, "the same pipeline under another name");
+    assert_eq!((a.name(), b.name()), ("test.a", "test.b"));
+    assert_eq!(a.pipeline(), b.pipeline());
+    let want = |n: u32, start: u32| (0..n).map(|i| i + start).collect::<Vec<u32>>();
+    assert_eq!(run_iota(&ctx, &a, 1000, 5), want(1000, 5));
+    assert_eq!(run_iota(&ctx, &b, 300, 9), want(300, 9));
+    let first = a.pipeline();
+    drop((a, b));
+    let c = Kernel::new(&ctx, &iota_desc("test.c", &spec, 8)).unwrap();
+    assert_eq!(ctx.pipelines_built(), 1, "kept after its kernels were dropped");
+    assert_eq!(c.pipeline(), first);
+    assert_eq!(run_iota(&ctx, &c, 700, 1), want(700, 1));
+    let spec_128 = [(0, 128), (1, sg), (2, 1)];
+    let d = Kernel::new(&ctx, &iota_desc("test.d", &spec_128, 8)).unwrap();
+    assert_eq!(ctx.pipelines_built(), 2, "other specialization constants");
+    assert_ne!(d.pipeline(), first);
+    // Workgroups of 128: twice the groups cover n.
+    let buf = Buffer::<u32>::new(&ctx, "test.pipeline_iota128", 1000).unwrap();
+    let mut rec = Recorder::new(&ctx).unwrap();
+    rec.dispatch(&d, &[buf.binding()], bytemuck::cast_slice(&[1000u32, 3]), [8, 1, 1]).unwrap();
+    rec.submit_and_wait().unwrap();
+    assert_eq!(buf.download().unwrap(), want(1000, 3));
+    Kernel::new(&ctx, &iota_desc("test.e", &spec, 16)).unwrap();
+    assert_eq!(ctx.pipelines_built(), 3, "another push-constant size");
+    // Four Iotas: their direct kernel is "test.a"'s pipeline, and the
+    // device-address one (where enabled) is built once.
+    let before = ctx.pipelines_built();
+    let iotas: Vec<Iota> = (0..4).map(|_| Iota::new(&ctx).unwrap()).collect();
+    assert_eq!(ctx.pipelines_built() - before, ctx.features().buffer_device_address as usize, "pipelines for four Iotas");
+    drop(iotas);
+    check_validation(&ctx);
+}
