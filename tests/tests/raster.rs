@@ -108,8 +108,21 @@ fn gradients_match_finite_differences_sh3() {
 
 #[test]
 fn gradients_plain_features_one_and_eight_channels() {
+    plain_features(Rng(seed("gradients_plain_features_one_and_eight_channels")));
+}
+
+/// The seed that found a gap in the reference's ambiguity test: at pixel
+/// 84 of the eight-channel scene a splat seen at a grazing angle has alpha
+/// 1.1e-6 below the 1/255 cut, within its f32 sensitivity (8.9e-6), and the
+/// GPU kept it (median depth 3.54 against none). The reference now leaves
+/// such pixels out; this keeps that case.
+#[test]
+fn alpha_cut_within_rounding_of_a_grazing_hit() {
+    plain_features(Rng(1795566249080618654));
+}
+
+fn plain_features(mut rng: Rng) {
     let ctx = ctx_shared();
-    let mut rng = Rng(seed("gradients_plain_features_one_and_eight_channels"));
     for ch in [1u32, 8] {
         let rast = Rasterizer::new(ctx, ch, Features::Plain).unwrap();
         let mut spec = SceneSpec::new(10, ch, Features::Plain);
