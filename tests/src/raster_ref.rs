@@ -181,30 +181,25 @@ fn hit(tu: V3, tv: V3, tw: V3, mu: [f64; 2], x: f64, y: f64) -> Option<(f64, f64
 /// depth plus alpha-weighted changes are summed in absolute value, so they
 /// cannot cancel (infinite when a perturbed ray misses).
 fn sensitivity(sp: &RefSplat, x: f64, y: f64, g: f64, z: f64) -> f64 {
-    let ulp = 1.0 / (1u64 << 23) as f64;
-    let mut total = 0.0f64;
-    for entry in 0..9 {
-        let mut rows = [sp.tu, sp.tv, sp.tw];
-        rows[entry / 3][entry % 3] *= 1.0 + ulp;
-        match hit(rows[0], rows[1], rows[2], sp.mu, x, y) {
-            Some((g2, z2)) => total += (z2 - z).abs() + (sp.o * (g2 - g)).abs() * (1.0 + z.abs()),
-            None => return f64::INFINITY,
-        }
-    }
-    total
+    ulp_sum(sp, x, y, |g2, z2| (z2 - z).abs() + (sp.o * (g2 - g)).abs() * (1.0 + z.abs()))
 }
 
-/// As [`sensitivity`] for alpha alone: the summed absolute change of
-/// o G when each of the 9 entries of T moves by one f32 ulp on its own
-/// (infinite when a perturbed ray misses).
+/// As [`sensitivity`] for alpha alone: the summed absolute change of o G.
 fn alpha_sensitivity(sp: &RefSplat, x: f64, y: f64, g: f64) -> f64 {
+    ulp_sum(sp, x, y, |g2, _| (sp.o * (g2 - g)).abs())
+}
+
+/// The sum over the 9 entries of T, each moved by one f32 ulp on its own,
+/// of `change(G, depth)` of the perturbed hit (infinite when a perturbed
+/// ray misses).
+fn ulp_sum(sp: &RefSplat, x: f64, y: f64, change: impl Fn(f64, f64) -> f64) -> f64 {
     let ulp = 1.0 / (1u64 << 23) as f64;
     let mut total = 0.0f64;
     for entry in 0..9 {
         let mut rows = [sp.tu, sp.tv, sp.tw];
         rows[entry / 3][entry % 3] *= 1.0 + ulp;
         match hit(rows[0], rows[1], rows[2], sp.mu, x, y) {
-            Some((g2, _)) => total += (sp.o * (g2 - g)).abs(),
+            Some((g2, z2)) => total += change(g2, z2),
             None => return f64::INFINITY,
         }
     }
