@@ -82,11 +82,35 @@ pub(crate) fn average(all: Vec<Vec<tgs_engine::Timing>>) -> Vec<KernelTime> {
     out
 }
 
+/// Refuse a benchmark size before any host or device memory is taken:
+/// `count` items of `what` with `largest` bytes in the largest single
+/// buffer and `total` bytes in all must fit the device's storage-binding
+/// range and its memory. `flag` names the option to lower.
+pub fn check_size(ctx: &Context, flag: &str, count: u64, largest: u64, total: u64) -> Result<()> {
+    let c = ctx.caps();
+    let range = c.max_storage_buffer_range;
+    if count == 0 {
+        bail!("{flag} 0: nothing to time (give at least 1)");
+    }
+    if largest > range {
+        bail!("{flag} {count}: its largest buffer would be {:.1} MiB, over {}'s {:.0} MiB per storage binding (at most {} at this size)", largest as f64 / 1048576.0, c.device_name, range as f64 / 1048576.0, (count as u128 * range as u128 / largest as u128));
+    }
+    if c.device_local_bytes > 0 && total > c.device_local_bytes {
+        bail!("{flag} {count}: it needs about {:.1} GiB, more than {}'s {:.1} GiB of device memory", total as f64 / (1u64 << 30) as f64, c.device_name, c.device_local_bytes as f64 / (1u64 << 30) as f64);
+    }
+    Ok(())
+}
+
 /// Time the radix sort of `n` random keys (low `bits` bits), `reps` timed runs after one warm-up.
 pub fn sort(ctx: &Arc<Context>, n: u32, bits: u32, reps: u32, cfg: Option<SortConfig>) -> Result<SortBench> {
     if bits == 0 || bits > 32 {
         bail!("--bits must be 1..=32, not {bits}");
     }
+    if reps == 0 {
+        bail!("--reps must be at least 1");
+    }
+    // Keys, values and their ping-pong copies (u32 each).
+    check_size(ctx, "--n", n as u64, 4 * n as u64, 16 * n as u64)?;
     let sorter = match cfg {
         Some(c) => RadixSort::with_config(ctx, c)?,
         None => RadixSort::new(ctx)?,
@@ -147,6 +171,10 @@ pub fn sort(ctx: &Arc<Context>, n: u32, bits: u32, reps: u32, cfg: Option<SortCo
 
 /// Time the exclusive prefix sum of `n` u32.
 pub fn scan(ctx: &Arc<Context>, n: u32, reps: u32) -> Result<ScanBench> {
+    if reps == 0 {
+        bail!("--reps must be at least 1");
+    }
+    check_size(ctx, "--n", n as u64, 4 * n as u64, 12 * n as u64)?;
     let scan = PrefixSum::new(ctx)?;
     let x: Vec<u32> = keys(n, 7).into_iter().map(|v| v & 0xff).collect();
     let src = Buffer::from_slice(ctx, "bench.src", &x)?;

@@ -32,6 +32,11 @@ pub struct MlpBench {
 }
 
 pub fn mlp(ctx: &Arc<Context>, shape: MlpShape, n: u32, reps: u32) -> Result<MlpBench> {
+    anyhow::ensure!(reps > 0, "--reps must be at least 1");
+    shape.validate()?;
+    // Activations: one width-wide f32 row per sample and layer.
+    let row = 4 * shape.width.max(SAMPLE) as u64;
+    crate::bench::check_size(ctx, "--n", n as u64, row * n as u64, row * n as u64 * (shape.depth as u64 + 2) * 2)?;
     let m = Mlp::new(ctx)?;
     let s = m.scratch(shape, n)?;
     let mut st = 0x3c6ef372u32;

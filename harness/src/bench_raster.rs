@@ -64,6 +64,12 @@ pub fn bench_camera(width: u32, height: u32) -> Camera {
 
 pub fn raster(ctx: &Arc<Context>, n: u32, width: u32, height: u32, reps: u32) -> Result<RasterBench> {
     ensure!(reps > 0, "--reps must be at least 1");
+    ensure!(width > 0 && height > 0 && width <= 16384 && height <= 16384, "--width and --height must be 1..=16384, not {width}x{height}");
+    // SH 3: 48 feature floats a Gaussian (the largest array), about 59
+    // floats of parameters and as many of gradients in all; 4 intersections
+    // a Gaussian of 8 bytes; 16 planes of frame per pixel.
+    let px = width as u64 * height as u64;
+    crate::bench::check_size(ctx, "--n", n as u64, (48 * 4 * n as u64).max(32 * n as u64), 2 * 59 * 4 * n as u64 + 32 * n as u64 + 64 * px)?;
     ctx.reset_peak_memory();
     let rast = Rasterizer::new(ctx, 3, Features::Sh { degree: 3 })?;
     let host = synthetic_scene(n, 7);

@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use serde_json::json;
-use tgs_engine::{list_devices, DeviceInfo};
+use tgs_engine::{list_devices, DeviceInfo, DeviceSelector};
 
 pub fn to_json(d: &DeviceInfo) -> serde_json::Value {
     let c = &d.caps;
@@ -32,8 +32,23 @@ pub fn to_json(d: &DeviceInfo) -> serde_json::Value {
     })
 }
 
-pub fn run(json_out: bool) -> Result<()> {
-    let devs = list_devices()?;
+/// The devices `sel` names (all of them for the default): an index or a
+/// name that matches none is an error listing what there is.
+pub fn select(devs: Vec<DeviceInfo>, sel: &DeviceSelector) -> Result<Vec<DeviceInfo>> {
+    let names = || devs.iter().map(|d| format!("[{}] {}", d.index, d.caps.device_name)).collect::<Vec<_>>().join(", ");
+    let picked: Vec<DeviceInfo> = match sel {
+        DeviceSelector::Best => return Ok(devs),
+        DeviceSelector::Index(i) => devs.iter().filter(|d| d.index == *i).cloned().collect(),
+        DeviceSelector::Name(n) => devs.iter().filter(|d| d.caps.device_name.to_lowercase().contains(&n.to_lowercase())).cloned().collect(),
+    };
+    if picked.is_empty() {
+        anyhow::bail!("--device {}: no such Vulkan device (there are: {})", match sel { DeviceSelector::Index(i) => i.to_string(), DeviceSelector::Name(n) => n.clone(), _ => String::new() }, if devs.is_empty() { "none".to_string() } else { names() });
+    }
+    Ok(picked)
+}
+
+pub fn run(json_out: bool, sel: &DeviceSelector) -> Result<()> {
+    let devs = select(list_devices()?, sel)?;
     if json_out {
         println!("{}", serde_json::to_string_pretty(&devs.iter().map(to_json).collect::<Vec<_>>())?);
         return Ok(());

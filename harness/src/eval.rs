@@ -9,10 +9,10 @@
 use crate::data::image_io::{write_exr, write_png, ImageF};
 use crate::data::View;
 use crate::train::trainer::Rendered;
+use crate::outdir::OutDir;
 use crate::train::Trainer;
 use anyhow::Result;
 use serde::Serialize;
-use std::path::Path;
 use tgs_pipelines::{Camera, Plane};
 
 /// Normal errors on the transmissive mask (degrees); None without a ground
@@ -188,10 +188,7 @@ fn normal_mae_where(normals: &[[f32; 3]], view: &View, keep: impl Fn(usize) -> b
 }
 
 /// Render, measure and (with `out`) write every view.
-pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<Metrics> {
-    if let Some(dir) = out {
-        std::fs::create_dir_all(dir)?;
-    }
+pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) -> Result<Metrics> {
     let mut per_view = Vec::new();
     for v in views {
         let r = tr.render(&v.camera)?;
@@ -217,7 +214,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
                 normal_mae_ray_facing_deg: v.normals.as_ref().and_then(|_| normal_mae(&ray_facing_normals(&v.camera), v)),
             },
         };
-        if let Some(dir) = out {
+        if let Some(dir) = out.as_deref_mut() {
             write_outputs(dir, &v.name, &r, &normals, &v.camera)?;
         }
         per_view.push(m);
@@ -237,17 +234,17 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], out: Option<&Path>) -> Result<
 /// `NAME.png` (colour), `NAME_normal.png` (world normal * 0.5 + 0.5),
 /// `NAME_depth.exr` (expected depth, 0 where empty) and `NAME_depth.png`
 /// (normalised to the view's depth range).
-pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]], cam: &Camera) -> Result<()> {
+pub fn write_outputs(dir: &mut OutDir, name: &str, r: &Rendered, normals: &[[f32; 3]], cam: &Camera) -> Result<()> {
     let (w, h) = (r.width, r.height);
     let n = (w * h) as usize;
-    write_png(&dir.join(format!("{name}.png")), &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]))?;
-    write_png(&dir.join(format!("{name}_normal.png")), &normal_image(w, h, normals))?;
+    write_png(&dir.file(&format!("{name}.png"))?, &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]))?;
+    write_png(&dir.file(&format!("{name}_normal.png"))?, &normal_image(w, h, normals))?;
     let (a, d) = (r.plane(Plane::Alpha), r.plane(Plane::Depth));
     let depth: Vec<f32> = (0..n).map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 }).collect();
-    write_exr(&dir.join(format!("{name}_depth.exr")), &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
+    write_exr(&dir.file(&format!("{name}_depth.exr"))?, &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
     let (lo, hi) = depth.iter().filter(|v| **v > 0.0).fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
     let scaled = depth.iter().map(|&v| if v > 0.0 && hi > lo { 1.0 - (v - lo) / (hi - lo) } else { 0.0 }).collect();
-    write_png(&dir.join(format!("{name}_depth.png")), &ImageF { width: w, height: h, channels: 1, data: scaled })?;
+    write_png(&dir.file(&format!("{name}_depth.png"))?, &ImageF { width: w, height: h, channels: 1, data: scaled })?;
     if let Some(l) = &r.layers {
         write_layers(dir, name, &l.0, &l.1, cam)?;
     }
@@ -259,10 +256,10 @@ pub fn write_outputs(dir: &Path, name: &str, r: &Rendered, normals: &[[f32; 3]],
 /// Stage III's F Phi), `NAME_R.png` (reflectivity map), `NAME_F0.png`
 /// (blended F0, when the stage has it), `NAME_phi_mask.png` (Stage III:
 /// where Phi was evaluated), `NAME_normal_scat.png`, `NAME_normal_refl.png`.
-fn write_layers(dir: &Path, name: &str, scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Result<()> {
+fn write_layers(dir: &mut OutDir, name: &str, scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Result<()> {
     let (w, h) = (scat.width, scat.height);
     let n = (w * h) as usize;
-    let png = |suffix: &str, channels: u32, data: &[f32]| write_png(&dir.join(format!("{name}_{suffix}.png")), &ImageF::from_planar(w, h, channels, data));
+    let mut png = |suffix: &str, channels: u32, data: &[f32]| write_png(&dir.file(&format!("{name}_{suffix}.png"))?, &ImageF::from_planar(w, h, channels, data));
     png("scat", 3, &scat.planes[..3 * n])?;
     png("refl", 3, refl.i_refl())?;
     png("R", 1, refl.r())?;
@@ -274,7 +271,7 @@ fn write_layers(dir: &Path, name: &str, scat: &Rendered, refl: &crate::train::tr
     if let Some(p) = &refl.phi {
         png("phi_mask", 1, &p.mask)?;
     }
-    let normal_png = |suffix: &str, normals: &[[f32; 3]]| write_png(&dir.join(format!("{name}_{suffix}.png")), &normal_image(w, h, normals));
+    let mut normal_png = |suffix: &str, normals: &[[f32; 3]]| write_png(&dir.file(&format!("{name}_{suffix}.png"))?, &normal_image(w, h, normals));
     normal_png("normal_scat", &world_normals(scat, cam))?;
     let rn = [0, 1, 2].map(|k| refl.refl_plane(Plane::Normal(k)));
     normal_png("normal_refl", &world_normals_of(rn, cam))

@@ -1,4 +1,4 @@
-use anyhow::Result;
+use anyhow::{Context as _, Result};
 use std::path::PathBuf;
 use tgs::train::run::TrainArgs;
 use clap::{Parser, Subcommand};
@@ -41,7 +41,9 @@ enum Cmd {
         /// TOML file of settings (applied after the preset).
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Any setting as KEY=VALUE (repeatable; applied last). See config.toml in a run directory for the keys.
+        /// Any setting as KEY=VALUE (repeatable; applied after --config). See config.toml in a run directory
+        /// for the keys. A key that a flag also sets (--iterations, --stages, --downscale, --background) is
+        /// refused when both are given.
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
         #[arg(long)]
@@ -83,8 +85,8 @@ enum Cmd {
         run: PathBuf,
         #[arg(long, default_value = "test")]
         cameras: String,
-        /// Orbit frames.
-        #[arg(long, default_value_t = 60)]
+        /// Orbit frames (1 to 100,000).
+        #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(1..=100_000))]
         frames: u32,
         /// Output directory (default RUN/renders/CAMERAS).
         #[arg(long)]
@@ -102,8 +104,8 @@ enum Cmd {
     Sweep {
         /// Dataset directory; default: the built-in scene, written to OUT/scene.
         dataset: Option<PathBuf>,
-        #[arg(long)]
-        out: PathBuf,
+        #[arg(long, required_unless_present = "print_grid")]
+        out: Option<PathBuf>,
         /// Grid file (TOML: preset, mode, [base], [knobs]); default: the
         /// built-in grid (`tgs sweep --print-grid` shows it).
         #[arg(long)]
@@ -255,7 +257,7 @@ fn context(cli: &Cli) -> Result<std::sync::Arc<Context>> {
 
 fn run(cli: Cli) -> Result<()> {
     match &cli.cmd {
-        Cmd::Devices { json } => tgs::devices::run(*json),
+        Cmd::Devices { json } => tgs::devices::run(*json, &DeviceSelector::from_arg_or_env(cli.device.as_deref())),
         Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, stages, from, profile, quiet } => {
             let ctx = context(&cli)?;
             let args = TrainArgs {
@@ -285,7 +287,11 @@ fn run(cli: Cli) -> Result<()> {
             if data.test.is_empty() {
                 anyhow::bail!("{}: the dataset has no test views", data.root.display());
             }
-            let m = tgs::eval::evaluate(&mut tr, &data.test, out.as_deref())?;
+            let mut dir = match out {
+                Some(d) => Some(tgs::outdir::OutDir::open(d, Some(&data.root))?),
+                None => None,
+            };
+            let m = tgs::eval::evaluate(&mut tr, &data.test, dir.as_mut())?;
             println!("{}", serde_json::to_string_pretty(&m)?);
             Ok(())
         }
@@ -320,6 +326,7 @@ fn run(cli: Cli) -> Result<()> {
                 return Ok(());
             }
             let ctx = context(&cli)?;
+            let out = out.as_ref().context("--out DIR is needed")?;
             let a = tgs::sweep::SweepArgs { dataset: dataset.clone(), out: out.clone(), grid: grid.clone(), quiet: *quiet };
             let o = tgs::sweep::sweep(&ctx, &a)?;
             if o.interrupted {

@@ -4,6 +4,7 @@
 
 use crate::eval::{world_normals, write_outputs};
 use crate::scene::trace::{cross, dot, sub};
+use crate::outdir::OutDir;
 use crate::train::run::open_run;
 use anyhow::{bail, Result};
 use std::path::Path;
@@ -90,11 +91,11 @@ pub fn render(ctx: &Arc<Context>, run: &Path, which: &str, frames: u32, out: &Pa
     if cams.is_empty() {
         bail!("the run's dataset has no {which} cameras");
     }
-    std::fs::create_dir_all(out)?;
+    let mut dir = OutDir::open(out, Some(&data.root))?;
     let bar = indicatif::ProgressBar::new(cams.len() as u64);
     for (name, cam) in &cams {
         let r = tr.render(cam)?;
-        write_outputs(out, name, &r, &world_normals(&r, cam), cam)?;
+        write_outputs(&mut dir, name, &r, &world_normals(&r, cam), cam)?;
         bar.inc(1);
     }
     bar.finish_and_clear();

@@ -454,3 +454,84 @@ fn diffuse_scene_is_the_glass_room_without_glass() {
     let ds = Dataset::load(&dir, &LoadOptions::default()).unwrap();
     assert!(ds.test.iter().all(|v| v.mask.as_ref().is_some_and(|m| m.iter().all(|&g| !g))), "a glass pixel in the diffuse scene");
 }
+
+/// Inputs that loaded silently before and trained on nonsense.
+#[test]
+fn accepted_nonsense_is_refused_or_warned_about() {
+    let opts = LoadOptions::default();
+    // A focal length of 4.8e31 px (camera_angle_x = 1e-30).
+    let d = blender_fixture("tinyfov", 4, 4);
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 1e-30, "frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "field of view", "camera_angle_x"]);
+    // A long lens still loads (focal length 1,000 image widths).
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"fl_x": 4000, "frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    Dataset::load(&d, &opts).unwrap();
+
+    // One image twice in a split, and one image with two poses across the splits.
+    let d = blender_fixture("dupframe", 4, 4);
+    let two = r#"[[1,0,0,0],[0,0,-1,-5],[0,1,0,0],[0,0,0,1]]"#;
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}, {{"file_path": "./train/a", "transform_matrix": {two}}}]}}"#)).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "./train/a", "twice", "frames 0 and 1"]);
+    let d = blender_fixture("twoposes", 4, 4);
+    std::fs::write(d.join("transforms_test.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": {two}}}]}}"#)).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["train/a", "two different poses"]);
+
+    // Paths that leave the dataset directory.
+    for bad in ["../outside/a", "/etc/passwd", "train/../../a"] {
+        let d = blender_fixture("escape", 4, 4);
+        std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "{bad}", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+        expect_err(Dataset::load(&d, &opts), &[bad, "dataset directory"]);
+    }
+    // Inside it, `..` that stays inside is fine.
+    let d = blender_fixture("inside", 4, 4);
+    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./test/../train/a", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    Dataset::load(&d, &opts).unwrap();
+
+    // NaN and infinite points: skipped, and said.
+    let d = blender_fixture("nanpoints", 4, 4);
+    std::fs::write(d.join("points3d.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n").unwrap();
+    let mut b = std::fs::read(d.join("points3d.ply")).unwrap();
+    let ply_head = String::from_utf8(b.clone()).unwrap().replace("ascii", "binary_little_endian");
+    b = ply_head.into_bytes();
+    for p in [[0.0f32, 0.0, 0.0], [f32::NAN, 0.0, 0.0], [0.0, f32::INFINITY, 1.0]] {
+        p.iter().for_each(|v| b.extend(v.to_le_bytes()));
+    }
+    std::fs::write(d.join("points3d.ply"), &b).unwrap();
+    let ds = Dataset::load(&d, &opts).unwrap();
+    assert_eq!(ds.points.as_ref().unwrap().positions.len(), 1);
+    assert!(ds.warnings.iter().any(|w| w.contains("points3d.ply") && w.contains("2 of 3 points")), "{:?}", ds.warnings);
+
+    // RGB images on a flat black backdrop against the white default: said,
+    // with the option that fixes it; on black, nothing is said.
+    let d = blender_fixture("backdrop", 6, 6);
+    let mut px = vec![0u8; 6 * 6 * 3];
+    px[3 * (2 * 6 + 2)..3 * (2 * 6 + 4)].fill(200);
+    image::save_buffer(d.join("train/a.png"), &px, 6, 6, image::ExtendedColorType::Rgb8).unwrap();
+    let ds = Dataset::load(&d, &opts).unwrap();
+    assert!(ds.warnings.iter().any(|w| w.contains("--background 0.00,0.00,0.00") && w.contains("no alpha")), "{:?}", ds.warnings);
+    let ds = Dataset::load(&d, &LoadOptions { background: [0.0; 3], ..opts }).unwrap();
+    assert!(ds.warnings.is_empty(), "{:?}", ds.warnings);
+    // RGBA images (the fixture's own) are composited: nothing to say.
+    assert!(Dataset::load(&blender_fixture("rgba", 4, 4), &opts).unwrap().warnings.is_empty());
+
+    // COLMAP: an image twice in the model, and a model without cameras.
+    let d = colmap_fixture("colmap-dup", false);
+    let t = std::fs::read_to_string(d.join("sparse/0/images.txt")).unwrap().replacen(" a.png", " c.png", 1);
+    std::fs::write(d.join("sparse/0/images.txt"), t).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["c.png", "twice"]);
+    let d = colmap_fixture("colmap-nocams", false);
+    std::fs::remove_file(d.join("sparse/0/cameras.txt")).unwrap();
+    expect_err(Dataset::load(&d, &opts), &["sparse/0", "cameras.txt"]);
+    // A COLMAP focal length of 10^6 image widths.
+    let d = colmap_fixture("colmap-fov", false);
+    write_text_model(&d.join("sparse/0"), "SIMPLE_PINHOLE 8 6 9e6 4 3");
+    expect_err(Dataset::load(&d, &opts), &["field of view"]);
+}
+
+#[test]
+fn scene_list_says_what_each_scene_is() {
+    let lines = tgs::scene::list();
+    let diffuse = lines.iter().find(|l| l.starts_with("diffuse")).unwrap();
+    assert!(!diffuse.contains("glass sphere in") && diffuse.contains("without the glass"), "{diffuse}");
+    assert!(lines.iter().find(|l| l.starts_with("glass ")).unwrap().contains("glass sphere"));
+}

@@ -286,7 +286,16 @@ fn bad_settings_and_missing_checkpoints_are_reported() {
     fails(with("light_field.levels_x=17"), &["light_field.levels_x", "17"]);
     fails(TrainArgs { downscale: Some(0), ..args(&out) }, &["--downscale 0"]);
     fails(TrainArgs { downscale: Some(1000), ..args(&out) }, &["--downscale 1000", "r_0.png"]);
-    fails(TrainArgs { background: Some("purple".into()), ..args(&out) }, &["--background 'purple'"]);
+    let no_background_set = || {
+        let mut a = args(&out);
+        a.set.retain(|kv| !kv.starts_with("background="));
+        a
+    };
+    fails(TrainArgs { background: Some("purple".into()), ..no_background_set() }, &["--background 'purple'"]);
+    // A key set both by a flag and by --set: refused, whichever order.
+    fails(TrainArgs { background: Some("white".into()), ..args(&out) }, &["--set background=\"black\"", "--background", "give one"]);
+    fails(TrainArgs { iterations: Some(20), ..with("iterations=30") }, &["iterations=30", "--iterations"]);
+    fails(TrainArgs { stages: Some("I,II".into()), ..args(&out) }, &["stages=\"I\"", "--stages"]);
     // A run directory with a checkpoint is not overwritten without --resume.
     let a = args(&out);
     std::fs::create_dir_all(&out).unwrap();

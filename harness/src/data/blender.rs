@@ -3,7 +3,7 @@
 //! camera-to-world matrices in OpenGL axes, RGBA PNGs composited on the
 //! background, and this project's optional `normal_path` / `mask_path`.
 
-use super::image_io::{read_mask, read_normals, read_rgb};
+use super::image_io::{border_colour, read_mask, read_normals, read_rgb_alpha};
 use super::{downscale_camera, downscale_mask, downscale_normals, Dataset, LoadOptions, Points, View};
 use anyhow::{bail, Context as _, Result};
 use serde::Deserialize;
@@ -103,20 +103,81 @@ fn check_rigid(m: &[[f64; 4]; 4]) -> Result<()> {
 }
 
 pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
-    let train = load_split(root, "train", opts)?.context("transforms_train.json vanished")?;
-    let test = load_split(root, "test", opts)?.unwrap_or_default();
+    let (mut files, mut all_alpha) = (Vec::new(), true);
+    let train = load_split(root, "train", opts, &mut files, &mut all_alpha)?.context("transforms_train.json vanished")?;
+    let test = load_split(root, "test", opts, &mut files, &mut all_alpha)?.unwrap_or_default();
+    let mut warnings = Vec::new();
+    if !all_alpha {
+        warnings.extend(backdrop_warning(&train, opts.background).map(|w| format!("{}: {w}", root.display())));
+    }
+    check_one_pose_per_file(root, &train, &test)?;
+    let (train, test) = (train.into_iter().map(|(v, _)| v).collect(), test.into_iter().map(|(v, _)| v).collect());
     let ply = root.join("points3d.ply");
-    let points = if ply.is_file() { Some(crate::export::ply::read_points(&ply)?) } else { None::<Points> };
-    Ok(Dataset { root: root.to_path_buf(), format: "blender", train, test, points, background: opts.background })
+    let points = if ply.is_file() {
+        files.push(ply.clone());
+        let (pts, skipped) = crate::export::ply::read_points(&ply)?;
+        if skipped > 0 {
+            warnings.push(format!("{}: {skipped} of {} points have NaN or infinite coordinates and are skipped", ply.display(), skipped + pts.positions.len()));
+        }
+        Some(pts)
+    } else {
+        None::<Points>
+    };
+    Ok(Dataset { root: root.to_path_buf(), format: "blender", train, test, points, background: opts.background, files, warnings })
 }
 
-fn resolve(root: &Path, rel: &str, default_ext: &str) -> std::path::PathBuf {
-    let p = root.join(rel.trim_start_matches("./"));
-    if p.extension().is_none() {
-        p.with_extension(default_ext)
-    } else {
-        p
+/// Images without alpha whose borders are one flat colour far from the
+/// background: a rendered backdrop (black, say) that the render's
+/// background (white by default) cannot match. Judged by the median view.
+fn backdrop_warning(views: &[(View, String)], background: [f32; 3]) -> Option<String> {
+    let mut flat: Vec<([f32; 3], f32)> = views.iter().map(|(v, _)| border_colour(&v.image)).filter(|(_, spread)| *spread < 0.05).collect();
+    // A photograph's border is not flat: then nothing is said.
+    if flat.len() * 2 <= views.len() {
+        return None;
     }
+    let off = |c: &[f32; 3]| (0..3).map(|k| (c[k] - background[k]).abs()).fold(0f32, f32::max);
+    flat.sort_by(|a, b| off(&a.0).total_cmp(&off(&b.0)));
+    let (c, _) = flat[flat.len() / 2];
+    (off(&c) > 0.25).then(|| {
+        format!(
+            "the images have no alpha and their borders are a flat {:.2},{:.2},{:.2}, not the background {:.2},{:.2},{:.2}: pass --background {:.2},{:.2},{:.2} (or black / white) so that empty space renders as the images show it",
+            c[0], c[1], c[2], background[0], background[1], background[2], c[0], c[1], c[2]
+        )
+    })
+}
+
+/// An image named in both splits must have one pose (the same file seen
+/// from two places is a broken dataset, not two views).
+fn check_one_pose_per_file(root: &Path, train: &[(View, String)], test: &[(View, String)]) -> Result<()> {
+    for (v, p) in test {
+        if let Some((t, _)) = train.iter().find(|(_, q)| q == p) {
+            if t.camera.world_to_view != v.camera.world_to_view {
+                bail!("{}: '{p}' is a frame of both transforms_train.json and transforms_test.json with two different poses", root.display());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The path of a frame's file: `rel` under `root` (`./` allowed), with
+/// `default_ext` when it has none. A path that leaves the dataset
+/// directory (absolute, or through `..`) is refused: a dataset is one
+/// directory, and tgs reads nothing outside it.
+fn resolve(root: &Path, rel: &str, default_ext: &str) -> Result<std::path::PathBuf> {
+    let mut depth = 0i32;
+    for c in Path::new(rel).components() {
+        match c {
+            std::path::Component::Normal(_) => depth += 1,
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir => depth -= 1,
+            _ => bail!("'{rel}' is an absolute path: file paths must be relative to the dataset directory"),
+        }
+        if depth < 0 {
+            bail!("'{rel}' leaves the dataset directory (through '..'): file paths must stay inside it");
+        }
+    }
+    let p = root.join(rel.trim_start_matches("./"));
+    Ok(if p.extension().is_none() { p.with_extension(default_ext) } else { p })
 }
 
 /// Convert a Blender/OpenGL camera-to-world matrix to our world-to-view rows.
@@ -133,12 +194,13 @@ pub fn gl_c2w_to_w2v(m: &[[f64; 4]; 4]) -> [[f32; 4]; 3] {
     rows
 }
 
-fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec<View>>> {
+fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std::path::PathBuf>, all_alpha: &mut bool) -> Result<Option<Vec<(View, String)>>> {
     let path = root.join(format!("transforms_{split}.json"));
     if !path.is_file() {
         return Ok(None);
     }
     let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?;
+    files.push(path.clone());
     let tf: Transforms = serde_json::from_str(&quote_non_finite(&text)).with_context(|| format!("{}: not a valid transforms file", path.display()))?;
     let opt = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose().with_context(|| path.display().to_string());
     let (fl_x, fl_y, cx, cy) = (opt(&tf.fl_x, "fl_x")?, opt(&tf.fl_y, "fl_y")?, opt(&tf.cx, "cx")?, opt(&tf.cy, "cy")?);
@@ -159,8 +221,13 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
             }
         }
         check_rigid(&m).with_context(what)?;
-        let img_path = resolve(root, &f.file_path, "png");
-        let image = read_rgb(&img_path, opts.background).with_context(what)?;
+        if let Some(j) = tf.frames[..i].iter().position(|g| g.file_path == f.file_path) {
+            bail!("{}: file_path '{}' is given twice (frames {j} and {i}): each image must be one frame", path.display(), f.file_path);
+        }
+        let img_path = resolve(root, &f.file_path, "png").with_context(what)?;
+        files.push(img_path.clone());
+        let (image, alpha) = read_rgb_alpha(&img_path, opts.background).with_context(what)?;
+        *all_alpha &= alpha;
         let (w, h) = (image.width, image.height);
         let image = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
         let fx = match (fl_x, angle_x) {
@@ -175,9 +242,11 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
         let cy = cy.unwrap_or(0.5 * h as f64) - 0.5;
         let cam = Camera { width: w, height: h, fx: fx as f32, fy: fy as f32, cx: cx as f32, cy: cy as f32, world_to_view: gl_c2w_to_w2v(&m) };
         cam.validate().with_context(what)?;
+        super::check_field_of_view(&cam).with_context(what)?;
         let normals = match &f.normal_path {
             Some(p) => {
-                let np = resolve(root, p, "npy");
+                let np = resolve(root, p, "npy").with_context(what)?;
+                files.push(np.clone());
                 let n = read_normals(&np).with_context(what)?;
                 if (n.width, n.height) != (w, h) {
                     bail!("{}: normals are {}x{} but the image is {w}x{h}", np.display(), n.width, n.height);
@@ -188,7 +257,8 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
         };
         let mask = match &f.mask_path {
             Some(p) => {
-                let mp = resolve(root, p, "png");
+                let mp = resolve(root, p, "png").with_context(what)?;
+                files.push(mp.clone());
                 let (mw, mh, m) = read_mask(&mp).with_context(what)?;
                 if (mw, mh) != (w, h) {
                     bail!("{}: mask is {mw}x{mh} but the image is {w}x{h}", mp.display());
@@ -198,7 +268,7 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions) -> Result<Option<Vec
             None => None,
         };
         let name = Path::new(&f.file_path).file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| format!("{split}_{i}"));
-        views.push(View { name, camera: downscale_camera(&cam, opts.downscale), image, normals, mask });
+        views.push((View { name, camera: downscale_camera(&cam, opts.downscale), image, normals, mask }, img_path.to_string_lossy().into_owned()));
     }
     Ok(Some(views))
 }

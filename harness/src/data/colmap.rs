@@ -59,6 +59,11 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     if images.is_empty() {
         bail!("{}: the model has no images", dir.display());
     }
+    if let Some(w) = images.windows(2).find(|w| w[0].name == w[1].name) {
+        bail!("{}: image '{}' is in the model twice (image ids {} and {}): each image must have one pose", dir.display(), w[0].name, w[0].id, w[1].id);
+    }
+    let ext = if dir.join("cameras.bin").is_file() { "bin" } else { "txt" };
+    let mut files: Vec<std::path::PathBuf> = ["cameras", "images", "points3D"].iter().map(|n| dir.join(format!("{n}.{ext}"))).filter(|p| p.is_file()).collect();
     let scaled_dir = root.join(format!("images_{}", opts.downscale));
     let (img_dir, prescaled) = if opts.downscale > 1 && scaled_dir.is_dir() { (scaled_dir, true) } else { (root.join("images"), false) };
     let mut train = Vec::new();
@@ -66,8 +71,10 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     for (i, im) in images.iter().enumerate() {
         let cc = cams.get(&im.camera_id).with_context(|| format!("{}: image '{}' refers to camera {} which is not in the model", dir.display(), im.name, im.camera_id))?;
         let cam = to_camera(cc, im).with_context(|| format!("{}: image '{}'", dir.display(), im.name))?;
+        super::check_field_of_view(&cam).with_context(|| format!("{}: image '{}' (camera {})", dir.display(), im.name, cc.id))?;
         let path = img_dir.join(&im.name);
         let image = read_rgb(&path, opts.background)?;
+        files.push(path.clone());
         let (image, cam) = if prescaled {
             let want = downscale_camera(&cam, opts.downscale);
             if (image.width, image.height) != (want.width, want.height) {
@@ -87,7 +94,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
             train.push(view);
         }
     }
-    Ok(Dataset { root: root.to_path_buf(), format: "colmap", train, test, points: Some(points), background: opts.background })
+    Ok(Dataset { root: root.to_path_buf(), format: "colmap", train, test, points: Some(points), background: opts.background, files, warnings: Vec::new() })
 }
 
 /// Our camera from a COLMAP camera and image pose.

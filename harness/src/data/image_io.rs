@@ -76,6 +76,11 @@ impl ImageF {
 
 /// An 8-bit PNG as RGB in [0, 1]; RGBA is composited on `background`.
 pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<ImageF> {
+    Ok(read_rgb_alpha(path, background)?.0)
+}
+
+/// [`read_rgb`], and whether the file had an alpha channel.
+pub fn read_rgb_alpha(path: &Path, background: [f32; 3]) -> Result<(ImageF, bool)> {
     let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?;
     let rgba = img.to_rgba32f();
     let has_alpha = img.color().has_alpha();
@@ -90,7 +95,22 @@ pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<ImageF> {
             out.data[3 * i + k] = px.0[k] * a + background[k] * (1.0 - a);
         }
     }
-    Ok(out)
+    Ok((out, has_alpha))
+}
+
+/// The mean colour of an image's one-pixel border and the largest
+/// deviation of a border pixel from it (any channel).
+pub fn border_colour(img: &ImageF) -> ([f32; 3], f32) {
+    let (w, h, c) = (img.width as usize, img.height as usize, img.channels as usize);
+    let idx: Vec<usize> = (0..h).flat_map(|y| (0..w).filter(move |&x| y == 0 || y + 1 == h || x == 0 || x + 1 == w).map(move |x| y * w + x)).collect();
+    let mut mean = [0f32; 3];
+    for &i in &idx {
+        for k in 0..3 {
+            mean[k] += img.data[c * i + k.min(c - 1)] / idx.len() as f32;
+        }
+    }
+    let spread = idx.iter().flat_map(|&i| (0..3).map(move |k| (i, k))).map(|(i, k)| (img.data[c * i + k.min(c - 1)] - mean[k]).abs()).fold(0f32, f32::max);
+    (mean, spread)
 }
 
 /// An 8-bit mask (grey or the first channel): true where the value is >= 128.

@@ -5,6 +5,7 @@
 
 pub mod blender;
 pub mod colmap;
+pub mod fingerprint;
 pub mod image_io;
 
 use anyhow::{bail, Result};
@@ -40,6 +41,11 @@ pub struct Dataset {
     pub test: Vec<View>,
     pub points: Option<Points>,
     pub background: [f32; 3],
+    /// Every file the load read (its [`fingerprint::Fingerprint`]'s list).
+    pub files: Vec<PathBuf>,
+    /// What the load found suspicious but not wrong (a backdrop that is
+    /// not the background, skipped points), for the commands to show.
+    pub warnings: Vec<String>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,6 +77,8 @@ impl Dataset {
             blender::load(root, opts)?
         } else if colmap::find_model(root).is_some() {
             colmap::load(root, opts)?
+        } else if let Some(d) = [root.join("sparse/0"), root.join("sparse")].into_iter().find(|d| d.is_dir()) {
+            bail!("{}: a COLMAP model directory without cameras.txt or cameras.bin (it needs cameras, images and optionally points3D, as .txt or .bin)", d.display());
         } else {
             bail!("{}: neither transforms_train.json (Blender layout) nor sparse/0 or sparse/ (COLMAP) found", root.display());
         };
@@ -78,6 +86,11 @@ impl Dataset {
             bail!("{}: the training split is empty", root.display());
         }
         Ok(ds)
+    }
+
+    /// The fingerprint of the files the load read.
+    pub fn fingerprint(&self) -> Result<fingerprint::Fingerprint> {
+        fingerprint::Fingerprint::of(&self.root, &self.files)
     }
 
     /// Scene extent (method-notes §1.12): 1.1 x the largest distance of a
@@ -94,6 +107,29 @@ impl Dataset {
         let far = centres.iter().map(|c| (0..3).map(|k| (c[k] - mean[k]).powi(2)).sum::<f32>().sqrt()).fold(0.0f32, f32::max);
         (1.1 * far.max(1e-6), mean)
     }
+}
+
+/// The narrowest field of view a dataset camera may have: focal lengths
+/// up to 10^4 times the image size (0.0057°; a 2,000 mm lens on a full
+/// frame sensor is 1.2°). A larger one is a unit or parse error (degrees
+/// for radians, a focal length in mm for one in pixels), and would train
+/// on a scene squeezed into a line of sight.
+pub const MAX_FOCAL_PER_PIXEL: f32 = 1e4;
+
+/// Refuse a camera whose field of view is implausibly narrow.
+pub fn check_field_of_view(cam: &Camera) -> Result<()> {
+    let (rx, ry) = (cam.fx / cam.width as f32, cam.fy / cam.height as f32);
+    if rx > MAX_FOCAL_PER_PIXEL || ry > MAX_FOCAL_PER_PIXEL {
+        bail!(
+            "focal length {} x {} px on a {}x{} image: a field of view under {:.4}°, implausibly narrow (check camera_angle_x / fl_x units: radians and pixels)",
+            cam.fx,
+            cam.fy,
+            cam.width,
+            cam.height,
+            2.0 * (0.5 / MAX_FOCAL_PER_PIXEL).atan().to_degrees()
+        );
+    }
+    Ok(())
 }
 
 /// Scale a camera's intrinsics for an image downscaled by `factor` (pixel

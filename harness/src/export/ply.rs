@@ -169,7 +169,10 @@ pub fn write_points(path: &Path, pts: &Points) -> Result<()> {
 
 /// Read x, y, z and (if present) red, green, blue from a binary PLY point
 /// cloud (float or double positions, uchar colours, other properties skipped).
-pub fn read_points(path: &Path) -> Result<Points> {
+/// Points from a PLY (x, y, z and optional red, green, blue); points with a
+/// NaN or infinite coordinate are skipped, and the second value says how
+/// many (a file of nothing else is an error).
+pub fn read_points(path: &Path) -> Result<(Points, usize)> {
     let (props, n, bytes, start) = read_vertices(path)?;
     let body = &bytes[start..];
     let stride: usize = props.iter().map(|p| p.size).sum();
@@ -186,6 +189,7 @@ pub fn read_points(path: &Path) -> Result<Points> {
     let xyz: Vec<(usize, &str)> = ["x", "y", "z"].iter().map(|a| find(a).with_context(|| format!("{}: no '{a}' property", path.display()))).collect::<Result<_>>()?;
     let rgb: Option<Vec<(usize, &str)>> = ["red", "green", "blue"].iter().map(|a| find(a)).collect();
     let mut pts = Points::default();
+    let mut skipped = 0usize;
     for i in 0..n {
         let row = &body[i * stride..(i + 1) * stride];
         let read = |(off, ty): (usize, &str)| -> f32 {
@@ -197,6 +201,7 @@ pub fn read_points(path: &Path) -> Result<Points> {
         };
         let p = [read(xyz[0]), read(xyz[1]), read(xyz[2])];
         if !p.iter().all(|v| v.is_finite()) {
+            skipped += 1;
             continue;
         }
         pts.positions.push(p);
@@ -205,7 +210,10 @@ pub fn read_points(path: &Path) -> Result<Points> {
             None => [0.5; 3],
         });
     }
-    Ok(pts)
+    if skipped > 0 && pts.positions.is_empty() {
+        bail!("{}: all {n} points have NaN or infinite coordinates", path.display());
+    }
+    Ok((pts, skipped))
 }
 
 /// The reflection set as a splat PLY: colour = f0 (as SH DC, so viewers show

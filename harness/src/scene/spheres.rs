@@ -166,7 +166,7 @@ pub fn dataset(spec: &SpheresSpec) -> Result<Dataset> {
     let views = |test: bool| -> Vec<View> {
         split(spec, test).into_iter().map(|(stem, c2w, image)| View { name: stem.rsplit('/').next().unwrap_or(&stem).to_string(), camera: camera(spec, &c2w), image, normals: None, mask: None }).collect()
     };
-    Ok(Dataset { root: "spheres (in memory)".into(), format: "spheres", train: views(false), test: views(true), points: Some(points(spec.points, 3)), background: [0.0; 3] })
+    Ok(Dataset { root: "spheres (in memory)".into(), format: "spheres", train: views(false), test: views(true), points: Some(points(spec.points, 3)), background: [0.0; 3], files: Vec::new(), warnings: Vec::new() })
 }
 
 /// Write the scene in the Blender layout (RGB PNGs on black, transforms,

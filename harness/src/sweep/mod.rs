@@ -23,7 +23,10 @@
 //! are redrawn with the Pareto front marked. Running the same command again
 //! resumes: finished runs (in the CSV) are kept, an interrupted run is
 //! trained again from the start (so every wall time is one uninterrupted
-//! run's), the rest follow.
+//! run's), the rest follow. Each row is keyed by its run's complete
+//! settings and the dataset's fingerprint (the `key` column): a row whose
+//! key no longer matches (the base, preset, a default or the dataset
+//! changed) is dropped and its run trained again.
 
 mod plot;
 
@@ -157,6 +160,8 @@ fn dir_name(name: &str) -> String {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Row {
     pub name: String,
+    /// The run's complete settings and the dataset's fingerprint, hashed.
+    pub key: String,
     pub settings: BTreeMap<String, String>,
     pub wall_s: f64,
     pub gpu_ms_per_iteration: f64,
@@ -172,7 +177,7 @@ pub struct Row {
 const STAGES: [&str; 3] = ["I", "II", "III"];
 
 impl Row {
-    fn from_metrics(name: &str, settings: BTreeMap<String, String>, m: &serde_json::Value) -> Result<Row> {
+    fn from_metrics(name: &str, key: &str, settings: BTreeMap<String, String>, m: &serde_json::Value) -> Result<Row> {
         let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
         let gpu = m["gpu_ms_per_iteration"].as_object().map(|k| k.iter().filter(|(n, _)| !crate::bench::nested_scope(n)).map(|(_, v)| f(v)).sum()).unwrap_or(f64::NAN);
         let mut stages = BTreeMap::new();
@@ -183,6 +188,7 @@ impl Row {
         let t = &m["test"];
         Ok(Row {
             name: name.into(),
+            key: key.into(),
             settings,
             wall_s: f(&m["train_wall_s"]),
             gpu_ms_per_iteration: gpu,
@@ -196,7 +202,7 @@ impl Row {
 }
 
 fn header(keys: &[String]) -> Vec<String> {
-    let mut h = vec!["run".to_string()];
+    let mut h = vec!["run".to_string(), "key".to_string()];
     h.extend(keys.iter().cloned());
     h.extend(["wall_s", "gpu_ms_per_iteration", "total_iterations", "psnr", "ssim", "normal_mae_deg"].map(String::from));
     for s in STAGES {
@@ -224,7 +230,7 @@ fn field(s: &str) -> String {
 }
 
 fn csv_line(r: &Row, keys: &[String]) -> String {
-    let mut v = vec![field(&r.name)];
+    let mut v = vec![field(&r.name), field(&r.key)];
     v.extend(keys.iter().map(|k| field(r.settings.get(k).map(String::as_str).unwrap_or(""))));
     v.extend([num(r.wall_s), num(r.gpu_ms_per_iteration), r.iterations.to_string(), num(r.psnr), num(r.ssim), num(r.normal_mae_deg)]);
     for s in STAGES {
@@ -264,7 +270,7 @@ fn read_csv(path: &Path, keys: &[String]) -> Result<Vec<Row>> {
     let mut lines = text.lines();
     let want = header(keys);
     if lines.next().map(split_csv) != Some(want.clone()) {
-        bail!("{}: written by another grid (its columns differ); use another --out or remove it", path.display());
+        bail!("{}: written by another grid or an older tgs (its columns differ); use another --out or move it away", path.display());
     }
     let p = |s: &String| s.parse::<f64>().unwrap_or(f64::NAN);
     let mut rows = Vec::new();
@@ -273,9 +279,9 @@ fn read_csv(path: &Path, keys: &[String]) -> Result<Vec<Row>> {
         if v.len() != want.len() {
             bail!("{}: line {} has {} fields, expected {}", path.display(), i + 2, v.len(), want.len());
         }
-        let k = keys.len();
-        let mut r = Row { name: v[0].clone(), ..Default::default() };
-        r.settings = keys.iter().cloned().zip(v[1..=k].iter().cloned()).filter(|(_, s)| !s.is_empty()).collect();
+        let k = keys.len() + 1;
+        let mut r = Row { name: v[0].clone(), key: v[1].clone(), ..Default::default() };
+        r.settings = keys.iter().cloned().zip(v[2..=k].iter().cloned()).filter(|(_, s)| !s.is_empty()).collect();
         (r.wall_s, r.gpu_ms_per_iteration) = (p(&v[k + 1]), p(&v[k + 2]));
         r.iterations = v[k + 3].parse().unwrap_or(0);
         (r.psnr, r.ssim, r.normal_mae_deg) = (p(&v[k + 4]), p(&v[k + 5]), p(&v[k + 6]));
@@ -327,6 +333,15 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
     let dataset = crate::train::run::dataset_dir(&TrainArgs { dataset: a.dataset.clone(), out: a.out.clone(), ..Default::default() }, a.quiet)?;
     let csv = a.out.join("sweep.csv");
     let mut rows = read_csv(&csv, &keys)?;
+    // Each run's key: its complete settings and the dataset's fingerprint.
+    let base_cfg = grid.config(&[])?;
+    let digest = crate::train::run::load_dataset(&dataset, &base_cfg)?.fingerprint()?.digest();
+    let run_keys: Vec<String> = runs.iter().map(|(_, s)| Ok(run_key(&toml::to_string(&grid.config(s)?)?, digest))).collect::<Result<_>>()?;
+    let before = rows.len();
+    rows.retain(|r| runs.iter().zip(&run_keys).any(|((n, _), k)| &r.name == n && &r.key == k));
+    if rows.len() < before && !a.quiet {
+        eprintln!("sweep: {} row(s) of {} were trained with other settings or another dataset (the base, preset, defaults or data changed): dropped, their runs train again", before - rows.len(), csv.display());
+    }
     let mut trained = 0;
     for (i, (name, set)) in runs.iter().enumerate() {
         if rows.iter().any(|r| &r.name == name) {
@@ -347,7 +362,7 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         }
         let m: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).with_context(|| format!("{}: no metrics.json", dir.display()))?)?;
         let settings = set.iter().map(|(k, v)| (k.clone(), plain(v))).collect();
-        rows.push(Row::from_metrics(name, settings, &m)?);
+        rows.push(Row::from_metrics(name, &run_keys[i], settings, &m)?);
         trained += 1;
         write_csv(&csv, &rows, &keys)?;
         plot::draw(&a.out, &rows)?;
@@ -358,6 +373,12 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         plot::draw(&a.out, &rows)?;
     }
     Ok(SweepOutcome { rows, trained, interrupted: false })
+}
+
+/// A run's key: FNV-1a over its settings (TOML) and the dataset digest.
+fn run_key(settings_toml: &str, dataset_digest: u64) -> String {
+    use crate::data::fingerprint::{fnv1a, FNV_START};
+    format!("{:016x}", fnv1a(fnv1a(FNV_START, settings_toml.as_bytes()), &dataset_digest.to_le_bytes()))
 }
 
 /// Indices of the rows on the Pareto front of (wall time down, `score` up):

@@ -15,9 +15,22 @@ pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
     apply_args(cfg, a)
 }
 
-/// Overlay the config file, `--set`, `--downscale`, `--background` and
-/// `--iterations` (in that order) on `cfg`.
+/// Overlay the config file, `--set`, `--stages`, `--downscale`,
+/// `--background` and `--iterations` on `cfg`. A key given both by `--set`
+/// and by its own flag is refused: there is no order to remember.
 pub(crate) fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainConfig> {
+    let flags = [
+        ("iterations", a.iterations.is_some(), "--iterations"),
+        ("stages", a.stages.is_some(), "--stages"),
+        ("downscale", a.downscale.is_some(), "--downscale"),
+        ("background", a.background.is_some(), "--background"),
+    ];
+    for kv in &a.set {
+        let key = kv.split_once('=').map(|(k, _)| k.trim()).unwrap_or("");
+        if let Some((_, _, flag)) = flags.iter().find(|(k, given, _)| *given && *k == key) {
+            bail!("--set {kv} and {flag} both set '{key}': give one of them");
+        }
+    }
     if let Some(p) = &a.config {
         cfg.merge_toml_file(p)?;
     }

@@ -1,12 +1,18 @@
 //! Checkpoints: everything a run needs to continue bit-identically (the
 //! parameters, Adam moments, densification statistics, iteration, generator
 //! state and the remaining view order), written atomically (temp file, then
-//! rename). Layout: `TGSCKPT1`, u32 header length, JSON header, then the
-//! arrays as little-endian f32 in header order.
+//! rename). Layout: `TGSCKPT2`, u32 header length, JSON header, the
+//! header's CRC-32 (u32), then each array as little-endian f32 in header
+//! order followed by its CRC-32. A checksum that does not match is refused,
+//! naming the header or the array. The header records the dataset's
+//! fingerprint and the run's identity: a checkpoint restored on a dataset
+//! that changed is refused, saying what changed. (`TGSCKPT1` files, from
+//! before the checksums, are still read.)
 
 use super::config::TrainConfig;
 use super::rng::Rng;
 use super::trainer::Trainer;
+use crate::data::fingerprint::Fingerprint;
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
@@ -15,7 +21,29 @@ use std::sync::Arc;
 use tgs_engine::Context;
 use tgs_pipelines::{HostGaussians, TrainableSet};
 
-const MAGIC: &[u8; 8] = b"TGSCKPT1";
+const MAGIC: &[u8; 8] = b"TGSCKPT2";
+const MAGIC_V1: &[u8; 8] = b"TGSCKPT1";
+
+/// Who wrote a checkpoint: the run (an id made when it started, kept by
+/// `--resume`, new for `--from`) and the dataset as it was then.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Identity {
+    pub run_id: String,
+    pub fingerprint: Fingerprint,
+}
+
+/// A new run's id: the time and the process, hashed (unique per run
+/// directory in practice; it only has to tell two runs apart).
+pub fn new_run_id() -> String {
+    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
+    let mut h = crc32fast::Hasher::new();
+    h.update(&t.to_le_bytes());
+    h.update(&std::process::id().to_le_bytes());
+    let a = h.finalize();
+    h = crc32fast::Hasher::new_with_initial(a);
+    h.update(&t.to_be_bytes());
+    format!("{:08x}{:08x}", a, h.finalize())
+}
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Header {
@@ -30,6 +58,10 @@ pub struct Header {
     pub coeffs: u32,
     pub extent: f32,
     pub arrays: Vec<(String, usize)>,
+    /// The run and its dataset's fingerprint (absent in checkpoints from
+    /// before they were recorded).
+    #[serde(default)]
+    pub identity: Option<Identity>,
     /// Stage II's state, when the run is in Stage II: its arrays follow the
     /// scattering set's (reflection set in `TrainableSet::layout` order with
     /// the prefix `refl.`, then the cube map's).
@@ -104,7 +136,7 @@ pub struct ReflHeader {
     pub arrays: Vec<(String, usize)>,
 }
 
-pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
+pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Result<()> {
     let set = &tr.scattering.set;
     let n = set.len() as usize;
     let arrays = set.arrays();
@@ -119,6 +151,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
         coeffs: set.params.coeffs,
         extent: tr.extent,
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
+        identity: Some(identity.clone()),
         reflection: None,
         light_field: None,
     };
@@ -159,13 +192,13 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str) -> Result<()> {
         f.write_all(MAGIC)?;
         f.write_all(&(json.len() as u32).to_le_bytes())?;
         f.write_all(&json)?;
-        for (_, buf, w) in &arrays {
-            let data = buf.download_range(0, w * n)?;
-            f.write_all(bytemuck::cast_slice(&data))?;
-        }
-        for (buf, len) in &refl_arrays {
-            let data = buf.download_range(0, *len)?;
-            f.write_all(bytemuck::cast_slice(&data))?;
+        f.write_all(&crc32fast::hash(&json).to_le_bytes())?;
+        let bufs = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).chain(refl_arrays.iter().map(|(b, l)| (*b, *l)));
+        for (buf, len) in bufs {
+            let data = buf.download_range(0, len)?;
+            let bytes: &[u8] = bytemuck::cast_slice(&data);
+            f.write_all(bytes)?;
+            f.write_all(&crc32fast::hash(bytes).to_le_bytes())?;
         }
         Ok(())
     })
@@ -186,19 +219,34 @@ fn push_reflection_set<'a>(set: &'a TrainableSet, names: &mut Vec<(String, usize
 pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read the checkpoint", path.display()))?;
     let bad = |what: &str| anyhow::anyhow!("{}: not a tgs checkpoint or corrupt ({what})", path.display());
-    if bytes.len() < 12 || &bytes[..8] != MAGIC {
+    if bytes.len() < 12 || (&bytes[..8] != MAGIC && &bytes[..8] != MAGIC_V1) {
         return Err(bad("magic"));
     }
+    // Version 2 has a CRC-32 after the header and after every array.
+    let sums = &bytes[..8] == MAGIC;
+    let crc_at = |at: usize| -> Option<u32> { bytes.get(at..at + 4).map(|b| u32::from_le_bytes(b.try_into().unwrap())) };
     let hlen = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
     let hbytes = 12usize.checked_add(hlen).and_then(|end| bytes.get(12..end)).ok_or_else(|| bad("header length"))?;
-    let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut at = 12 + hlen;
+    if sums {
+        if crc_at(at) != Some(crc32fast::hash(hbytes)) {
+            return Err(bad("the header's checksum does not match: the file was damaged"));
+        }
+        at += 4;
+    }
+    let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut arrays = Vec::new();
     let refl = header.reflection.iter().flat_map(|r| r.arrays.iter()).chain(header.light_field.iter().flat_map(|l| l.arrays.iter()));
     for (name, len) in header.arrays.iter().chain(refl) {
         let b = len.checked_mul(4).and_then(|n| at.checked_add(n)).and_then(|end| bytes.get(at..end)).ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
-        arrays.push(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect());
         at += 4 * len;
+        if sums {
+            if crc_at(at) != Some(crc32fast::hash(b)) {
+                return Err(bad(&format!("array {name}'s checksum does not match: the file was damaged")));
+            }
+            at += 4;
+        }
+        arrays.push(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect());
     }
     if at != bytes.len() {
         return Err(bad("trailing bytes"));
@@ -246,6 +294,12 @@ fn upload_set(set: &TrainableSet, arrays: &[Vec<f32>]) -> Result<()> {
 /// have exactly the length its header's Gaussian count implies.
 pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f32>>), data: &Dataset) -> Result<Trainer> {
     let bad = |what: String| anyhow::anyhow!("{}: corrupt checkpoint ({what})", path.display());
+    if let Some(id) = &h.identity {
+        let now = data.fingerprint()?;
+        if let Some(c) = id.fingerprint.changes(&now) {
+            bail!("{}: the dataset {} changed since this checkpoint was written: {c}; the run cannot continue on other data (train a new run)", path.display(), data.root.display());
+        }
+    }
     h.config.validate().map_err(|e| bad(format!("settings: {e:#}")))?;
     let k = (h.config.sh_degree + 1).pow(2);
     if h.channels != 3 || h.coeffs != k {

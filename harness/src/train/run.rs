@@ -13,6 +13,7 @@ use super::config::{paper_schedule_note, TrainConfig};
 use super::trainer::Trainer;
 use crate::data::{Dataset, LoadOptions};
 use crate::eval::{evaluate, Metrics};
+use crate::outdir::OutDir;
 use crate::export::atomic_write;
 use crate::data::image_io::{write_exr, write_png, ImageF};
 use crate::export::ply::{write_reflection_splats, write_splats};
@@ -35,6 +36,31 @@ pub const CHECKPOINT: &str = "checkpoint.bin";
 pub const STAGE_ONE_CHECKPOINT: &str = "checkpoint-stage1.bin";
 pub const STAGE_TWO_CHECKPOINT: &str = "checkpoint-stage2.bin";
 pub const DEFAULT_SCENE: &str = "glass";
+/// The run's identity (its id and dataset), written when it starts: a
+/// `--resume` whose checkpoint.bin names another run is refused.
+pub const RUN_RECORD: &str = "run.json";
+
+/// Every file a run writes directly into its directory (renders and
+/// residual maps go into directories of their own). A new run claims them
+/// all in the directory's `.tgs-written` before it starts, so a directory
+/// holding a file of these names that tgs did not write is refused.
+pub const RUN_FILES: [&str; 15] = [
+    RUN_RECORD,
+    "config.toml",
+    "log.jsonl",
+    CHECKPOINT,
+    STAGE_ONE_CHECKPOINT,
+    STAGE_TWO_CHECKPOINT,
+    "checkpoint-nonfinite.bin",
+    super::clock::CLOCK_FILE,
+    "stages.json",
+    "point_cloud.ply",
+    "reflection.ply",
+    "light_field.safetensors",
+    "envmap.exr",
+    "envmap.png",
+    "metrics.json",
+];
 
 #[derive(Clone, Debug, Default)]
 pub struct TrainArgs {
@@ -115,7 +141,17 @@ pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
     Dataset::load(dir, &opts)
 }
 
+/// The dataset's warnings on stderr (unless quiet).
+fn show_warnings(data: &Dataset, quiet: bool) {
+    if !quiet {
+        for w in &data.warnings {
+            eprintln!("tgs: warning: {w}");
+        }
+    }
+}
+
 pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
+    crate::outdir::refuse_dataset(&a.out, a.dataset.as_deref())?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
     let ckpt = a.out.join(CHECKPOINT);
     let start = Instant::now();
@@ -127,7 +163,13 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     if !a.resume && ckpt.is_file() {
         bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
     }
-    let (mut tr, data, dataset_str) = if a.resume {
+    if !a.resume {
+        let mut dir = OutDir::open(&a.out, a.dataset.as_deref())?;
+        for f in RUN_FILES {
+            dir.file(f)?;
+        }
+    }
+    let (mut tr, data, dataset_str, identity) = if a.resume {
         if !ckpt.is_file() {
             bail!("{}: no checkpoint to resume from", ckpt.display());
         }
@@ -140,8 +182,13 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
                 bail!("--resume continues the run on its own dataset {}; {} was given (leave it out, or start a new run with another --out)", dir.display(), given.display());
             }
         }
+        check_run_record(&a.out, &h)?;
         let data = load_dataset(&dir, &h.config)?;
         let dataset = h.dataset.clone();
+        let identity = match &h.identity {
+            Some(id) => id.clone(),
+            None => checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? },
+        };
         let h_stage1 = h.config.iterations;
         let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
         let total = super::trainer::Schedule::from_config(&cfg).total();
@@ -154,11 +201,12 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         tr.cfg = cfg;
         tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
         truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
-        (tr, data, dataset)
+        (tr, data, dataset, identity)
     } else if let Some(run) = &a.from {
         let (tr, data, dataset, kept) = start_from(ctx, a, run)?;
         from_record = kept;
-        (tr, data, dataset)
+        let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
+        (tr, data, dataset, identity)
     } else {
         let cfg = config_from_args(a)?;
         let dir = dataset_dir(a, a.quiet)?;
@@ -166,8 +214,14 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let tr = Trainer::new(ctx, cfg, &data)?;
         // Absolute, so that --resume, eval and render work from any directory.
         let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
-        (tr, data, abs.to_string_lossy().into_owned())
+        let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
+        (tr, data, abs.to_string_lossy().into_owned(), identity)
     };
+    if !a.resume || !a.out.join(RUN_RECORD).is_file() {
+        let rec = json!({"run_id": identity.run_id, "dataset": dataset_str, "dataset_files": identity.fingerprint.files.len(), "dataset_digest": format!("{:016x}", identity.fingerprint.digest())});
+        atomic_write(&a.out.join(RUN_RECORD), serde_json::to_string_pretty(&rec)?.as_bytes())?;
+    }
+    show_warnings(&data, a.quiet);
     atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
     install_signal_handler();
     INTERRUPTED.store(false, Ordering::SeqCst);
@@ -210,7 +264,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let mut clocks = Clocks::new(start, before);
     // checkpoint.bin and, beside it, the clocks at its iteration.
     let save_run = |tr: &Trainer, clocks: &Clocks| -> Result<()> {
-        checkpoint::save(tr, &ckpt, &dataset_str)?;
+        checkpoint::save(tr, &ckpt, &dataset_str, &identity)?;
         clocks.save(&a.out, tr.iteration)
     };
     // Set when a skipped Stage II closed the last stage for good.
@@ -223,14 +277,14 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             // Not on a resume inside Stage II (the cache is rebuilt then),
             // nor as Stage II begins again (reflection.reseed).
             if tr.reflection.is_none() && first_round {
-                checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str)?;
+                checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str, &identity)?;
             }
             let prev = tr.schedule.label(entry.saturating_sub(1));
             let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
             Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin", "reflection": tr.decision})))
         } else if tr.at_light_field_start() {
             if first_round {
-                checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str)?;
+                checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str, &identity)?;
             }
             let prev = tr.schedule.label(entry.saturating_sub(1));
             let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
@@ -253,7 +307,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         let r = tr.step(a.profile)?;
         if !r.loss.is_finite() {
-            checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str)?;
+            checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str, &identity)?;
             bail!("iteration {}: the loss is {} (state saved to checkpoint-nonfinite.bin)", r.iteration, r.loss);
         }
         first_loss.get_or_insert(r.loss);
@@ -331,7 +385,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         write_exr(&a.out.join("envmap.exr"), &img)?;
         write_png(&a.out.join("envmap.png"), &img)?;
     }
-    let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&a.out.join("renders/test")))?) };
+    let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?) };
     if !last_closed {
         let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
         stages.retain(|s| s["stage"] != last_stage.as_str());
@@ -406,7 +460,7 @@ fn renders_dir(label: &str) -> String {
 /// it came from); the test metrics are re-measured.
 fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str, renders: &str) -> Result<()> {
     let dir = out.join("renders").join(renders);
-    let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&dir))?) };
+    let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&mut OutDir::open(&dir, Some(&data.root))?))?) };
     let from = stages.iter().find(|s| s["stage"] == stage && s.get("from").is_some()).cloned();
     stages.retain(|s| s["stage"] != stage);
     let mut rec = stage_record(stage, tr, clock.stage_s(), m.as_ref());
@@ -431,7 +485,7 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
     }
     // The second round's residual (reflection.reseed) beside the first's.
     let dir = out.join(if reseed { "residual/round2" } else { "residual" });
-    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let mut maps = OutDir::open(&dir, Some(&data.root))?;
     let names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
     let d = tr.begin_reflection(|i, cam, r| {
         if resumed {
@@ -439,10 +493,10 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
         }
         let n = (cam.width * cam.height) as usize;
         let name = &names[i];
-        write_exr(&dir.join(format!("{name}.exr")), &ImageF::from_planar(cam.width, cam.height, 3, &r[..3 * n]))?;
+        write_exr(&maps.file(&format!("{name}.exr"))?, &ImageF::from_planar(cam.width, cam.height, 3, &r[..3 * n]))?;
         // Heat map of mean |r|: 0 black, >= 0.25 white.
         let heat: Vec<f32> = r[3 * n..4 * n].iter().map(|v| v / 0.25).collect();
-        write_png(&dir.join(format!("{name}.png")), &ImageF { width: cam.width, height: cam.height, channels: 1, data: heat })
+        write_png(&maps.file(&format!("{name}.png"))?, &ImageF { width: cam.width, height: cam.height, channels: 1, data: heat })
     })?;
     Ok(if d.run {
         format!(
@@ -535,6 +589,26 @@ fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
         atomic_write(path, kept.as_bytes())?;
     }
     Ok(())
+}
+
+/// A `--resume`'s checkpoint must be this run directory's own: the run id
+/// in run.json (written when the run started) and the checkpoint's agree.
+fn check_run_record(out: &Path, h: &checkpoint::Header) -> Result<()> {
+    let path = out.join(RUN_RECORD);
+    let Ok(bytes) = std::fs::read(&path) else { return Ok(()) };
+    let rec: serde_json::Value = serde_json::from_slice(&bytes).with_context(|| format!("{}: not valid JSON", path.display()))?;
+    let mine = rec["run_id"].as_str().unwrap_or("");
+    match &h.identity {
+        Some(id) if id.run_id != mine => bail!(
+            "{}: the checkpoint belongs to another run (run {} on {}), not to this directory's run {mine} on {} ({}): a checkpoint cannot be moved between runs; train a new run",
+            out.join(CHECKPOINT).display(),
+            id.run_id,
+            h.dataset,
+            rec["dataset"].as_str().unwrap_or("?"),
+            path.display()
+        ),
+        _ => Ok(()),
+    }
 }
 
 /// Load a run directory's checkpoint with its dataset.
