@@ -65,7 +65,7 @@ fn sweep_tabulates_plots_and_resumes() {
     assert_eq!(o.rows[1].settings["iterations"], "40");
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
     assert_eq!(csv.lines().count(), 4);
-    assert!(csv.starts_with("run,iterations,light_field.threshold,wall_s,gpu_ms_per_iteration,total_iterations,psnr,"), "{csv}");
+    assert!(csv.starts_with("run,key,iterations,light_field.threshold,wall_s,gpu_ms_per_iteration,total_iterations,psnr,"), "{csv}");
     for p in ["psnr_vs_time.png", "normal_mae_vs_time.png"] {
         let img = image::open(out.join(p)).unwrap_or_else(|e| panic!("{p}: {e}"));
         assert_eq!((img.width(), img.height()), (960, 640));
