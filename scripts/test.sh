@@ -19,7 +19,7 @@ echo "== the whole suite took $(( $(date +%s) - s )) s"
 # same code; a second pass of them at width 4 found nothing the kernel
 # suites do not (perf/RESULTS.md, CI profile) and cost over half of CI.
 # On other devices LP_NATIVE_VECTOR_WIDTH does nothing and this is a rerun.
-KERNEL_SUITES=(engine sort scan raster raster_hard loss loss_hf mlp lightfield reflection train_kernels train_step)
+KERNEL_SUITES=(engine sort scan raster raster_hard loss loss_hf mlp lightfield reflection env_init train_kernels train_step)
 args=()
 for t in "${KERNEL_SUITES[@]}"; do args+=(--test "$t"); done
 echo "== kernel suites again with LP_NATIVE_VECTOR_WIDTH=128 (lavapipe subgroup size 4)"
