@@ -50,6 +50,16 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     out
 }
 
+/// A scratch directory `name` with a private dataset and, in `run`, a
+/// 12-iteration Stage I run trained on it (call with the DRIVER lock held).
+fn trained_run(name: &str) -> (tgs_tests::TempDir, PathBuf, PathBuf) {
+    let base = tgs_tests::TempDir::created(name);
+    let ds = own_scene(&base);
+    let run = base.join("run");
+    train(ctx_shared(), &tiny_args(&ds, &run, 12)).unwrap();
+    (base, ds, run)
+}
+
 /// A 12-iteration Stage I run with a checkpoint.
 fn tiny_args(dataset: &Path, out: &Path, iterations: u32) -> TrainArgs {
     let set = ["stages=\"I\"", "background=\"black\"", "test_interval=0", "checkpoint_interval=0", "densify_from=1000"];
@@ -74,10 +84,7 @@ fn err<T>(r: anyhow::Result<T>) -> String {
 fn renders_never_go_into_a_dataset_or_over_other_files() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
-    let base = tgs_tests::TempDir::created("reliability-out");
-    let ds = own_scene(&base);
-    let run = base.join("run");
-    train(ctx, &tiny_args(&ds, &run, 12)).unwrap();
+    let (base, ds, run) = trained_run("reliability-out");
     let before = snapshot(&ds);
 
     // Into the dataset, its split directories or the dataset itself: refused with the path.
@@ -149,10 +156,7 @@ fn array_offsets(bytes: &[u8]) -> Vec<(String, usize, usize)> {
 fn damaged_checkpoints_are_refused_naming_the_part() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
-    let base = tgs_tests::TempDir::created("reliability-ckpt");
-    let ds = own_scene(&base);
-    let run = base.join("run");
-    train(ctx, &tiny_args(&ds, &run, 12)).unwrap();
+    let (base, ds, run) = trained_run("reliability-ckpt");
     let ck = run.join("checkpoint.bin");
     let good = std::fs::read(&ck).unwrap();
     assert_eq!(&good[..8], b"TGSCKPT2");
@@ -211,10 +215,7 @@ fn damaged_checkpoints_are_refused_naming_the_part() {
 fn resume_refuses_a_changed_dataset_and_another_runs_checkpoint() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
-    let base = tgs_tests::TempDir::created("reliability-resume");
-    let ds = own_scene(&base);
-    let run = base.join("run");
-    train(ctx, &tiny_args(&ds, &run, 12)).unwrap();
+    let (base, ds, run) = trained_run("reliability-resume");
     let resume = || train(ctx, &TrainArgs { resume: true, dataset: None, set: Vec::new(), ..tiny_args(&ds, &run, 14) });
 
     // One training image replaced (a pixel changed): refused, naming it.
