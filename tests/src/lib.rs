@@ -83,6 +83,19 @@ pub fn tiny_glass_scene(dir: &std::path::Path) -> std::path::PathBuf {
     dir.to_path_buf()
 }
 
+/// Copy the directory tree `from` to `to` (made if missing).
+pub fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &to.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+        }
+    }
+}
+
 /// A test's scratch directory, `<system temp>/tgs-<name>-<pid>`: emptied
 /// when made, removed when dropped (also when the test fails, as
 /// unwinding drops it), so test runs leave nothing behind.

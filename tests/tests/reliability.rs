@@ -20,20 +20,8 @@ static DRIVER: Mutex<()> = Mutex::new(());
 fn own_scene(base: &Path) -> PathBuf {
     let shared = tgs_tests::tiny_glass_scene(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("reliability-scene"));
     let dir = base.join("dataset");
-    copy_dir(&shared, &dir);
+    tgs_tests::copy_dir(&shared, &dir);
     dir
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &to.join(e.file_name()));
-        } else {
-            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
-        }
-    }
 }
 
 /// Every file under `dir` with its bytes.
@@ -98,7 +86,7 @@ fn renders_never_go_into_a_dataset_or_over_other_files() {
     assert!(e.contains("never writes into a dataset"), "{e}");
     // A dataset that is not the run's is recognised by its transforms.
     let other = base.join("other-dataset");
-    copy_dir(&ds, &other);
+    tgs_tests::copy_dir(&ds, &other);
     let e = err(tgs::render::render(ctx, &run, "test", 1, &other.join("test")));
     assert!(e.contains("never writes into a dataset"), "{e}");
     // Training into a dataset is refused before anything is written.
