@@ -535,3 +535,96 @@ fn scene_list_says_what_each_scene_is() {
     assert!(!diffuse.contains("glass sphere in") && diffuse.contains("without the glass"), "{diffuse}");
     assert!(lines.iter().find(|l| l.starts_with("glass ")).unwrap().contains("glass sphere"));
 }
+
+/// A JPEG of `w` x `h` (RGB, or grey when `grey`), quality 100, pixel (x, y)
+/// = `f(x, y)`; returns what the file decodes to (RGB in [0, 1]).
+fn jpeg(path: &Path, w: u32, h: u32, grey: bool, f: impl Fn(u32, u32) -> [u8; 3]) -> Vec<f32> {
+    let rgb: Vec<u8> = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).flat_map(|(x, y)| f(x, y)).collect();
+    let file = std::fs::File::create(path).unwrap();
+    let mut enc = image::codecs::jpeg::JpegEncoder::new_with_quality(file, 100);
+    if grey {
+        let l: Vec<u8> = rgb.chunks(3).map(|p| p[0]).collect();
+        enc.encode(&l, w, h, image::ExtendedColorType::L8).unwrap();
+    } else {
+        enc.encode(&rgb, w, h, image::ExtendedColorType::Rgb8).unwrap();
+    }
+    image::open(path).unwrap().to_rgb32f().into_raw()
+}
+
+/// Real captures are JPEG (Mip-NeRF 360, the NeRF-Casting scenes): a COLMAP
+/// model whose images are `.JPG` and `.jpg`, one of them grey, with a
+/// prescaled `images_2/` that `--downscale 2` reads; and a Blender frame
+/// whose `file_path` names a JPEG.
+#[test]
+fn jpeg_captures_load_in_both_layouts() {
+    let d = tmp("colmap-jpeg");
+    let model = d.join("sparse/0");
+    std::fs::create_dir_all(&model).unwrap();
+    std::fs::create_dir_all(d.join("images")).unwrap();
+    std::fs::create_dir_all(d.join("images_2")).unwrap();
+    std::fs::write(model.join("cameras.txt"), "1 PINHOLE 16 12 20 20 8 6\n").unwrap();
+    let names = ["IMG_0001.JPG", "IMG_0002.jpg", "IMG_0003.JPG"];
+    let mut text = String::new();
+    let mut full = Vec::new();
+    let mut half = Vec::new();
+    for (i, name) in names.iter().enumerate() {
+        text += &format!("{} 1 0 0 0 0 0 {} 1 {name}\n\n", i + 1, 4.0 + i as f64);
+        let grey = i == 2;
+        full.push(jpeg(&d.join("images").join(name), 16, 12, grey, |x, y| [(x * 15) as u8, (y * 20) as u8, 100 + 10 * i as u8]));
+        // The prescaled copy differs from a box filter of the full one, so
+        // the test sees which was read.
+        half.push(jpeg(&d.join("images_2").join(name), 8, 6, grey, |_, _| [200, 40 + 50 * i as u8, 90]));
+    }
+    std::fs::write(model.join("images.txt"), text).unwrap();
+    std::fs::write(model.join("points3D.txt"), "1 0 0 1 255 255 255 0.1\n").unwrap();
+
+    let ds = Dataset::load(&d, &LoadOptions { holdout: 0, ..Default::default() }).unwrap();
+    assert_eq!(ds.format, "colmap");
+    assert_eq!(ds.train.iter().map(|v| v.name.as_str()).collect::<Vec<_>>(), names);
+    for (v, want) in ds.train.iter().zip(&full) {
+        assert_eq!((v.image.width, v.image.height, v.image.channels), (16, 12, 3), "{}", v.name);
+        assert_eq!(&v.image.data, want, "{}: pixels differ from the decoded JPEG", v.name);
+    }
+    // The encoder's loss is small: the gradient survives.
+    let px = |v: &tgs::data::View, x: usize, y: usize| v.image.data[(y * 16 + x) * 3];
+    assert!((px(&ds.train[0], 10, 0) - 150.0 / 255.0).abs() < 0.03 && px(&ds.train[0], 0, 0) < 0.03);
+    // The grey JPEG loads as RGB with three equal channels.
+    assert!(ds.train[2].image.data.chunks(3).all(|p| p[0] == p[1] && p[1] == p[2]));
+    // --downscale 2 reads images_2/ as it is (the camera at half size).
+    let ds2 = Dataset::load(&d, &LoadOptions { holdout: 0, downscale: 2, ..Default::default() }).unwrap();
+    for (v, want) in ds2.train.iter().zip(&half) {
+        assert_eq!((v.camera.width, v.camera.height, v.image.width), (8, 6, 8), "{}", v.name);
+        assert_eq!(&v.image.data, want, "{}: not the prescaled JPEG", v.name);
+    }
+    // Without images_2/, the full JPEGs are box-filtered.
+    std::fs::remove_dir_all(d.join("images_2")).unwrap();
+    let ds3 = Dataset::load(&d, &LoadOptions { holdout: 0, downscale: 2, ..Default::default() }).unwrap();
+    assert_eq!(ds3.train[0].image.width, 8);
+    let box00: f32 = [(0, 0), (1, 0), (0, 1), (1, 1)].iter().map(|&(x, y)| full[0][(y * 16 + x) * 3 + 2]).sum::<f32>() / 4.0;
+    assert!((ds3.train[0].image.data[2] - box00).abs() < 1e-6);
+    // A distorted camera model is refused, saying how to undistort.
+    std::fs::write(model.join("cameras.txt"), "1 OPENCV 16 12 20 20 8 6 0.1 0 0 0\n").unwrap();
+    expect_err(Dataset::load(&d, &LoadOptions::default()), &["OPENCV", "image_undistorter"]);
+
+    // Blender layout: a frame whose file_path is a JPEG.
+    let b = blender_fixture("blender-jpeg", 8, 6);
+    let want = jpeg(&b.join("train/a.jpg"), 8, 6, false, |x, _| [(x * 30) as u8, 60, 90]);
+    std::fs::remove_file(b.join("train/a.png")).unwrap();
+    std::fs::write(b.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a.jpg", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    let ds = Dataset::load(&b, &LoadOptions::default()).unwrap();
+    assert_eq!(ds.train[0].image.data, want);
+    // The PNG variants the README names: 16-bit RGBA and grey + alpha,
+    // composited on the (white) background.
+    let rgba16: Vec<u8> = (0..48).flat_map(|_| [0xffffu16, 0x8000, 0, 0x8000]).flat_map(|v| v.to_ne_bytes()).collect();
+    image::save_buffer(b.join("train/a.png"), &rgba16, 8, 6, image::ExtendedColorType::Rgba16).unwrap();
+    let frame = |f: &str| std::fs::write(b.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "{f}", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    frame("./train/a");
+    let px = Dataset::load(&b, &LoadOptions::default()).unwrap().train[0].image.data[..3].to_vec();
+    let a = 0x8000 as f32 / 65535.0;
+    for (k, want) in [1.0, a * a + 1.0 - a, 1.0 - a].iter().enumerate() {
+        assert!((px[k] - want).abs() < 1e-4, "16-bit RGBA pixel {px:?}");
+    }
+    image::save_buffer(b.join("train/a.png"), &[64u8, 255].repeat(48), 8, 6, image::ExtendedColorType::La8).unwrap();
+    let px = Dataset::load(&b, &LoadOptions::default()).unwrap().train[0].image.data[..3].to_vec();
+    assert!(px.iter().all(|&v| (v - 64.0 / 255.0).abs() < 1e-6), "grey + alpha pixel {px:?}");
+}
