@@ -75,7 +75,10 @@ pub fn place_labels(at: &[(i32, i32)], sizes: &[(i32, i32)], marker: i32, area: 
             r.0 >= area.0 && r.1 >= area.1 && r.2 <= area.2 && r.3 <= area.3 && !placed.iter().chain(&markers).any(|&p| overlap(p, r))
         };
         let pick = candidates.iter().copied().find(free).unwrap_or(candidates[0]);
-        placed.push((x + pick.0, y + pick.1, x + pick.0 + w, y + pick.1 + h));
+        // An empty label (a point that only obstructs) occupies nothing.
+        if w > 0 && h > 0 {
+            placed.push((x + pick.0, y + pick.1, x + pick.0 + w, y + pick.1 + h));
+        }
         out.push(pick);
     }
     out
@@ -190,6 +193,10 @@ mod tests {
                 assert!(!overlap(*a, (x - 6, y - 6, x + 7, y + 7)), "label {i} covers point {j}");
             }
         }
+        // Points with empty labels obstruct only with their markers: a label
+        // may cross where an empty label's box would have been.
+        let off = place_labels(&[(135, 89), (130, 90)], &[(0, 0), (16, 15)], 6, area);
+        assert_eq!(off[1], (8, -23), "the first place beside the point is free");
         // A point in a corner puts its label inside the chart.
         let off = place_labels(&[(685, 5)], &[(16, 15)], 6, area);
         assert!(685 + off[0].0 + 16 <= 690 && 5 + off[0].1 >= 0, "{off:?}");
