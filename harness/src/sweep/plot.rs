@@ -55,12 +55,13 @@ fn overlap(a: Rect, b: Rect) -> bool {
 
 /// Offsets (from each point, in pixels) for labels of `sizes` (width,
 /// height) beside the points `at` (pixels), chosen in order so that no label
-/// box overlaps another label or any point's marker (`marker` pixels around
-/// it) and stays inside `area`: the first of the candidate places around the
-/// point that is free, then the same further out. A label with no free place
-/// takes the first candidate (the table still names it).
-pub fn place_labels(at: &[(i32, i32)], sizes: &[(i32, i32)], marker: i32, area: Rect) -> Vec<(i32, i32)> {
-    let markers: Vec<Rect> = at.iter().map(|&(x, y)| (x - marker, y - marker, x + marker + 1, y + marker + 1)).collect();
+/// box overlaps another label or the marker (`marker` pixels around it) of
+/// a labelled point or of an unlabelled one in `others`, and stays inside
+/// `area`: the first of the candidate places around the point that is free,
+/// then the same further out. A label with no free place takes the first
+/// candidate (the table still names it).
+pub fn place_labels(at: &[(i32, i32)], sizes: &[(i32, i32)], others: &[(i32, i32)], marker: i32, area: Rect) -> Vec<(i32, i32)> {
+    let markers: Vec<Rect> = at.iter().chain(others).map(|&(x, y)| (x - marker, y - marker, x + marker + 1, y + marker + 1)).collect();
     let mut placed: Vec<Rect> = Vec::new();
     let mut out = Vec::with_capacity(at.len());
     for (&(x, y), &(w, h)) in at.iter().zip(sizes) {
@@ -75,10 +76,7 @@ pub fn place_labels(at: &[(i32, i32)], sizes: &[(i32, i32)], marker: i32, area: 
             r.0 >= area.0 && r.1 >= area.1 && r.2 <= area.2 && r.3 <= area.3 && !placed.iter().chain(&markers).any(|&p| overlap(p, r))
         };
         let pick = candidates.iter().copied().find(free).unwrap_or(candidates[0]);
-        // An empty label (a point that only obstructs) occupies nothing.
-        if w > 0 && h > 0 {
-            placed.push((x + pick.0, y + pick.1, x + pick.0 + w, y + pick.1 + h));
-        }
+        placed.push((x + pick.0, y + pick.1, x + pick.0 + w, y + pick.1 + h));
         out.push(pick);
     }
     out
@@ -132,15 +130,9 @@ fn one(path: &Path, rows: &[Row], (what, better): (&str, &str), y: impl Fn(&Row)
     let sizes: Vec<(i32, i32)> = labels.iter().map(|l| (CHAR_W * l.len() as i32, FONT as i32 + 2)).collect();
     let (xr, yr) = chart.plotting_area().get_pixel_range();
     let area = (xr.start, yr.start, xr.end, yr.end);
-    // Markers of runs off the front are obstacles too: place them first as
-    // zero-size labels that cannot move.
-    let mut at = all_px.clone();
-    at.extend(&px);
-    let mut sz: Vec<(i32, i32)> = vec![(0, 0); all_px.len()];
-    sz.extend(&sizes);
-    let offsets = place_labels(&at, &sz, 6, area);
+    let offsets = place_labels(&px, &sizes, &all_px, 6, area);
     let font = ("sans-serif", FONT).into_font().color(&BLACK);
-    for ((&(x, y), &(dx, dy)), label) in px.iter().zip(&offsets[all_px.len()..]).zip(&labels) {
+    for ((&(x, y), &(dx, dy)), label) in px.iter().zip(&offsets).zip(&labels) {
         left.draw(&Text::new(label.clone(), (x + dx, y + dy), font.clone())).map_err(|e| err(&e))?;
     }
     chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.8)).position(SeriesLabelPosition::LowerRight).draw().map_err(|e| err(&e))?;
@@ -182,7 +174,7 @@ mod tests {
         let at: Vec<(i32, i32)> = (0..12).map(|k| (300 + 3 * (k % 4), 200 + 2 * (k / 4))).collect();
         let sizes = vec![(16, 15); at.len()];
         let area = (0, 0, 690, 640);
-        let off = place_labels(&at, &sizes, 6, area);
+        let off = place_labels(&at, &sizes, &[], 6, area);
         let boxes: Vec<Rect> = at.iter().zip(&off).zip(&sizes).map(|((&(x, y), &(dx, dy)), &(w, h))| (x + dx, y + dy, x + dx + w, y + dy + h)).collect();
         for (i, a) in boxes.iter().enumerate() {
             assert!(a.0 >= area.0 && a.1 >= area.1 && a.2 <= area.2 && a.3 <= area.3, "label {i} leaves the chart: {a:?}");
@@ -193,12 +185,16 @@ mod tests {
                 assert!(!overlap(*a, (x - 6, y - 6, x + 7, y + 7)), "label {i} covers point {j}");
             }
         }
-        // Points with empty labels obstruct only with their markers: a label
-        // may cross where an empty label's box would have been.
-        let off = place_labels(&[(135, 89), (130, 90)], &[(0, 0), (16, 15)], 6, area);
-        assert_eq!(off[1], (8, -23), "the first place beside the point is free");
+        // Unlabelled points obstruct only with their markers: a label may
+        // lie just beside one (here above-right of its own point, clear of
+        // the other's marker).
+        let off = place_labels(&[(130, 90)], &[(16, 15)], &[(135, 89)], 6, area);
+        assert_eq!(off[0], (8, -23), "the first place beside the point is free");
+        // ... and not over it.
+        let off = place_labels(&[(130, 90)], &[(16, 15)], &[(145, 75)], 6, area);
+        assert_ne!(off[0], (8, -23), "a label over another point's marker");
         // A point in a corner puts its label inside the chart.
-        let off = place_labels(&[(685, 5)], &[(16, 15)], 6, area);
+        let off = place_labels(&[(685, 5)], &[(16, 15)], &[], 6, area);
         assert!(685 + off[0].0 + 16 <= 690 && 5 + off[0].1 >= 0, "{off:?}");
     }
 }
