@@ -9,14 +9,27 @@ They are for checking that a setting tuned on the built-in scene and `lantern`
 carries over to other glass shapes; nothing in the tests depends on them.
 
     python3 -m venv /tmp/mv && /tmp/mv/bin/pip install mitsuba numpy
-    /tmp/mv/bin/python perf/scenes/mitsuba_scenes.py --out /tmp/scenes [--scene globe] [--res 200] [--spp 128]
+    /tmp/mv/bin/python perf/scenes/mitsuba_scenes.py --out /tmp/scenes [--scene globe|suite] [--res 200] [--spp 128]
 
-Scenes (every one: checkered floor, a ring of checkered blocks outside the
-camera orbit for near-field reflections, a diffuse sphere and box in the
-middle, sun and sky):
-  globe    a thin glass sphere over the middle objects
-  pane     a vertical glass pane between the middle objects
-  diffuse  no glass at all (Stage II should skip it)
+Scenes (every one: checkered floor, sun and sky; all but `globe_far` a ring
+of checkered blocks outside the camera orbit for near-field reflections):
+  globe      a thin glass sphere over a diffuse sphere and box (closed, curved)
+  globe_far  the same with nothing around it: only the sky and the floor to
+             reflect (distant light)
+  pane       a vertical glass pane between the two objects (flat, open)
+  dome       a glass hemisphere over the objects, four pillars around it
+             inside the camera orbit (near-field structures)
+  cabinet    a glass box standing on the floor with the objects inside
+             (closed, flat faces, edges)
+  cylinder   an open glass tube (no caps) around the objects (open, curved,
+             seen from inside through its top)
+  facade     a flat glass front of a lit room (walls, ceiling lamp, objects);
+             cameras in front only
+  windshield a curved glass front (a section of a vertical cylinder) of the
+             same kind of room; cameras in front only
+  diffuse    no glass at all (Stage II should skip it)
+The suite the Stage II defaults are chosen on: every scene but `diffuse`
+(`--scene suite`).
 
 `--no-reflection` renders the same scenes (same cameras, same sampler seeds)
 with the glass's reflection weighted by zero (thin-dielectric
@@ -35,6 +48,7 @@ import argparse
 import json
 import math
 import os
+import tempfile
 import time
 
 import numpy as np
@@ -51,14 +65,22 @@ def translate_scale(t, s, rot_z_deg=0.0):
 
 
 class Prim:
-    """One shape: kind in sphere | cube | rectangle (Mitsuba's unit shapes)."""
+    """One shape: kind in sphere | cube | rectangle | cylinder (Mitsuba's unit
+    shapes; the cylinder open, radius 1, z in [0, 1]) | arc (the part of that
+    cylinder with |azimuth| <= `half_angle`, a triangle mesh for Mitsuba)."""
 
-    def __init__(self, kind, to_world, bsdf, glass=False):
+    def __init__(self, kind, to_world, bsdf, glass=False, emitter=None, half_angle=None):
         self.kind, self.m, self.bsdf, self.glass = kind, to_world, bsdf, glass
+        self.emitter, self.half_angle = emitter, half_angle
         self.inv = np.linalg.inv(to_world)
 
-    def mitsuba(self, mi):
-        return {"type": self.kind, "to_world": mi.ScalarTransform4f(self.m.tolist()), "bsdf": self.bsdf}
+    def mitsuba(self, mi, tmp):
+        d = {"type": self.kind, "to_world": mi.ScalarTransform4f(self.m.tolist()), "bsdf": self.bsdf}
+        if self.kind == "arc":
+            d["type"], d["filename"], d["face_normals"] = "obj", arc_obj(tmp, self.half_angle), False
+        if self.emitter is not None:
+            d["emitter"] = self.emitter
+        return d
 
     def intersect(self, o, d):
         """Nearest t > 1e-6 (inf when missed) and world normals, for rays o + t d (N x 3)."""
@@ -96,6 +118,24 @@ class Prim:
             p = lo + np.where(np.isfinite(t), t, 0)[:, None] * ld
             axis = np.abs(p).argmax(1)
             n_local[np.arange(len(o)), axis] = np.sign(p[np.arange(len(o)), axis])
+        elif self.kind in ("cylinder", "arc"):
+            a = ld[:, 0] ** 2 + ld[:, 1] ** 2
+            b = 2 * (lo[:, 0] * ld[:, 0] + lo[:, 1] * ld[:, 1])
+            c = lo[:, 0] ** 2 + lo[:, 1] ** 2 - 1
+            with np.errstate(divide="ignore", invalid="ignore"):
+                disc = b * b - 4 * a * c
+                ok = (disc >= 0) & (a > 0)
+                sq = np.sqrt(np.where(ok, disc, 0))
+                roots = [(-b - sq) / (2 * a), (-b + sq) / (2 * a)]
+            t = inf.copy()
+            for r in reversed(roots):  # the nearer root wins when both are valid
+                r = np.where(ok, r, np.inf)
+                p = lo + np.where(np.isfinite(r), r, 0)[:, None] * ld
+                good = np.isfinite(r) & (r > 1e-6) & (p[:, 2] >= 0) & (p[:, 2] <= 1)
+                if self.kind == "arc":
+                    good &= np.abs(np.arctan2(p[:, 1], p[:, 0])) <= self.half_angle
+                t = np.where(good, r, t)
+                n_local = np.where(good[:, None], p * np.array([1.0, 1.0, 0.0]), n_local)
         else:
             raise ValueError(self.kind)
         n = n_local @ self.inv[:3, :3]  # inverse transpose
@@ -103,33 +143,111 @@ class Prim:
         return t, n
 
 
+def arc_obj(tmp, half_angle, segments=512):
+    """An OBJ of the unit cylinder's part with |azimuth| <= half_angle, with
+    vertex normals (smooth shading; the chord error at 512 segments is far
+    below a pixel)."""
+    path = os.path.join(tmp, f"arc_{half_angle:.6f}.obj")
+    a = np.linspace(-half_angle, half_angle, segments + 1)
+    lines = []
+    for z in (0.0, 1.0):
+        lines += [f"v {math.cos(t):.9f} {math.sin(t):.9f} {z}" for t in a]
+    lines += [f"vn {math.cos(t):.9f} {math.sin(t):.9f} 0" for t in a] * 2
+    m = segments + 1
+    for i in range(segments):
+        q = (i + 1, i + 2, m + i + 2, m + i + 1)
+        lines.append("f " + " ".join(f"{v}//{v}" for v in q))
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path
+
+
+def twosided(bsdf):
+    return {"type": "twosided", "bsdf": bsdf}
+
+
 def checker(mi, c0, c1, scale):
     return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
 
 
+SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse"]
+SUITE = [n for n in SCENES if n != "diffuse"]
+FRONT_ONLY = {"facade", "windshield"}
+
+
+def upright(width, height, centre, normal_axis="x"):
+    """A rectangle standing upright: `width` along world y (normal +x) or x
+    (normal +y), `height` along z, centred at `centre`."""
+    m = np.eye(4)
+    if normal_axis == "x":
+        m[:3, :3] = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]]) @ np.diag([width / 2, height / 2, 1.0])
+    else:
+        m[:3, :3] = np.array([[1, 0, 0], [0, 0, 1], [0, 1, 0]]) @ np.diag([width / 2, height / 2, 1.0])
+    m[:3, 3] = centre
+    return m
+
+
+def room(mi, front_x):
+    """A room behind a glass front at x = front_x: checkered back and side
+    walls, a ceiling with a lamp under it, a sphere and a box inside."""
+    wall = twosided(checker(mi, [0.85, 0.82, 0.7], [0.45, 0.3, 0.25], 6))
+    side = twosided(checker(mi, [0.3, 0.45, 0.7], [0.85, 0.85, 0.8], 5))
+    depth = front_x + 1.6
+    prims = [Prim("rectangle", upright(2.8, 1.5, [-1.6, 0, 0.75]), wall),
+             Prim("rectangle", upright(depth, 1.5, [front_x - depth / 2, -1.4, 0.75], "y"), side),
+             Prim("rectangle", upright(depth, 1.5, [front_x - depth / 2, 1.4, 0.75], "y"), side),
+             Prim("rectangle", translate_scale([-0.6, 0, 1.5], [1.0, 1.4, 1]), twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}}))]
+    # The lamp faces down (the rectangle's normal flipped by a rotation about x).
+    lamp = translate_scale([-0.6, 0, 1.49], [0.35, 0.25, 1]) @ np.diag([1.0, -1.0, -1.0, 1.0])
+    prims.append(Prim("rectangle", lamp, {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.9, 0.9]}},
+                      emitter={"type": "area", "radiance": {"type": "rgb", "value": [6.0, 5.6, 5.0]}}))
+    prims.append(Prim("sphere", translate_scale([-0.5, -0.5, 0.35], 0.35), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
+    prims.append(Prim("cube", translate_scale([-0.9, 0.55, 0.4], [0.2, 0.2, 0.4], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
+    return prims
+
+
 def build(mi, name, reflection=True):
+    if name not in SCENES:
+        raise ValueError(f"unknown scene '{name}'")
     glass = {"type": "thindielectric", "int_ior": 1.5}
     if not reflection:
         glass["specular_reflectance"] = 0.0
     prims = [Prim("rectangle", translate_scale([0, 0, 0], [200, 200, 1]), checker(mi, [0.75, 0.78, 0.72], [0.30, 0.42, 0.36], 400))]
     palette = [([0.9, 0.2, 0.2], [0.95, 0.85, 0.2]), ([0.2, 0.4, 0.9], [0.9, 0.9, 0.9]), ([0.2, 0.75, 0.3], [0.9, 0.5, 0.1]),
                ([0.8, 0.3, 0.8], [0.2, 0.8, 0.8]), ([0.95, 0.6, 0.1], [0.3, 0.2, 0.6]), ([0.1, 0.5, 0.5], [0.9, 0.8, 0.7])]
-    for k, (c0, c1) in enumerate(palette):
-        a = 2 * math.pi * (k + 0.25) / len(palette)
-        h = 0.6 + 0.3 * (k % 3)
-        prims.append(Prim("cube", translate_scale([6.0 * math.cos(a), 6.0 * math.sin(a), h], [0.5, 0.5, h], math.degrees(a)), checker(mi, c0, c1, 3)))
-    prims.append(Prim("sphere", translate_scale([0.25, -0.15, 0.35], 0.35), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
-    prims.append(Prim("cube", translate_scale([-0.3, 0.3, 0.4], [0.15, 0.15, 0.4], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
-    if name == "globe":
+    if name != "globe_far":
+        for k, (c0, c1) in enumerate(palette):
+            a = 2 * math.pi * (k + 0.25) / len(palette)
+            h = 0.6 + 0.3 * (k % 3)
+            prims.append(Prim("cube", translate_scale([6.0 * math.cos(a), 6.0 * math.sin(a), h], [0.5, 0.5, h], math.degrees(a)), checker(mi, c0, c1, 3)))
+    if name in FRONT_ONLY:
+        prims += room(mi, 0.4)
+    else:
+        centre = [0.2, -0.15, 0.35] if name == "cabinet" else [0.25, -0.15, 0.35]
+        prims.append(Prim("sphere", translate_scale(centre, 0.35), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
+        prims.append(Prim("cube", translate_scale([-0.3, 0.3, 0.4], [0.15, 0.15, 0.4], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
+    if name in ("globe", "globe_far"):
         prims.append(Prim("sphere", translate_scale([0, 0, 0.95], 0.95), glass, glass=True))
     elif name == "pane":
         # A 2.4 x 1.4 pane standing upright between the two middle objects.
-        m = np.eye(4)
-        m[:3, :3] = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]]) @ np.diag([1.2, 0.7, 1.0])  # local x -> world y, local y -> world z, normal -> world x
-        m[:3, 3] = [0.0, 0.0, 0.7]
-        prims.append(Prim("rectangle", m, glass, glass=True))
-    elif name != "diffuse":
-        raise ValueError(f"unknown scene '{name}'")
+        prims.append(Prim("rectangle", upright(2.4, 1.4, [0.0, 0.0, 0.7]), glass, glass=True))
+    elif name == "dome":
+        # A hemisphere: the sphere's lower half is under the floor.
+        prims.append(Prim("sphere", translate_scale([0, 0, 0], 1.1), glass, glass=True))
+        for k in range(4):
+            a = math.pi / 4 + k * math.pi / 2
+            prims.append(Prim("cube", translate_scale([2.0 * math.cos(a), 2.0 * math.sin(a), 0.7], [0.12, 0.12, 0.7], 30 * k),
+                              checker(mi, [0.95, 0.95, 0.9], [0.25, 0.25, 0.3], 4)))
+    elif name == "cabinet":
+        prims.append(Prim("cube", translate_scale([0, 0, 0.61], [0.7, 0.7, 0.6], 25), glass, glass=True))
+    elif name == "cylinder":
+        prims.append(Prim("cylinder", translate_scale([0, 0, 0.005], [0.85, 0.85, 1.3]), glass, glass=True))
+    elif name == "facade":
+        prims.append(Prim("rectangle", upright(2.8, 1.5, [0.4, 0.0, 0.75]), glass, glass=True))
+    elif name == "windshield":
+        # Axis at x = -1.6, radius 2: the apex at x = 0.4, the edges at y = +-1.4.
+        half = math.asin(1.4 / 2.0)
+        prims.append(Prim("arc", translate_scale([-1.6, 0, 0], [2.0, 2.0, 1.5]), glass, glass=True, half_angle=half))
     return prims
 
 
@@ -146,14 +264,18 @@ def c2w_look_at(o, target, up=(0.0, 0.0, 1.0)):
     return m
 
 
-def cameras(n, offset, rng):
+def cameras(n, offset, rng, front=False):
+    """An orbit around the middle; `front`: azimuths within 50 degrees of +x
+    only (the scenes whose glass is the front of a room), lower and aimed at
+    the room's middle."""
     out = []
     for i in range(n):
-        az = 2 * math.pi * ((i * 0.618034 + offset) % 1.0)
-        el = math.radians(rng.uniform(20, 50))
+        u = (i * 0.618034 + offset) % 1.0
+        az = math.radians(-50 + 100 * u) if front else 2 * math.pi * u
+        el = math.radians(rng.uniform(8, 30) if front else rng.uniform(20, 50))
         rad = rng.uniform(3.6, 4.4)
         o = [rad * math.cos(el) * math.cos(az), rad * math.cos(el) * math.sin(az), rad * math.sin(el)]
-        out.append(c2w_look_at(o, [0, 0, 0.5]))
+        out.append(c2w_look_at(o, [0, 0, 0.7] if front else [0, 0, 0.5]))
     return out
 
 
@@ -193,7 +315,7 @@ def write_png(mi, path, image, srgb):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--scene", action="append", choices=["globe", "pane", "diffuse"])
+    ap.add_argument("--scene", action="append", choices=SCENES + ["suite"], help="repeatable; suite: every glass scene; default: all")
     ap.add_argument("--res", type=int, default=200)
     ap.add_argument("--spp", type=int, default=128)
     ap.add_argument("--train", type=int, default=60)
@@ -203,18 +325,26 @@ def main():
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     fov = math.pi / 4
-    for name in a.scene or ["globe", "pane", "diffuse"]:
+    names = []
+    for n in a.scene or SCENES:
+        for m in (SUITE if n == "suite" else [n]):
+            if m not in names:
+                names.append(m)
+    for name in names:
+        root = os.path.join(a.out, name + ("_norefl" if a.no_reflection else ""))
+        if os.path.exists(os.path.join(root, "transforms_train.json")):
+            raise SystemExit(f"{root} already holds a dataset; this script never writes over one (remove it or pick another --out)")
         prims = build(mi, name, not a.no_reflection)
         scene_d = {"type": "scene", "integrator": {"type": "path", "max_depth": 12}, "sky": {"type": "sunsky", "sun_direction": [0.45, -0.35, 0.82], "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], 90)}}
-        for k, p in enumerate(prims):
-            scene_d[f"shape{k:02}"] = p.mitsuba(mi)
-        scene = mi.load_dict(scene_d)
-        root = os.path.join(a.out, name + ("_norefl" if a.no_reflection else ""))
-        rng = np.random.default_rng({"globe": 1, "pane": 2, "diffuse": 3}[name])
+        with tempfile.TemporaryDirectory() as tmp:
+            for k, p in enumerate(prims):
+                scene_d[f"shape{k:02}"] = p.mitsuba(mi, tmp)
+            scene = mi.load_dict(scene_d)
+        rng = np.random.default_rng({"globe": 1, "pane": 2, "diffuse": 3}.get(name, 100 + SCENES.index(name)))  # the first three as before
         for split, n, offset in (("train", a.train, 0.0), ("test", a.test, 0.37)):
             os.makedirs(os.path.join(root, split), exist_ok=True)
             frames = []
-            for i, c2w in enumerate(cameras(n, offset, rng)):
+            for i, c2w in enumerate(cameras(n, offset, rng, name in FRONT_ONLY)):
                 t0 = time.time()
                 o = c2w[:3, 3]
                 sensor = mi.load_dict({"type": "perspective", "fov": math.degrees(fov), "fov_axis": "x",

@@ -1,0 +1,151 @@
+#!/usr/bin/env python3
+"""Run tgs on a suite of glass scenes and report every scene, the mean and the worst.
+
+The suite is a directory of datasets (each with transforms_train.json), such
+as `mitsuba_scenes.py --scene suite` writes. For every scene and seed this
+trains Stage I once (`RUNS/SCENE/sSEED/I`, kept and reused on a rerun), then
+every variant's Stage II from it with `--from` (`RUNS/SCENE/sSEED/VARIANT`,
+also kept), and prints one Markdown table per variant:
+
+    scene | Stage I MAE | ray-facing MAE | Stage II MAE | II / I | II / ray-facing | coverage | PSNR I -> II | Stage II s
+
+with the mean and the worst scene (the largest II / I) under it. Over
+several seeds a cell is the mean over seeds, with the spread (max - min) in
+brackets. A variant is `NAME` (today's defaults) or `NAME:KEY=VALUE;KEY=VALUE`
+(tgs `--set` pairs, e.g. `geom:reflection.lr_quats=1e-2;reflection.lr_scales=5e-3`).
+Nothing is written over: run directories that hold a finished run are read,
+not retrained; a half-written one (no metrics.json) is an error naming it.
+
+    python3 perf/scenes/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
+        --variant default --variant 'geom:reflection.lr_quats=1e-2' [--seeds 0,1] [--tgs target/debug/tgs]
+
+Only the Python standard library is needed.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+
+def run(cmd, log):
+    t0 = time.time()
+    with open(log, "w") as fh:
+        p = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT)
+    if p.returncode != 0:
+        raise SystemExit(f"failed ({p.returncode}): {' '.join(cmd)}; see {log}")
+    return time.time() - t0
+
+
+def train(tgs, out, args, label):
+    metrics = os.path.join(out, "metrics.json")
+    if os.path.exists(metrics):
+        return json.load(open(metrics))
+    if os.path.exists(out):
+        raise SystemExit(f"{out} exists without metrics.json (an unfinished run): resume it with `tgs train --resume --out {out}` or remove it")
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    log = out + ".log"
+    print(f"{label} ...", end="", flush=True, file=sys.stderr)
+    s = run([tgs, "train", "--quiet", "--out", out] + args, log)
+    print(f" {s:.0f} s", file=sys.stderr, flush=True)
+    return json.load(open(metrics))
+
+
+def stage(m, name):
+    for s in m.get("stages", []):
+        if s.get("stage") == name:
+            return s
+    return None
+
+
+def fmt(vals, digits=1):
+    vals = [v for v in vals if v is not None]
+    if not vals:
+        return "–"
+    mean = sum(vals) / len(vals)
+    if len(vals) == 1:
+        return f"{mean:.{digits}f}"
+    return f"{mean:.{digits}f} ({max(vals) - min(vals):.{digits}f})"
+
+
+def mean(vals):
+    vals = [v for v in vals if v is not None]
+    return sum(vals) / len(vals) if vals else None
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", required=True, help="directory of datasets")
+    ap.add_argument("--runs", required=True, help="directory for the runs (kept; reruns reuse them)")
+    ap.add_argument("--variant", action="append", default=[], help="NAME or NAME:KEY=VALUE;KEY=VALUE (repeatable)")
+    ap.add_argument("--seeds", default="0")
+    ap.add_argument("--only", action="append", help="scene names to run, in this order (repeatable; default: all, by name)")
+    ap.add_argument("--stage1", default="", help="KEY=VALUE;... for Stage I (part of its run directory's identity: use a new --runs when changing it)")
+    ap.add_argument("--tgs", default=os.path.join(os.path.dirname(__file__), "..", "..", "target", "debug", "tgs"))
+    a = ap.parse_args()
+    scenes = sorted(d for d in os.listdir(a.scenes) if os.path.exists(os.path.join(a.scenes, d, "transforms_train.json")))
+    if a.only:
+        missing = [s for s in a.only if s not in scenes]
+        if missing:
+            raise SystemExit(f"no dataset {missing} in {a.scenes} (it has {scenes})")
+        scenes = list(dict.fromkeys(a.only))  # in the order given
+    if not scenes:
+        raise SystemExit(f"{a.scenes} holds no dataset (a directory with transforms_train.json)")
+    seeds = [int(s) for s in a.seeds.split(",")]
+    variants = []
+    for v in a.variant or ["default"]:
+        name, _, sets = v.partition(":")
+        if not name or "/" in name or name == "I":
+            raise SystemExit(f"bad variant name '{name}' (a plain name other than I)")
+        variants.append((name, [kv for kv in sets.split(";") if kv]))
+    stage1_sets = [kv for kv in a.stage1.split(";") if kv]
+
+    def sets(kvs):
+        return [x for kv in kvs for x in ("--set", kv)]
+
+    res = {}  # (scene, seed, variant) -> (stage I record, stage II record)
+    for scene in scenes:
+        data = os.path.join(a.scenes, scene)
+        for seed in seeds:
+            base = os.path.join(a.runs, scene, f"s{seed}")
+            one = os.path.join(base, "I")
+            m1 = train(a.tgs, one, [data, "--stages", "I", "--set", f"seed={seed}"] + sets(stage1_sets), f"{scene} seed {seed} Stage I")
+            for name, kvs in variants:
+                m2 = train(a.tgs, os.path.join(base, name), [data, "--from", one, "--stages", "II"] + sets(kvs), f"{scene} seed {seed} {name}")
+                res[(scene, seed, name)] = (stage(m1, "I"), stage(m2, "II"))
+
+    for name, kvs in variants:
+        print(f"\n### {name}" + (f": `{'; '.join(kvs)}`" if kvs else " (today's defaults)"))
+        print(f"seeds {a.seeds}; cells are means over seeds, (spread) = max - min\n")
+        print("| scene | Stage I MAE | ray-facing | Stage II MAE | II / I | II / ray-facing | coverage | PSNR I → II | Stage II s |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        ratios = {}
+        cols = {k: [] for k in ("i", "ray", "ii", "r1", "rr", "cov", "p1", "p2", "s")}
+        for scene in scenes:
+            rows = [res[(scene, s, name)] for s in seeds]
+            t = lambda r, st, key: (r[st] or {}).get("test", {}) .get(key) if r[st] else None
+            i = [t(r, 0, "normal_mae_deg") for r in rows]
+            ray = [t(r, 0, "normal_mae_ray_facing_deg") for r in rows]
+            ii = [t(r, 1, "normal_mae_deg") for r in rows]
+            r1 = [b / a_ if a_ and b is not None else None for a_, b in zip(i, ii)]
+            rr = [b / a_ if a_ and b is not None else None for a_, b in zip(ray, ii)]
+            cov = [t(r, 1, "reflection_coverage") for r in rows]
+            p1 = [t(r, 0, "psnr") for r in rows]
+            p2 = [t(r, 1, "psnr") for r in rows]
+            sec = [(r[1] or {}).get("wall_s") for r in rows]
+            ratios[scene] = mean(r1)
+            for k, v in zip(cols, (i, ray, ii, r1, rr, cov, p1, p2, sec)):
+                cols[k].append(mean(v))
+            print(f"| {scene} | {fmt(i)}° | {fmt(ray)}° | {fmt(ii)}° | {fmt(r1, 2)} | {fmt(rr, 2)} | {fmt(cov, 2)} | {fmt(p1, 2)} → {fmt(p2, 2)} | {fmt(sec, 0)} |")
+        m = {k: mean(v) for k, v in cols.items()}
+        f = lambda v, d=1: "–" if v is None else f"{v:.{d}f}"
+        print(f"| **mean** | {f(m['i'])}° | {f(m['ray'])}° | {f(m['ii'])}° | {f(m['r1'], 2)} | {f(m['rr'], 2)} | {f(m['cov'], 2)} | {f(m['p1'], 2)} → {f(m['p2'], 2)} | {f(m['s'], 0)} |")
+        known = {k: v for k, v in ratios.items() if v is not None}
+        if known:
+            w = max(known, key=known.get)
+            print(f"| **worst** ({w}) | | | | {known[w]:.2f} | | | | |")
+
+
+if __name__ == "__main__":
+    main()
