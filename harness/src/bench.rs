@@ -1,7 +1,7 @@
 //! Benchmarks of the sort and scan kernels, shared by `tgs bench` and
 //! `cargo bench` (perf/). GPU times come from timestamp queries per kernel.
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context as _, Result};
 use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
@@ -236,4 +236,46 @@ pub fn print_scan(b: &ScanBench) {
     for k in &b.kernels {
         println!("    {:<16} {:>10.3} ms  ({} calls)", k.name, k.ms, k.calls);
     }
+}
+
+/// `tgs bench lpips`: LPIPS of two `size` x `size` images on the CPU
+/// (seconds per pair, GFLOP/s of the convolutions), after one warm-up.
+pub fn lpips(size: u32, reps: u32, json: bool) -> Result<()> {
+    use crate::lpips::{shared, weights_path, CONVS, MIN_SIDE};
+    let s = size as usize;
+    if !(MIN_SIDE..=4096).contains(&s) {
+        bail!("--size must be {MIN_SIDE}..=4096 (LPIPS needs {MIN_SIDE} pixels a side; larger feature maps would take gigabytes), not {size}");
+    }
+    if reps == 0 {
+        bail!("--reps must be at least 1");
+    }
+    let net = shared().with_context(|| format!("no LPIPS weights at {}", weights_path().display()))?;
+    let img = |k: usize| -> Vec<f32> { (0..3 * s * s).map(|i| ((i * (7 + k) + i / s * 13) % 97) as f32 / 96.0).collect() };
+    let (a, b) = (img(0), img(1));
+    // Multiply-adds of the five convolutions, for both images.
+    let (mut h, mut flops) = (s, 0.0f64);
+    for (l, &(k, st, p, ci, co)) in CONVS.iter().enumerate() {
+        if l == 1 || l == 2 {
+            h = (h - 3) / 2 + 1;
+        }
+        h = (h + 2 * p - k) / st + 1;
+        flops += 2.0 * 2.0 * (h * h * k * k * ci * co) as f64;
+    }
+    net.distance(&a, &b, s, s);
+    let t = std::time::Instant::now();
+    let mut d = 0.0;
+    for _ in 0..reps {
+        d = net.distance(&a, &b, s, s).unwrap_or(f64::NAN);
+    }
+    let sec = t.elapsed().as_secs_f64() / reps as f64;
+    let threads = std::thread::available_parallelism().map(|t| t.get()).unwrap_or(1);
+    let cpu = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|c| c.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|m| m.trim().to_string())).unwrap_or_else(|| "unknown CPU".into());
+    let device = format!("CPU: {cpu}, {threads} threads");
+    if json {
+        println!("{}", serde_json::json!({"device": device, "size": size, "reps": reps, "seconds_per_pair": sec, "gflop_per_s": flops / sec / 1e9, "lpips": d}));
+    } else {
+        println!("device: {device}");
+        println!("LPIPS {size}x{size}: {:.3} s per image pair, {:.2} GFLOP/s ({:.1} GFLOP), value {d:.4}", sec, flops / sec / 1e9, flops / 1e9);
+    }
+    Ok(())
 }

@@ -60,6 +60,9 @@ pub struct ViewMetrics {
     pub name: String,
     pub psnr: f64,
     pub ssim: f64,
+    /// LPIPS (AlexNet v0.1, crate::lpips); None without the weights or
+    /// below 31 pixels a side.
+    pub lpips: Option<f64>,
     #[serde(flatten)]
     pub normals: NormalMetrics,
 }
@@ -71,6 +74,8 @@ pub struct Metrics {
     pub views: usize,
     pub psnr: f64,
     pub ssim: f64,
+    /// The mean over the views that have one.
+    pub lpips: Option<f64>,
     #[serde(flatten)]
     pub normals: NormalMetrics,
     pub per_view: Vec<ViewMetrics>,
@@ -206,6 +211,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
             name: v.name.clone(),
             psnr: psnr(rgb, &target),
             ssim: ssim(rgb, &target, w, h, 3),
+            lpips: crate::lpips::shared().and_then(|net| net.distance(&rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>(), &target, w, h)),
             normals: NormalMetrics {
                 normal_mae_deg: normal_mae(&normals, v),
                 normal_mae_scattering_deg: scat_mae,
@@ -227,6 +233,10 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
         views: per_view.len(),
         psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,
+        lpips: {
+            let l: Vec<f64> = per_view.iter().filter_map(|m| m.lpips).collect();
+            (!l.is_empty()).then(|| l.iter().sum::<f64>() / l.len() as f64)
+        },
         per_view,
     })
 }

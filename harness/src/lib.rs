@@ -11,6 +11,7 @@ pub mod devices;
 pub mod embed;
 pub mod eval;
 pub mod export;
+pub mod lpips;
 pub mod outdir;
 pub mod render;
 pub mod scene;

@@ -99,7 +99,7 @@ enum Cmd {
     },
     /// Train a grid of settings that trade accuracy for time: one row per
     /// run in OUT/sweep.csv (settings, wall time, GPU ms per iteration, test
-    /// PSNR / SSIM / normal MAE per stage) and plots against wall time with
+    /// PSNR / SSIM / normal MAE / LPIPS per stage) and plots against wall time with
     /// the Pareto front. Run it again to resume.
     Sweep {
         /// Dataset directory; default: the built-in scene, written to OUT/scene.
@@ -237,6 +237,16 @@ enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// LPIPS (AlexNet v0.1, on the CPU) of two SIZE x SIZE images: seconds
+    /// per image pair and GFLOP/s.
+    Lpips {
+        #[arg(long, default_value_t = 800)]
+        size: u32,
+        #[arg(long, default_value_t = 3)]
+        reps: u32,
+        #[arg(long)]
+        json: bool,
+    },
     /// Exclusive prefix sum of N u32.
     Scan {
         #[arg(long, default_value_t = 1 << 20)]
@@ -335,12 +345,13 @@ fn run(cli: Cli) -> Result<()> {
             }
             eprintln!("sweep: {} runs ({} trained now); {} and plots in {}", o.rows.len(), o.trained, out.join("sweep.csv").display(), out.display());
             let front = tgs::sweep::pareto(&o.rows, |r| r.psnr);
-            println!("{:48} {:>9} {:>8} {:>8} {:>9}  pareto", "run", "wall s", "PSNR", "SSIM", "MAE °");
+            println!("{:48} {:>9} {:>8} {:>8} {:>8} {:>9}  pareto", "run", "wall s", "PSNR", "SSIM", "LPIPS", "MAE °");
             for (i, r) in o.rows.iter().enumerate() {
-                println!("{:48} {:9.1} {:8.3} {:8.4} {:9.2}  {}", r.name, r.wall_s, r.psnr, r.ssim, r.normal_mae_deg, if front.contains(&i) { "*" } else { "" });
+                println!("{:48} {:9.1} {:8.3} {:8.4} {:8.4} {:9.2}  {}", r.name, r.wall_s, r.psnr, r.ssim, r.lpips, r.normal_mae_deg, if front.contains(&i) { "*" } else { "" });
             }
             Ok(())
         }
+        Cmd::Bench { what: Bench::Lpips { size, reps, json } } => tgs::bench::lpips(*size, *reps, *json),
         Cmd::Bench { what } => {
             let ctx = context(&cli)?;
             match what {
@@ -408,6 +419,7 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_stages::print_stages(&b);
                     }
                 }
+                Bench::Lpips { .. } => {} // above: on the CPU, no device
                 Bench::Scan { n, reps, json } => {
                     let b = tgs::bench::scan(&ctx, *n, *reps)?;
                     if *json {

@@ -7,6 +7,7 @@ pub mod loss_ref;
 pub mod reflection_ref;
 pub mod mlp_ref;
 pub mod lightfield_ref;
+pub mod lpips_ref;
 
 use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};

@@ -60,13 +60,17 @@ fn sweep_tabulates_plots_and_resumes() {
         assert_eq!(r.stages.keys().map(String::as_str).collect::<Vec<_>>(), ["I", "II", "III"], "{}", r.name);
         assert!(r.wall_s > 0.0 && r.gpu_ms_per_iteration > 0.0 && r.psnr.is_finite() && r.normal_mae_deg.is_finite(), "{r:?}");
         assert_eq!(r.psnr, r.stages["III"].0[0]);
+        // LPIPS (the weights scripts/setup.sh converts) for the run and each stage.
+        assert!(r.lpips.is_finite() && r.lpips > 0.0 && r.lpips == r.stages["III"].0[3], "{r:?}");
+        assert!(r.stages.values().all(|s| s.0[3].is_finite()), "{r:?}");
     }
     assert_eq!(o.rows[1].iterations, 60, "40 + 10 + 10 iterations");
     assert_eq!(o.rows[1].settings["iterations"], "40");
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
     assert_eq!(csv.lines().count(), 4);
     assert!(csv.starts_with("run,key,iterations,light_field.threshold,wall_s,gpu_ms_per_iteration,total_iterations,psnr,"), "{csv}");
-    for p in ["psnr_vs_time.png", "normal_mae_vs_time.png"] {
+    assert!(csv.lines().next().unwrap().contains(",normal_mae_deg,lpips,I_psnr,I_ssim,I_normal_mae_deg,I_lpips,I_wall_s,"), "{csv}");
+    for p in ["psnr_vs_time.png", "normal_mae_vs_time.png", "lpips_vs_time.png"] {
         let img = image::open(out.join(p)).unwrap_or_else(|e| panic!("{p}: {e}"));
         assert_eq!((img.width(), img.height()), (960, 640));
     }

@@ -105,6 +105,13 @@ fn stage_one_trains_and_resumes_exactly() {
     assert!(m.psnr > baseline + 5.0, "test PSNR {:.2} vs mean-colour baseline {baseline:.2}", m.psnr);
     let mae = m.normals.normal_mae_deg.expect("normal MAE on the masks");
     assert!(mae.is_finite() && mae < 55.0, "normal MAE {mae:.2}°");
+    // LPIPS (AlexNet; the weights scripts/setup.sh converts): per view, the
+    // mean, in the periodic evaluation, and lower at the end than at 100.
+    let lpips = m.lpips.expect("LPIPS in the metrics");
+    let lpips_at = |it: usize| log[it - 1]["test"]["lpips"].as_f64().unwrap_or_else(|| panic!("no test LPIPS at {it}"));
+    eprintln!("test LPIPS {lpips:.4} (at 100: {:.4}, at 200: {:.4})", lpips_at(100), lpips_at(200));
+    assert!(m.per_view.iter().all(|v| v.lpips.is_some_and(|l| l.is_finite() && l > 0.0)));
+    assert!(lpips > 0.0 && lpips < lpips_at(100), "final LPIPS {lpips:.4} vs {:.4} at 100", lpips_at(100));
     // The reference of normals facing each pixel's ray, per stage as well
     // (measured 44.4°: this Stage I, at 48.8°, knows little of the glass).
     let facing = m.normals.normal_mae_ray_facing_deg.expect("ray-facing reference on the masks");
@@ -117,6 +124,8 @@ fn stage_one_trains_and_resumes_exactly() {
     let metrics: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(full.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["iterations"], 300);
     assert_eq!(metrics["stages"][0]["test"]["normal_mae_ray_facing_deg"].as_f64(), Some(facing));
+    assert_eq!(metrics["stages"][0]["test"]["lpips"].as_f64(), Some(lpips));
+    assert_eq!(metrics["test"]["per_view"][0]["lpips"].as_f64(), m.per_view[0].lpips);
     for f in ["r_0.png", "r_0_normal.png", "r_0_depth.exr", "r_0_depth.png"] {
         let p = full.join("renders/test").join(f);
         assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "{} missing", p.display());
@@ -128,7 +137,7 @@ fn stage_one_trains_and_resumes_exactly() {
     // `tgs eval` and `tgs render` on the run directory.
     let (mut tr, data) = tgs::train::run::open_run(ctx, &full).unwrap();
     let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
-    assert_eq!((again.psnr, again.ssim), (m.psnr, m.ssim), "evaluation from the checkpoint differs");
+    assert_eq!((again.psnr, again.ssim, again.lpips), (m.psnr, m.ssim, m.lpips), "evaluation from the checkpoint differs");
     let orbit = full.join("orbit");
     assert_eq!(tgs::render::render(ctx, &full, "orbit", 3, &orbit).unwrap(), 3);
     assert!(orbit.join("orbit_0002.png").is_file());

@@ -18,9 +18,9 @@
 //! knobs at the base (duplicates of the base run once); `product` runs
 //! every combination. Each run trains in `DIR/runs/NAME` with GPU
 //! timestamps on, and its row (settings, wall time, GPU ms per iteration,
-//! test PSNR / SSIM / normal MAE per stage) is added to `DIR/sweep.csv` as
-//! soon as it finishes; `DIR/psnr_vs_time.png` and `DIR/normal_mae_vs_time.png`
-//! are redrawn with the Pareto front marked. Running the same command again
+//! test PSNR / SSIM / normal MAE / LPIPS per stage) is added to `DIR/sweep.csv` as
+//! soon as it finishes; `DIR/psnr_vs_time.png`, `DIR/normal_mae_vs_time.png`
+//! and `DIR/lpips_vs_time.png` (with the LPIPS weights) are redrawn with the Pareto front marked. Running the same command again
 //! resumes: finished runs (in the CSV) are kept, an interrupted run is
 //! trained again from the start (so every wall time is one uninterrupted
 //! run's), the rest follow. Each row is keyed by its run's complete
@@ -166,12 +166,14 @@ pub struct Row {
     pub wall_s: f64,
     pub gpu_ms_per_iteration: f64,
     pub iterations: u64,
-    /// stage -> (psnr, ssim, normal MAE), wall s.
-    pub stages: BTreeMap<String, ([f64; 3], f64)>,
+    /// stage -> (psnr, ssim, normal MAE, LPIPS), wall s.
+    pub stages: BTreeMap<String, ([f64; 4], f64)>,
     /// The last stage's.
     pub psnr: f64,
     pub ssim: f64,
     pub normal_mae_deg: f64,
+    /// NaN without the LPIPS weights.
+    pub lpips: f64,
 }
 
 const STAGES: [&str; 3] = ["I", "II", "III"];
@@ -183,7 +185,7 @@ impl Row {
         let mut stages = BTreeMap::new();
         for s in m["stages"].as_array().context("metrics.json has no stages")? {
             let t = &s["test"];
-            stages.insert(s["stage"].as_str().unwrap_or("?").to_string(), ([f(&t["psnr"]), f(&t["ssim"]), f(&t["normal_mae_deg"])], f(&s["wall_s"])));
+            stages.insert(s["stage"].as_str().unwrap_or("?").to_string(), ([f(&t["psnr"]), f(&t["ssim"]), f(&t["normal_mae_deg"]), f(&t["lpips"])], f(&s["wall_s"])));
         }
         let t = &m["test"];
         Ok(Row {
@@ -197,6 +199,7 @@ impl Row {
             psnr: f(&t["psnr"]),
             ssim: f(&t["ssim"]),
             normal_mae_deg: f(&t["normal_mae_deg"]),
+            lpips: f(&t["lpips"]),
         })
     }
 }
@@ -204,9 +207,9 @@ impl Row {
 fn header(keys: &[String]) -> Vec<String> {
     let mut h = vec!["run".to_string(), "key".to_string()];
     h.extend(keys.iter().cloned());
-    h.extend(["wall_s", "gpu_ms_per_iteration", "total_iterations", "psnr", "ssim", "normal_mae_deg"].map(String::from));
+    h.extend(["wall_s", "gpu_ms_per_iteration", "total_iterations", "psnr", "ssim", "normal_mae_deg", "lpips"].map(String::from));
     for s in STAGES {
-        h.extend([format!("{s}_psnr"), format!("{s}_ssim"), format!("{s}_normal_mae_deg"), format!("{s}_wall_s")]);
+        h.extend([format!("{s}_psnr"), format!("{s}_ssim"), format!("{s}_normal_mae_deg"), format!("{s}_lpips"), format!("{s}_wall_s")]);
     }
     h
 }
@@ -232,11 +235,11 @@ fn field(s: &str) -> String {
 fn csv_line(r: &Row, keys: &[String]) -> String {
     let mut v = vec![field(&r.name), field(&r.key)];
     v.extend(keys.iter().map(|k| field(r.settings.get(k).map(String::as_str).unwrap_or(""))));
-    v.extend([num(r.wall_s), num(r.gpu_ms_per_iteration), r.iterations.to_string(), num(r.psnr), num(r.ssim), num(r.normal_mae_deg)]);
+    v.extend([num(r.wall_s), num(r.gpu_ms_per_iteration), r.iterations.to_string(), num(r.psnr), num(r.ssim), num(r.normal_mae_deg), num(r.lpips)]);
     for s in STAGES {
         match r.stages.get(s) {
-            Some((t, w)) => v.extend([num(t[0]), num(t[1]), num(t[2]), num(*w)]),
-            None => v.extend(["", "", "", ""].map(String::from)),
+            Some((t, w)) => v.extend([num(t[0]), num(t[1]), num(t[2]), num(t[3]), num(*w)]),
+            None => v.extend(["", "", "", "", ""].map(String::from)),
         }
     }
     v.join(",")
@@ -284,11 +287,11 @@ fn read_csv(path: &Path, keys: &[String]) -> Result<Vec<Row>> {
         r.settings = keys.iter().cloned().zip(v[2..=k].iter().cloned()).filter(|(_, s)| !s.is_empty()).collect();
         (r.wall_s, r.gpu_ms_per_iteration) = (p(&v[k + 1]), p(&v[k + 2]));
         r.iterations = v[k + 3].parse().unwrap_or(0);
-        (r.psnr, r.ssim, r.normal_mae_deg) = (p(&v[k + 4]), p(&v[k + 5]), p(&v[k + 6]));
+        (r.psnr, r.ssim, r.normal_mae_deg, r.lpips) = (p(&v[k + 4]), p(&v[k + 5]), p(&v[k + 6]), p(&v[k + 7]));
         for (j, s) in STAGES.iter().enumerate() {
-            let b = k + 7 + 4 * j;
+            let b = k + 8 + 5 * j;
             if !v[b].is_empty() {
-                r.stages.insert(s.to_string(), ([p(&v[b]), p(&v[b + 1]), p(&v[b + 2])], p(&v[b + 3])));
+                r.stages.insert(s.to_string(), ([p(&v[b]), p(&v[b + 1]), p(&v[b + 2]), p(&v[b + 3])], p(&v[b + 4])));
             }
         }
         rows.push(r);

@@ -22,7 +22,12 @@ const CHAR_W: i32 = 8;
 
 pub fn draw(dir: &Path, rows: &[Row]) -> Result<()> {
     one(&dir.join("psnr_vs_time.png"), rows, ("test PSNR (dB)", "higher is better"), |r| r.psnr, true)?;
-    one(&dir.join("normal_mae_vs_time.png"), rows, ("test normal MAE on the glass (degrees)", "lower is better"), |r| r.normal_mae_deg, false)
+    one(&dir.join("normal_mae_vs_time.png"), rows, ("test normal MAE on the glass (degrees)", "lower is better"), |r| r.normal_mae_deg, false)?;
+    // Without the LPIPS weights every row's is NaN: no empty chart.
+    if rows.iter().any(|r| r.lpips.is_finite()) {
+        one(&dir.join("lpips_vs_time.png"), rows, ("test LPIPS (AlexNet)", "lower is better"), |r| r.lpips, false)?;
+    }
+    Ok(())
 }
 
 /// Lower and upper bounds of `v` with 8% margins (a unit span when flat).

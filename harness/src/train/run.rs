@@ -338,9 +338,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let cfg = &tr.cfg;
         if cfg.test_interval > 0 && r.iteration % cfg.test_interval == 0 && r.iteration < total && !data.test.is_empty() {
             let m = evaluate(&mut tr, &data.test, None)?;
-            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normals.normal_mae_deg, "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg});
+            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "lpips": m.lpips, "normal_mae_deg": m.normals.normal_mae_deg, "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg});
             if !tty && !a.quiet {
-                eprintln!("[{}] test PSNR {:.2} SSIM {:.4}", r.iteration, m.psnr, m.ssim);
+                eprintln!("[{}] test PSNR {:.2} SSIM {:.4}{}", r.iteration, m.psnr, m.ssim, lpips_text(m.lpips));
             }
         }
         writeln!(log, "{line}")?;
@@ -410,7 +410,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     if !a.quiet {
         if let Some(m) = &metrics {
             let mae = m.normals.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
-            eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{mae}", tr.iteration, tr.scattering.set.len(), m.psnr, m.ssim);
+            eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{}{mae}", tr.iteration, tr.scattering.set.len(), m.psnr, m.ssim, lpips_text(m.lpips));
         }
         if a.profile {
             eprintln!("GPU ms per iteration by kernel:");
@@ -423,11 +423,16 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: clocks.total_s() })
 }
 
+/// ", LPIPS 0.123" (nothing without one).
+fn lpips_text(l: Option<f64>) -> String {
+    l.map(|v| format!(", LPIPS {v:.4}")).unwrap_or_default()
+}
+
 /// metrics.json's record of a finished stage.
 fn stage_record(stage: &str, tr: &Trainer, wall_s: f64, m: Option<&Metrics>) -> serde_json::Value {
     let its = tr.schedule.iterations_of(stage);
     let test = m.map(|m| {
-        json!({"psnr": m.psnr, "ssim": m.ssim, "normal_mae_deg": m.normals.normal_mae_deg, "normal_mae_scattering_deg": m.normals.normal_mae_scattering_deg,
+        json!({"psnr": m.psnr, "ssim": m.ssim, "lpips": m.lpips, "normal_mae_deg": m.normals.normal_mae_deg, "normal_mae_scattering_deg": m.normals.normal_mae_scattering_deg,
                "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg,
                "normal_mae_ray_facing_deg": m.normals.normal_mae_ray_facing_deg})
     });
