@@ -250,12 +250,43 @@ fn paper_preset_notes_small_datasets() {
 }
 
 #[test]
-fn seed_normal_names() {
-    for (name, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient)] {
-        let rc = ReflectionConfig { seed_normal: name.into(), ..Default::default() };
-        assert_eq!(rc.seed_normal().unwrap(), want, "reflection.seed_normal = \"{name}\"");
+fn named_settings_read_and_write_as_their_names() {
+    use tgs::train::settings::{EnvStart, LightFresnel, ReflectionFresnel, ReflectionInit, ScatteringParams};
+    assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::View);
+    for (n, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient)] {
+        assert_eq!(SeedNormal::parse(n), Ok(want));
     }
-    assert_eq!(ReflectionConfig::default().seed_normal().unwrap(), SeedNormal::View);
+    assert_eq!(ReflectionInit::parse("copy+hull").map(ReflectionInit::parts), Ok((true, true)));
+    assert_eq!(ReflectionInit::parse("copy").map(ReflectionInit::parts), Ok((true, false)));
+    assert_eq!(ReflectionInit::parse("hull").map(ReflectionInit::parts), Ok((false, true)));
+    // Every name of every named setting, set as --set does: the config
+    // takes it and writes it back as the same text (config.toml, checkpoint
+    // headers and sweep keys read as they did when these were strings).
+    let keys: [(&str, &[&str]); 6] = [
+        (SeedNormal::KEY, SeedNormal::NAMES),
+        (EnvStart::KEY, EnvStart::NAMES),
+        (ReflectionInit::KEY, ReflectionInit::NAMES),
+        (ReflectionFresnel::KEY, ReflectionFresnel::NAMES),
+        (LightFresnel::KEY, LightFresnel::NAMES),
+        (ScatteringParams::KEY, ScatteringParams::NAMES),
+    ];
+    for (key, names) in keys {
+        assert!(names.len() >= 2, "{key}");
+        let (sec, k) = key.split_once('.').unwrap();
+        for n in names {
+            let mut c = TrainConfig::quick();
+            c.set(&format!("{key}=\"{n}\"")).unwrap_or_else(|e| panic!("{key}={n}: {e:#}"));
+            let t = toml::Table::try_from(&c).unwrap();
+            assert_eq!(t[sec][k].as_str(), Some(*n), "{key}");
+            // Bare words are strings too.
+            let mut bare = TrainConfig::quick();
+            bare.set(&format!("{key}={n}")).unwrap();
+            assert_eq!(bare, c, "{key}={n}");
+        }
+        let e = format!("{:#}", TrainConfig::quick().set(&format!("{key}=\"nonsense\"")).unwrap_err());
+        let last = names.last().unwrap();
+        assert!(e.contains(key) && e.contains("'nonsense'") && e.contains(&format!("'{last}'")), "{e}");
+    }
 }
 
 #[test]
@@ -410,7 +441,7 @@ fn from_names_inherited_settings_that_differ_from_the_defaults() {
     let mut saved = TrainConfig::preset("quick").unwrap();
     assert!(inherited_settings(&saved, &saved, false).unwrap().is_empty(), "a run with today's defaults inherits nothing to report");
     saved.light_field.train_scattering = false;
-    saved.reflection.env_init = "scene".into();
+    saved.reflection.env_init = tgs::train::settings::EnvStart::Scene;
     saved.reflection.lr_r = 0.25;
     saved.light_field.lr_f0 = 0.5;
     saved.lr_opacity = 0.5;

@@ -381,7 +381,7 @@ fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -
     let k = r.check(&arrays)?;
     let g = host_set(MATERIAL, 1, &arrays);
     let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone() };
-    let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel()?, tr.cfg.adam_eps)?;
+    let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel.pipeline(), tr.cfg.adam_eps)?;
     upload_set(&m.set, &arrays)?;
     m.env.m.upload(&arrays[k + 1])?;
     m.env.v.upload(&arrays[k + 2])?;
@@ -426,7 +426,7 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
             let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[k].clone() };
-            ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel()? })
+            ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel.pipeline() })
         }
         (None, Some(l)) => {
             let shape = l.shape().context("Stage III state")?;

@@ -6,6 +6,7 @@ use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use super::seed::SeedNormal;
+use super::settings::{EnvStart, LightFresnel, ReflectionFresnel, ReflectionInit, ScatteringParams};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -110,7 +111,7 @@ pub struct LightFieldConfig {
     /// others take I_refl = 0 (an error of at most this in the composite).
     pub threshold: f32,
     /// "schlick": I_refl = F(F0, cos) Phi (the paper's Stage III); "off": F0 Phi.
-    pub fresnel: String,
+    pub fresnel: LightFresnel,
     /// Train the scattering set too (the paper's joint training; no
     /// densification, positions at Stage I's final rate), what of it
     /// `scattering_params` says. On by default, its colour only.
@@ -123,7 +124,7 @@ pub struct LightFieldConfig {
     /// `lantern`, +0.10 on `pane`, normals unchanged, ~30% more time per
     /// Stage III iteration; "all" fits the training views' transmitted
     /// detail and lost 0.15 dB on the built-in glass.
-    pub scattering_params: String,
+    pub scattering_params: ScatteringParams,
     /// High-frequency loss weight and percentile (as in `[reflection]`).
     pub lambda_hf: f32,
     pub hf_percentile: f32,
@@ -143,9 +144,9 @@ impl Default for LightFieldConfig {
             lr_f0: 0.0075,
             lr_r: 0.005,
             threshold: 0.01,
-            fresnel: "schlick".into(),
+            fresnel: LightFresnel::Schlick,
             train_scattering: true,
-            scattering_params: "colour".into(),
+            scattering_params: ScatteringParams::Colour,
             lambda_hf: 0.1,
             hf_percentile: 90.0,
             lambda_r: 0.0,
@@ -165,26 +166,16 @@ impl LightFieldConfig {
         shape.validate().context("light_field.levels_x / levels_w")?;
         Ok(shape)
     }
-    pub fn schlick(&self) -> Result<bool> {
-        match self.fresnel.as_str() {
-            "schlick" => Ok(true),
-            "off" => Ok(false),
-            f => bail!("light_field.fresnel must be 'schlick' or 'off', not '{f}'"),
-        }
+    pub fn schlick(&self) -> bool {
+        self.fresnel == LightFresnel::Schlick
     }
     /// Whether Stage III trains the scattering set's colour only (geometry
     /// and opacity frozen); meaningful with `train_scattering`.
-    pub fn scattering_colour_only(&self) -> Result<bool> {
-        match self.scattering_params.as_str() {
-            "all" => Ok(false),
-            "colour" => Ok(true),
-            p => bail!("light_field.scattering_params must be 'all' or 'colour', not '{p}'"),
-        }
+    pub fn scattering_colour_only(&self) -> bool {
+        self.scattering_params == ScatteringParams::Colour
     }
     fn validate(&self) -> Result<()> {
         self.shape()?;
-        self.schlick()?;
-        self.scattering_colour_only()?;
         if self.iterations == 0 {
             bail!("light_field.iterations must be at least 1 (leave Stage III out with stages = \"I,II\")");
         }
@@ -207,7 +198,7 @@ pub struct ReflectionConfig {
     pub iterations: u32,
     /// "off": c = f0 E(w) (the paper's Stage II colour); "schlick": c = E(w)
     /// and Schlick's F with the blended F0 per pixel.
-    pub fresnel: String,
+    pub fresnel: ReflectionFresnel,
     /// Cube-map face size. The quick preset's 16 (it was 64): a finer map
     /// memorises each training sample's colour as texel noise and leaves
     /// test views worse; measured after Stage II, 16 against 64: +0.20 dB
@@ -221,7 +212,7 @@ pub struct ReflectionConfig {
     /// quick preset): "scene" gains after Stage II on `lantern` (+0.21 dB)
     /// and moves the normals no more than grey; after Stage III the two
     /// starts end within 0.002 dB on three scenes: grey stays.
-    pub env_init: String,
+    pub env_init: EnvStart,
     pub lr_env: f32,
     pub lr_f0: f32,
     pub lr_r: f32,
@@ -262,7 +253,7 @@ pub struct ReflectionConfig {
     /// residual hull (train/seed.rs) only; "copy+hull" = both. Measured on
     /// the glass scene: the copy sits behind the glass (normal MAE 70.7
     /// degrees after Stage II vs Stage I's 63.1); the seeds start at 43.
-    pub init: String,
+    pub init: ReflectionInit,
     /// Residual hull: rays cast (at most one seed each) and the fraction of
     /// the views seeing a point that must see residual there.
     pub seed_rays: u32,
@@ -298,7 +289,7 @@ pub struct ReflectionConfig {
     /// (0.48x), path-traced `globe` 35.1 -> 20.5 (0.34x), but `lantern`
     /// 49.1 -> 64.0 and the flat `pane` 55.6 -> 63.4 (its silhouette
     /// cones' normal lies in the pane's plane).
-    pub seed_normal: String,
+    pub seed_normal: SeedNormal,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
     /// High-frequency loss (method-notes §3.6): weight of the mean error of
@@ -330,9 +321,9 @@ impl Default for ReflectionConfig {
     fn default() -> Self {
         ReflectionConfig {
             iterations: 10_000,
-            fresnel: "off".into(),
+            fresnel: ReflectionFresnel::Off,
             env_res: 128,
-            env_init: "grey".into(),
+            env_init: EnvStart::Grey,
             lr_env: 0.01,
             lr_f0: 0.0075,
             lr_r: 0.005,
@@ -360,11 +351,11 @@ impl Default for ReflectionConfig {
             // ~1.16x on both sides (the residual mean alone does not separate
             // them: `diffuse` 0.0146 at 50², 0.0273 at 100²).
             min_view_dependence: 0.007,
-            init: "hull".into(),
+            init: ReflectionInit::Hull,
             seed_rays: 8192,
             seed_agree: 0.9,
             seed_significance: 1e-6,
-            seed_normal: "view".into(),
+            seed_normal: SeedNormal::View,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,
@@ -376,48 +367,7 @@ impl Default for ReflectionConfig {
 }
 
 impl ReflectionConfig {
-    pub fn fresnel(&self) -> Result<tgs_pipelines::Fresnel> {
-        match self.fresnel.as_str() {
-            "off" => Ok(tgs_pipelines::Fresnel::Off),
-            "schlick" => Ok(tgs_pipelines::Fresnel::Schlick),
-            f => bail!("reflection.fresnel must be 'off' or 'schlick', not '{f}'"),
-        }
-    }
-
-    /// (copy the Stage I set, seed on the residual hull), from `init`.
-    pub fn init_parts(&self) -> Result<(bool, bool)> {
-        match self.init.as_str() {
-            "copy" => Ok((true, false)),
-            "hull" => Ok((false, true)),
-            "copy+hull" => Ok((true, true)),
-            i => bail!("reflection.init must be 'copy', 'hull' or 'copy+hull', not '{i}'"),
-        }
-    }
-
-    /// How a seed's normal is chosen (`seed_normal`).
-    pub fn seed_normal(&self) -> Result<SeedNormal> {
-        match self.seed_normal.as_str() {
-            "view" => Ok(SeedNormal::View),
-            "plane" => Ok(SeedNormal::Plane),
-            "gradient" => Ok(SeedNormal::Gradient),
-            n => bail!("reflection.seed_normal must be 'view', 'plane' or 'gradient', not '{n}'"),
-        }
-    }
-
-    /// Whether the cube map starts from the scene (`env_init`).
-    pub fn env_from_scene(&self) -> Result<bool> {
-        match self.env_init.as_str() {
-            "grey" => Ok(false),
-            "scene" => Ok(true),
-            e => bail!("reflection.env_init must be 'grey' or 'scene', not '{e}'"),
-        }
-    }
-
     fn validate(&self) -> Result<()> {
-        self.fresnel()?;
-        self.init_parts()?;
-        self.env_from_scene()?;
-        self.seed_normal()?;
         if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
             bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);
         }

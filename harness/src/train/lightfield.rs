@@ -259,7 +259,7 @@ impl LightFieldModel {
         };
         let weights = LossWeights { ssim: cfg.lambda_ssim, normal: 0.0, dist: 0.0 };
         let lf = &cfg.light_field;
-        let colour_only = lf.scattering_colour_only()?;
+        let colour_only = lf.scattering_colour_only();
         let it = x.iteration as u64;
         let net_group = AdamGroup::single(Self::lr(cfg, x.iteration));
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.

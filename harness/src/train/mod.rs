@@ -14,6 +14,7 @@ pub mod run;
 pub mod reflection;
 pub mod scattering;
 pub mod seed;
+pub mod settings;
 pub mod trainer;
 pub mod view_dependence;
 

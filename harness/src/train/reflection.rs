@@ -155,7 +155,7 @@ impl ReflectionModel {
         if h.is_empty() {
             bail!("the reflection set would be empty (reflection.init = '{}' found nothing to start from)", rc.init);
         }
-        Self::new(ctx, &h, &env, rc.fresnel()?, adam_eps)
+        Self::new(ctx, &h, &env, rc.fresnel.pipeline(), adam_eps)
     }
 
     pub fn new(ctx: &Arc<Context>, set: &HostGaussians, env: &HostEnvMap, fresnel: Fresnel, adam_eps: f32) -> Result<ReflectionModel> {

@@ -565,7 +565,7 @@ fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut 
         s.params(),
         lf.threshold,
         lf.iterations,
-        match (lf.train_scattering, lf.scattering_colour_only()?) {
+        match (lf.train_scattering, lf.scattering_colour_only()) {
             (false, _) => " (scattering set frozen)",
             (true, true) => " (scattering colour trained, its geometry frozen)",
             (true, false) => " (scattering set trained)",

@@ -78,26 +78,27 @@ pub struct SeedParams {
     pub threads: usize,
 }
 
-/// A seed's normal (see the module documentation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SeedNormal {
-    /// The unit direction from the seed to the centre of the camera whose
-    /// ray found it.
-    View,
-    /// The least-squares plane of the seed and its 16 nearest seeds,
-    /// turned to face that camera (the camera direction with fewer than 3
-    /// neighbours).
-    Plane,
-    /// Against the gradient of the hull's agreement field: the sum, over
-    /// the views that see the seed, of their residual masks blurred by a
-    /// tenth of the image width and sampled at its projections,
-    /// differentiated in 3D by central differences over that width. A view
-    /// whose mask edge passes near the seed adds the normal of its
-    /// silhouette cone there; a view that sees it deep inside or outside
-    /// its mask adds nothing. Where the field changes by less than
-    /// [`GRADIENT_MIN`] over the step, the camera direction (as `View`).
-    Gradient,
-}
+crate::train::settings::name_enum!(
+    /// A seed's normal (see the module documentation; `reflection.seed_normal`).
+    SeedNormal, "reflection.seed_normal", {
+        /// The unit direction from the seed to the centre of the camera whose
+        /// ray found it.
+        View = "view",
+        /// The least-squares plane of the seed and its 16 nearest seeds,
+        /// turned to face that camera (the camera direction with fewer than 3
+        /// neighbours).
+        Plane = "plane",
+        /// Against the gradient of the hull's agreement field: the sum, over
+        /// the views that see the seed, of their residual masks blurred by a
+        /// tenth of the image width and sampled at its projections,
+        /// differentiated in 3D by central differences over that width. A view
+        /// whose mask edge passes near the seed adds the normal of its
+        /// silhouette cone there; a view that sees it deep inside or outside
+        /// its mask adds nothing. Where the field changes by less than
+        /// [`GRADIENT_MIN`] over the step, the camera direction (as `View`).
+        Gradient = "gradient",
+    }
+);
 
 impl Default for SeedParams {
     fn default() -> Self {

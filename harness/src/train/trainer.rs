@@ -323,7 +323,7 @@ impl Trainer {
         // and both reduced for the view-dependence measure.
         let mut maps: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
         let mut vd_maps: Vec<VdMap> = Vec::new();
-        let (copy, hull) = self.cfg.reflection.init_parts()?;
+        let (copy, hull) = self.cfg.reflection.init.parts();
         for (i, cam) in self.cameras.clone().iter().enumerate() {
             let n = (cam.width * cam.height) as usize;
             let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * n)?;
@@ -375,7 +375,7 @@ impl Trainer {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
                 let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-                let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal()?, significance: rc.seed_significance as f64, ..SeedParams::default() };
+                let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal, significance: rc.seed_significance as f64, ..SeedParams::default() };
                 let seeds = if hull {
                     let h = hull_seeding(&views, &p);
                     d.significance_dropped = h.significance_dropped;
@@ -390,7 +390,7 @@ impl Trainer {
                 let g = if copy || d.hull_empty { Some(self.scattering.set.params.download()?) } else { None };
                 d.seeds = seeds.len() as u32;
                 d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
-                let env = if rc.env_from_scene()? {
+                let env = if rc.env_init == super::settings::EnvStart::Scene {
                     let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
                     means.extend(seeds.iter().flat_map(|s| s.position));
                     let scat = self.scattering.set.params.download()?;
@@ -425,7 +425,7 @@ impl Trainer {
         let set = refl.into_set();
         let (centre, half_extent) = normalization_box(&set.params.means.download()?);
         let lf = &self.cfg.light_field;
-        let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick()? };
+        let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick() };
         let net = LightFieldModel::init_net(&self.ctx, lf.shape()?, self.cfg.seed ^ 0x4c46)?;
         self.light_field = Some(LightFieldModel::new(&self.ctx, set, net, shade, self.cfg.adam_eps)?);
         // Stage III renders the scattering colour itself, or caches it
