@@ -10,8 +10,9 @@ void main() {
     if (i >= pc.n) {
         return;
     }
-    ReflGeom g = refl_geom(gaussian_mean(i), quats[i]);
-    vec3 e = sigmoid3(env_raw(env_taps(g.w, pc.res)));
+    vec3 p = gaussian_mean(i);
+    ReflGeom g = refl_geom(p, quats[i]);
+    vec3 e = sigmoid3(env_raw(env_taps(env_dir(p, g.w).d, pc.res)));
     vec3 f0 = gaussian_f0(i);
     float r = gaussian_r(i);
     vec3 c = pc.schlick != 0u ? e : f0 * e;

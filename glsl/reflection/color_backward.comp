@@ -24,8 +24,10 @@ void main() {
     if (i >= pc.n) {
         return;
     }
-    ReflGeom g = refl_geom(gaussian_mean(i), quats[i]);
-    EnvTaps t = env_taps(g.w, pc.res);
+    vec3 p = gaussian_mean(i);
+    ReflGeom g = refl_geom(p, quats[i]);
+    EnvDir ed = env_dir(p, g.w);
+    EnvTaps t = env_taps(ed.d, pc.res);
     vec3 u = env_raw(t);
     vec3 e = sigmoid3(u);
     vec3 f0 = gaussian_f0(i);
@@ -48,7 +50,7 @@ void main() {
 
     // Through the sigmoid to the pre-sigmoid value u = sum w_k T_k.
     vec3 du = de * e * (1.0 - e);
-    vec3 dw = vec3(0.0);
+    vec3 dd = vec3(0.0); // dL/d(lookup direction)
     for (uint k = 0u; k < 4u; k++) {
         uint s = 4u * i + k;
         tap_keys[s] = t.idx[k];
@@ -57,14 +59,17 @@ void main() {
         tap_grads[3u * s] = gt.x;
         tap_grads[3u * s + 1u] = gt.y;
         tap_grads[3u * s + 2u] = gt.z;
-        dw += dot(du, env_texel(t.idx[k])) * t.dw[k];
+        dd += dot(du, env_texel(t.idx[k])) * t.dw[k];
     }
+    // Through the parallax proxy (the identity without one).
+    vec3 dp_proxy = vec3(0.0);
+    vec3 dw = env_dir_backward(ed, g.w, dd, dp_proxy);
     // w = 2 (n.v) n - v.
     float nv = dot(g.n, g.v);
     vec3 dn = 2.0 * nv * dw + 2.0 * dot(dw, g.n) * g.v;
     vec3 dv = 2.0 * dot(dw, g.n) * g.n - dw;
     // v = (c - p) / |c - p|.
-    vec3 dp = g.vlen > 1e-20 ? -(dv - g.v * dot(g.v, dv)) / g.vlen : vec3(0.0);
+    vec3 dp = (g.vlen > 1e-20 ? -(dv - g.v * dot(g.v, dv)) / g.vlen : vec3(0.0)) + dp_proxy;
     // n = sgn t_w(q / |q|).
     vec3 dt = g.sgn * dn;
     vec4 q = g.q;

@@ -15,6 +15,7 @@ layout(push_constant) uniform Push {
     uint schlick;  // 1: c = E(w) (Fresnel applied per pixel); 0: c = f0 E(w)
     vec3 centre;   // camera centre, world space
     uint pad;
+    vec4 proxy;    // the map's parallax proxy: centre (xyz), radius (w; 0: infinitely far)
 } pc;
 
 // Camera-facing world normal t_w of a normalized quaternion (r, x, y, z).
@@ -46,6 +47,55 @@ ReflGeom refl_geom(vec3 p, vec4 q_raw) {
     g.n = g.sgn * t;
     g.w = 2.0 * dot(g.n, g.v) * g.n - g.v;
     return g;
+}
+
+// The cube-map lookup direction of a reflection from p along the unit
+// mirror direction w. With a parallax proxy (radius R > 0) and p inside
+// it, the map holds the light of the sphere |x - c| = R (a local cube
+// map): the lookup goes from c to where p + t w (t > 0) leaves the sphere,
+// d = o + t w with o = p - c, t = s - b, b = o.w, s = sqrt(b^2 - |o|^2 + R^2)
+// (s > |b| inside, so t > 0). Otherwise d = w. d is not unit length (the
+// cube lookup does not need it).
+struct EnvDir {
+    vec3 d;
+    bool on;
+    vec3 o;
+    float t, b, s;
+};
+
+EnvDir env_dir(vec3 p, vec3 w) {
+    EnvDir e;
+    e.d = w;
+    e.on = false;
+    e.o = vec3(0.0);
+    e.t = 0.0;
+    e.b = 0.0;
+    e.s = 1.0;
+    float r = pc.proxy.w;
+    if (r > 0.0) {
+        vec3 o = p - pc.proxy.xyz;
+        float k = dot(o, o) - r * r;
+        if (k < 0.0) {
+            e.on = true;
+            e.o = o;
+            e.b = dot(o, w);
+            e.s = sqrt(e.b * e.b - k);
+            e.t = e.s - e.b;
+            e.d = o + e.t * w;
+        }
+    }
+    return e;
+}
+
+// From dL/dd to dL/dw (returned) and dL/dp (added to dp).
+vec3 env_dir_backward(EnvDir e, vec3 w, vec3 dd, inout vec3 dp) {
+    if (!e.on) {
+        return dd;
+    }
+    float dw_t = dot(dd, w); // dL/dt
+    // dt/dw = (b / s - 1) o; dt/do = (b w - o) / s - w.
+    dp += dd + dw_t * ((e.b * w - e.o) / e.s - w);
+    return e.t * dd + dw_t * (e.b / e.s - 1.0) * e.o;
 }
 
 float sigmoid(float x) {

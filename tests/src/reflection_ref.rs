@@ -112,9 +112,33 @@ pub fn mirror_dir(g: &ReflGaussian, centre: V3) -> V3 {
     [0, 1, 2].map(|k| 2.0 * nv * n[k] - v[k])
 }
 
+/// The lookup direction through a parallax proxy (centre c, radius R):
+/// from c to the exit point of p + t w from the sphere, t > 0, solved here
+/// as the larger root of |p - c + t w|^2 = R^2 in the numerically stable
+/// form (not the shader's s - b); w itself without a proxy or with p on
+/// or outside the sphere.
+pub fn proxy_dir(p: V3, w: V3, proxy: Option<(V3, f64)>) -> V3 {
+    let Some((c, r)) = proxy else { return w };
+    let o = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+    let (a, b, k) = (dot(w, w), dot(o, w), dot(o, o) - r * r);
+    if k >= 0.0 || r <= 0.0 {
+        return w;
+    }
+    // a t^2 + 2 b t + k = 0 with k < 0: one positive root,
+    // (-b + sq) / a = -k / (b + sq); the second form where b >= 0.
+    let sq = (b * b - a * k).sqrt();
+    let t = if b >= 0.0 { -k / (b + sq) } else { (sq - b) / a };
+    [0, 1, 2].map(|i| o[i] + t * w[i])
+}
+
 /// Rasterized features: [c (3), r] plus f0 (3) with Schlick; c = f0 E or E.
 pub fn color(g: &ReflGaussian, env: &[f64], res: usize, centre: V3, schlick: bool) -> Vec<f64> {
-    let e = env_lookup(env, res, mirror_dir(g, centre));
+    color_with_proxy(g, env, res, centre, None, schlick)
+}
+
+/// [`color`] with the map's parallax proxy ([`proxy_dir`]).
+pub fn color_with_proxy(g: &ReflGaussian, env: &[f64], res: usize, centre: V3, proxy: Option<(V3, f64)>, schlick: bool) -> Vec<f64> {
+    let e = env_lookup(env, res, proxy_dir(g.p, mirror_dir(g, centre), proxy));
     let f0 = [0, 1, 2].map(|c| sigmoid(g.material[c]));
     let r = sigmoid(g.material[3]);
     let c = if schlick { e } else { [0, 1, 2].map(|k| f0[k] * e[k]) };

@@ -7,7 +7,7 @@
 //! and bit-identical reruns.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
+use tgs_pipelines::{EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
 use tgs_tests::reflection_ref::{self as rr, CompositePixel, ReflGaussian, V3};
 use tgs_tests::{check_validation, ctx_shared, seed, Rng};
 
@@ -115,15 +115,29 @@ fn random_env(rng: &mut Rng, res: usize) -> Vec<f64> {
     (0..6 * res * res * 3).map(|_| uni(rng, -2.0, 2.0)).collect()
 }
 
-fn upload_env(ctx: &std::sync::Arc<tgs_engine::Context>, res: usize, raw: &[f64]) -> EnvMap {
-    EnvMap::upload(ctx, &HostEnvMap { res: res as u32, raw: raw.iter().map(|&v| v as f32).collect() }).unwrap()
+/// A parallax proxy (centre, radius) as the GPU takes it.
+fn gpu_proxy(proxy: Option<(V3, f64)>) -> Option<EnvProxy> {
+    proxy.map(|(c, r)| EnvProxy { centre: c.map(|v| v as f32), radius: r as f32 })
+}
+
+/// The proxy as the GPU sees it (rounded to f32).
+fn proxy32(proxy: Option<(V3, f64)>) -> Option<(V3, f64)> {
+    proxy.map(|(c, r)| (c.map(|v| v as f32 as f64), r as f32 as f64))
+}
+
+fn upload_env_proxy(ctx: &std::sync::Arc<tgs_engine::Context>, res: usize, raw: &[f64], proxy: Option<(V3, f64)>) -> EnvMap {
+    EnvMap::upload(ctx, &HostEnvMap { res: res as u32, raw: raw.iter().map(|&v| v as f32).collect(), proxy: gpu_proxy(proxy) }).unwrap()
 }
 
 fn gpu_color(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel) -> Vec<f32> {
+    gpu_color_proxy(gs, env, res, fresnel, None)
+}
+
+fn gpu_color_proxy(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, proxy: Option<(V3, f64)>) -> Vec<f32> {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let g = Gaussians::upload(ctx, &host_set(gs)).unwrap();
-    let e = upload_env(ctx, res, env);
+    let e = upload_env_proxy(ctx, res, env, proxy);
     let feat = Buffer::<f32>::new(ctx, "test.feat", fresnel.channels() as usize * gs.len()).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
     shading.record_color(&mut rec, &g, &e, &camera(), fresnel, &feat).unwrap();
@@ -218,12 +232,12 @@ struct Backward {
     env: Vec<f32>,
 }
 
-fn gpu_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, dfeat: &[f64]) -> Backward {
+fn gpu_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, dfeat: &[f64], proxy: Option<(V3, f64)>) -> Backward {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let g = Gaussians::upload(ctx, &host_set(gs)).unwrap();
     let grads = Gaussians::zeros(ctx, gs.len() as u32, 4, 1).unwrap();
-    let e = upload_env(ctx, res, env);
+    let e = upload_env_proxy(ctx, res, env, proxy);
     let df: Vec<f32> = dfeat.iter().map(|&v| v as f32).collect();
     let d = Buffer::from_slice(ctx, "test.dfeat", &df).unwrap();
     let s = shading.texel_scratch(&e, gs.len() as u32).unwrap();
@@ -234,9 +248,9 @@ fn gpu_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, 
     Backward { material: h.features, means: h.means, quats: h.quats, env: e.grads.download().unwrap() }
 }
 
-fn ref_loss(gs: &[ReflGaussian], env: &[f64], res: usize, schlick: bool, dfeat: &[f64]) -> f64 {
+fn ref_loss(gs: &[ReflGaussian], env: &[f64], res: usize, schlick: bool, dfeat: &[f64], proxy: Option<(V3, f64)>) -> f64 {
     let ch = if schlick { 7 } else { 4 };
-    gs.iter().enumerate().map(|(i, g)| rr::color(g, env, res, CENTRE, schlick).iter().enumerate().map(|(c, v)| v * dfeat[ch * i + c]).sum::<f64>()).sum()
+    gs.iter().enumerate().map(|(i, g)| rr::color_with_proxy(g, env, res, CENTRE, proxy, schlick).iter().enumerate().map(|(c, v)| v * dfeat[ch * i + c]).sum::<f64>()).sum()
 }
 
 fn close(got: f32, want: f64, scale: f64) -> bool {
@@ -244,6 +258,11 @@ fn close(got: f32, want: f64, scale: f64) -> bool {
 }
 
 fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, rng: &mut Rng, what: &str) -> Backward {
+    check_backward_proxy(gs, env, res, fresnel, rng, what, None)
+}
+
+fn check_backward_proxy(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, rng: &mut Rng, what: &str, proxy: Option<(V3, f64)>) -> Backward {
+    let proxy = proxy32(proxy);
     let schlick = fresnel == Fresnel::Schlick;
     let ch = fresnel.channels() as usize;
     let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(rng, -1.0, 1.0)).collect();
@@ -251,7 +270,7 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
     let gs: Vec<ReflGaussian> = gs.iter().map(round32).collect();
     let env: Vec<f64> = env.iter().map(|&v| v as f32 as f64).collect();
     let dfeat: Vec<f64> = dfeat.iter().map(|&v| v as f32 as f64).collect();
-    let got = gpu_backward(&gs, &env, res, fresnel, &dfeat);
+    let got = gpu_backward(&gs, &env, res, fresnel, &dfeat, proxy);
     let h = 1e-6;
     let fd = |f: &dyn Fn(f64) -> f64| (f(h) - f(-h)) / (2.0 * h);
     let mut bad = Vec::new();
@@ -259,7 +278,7 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
         let with = |k: &dyn Fn(&mut ReflGaussian, f64), e: f64| {
             let mut m = gs.clone();
             k(&mut m[i], e);
-            ref_loss(&m, &env, res, schlick, &dfeat)
+            ref_loss(&m, &env, res, schlick, &dfeat, proxy)
         };
         for c in 0..4 {
             let want = fd(&|e| with(&|g, e| g.material[c] += e, e));
@@ -287,7 +306,7 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
         let want = fd(&|e| {
             let mut m = env.clone();
             m[t] += e;
-            ref_loss(&gs, &m, res, schlick, &dfeat)
+            ref_loss(&gs, &m, res, schlick, &dfeat, proxy)
         });
         if !close(got.env[t], want, scale) {
             bad.push(format!("texel value {t}: GPU {} vs FD {want}", got.env[t]));
@@ -299,8 +318,89 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
             eprintln!("Gaussian {i}: w {w:?} face {:?} taps {:?}", rr::cube_coords(w), rr::taps(w, res));
         }
     }
-    assert!(bad.is_empty(), "{what} ({fresnel:?}, res {res}): {} mismatches:\n{}", bad.len(), bad[..bad.len().min(20)].join("\n"));
+    assert!(bad.is_empty(), "{what} ({fresnel:?}, res {res}, proxy {proxy:?}): {} mismatches:\n{}", bad.len(), bad[..bad.len().min(20)].join("\n"));
     got
+}
+
+/// A proxy around the Gaussians (|p| <= sqrt 3) that also leaves some
+/// outside it, where the lookup falls back to the mirror direction.
+const PROXY: (V3, f64) = ([0.2, -0.3, 0.1], 1.2);
+
+#[test]
+fn parallax_proxy_lookup_matches_reference() {
+    // The reference's exit point lies on the sphere, beyond p, along w.
+    let mut rng = Rng(seed("proxy_dir"));
+    for _ in 0..200 {
+        let p = [uni(&mut rng, -1.0, 1.0), uni(&mut rng, -1.0, 1.0), uni(&mut rng, -1.0, 1.0)];
+        let w = random_dir(&mut rng);
+        let (c, r) = PROXY;
+        let d = rr::proxy_dir(p, w, Some(PROXY));
+        let o = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+        if (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt() >= r {
+            assert_eq!(d, w, "outside the sphere: the mirror direction");
+            continue;
+        }
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        assert!((len - r).abs() < 1e-9, "exit point at distance {len} from the centre, not {r}");
+        let t: f64 = (0..3).map(|k| (d[k] - o[k]) * w[k]).sum();
+        assert!(t > 0.0 && (0..3).all(|k| (o[k] + t * w[k] - d[k]).abs() < 1e-9), "not ahead along w");
+        // A huge sphere is the map at infinity: the direction tends to w.
+        let far = norm(rr::proxy_dir(p, w, Some((c, 1e7))));
+        assert!((0..3).all(|k| (far[k] - w[k]).abs() < 1e-6));
+    }
+    // The GPU colour through the proxy, against the reference.
+    for res in [3usize, 16] {
+        let env = random_env(&mut rng, res);
+        let mut dirs = special_dirs();
+        dirs.extend((0..200).map(|_| random_dir(&mut rng)));
+        let mut gs: Vec<_> = dirs.iter().map(|&w| random_gaussian(&mut rng, w)).collect();
+        // At the proxy's centre and on its boundary's inside.
+        gs[0].p = PROXY.0;
+        gs[1].p = [PROXY.0[0] + 1.199, PROXY.0[1], PROXY.0[2]];
+        for fresnel in [Fresnel::Off, Fresnel::Schlick] {
+            let ch = fresnel.channels() as usize;
+            let got = gpu_color_proxy(&gs, &env, res, fresnel, Some(PROXY));
+            let (mut inside, mut off) = (0, 0);
+            for (i, g) in gs.iter().enumerate() {
+                let g32 = round32(g);
+                let centre = CENTRE.map(|v| v as f32 as f64);
+                let want = rr::color_with_proxy(&g32, &env, res, centre, proxy32(Some(PROXY)), fresnel == Fresnel::Schlick);
+                let got_i = &got[ch * i..ch * (i + 1)];
+                assert!(got_i.iter().all(|v| v.is_finite()), "res {res} {fresnel:?} Gaussian {i}: {got_i:?}");
+                if (0..ch).all(|c| (got_i[c] as f64 - want[c]).abs() < 2e-4) {
+                    let o: f64 = (0..3).map(|k| (g32.p[k] - PROXY.0[k]).powi(2)).sum::<f64>().sqrt();
+                    if o < PROXY.1 { inside += 1 } else { off += 1 }
+                    continue;
+                }
+                // A tie on a seam (as in the test without a proxy).
+                let d = rr::proxy_dir(g32.p, rr::mirror_dir(&g32, centre), proxy32(Some(PROXY)));
+                let tie_ok = (0..6).any(|k| {
+                    let mut d2 = norm(d);
+                    d2[k / 2] += if k % 2 == 0 { 1e-6 } else { -1e-6 };
+                    let e = rr::env_lookup(&env, res, norm(d2));
+                    let f0 = [0, 1, 2].map(|c| 1.0 / (1.0 + (-g32.material[c]).exp()));
+                    (0..3).all(|c| (got_i[c] as f64 - if fresnel == Fresnel::Schlick { e[c] } else { f0[c] * e[c] }).abs() < 2e-4)
+                });
+                assert!(tie_ok, "res {res} {fresnel:?} Gaussian {i}: GPU {got_i:?} vs f64 {want:?}");
+            }
+            assert!(inside > 50 && off > 10, "the cases cover both sides of the sphere: {inside} inside, {off} outside");
+        }
+    }
+    check_validation(ctx_shared());
+}
+
+#[test]
+fn color_backward_through_the_proxy_matches_finite_differences() {
+    let mut rng = Rng(seed("color_backward_proxy"));
+    for fresnel in [Fresnel::Off, Fresnel::Schlick] {
+        let env = random_env(&mut rng, 3);
+        let gs: Vec<_> = (0..24).map(|_| {
+            let w = random_dir(&mut rng);
+            random_gaussian(&mut rng, w)
+        }).collect();
+        check_backward_proxy(&gs, &env, 3, fresnel, &mut rng, "random directions through a proxy", Some(PROXY));
+    }
+    check_validation(ctx_shared());
 }
 
 #[test]
@@ -329,8 +429,8 @@ fn texel_gradients_sum_many_gaussians_per_texel_deterministically() {
     }).collect();
     let ch = Fresnel::Off.channels() as usize;
     let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64).collect();
-    let a = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat);
-    let b = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat);
+    let a = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat, None);
+    let b = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat, None);
     assert_eq!(a.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "texel gradients differ between identical runs");
     assert_eq!(a.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
     // Against central differences of the f64 reference.
@@ -341,7 +441,7 @@ fn texel_gradients_sum_many_gaussians_per_texel_deterministically() {
         let f = |e: f64| {
             let mut m = env32.clone();
             m[t] += e;
-            ref_loss(&gs32, &m, 1, false, &dfeat)
+            ref_loss(&gs32, &m, 1, false, &dfeat, None)
         };
         let want = (f(h) - f(-h)) / (2.0 * h);
         assert!(close(a.env[t], want, 1.0 + want.abs()), "texel value {t}: GPU {} vs FD {want}", a.env[t]);
@@ -364,13 +464,19 @@ fn degenerate_reflection_gaussians_stay_finite() {
         ReflGaussian { p: [0.0; 3], q: quat_to(edge_n), material: [1.0; 4] },
         ReflGaussian { p: [1e-30, 0.0, 0.0], q: [1e-20, 0.0, 0.0, 0.0], material: [0.0; 4] },
     ];
-    for fresnel in [Fresnel::Off, Fresnel::Schlick] {
-        let feat = gpu_color(&gs, &env, 4, fresnel);
-        assert!(feat.iter().all(|v| v.is_finite()), "{fresnel:?}: non-finite colour {feat:?}");
-        let dfeat = vec![1.0; fresnel.channels() as usize * gs.len()];
-        let b = gpu_backward(&gs, &env, 4, fresnel, &dfeat);
-        for (name, v) in [("material", &b.material), ("means", &b.means), ("quats", &b.quats), ("env", &b.env)] {
-            assert!(v.iter().all(|x| x.is_finite()), "{fresnel:?}: non-finite {name} gradient {v:?}");
+    let mut gs = gs;
+    // Exactly on a parallax proxy's sphere (radius 1 about the origin).
+    gs.push(ReflGaussian { p: [1.0, 0.0, 0.0], q: quat_to(v), material: [0.0; 4] });
+    // The proxy centred on Gaussians at the origin, and one too small to hold any.
+    for proxy in [None, Some(([0.0; 3], 1.0)), Some(([0.0; 3], 1e-30))] {
+        for fresnel in [Fresnel::Off, Fresnel::Schlick] {
+            let feat = gpu_color_proxy(&gs, &env, 4, fresnel, proxy);
+            assert!(feat.iter().all(|v| v.is_finite()), "{fresnel:?} {proxy:?}: non-finite colour {feat:?}");
+            let dfeat = vec![1.0; fresnel.channels() as usize * gs.len()];
+            let b = gpu_backward(&gs, &env, 4, fresnel, &dfeat, proxy);
+            for (name, v) in [("material", &b.material), ("means", &b.means), ("quats", &b.quats), ("env", &b.env)] {
+                assert!(v.iter().all(|x| x.is_finite()), "{fresnel:?} {proxy:?}: non-finite {name} gradient {v:?}");
+            }
         }
     }
     check_validation(ctx_shared());

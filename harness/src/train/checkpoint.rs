@@ -380,7 +380,7 @@ fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -
     use tgs_pipelines::reflection::MATERIAL;
     let k = r.check(&arrays)?;
     let g = host_set(MATERIAL, 1, &arrays);
-    let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone() };
+    let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone(), proxy: r.decision.proxy() };
     let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel.pipeline(), tr.cfg.adam_eps)?;
     upload_set(&m.set, &arrays)?;
     m.env.m.upload(&arrays[k + 1])?;
@@ -425,7 +425,7 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
             let k = r.check(&refl).context("Stage II state")?;
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
-            let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[k].clone() };
+            let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[k].clone(), proxy: r.decision.proxy() };
             ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel.pipeline() })
         }
         (None, Some(l)) => {

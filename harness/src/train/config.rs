@@ -213,6 +213,14 @@ pub struct ReflectionConfig {
     /// and moves the normals no more than grey; after Stage III the two
     /// starts end within 0.002 dB on three scenes: grey stays.
     pub env_init: EnvStart,
+    /// Where the cube map's light is: 0, infinitely far (the paper's map);
+    /// r > 0, on a sphere around the reflection set's box centre of radius
+    /// r x the mean distance from that centre to the training cameras, so
+    /// a reflection looks up the direction to where its ray leaves that
+    /// sphere (a parallax-corrected, local cube map; glsl/reflection/
+    /// color_common.glsl `env_dir`). Near-field content then lands where
+    /// each surfel sees it, not where the centre would.
+    pub env_radius: f32,
     pub lr_env: f32,
     pub lr_f0: f32,
     pub lr_r: f32,
@@ -324,6 +332,7 @@ impl Default for ReflectionConfig {
             fresnel: ReflectionFresnel::Off,
             env_res: 128,
             env_init: EnvStart::Grey,
+            env_radius: 0.0,
             lr_env: 0.01,
             lr_f0: 0.0075,
             lr_r: 0.005,
@@ -368,6 +377,9 @@ impl Default for ReflectionConfig {
 
 impl ReflectionConfig {
     fn validate(&self) -> Result<()> {
+        if !(self.env_radius >= 0.0 && self.env_radius <= 1e6) {
+            bail!("reflection.env_radius must be 0 (light infinitely far) or a positive multiple of the camera distance up to 1e6, not {}", self.env_radius);
+        }
         if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
             bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);
         }

@@ -21,7 +21,7 @@ use crate::data::Dataset;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Timing};
-use tgs_pipelines::{Camera, HostEnvMap, HostGaussians, LossValues, Plane, ReflectionShading};
+use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, HostGaussians, LossValues, Plane, ReflectionShading};
 
 pub use super::reflection::ReflRendered;
 pub use super::scattering::Rendered;
@@ -97,6 +97,10 @@ pub struct ReflDecision {
     /// the box it was rendered from and the Gaussians outside it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub env_from: Option<EnvInit>,
+    /// The cube map's parallax proxy (reflection.env_radius > 0): centre
+    /// and radius in world units, fixed when Stage II starts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub env_proxy: Option<[f32; 4]>,
 }
 
 /// The stage schedule: each stage with its iteration count, run in order.
@@ -364,6 +368,7 @@ impl Trainer {
             hull_empty: false,
             significance_dropped: false,
             env_from: None,
+            env_proxy: None,
             round,
         };
         // A reflection set that exists (a resumed Stage II without a
@@ -390,9 +395,9 @@ impl Trainer {
                 let g = if copy || d.hull_empty { Some(self.scattering.set.params.download()?) } else { None };
                 d.seeds = seeds.len() as u32;
                 d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
-                let env = if rc.env_init == super::settings::EnvStart::Scene {
-                    let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
-                    means.extend(seeds.iter().flat_map(|s| s.position));
+                let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
+                means.extend(seeds.iter().flat_map(|s| s.position));
+                let mut env = if rc.env_init == super::settings::EnvStart::Scene {
                     let scat = self.scattering.set.params.download()?;
                     let (env, info) = scene_env_map(&self.ctx, &scat, sh, &self.background, &means, rc.env_res, self.cfg.adam_eps)?;
                     d.env_from = Some(info);
@@ -400,6 +405,11 @@ impl Trainer {
                 } else {
                     HostEnvMap::constant(rc.env_res, 0.0)?
                 };
+                if rc.env_radius > 0.0 {
+                    let p = env_proxy(&means, &self.cameras, rc.env_radius);
+                    d.env_proxy = p.map(|p| EnvProxy::packed(Some(p)));
+                    env.proxy = p;
+                }
                 self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, g.as_ref(), &seeds, env, rc, self.cfg.adam_eps)?);
             }
             d.reflection_gaussians = self.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0);
@@ -597,4 +607,28 @@ impl Trainer {
     pub fn gaussians(&self) -> Result<HostGaussians> {
         self.scattering.set.params.download()
     }
+}
+
+impl ReflDecision {
+    /// The recorded parallax proxy of the cube map.
+    pub fn proxy(&self) -> Option<EnvProxy> {
+        self.env_proxy.map(|p| EnvProxy { centre: [p[0], p[1], p[2]], radius: p[3] })
+    }
+}
+
+/// The cube map's parallax proxy for `reflection.env_radius` = `radius`:
+/// centred on the box of the reflection set's starting positions `means`
+/// (as `env_init = "scene"` renders from), of `radius` x the mean distance
+/// from there to the `cameras`. None when nothing sets a positive radius.
+pub fn env_proxy(means: &[f32], cameras: &[Camera], radius: f32) -> Option<EnvProxy> {
+    if means.is_empty() || cameras.is_empty() {
+        return None;
+    }
+    let (centre, _) = normalization_box(means);
+    let dist = cameras.iter().map(|c| {
+        let e = c.centre();
+        (0..3).map(|k| ((e[k] - centre[k]) as f64).powi(2)).sum::<f64>().sqrt()
+    }).sum::<f64>() / cameras.len() as f64;
+    let r = (radius as f64 * dist) as f32;
+    (r > 0.0 && r.is_finite()).then_some(EnvProxy { centre, radius: r })
 }

@@ -17,6 +17,26 @@ pub struct HostEnvMap {
     pub res: u32,
     /// 6 * res * res * 3 raw texel values.
     pub raw: Vec<f32>,
+    /// Where the map's light comes from ([`EnvProxy`]); `None`: infinitely far.
+    pub proxy: Option<EnvProxy>,
+}
+
+/// A parallax proxy: the map holds the light of a sphere of `radius`
+/// around `centre` (world space), so a reflection from a point p in
+/// direction w looks up the direction from `centre` to where the ray
+/// p + t w leaves that sphere, not w itself (a local cube map). A point on
+/// or outside the sphere looks up w.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EnvProxy {
+    pub centre: [f32; 3],
+    pub radius: f32,
+}
+
+impl EnvProxy {
+    /// (centre, radius) for the shaders' push constants; radius 0 = none.
+    pub fn packed(p: Option<EnvProxy>) -> [f32; 4] {
+        p.map(|p| [p.centre[0], p.centre[1], p.centre[2], p.radius]).unwrap_or([0.0; 4])
+    }
 }
 
 impl HostEnvMap {
@@ -24,7 +44,7 @@ impl HostEnvMap {
     /// method-notes §3.7).
     pub fn constant(res: u32, raw: f32) -> Result<HostEnvMap> {
         check_res(res)?;
-        Ok(HostEnvMap { res, raw: vec![raw; texels(res) * 3] })
+        Ok(HostEnvMap { res, raw: vec![raw; texels(res) * 3], proxy: None })
     }
 
     pub fn texels(&self) -> usize {
@@ -38,6 +58,11 @@ impl HostEnvMap {
         }
         if let Some(i) = self.raw.iter().position(|v| !v.is_finite()) {
             bail!("environment map value {i} is {}", self.raw[i]);
+        }
+        if let Some(p) = self.proxy {
+            if !(p.radius > 0.0 && p.radius.is_finite() && p.centre.iter().all(|c| c.is_finite())) {
+                bail!("environment map proxy {p:?}: the radius must be positive and everything finite");
+            }
         }
         Ok(())
     }
@@ -108,6 +133,7 @@ pub struct EnvMap {
     pub grads: Buffer<f32>,
     pub m: Buffer<f32>,
     pub v: Buffer<f32>,
+    pub proxy: Option<EnvProxy>,
 }
 
 impl EnvMap {
@@ -120,6 +146,7 @@ impl EnvMap {
             grads: Buffer::new(ctx, "env.grads", n)?,
             m: Buffer::new(ctx, "env.adam_m", n)?,
             v: Buffer::new(ctx, "env.adam_v", n)?,
+            proxy: h.proxy,
         })
     }
 
@@ -136,7 +163,7 @@ impl EnvMap {
     }
 
     pub fn download(&self) -> Result<HostEnvMap> {
-        Ok(HostEnvMap { res: self.res, raw: self.params.download_range(0, self.len())? })
+        Ok(HostEnvMap { res: self.res, raw: self.params.download_range(0, self.len())?, proxy: self.proxy })
     }
 
     /// The arrays a checkpoint stores, named, in a fixed order.

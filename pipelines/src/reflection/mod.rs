@@ -15,7 +15,7 @@
 
 mod envmap;
 
-pub use envmap::{EnvMap, HostEnvMap, MAX_ENV_RES};
+pub use envmap::{EnvMap, EnvProxy, HostEnvMap, MAX_ENV_RES};
 
 use crate::raster::{Camera, Gaussians, Plane};
 use crate::scan::Count;
@@ -80,6 +80,8 @@ struct ColorPush {
     schlick: u32,
     centre: [f32; 3],
     pad: u32,
+    /// The map's parallax proxy: centre, radius (0: infinitely far).
+    proxy: [f32; 4],
 }
 
 #[repr(C)]
@@ -169,7 +171,7 @@ impl ReflectionShading {
     }
 
     fn color_push(g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel) -> ColorPush {
-        ColorPush { n: g.n, channels: fresnel.channels(), res: env.res, schlick: fresnel.flag(), centre: cam.centre(), pad: 0 }
+        ColorPush { n: g.n, channels: fresnel.channels(), res: env.res, schlick: fresnel.flag(), centre: cam.centre(), pad: 0, proxy: envmap::EnvProxy::packed(env.proxy) }
     }
 
     fn check_set(g: &Gaussians, features: &Buffer<f32>, fresnel: Fresnel) -> Result<()> {
