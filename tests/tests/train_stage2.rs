@@ -155,6 +155,49 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     refused(TrainArgs { set: vec!["reflection.env_init=white".into()], ..ae.clone() }, &["reflection.env_init", "white"]);
     let _ = std::fs::remove_dir_all(&scene_env);
 
+    // reflection.rotation_grad = "reflection": with a constant map that
+    // does not learn (lr_env 0) the reflected colour does not depend on the
+    // normal, so nothing turns the surfels: after 20 steps at a fast
+    // rotation rate they face exactly where they started (one step);
+    // with "all" the rasterizer's gradient turns them.
+    let quats_after = |its: u32, rotation: &str| {
+        let dir = tgs_tests::TempDir::new(&format!("stage2-rot-{rotation}-{its}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        let set = vec![format!("reflection.iterations={its}"), "test_interval=0".into(), "reflection.lr_env=0".into(), "reflection.lr_quats=0.01".into(), format!("reflection.rotation_grad={rotation}")];
+        assert_eq!(train(ctx, &TrainArgs { out: dir.to_path_buf(), set, ..af.clone() }).unwrap().iteration, 300 + its);
+        let (h, a) = checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
+        let k = h.arrays.len() + h.reflection.as_ref().unwrap().arrays.iter().position(|(n, _)| n == "refl.param.quats").unwrap();
+        let means = h.arrays.len() + h.reflection.as_ref().unwrap().arrays.iter().position(|(n, _)| n == "refl.param.means").unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        (bits(&a[k]), bits(&a[means]))
+    };
+    let (q1, m1) = quats_after(1, "reflection");
+    let (q20, m20) = quats_after(20, "reflection");
+    assert!(q1 == q20, "surfels turned with rotation_grad = reflection and a constant, frozen map");
+    assert!(m1 != m20, "the positions should still train");
+    let (a1, _) = quats_after(1, "all");
+    let (a20, _) = quats_after(20, "all");
+    assert!(a1 != a20, "with rotation_grad = all the rasterizer's gradient turns the surfels");
+    refused(TrainArgs { set: vec!["reflection.rotation_grad=colour".into()], ..ae.clone() }, &["reflection.rotation_grad", "colour", "'reflection'"]);
+
+    // reflection.env_radius: the proxy (box centre, radius x the mean
+    // camera distance) is recorded and restored: evaluating the run from its
+    // checkpoint gives the PSNR the run measured.
+    let proxy = tgs_tests::TempDir::new("stage2-proxy");
+    let _ = std::fs::remove_dir_all(&proxy);
+    let ap = TrainArgs { out: proxy.to_path_buf(), set: vec!["reflection.iterations=20".into(), "test_interval=0".into(), "reflection.env_radius=1.5".into()], ..af.clone() };
+    assert_eq!(train(ctx, &ap).unwrap().iteration, 320);
+    let mp = json(&proxy.join("metrics.json"));
+    let p: Vec<f64> = mp["reflection"]["env_proxy"].as_array().expect("env_proxy recorded").iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!(p.len() == 4 && p.iter().all(|v| v.is_finite()) && p[3] > 0.5, "proxy {p:?}");
+    let (mut tr, data) = tgs::train::run::open_run(ctx, &proxy).unwrap();
+    let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
+    assert_eq!(Some(again.psnr), mp["test"]["psnr"].as_f64(), "the proxy is not restored from the checkpoint");
+    assert!(d.get("env_proxy").is_none(), "no proxy by default: {d}");
+    refused(TrainArgs { set: vec!["reflection.env_radius=-1".into()], ..ap.clone() }, &["reflection.env_radius"]);
+    drop(tr);
+    let _ = std::fs::remove_dir_all(&proxy);
+
     // Stage II that trains the scattering colour too: the SH colour and
     // its Adam moments move; positions, scales, rotations, opacity and
     // their moments stay Stage I's. A rerun is bit-identical.

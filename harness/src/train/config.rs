@@ -6,7 +6,7 @@ use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use super::seed::SeedNormal;
-use super::settings::{EnvStart, LightFresnel, ReflectionFresnel, ReflectionInit, ScatteringParams};
+use super::settings::{EnvStart, LightFresnel, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -236,6 +236,9 @@ pub struct ReflectionConfig {
     /// and rotations at a tenth keep them.
     pub lr_quats: f32,
     pub lr_scales: f32,
+    /// What turns the surfels ("all" or "reflection": the reflected colour
+    /// alone, the rasterizer's rotation gradient dropped; settings.rs).
+    pub rotation_grad: RotationGrad,
     /// Initial f0 (all channels) and reflectivity r of every reflection
     /// Gaussian. With the paper's c = f0 E the reflection term is R f0 E:
     /// at f0 = 0.04, r = 0.01 (method-notes' first guess) it starts at 4e-4
@@ -339,6 +342,7 @@ impl Default for ReflectionConfig {
             lr_opacity: 0.005,
             lr_quats: 0.0001,
             lr_scales: 0.0,
+            rotation_grad: RotationGrad::All,
             f0_init: 0.5,
             r_init: 0.1,
             lambda_normal: 0.05,

@@ -11,6 +11,7 @@ use super::config::{ReflectionConfig, TrainConfig};
 use super::logit;
 use super::scattering::{ScatteringModel, StepOutput};
 use super::seed::{quat_for_normal, Seed};
+use super::settings::RotationGrad;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -295,6 +296,10 @@ impl ReflectionModel {
                 m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
             }
             self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
+            if rc.rotation_grad == RotationGrad::Reflection {
+                // The colour's backward adds the mirror direction's part to zeros.
+                rec.fill(&self.set.grads.quats.binding(), 0)?;
+            }
             let sc = rec.begin_scope("refl.color_backward");
             self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
             rec.end_scope(sc);

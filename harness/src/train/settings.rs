@@ -137,3 +137,18 @@ name_enum!(
         All = "all",
     }
 );
+
+name_enum!(
+    /// What turns the reflection set's surfels in Stage II
+    /// (`reflection.rotation_grad`).
+    RotationGrad, "reflection.rotation_grad", {
+        /// Every gradient: the reflected colour through the mirror
+        /// direction, and the rasterizer's (each surfel's footprint,
+        /// depth and normal planes, so also the normal consistency).
+        All = "all",
+        /// The reflected colour alone: the rasterizer's rotation gradient
+        /// is dropped, so a surfel turns only to fetch other light, not to
+        /// change which pixels it covers.
+        Reflection = "reflection",
+    }
+);
