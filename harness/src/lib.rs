@@ -12,6 +12,7 @@ pub mod embed;
 pub mod eval;
 pub mod export;
 pub mod lpips;
+pub mod mesh;
 pub mod outdir;
 pub mod render;
 pub mod scene;

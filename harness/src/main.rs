@@ -92,6 +92,33 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Meshes of a run by TSDF fusion of rendered median depth over the
+    /// training views, extracted by marching tetrahedra: mesh_scene.ply (the
+    /// scattering set, vertex colours) and, after Stage II, mesh_glass.ply
+    /// (the reflection set where it covers a pixel, weighted by its alpha).
+    Mesh {
+        run: PathBuf,
+        /// Voxel size in world units (default: two pixels' footprint at the
+        /// surfaces' median depth, at most --resolution voxels along the
+        /// longest side of their box).
+        #[arg(long)]
+        voxel: Option<f32>,
+        /// Most voxels along the box's longest side when --voxel is not given.
+        #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(2..=4096))]
+        resolution: u32,
+        /// Truncation distance in world units (default: 4 voxels).
+        #[arg(long)]
+        trunc: Option<f32>,
+        /// Depths past this are not fused (default: no limit).
+        #[arg(long)]
+        depth_max: Option<f32>,
+        /// Largest voxel grid in MiB of device memory (20 bytes a voxel).
+        #[arg(long, default_value_t = 2048)]
+        max_mib: u64,
+        /// Output directory (default: RUN).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Built-in procedural scenes.
     Scene {
         #[command(subcommand)]
@@ -310,6 +337,14 @@ fn run(cli: Cli) -> Result<()> {
             let dir = out.clone().unwrap_or_else(|| run.join("renders").join(cameras));
             let n = tgs::render::render(&ctx, run, cameras, *frames, &dir)?;
             eprintln!("{n} views written to {}", dir.display());
+            Ok(())
+        }
+        Cmd::Mesh { run, voxel, resolution, trunc, depth_max, max_mib, out } => {
+            let ctx = context(&cli)?;
+            let args = tgs::mesh::MeshArgs { voxel: *voxel, resolution: *resolution, trunc: *trunc, depth_max: *depth_max, max_bytes: max_mib.saturating_mul(1 << 20), out: out.clone(), progress: true };
+            for r in tgs::mesh::mesh(&ctx, run, &args)? {
+                eprintln!("{}: {} vertices, {} triangles", r.path.display(), r.mesh.positions.len(), r.mesh.triangles.len());
+            }
             Ok(())
         }
         Cmd::Scene { what } => match what {

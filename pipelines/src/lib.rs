@@ -23,3 +23,5 @@ pub mod mlp;
 pub use mlp::{Mlp, MlpScratch, MlpShape};
 pub mod lightfield;
 pub use lightfield::{LightFieldShading, SampleScratch, ShadeParams};
+pub mod mesh;
+pub use mesh::{HostTsdf, TsdfFusion, TsdfGrid, TsdfVolume, BYTES_PER_VOXEL};

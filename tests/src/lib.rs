@@ -8,6 +8,7 @@ pub mod reflection_ref;
 pub mod mlp_ref;
 pub mod lightfield_ref;
 pub mod lpips_ref;
+pub mod tsdf_ref;
 
 use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};

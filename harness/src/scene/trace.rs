@@ -150,6 +150,27 @@ impl Scene {
         best
     }
 
+    /// Distance from `p` to the nearest opaque surface (floor disc, wall,
+    /// blocks, the box and ball inside the glass): the truth a scene mesh
+    /// is measured against.
+    pub fn surface_distance(&self, p: V3) -> f64 {
+        let box_dist = |b: &Box3| {
+            let q: [f64; 3] = std::array::from_fn(|k| (p[k] - 0.5 * (b.lo[k] + b.hi[k])).abs() - 0.5 * (b.hi[k] - b.lo[k]));
+            let outside = q.iter().map(|v| v.max(0.0).powi(2)).sum::<f64>().sqrt();
+            (outside + q[0].max(q[1]).max(q[2]).min(0.0)).abs()
+        };
+        let r = p[0].hypot(p[1]);
+        let floor = if r < WALL_R { p[2].abs() } else { (r - WALL_R).hypot(p[2]) };
+        let wall = (r - WALL_R).hypot(p[2] - p[2].clamp(0.0, WALL_H));
+        let ball = (dot(sub(p, self.ball.0), sub(p, self.ball.0)).sqrt() - self.ball.1).abs();
+        self.blocks.iter().chain(std::iter::once(&self.inner_box)).map(box_dist).fold(floor.min(wall).min(ball), f64::min)
+    }
+
+    /// Distance from `p` to the glass sphere's surface.
+    pub fn glass_distance(p: V3) -> f64 {
+        (dot(sub(p, GLASS_C), sub(p, GLASS_C)).sqrt() - GLASS_R).abs()
+    }
+
     /// Radiance along a ray (thin glass: reflect F, transmit 1 - F unbent).
     pub fn radiance(&self, o: V3, d: V3, depth: u32) -> V3 {
         let Some(h) = self.intersect(o, d, f64::INFINITY, true) else {
