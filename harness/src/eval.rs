@@ -30,6 +30,12 @@ pub struct NormalMetrics {
     pub reflection_coverage: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_covered_deg: Option<f64>,
+    /// In Stage II: of the pixels the reflection set covers, the fraction
+    /// outside the transmissive mask. There its normals replace the
+    /// scattering set's although no glass is there; the MAEs above, taken
+    /// on the mask, do not see it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reflection_outside_mask: Option<f64>,
     /// The MAE, on the same mask pixels, of a normal facing each pixel's
     /// camera ray ([`ray_facing_normals`]): what a normal that knows
     /// nothing of the surface scores. Normals carry surface information
@@ -50,6 +56,7 @@ impl NormalMetrics {
             normal_mae_scattering_deg: mean_of(|m| m.normal_mae_scattering_deg),
             reflection_coverage: mean_of(|m| m.reflection_coverage),
             normal_mae_covered_deg: mean_of(|m| m.normal_mae_covered_deg),
+            reflection_outside_mask: mean_of(|m| m.reflection_outside_mask),
             normal_mae_ray_facing_deg: mean_of(|m| m.normal_mae_ray_facing_deg),
         }
     }
@@ -207,6 +214,13 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
             (Some(_), Some(mask)) if mask.iter().any(|&m| m) => Some((0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64 / mask.iter().filter(|&&m| m).count() as f64),
             _ => None,
         };
+        let outside = match (&r.layers, &v.mask) {
+            (Some(_), Some(mask)) => {
+                let covered: Vec<usize> = (0..mask.len()).filter(|&i| covered(i)).collect();
+                (!covered.is_empty()).then(|| covered.iter().filter(|&&i| !mask[i]).count() as f64 / covered.len() as f64)
+            }
+            _ => None,
+        };
         let m = ViewMetrics {
             name: v.name.clone(),
             psnr: psnr(rgb, &target),
@@ -216,6 +230,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
                 normal_mae_deg: normal_mae(&normals, v),
                 normal_mae_scattering_deg: scat_mae,
                 reflection_coverage: coverage,
+                reflection_outside_mask: outside,
                 normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
                 normal_mae_ray_facing_deg: v.normals.as_ref().and_then(|_| normal_mae(&ray_facing_normals(&v.camera), v)),
             },

@@ -48,7 +48,7 @@ impl TsdfGrid {
         if !(self.trunc > 0.0 && self.trunc.is_finite()) {
             bail!("truncation distance {} must be positive and finite", self.trunc);
         }
-        if !(self.depth_max > 0.0) || self.depth_max.is_nan() {
+        if self.depth_max.is_nan() || self.depth_max <= 0.0 {
             bail!("maximum depth {} must be positive", self.depth_max);
         }
         if self.origin.iter().any(|v| !v.is_finite()) {
@@ -118,10 +118,10 @@ impl TsdfFusion {
     /// where one of its arrays exceeds the device's storage-buffer range or
     /// the whole exceeds `max_bytes`.
     pub fn volume(&self, grid: TsdfGrid, max_bytes: u64) -> Result<TsdfVolume> {
-        grid.validate()?;
-        let n = grid.voxels()? as u64;
+        // The sizes first (in u64: a grid past 2^32 voxels is named in MiB too).
         let [x, y, z] = grid.dims;
-        let total = n * BYTES_PER_VOXEL;
+        let n = x as u64 * y as u64 * z as u64;
+        let total = n.saturating_mul(BYTES_PER_VOXEL);
         if total > max_bytes {
             bail!(
                 "a {x}x{y}x{z} voxel grid (voxel {}) needs {:.1} MiB, over the limit of {:.1} MiB: choose a larger voxel",
@@ -131,9 +131,10 @@ impl TsdfFusion {
             );
         }
         let range = self.ctx.caps().max_storage_buffer_range;
-        if n * 4 > range {
+        if n.saturating_mul(4) > range {
             bail!("a {x}x{y}x{z} voxel grid needs {:.1} MiB per array, over this device's storage-buffer range of {:.1} MiB: choose a larger voxel", (n * 4) as f64 / 1048576.0, range as f64 / 1048576.0);
         }
+        grid.validate()?;
         let n = n as usize;
         Ok(TsdfVolume {
             grid,

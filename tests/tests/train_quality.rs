@@ -38,6 +38,28 @@ fn method_on_glass() {
     eprintln!("Stage III: MAE {:.2} PSNR {:.3}", get(2, "normal_mae_deg"), get(2, "psnr"));
     assert!((get(2, "normal_mae_deg") - mae2).abs() < 1e-9);
     assert!(get(2, "psnr") > get(1, "psnr") + 0.2, "Stage III PSNR {} vs Stage II {}", get(2, "psnr"), get(1, "psnr"));
+    // `tgs mesh`: the scene mesh near the room's true surfaces, the glass
+    // mesh near the glass sphere (radius 0.75), in scene units.
+    use tgs::scene::trace::Scene;
+    let reports = tgs::mesh::mesh(ctx, &out, &tgs::mesh::MeshArgs::default()).unwrap();
+    assert_eq!(reports.len(), 2);
+    let truth = Scene::new();
+    let stats = |d: Vec<f64>| {
+        let mut d = d;
+        d.sort_by(f64::total_cmp);
+        (d.iter().sum::<f64>() / d.len() as f64, d[d.len() / 2])
+    };
+    let (mean, median) = stats(reports[0].mesh.positions.iter().map(|p| truth.surface_distance(p.map(f64::from))).collect());
+    let (gmean, gmedian) = stats(reports[1].mesh.positions.iter().map(|p| Scene::glass_distance(p.map(f64::from))).collect());
+    eprintln!("meshes: scene {} triangles, distance mean {mean:.3} median {median:.3}; glass {} triangles, distance mean {gmean:.3} median {gmedian:.3}", reports[0].mesh.triangles.len(), reports[1].mesh.triangles.len());
+    // Measured (lavapipe, twenty-seventh session): scene mean 0.246, median
+    // 0.189 (voxel 0.14: two pixels at the walls' depth); glass mean 0.419,
+    // median 0.427. The glass mesh is the reflection set's surface, which
+    // here is a shell around the sphere larger than it (the residual hull):
+    // on the glass mask its median depth lies 0.06 from the glass, but it
+    // also covers pixels beside the glass (`reflection_outside_mask`).
+    assert!(mean < 0.3 && median < 0.25, "scene mesh: mean {mean} median {median}");
+    assert!(gmean < 0.5 && gmedian < 0.5, "glass mesh: mean {gmean} median {gmedian}");
     let _ = std::fs::remove_dir_all(&out);
     check_validation(ctx);
 }

@@ -98,6 +98,11 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     // The reflection set starts from residual-hull seeds alone (init = hull).
     assert!(d["seeds"].as_u64().unwrap() > 100 && d["copied"] == 0 && d["seeds"] == d["reflection_gaussians"], "{d}");
     assert!(stages[1]["test"]["normal_mae_scattering_deg"].as_f64().unwrap().is_finite());
+    // How much of what the reflection set decides is off the glass.
+    let outside = stages[1]["test"]["reflection_outside_mask"].as_f64().unwrap();
+    eprintln!("reflection set: {outside:.3} of its covered test pixels are off the glass mask");
+    assert!((0.0..=1.0).contains(&outside));
+    assert!(stages[0]["test"]["reflection_outside_mask"].is_null());
     assert_eq!(m["test"]["psnr"], stages[1]["test"]["psnr"]);
     // Outputs.
     for f in ["envmap.exr", "envmap.png", "reflection.ply", "point_cloud.ply", "residual/r_0.exr", "residual/r_0.png", "renders/stage1/r_0.png"] {

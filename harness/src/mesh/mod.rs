@@ -71,9 +71,12 @@ enum Surface {
     Glass,
 }
 
+/// A view's depth, weight and colour (three) planes.
+type Planes = (Vec<f32>, Vec<f32>, Vec<f32>);
+
 /// One view's depth, weight and colour planes for `surface` (None when the
 /// render has no such layer).
-fn view_planes(tr: &mut Trainer, cam: &Camera, surface: Surface) -> Result<Option<(Vec<f32>, Vec<f32>, Vec<f32>)>> {
+fn view_planes(tr: &mut Trainer, cam: &Camera, surface: Surface) -> Result<Option<Planes>> {
     let r = tr.render(cam)?;
     let n = (cam.width * cam.height) as usize;
     Ok(match surface {
@@ -191,7 +194,7 @@ fn fuse(ctx: &Arc<Context>, tr: &mut Trainer, cams: &[Camera], surface: Surface,
 /// set, `mesh_glass.ply` into `args.out` (default the run directory).
 pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshReport>> {
     if let Some(d) = args.depth_max {
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             bail!("--depth-max {d} must be positive");
         }
     }
