@@ -55,7 +55,7 @@ fn a_requeued_task_resumes_and_ends_as_an_uninterrupted_one() {
 
     // SIGTERM to the task (SLURM's --signal=B:TERM goes to the batch
     // shell) once 40 iterations are logged.
-    let mut child = task(&base, "b").env("SLURM_JOB_ID", "78").env("SLURM_ARRAY_JOB_ID", "77").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let child = task(&base, "b").env("SLURM_JOB_ID", "78").env("SLURM_ARRAY_JOB_ID", "77").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
     let run = base.join("b/glass-tiny");
     let t0 = std::time::Instant::now();
     while std::fs::read_to_string(run.join("log.jsonl")).map(|s| s.lines().count()).unwrap_or(0) < 40 {
@@ -85,7 +85,7 @@ fn a_requeued_task_resumes_and_ends_as_an_uninterrupted_one() {
     assert_eq!(std::fs::read(run.join("checkpoint.bin")).unwrap(), before);
 
     // Outside SLURM an interrupted task exits 130 and says how to go on.
-    let mut child = task(&base, "c").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let child = task(&base, "c").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
     let run_c = base.join("c/glass-tiny");
     while std::fs::read_to_string(run_c.join("log.jsonl")).map(|s| s.lines().count()).unwrap_or(0) < 10 {
         assert!(t0.elapsed().as_secs() < 600, "the task logged no iterations");
