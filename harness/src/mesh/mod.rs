@@ -52,7 +52,15 @@ pub struct MeshArgs {
 
 impl Default for MeshArgs {
     fn default() -> Self {
-        MeshArgs { voxel: None, resolution: 512, trunc: None, depth_max: None, max_bytes: 2 << 30, out: None, progress: false }
+        MeshArgs {
+            voxel: None,
+            resolution: 512,
+            trunc: None,
+            depth_max: None,
+            max_bytes: 2 << 30,
+            out: None,
+            progress: false,
+        }
     }
 }
 
@@ -83,14 +91,25 @@ fn view_planes(tr: &mut Trainer, cam: &Camera, surface: Surface) -> Result<Optio
         Surface::Scene => {
             let s = r.layers.as_ref().map(|l| &l.0).unwrap_or(&r);
             let depth = s.plane(Plane::Median).to_vec();
-            let weight = depth.iter().map(|&d| if d > 0.0 && d.is_finite() { 1.0 } else { 0.0 }).collect();
+            let weight = depth
+                .iter()
+                .map(|&d| if d > 0.0 && d.is_finite() { 1.0 } else { 0.0 })
+                .collect();
             Some((depth, weight, s.planes[..3 * n].to_vec()))
         }
         Surface::Glass => match &r.layers {
             None => None,
             Some(l) => {
                 let (depth, alpha) = (l.1.refl_plane(Plane::Median), l.1.refl_plane(Plane::Alpha));
-                let weight = (0..n).map(|i| if depth[i] > 0.0 && depth[i].is_finite() && alpha[i] >= 0.5 { alpha[i] } else { 0.0 }).collect();
+                let weight = (0..n)
+                    .map(|i| {
+                        if depth[i] > 0.0 && depth[i].is_finite() && alpha[i] >= 0.5 {
+                            alpha[i]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect();
                 Some((depth.to_vec(), weight, l.1.composite[..3 * n].to_vec()))
             }
         },
@@ -106,16 +125,27 @@ pub struct Extent {
     pub pixel: f32,
 }
 
-fn bounds(tr: &mut Trainer, cams: &[Camera], surface: Surface, depth_max: f32) -> Result<Option<Extent>> {
+fn bounds(
+    tr: &mut Trainer,
+    cams: &[Camera],
+    surface: Surface,
+    depth_max: f32,
+) -> Result<Option<Extent>> {
     let mut pts: [Vec<f32>; 3] = Default::default();
     let mut footprint = Vec::new();
     for cam in cams {
-        let Some((depth, weight, _)) = view_planes(tr, cam, surface)? else { return Ok(None) };
+        let Some((depth, weight, _)) = view_planes(tr, cam, surface)? else {
+            return Ok(None);
+        };
         let n = depth.len();
         let step = n.div_ceil(20_000).max(1);
         for i in (0..n).step_by(step) {
             if weight[i] > 0.0 && depth[i] <= depth_max {
-                let p = cam.unproject((i % cam.width as usize) as f32, (i / cam.width as usize) as f32, depth[i]);
+                let p = cam.unproject(
+                    (i % cam.width as usize) as f32,
+                    (i / cam.width as usize) as f32,
+                    depth[i],
+                );
                 if p.iter().all(|v| v.is_finite()) {
                     for k in 0..3 {
                         pts[k].push(p[k]);
@@ -137,7 +167,11 @@ fn bounds(tr: &mut Trainer, cams: &[Camera], surface: Surface, depth_max: f32) -
         hi[k] = q(0.99);
     }
     footprint.sort_by(f32::total_cmp);
-    Ok(Some(Extent { lo, hi, pixel: footprint[footprint.len() / 2] }))
+    Ok(Some(Extent {
+        lo,
+        hi,
+        pixel: footprint[footprint.len() / 2],
+    }))
 }
 
 /// The grid over the extent (widened by 5% a side) for `args`.
@@ -155,7 +189,11 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
             // `resolution` voxels along the longest side; a degenerate box
             // (one point) still gets a grid of some size.
             let finest = (side.max(1e-3) * 1.1) / args.resolution as f32;
-            if e.pixel > 0.0 && e.pixel.is_finite() { (2.0 * e.pixel).max(finest) } else { finest }
+            if e.pixel > 0.0 && e.pixel.is_finite() {
+                (2.0 * e.pixel).max(finest)
+            } else {
+                finest
+            }
         }
     };
     let trunc = match args.trunc {
@@ -165,21 +203,55 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
     };
     let pad: [f32; 3] = std::array::from_fn(|_| 0.05 * side.max(1e-3) + 2.0 * voxel);
     let origin: [f32; 3] = std::array::from_fn(|k| lo[k] - pad[k]);
-    let dims_f: [f64; 3] = std::array::from_fn(|k| (((hi[k] + pad[k]) - origin[k]) as f64 / voxel as f64).ceil().max(2.0));
+    let dims_f: [f64; 3] = std::array::from_fn(|k| {
+        (((hi[k] + pad[k]) - origin[k]) as f64 / voxel as f64)
+            .ceil()
+            .max(2.0)
+    });
     if dims_f.iter().any(|&d| d > u32::MAX as f64) {
-        bail!("voxel {voxel} over a {:?} box gives {:?} voxels per axis: choose a larger --voxel", [0, 1, 2].map(|k| hi[k] - lo[k]), dims_f);
+        bail!(
+            "voxel {voxel} over a {:?} box gives {:?} voxels per axis: choose a larger --voxel",
+            [0, 1, 2].map(|k| hi[k] - lo[k]),
+            dims_f
+        );
     }
-    Ok(TsdfGrid { origin, voxel, dims: dims_f.map(|d| d as u32), trunc, depth_max: args.depth_max.unwrap_or(f32::INFINITY) })
+    Ok(TsdfGrid {
+        origin,
+        voxel,
+        dims: dims_f.map(|d| d as u32),
+        trunc,
+        depth_max: args.depth_max.unwrap_or(f32::INFINITY),
+    })
 }
 
 /// Fuse `surface` over `cams` into `grid` and extract its mesh.
-fn fuse(ctx: &Arc<Context>, tr: &mut Trainer, cams: &[Camera], surface: Surface, grid: TsdfGrid, args: &MeshArgs, label: &str) -> Result<Mesh> {
+fn fuse(
+    ctx: &Arc<Context>,
+    tr: &mut Trainer,
+    cams: &[Camera],
+    surface: Surface,
+    grid: TsdfGrid,
+    args: &MeshArgs,
+    label: &str,
+) -> Result<Mesh> {
     let fusion = TsdfFusion::new(ctx)?;
-    let vol = fusion.volume(grid, args.max_bytes).with_context(|| format!("the {label} mesh's grid"))?;
-    let bar = if args.progress { indicatif::ProgressBar::new(cams.len() as u64).with_message(format!("{label}: fusing")) } else { indicatif::ProgressBar::hidden() };
+    let vol = fusion
+        .volume(grid, args.max_bytes)
+        .with_context(|| format!("the {label} mesh's grid"))?;
+    let bar = if args.progress {
+        indicatif::ProgressBar::new(cams.len() as u64).with_message(format!("{label}: fusing"))
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
     for cam in cams {
-        let Some((depth, weight, colour)) = view_planes(tr, cam, surface)? else { bail!("the run renders no {label} layer") };
-        let (d, w, c) = (Buffer::from_slice(ctx, "mesh.depth", &depth)?, Buffer::from_slice(ctx, "mesh.pix_weight", &weight)?, Buffer::from_slice(ctx, "mesh.colour", &colour)?);
+        let Some((depth, weight, colour)) = view_planes(tr, cam, surface)? else {
+            bail!("the run renders no {label} layer")
+        };
+        let (d, w, c) = (
+            Buffer::from_slice(ctx, "mesh.depth", &depth)?,
+            Buffer::from_slice(ctx, "mesh.pix_weight", &weight)?,
+            Buffer::from_slice(ctx, "mesh.colour", &colour)?,
+        );
         let mut rec = Recorder::new(ctx)?;
         fusion.record(&mut rec, &vol, cam, &d, &w, &c)?;
         rec.submit_and_wait()?;
@@ -201,7 +273,10 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
     let (mut tr, data) = open_run(ctx, run)?;
     let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
     if cams.is_empty() {
-        bail!("{}: the run's dataset has no training views to fuse", data.root.display());
+        bail!(
+            "{}: the run's dataset has no training views to fuse",
+            data.root.display()
+        );
     }
     let out = args.out.clone().unwrap_or_else(|| run.to_path_buf());
     let mut dir = OutDir::open(&out, Some(&data.root))?;
@@ -211,17 +286,28 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
     }
     let depth_max = args.depth_max.unwrap_or(f32::INFINITY);
     let mut reports = Vec::new();
-    for (surface, name, label) in [(Surface::Scene, "mesh_scene.ply", "scene"), (Surface::Glass, "mesh_glass.ply", "glass")] {
+    for (surface, name, label) in [
+        (Surface::Scene, "mesh_scene.ply", "scene"),
+        (Surface::Glass, "mesh_glass.ply", "glass"),
+    ] {
         let Some(extent) = bounds(&mut tr, &cams, surface, depth_max)? else {
             if surface == Surface::Scene {
-                bail!("{}: no training view sees a surface (within --depth-max): nothing to mesh", run.display());
+                bail!(
+                    "{}: no training view sees a surface (within --depth-max): nothing to mesh",
+                    run.display()
+                );
             }
             continue;
         };
         let grid = grid_for(&extent, args)?;
         if args.progress {
             let [x, y, z] = grid.dims;
-            eprintln!("{label}: {x}x{y}x{z} voxels of {:.4} ({:.0} MiB), truncation {:.4}", grid.voxel, (x as f64 * y as f64 * z as f64 * BYTES_PER_VOXEL as f64) / 1048576.0, grid.trunc);
+            eprintln!(
+                "{label}: {x}x{y}x{z} voxels of {:.4} ({:.0} MiB), truncation {:.4}",
+                grid.voxel,
+                (x as f64 * y as f64 * z as f64 * BYTES_PER_VOXEL as f64) / 1048576.0,
+                grid.trunc
+            );
         }
         let mesh = fuse(ctx, &mut tr, &cams, surface, grid, args, label)?;
         let path = dir.file(name)?;

@@ -1,9 +1,11 @@
 //! Stage III's reflection light field Phi(x, w) (paper §3.4, method-notes
 //! §3.5), GLSL in `glsl/mlp/`:
 //! - `encode`: the Fourier features gamma(x), gamma(w) of each sample;
-//! - `gemm`: one tiled GEMM for the three products of every layer (forward
-//!   with bias and activation; the input gradient dX = dZ W; the weight
-//!   gradient dW = dZ^T [X, 1] as per-chunk partials in their own slots);
+//! - `gemm` / `gemm_rows`: one GEMM for the three products of every layer
+//!   (forward with bias and activation; the input gradient dX = dZ W; the
+//!   weight gradient dW = dZ^T [X, 1] as per-chunk partials in their own
+//!   slots), in two kernels with bit-identical results ([`Gemm`]): tiled
+//!   through shared memory on GPUs, a row per invocation on CPU devices;
 //! - `reduce`: the partials summed per parameter in a fixed order.
 //!
 //! No atomics: every output has one writer and a fixed summation order that
@@ -18,7 +20,7 @@ pub use shape::{MlpShape, OUT, SAMPLE};
 
 use crate::shaders;
 use crate::train::{grid, kernel};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context as _, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Recorder};
@@ -28,6 +30,13 @@ use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Recorder};
 /// smaller side, up to 16 (measured on llvmpipe, 8 x 256 on 4,096 samples:
 /// blocks of 4 / 8 / 16 give 2.0 / 3.9 / 7.1 GFLOP/s forward).
 const BLOCKS: [u32; 3] = [4, 8, 16];
+/// Columns of C per invocation of the row kernel (glsl/mlp/gemm_rows.comp):
+/// 64 for products at least 128 wide, else the smallest that holds them up
+/// to 32 (measured on llvmpipe, 4,096 samples, forward + backward: the
+/// small network 9,796 samples/s with 32 and 9,487 with 64; the paper
+/// network 422 with 32 and 475 with 64; perf/RESULTS.md, twenty-eighth
+/// session).
+const ROW_BLOCKS: [u32; 4] = [8, 16, 32, 64];
 /// At most this many sample chunks hold weight-gradient partials (a power
 /// of two: the counted backward walks them in bit-reversed order).
 const MAX_CHUNKS: u32 = 16;
@@ -107,7 +116,11 @@ impl MlpScratch {
     }
     /// Bytes of device memory held.
     pub fn bytes(&self) -> u64 {
-        let mut b = self.samples.bytes() + self.out.bytes() + self.in0.bytes() + self.cat.bytes() + self.part.bytes();
+        let mut b = self.samples.bytes()
+            + self.out.bytes()
+            + self.in0.bytes()
+            + self.cat.bytes()
+            + self.part.bytes();
         b += self.hidden.iter().flatten().map(|h| h.bytes()).sum::<u64>();
         b + self.d.iter().map(|d| d.bytes()).sum::<u64>()
     }
@@ -126,7 +139,12 @@ impl MlpScratch {
         match l {
             0 => (&self.in0, s.dx()),
             l if l == s.skip => (&self.cat, s.cat_width()),
-            _ => (self.hidden[l as usize - 1].as_ref().expect("hidden layer buffer"), s.width),
+            _ => (
+                self.hidden[l as usize - 1]
+                    .as_ref()
+                    .expect("hidden layer buffer"),
+                s.width,
+            ),
         }
     }
     /// Layer `l`'s output buffer and row stride.
@@ -137,27 +155,134 @@ impl MlpScratch {
         } else if l + 1 == s.skip {
             (&self.cat, s.cat_width())
         } else {
-            (self.hidden[l as usize].as_ref().expect("hidden layer buffer"), s.width)
+            (
+                self.hidden[l as usize]
+                    .as_ref()
+                    .expect("hidden layer buffer"),
+                s.width,
+            )
         }
     }
 }
 
+/// The kernel the MLP's products run on. Both sum every element of C in
+/// increasing k with one invocation, so their results are bit-identical
+/// (tests/tests/mlp.rs); they differ in where the operands come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gemm {
+    /// glsl/mlp/gemm.comp: tiles of A and B staged in shared memory; for
+    /// GPUs, where shared memory is fast and global loads coalesce.
+    Tiled,
+    /// glsl/mlp/gemm_rows.comp: a row of C per invocation, its A from
+    /// memory, B shared across the subgroup by broadcasts; for CPU devices
+    /// (lavapipe), where every load a lane makes costs a scalar load and the
+    /// tiled kernel's shared-memory reads were the bottleneck. Measured on
+    /// llvmpipe, 4,096 samples, forward + backward: the small network 5,162
+    /// -> 9,796 samples/s, the paper network 447 -> 475.
+    Rows,
+}
+
+impl Gemm {
+    /// Rows on CPU devices, tiled elsewhere; the environment variable
+    /// `TGS_MLP_GEMM` (tiled, rows) overrides the choice.
+    pub fn for_device(ctx: &Context) -> Result<Gemm> {
+        if let Ok(v) = std::env::var(GEMM_ENV) {
+            return Gemm::parse(&v).with_context(|| format!("environment variable {GEMM_ENV}"));
+        }
+        Ok(if ctx.caps().is_cpu() {
+            Gemm::Rows
+        } else {
+            Gemm::Tiled
+        })
+    }
+    /// By name: "tiled" or "rows".
+    pub fn parse(name: &str) -> Result<Gemm> {
+        match name {
+            "tiled" => Ok(Gemm::Tiled),
+            "rows" => Ok(Gemm::Rows),
+            _ => bail!("unknown MLP kernel '{name}' (tiled, rows)"),
+        }
+    }
+    pub fn name(&self) -> &'static str {
+        match self {
+            Gemm::Tiled => "tiled",
+            Gemm::Rows => "rows",
+        }
+    }
+}
+
+/// The environment variable that overrides [`Gemm::for_device`].
+pub const GEMM_ENV: &str = "TGS_MLP_GEMM";
+
 pub struct Mlp {
     ctx: Arc<Context>,
-    /// The GEMM, one pipeline per block size of [`BLOCKS`].
+    gemm_kind: Gemm,
+    /// The GEMM, one pipeline per block size of [`BLOCKS`] (tiled) or
+    /// [`ROW_BLOCKS`] (rows).
     gemm: Vec<Kernel>,
     encode: Kernel,
     reduce: Kernel,
 }
 
 impl Mlp {
+    /// The MLP on the kernel this device runs best ([`Gemm::for_device`]).
     pub fn new(ctx: &Arc<Context>) -> Result<Mlp> {
+        Self::with_gemm(ctx, Gemm::for_device(ctx)?)
+    }
+
+    /// The MLP on a chosen kernel (tests compare the two; `tgs bench mlp --gemm`).
+    pub fn with_gemm(ctx: &Arc<Context>, gemm_kind: Gemm) -> Result<Mlp> {
         let push = std::mem::size_of::<Product>() as u32;
-        let gemm = BLOCKS
-            .iter()
-            .map(|&b| Kernel::new(ctx, &KernelDesc { name: "mlp.gemm", spirv: shaders::MLP_GEMM, spec: &[(3, b)], push_bytes: push, subgroup_size: None, full_subgroups: false }))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(Mlp { ctx: ctx.clone(), gemm, encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 20)?, reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 16)? })
+        // The row kernel broadcasts B across SB lanes: a power of two no
+        // larger than the device's smallest subgroup (every pipeline's
+        // subgroup has at least that many lanes) nor the smallest block.
+        let sb = ctx.caps().min_subgroup_size.clamp(1, ROW_BLOCKS[0]);
+        let gemm = match gemm_kind {
+            Gemm::Tiled => BLOCKS
+                .iter()
+                .map(|&b| {
+                    Kernel::new(
+                        ctx,
+                        &KernelDesc {
+                            name: "mlp.gemm",
+                            spirv: shaders::MLP_GEMM,
+                            spec: &[(3, b)],
+                            push_bytes: push,
+                            subgroup_size: None,
+                            full_subgroups: false,
+                        },
+                    )
+                })
+                .collect::<Result<Vec<_>>>()?,
+            Gemm::Rows => ROW_BLOCKS
+                .iter()
+                .map(|&b| {
+                    Kernel::new(
+                        ctx,
+                        &KernelDesc {
+                            name: "mlp.gemm_rows",
+                            spirv: shaders::MLP_GEMM_ROWS,
+                            spec: &[(3, b), (4, sb)],
+                            push_bytes: push,
+                            subgroup_size: None,
+                            full_subgroups: false,
+                        },
+                    )
+                })
+                .collect::<Result<Vec<_>>>()?,
+        };
+        Ok(Mlp {
+            ctx: ctx.clone(),
+            gemm_kind,
+            gemm,
+            encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 20)?,
+            reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 16)?,
+        })
+    }
+
+    /// The kernel the products run on.
+    pub fn gemm(&self) -> Gemm {
+        self.gemm_kind
     }
 
     /// The most samples one scratch of `shape` holds on this device (its
@@ -186,7 +311,13 @@ impl Mlp {
         let c = cap as usize;
         let w = shape.width as usize;
         let hidden = (0..shape.depth)
-            .map(|l| if l + 1 == shape.skip { Ok(None) } else { Buffer::uninit(ctx, &format!("mlp.h{l}"), c * w).map(Some) })
+            .map(|l| {
+                if l + 1 == shape.skip {
+                    Ok(None)
+                } else {
+                    Buffer::uninit(ctx, &format!("mlp.h{l}"), c * w).map(Some)
+                }
+            })
             .collect::<Result<Vec<_>>>()?;
         Ok(MlpScratch {
             shape,
@@ -196,37 +327,93 @@ impl Mlp {
             in0: Buffer::uninit(ctx, "mlp.in0", c * shape.dx() as usize)?,
             cat: Buffer::uninit(ctx, "mlp.cat", c * shape.cat_width() as usize)?,
             hidden,
-            d: [Buffer::uninit(ctx, "mlp.d0", c * w)?, Buffer::uninit(ctx, "mlp.d1", c * w)?],
+            d: [
+                Buffer::uninit(ctx, "mlp.d0", c * w)?,
+                Buffer::uninit(ctx, "mlp.d1", c * w)?,
+            ],
             part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
         })
     }
 
     fn check(s: &MlpScratch, params: &Buffer<f32>, n: u32) -> Result<()> {
         if n > s.capacity {
-            bail!("{n} light-field samples exceed the scratch's {}", s.capacity);
+            bail!(
+                "{n} light-field samples exceed the scratch's {}",
+                s.capacity
+            );
         }
         if params.len() < s.shape.params() as usize {
-            bail!("'{}' holds {} values; the light field has {} parameters", params.name(), params.len(), s.shape.params());
+            bail!(
+                "'{}' holds {} values; the light field has {} parameters",
+                params.name(),
+                params.len(),
+                s.shape.params()
+            );
         }
         Ok(())
     }
 
     /// One GEMM; `rows` (binding 4) is read only with `p.m_count` set.
-    fn dispatch(&self, rec: &mut Recorder, p: &Product, bufs: [&Buffer<f32>; 4], chunks: u32, rows: Option<&Buffer<u32>>) -> Result<()> {
+    fn dispatch(
+        &self,
+        rec: &mut Recorder,
+        p: &Product,
+        bufs: [&Buffer<f32>; 4],
+        chunks: u32,
+        rows: Option<&Buffer<u32>>,
+    ) -> Result<()> {
+        let [a, b, y, c] = bufs.map(|b| b.binding());
+        let r = rows.map(|r| r.binding()).unwrap_or_else(|| a.clone());
+        if self.gemm_kind == Gemm::Rows {
+            // 64 rows of C per workgroup, NB columns.
+            let k = if p.n >= 128 {
+                ROW_BLOCKS.len() - 1
+            } else {
+                ROW_BLOCKS[..ROW_BLOCKS.len() - 1]
+                    .iter()
+                    .position(|&nb| nb >= p.n)
+                    .unwrap_or(ROW_BLOCKS.len() - 2)
+            };
+            let groups = p.m.div_ceil(64);
+            let groups = if p.m_count != 0 {
+                groups.next_power_of_two()
+            } else {
+                groups
+            };
+            return rec.dispatch(
+                &self.gemm[k],
+                &[a, b, y, c, r],
+                bytemuck::bytes_of(p),
+                [p.n.div_ceil(ROW_BLOCKS[k]), groups, chunks],
+            );
+        }
         let side = p.m.min(p.n).max(32);
         let k = BLOCKS.iter().rposition(|&rb| 8 * rb <= side).unwrap_or(0);
         let tile = 8 * BLOCKS[k];
-        let [a, b, y, c] = bufs.map(|b| b.binding());
-        let r = rows.map(|r| r.binding()).unwrap_or_else(|| a.clone());
         // Counted rows are walked in bit-reversed order over a power-of-two
         // grid (glsl/mlp/gemm.comp `spread`); counted chunks are MAX_CHUNKS.
         let row_tiles = p.m.div_ceil(tile);
-        let row_tiles = if p.m_count != 0 { row_tiles.next_power_of_two() } else { row_tiles };
-        rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(tile), row_tiles, chunks])
+        let row_tiles = if p.m_count != 0 {
+            row_tiles.next_power_of_two()
+        } else {
+            row_tiles
+        };
+        rec.dispatch(
+            &self.gemm[k],
+            &[a, b, y, c, r],
+            bytemuck::bytes_of(p),
+            [p.n.div_ceil(tile), row_tiles, chunks],
+        )
     }
 
     /// Record Phi on the first `n` samples of `s.samples` into `s.out`.
-    pub fn record_forward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, s: &MlpScratch) -> Result<()> {
+    pub fn record_forward(
+        &self,
+        rec: &mut Recorder,
+        params: &Buffer<f32>,
+        n: u32,
+        s: &MlpScratch,
+    ) -> Result<()> {
         self.record_forward_rows(rec, params, n, None, s)
     }
 
@@ -236,11 +423,24 @@ impl Mlp {
     /// host's command buffer, or a Stage III step in one submission). The
     /// grid covers the capacity; workgroups past the count skip their work,
     /// and the busy ones are spread over the grid (glsl/mlp/gemm.comp).
-    pub fn record_forward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, s: &MlpScratch) -> Result<()> {
+    pub fn record_forward_counted(
+        &self,
+        rec: &mut Recorder,
+        params: &Buffer<f32>,
+        count: &Buffer<u32>,
+        s: &MlpScratch,
+    ) -> Result<()> {
         self.record_forward_rows(rec, params, s.capacity, Some(count), s)
     }
 
-    fn record_forward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, s: &MlpScratch) -> Result<()> {
+    fn record_forward_rows(
+        &self,
+        rec: &mut Recorder,
+        params: &Buffer<f32>,
+        n: u32,
+        rows: Option<&Buffer<u32>>,
+        s: &MlpScratch,
+    ) -> Result<()> {
         Self::check(s, params, n)?;
         if n == 0 {
             return Ok(());
@@ -249,8 +449,15 @@ impl Mlp {
         let m_count = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.encode");
         let push = [n, sh.levels_x, sh.levels_w, sh.width, m_count];
-        let r = rows.map(|r| r.binding()).unwrap_or_else(|| s.samples.binding());
-        rec.dispatch(&self.encode, &[s.samples.binding(), s.in0.binding(), s.cat.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n))?;
+        let r = rows
+            .map(|r| r.binding())
+            .unwrap_or_else(|| s.samples.binding());
+        rec.dispatch(
+            &self.encode,
+            &[s.samples.binding(), s.in0.binding(), s.cat.binding(), r],
+            bytemuck::cast_slice(&push),
+            grid(&self.ctx, n),
+        )?;
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.forward");
         for l in 0..sh.layers() {
@@ -284,7 +491,15 @@ impl Mlp {
     /// same parameters): `d_out` (RGB per sample, dL/dPhi) to `grads`
     /// (every parameter, overwritten). The inputs get no gradient (the
     /// reflection geometry is frozen in Stage III).
-    pub fn record_backward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+    pub fn record_backward(
+        &self,
+        rec: &mut Recorder,
+        params: &Buffer<f32>,
+        n: u32,
+        d_out: &Buffer<f32>,
+        grads: &Buffer<f32>,
+        s: &MlpScratch,
+    ) -> Result<()> {
         self.record_backward_rows(rec, params, n, None, d_out, grads, s)
     }
 
@@ -293,19 +508,46 @@ impl Mlp {
     /// never reading the count: the same products, chunks and summation
     /// order as [`Mlp::record_backward`] with that count, so the gradients
     /// are bit-identical to it.
-    pub fn record_backward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+    pub fn record_backward_counted(
+        &self,
+        rec: &mut Recorder,
+        params: &Buffer<f32>,
+        count: &Buffer<u32>,
+        d_out: &Buffer<f32>,
+        grads: &Buffer<f32>,
+        s: &MlpScratch,
+    ) -> Result<()> {
         self.record_backward_rows(rec, params, s.capacity, Some(count), d_out, grads, s)
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn record_backward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+    fn record_backward_rows(
+        &self,
+        rec: &mut Recorder,
+        params: &Buffer<f32>,
+        n: u32,
+        rows: Option<&Buffer<u32>>,
+        d_out: &Buffer<f32>,
+        grads: &Buffer<f32>,
+        s: &MlpScratch,
+    ) -> Result<()> {
         Self::check(s, params, n)?;
         let sh = s.shape;
         if grads.len() < sh.params() as usize {
-            bail!("'{}' holds {} values; the light field has {} parameters", grads.name(), grads.len(), sh.params());
+            bail!(
+                "'{}' holds {} values; the light field has {} parameters",
+                grads.name(),
+                grads.len(),
+                sh.params()
+            );
         }
         if d_out.len() < (n * OUT) as usize {
-            bail!("'{}' holds {} values; {n} samples need {}", d_out.name(), d_out.len(), n * OUT);
+            bail!(
+                "'{}' holds {} values; {n} samples need {}",
+                d_out.name(),
+                d_out.len(),
+                n * OUT
+            );
         }
         if n == 0 {
             rec.fill(&grads.slice(0, sh.params() as usize), 0)?;
@@ -313,7 +555,11 @@ impl Mlp {
         }
         // Counted: every chunk the capacity could need is dispatched; those
         // past the count's skip their work.
-        let (chunk, chunks) = if rows.is_some() { (0, MAX_CHUNKS) } else { weight_chunks(n) };
+        let (chunk, chunks) = if rows.is_some() {
+            (0, MAX_CHUNKS)
+        } else {
+            weight_chunks(n)
+        };
         let counted = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.backward");
         for l in (0..sh.layers()).rev() {
@@ -321,7 +567,11 @@ impl Mlp {
             let (y, y_ld) = s.output(l);
             // This layer's output gradient: d_out for the head, else the
             // ping-pong buffer the layer above wrote (row stride width).
-            let (dy, d_ld) = if l == sh.depth { (d_out, OUT) } else { (&s.d[(l % 2) as usize], sh.width) };
+            let (dy, d_ld) = if l == sh.depth {
+                (d_out, OUT)
+            } else {
+                (&s.d[(l % 2) as usize], sh.width)
+            };
             let deriv = if l == sh.depth { SIGMOID } else { RELU };
             let j = sh.fan_out(l);
             // [dW | db] (J x (K + 1)) = dZ^T [X, 1], per chunk of samples.
@@ -368,14 +618,30 @@ impl Mlp {
                     m_count: counted,
                     ..Default::default()
                 };
-                self.dispatch(rec, &pd, [dy, params, y, &s.d[((l - 1) % 2) as usize]], 1, rows)?;
+                self.dispatch(
+                    rec,
+                    &pd,
+                    [dy, params, y, &s.d[((l - 1) % 2) as usize]],
+                    1,
+                    rows,
+                )?;
             }
         }
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.reduce");
-        let push = [sh.params(), chunks, sh.params(), if rows.is_some() { n } else { 0 }];
+        let push = [
+            sh.params(),
+            chunks,
+            sh.params(),
+            if rows.is_some() { n } else { 0 },
+        ];
         let count = rows.map(|r| r.binding()).unwrap_or_else(|| grads.binding());
-        rec.dispatch(&self.reduce, &[s.part.binding(), grads.binding(), count], bytemuck::cast_slice(&push), grid(&self.ctx, sh.params()))?;
+        rec.dispatch(
+            &self.reduce,
+            &[s.part.binding(), grads.binding(), count],
+            bytemuck::cast_slice(&push),
+            grid(&self.ctx, sh.params()),
+        )?;
         rec.end_scope(sc);
         Ok(())
     }

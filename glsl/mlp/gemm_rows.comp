@@ -1,0 +1,134 @@
+#version 460
+// The light-field MLP's GEMM, one row of C per invocation (pipelines/src/mlp
+// Gemm::Rows, chosen on CPU devices): the same products, push constants and
+// bindings as mlp/gemm.comp, and the same summation (each element of C
+// summed in increasing k by one invocation, acc += a_ik b_kj), so its
+// results are bit-identical to the tiled kernel's.
+//
+// Invocation t of a workgroup owns row i = 64 y + t of C and the NB columns
+// [x NB, x NB + NB) that the whole workgroup shares. At each k it loads its
+// own A(i, k) once and multiplies it into NB accumulators held in
+// registers. The B(k, j) are the same for every invocation: each group of
+// SB lanes loads SB different columns and shares them by broadcast, so a
+// lane makes 1 + NB / SB loads per NB multiply-adds. In the forward (A the
+// layer's input rows, B the weights) and the input gradient (A = dZ, B = W)
+// B is the weights; in the weight gradient (C = dZ^T [X, 1]: rows the
+// outputs j, k the samples) it is the samples' input rows.
+//
+// Why: on lavapipe every load goes lane by lane (a scalar load each, with
+// its bounds check), and the tiled kernel's shared-memory reads and
+// staging were the bottleneck: 0.65 GFLOP/s on the small network; this
+// kernel 1.3 (perf/RESULTS.md, twenty-eighth session). No branch sits in
+// the inner loop for the same reason (a branch masks the loads inside it).
+//
+// Rows on the GPU (m_count), chunks of k over z (k_count), the bit-reversed
+// walk of counted grids: as in mlp/gemm.comp.
+#extension GL_EXT_control_flow_attributes : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#include "mlp/chunks.glsl"
+
+layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
+// Columns of C per invocation.
+layout(constant_id = 3) const uint NB = 16;
+// Lanes that share their loads by broadcast: at most the smallest subgroup size.
+layout(constant_id = 4) const uint SB = 4;
+
+layout(std430, binding = 0) readonly buffer A { float a[]; };
+layout(std430, binding = 1) readonly buffer B { float b[]; };
+layout(std430, binding = 2) readonly buffer Y { float y[]; };
+layout(std430, binding = 3) buffer C { float c[]; };
+layout(std430, binding = 4) readonly buffer Rows { uint rows[]; };
+
+layout(push_constant) uniform Push {
+    uint m, n, kdim, k_chunk;
+    uint a_off, a_rs, a_cs, a_ones_k;
+    uint b_off, b_rs, b_cs, b_ones_j;
+    uint y_off, y_rs, y_cs, a_deriv;
+    uint c_off, c_rs, c_zstride, c_act;
+    uint m_count;
+    uint k_count;
+} pc;
+
+// A(i, k) with its activation derivative; the implicit ones column reads a
+// valid address and is replaced (a select, not a branch around the load).
+float load_a(uint i, uint k) {
+    uint kk = k == pc.a_ones_k ? 0u : k;
+    float v = a[pc.a_off + i * pc.a_rs + kk * pc.a_cs];
+    if (pc.a_deriv != 0u) {
+        float s = y[pc.y_off + i * pc.y_rs + kk * pc.y_cs];
+        v *= pc.a_deriv == 1u ? (s > 0.0 ? 1.0 : 0.0) : s * (1.0 - s);
+    }
+    return k == pc.a_ones_k ? 1.0 : v;
+}
+
+// g's bits reversed within log2(n) bits (n a power of two).
+uint spread(uint g, uint n) {
+    return n <= 1u ? g : bitfieldReverse(g) >> (32u - uint(findMSB(n)));
+}
+
+void main() {
+    uint row_group = pc.m_count != 0u ? spread(gl_WorkGroupID.y, gl_NumWorkGroups.y) : gl_WorkGroupID.y;
+    uint zc = pc.k_count != 0u ? spread(gl_WorkGroupID.z, gl_NumWorkGroups.z) : gl_WorkGroupID.z;
+    uint i = row_group * 64u + gl_LocalInvocationID.x;
+    uint j0 = gl_WorkGroupID.x * NB;
+    uint count = (pc.m_count | pc.k_count) != 0u ? rows[0] : 0u;
+    uint m = pc.m_count != 0u ? min(pc.m, count) : pc.m;
+    uint kdim = pc.kdim, k_chunk = pc.k_chunk;
+    if (pc.k_count != 0u) {
+        kdim = min(kdim, count);
+        k_chunk = weight_chunk(kdim);
+    }
+    uint kbeg = zc * k_chunk;
+    uint kend = min(kbeg + k_chunk, kdim);
+    // A workgroup past the chunks (uniform) has nothing to do: its partial
+    // slot is not summed.
+    if (zc > 0u && kbeg >= kdim) {
+        return;
+    }
+    // A workgroup past the rows (uniform; a counted grid covers the
+    // capacity) likewise.
+    if (row_group * 64u >= m) {
+        return;
+    }
+    // Every invocation walks the same k (the broadcasts below need the
+    // whole subgroup); one past the rows reads row m - 1 and writes nothing.
+    uint row = min(i, max(m, 1u) - 1u);
+    // Columns past n (uniform): B is read as 0 there and C not written.
+    uint nb = min(NB, pc.n - min(j0, pc.n));
+    float acc[NB];
+    [[unroll]] for (uint q = 0u; q < NB; q++) {
+        acc[q] = 0.0;
+    }
+    uint jl = max(pc.n, 1u) - 1u;
+    uint lane = gl_SubgroupInvocationID % SB;
+    for (uint k = kbeg; k < kend; k++) {
+        float av = load_a(row, k);
+        uint boff = pc.b_off + k * pc.b_rs;
+        // Each lane loads one of SB columns; the SB values are broadcast.
+        [[unroll]] for (uint g = 0u; g < NB / SB; g++) {
+            uint j = j0 + SB * g + lane;
+            uint jj = j == pc.b_ones_j ? 0u : min(j, jl);
+            float bl = b[boff + jj * pc.b_cs];
+            bl = j == pc.b_ones_j ? 1.0 : (SB * g + lane < nb ? bl : 0.0);
+            [[unroll]] for (uint t = 0u; t < SB; t++) {
+                acc[SB * g + t] += av * subgroupBroadcast(bl, t);
+            }
+        }
+    }
+    if (i >= m) {
+        return;
+    }
+    uint base = pc.c_off + zc * pc.c_zstride + i * pc.c_rs + j0;
+    [[unroll]] for (uint q = 0u; q < NB; q++) {
+        if (q < nb) {
+            float v = acc[q];
+            if (pc.c_act == 1u) {
+                v = max(v, 0.0);
+            } else if (pc.c_act == 2u) {
+                v = 1.0 / (1.0 + exp(-v));
+            }
+            c[base + q] = v;
+        }
+    }
+}
