@@ -270,10 +270,10 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
         };
         let outside = match (&r.layers, &v.mask) {
             (Some(_), Some(mask)) => {
-                let covered: Vec<usize> = (0..mask.len()).filter(|&i| covered(i)).collect();
-                (!covered.is_empty()).then(|| {
-                    covered.iter().filter(|&&i| !mask[i]).count() as f64 / covered.len() as f64
-                })
+                let (all, off) = (0..mask.len())
+                    .filter(|&i| covered(i))
+                    .fold((0usize, 0usize), |(a, o), i| (a + 1, o + !mask[i] as usize));
+                (all > 0).then(|| off as f64 / all as f64)
             }
             _ => None,
         };

@@ -53,7 +53,9 @@ impl TsdfGrid {
         })
     }
 
-    fn validate(&self) -> Result<()> {
+    /// The grid's rules: positive finite voxel and truncation, a positive
+    /// maximum depth, a finite origin, 1 to 2^32 voxels.
+    pub fn validate(&self) -> Result<()> {
         if !(self.voxel > 0.0 && self.voxel.is_finite()) {
             bail!("voxel size {} must be positive and finite", self.voxel);
         }

@@ -154,6 +154,56 @@ fn meshes_of_the_run(ctx: &std::sync::Arc<tgs_engine::Context>, run: &Path) {
         .unwrap_err()
     );
     assert!(e.contains("MiB") && e.contains("voxel"), "{e}");
+    // Bad options are refused before any work, naming the option.
+    for (bad, what) in [
+        (
+            MeshArgs {
+                voxel: Some(-1.0),
+                ..Default::default()
+            },
+            "voxel size -1",
+        ),
+        (
+            MeshArgs {
+                trunc: Some(f32::NAN),
+                ..Default::default()
+            },
+            "truncation distance NaN",
+        ),
+        (
+            MeshArgs {
+                depth_max: Some(0.0),
+                ..Default::default()
+            },
+            "maximum depth 0",
+        ),
+        (
+            MeshArgs {
+                resolution: 0,
+                ..Default::default()
+            },
+            "--resolution",
+        ),
+    ] {
+        let e = format!(
+            "{:#}",
+            mesh(
+                ctx,
+                run,
+                &MeshArgs {
+                    out: Some(run.join("bad")),
+                    ..bad
+                }
+            )
+            .unwrap_err()
+        );
+        assert!(
+            e.contains(what)
+                && (what.starts_with("--") || e.contains("--voxel, --trunc, --depth-max")),
+            "{e}"
+        );
+        assert!(!run.join("bad").join("mesh_scene.ply").exists());
+    }
 }
 
 fn json(path: &Path) -> serde_json::Value {

@@ -55,13 +55,9 @@ pub fn extract(grid: &HostTsdf, origin: [f32; 3], voxel: f32, min_weight: f32) -
     }
     let index = |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
     let observed = |v: usize| grid.weight[v] > min_weight && grid.tsdf[v].is_finite();
-    let centre = |v: usize| {
-        let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
-        [i, j, k]
-            .iter()
-            .zip(origin)
-            .map(|(&c, o)| o as f64 + (c as f64 + 0.5) * voxel as f64)
-            .collect::<Vec<f64>>()
+    let centre = |v: usize| -> [f64; 3] {
+        let ijk = [v % nx, (v / nx) % ny, v / (nx * ny)];
+        std::array::from_fn(|c| origin[c] as f64 + (ijk[c] as f64 + 0.5) * voxel as f64)
     };
     let mut vertex_of: HashMap<(usize, usize), u32> = HashMap::new();
     // The vertex on the edge from voxel a (inside) to voxel b (outside).
@@ -108,8 +104,11 @@ pub fn extract(grid: &HostTsdf, origin: [f32; 3], voxel: f32, min_weight: f32) -
                     };
                     // Outwards: from the inside corners towards the outside ones.
                     let mean = |s: &[usize]| {
-                        let ps: Vec<Vec<f64>> = s.iter().map(|&x| centre(x)).collect();
-                        [0, 1, 2].map(|c| ps.iter().map(|p| p[c]).sum::<f64>() / ps.len() as f64)
+                        let sum = s.iter().fold([0.0; 3], |acc, &x| {
+                            let p = centre(x);
+                            [0, 1, 2].map(|c| acc[c] + p[c])
+                        });
+                        sum.map(|v| v / s.len() as f64)
                     };
                     let out_dir = sub(mean(&outs), mean(&ins));
                     for tri in tris {

@@ -29,7 +29,7 @@ pub use extract::{extract, Mesh};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder};
-use tgs_pipelines::{Camera, Plane, TsdfFusion, TsdfGrid, BYTES_PER_VOXEL};
+use tgs_pipelines::{Camera, Plane, TsdfFusion, TsdfGrid, TsdfVolume, BYTES_PER_VOXEL};
 
 /// What `tgs mesh` is asked for.
 #[derive(Clone, Debug)]
@@ -72,48 +72,35 @@ pub struct MeshReport {
     pub mesh: Mesh,
 }
 
-/// Which surface a fusion reads from a render.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Surface {
-    Scene,
-    Glass,
-}
-
 /// A view's depth, weight and colour (three) planes.
 type Planes = (Vec<f32>, Vec<f32>, Vec<f32>);
 
-/// One view's depth, weight and colour planes for `surface` (None when the
-/// render has no such layer).
-fn view_planes(tr: &mut Trainer, cam: &Camera, surface: Surface) -> Result<Option<Planes>> {
+/// One render of `cam`, read as both surfaces' planes: the scene's, and the
+/// glass's when the run renders a reflection layer.
+fn view_planes(tr: &mut Trainer, cam: &Camera) -> Result<(Planes, Option<Planes>)> {
     let r = tr.render(cam)?;
     let n = (cam.width * cam.height) as usize;
-    Ok(match surface {
-        Surface::Scene => {
-            let s = r.layers.as_ref().map(|l| &l.0).unwrap_or(&r);
-            let depth = s.plane(Plane::Median).to_vec();
-            let weight = depth
-                .iter()
-                .map(|&d| if d > 0.0 && d.is_finite() { 1.0 } else { 0.0 })
-                .collect();
-            Some((depth, weight, s.planes[..3 * n].to_vec()))
-        }
-        Surface::Glass => match &r.layers {
-            None => None,
-            Some(l) => {
-                let (depth, alpha) = (l.1.refl_plane(Plane::Median), l.1.refl_plane(Plane::Alpha));
-                let weight = (0..n)
-                    .map(|i| {
-                        if depth[i] > 0.0 && depth[i].is_finite() && alpha[i] >= 0.5 {
-                            alpha[i]
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect();
-                Some((depth.to_vec(), weight, l.1.composite[..3 * n].to_vec()))
-            }
-        },
-    })
+    let s = r.layers.as_ref().map(|l| &l.0).unwrap_or(&r);
+    let depth = s.plane(Plane::Median).to_vec();
+    let weight = depth
+        .iter()
+        .map(|&d| if d > 0.0 && d.is_finite() { 1.0 } else { 0.0 })
+        .collect();
+    let scene = (depth, weight, s.planes[..3 * n].to_vec());
+    let glass = r.layers.as_ref().map(|l| {
+        let (depth, alpha) = (l.1.refl_plane(Plane::Median), l.1.refl_plane(Plane::Alpha));
+        let weight = (0..n)
+            .map(|i| {
+                if depth[i] > 0.0 && depth[i].is_finite() && alpha[i] >= 0.5 {
+                    alpha[i]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        (depth.to_vec(), weight, l.1.composite[..3 * n].to_vec())
+    });
+    Ok((scene, glass))
 }
 
 /// The surfaces the views see: the 1st and 99th percentiles per axis of
@@ -125,18 +112,15 @@ pub struct Extent {
     pub pixel: f32,
 }
 
-fn bounds(
-    tr: &mut Trainer,
-    cams: &[Camera],
-    surface: Surface,
-    depth_max: f32,
-) -> Result<Option<Extent>> {
-    let mut pts: [Vec<f32>; 3] = Default::default();
-    let mut footprint = Vec::new();
-    for cam in cams {
-        let Some((depth, weight, _)) = view_planes(tr, cam, surface)? else {
-            return Ok(None);
-        };
+/// A surface's sampled points and pixel footprints, gathered view by view.
+#[derive(Default)]
+struct Points {
+    axes: [Vec<f32>; 3],
+    footprint: Vec<f32>,
+}
+
+impl Points {
+    fn add(&mut self, cam: &Camera, (depth, weight, _): &Planes, depth_max: f32) {
         let n = depth.len();
         let step = n.div_ceil(20_000).max(1);
         for i in (0..n).step_by(step) {
@@ -148,30 +132,54 @@ fn bounds(
                 );
                 if p.iter().all(|v| v.is_finite()) {
                     for k in 0..3 {
-                        pts[k].push(p[k]);
+                        self.axes[k].push(p[k]);
                     }
-                    footprint.push(depth[i] / cam.fx.max(cam.fy));
+                    self.footprint.push(depth[i] / cam.fx.max(cam.fy));
                 }
             }
         }
     }
-    if pts[0].is_empty() {
-        return Ok(None);
+
+    fn extent(mut self) -> Option<Extent> {
+        if self.axes[0].is_empty() {
+            return None;
+        }
+        let mut lo = [0f32; 3];
+        let mut hi = [0f32; 3];
+        for k in 0..3 {
+            let a = &mut self.axes[k];
+            a.sort_by(f32::total_cmp);
+            let q = |f: f64| a[((a.len() - 1) as f64 * f).round() as usize];
+            lo[k] = q(0.01);
+            hi[k] = q(0.99);
+        }
+        self.footprint.sort_by(f32::total_cmp);
+        Some(Extent {
+            lo,
+            hi,
+            pixel: self.footprint[self.footprint.len() / 2],
+        })
     }
-    let mut lo = [0f32; 3];
-    let mut hi = [0f32; 3];
-    for k in 0..3 {
-        pts[k].sort_by(f32::total_cmp);
-        let q = |f: f64| pts[k][((pts[k].len() - 1) as f64 * f).round() as usize];
-        lo[k] = q(0.01);
-        hi[k] = q(0.99);
+}
+
+/// One pass over the views: the scene's extent and, when the run renders
+/// a reflection layer, the glass's.
+fn bounds(
+    tr: &mut Trainer,
+    cams: &[Camera],
+    depth_max: f32,
+) -> Result<(Option<Extent>, Option<Extent>)> {
+    let (mut scene, mut glass) = (Points::default(), None::<Points>);
+    for cam in cams {
+        let (s, g) = view_planes(tr, cam)?;
+        scene.add(cam, &s, depth_max);
+        if let Some(g) = g {
+            glass
+                .get_or_insert_with(Points::default)
+                .add(cam, &g, depth_max);
+        }
     }
-    footprint.sort_by(f32::total_cmp);
-    Ok(Some(Extent {
-        lo,
-        hi,
-        pixel: footprint[footprint.len() / 2],
-    }))
+    Ok((scene.extent(), glass.and_then(Points::extent)))
 }
 
 /// The grid over the extent (widened by 5% a side) for `args`.
@@ -179,16 +187,12 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
     let (lo, hi) = (e.lo, e.hi);
     let side = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f32, f32::max);
     let voxel = match args.voxel {
-        Some(v) if v > 0.0 && v.is_finite() => v,
-        Some(v) => bail!("--voxel {v} must be positive and finite"),
+        Some(v) => v,
         None => {
-            if args.resolution == 0 {
-                bail!("--resolution must be at least 1");
-            }
             // Two pixels' footprint, unless that puts more than
             // `resolution` voxels along the longest side; a degenerate box
             // (one point) still gets a grid of some size.
-            let finest = (side.max(1e-3) * 1.1) / args.resolution as f32;
+            let finest = (side.max(1e-3) * 1.1) / args.resolution.max(1) as f32;
             if e.pixel > 0.0 && e.pixel.is_finite() {
                 (2.0 * e.pixel).max(finest)
             } else {
@@ -196,11 +200,7 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
             }
         }
     };
-    let trunc = match args.trunc {
-        Some(t) if t > 0.0 && t.is_finite() => t,
-        Some(t) => bail!("--trunc {t} must be positive and finite"),
-        None => 4.0 * voxel,
-    };
+    let trunc = args.trunc.unwrap_or(4.0 * voxel);
     let pad: [f32; 3] = std::array::from_fn(|_| 0.05 * side.max(1e-3) + 2.0 * voxel);
     let origin: [f32; 3] = std::array::from_fn(|k| lo[k] - pad[k]);
     let dims_f: [f64; 3] = std::array::from_fn(|k| {
@@ -215,6 +215,8 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
             dims_f
         );
     }
+    // Its sizes and rules are checked where it is allocated
+    // (TsdfFusion::volume), naming its size in MiB.
     Ok(TsdfGrid {
         origin,
         voxel,
@@ -224,52 +226,72 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
     })
 }
 
-/// Fuse `surface` over `cams` into `grid` and extract its mesh.
-fn fuse(
-    ctx: &Arc<Context>,
-    tr: &mut Trainer,
-    cams: &[Camera],
-    surface: Surface,
-    grid: TsdfGrid,
-    args: &MeshArgs,
-    label: &str,
-) -> Result<Mesh> {
-    let fusion = TsdfFusion::new(ctx)?;
-    let vol = fusion
-        .volume(grid, args.max_bytes)
-        .with_context(|| format!("the {label} mesh's grid"))?;
-    let bar = if args.progress {
-        indicatif::ProgressBar::new(cams.len() as u64).with_message(format!("{label}: fusing"))
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    for cam in cams {
-        let Some((depth, weight, colour)) = view_planes(tr, cam, surface)? else {
-            bail!("the run renders no {label} layer")
-        };
-        let (d, w, c) = (
-            Buffer::from_slice(ctx, "mesh.depth", &depth)?,
-            Buffer::from_slice(ctx, "mesh.pix_weight", &weight)?,
-            Buffer::from_slice(ctx, "mesh.colour", &colour)?,
-        );
-        let mut rec = Recorder::new(ctx)?;
-        fusion.record(&mut rec, &vol, cam, &d, &w, &c)?;
-        rec.submit_and_wait()?;
-        bar.inc(1);
+/// The options against the grid's rules ([`TsdfGrid::validate`]), before
+/// any work.
+fn check_options(args: &MeshArgs) -> Result<()> {
+    if args.voxel.is_none() && args.resolution == 0 {
+        bail!("--resolution must be at least 1");
     }
-    bar.finish_and_clear();
-    let host = vol.download()?;
-    Ok(extract(&host, grid.origin, grid.voxel, 0.0))
+    let probe = TsdfGrid {
+        origin: [0.0; 3],
+        voxel: args.voxel.unwrap_or(1.0),
+        dims: [1; 3],
+        trunc: args.trunc.unwrap_or(1.0),
+        depth_max: args.depth_max.unwrap_or(f32::INFINITY),
+    };
+    probe
+        .validate()
+        .context("tgs mesh options (--voxel, --trunc, --depth-max)")
+}
+
+/// A surface being fused: its volume and its three per-view planes on the
+/// device (sized for the largest view, reused).
+struct Fusing {
+    vol: TsdfVolume,
+    planes: [Buffer<f32>; 3],
+}
+
+impl Fusing {
+    fn new(
+        ctx: &Arc<Context>,
+        fusion: &TsdfFusion,
+        grid: TsdfGrid,
+        args: &MeshArgs,
+        npix: usize,
+        label: &str,
+    ) -> Result<Fusing> {
+        let vol = fusion
+            .volume(grid, args.max_bytes)
+            .with_context(|| format!("the {label} mesh's grid"))?;
+        let planes = [
+            Buffer::uninit(ctx, "mesh.depth", npix)?,
+            Buffer::uninit(ctx, "mesh.pix_weight", npix)?,
+            Buffer::uninit(ctx, "mesh.colour", 3 * npix)?,
+        ];
+        Ok(Fusing { vol, planes })
+    }
+
+    fn record(
+        &self,
+        fusion: &TsdfFusion,
+        rec: &mut Recorder,
+        cam: &Camera,
+        (d, w, c): &Planes,
+    ) -> Result<()> {
+        let [bd, bw, bc] = &self.planes;
+        bd.upload(d)?;
+        bw.upload(w)?;
+        bc.upload(c)?;
+        fusion.record(rec, &self.vol, cam, bd, bw, bc)
+    }
 }
 
 /// `tgs mesh`: write `mesh_scene.ply` and, when the run has a reflection
-/// set, `mesh_glass.ply` into `args.out` (default the run directory).
+/// set, `mesh_glass.ply` into `args.out` (default the run directory). Two
+/// renders a view: one for the grids' extents, one for the fusion of both
+/// surfaces.
 pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshReport>> {
-    if let Some(d) = args.depth_max {
-        if d.is_nan() || d <= 0.0 {
-            bail!("--depth-max {d} must be positive");
-        }
-    }
+    check_options(args)?;
     let (mut tr, data) = open_run(ctx, run)?;
     let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
     if cams.is_empty() {
@@ -285,21 +307,26 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
         dir.check(name)?;
     }
     let depth_max = args.depth_max.unwrap_or(f32::INFINITY);
-    let mut reports = Vec::new();
-    for (surface, name, label) in [
-        (Surface::Scene, "mesh_scene.ply", "scene"),
-        (Surface::Glass, "mesh_glass.ply", "glass"),
+    let (scene, glass) = bounds(&mut tr, &cams, depth_max)?;
+    let Some(scene) = scene else {
+        bail!(
+            "{}: no training view sees a surface (within --depth-max): nothing to mesh",
+            run.display()
+        );
+    };
+    let npix = cams
+        .iter()
+        .map(|c| c.width as usize * c.height as usize)
+        .max()
+        .unwrap_or(1);
+    let fusion = TsdfFusion::new(ctx)?;
+    let mut surfaces = Vec::new();
+    for (extent, name, label) in [
+        (Some(scene), "mesh_scene.ply", "scene"),
+        (glass, "mesh_glass.ply", "glass"),
     ] {
-        let Some(extent) = bounds(&mut tr, &cams, surface, depth_max)? else {
-            if surface == Surface::Scene {
-                bail!(
-                    "{}: no training view sees a surface (within --depth-max): nothing to mesh",
-                    run.display()
-                );
-            }
-            continue;
-        };
-        let grid = grid_for(&extent, args)?;
+        let Some(extent) = extent else { continue };
+        let grid = grid_for(&extent, args).with_context(|| format!("the {label} mesh's grid"))?;
         if args.progress {
             let [x, y, z] = grid.dims;
             eprintln!(
@@ -309,7 +336,28 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
                 grid.trunc
             );
         }
-        let mesh = fuse(ctx, &mut tr, &cams, surface, grid, args, label)?;
+        surfaces.push((Fusing::new(ctx, &fusion, grid, args, npix, label)?, name));
+    }
+    let bar = if args.progress {
+        indicatif::ProgressBar::new(cams.len() as u64).with_message("fusing")
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    for cam in &cams {
+        let (s, g) = view_planes(&mut tr, cam)?;
+        let mut rec = Recorder::new(ctx)?;
+        surfaces[0].0.record(&fusion, &mut rec, cam, &s)?;
+        if let (Some((f, _)), Some(g)) = (surfaces.get(1), &g) {
+            f.record(&fusion, &mut rec, cam, g)?;
+        }
+        rec.submit_and_wait()?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let mut reports = Vec::new();
+    for (f, name) in surfaces {
+        let grid = f.vol.grid;
+        let mesh = extract(&f.vol.download()?, grid.origin, grid.voxel, 0.0);
         let path = dir.file(name)?;
         ply::write_mesh(&path, &mesh)?;
         reports.push(MeshReport { path, grid, mesh });
