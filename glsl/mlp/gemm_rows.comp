@@ -5,21 +5,23 @@
 // summed in increasing k by one invocation, acc += a_ik b_kj), so its
 // results are bit-identical to the tiled kernel's.
 //
-// Invocation t of a workgroup owns row i = 64 y + t of C and the NB columns
-// [x NB, x NB + NB) that the whole workgroup shares. At each k it loads its
-// own A(i, k) once and multiplies it into NB accumulators held in
-// registers. The B(k, j) are the same for every invocation: each group of
-// SB lanes loads SB different columns and shares them by broadcast, so a
-// lane makes 1 + NB / SB loads per NB multiply-adds. In the forward (A the
-// layer's input rows, B the weights) and the input gradient (A = dZ, B = W)
-// B is the weights; in the weight gradient (C = dZ^T [X, 1]: rows the
-// outputs j, k the samples) it is the samples' input rows.
+// Invocation t of a workgroup of WGX owns the RR rows i = WGX RR y + t +
+// WGX r (r < RR) of C and the NB columns [x NB, x NB + NB) that the whole
+// workgroup shares, RR x NB accumulators in registers. At each k it loads
+// its rows' A(i, k) and multiplies them by B(k, j): those are the same for
+// every invocation, so each group of SB lanes loads SB different columns
+// and shares them by broadcast. A lane makes RR + NB / SB loads and NB
+// broadcasts per RR NB multiply-adds. In the forward (A the layer's input
+// rows, B the weights) and the input gradient (A = dZ, B = W) B is the
+// weights; in the weight gradient (C = dZ^T [X, 1]: rows the outputs j, k
+// the samples) it is the samples' input rows.
 //
 // Why: on lavapipe every load goes lane by lane (a scalar load each, with
-// its bounds check), and the tiled kernel's shared-memory reads and
-// staging were the bottleneck: 0.65 GFLOP/s on the small network; this
-// kernel 1.3 (perf/RESULTS.md, twenty-eighth session). No branch sits in
-// the inner loop for the same reason (a branch masks the loads inside it).
+// its bounds check) and a broadcast costs several multiply-adds; the tiled
+// kernel's shared-memory reads and staging were its bottleneck (0.66
+// GFLOP/s forward on the small network), this kernel runs it at 3.9
+// (perf/RESULTS.md, twenty-eighth session). No branch sits in the inner
+// loop for the same reason (a branch masks the loads inside it).
 //
 // Rows on the GPU (m_count), chunks of k over z (k_count), the bit-reversed
 // walk of counted grids: as in mlp/gemm.comp.
@@ -28,11 +30,15 @@
 #extension GL_KHR_shader_subgroup_ballot : require
 #include "mlp/chunks.glsl"
 
-layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
+// Invocations per workgroup (spec constant 6).
+layout(local_size_x_id = 6, local_size_y = 1, local_size_z = 1) in;
+#define WGX (gl_WorkGroupSize.x)
 // Columns of C per invocation.
 layout(constant_id = 3) const uint NB = 16;
 // Lanes that share their loads by broadcast: at most the smallest subgroup size.
 layout(constant_id = 4) const uint SB = 4;
+// Rows of C per invocation: rows i + WGX r, r < RR (the workgroup's WGX RR).
+layout(constant_id = 5) const uint RR = 1;
 
 layout(std430, binding = 0) readonly buffer A { float a[]; };
 layout(std430, binding = 1) readonly buffer B { float b[]; };
@@ -70,7 +76,7 @@ uint spread(uint g, uint n) {
 void main() {
     uint row_group = pc.m_count != 0u ? spread(gl_WorkGroupID.y, gl_NumWorkGroups.y) : gl_WorkGroupID.y;
     uint zc = pc.k_count != 0u ? spread(gl_WorkGroupID.z, gl_NumWorkGroups.z) : gl_WorkGroupID.z;
-    uint i = row_group * 64u + gl_LocalInvocationID.x;
+    uint i = row_group * WGX * RR + gl_LocalInvocationID.x;
     uint j0 = gl_WorkGroupID.x * NB;
     uint count = (pc.m_count | pc.k_count) != 0u ? rows[0] : 0u;
     uint m = pc.m_count != 0u ? min(pc.m, count) : pc.m;
@@ -88,22 +94,30 @@ void main() {
     }
     // A workgroup past the rows (uniform; a counted grid covers the
     // capacity) likewise.
-    if (row_group * 64u >= m) {
+    if (row_group * WGX * RR >= m) {
         return;
     }
     // Every invocation walks the same k (the broadcasts below need the
-    // whole subgroup); one past the rows reads row m - 1 and writes nothing.
-    uint row = min(i, max(m, 1u) - 1u);
+    // whole subgroup); a row past m reads row m - 1 and is not written.
+    uint row[RR];
+    [[unroll]] for (uint r = 0u; r < RR; r++) {
+        row[r] = min(i + WGX * r, m - 1u);
+    }
     // Columns past n (uniform): B is read as 0 there and C not written.
     uint nb = min(NB, pc.n - min(j0, pc.n));
-    float acc[NB];
-    [[unroll]] for (uint q = 0u; q < NB; q++) {
-        acc[q] = 0.0;
+    float acc[RR][NB];
+    [[unroll]] for (uint r = 0u; r < RR; r++) {
+        [[unroll]] for (uint q = 0u; q < NB; q++) {
+            acc[r][q] = 0.0;
+        }
     }
     uint jl = max(pc.n, 1u) - 1u;
     uint lane = gl_SubgroupInvocationID % SB;
     for (uint k = kbeg; k < kend; k++) {
-        float av = load_a(row, k);
+        float av[RR];
+        [[unroll]] for (uint r = 0u; r < RR; r++) {
+            av[r] = load_a(row[r], k);
+        }
         uint boff = pc.b_off + k * pc.b_rs;
         // Each lane loads one of SB columns; the SB values are broadcast.
         [[unroll]] for (uint g = 0u; g < NB / SB; g++) {
@@ -112,23 +126,28 @@ void main() {
             float bl = b[boff + jj * pc.b_cs];
             bl = j == pc.b_ones_j ? 1.0 : (SB * g + lane < nb ? bl : 0.0);
             [[unroll]] for (uint t = 0u; t < SB; t++) {
-                acc[SB * g + t] += av * subgroupBroadcast(bl, t);
+                float bv = subgroupBroadcast(bl, t);
+                [[unroll]] for (uint r = 0u; r < RR; r++) {
+                    acc[r][SB * g + t] += av[r] * bv;
+                }
             }
         }
     }
-    if (i >= m) {
-        return;
-    }
-    uint base = pc.c_off + zc * pc.c_zstride + i * pc.c_rs + j0;
-    [[unroll]] for (uint q = 0u; q < NB; q++) {
-        if (q < nb) {
-            float v = acc[q];
-            if (pc.c_act == 1u) {
-                v = max(v, 0.0);
-            } else if (pc.c_act == 2u) {
-                v = 1.0 / (1.0 + exp(-v));
+    [[unroll]] for (uint r = 0u; r < RR; r++) {
+        uint ir = i + WGX * r;
+        if (ir < m) {
+            uint base = pc.c_off + zc * pc.c_zstride + ir * pc.c_rs + j0;
+            [[unroll]] for (uint q = 0u; q < NB; q++) {
+                if (q < nb) {
+                    float v = acc[r][q];
+                    if (pc.c_act == 1u) {
+                        v = max(v, 0.0);
+                    } else if (pc.c_act == 2u) {
+                        v = 1.0 / (1.0 + exp(-v));
+                    }
+                    c[base + q] = v;
+                }
             }
-            c[base + q] = v;
         }
     }
 }

@@ -131,8 +131,8 @@ impl Points {
                     depth[i],
                 );
                 if p.iter().all(|v| v.is_finite()) {
-                    for k in 0..3 {
-                        self.axes[k].push(p[k]);
+                    for (axis, v) in self.axes.iter_mut().zip(p) {
+                        axis.push(v);
                     }
                     self.footprint.push(depth[i] / cam.fx.max(cam.fy));
                 }

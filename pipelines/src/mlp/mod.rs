@@ -30,13 +30,108 @@ use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Recorder};
 /// smaller side, up to 16 (measured on llvmpipe, 8 x 256 on 4,096 samples:
 /// blocks of 4 / 8 / 16 give 2.0 / 3.9 / 7.1 GFLOP/s forward).
 const BLOCKS: [u32; 3] = [4, 8, 16];
-/// Columns of C per invocation of the row kernel (glsl/mlp/gemm_rows.comp):
-/// 64 for products at least 128 wide, else the smallest that holds them up
-/// to 32 (measured on llvmpipe, 4,096 samples, forward + backward: the
-/// small network 9,796 samples/s with 32 and 9,487 with 64; the paper
-/// network 422 with 32 and 475 with 64; perf/RESULTS.md, twenty-eighth
-/// session).
-const ROW_BLOCKS: [u32; 4] = [8, 16, 32, 64];
+/// A configuration of the row kernel (glsl/mlp/gemm_rows.comp): `nb`
+/// columns and `rr` rows of C per invocation, `wg` invocations per
+/// workgroup (which covers wg x rr rows).
+#[derive(Clone, Copy, Debug)]
+struct RowConfig {
+    nb: u32,
+    rr: u32,
+    wg: u32,
+}
+
+/// The row kernel's pipelines: for each column block (8, 16, 32, 64), a
+/// workgroup of 64 invocations with 8 rows each (4 with 64 columns, whose
+/// accumulators would otherwise not fit the registers) for products with
+/// many rows (the forward and the input gradient: a row per sample), one of
+/// 16 with 4 rows for products of at most 64 rows (the weight gradient: a
+/// row per output unit), and one of 8 with 1 row for at most 8 (the head's
+/// weight gradient). Rows per invocation share every broadcast of B:
+/// measured on llvmpipe, the small network's forward on 4,096 samples takes
+/// 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8 rows (perf/RESULTS.md,
+/// twenty-eighth session).
+const ROW_CONFIGS: [RowConfig; 12] = [
+    RowConfig {
+        nb: 8,
+        rr: 8,
+        wg: 64,
+    },
+    RowConfig {
+        nb: 16,
+        rr: 8,
+        wg: 64,
+    },
+    RowConfig {
+        nb: 32,
+        rr: 8,
+        wg: 64,
+    },
+    RowConfig {
+        nb: 64,
+        rr: 4,
+        wg: 64,
+    },
+    RowConfig {
+        nb: 8,
+        rr: 4,
+        wg: 16,
+    },
+    RowConfig {
+        nb: 16,
+        rr: 4,
+        wg: 16,
+    },
+    RowConfig {
+        nb: 32,
+        rr: 4,
+        wg: 16,
+    },
+    RowConfig {
+        nb: 64,
+        rr: 4,
+        wg: 16,
+    },
+    RowConfig {
+        nb: 8,
+        rr: 1,
+        wg: 8,
+    },
+    RowConfig {
+        nb: 16,
+        rr: 1,
+        wg: 8,
+    },
+    RowConfig {
+        nb: 32,
+        rr: 1,
+        wg: 8,
+    },
+    RowConfig {
+        nb: 64,
+        rr: 1,
+        wg: 8,
+    },
+];
+
+/// The row configuration for a product of `m` x `n`: 64 columns for
+/// products at least 128 wide, else the smallest block that holds them (8,
+/// 16, 32); the smallest workgroup shape that covers the rows.
+fn row_config(m: u32, n: u32) -> usize {
+    let col = if n >= 128 {
+        3
+    } else {
+        [8, 16, 32].iter().position(|&nb| nb >= n).unwrap_or(2)
+    };
+    let rows = if m <= 8 {
+        8
+    } else if m <= 64 {
+        4
+    } else {
+        0
+    };
+    rows + col
+}
+
 /// At most this many sample chunks hold weight-gradient partials (a power
 /// of two: the counted backward walks them in bit-reversed order).
 const MAX_CHUNKS: u32 = 16;
@@ -173,12 +268,12 @@ pub enum Gemm {
     /// glsl/mlp/gemm.comp: tiles of A and B staged in shared memory; for
     /// GPUs, where shared memory is fast and global loads coalesce.
     Tiled,
-    /// glsl/mlp/gemm_rows.comp: a row of C per invocation, its A from
+    /// glsl/mlp/gemm_rows.comp: rows of C per invocation, their A from
     /// memory, B shared across the subgroup by broadcasts; for CPU devices
     /// (lavapipe), where every load a lane makes costs a scalar load and the
     /// tiled kernel's shared-memory reads were the bottleneck. Measured on
-    /// llvmpipe, 4,096 samples, forward + backward: the small network 5,162
-    /// -> 9,796 samples/s, the paper network 447 -> 475.
+    /// llvmpipe, 4,096 samples, forward + backward: the small network 5,174
+    /// -> 24,558 samples/s, the paper network 447 -> 1,167.
     Rows,
 }
 
@@ -218,7 +313,7 @@ pub struct Mlp {
     ctx: Arc<Context>,
     gemm_kind: Gemm,
     /// The GEMM, one pipeline per block size of [`BLOCKS`] (tiled) or
-    /// [`ROW_BLOCKS`] (rows).
+    /// [`ROW_CONFIGS`] (rows).
     gemm: Vec<Kernel>,
     encode: Kernel,
     reduce: Kernel,
@@ -236,7 +331,7 @@ impl Mlp {
         // The row kernel broadcasts B across SB lanes: a power of two no
         // larger than the device's smallest subgroup (every pipeline's
         // subgroup has at least that many lanes) nor the smallest block.
-        let sb = ctx.caps().min_subgroup_size.clamp(1, ROW_BLOCKS[0]);
+        let sb = ctx.caps().min_subgroup_size.clamp(1, ROW_CONFIGS[0].nb);
         let gemm = match gemm_kind {
             Gemm::Tiled => BLOCKS
                 .iter()
@@ -254,15 +349,15 @@ impl Mlp {
                     )
                 })
                 .collect::<Result<Vec<_>>>()?,
-            Gemm::Rows => ROW_BLOCKS
+            Gemm::Rows => ROW_CONFIGS
                 .iter()
-                .map(|&b| {
+                .map(|c| {
                     Kernel::new(
                         ctx,
                         &KernelDesc {
                             name: "mlp.gemm_rows",
                             spirv: shaders::MLP_GEMM_ROWS,
-                            spec: &[(3, b), (4, sb)],
+                            spec: &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)],
                             push_bytes: push,
                             subgroup_size: None,
                             full_subgroups: false,
@@ -362,19 +457,12 @@ impl Mlp {
         chunks: u32,
         rows: Option<&Buffer<u32>>,
     ) -> Result<()> {
-        let [a, b, y, c] = bufs.map(|b| b.binding());
+        let [a, b, y, c_buf] = bufs.map(|b| b.binding());
         let r = rows.map(|r| r.binding()).unwrap_or_else(|| a.clone());
         if self.gemm_kind == Gemm::Rows {
-            // 64 rows of C per workgroup, NB columns.
-            let k = if p.n >= 128 {
-                ROW_BLOCKS.len() - 1
-            } else {
-                ROW_BLOCKS[..ROW_BLOCKS.len() - 1]
-                    .iter()
-                    .position(|&nb| nb >= p.n)
-                    .unwrap_or(ROW_BLOCKS.len() - 2)
-            };
-            let groups = p.m.div_ceil(64);
+            let k = row_config(p.m, p.n);
+            let c = ROW_CONFIGS[k];
+            let groups = p.m.div_ceil(c.wg * c.rr);
             let groups = if p.m_count != 0 {
                 groups.next_power_of_two()
             } else {
@@ -382,9 +470,9 @@ impl Mlp {
             };
             return rec.dispatch(
                 &self.gemm[k],
-                &[a, b, y, c, r],
+                &[a, b, y, c_buf, r],
                 bytemuck::bytes_of(p),
-                [p.n.div_ceil(ROW_BLOCKS[k]), groups, chunks],
+                [p.n.div_ceil(c.nb), groups, chunks],
             );
         }
         let side = p.m.min(p.n).max(32);
@@ -400,7 +488,7 @@ impl Mlp {
         };
         rec.dispatch(
             &self.gemm[k],
-            &[a, b, y, c, r],
+            &[a, b, y, c_buf, r],
             bytemuck::bytes_of(p),
             [p.n.div_ceil(tile), row_tiles, chunks],
         )
