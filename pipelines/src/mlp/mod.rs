@@ -316,6 +316,7 @@ pub struct Mlp {
     /// [`ROW_CONFIGS`] (rows).
     gemm: Vec<Kernel>,
     encode: Kernel,
+    relu_grad: Kernel,
     reduce: Kernel,
 }
 
@@ -371,6 +372,7 @@ impl Mlp {
             gemm_kind,
             gemm,
             encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 20)?,
+            relu_grad: kernel(ctx, "mlp.relu_grad", shaders::MLP_RELU_GRAD, 16)?,
             reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 16)?,
         })
     }
@@ -660,7 +662,22 @@ impl Mlp {
             } else {
                 (&s.d[(l % 2) as usize], sh.width)
             };
-            let deriv = if l == sh.depth { SIGMOID } else { RELU };
+            // A hidden layer's dY becomes dZ in place, once (both products
+            // below then read it without Y); the head's sigmoid derivative
+            // is taken in the products (d_out is the caller's, 3 wide).
+            let deriv = if l == sh.depth {
+                SIGMOID
+            } else {
+                let push = [n, sh.width, y_ld, counted];
+                let r = rows.map(|r| r.binding()).unwrap_or_else(|| dy.binding());
+                rec.dispatch(
+                    &self.relu_grad,
+                    &[dy.binding(), y.binding(), r],
+                    bytemuck::cast_slice(&push),
+                    grid(&self.ctx, n * sh.width),
+                )?;
+                0
+            };
             let j = sh.fan_out(l);
             // [dW | db] (J x (K + 1)) = dZ^T [X, 1], per chunk of samples.
             let pw = Product {
