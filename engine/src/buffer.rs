@@ -20,12 +20,7 @@ pub(crate) struct RawBuffer {
 }
 
 impl RawBuffer {
-    pub(crate) fn new(
-        ctx: &Arc<Context>,
-        name: &str,
-        bytes: u64,
-        location: MemoryLocation,
-    ) -> Result<Arc<Self>> {
+    pub(crate) fn new(ctx: &Arc<Context>, name: &str, bytes: u64, location: MemoryLocation) -> Result<Arc<Self>> {
         let mut usage = vk::BufferUsageFlags::STORAGE_BUFFER
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;
@@ -45,12 +40,8 @@ impl RawBuffer {
             );
         }
         let d = &ctx.device;
-        let info = vk::BufferCreateInfo::default()
-            .size(size)
-            .usage(usage)
-            .sharing_mode(vk::SharingMode::EXCLUSIVE);
-        let raw = unsafe { d.create_buffer(&info, None) }
-            .with_context(|| format!("vkCreateBuffer '{name}'"))?;
+        let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let raw = unsafe { d.create_buffer(&info, None) }.with_context(|| format!("vkCreateBuffer '{name}'"))?;
         let req = unsafe { d.get_buffer_memory_requirements(raw) };
         let alloc = ctx
             .allocator
@@ -83,24 +74,13 @@ impl RawBuffer {
             return Err(anyhow!("vkBindBufferMemory '{name}': {e}"));
         }
         ctx.memory_allocated(alloc.size());
-        Ok(Arc::new(RawBuffer {
-            ctx: ctx.clone(),
-            raw,
-            alloc: Mutex::new(Some(alloc)),
-            bytes,
-            name: name.to_string(),
-        }))
+        Ok(Arc::new(RawBuffer { ctx: ctx.clone(), raw, alloc: Mutex::new(Some(alloc)), bytes, name: name.to_string() }))
     }
 
     fn with_mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Result<R> {
-        let mut guard = self
-            .alloc
-            .lock()
-            .map_err(|_| anyhow!("buffer lock poisoned"))?;
+        let mut guard = self.alloc.lock().map_err(|_| anyhow!("buffer lock poisoned"))?;
         let alloc = guard.as_mut().ok_or_else(|| anyhow!("buffer freed"))?;
-        let slice = alloc
-            .mapped_slice_mut()
-            .ok_or_else(|| anyhow!("staging buffer '{}' is not host-mapped", self.name))?;
+        let slice = alloc.mapped_slice_mut().ok_or_else(|| anyhow!("staging buffer '{}' is not host-mapped", self.name))?;
         Ok(f(&mut slice[..self.bytes as usize]))
     }
 
@@ -141,12 +121,7 @@ impl BufferBinding {
     /// # Safety
     /// The buffer must have STORAGE_BUFFER usage and outlive every recording using it.
     pub unsafe fn external(buffer: vk::Buffer, offset: u64, range: u64) -> Self {
-        BufferBinding {
-            buffer,
-            offset,
-            range,
-            keep: None,
-        }
+        BufferBinding { buffer, offset, range, keep: None }
     }
 }
 
@@ -184,19 +159,14 @@ impl<T: Pod> Buffer<T> {
         let bytes = (len as u64)
             .checked_mul(std::mem::size_of::<T>() as u64)
             .ok_or_else(|| anyhow!("buffer '{name}': size overflow"))?;
-        Ok(Buffer {
-            inner: RawBuffer::new(ctx, name, bytes, MemoryLocation::GpuOnly)?,
-            len,
-            _t: PhantomData,
-        })
+        Ok(Buffer { inner: RawBuffer::new(ctx, name, bytes, MemoryLocation::GpuOnly)?, len, _t: PhantomData })
     }
 
     /// Fill the whole allocation with a repeated 32-bit pattern (blocking).
     fn fill_bits(&self, bits: u32) -> Result<()> {
         let mut rec = Recorder::new(&self.inner.ctx)?;
         rec.fill(&self.binding(), bits)?;
-        rec.submit_and_wait()
-            .with_context(|| format!("initialising buffer '{}'", self.name()))?;
+        rec.submit_and_wait().with_context(|| format!("initialising buffer '{}'", self.name()))?;
         Ok(())
     }
 
@@ -252,10 +222,7 @@ impl<T: Pod> Buffer<T> {
     /// reach buffers of any size through `GL_EXT_buffer_reference`.
     pub fn device_address(&self) -> Result<u64> {
         if !self.inner.ctx.features.buffer_device_address {
-            bail!(
-                "buffer device address is not enabled on {}",
-                self.inner.ctx.caps.device_name
-            );
+            bail!("buffer device address is not enabled on {}", self.inner.ctx.caps.device_name);
         }
         let info = vk::BufferDeviceAddressInfo::default().buffer(self.inner.raw);
         Ok(unsafe { self.inner.ctx.device.get_buffer_device_address(&info) })
@@ -264,29 +231,18 @@ impl<T: Pod> Buffer<T> {
     /// Copy `data` to the start of the buffer (blocking).
     pub fn upload(&self, data: &[T]) -> Result<()> {
         if data.len() > self.len {
-            bail!(
-                "upload of {} elements into buffer '{}' of {}",
-                data.len(),
-                self.name(),
-                self.len
-            );
+            bail!("upload of {} elements into buffer '{}' of {}", data.len(), self.name(), self.len);
         }
         if data.is_empty() {
             return Ok(());
         }
         let ctx = &self.inner.ctx;
         let bytes: &[u8] = bytemuck::cast_slice(data);
-        let staging = RawBuffer::new(
-            ctx,
-            "staging-upload",
-            bytes.len() as u64,
-            MemoryLocation::CpuToGpu,
-        )?;
+        let staging = RawBuffer::new(ctx, "staging-upload", bytes.len() as u64, MemoryLocation::CpuToGpu)?;
         staging.with_mapped(|m| m.copy_from_slice(bytes))?;
         let mut rec = Recorder::new(ctx)?;
         rec.copy_raw_at(&staging, 0, &self.inner, 0, bytes.len() as u64)?;
-        rec.submit_and_wait()
-            .with_context(|| format!("uploading buffer '{}'", self.name()))?;
+        rec.submit_and_wait().with_context(|| format!("uploading buffer '{}'", self.name()))?;
         Ok(())
     }
 
@@ -298,12 +254,7 @@ impl<T: Pod> Buffer<T> {
     /// Read elements `[start, start+count)` back (blocking).
     pub fn download_range(&self, start: usize, count: usize) -> Result<Vec<T>> {
         if start + count > self.len {
-            bail!(
-                "download of [{start}, {}) from buffer '{}' of {}",
-                start + count,
-                self.name(),
-                self.len
-            );
+            bail!("download of [{start}, {}) from buffer '{}' of {}", start + count, self.name(), self.len);
         }
         if count == 0 {
             return Ok(Vec::new());
@@ -314,8 +265,7 @@ impl<T: Pod> Buffer<T> {
         let staging = RawBuffer::new(ctx, "staging-download", bytes, MemoryLocation::GpuToCpu)?;
         let mut rec = Recorder::new(ctx)?;
         rec.copy_raw_at(&self.inner, start as u64 * sz, &staging, 0, bytes)?;
-        rec.submit_and_wait()
-            .with_context(|| format!("downloading buffer '{}'", self.name()))?;
+        rec.submit_and_wait().with_context(|| format!("downloading buffer '{}'", self.name()))?;
         staging.read_mapped(count)
     }
 }
@@ -336,11 +286,7 @@ impl<T: Pod> Readback<T> {
         let bytes = (len.max(1) * std::mem::size_of::<T>()) as u64;
         let inner = RawBuffer::new(ctx, name, bytes, MemoryLocation::GpuToCpu)?;
         inner.with_mapped(|m| m.fill(0))?;
-        Ok(Readback {
-            inner,
-            len,
-            _t: PhantomData,
-        })
+        Ok(Readback { inner, len, _t: PhantomData })
     }
 
     pub fn len(&self) -> usize {

@@ -51,11 +51,7 @@ impl Capabilities {
     ///
     /// # Safety
     /// `pd` must come from `instance`.
-    pub unsafe fn query(
-        instance: &ash::Instance,
-        pd: vk::PhysicalDevice,
-        queue_family: u32,
-    ) -> Self {
+    pub unsafe fn query(instance: &ash::Instance, pd: vk::PhysicalDevice, queue_family: u32) -> Self {
         let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
         let mut sg_ctrl = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
         let mut driver = vk::PhysicalDeviceDriverProperties::default();
@@ -68,31 +64,20 @@ impl Capabilities {
 
         let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
         let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
-        let exts = instance
-            .enumerate_device_extension_properties(pd)
-            .unwrap_or_default();
-        let has_ext = |name: &CStr| {
-            exts.iter()
-                .any(|e| e.extension_name_as_c_str().ok() == Some(name))
-        };
+        let exts = instance.enumerate_device_extension_properties(pd).unwrap_or_default();
+        let has_ext = |name: &CStr| exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(name));
         let atomic_float_ext = has_ext(ash::ext::shader_atomic_float::NAME);
         let mut fatomic = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default();
         {
-            let mut f2 = vk::PhysicalDeviceFeatures2::default()
-                .push_next(&mut f12)
-                .push_next(&mut f13);
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f12).push_next(&mut f13);
             if atomic_float_ext {
                 f2 = f2.push_next(&mut fatomic);
             }
             instance.get_physical_device_features2(pd, &mut f2);
         }
-        let api13 = vk::api_version_major(props.api_version) >= 1
-            && vk::api_version_minor(props.api_version) >= 3;
-        let sg_ctrl_ok = api13
-            && f13.subgroup_size_control == vk::TRUE
-            && sg_ctrl
-                .required_subgroup_size_stages
-                .contains(vk::ShaderStageFlags::COMPUTE);
+        let api13 = vk::api_version_major(props.api_version) >= 1 && vk::api_version_minor(props.api_version) >= 3;
+        let sg_ctrl_ok = api13 && f13.subgroup_size_control == vk::TRUE
+            && sg_ctrl.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE);
         let (min_sg, max_sg) = if sg_ctrl_ok {
             (sg_ctrl.min_subgroup_size, sg_ctrl.max_subgroup_size)
         } else {
@@ -103,19 +88,13 @@ impl Capabilities {
             | vk::SubgroupFeatureFlags::ARITHMETIC
             | vk::SubgroupFeatureFlags::BALLOT
             | vk::SubgroupFeatureFlags::SHUFFLE;
-        let subgroup_ops_ok = subgroup
-            .supported_stages
-            .contains(vk::ShaderStageFlags::COMPUTE)
+        let subgroup_ops_ok = subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE)
             && subgroup.supported_operations.contains(need);
 
         let qf = instance.get_physical_device_queue_family_properties(pd);
-        let ts_bits = qf
-            .get(queue_family as usize)
-            .map(|q| q.timestamp_valid_bits)
-            .unwrap_or(0);
+        let ts_bits = qf.get(queue_family as usize).map(|q| q.timestamp_valid_bits).unwrap_or(0);
         let mem = instance.get_physical_device_memory_properties(pd);
-        let device_local_bytes = mem
-            .memory_heaps_as_slice()
+        let device_local_bytes = mem.memory_heaps_as_slice()
             .iter()
             .filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
             .map(|h| h.size)
@@ -126,11 +105,7 @@ impl Capabilities {
         instance.get_physical_device_properties2(pd, &mut p2);
 
         let cstr = |s: &[std::ffi::c_char]| -> String {
-            let bytes: Vec<u8> = s
-                .iter()
-                .take_while(|&&c| c != 0)
-                .map(|&c| c as u8)
-                .collect();
+            let bytes: Vec<u8> = s.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
             String::from_utf8_lossy(&bytes).into_owned()
         };
         Capabilities {

@@ -87,10 +87,7 @@ pub(crate) fn load_entry() -> Result<ash::Entry> {
 
 type Debug = Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>;
 
-pub(crate) fn create_instance(
-    entry: &ash::Entry,
-    validation: bool,
-) -> Result<(ash::Instance, bool)> {
+pub(crate) fn create_instance(entry: &ash::Entry, validation: bool) -> Result<(ash::Instance, bool)> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"tgs")
         .engine_name(c"tgs-engine")
@@ -99,16 +96,8 @@ pub(crate) fn create_instance(
     if validation && !use_layer {
         eprintln!("tgs: validation requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)");
     }
-    let layers = if use_layer {
-        vec![validation::LAYER.as_ptr()]
-    } else {
-        vec![]
-    };
-    let exts = if use_layer {
-        vec![ash::ext::debug_utils::NAME.as_ptr()]
-    } else {
-        vec![]
-    };
+    let layers = if use_layer { vec![validation::LAYER.as_ptr()] } else { vec![] };
+    let exts = if use_layer { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
     let info = vk::InstanceCreateInfo::default()
         .application_info(&app)
         .enabled_layer_names(&layers)
@@ -123,17 +112,10 @@ pub(crate) fn create_instance(
     Ok((instance, use_layer))
 }
 
-fn create_messenger(
-    entry: &ash::Entry,
-    instance: &ash::Instance,
-    log: &Arc<ValidationLog>,
-) -> Result<Debug> {
+fn create_messenger(entry: &ash::Entry, instance: &ash::Instance, log: &Arc<ValidationLog>) -> Result<Debug> {
     let du = ash::ext::debug_utils::Instance::new(entry, instance);
     let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-        .message_severity(
-            vk::DebugUtilsMessageSeverityFlagsEXT::ERROR
-                | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING,
-        )
+        .message_severity(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING)
         .message_type(
             vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
                 | vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
@@ -141,19 +123,16 @@ fn create_messenger(
         )
         .pfn_user_callback(Some(validation::callback))
         .user_data(Arc::as_ptr(log) as *mut std::ffi::c_void);
-    let m = unsafe { du.create_debug_utils_messenger(&info, None) }
-        .context("creating the validation messenger")?;
+    let m = unsafe { du.create_debug_utils_messenger(&info, None) }.context("creating the validation messenger")?;
     Ok(Some((du, m)))
 }
 
 impl Context {
     /// Create a headless instance and device.
     pub fn new(opts: &ContextOptions) -> Result<Arc<Context>> {
-        let validation = opts.validation.unwrap_or_else(|| {
-            std::env::var("TGS_VALIDATION")
-                .map(|v| v == "1")
-                .unwrap_or(false)
-        });
+        let validation = opts
+            .validation
+            .unwrap_or_else(|| std::env::var("TGS_VALIDATION").map(|v| v == "1").unwrap_or(false));
         let entry = load_entry()?;
         let (instance, layer_on) = create_instance(&entry, validation)?;
         let log = Arc::new(ValidationLog::default());
@@ -178,9 +157,7 @@ impl Context {
             let devices = select::describe_all(&instance)?;
             let idx = select::choose(&devices, &opts.device)?;
             let (pd, info) = &devices[idx];
-            let qf = info
-                .compute_queue_family
-                .expect("usable device has a compute queue");
+            let qf = info.compute_queue_family.expect("usable device has a compute queue");
             let caps = &info.caps;
             let api13 = vk::api_version_minor(caps.api_version) >= 3;
             let features = EnabledFeatures {
@@ -189,17 +166,13 @@ impl Context {
                 compute_full_subgroups: caps.compute_full_subgroups,
             };
             let prio = [1.0f32];
-            let qinfo = [vk::DeviceQueueCreateInfo::default()
-                .queue_family_index(qf)
-                .queue_priorities(&prio)];
+            let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qf).queue_priorities(&prio)];
             let mut f12 = vk::PhysicalDeviceVulkan12Features::default()
                 .buffer_device_address(features.buffer_device_address);
             let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
                 .subgroup_size_control(features.subgroup_size_control)
                 .compute_full_subgroups(features.compute_full_subgroups);
-            let mut dinfo = vk::DeviceCreateInfo::default()
-                .queue_create_infos(&qinfo)
-                .push_next(&mut f12);
+            let mut dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).push_next(&mut f12);
             if api13 {
                 dinfo = dinfo.push_next(&mut f13);
             }
@@ -235,27 +208,13 @@ impl Context {
     pub unsafe fn adopt(info: AdoptInfo) -> Result<Arc<Context>> {
         let instance = ash::Instance::load(info.entry.static_fn(), info.instance);
         let props = instance.get_physical_device_properties(info.physical_device);
-        if vk::api_version_major(props.api_version) == 1
-            && vk::api_version_minor(props.api_version) < 2
-        {
-            bail!(
-                "adopted device supports Vulkan {}.{}; tgs needs 1.2",
-                vk::api_version_major(props.api_version),
-                vk::api_version_minor(props.api_version)
-            );
+        if vk::api_version_major(props.api_version) == 1 && vk::api_version_minor(props.api_version) < 2 {
+            bail!("adopted device supports Vulkan {}.{}; tgs needs 1.2",
+                vk::api_version_major(props.api_version), vk::api_version_minor(props.api_version));
         }
         let device = ash::Device::load(instance.fp_v1_0(), info.device);
-        Self::finish(
-            info.entry,
-            instance,
-            info.physical_device,
-            device,
-            info.queue_family_index,
-            Some(info.queue),
-            info.enabled,
-            None,
-            Arc::new(ValidationLog::default()),
-        )
+        Self::finish(info.entry, instance, info.physical_device, device, info.queue_family_index,
+            Some(info.queue), info.enabled, None, Arc::new(ValidationLog::default()))
         .map_err(|(e, ..)| e)
     }
 
@@ -290,18 +249,10 @@ impl Context {
         });
         let allocator = match allocator {
             Ok(a) => a,
-            Err(e) => {
-                return Err((
-                    anyhow!("creating the memory allocator: {e}"),
-                    instance,
-                    device,
-                    debug,
-                ))
-            }
+            Err(e) => return Err((anyhow!("creating the memory allocator: {e}"), instance, device, debug)),
         };
         let owns = adopted_queue.is_none();
-        let queue =
-            adopted_queue.unwrap_or_else(|| unsafe { device.get_device_queue(queue_family, 0) });
+        let queue = adopted_queue.unwrap_or_else(|| unsafe { device.get_device_queue(queue_family, 0) });
         Ok(Arc::new(Context {
             entry,
             instance,
@@ -360,23 +311,18 @@ impl Context {
     /// same way every run instead of depending on what an earlier user of the
     /// memory left there. Tests turn this on; it costs one fill per buffer.
     pub fn set_poison_uninit(&self, on: bool) {
-        self.poison_uninit
-            .store(on, std::sync::atomic::Ordering::SeqCst);
+        self.poison_uninit.store(on, std::sync::atomic::Ordering::SeqCst);
     }
 
     /// Bytes of device memory held by this context's buffers now, and the
     /// most held at once since the context was made (or since
     /// [`Context::reset_peak_memory`]).
     pub fn memory_use(&self) -> MemoryUse {
-        MemoryUse {
-            live_bytes: self.live_bytes.load(Ordering::SeqCst),
-            peak_bytes: self.peak_bytes.load(Ordering::SeqCst),
-        }
+        MemoryUse { live_bytes: self.live_bytes.load(Ordering::SeqCst), peak_bytes: self.peak_bytes.load(Ordering::SeqCst) }
     }
     /// Start the peak over from what is held now.
     pub fn reset_peak_memory(&self) {
-        self.peak_bytes
-            .store(self.live_bytes.load(Ordering::SeqCst), Ordering::SeqCst);
+        self.peak_bytes.store(self.live_bytes.load(Ordering::SeqCst), Ordering::SeqCst);
     }
     pub(crate) fn memory_allocated(&self, bytes: u64) {
         let live = self.live_bytes.fetch_add(bytes, Ordering::SeqCst) + bytes;
@@ -388,11 +334,7 @@ impl Context {
 
     /// Validation errors reported so far (empty without the layer).
     pub fn validation_errors(&self) -> Vec<String> {
-        self.validation
-            .errors
-            .lock()
-            .map(|e| e.clone())
-            .unwrap_or_default()
+        self.validation.errors.lock().map(|e| e.clone()).unwrap_or_default()
     }
 
     /// Submit a command buffer on the compute queue and wait for it.
@@ -408,10 +350,7 @@ impl Context {
             let cmds = [cmd];
             let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
             let r = {
-                let q = self
-                    .queue
-                    .lock()
-                    .map_err(|_| anyhow!("queue lock poisoned"))?;
+                let q = self.queue.lock().map_err(|_| anyhow!("queue lock poisoned"))?;
                 d.queue_submit(*q, &submit, fence)
             };
             let r = r.and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX));

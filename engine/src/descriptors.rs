@@ -18,26 +18,13 @@ pub(crate) struct DescriptorArena {
 
 impl DescriptorArena {
     pub(crate) fn new(ctx: &Arc<Context>) -> Self {
-        DescriptorArena {
-            ctx: ctx.clone(),
-            pools: Vec::new(),
-        }
+        DescriptorArena { ctx: ctx.clone(), pools: Vec::new() }
     }
 
     fn new_pool(&mut self) -> Result<vk::DescriptorPool> {
-        let sizes = [vk::DescriptorPoolSize {
-            ty: vk::DescriptorType::STORAGE_BUFFER,
-            descriptor_count: BUFFERS_PER_POOL,
-        }];
-        let info = vk::DescriptorPoolCreateInfo::default()
-            .max_sets(SETS_PER_POOL)
-            .pool_sizes(&sizes);
-        let spare = self
-            .ctx
-            .spare
-            .lock()
-            .ok()
-            .and_then(|mut s| s.take_descriptor_pool());
+        let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: BUFFERS_PER_POOL }];
+        let info = vk::DescriptorPoolCreateInfo::default().max_sets(SETS_PER_POOL).pool_sizes(&sizes);
+        let spare = self.ctx.spare.lock().ok().and_then(|mut s| s.take_descriptor_pool());
         let pool = match spare {
             Some(p) => p,
             None => unsafe { self.ctx.device.create_descriptor_pool(&info, None) }?,
@@ -47,12 +34,7 @@ impl DescriptorArena {
     }
 
     /// A set for `layout`, written with `bindings` (binding i = bindings[i]).
-    pub(crate) fn bind(
-        &mut self,
-        kernel: &str,
-        layout: vk::DescriptorSetLayout,
-        bindings: &[BufferBinding],
-    ) -> Result<vk::DescriptorSet> {
+    pub(crate) fn bind(&mut self, kernel: &str, layout: vk::DescriptorSetLayout, bindings: &[BufferBinding]) -> Result<vk::DescriptorSet> {
         let caps = &self.ctx.caps;
         for (i, b) in bindings.iter().enumerate() {
             if b.range > caps.max_storage_buffer_range {
@@ -72,9 +54,7 @@ impl DescriptorArena {
         let layouts = [layout];
         let mut set = None;
         if let Some(&pool) = self.pools.last() {
-            let info = vk::DescriptorSetAllocateInfo::default()
-                .descriptor_pool(pool)
-                .set_layouts(&layouts);
+            let info = vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts);
             if let Ok(s) = unsafe { self.ctx.device.allocate_descriptor_sets(&info) } {
                 set = Some(s[0]);
             }
@@ -83,21 +63,13 @@ impl DescriptorArena {
             Some(s) => s,
             None => {
                 let pool = self.new_pool()?;
-                let info = vk::DescriptorSetAllocateInfo::default()
-                    .descriptor_pool(pool)
-                    .set_layouts(&layouts);
+                let info = vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts);
                 unsafe { self.ctx.device.allocate_descriptor_sets(&info) }?[0]
             }
         };
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
             .iter()
-            .map(|b| {
-                [vk::DescriptorBufferInfo {
-                    buffer: b.buffer,
-                    offset: b.offset,
-                    range: b.range,
-                }]
-            })
+            .map(|b| [vk::DescriptorBufferInfo { buffer: b.buffer, offset: b.offset, range: b.range }])
             .collect();
         let writes: Vec<_> = infos
             .iter()

@@ -88,19 +88,8 @@ impl Kernel {
     /// The kernel of `desc`: the context's pipeline for it, built now if
     /// this context has not built it before.
     pub fn new(ctx: &Arc<Context>, desc: &KernelDesc) -> Result<Kernel> {
-        let key = PipelineKey {
-            spirv: desc.spirv.to_vec(),
-            spec: desc.spec.to_vec(),
-            push_bytes: desc.push_bytes,
-            subgroup_size: desc.subgroup_size,
-            full_subgroups: desc.full_subgroups,
-        };
-        let mut built = ctx.pipelines.lock().map_err(|_| {
-            anyhow::anyhow!(
-                "kernel '{}': the context's pipeline table is poisoned",
-                desc.name
-            )
-        })?;
+        let key = PipelineKey { spirv: desc.spirv.to_vec(), spec: desc.spec.to_vec(), push_bytes: desc.push_bytes, subgroup_size: desc.subgroup_size, full_subgroups: desc.full_subgroups };
+        let mut built = ctx.pipelines.lock().map_err(|_| anyhow::anyhow!("kernel '{}': the context's pipeline table is poisoned", desc.name))?;
         let p = match built.get(&key) {
             Some(p) => *p,
             None => {
@@ -127,11 +116,7 @@ impl Kernel {
         let words = spirv::words(desc.spirv).with_context(|| format!("kernel '{name}'"))?;
         let bindings = spirv::binding_count(&words);
         if desc.push_bytes > ctx.caps.max_push_constants {
-            bail!(
-                "kernel '{name}' needs {} push-constant bytes; device allows {}",
-                desc.push_bytes,
-                ctx.caps.max_push_constants
-            );
+            bail!("kernel '{name}' needs {} push-constant bytes; device allows {}", desc.push_bytes, ctx.caps.max_push_constants);
         }
         let d = &ctx.device;
         unsafe {
@@ -147,10 +132,7 @@ impl Kernel {
                         .stage_flags(vk::ShaderStageFlags::COMPUTE)
                 })
                 .collect();
-            let set_layout = d.create_descriptor_set_layout(
-                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&lb),
-                None,
-            )?;
+            let set_layout = d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&lb), None)?;
             let ranges = [vk::PushConstantRange::default()
                 .stage_flags(vk::ShaderStageFlags::COMPUTE)
                 .offset(0)
@@ -166,20 +148,10 @@ impl Kernel {
                 .spec
                 .iter()
                 .enumerate()
-                .map(|(i, (id, _))| vk::SpecializationMapEntry {
-                    constant_id: *id,
-                    offset: (i * 4) as u32,
-                    size: 4,
-                })
+                .map(|(i, (id, _))| vk::SpecializationMapEntry { constant_id: *id, offset: (i * 4) as u32, size: 4 })
                 .collect();
-            let data: Vec<u8> = desc
-                .spec
-                .iter()
-                .flat_map(|(_, v)| v.to_le_bytes())
-                .collect();
-            let spec = vk::SpecializationInfo::default()
-                .map_entries(&entries)
-                .data(&data);
+            let data: Vec<u8> = desc.spec.iter().flat_map(|(_, v)| v.to_le_bytes()).collect();
+            let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&data);
             let mut flags = vk::PipelineShaderStageCreateFlags::empty();
             if desc.full_subgroups && ctx.features.compute_full_subgroups {
                 flags |= vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS;
@@ -194,32 +166,21 @@ impl Kernel {
             if let Some(sg) = desc.subgroup_size {
                 let c = &ctx.caps;
                 if sg != c.subgroup_size {
-                    if !c.subgroup_size_control
-                        || sg < c.min_subgroup_size
-                        || sg > c.max_subgroup_size
-                    {
+                    if !c.subgroup_size_control || sg < c.min_subgroup_size || sg > c.max_subgroup_size {
                         d.destroy_shader_module(module, None);
                         d.destroy_pipeline_layout(layout, None);
                         d.destroy_descriptor_set_layout(set_layout, None);
                         bail!(
                             "kernel '{name}' asks for subgroup size {sg}; {} supports {}..{}{}",
-                            c.device_name,
-                            c.min_subgroup_size,
-                            c.max_subgroup_size,
-                            if c.subgroup_size_control {
-                                ""
-                            } else {
-                                " (no subgroup size control)"
-                            }
+                            c.device_name, c.min_subgroup_size, c.max_subgroup_size,
+                            if c.subgroup_size_control { "" } else { " (no subgroup size control)" }
                         );
                     }
                     req = req.required_subgroup_size(sg);
                     stage = stage.push_next(&mut req);
                 }
             }
-            let info = [vk::ComputePipelineCreateInfo::default()
-                .stage(stage)
-                .layout(layout)];
+            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
             let res = d.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
             d.destroy_shader_module(module, None);
             let pipeline = match res {
@@ -230,12 +191,7 @@ impl Kernel {
                     bail!("creating compute pipeline '{name}': {e}");
                 }
             };
-            Ok(Pipeline {
-                pipeline,
-                layout,
-                set_layout,
-                bindings,
-            })
+            Ok(Pipeline { pipeline, layout, set_layout, bindings })
         }
     }
 

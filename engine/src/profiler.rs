@@ -29,11 +29,7 @@ pub fn summarize(timings: &[Timing]) -> Vec<TimingSummary> {
                 s.total_ms += t.ms;
                 s.count += 1;
             }
-            None => out.push(TimingSummary {
-                name: t.name.clone(),
-                total_ms: t.ms,
-                count: 1,
-            }),
+            None => out.push(TimingSummary { name: t.name.clone(), total_ms: t.ms, count: 1 }),
         }
     }
     out
@@ -56,26 +52,13 @@ impl Profiler {
             return Ok(None);
         }
         let capacity = max_scopes * 2;
-        let info = vk::QueryPoolCreateInfo::default()
-            .query_type(vk::QueryType::TIMESTAMP)
-            .query_count(capacity);
+        let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(capacity);
         let pool = unsafe { ctx.device.create_query_pool(&info, None) }?;
-        Ok(Some(Profiler {
-            ctx: ctx.clone(),
-            pool,
-            capacity,
-            next: 0,
-            scopes: Vec::new(),
-            dropped: 0,
-        }))
+        Ok(Some(Profiler { ctx: ctx.clone(), pool, capacity, next: 0, scopes: Vec::new(), dropped: 0 }))
     }
 
     pub(crate) fn reset(&mut self, cmd: vk::CommandBuffer) {
-        unsafe {
-            self.ctx
-                .device
-                .cmd_reset_query_pool(cmd, self.pool, 0, self.capacity)
-        };
+        unsafe { self.ctx.device.cmd_reset_query_pool(cmd, self.pool, 0, self.capacity) };
         self.next = 0;
         self.scopes.clear();
     }
@@ -87,28 +70,14 @@ impl Profiler {
         }
         let q = self.next;
         self.next += 2;
-        unsafe {
-            self.ctx.device.cmd_write_timestamp(
-                cmd,
-                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                self.pool,
-                q,
-            )
-        };
+        unsafe { self.ctx.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.pool, q) };
         self.scopes.push((name.to_string(), q, u32::MAX));
         Some(self.scopes.len() - 1)
     }
 
     pub(crate) fn end(&mut self, cmd: vk::CommandBuffer, scope: usize) {
         let q = self.scopes[scope].1 + 1;
-        unsafe {
-            self.ctx.device.cmd_write_timestamp(
-                cmd,
-                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                self.pool,
-                q,
-            )
-        };
+        unsafe { self.ctx.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.pool, q) };
         self.scopes[scope].2 = q;
     }
 
@@ -127,23 +96,15 @@ impl Profiler {
             )
         }?;
         let bits = self.ctx.caps.timestamp_valid_bits;
-        let mask = if bits >= 64 {
-            u64::MAX
-        } else {
-            (1u64 << bits) - 1
-        };
+        let mask = if bits >= 64 { u64::MAX } else { (1u64 << bits) - 1 };
         let period = self.ctx.caps.timestamp_period as f64;
         Ok(self
             .scopes
             .iter()
             .filter(|s| s.2 != u32::MAX)
             .map(|(name, b, e)| {
-                let ticks =
-                    (data[*e as usize] & mask).wrapping_sub(data[*b as usize] & mask) & mask;
-                Timing {
-                    name: name.clone(),
-                    ms: ticks as f64 * period / 1e6,
-                }
+                let ticks = (data[*e as usize] & mask).wrapping_sub(data[*b as usize] & mask) & mask;
+                Timing { name: name.clone(), ms: ticks as f64 * period / 1e6 }
             })
             .collect())
     }

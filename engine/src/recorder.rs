@@ -68,12 +68,7 @@ impl Recorder {
         let (pool, cmd) = match spare {
             Some(pc) => pc,
             None => {
-                let pool = unsafe {
-                    d.create_command_pool(
-                        &vk::CommandPoolCreateInfo::default().queue_family_index(ctx.queue_family),
-                        None,
-                    )
-                }?;
+                let pool = unsafe { d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(ctx.queue_family), None) }?;
                 match unsafe {
                     d.allocate_command_buffers(
                         &vk::CommandBufferAllocateInfo::default()
@@ -90,26 +85,14 @@ impl Recorder {
                 }
             }
         };
-        if let Err(e) = unsafe {
-            d.begin_command_buffer(
-                cmd,
-                &vk::CommandBufferBeginInfo::default()
-                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-            )
-        } {
+        if let Err(e) = unsafe { d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT)) } {
             unsafe { d.destroy_command_pool(pool, None) };
             return Err(anyhow!("beginning a command buffer: {e}"));
         }
         Self::assemble(ctx, pool, cmd, true, max_scopes)
     }
 
-    fn assemble(
-        ctx: &Arc<Context>,
-        pool: vk::CommandPool,
-        cmd: vk::CommandBuffer,
-        owned: bool,
-        max_scopes: u32,
-    ) -> Result<Recorder> {
+    fn assemble(ctx: &Arc<Context>, pool: vk::CommandPool, cmd: vk::CommandBuffer, owned: bool, max_scopes: u32) -> Result<Recorder> {
         let mut r = Recorder {
             ctx: ctx.clone(),
             pool,
@@ -142,11 +125,7 @@ impl Recorder {
     /// # Safety
     /// `cmd` must be a primary command buffer in the recording state, from a
     /// pool of this context's queue family.
-    pub unsafe fn record_into(
-        ctx: &Arc<Context>,
-        cmd: vk::CommandBuffer,
-        max_scopes: u32,
-    ) -> Result<Recorder> {
+    pub unsafe fn record_into(ctx: &Arc<Context>, cmd: vk::CommandBuffer, max_scopes: u32) -> Result<Recorder> {
         Self::assemble(ctx, vk::CommandPool::null(), cmd, false, max_scopes)
     }
 
@@ -168,12 +147,7 @@ impl Recorder {
     /// visible to all later compute/transfer/indirect reads and writes.
     pub fn barrier(&mut self) {
         let mb = [vk::MemoryBarrier::default()
-            .src_access_mask(
-                vk::AccessFlags::SHADER_WRITE
-                    | vk::AccessFlags::TRANSFER_WRITE
-                    | vk::AccessFlags::SHADER_READ
-                    | vk::AccessFlags::TRANSFER_READ,
-            )
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_READ | vk::AccessFlags::TRANSFER_READ)
             .dst_access_mask(
                 vk::AccessFlags::SHADER_READ
                     | vk::AccessFlags::SHADER_WRITE
@@ -185,9 +159,7 @@ impl Recorder {
             self.ctx.device.cmd_pipeline_barrier(
                 self.cmd,
                 vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::COMPUTE_SHADER
-                    | vk::PipelineStageFlags::TRANSFER
-                    | vk::PipelineStageFlags::DRAW_INDIRECT,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::DRAW_INDIRECT,
                 vk::DependencyFlags::empty(),
                 &mb,
                 &[],
@@ -207,34 +179,17 @@ impl Recorder {
         self.check_open()?;
         let k = &kernel.inner;
         if bindings.len() != k.bindings {
-            bail!(
-                "kernel '{}' declares {} buffers, {} given",
-                k.name,
-                k.bindings,
-                bindings.len()
-            );
+            bail!("kernel '{}' declares {} buffers, {} given", k.name, k.bindings, bindings.len());
         }
         if push.len() as u32 != k.push_bytes {
-            bail!(
-                "kernel '{}' takes {} push-constant bytes, {} given",
-                k.name,
-                k.push_bytes,
-                push.len()
-            );
+            bail!("kernel '{}' takes {} push-constant bytes, {} given", k.name, k.push_bytes, push.len());
         }
         let set = self.arena.bind(&k.name, k.set_layout, bindings)?;
         self.before();
         let d = &self.ctx.device;
         unsafe {
             d.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, k.pipeline);
-            d.cmd_bind_descriptor_sets(
-                self.cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                k.layout,
-                0,
-                &[set],
-                &[],
-            );
+            d.cmd_bind_descriptor_sets(self.cmd, vk::PipelineBindPoint::COMPUTE, k.layout, 0, &[set], &[]);
             if !push.is_empty() {
                 d.cmd_push_constants(self.cmd, k.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
             }
@@ -244,40 +199,21 @@ impl Recorder {
                 self.keep.push(keep.clone());
             }
         }
-        if !self
-            .kernels
-            .iter()
-            .any(|x| Arc::ptr_eq(&x.inner, &kernel.inner))
-        {
+        if !self.kernels.iter().any(|x| Arc::ptr_eq(&x.inner, &kernel.inner)) {
             self.kernels.push(kernel.clone());
         }
         Ok(())
     }
 
     /// Dispatch `groups` workgroups (each dimension within the device limit).
-    pub fn dispatch(
-        &mut self,
-        kernel: &Kernel,
-        bindings: &[BufferBinding],
-        push: &[u8],
-        groups: [u32; 3],
-    ) -> Result<()> {
+    pub fn dispatch(&mut self, kernel: &Kernel, bindings: &[BufferBinding], push: &[u8], groups: [u32; 3]) -> Result<()> {
         let max = self.ctx.caps.max_workgroup_count;
         if groups.iter().zip(max.iter()).any(|(g, m)| g > m) {
-            bail!(
-                "kernel '{}': {:?} workgroups exceed the device limit {:?} (use groups_2d)",
-                kernel.name(),
-                groups,
-                max
-            );
+            bail!("kernel '{}': {:?} workgroups exceed the device limit {:?} (use groups_2d)", kernel.name(), groups, max);
         }
         self.bind(kernel, bindings, push)?;
         if groups.iter().all(|&g| g > 0) {
-            unsafe {
-                self.ctx
-                    .device
-                    .cmd_dispatch(self.cmd, groups[0], groups[1], groups[2])
-            };
+            unsafe { self.ctx.device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]) };
         }
         self.dirty = true;
         Ok(())
@@ -285,22 +221,12 @@ impl Recorder {
 
     /// Dispatch with the workgroup counts read from `args` (3 u32 at its offset),
     /// written earlier on the GPU: no host read-back.
-    pub fn dispatch_indirect(
-        &mut self,
-        kernel: &Kernel,
-        bindings: &[BufferBinding],
-        push: &[u8],
-        args: &BufferBinding,
-    ) -> Result<()> {
+    pub fn dispatch_indirect(&mut self, kernel: &Kernel, bindings: &[BufferBinding], push: &[u8], args: &BufferBinding) -> Result<()> {
         self.bind(kernel, bindings, push)?;
         if let Some(keep) = &args.keep {
             self.keep.push(keep.clone());
         }
-        unsafe {
-            self.ctx
-                .device
-                .cmd_dispatch_indirect(self.cmd, args.buffer, args.offset)
-        };
+        unsafe { self.ctx.device.cmd_dispatch_indirect(self.cmd, args.buffer, args.offset) };
         self.dirty = true;
         Ok(())
     }
@@ -309,11 +235,7 @@ impl Recorder {
     pub fn fill(&mut self, dst: &BufferBinding, value: u32) -> Result<()> {
         self.check_open()?;
         self.before();
-        unsafe {
-            self.ctx
-                .device
-                .cmd_fill_buffer(self.cmd, dst.buffer, dst.offset, dst.range, value)
-        };
+        unsafe { self.ctx.device.cmd_fill_buffer(self.cmd, dst.buffer, dst.offset, dst.range, value) };
         if let Some(k) = &dst.keep {
             self.keep.push(k.clone());
         }
@@ -328,18 +250,10 @@ impl Recorder {
             return Ok(());
         }
         if data.len() > 65536 || data.len() % 4 != 0 || data.len() as u64 > dst.range {
-            bail!(
-                "update of {} bytes into a range of {}",
-                data.len(),
-                dst.range
-            );
+            bail!("update of {} bytes into a range of {}", data.len(), dst.range);
         }
         self.before();
-        unsafe {
-            self.ctx
-                .device
-                .cmd_update_buffer(self.cmd, dst.buffer, dst.offset, data)
-        };
+        unsafe { self.ctx.device.cmd_update_buffer(self.cmd, dst.buffer, dst.offset, data) };
         if let Some(k) = &dst.keep {
             self.keep.push(k.clone());
         }
@@ -354,23 +268,11 @@ impl Recorder {
             return Ok(());
         }
         if bytes > src.range || bytes > dst.range {
-            bail!(
-                "copy of {bytes} bytes exceeds a range ({} / {})",
-                src.range,
-                dst.range
-            );
+            bail!("copy of {bytes} bytes exceeds a range ({} / {})", src.range, dst.range);
         }
         self.before();
-        let region = [vk::BufferCopy {
-            src_offset: src.offset,
-            dst_offset: dst.offset,
-            size: bytes,
-        }];
-        unsafe {
-            self.ctx
-                .device
-                .cmd_copy_buffer(self.cmd, src.buffer, dst.buffer, &region)
-        };
+        let region = [vk::BufferCopy { src_offset: src.offset, dst_offset: dst.offset, size: bytes }];
+        unsafe { self.ctx.device.cmd_copy_buffer(self.cmd, src.buffer, dst.buffer, &region) };
         for k in [&src.keep, &dst.keep].into_iter().flatten() {
             self.keep.push(k.clone());
         }
@@ -378,26 +280,11 @@ impl Recorder {
         Ok(())
     }
 
-    pub(crate) fn copy_raw_at(
-        &mut self,
-        src: &Arc<RawBuffer>,
-        src_off: u64,
-        dst: &Arc<RawBuffer>,
-        dst_off: u64,
-        bytes: u64,
-    ) -> Result<()> {
+    pub(crate) fn copy_raw_at(&mut self, src: &Arc<RawBuffer>, src_off: u64, dst: &Arc<RawBuffer>, dst_off: u64, bytes: u64) -> Result<()> {
         self.check_open()?;
         self.before();
-        let region = [vk::BufferCopy {
-            src_offset: src_off,
-            dst_offset: dst_off,
-            size: bytes,
-        }];
-        unsafe {
-            self.ctx
-                .device
-                .cmd_copy_buffer(self.cmd, src.raw, dst.raw, &region)
-        };
+        let region = [vk::BufferCopy { src_offset: src_off, dst_offset: dst_off, size: bytes }];
+        unsafe { self.ctx.device.cmd_copy_buffer(self.cmd, src.raw, dst.raw, &region) };
         self.keep.push(src.clone());
         self.keep.push(dst.clone());
         self.dirty = true;
@@ -406,31 +293,15 @@ impl Recorder {
 
     /// Copy elements `[start, start + dst.len())` of `src` into `dst`, to be
     /// read on the host once this recording's submission has completed.
-    pub fn read_back<T: bytemuck::Pod>(
-        &mut self,
-        src: &crate::Buffer<T>,
-        start: usize,
-        dst: &crate::Readback<T>,
-    ) -> Result<()> {
+    pub fn read_back<T: bytemuck::Pod>(&mut self, src: &crate::Buffer<T>, start: usize, dst: &crate::Readback<T>) -> Result<()> {
         if start + dst.len() > src.len() {
-            bail!(
-                "read-back of [{start}, {}) from buffer '{}' of {}",
-                start + dst.len(),
-                src.name(),
-                src.len()
-            );
+            bail!("read-back of [{start}, {}) from buffer '{}' of {}", start + dst.len(), src.name(), src.len());
         }
         if dst.is_empty() {
             return Ok(());
         }
         let sz = std::mem::size_of::<T>() as u64;
-        self.copy_raw_at(
-            src.raw_arc(),
-            start as u64 * sz,
-            dst.raw(),
-            0,
-            dst.len() as u64 * sz,
-        )?;
+        self.copy_raw_at(src.raw_arc(), start as u64 * sz, dst.raw(), 0, dst.len() as u64 * sz)?;
         self.host_reads = true;
         Ok(())
     }
@@ -471,11 +342,7 @@ impl Recorder {
         if !self.owned {
             let mb = [vk::MemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(
-                    vk::AccessFlags::MEMORY_READ
-                        | vk::AccessFlags::MEMORY_WRITE
-                        | vk::AccessFlags::HOST_READ,
-                )];
+                .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE | vk::AccessFlags::HOST_READ)];
             unsafe {
                 self.ctx.device.cmd_pipeline_barrier(
                     self.cmd,
@@ -489,19 +356,9 @@ impl Recorder {
             };
         } else {
             if self.host_reads {
-                let mb = [vk::MemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::HOST_READ)];
+                let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::TRANSFER_WRITE).dst_access_mask(vk::AccessFlags::HOST_READ)];
                 unsafe {
-                    self.ctx.device.cmd_pipeline_barrier(
-                        self.cmd,
-                        vk::PipelineStageFlags::TRANSFER,
-                        vk::PipelineStageFlags::HOST,
-                        vk::DependencyFlags::empty(),
-                        &mb,
-                        &[],
-                        &[],
-                    )
+                    self.ctx.device.cmd_pipeline_barrier(self.cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::HOST, vk::DependencyFlags::empty(), &mb, &[], &[])
                 };
             }
             unsafe { self.ctx.device.end_command_buffer(self.cmd) }?;

@@ -31,9 +31,7 @@ impl DeviceSelector {
     pub fn from_arg_or_env(arg: Option<&str>) -> Self {
         match arg {
             Some(a) => Self::parse(a),
-            None => std::env::var("TGS_DEVICE")
-                .map(|v| Self::parse(&v))
-                .unwrap_or_default(),
+            None => std::env::var("TGS_DEVICE").map(|v| Self::parse(&v)).unwrap_or_default(),
         }
     }
 }
@@ -52,31 +50,21 @@ pub struct DeviceInfo {
 pub(crate) fn pick_queue_family(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Option<u32> {
     let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
     // Prefer a compute-only family (async compute), then any with compute.
-    let compute = |q: &vk::QueueFamilyProperties| {
-        q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.queue_count > 0
-    };
+    let compute = |q: &vk::QueueFamilyProperties| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.queue_count > 0;
     families
         .iter()
-        .position(|q| {
-            compute(q)
-                && !q.queue_flags.contains(vk::QueueFlags::GRAPHICS)
-                && q.timestamp_valid_bits > 0
-        })
+        .position(|q| compute(q) && !q.queue_flags.contains(vk::QueueFlags::GRAPHICS) && q.timestamp_valid_bits > 0)
         .or_else(|| families.iter().position(compute))
         .map(|i| i as u32)
 }
 
-pub(crate) fn describe_all(
-    instance: &ash::Instance,
-) -> Result<Vec<(vk::PhysicalDevice, DeviceInfo)>> {
+pub(crate) fn describe_all(instance: &ash::Instance) -> Result<Vec<(vk::PhysicalDevice, DeviceInfo)>> {
     let pds = unsafe { instance.enumerate_physical_devices() }?;
     let mut out = Vec::new();
     for (index, pd) in pds.into_iter().enumerate() {
         let qf = pick_queue_family(instance, pd);
         let caps = unsafe { Capabilities::query(instance, pd, qf.unwrap_or(0)) };
-        let unusable = if vk::api_version_minor(caps.api_version) < 2
-            && vk::api_version_major(caps.api_version) == 1
-        {
+        let unusable = if vk::api_version_minor(caps.api_version) < 2 && vk::api_version_major(caps.api_version) == 1 {
             Some(format!("Vulkan {} < 1.2", caps.api_version_string()))
         } else if qf.is_none() {
             Some("no compute queue".into())
@@ -85,15 +73,7 @@ pub(crate) fn describe_all(
         } else {
             None
         };
-        out.push((
-            pd,
-            DeviceInfo {
-                index,
-                caps,
-                compute_queue_family: qf,
-                unusable,
-            },
-        ));
+        out.push((pd, DeviceInfo { index, caps, compute_queue_family: qf, unusable }));
     }
     Ok(out)
 }
@@ -108,10 +88,7 @@ fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
     }
 }
 
-pub(crate) fn choose(
-    devices: &[(vk::PhysicalDevice, DeviceInfo)],
-    sel: &DeviceSelector,
-) -> Result<usize> {
+pub(crate) fn choose(devices: &[(vk::PhysicalDevice, DeviceInfo)], sel: &DeviceSelector) -> Result<usize> {
     let names = || {
         devices
             .iter()
@@ -128,51 +105,28 @@ pub(crate) fn choose(
     let usable = |i: usize| -> Result<usize> {
         let d = &devices[i].1;
         if let Some(why) = &d.unusable {
-            bail!(
-                "device [{}] {} is not usable by tgs: {}",
-                d.index,
-                d.caps.device_name,
-                why
-            );
+            bail!("device [{}] {} is not usable by tgs: {}", d.index, d.caps.device_name, why);
         }
         Ok(i)
     };
     match sel {
         DeviceSelector::Index(i) => {
             if *i >= devices.len() {
-                bail!(
-                    "--device {i}: there are only {} Vulkan device(s):\n{}",
-                    devices.len(),
-                    names()
-                );
+                bail!("--device {i}: there are only {} Vulkan device(s):\n{}", devices.len(), names());
             }
             usable(*i)
         }
         DeviceSelector::Name(n) => {
             let lower = n.to_lowercase();
             let hits: Vec<usize> = (0..devices.len())
-                .filter(|&i| {
-                    devices[i]
-                        .1
-                        .caps
-                        .device_name
-                        .to_lowercase()
-                        .contains(&lower)
-                })
+                .filter(|&i| devices[i].1.caps.device_name.to_lowercase().contains(&lower))
                 .collect();
             match hits.as_slice() {
-                [] => bail!(
-                    "--device {n:?}: no Vulkan device name contains it; devices are:\n{}",
-                    names()
-                ),
+                [] => bail!("--device {n:?}: no Vulkan device name contains it; devices are:\n{}", names()),
                 [i] => usable(*i),
                 many => {
                     // Several match: take the first usable one.
-                    many.iter()
-                        .copied()
-                        .find(|&i| devices[i].1.unusable.is_none())
-                        .map(Ok)
-                        .unwrap_or_else(|| usable(many[0]))
+                    many.iter().copied().find(|&i| devices[i].1.unusable.is_none()).map(Ok).unwrap_or_else(|| usable(many[0]))
                 }
             }
         }

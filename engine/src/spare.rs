@@ -32,18 +32,9 @@ impl Spare {
     }
 
     /// Take back a command pool whose command buffer is no longer pending.
-    pub(crate) fn give_commands(
-        &mut self,
-        device: &ash::Device,
-        pool: vk::CommandPool,
-        cmd: vk::CommandBuffer,
-    ) {
+    pub(crate) fn give_commands(&mut self, device: &ash::Device, pool: vk::CommandPool, cmd: vk::CommandBuffer) {
         unsafe {
-            if self.commands.len() < KEEP
-                && device
-                    .reset_command_pool(pool, vk::CommandPoolResetFlags::empty())
-                    .is_ok()
-            {
+            if self.commands.len() < KEEP && device.reset_command_pool(pool, vk::CommandPoolResetFlags::empty()).is_ok() {
                 self.commands.push((pool, cmd));
             } else {
                 device.destroy_command_pool(pool, None);
@@ -53,11 +44,7 @@ impl Spare {
     /// Take back a descriptor pool none of whose sets is in use.
     pub(crate) fn give_descriptor_pool(&mut self, device: &ash::Device, pool: vk::DescriptorPool) {
         unsafe {
-            if self.descriptor_pools.len() < KEEP_DESCRIPTOR_POOLS
-                && device
-                    .reset_descriptor_pool(pool, vk::DescriptorPoolResetFlags::empty())
-                    .is_ok()
-            {
+            if self.descriptor_pools.len() < KEEP_DESCRIPTOR_POOLS && device.reset_descriptor_pool(pool, vk::DescriptorPoolResetFlags::empty()).is_ok() {
                 self.descriptor_pools.push(pool);
             } else {
                 device.destroy_descriptor_pool(pool, None);
@@ -92,10 +79,6 @@ impl Spare {
 
     /// Objects held: (command pools, descriptor pools, fences).
     pub(crate) fn counts(&self) -> (usize, usize, usize) {
-        (
-            self.commands.len(),
-            self.descriptor_pools.len(),
-            self.fences.len(),
-        )
+        (self.commands.len(), self.descriptor_pools.len(), self.fences.len())
     }
 }

@@ -7,10 +7,7 @@ pub(crate) fn words(bytes: &[u8]) -> Result<Vec<u32>> {
     if bytes.len() % 4 != 0 || bytes.len() < 20 {
         bail!("SPIR-V of {} bytes is not a whole module", bytes.len());
     }
-    let w: Vec<u32> = bytes
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
+    let w: Vec<u32> = bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
     if w[0] != 0x0723_0203 {
         bail!("not SPIR-V (magic {:#x})", w[0]);
     }

@@ -25,9 +25,7 @@ pub(crate) unsafe extern "system" fn callback(
     let msg = if (*data).p_message.is_null() {
         String::from("(no message)")
     } else {
-        CStr::from_ptr((*data).p_message)
-            .to_string_lossy()
-            .into_owned()
+        CStr::from_ptr((*data).p_message).to_string_lossy().into_owned()
     };
     if severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR) {
         eprintln!("[vulkan validation error] {msg}");
@@ -43,9 +41,6 @@ pub(crate) unsafe extern "system" fn callback(
 
 pub(crate) fn layer_available(entry: &ash::Entry) -> bool {
     unsafe { entry.enumerate_instance_layer_properties() }
-        .map(|ls| {
-            ls.iter()
-                .any(|l| l.layer_name_as_c_str().ok() == Some(LAYER))
-        })
+        .map(|ls| ls.iter().any(|l| l.layer_name_as_c_str().ok() == Some(LAYER)))
         .unwrap_or(false)
 }

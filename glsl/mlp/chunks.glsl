@@ -1,3 +1,5 @@
+// The MLP GEMMs' shared pieces (mlp/gemm.comp, mlp/gemm_rows.comp).
+//
 // The weight gradients' split of the samples into chunks, each summed by
 // its own workgroups into its own partial (pipelines/src/mlp weight_chunks,
 // which must agree: tests/tests/mlp.rs compares the counted and host paths
@@ -13,4 +15,11 @@ uint weight_chunk(uint n) {
 
 uint weight_chunk_count(uint n) {
     return max((n + weight_chunk(n) - 1u) / weight_chunk(n), 1u);
+}
+
+// The walk of a counted grid (a power of two of workgroups along y or z):
+// g's bits reversed within log2(n) bits, so that the busy workgroups (the
+// first rows and chunks) spread over the grid.
+uint spread(uint g, uint n) {
+    return n <= 1u ? g : bitfieldReverse(g) >> (32u - uint(findMSB(n)));
 }

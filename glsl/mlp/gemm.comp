@@ -83,11 +83,6 @@ float load_b(uint k, uint j) {
     return b[pc.b_off + k * pc.b_rs + j * pc.b_cs];
 }
 
-// g's bits reversed within log2(n) bits (n a power of two).
-uint spread(uint g, uint n) {
-    return n <= 1u ? g : bitfieldReverse(g) >> (32u - uint(findMSB(n)));
-}
-
 void main() {
     uint lid = gl_LocalInvocationID.x;
     uint tx = lid % 8u, ty = lid / 8u;

@@ -68,11 +68,6 @@ float load_a(uint i, uint k) {
     return k == pc.a_ones_k ? 1.0 : v;
 }
 
-// g's bits reversed within log2(n) bits (n a power of two).
-uint spread(uint g, uint n) {
-    return n <= 1u ? g : bitfieldReverse(g) >> (32u - uint(findMSB(n)));
-}
-
 void main() {
     uint row_group = pc.m_count != 0u ? spread(gl_WorkGroupID.y, gl_NumWorkGroups.y) : gl_WorkGroupID.y;
     uint zc = pc.k_count != 0u ? spread(gl_WorkGroupID.z, gl_NumWorkGroups.z) : gl_WorkGroupID.z;

@@ -33,9 +33,7 @@ fn args() -> Result<Args> {
             s => bail!("unknown argument '{s}'"),
         }
     }
-    let run = run.context(
-        "usage: embed RUN [--view N] [--out frame.png] (RUN: a `tgs train` output directory)",
-    )?;
+    let run = run.context("usage: embed RUN [--view N] [--out frame.png] (RUN: a `tgs train` output directory)")?;
     Ok(Args { run, view, out })
 }
 
@@ -54,17 +52,9 @@ impl Host {
     fn new() -> Result<Host> {
         unsafe {
             let entry = ash::Entry::load().context("no Vulkan loader")?;
-            let app = vk::ApplicationInfo::default()
-                .application_name(c"tgs embed example")
-                .api_version(vk::API_VERSION_1_3);
-            let instance = entry.create_instance(
-                &vk::InstanceCreateInfo::default().application_info(&app),
-                None,
-            )?;
-            let physical = *instance
-                .enumerate_physical_devices()?
-                .first()
-                .context("no Vulkan device")?;
+            let app = vk::ApplicationInfo::default().application_name(c"tgs embed example").api_version(vk::API_VERSION_1_3);
+            let instance = entry.create_instance(&vk::InstanceCreateInfo::default().application_info(&app), None)?;
+            let physical = *instance.enumerate_physical_devices()?.first().context("no Vulkan device")?;
             let family = instance
                 .get_physical_device_queue_family_properties(physical)
                 .iter()
@@ -83,26 +73,10 @@ impl Host {
                 .subgroup_size_control(features.subgroup_size_control)
                 .compute_full_subgroups(features.compute_full_subgroups);
             let prio = [1.0f32];
-            let queues = [vk::DeviceQueueCreateInfo::default()
-                .queue_family_index(family)
-                .queue_priorities(&prio)];
-            let device = instance.create_device(
-                physical,
-                &vk::DeviceCreateInfo::default()
-                    .queue_create_infos(&queues)
-                    .push_next(&mut want13),
-                None,
-            )?;
+            let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&prio)];
+            let device = instance.create_device(physical, &vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut want13), None)?;
             let queue = device.get_device_queue(family, 0);
-            Ok(Host {
-                entry,
-                instance,
-                physical,
-                device,
-                family,
-                queue,
-                features,
-            })
+            Ok(Host { entry, instance, physical, device, family, queue, features })
         }
     }
 
@@ -110,28 +84,14 @@ impl Host {
     fn buffer(&self, bytes: u64) -> Result<(vk::Buffer, vk::DeviceMemory)> {
         unsafe {
             let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
-            let buf = self.device.create_buffer(
-                &vk::BufferCreateInfo::default().size(bytes).usage(usage),
-                None,
-            )?;
+            let buf = self.device.create_buffer(&vk::BufferCreateInfo::default().size(bytes).usage(usage), None)?;
             let req = self.device.get_buffer_memory_requirements(buf);
-            let props = self
-                .instance
-                .get_physical_device_memory_properties(self.physical);
-            let want =
-                vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+            let props = self.instance.get_physical_device_memory_properties(self.physical);
+            let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
             let ty = (0..props.memory_type_count)
-                .find(|&i| {
-                    req.memory_type_bits & (1 << i) != 0
-                        && props.memory_types[i as usize].property_flags.contains(want)
-                })
+                .find(|&i| req.memory_type_bits & (1 << i) != 0 && props.memory_types[i as usize].property_flags.contains(want))
                 .context("no host-visible memory")?;
-            let mem = self.device.allocate_memory(
-                &vk::MemoryAllocateInfo::default()
-                    .allocation_size(req.size)
-                    .memory_type_index(ty),
-                None,
-            )?;
+            let mem = self.device.allocate_memory(&vk::MemoryAllocateInfo::default().allocation_size(req.size).memory_type_index(ty), None)?;
             self.device.bind_buffer_memory(buf, mem, 0)?;
             Ok((buf, mem))
         }
@@ -156,51 +116,25 @@ fn main() -> Result<()> {
     println!("device: {}", ctx.caps().describe());
     let mut scene = SceneRenderer::load(&ctx, &a.run)?;
     let cams = tgs::embed::run_cameras(&a.run)?;
-    let (name, cam) = cams
-        .get(a.view)
-        .with_context(|| format!("--view {}: the run has {} test cameras", a.view, cams.len()))?
-        .clone();
-    println!(
-        "{}: Stage {} run, camera '{name}' ({}x{})",
-        a.run.display(),
-        scene.stage,
-        cam.width,
-        cam.height
-    );
+    let (name, cam) = cams.get(a.view).with_context(|| format!("--view {}: the run has {} test cameras", a.view, cams.len()))?.clone();
+    println!("{}: Stage {} run, camera '{name}' ({}x{})", a.run.display(), scene.stage, cam.width, cam.height);
 
     let bytes = 4 * SceneRenderer::output_len(cam.width, cam.height) as u64;
     let (out, mem) = host.buffer(bytes)?;
     let d = &host.device;
-    let pool = unsafe {
-        d.create_command_pool(
-            &vk::CommandPoolCreateInfo::default().queue_family_index(host.family),
-            None,
-        )?
-    };
+    let pool = unsafe { d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(host.family), None)? };
     let fence = unsafe { d.create_fence(&vk::FenceCreateInfo::default(), None)? };
     let mut recordings = 0;
     loop {
         // The host's frame: its command buffer, tgs's commands inside it.
-        let cmd = unsafe {
-            d.allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(pool)
-                    .command_buffer_count(1),
-            )?[0]
-        };
+        let cmd = unsafe { d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1))?[0] };
         unsafe { d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())? };
         let mut rec = unsafe { Recorder::record_into(&ctx, cmd, 0)? };
-        scene.record(&mut rec, &cam, &unsafe {
-            BufferBinding::external(out, 0, bytes)
-        })?;
+        scene.record(&mut rec, &cam, &unsafe { BufferBinding::external(out, 0, bytes) })?;
         rec.finish()?;
         unsafe {
             d.end_command_buffer(cmd)?;
-            d.queue_submit(
-                host.queue,
-                &[vk::SubmitInfo::default().command_buffers(&[cmd])],
-                fence,
-            )?;
+            d.queue_submit(host.queue, &[vk::SubmitInfo::default().command_buffers(&[cmd])], fence)?;
             d.wait_for_fences(&[fence], true, u64::MAX)?;
             d.reset_fences(&[fence])?;
         }
@@ -215,19 +149,12 @@ fn main() -> Result<()> {
     // "Present": read the host's buffer and write a PNG.
     let planes = unsafe {
         let p = d.map_memory(mem, 0, bytes, vk::MemoryMapFlags::empty())? as *const f32;
-        let v = std::slice::from_raw_parts(p, SceneRenderer::output_len(cam.width, cam.height))
-            .to_vec();
+        let v = std::slice::from_raw_parts(p, SceneRenderer::output_len(cam.width, cam.height)).to_vec();
         d.unmap_memory(mem);
         v
     };
-    tgs::data::image_io::write_png(
-        &a.out,
-        &tgs::data::image_io::ImageF::from_planar(cam.width, cam.height, 3, &planes),
-    )?;
-    println!(
-        "rendered in {recordings} recording(s) of the host's command buffer; wrote {}",
-        a.out.display()
-    );
+    tgs::data::image_io::write_png(&a.out, &tgs::data::image_io::ImageF::from_planar(cam.width, cam.height, 3, &planes))?;
+    println!("rendered in {recordings} recording(s) of the host's command buffer; wrote {}", a.out.display());
 
     drop(scene);
     drop(ctx);

@@ -61,9 +61,7 @@ fn keys(n: u32, seed: u64) -> Vec<u32> {
     let mut s = seed;
     (0..n)
         .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (s >> 32) as u32
         })
         .collect()
@@ -77,11 +75,7 @@ pub(crate) fn average(all: Vec<Vec<tgs_engine::Timing>>) -> Vec<KernelTime> {
         for s in summarize(t) {
             match out.iter_mut().find(|k| k.name == s.name) {
                 Some(k) => k.ms += s.total_ms / reps,
-                None => out.push(KernelTime {
-                    name: s.name,
-                    ms: s.total_ms / reps,
-                    calls: s.count,
-                }),
+                None => out.push(KernelTime { name: s.name, ms: s.total_ms / reps, calls: s.count }),
             }
         }
     }
@@ -102,24 +96,13 @@ pub fn check_size(ctx: &Context, flag: &str, count: u64, largest: u64, total: u6
         bail!("{flag} {count}: its largest buffer would be {:.1} MiB, over {}'s {:.0} MiB per storage binding (at most {} at this size)", largest as f64 / 1048576.0, c.device_name, range as f64 / 1048576.0, (count as u128 * range as u128 / largest as u128));
     }
     if c.device_local_bytes > 0 && total > c.device_local_bytes {
-        bail!(
-            "{flag} {count}: it needs about {:.1} GiB, more than {}'s {:.1} GiB of device memory",
-            total as f64 / (1u64 << 30) as f64,
-            c.device_name,
-            c.device_local_bytes as f64 / (1u64 << 30) as f64
-        );
+        bail!("{flag} {count}: it needs about {:.1} GiB, more than {}'s {:.1} GiB of device memory", total as f64 / (1u64 << 30) as f64, c.device_name, c.device_local_bytes as f64 / (1u64 << 30) as f64);
     }
     Ok(())
 }
 
 /// Time the radix sort of `n` random keys (low `bits` bits), `reps` timed runs after one warm-up.
-pub fn sort(
-    ctx: &Arc<Context>,
-    n: u32,
-    bits: u32,
-    reps: u32,
-    cfg: Option<SortConfig>,
-) -> Result<SortBench> {
+pub fn sort(ctx: &Arc<Context>, n: u32, bits: u32, reps: u32, cfg: Option<SortConfig>) -> Result<SortBench> {
     if bits == 0 || bits > 32 {
         bail!("--bits must be 1..=32, not {bits}");
     }
@@ -132,15 +115,8 @@ pub fn sort(
         Some(c) => RadixSort::with_config(ctx, c)?,
         None => RadixSort::new(ctx)?,
     };
-    let mask = if bits == 32 {
-        u32::MAX
-    } else {
-        (1u32 << bits) - 1
-    };
-    let k: Vec<u32> = keys(n, 0x5eed ^ n as u64)
-        .into_iter()
-        .map(|x| x & mask)
-        .collect();
+    let mask = if bits == 32 { u32::MAX } else { (1u32 << bits) - 1 };
+    let k: Vec<u32> = keys(n, 0x5eed ^ n as u64).into_iter().map(|x| x & mask).collect();
     let v: Vec<u32> = (0..n).collect();
     let kb = Buffer::new(ctx, "bench.keys", n as usize)?;
     let vb = Buffer::new(ctx, "bench.vals", n as usize)?;
@@ -180,10 +156,7 @@ pub fn sort(
         device: ctx.caps().describe(),
         n,
         bits,
-        config: format!(
-            "wg {} kpt {} radix_bits {}",
-            cfg.wg, cfg.kpt, cfg.radix_bits
-        ),
+        config: format!("wg {} kpt {} radix_bits {}", cfg.wg, cfg.kpt, cfg.radix_bits),
         reps,
         kernels,
         gpu_ms,
@@ -276,13 +249,8 @@ pub fn lpips(size: u32, reps: u32, json: bool) -> Result<()> {
     if reps == 0 {
         bail!("--reps must be at least 1");
     }
-    let net =
-        shared().with_context(|| format!("no LPIPS weights at {}", weights_path().display()))?;
-    let img = |k: usize| -> Vec<f32> {
-        (0..3 * s * s)
-            .map(|i| ((i * (7 + k) + i / s * 13) % 97) as f32 / 96.0)
-            .collect()
-    };
+    let net = shared().with_context(|| format!("no LPIPS weights at {}", weights_path().display()))?;
+    let img = |k: usize| -> Vec<f32> { (0..3 * s * s).map(|i| ((i * (7 + k) + i / s * 13) % 97) as f32 / 96.0).collect() };
     let (a, b) = (img(0), img(1));
     // Multiply-adds of the five convolutions, for both images.
     let (mut h, mut flops) = (s, 0.0f64);
@@ -300,24 +268,11 @@ pub fn lpips(size: u32, reps: u32, json: bool) -> Result<()> {
         d = net.distance(&a, &b, s, s).unwrap_or(f64::NAN);
     }
     let sec = t.elapsed().as_secs_f64() / reps as f64;
-    let threads = std::thread::available_parallelism()
-        .map(|t| t.get())
-        .unwrap_or(1);
-    let cpu = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|c| {
-            c.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split(':').nth(1))
-                .map(|m| m.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".into());
+    let threads = std::thread::available_parallelism().map(|t| t.get()).unwrap_or(1);
+    let cpu = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|c| c.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|m| m.trim().to_string())).unwrap_or_else(|| "unknown CPU".into());
     let device = format!("CPU: {cpu}, {threads} threads");
     if json {
-        println!(
-            "{}",
-            serde_json::json!({"device": device, "size": size, "reps": reps, "seconds_per_pair": sec, "gflop_per_s": flops / sec / 1e9, "lpips": d})
-        );
+        println!("{}", serde_json::json!({"device": device, "size": size, "reps": reps, "seconds_per_pair": sec, "gflop_per_s": flops / sec / 1e9, "lpips": d}));
     } else {
         println!("device: {device}");
         println!("LPIPS {size}x{size}: {:.3} s per image pair, {:.2} GFLOP/s ({:.1} GFLOP), value {d:.4}", sec, flops / sec / 1e9, flops / 1e9);

@@ -34,24 +34,12 @@ pub struct MlpBench {
 }
 
 /// `gemm`: the kernel, or None for the device's ([`Gemm::for_device`]).
-pub fn mlp(
-    ctx: &Arc<Context>,
-    shape: MlpShape,
-    n: u32,
-    reps: u32,
-    gemm: Option<Gemm>,
-) -> Result<MlpBench> {
+pub fn mlp(ctx: &Arc<Context>, shape: MlpShape, n: u32, reps: u32, gemm: Option<Gemm>) -> Result<MlpBench> {
     anyhow::ensure!(reps > 0, "--reps must be at least 1");
     shape.validate()?;
     // Activations: one width-wide f32 row per sample and layer.
     let row = 4 * shape.width.max(SAMPLE) as u64;
-    crate::bench::check_size(
-        ctx,
-        "--n",
-        n as u64,
-        row * n as u64,
-        row * n as u64 * (shape.depth as u64 + 2) * 2,
-    )?;
+    crate::bench::check_size(ctx, "--n", n as u64, row * n as u64, row * n as u64 * (shape.depth as u64 + 2) * 2)?;
     let m = match gemm {
         Some(g) => Mlp::with_gemm(ctx, g)?,
         None => Mlp::new(ctx)?,
@@ -67,11 +55,7 @@ pub fn mlp(
     let samples: Vec<f32> = (0..n * SAMPLE).map(|_| next()).collect();
     s.samples.upload(&samples)?;
     let params = Buffer::from_slice(ctx, "bench.mlp_params", &shape.init_params(7))?;
-    let d_out = Buffer::from_slice(
-        ctx,
-        "bench.mlp_dout",
-        &(0..n * OUT).map(|_| next()).collect::<Vec<_>>(),
-    )?;
+    let d_out = Buffer::from_slice(ctx, "bench.mlp_dout", &(0..n * OUT).map(|_| next()).collect::<Vec<_>>())?;
     let grads = Buffer::uninit(ctx, "bench.mlp_grads", shape.params() as usize)?;
     let mut timings = Vec::new();
     let mut wall = f64::INFINITY;
@@ -86,27 +70,15 @@ pub fn mlp(
             wall = wall.min(t0.elapsed().as_secs_f64() * 1e3);
         }
     }
-    let kernels: Vec<KernelTime> = average(timings)
-        .into_iter()
-        .filter(|k| k.name.starts_with("mlp."))
-        .collect();
-    let ms = |name: &str| {
-        kernels
-            .iter()
-            .filter(|k| k.name == name)
-            .map(|k| k.ms)
-            .sum::<f64>()
-    };
+    let kernels: Vec<KernelTime> = average(timings).into_iter().filter(|k| k.name.starts_with("mlp.")).collect();
+    let ms = |name: &str| kernels.iter().filter(|k| k.name == name).map(|k| k.ms).sum::<f64>();
     let forward_ms = ms("mlp.encode") + ms("mlp.forward");
     let backward_ms = ms("mlp.backward") + ms("mlp.reduce");
     let flop = 2.0 * shape.macs() as f64 * n as f64;
     let (fwd, bwd) = (ms("mlp.forward"), ms("mlp.backward"));
     Ok(MlpBench {
         device: ctx.caps().describe(),
-        shape: format!(
-            "{} x {}, skip {}, L {}/{}",
-            shape.depth, shape.width, shape.skip, shape.levels_x, shape.levels_w
-        ),
+        shape: format!("{} x {}, skip {}, L {}/{}", shape.depth, shape.width, shape.skip, shape.levels_x, shape.levels_w),
         gemm: m.gemm().name().into(),
         params: shape.params(),
         samples: n,

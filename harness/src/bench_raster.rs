@@ -44,9 +44,7 @@ pub struct RasterBench {
 pub fn synthetic_scene(n: u32, seed: u64) -> HostGaussians {
     let mut s = seed;
     let mut next = move || {
-        s = s
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         ((s >> 11) as f64 / (1u64 << 53) as f64) as f32
     };
     let mut h = HostGaussians::new(3, 16);
@@ -54,54 +52,24 @@ pub fn synthetic_scene(n: u32, seed: u64) -> HostGaussians {
         let mean = [next() * 2.0 - 1.0, next() * 2.0 - 1.0, next() * 2.0 - 1.0];
         let ls = [-4.5 + 2.0 * next(), -4.5 + 2.0 * next()];
         let q = [next() - 0.5, next() - 0.5, next() - 0.5, next() - 0.5];
-        let feats: Vec<f32> = (0..48)
-            .map(|i| {
-                if i < 3 {
-                    next() * 2.0 - 1.0
-                } else {
-                    (next() - 0.5) * 0.2
-                }
-            })
-            .collect();
+        let feats: Vec<f32> = (0..48).map(|i| if i < 3 { next() * 2.0 - 1.0 } else { (next() - 0.5) * 0.2 }).collect();
         h.push(mean, ls, q, next() * 4.0 - 2.0, &feats);
     }
     h
 }
 
 pub fn bench_camera(width: u32, height: u32) -> Camera {
-    Camera::look_at(
-        [0.0, 0.0, -3.2],
-        [0.0, 0.0, 0.0],
-        [0.0, -1.0, 0.0],
-        0.8,
-        width,
-        height,
-    )
+    Camera::look_at([0.0, 0.0, -3.2], [0.0, 0.0, 0.0], [0.0, -1.0, 0.0], 0.8, width, height)
 }
 
-pub fn raster(
-    ctx: &Arc<Context>,
-    n: u32,
-    width: u32,
-    height: u32,
-    reps: u32,
-) -> Result<RasterBench> {
+pub fn raster(ctx: &Arc<Context>, n: u32, width: u32, height: u32, reps: u32) -> Result<RasterBench> {
     ensure!(reps > 0, "--reps must be at least 1");
-    ensure!(
-        width > 0 && height > 0 && width <= 16384 && height <= 16384,
-        "--width and --height must be 1..=16384, not {width}x{height}"
-    );
+    ensure!(width > 0 && height > 0 && width <= 16384 && height <= 16384, "--width and --height must be 1..=16384, not {width}x{height}");
     // SH 3: 48 feature floats a Gaussian (the largest array), about 59
     // floats of parameters and as many of gradients in all; 4 intersections
     // a Gaussian of 8 bytes; 16 planes of frame per pixel.
     let px = width as u64 * height as u64;
-    crate::bench::check_size(
-        ctx,
-        "--n",
-        n as u64,
-        (48 * 4 * n as u64).max(32 * n as u64),
-        2 * 59 * 4 * n as u64 + 32 * n as u64 + 64 * px,
-    )?;
+    crate::bench::check_size(ctx, "--n", n as u64, (48 * 4 * n as u64).max(32 * n as u64), 2 * 59 * 4 * n as u64 + 32 * n as u64 + 64 * px)?;
     ctx.reset_peak_memory();
     let rast = Rasterizer::new(ctx, 3, Features::Sh { degree: 3 })?;
     let host = synthetic_scene(n, 7);
@@ -113,9 +81,7 @@ pub fn raster(
     // Warm-up: grows the frame to fit, compiles everything.
     rast.forward(&g, &cam, &bg, 3, &mut frame, false)?;
     let planes = tgs_pipelines::Plane::count(3) as usize;
-    let go: Vec<f32> = (0..planes * frame.pixels())
-        .map(|i| ((i * 7919) % 200) as f32 / 100.0 - 1.0)
-        .collect();
+    let go: Vec<f32> = (0..planes * frame.pixels()).map(|i| ((i * 7919) % 200) as f32 / 100.0 - 1.0).collect();
     frame.grad_out.upload(&go)?;
 
     let mut all = Vec::new();
@@ -174,14 +140,7 @@ pub fn print_raster(b: &RasterBench) {
         b.gaussians, b.width, b.height, b.channels, b.intersections, b.spans, b.span, b.forward_ms, b.backward_ms, b.total_ms, b.wall_ms, b.intersections_per_s / 1e6, b.device, b.peak_memory_mib, b.bytes_per_intersection, b.records
     );
     for k in &b.kernels {
-        let indent = if crate::bench::nested_scope(&k.name) {
-            "      "
-        } else {
-            "    "
-        };
-        println!(
-            "{indent}{:<20} {:>10.3} ms  ({} calls)",
-            k.name, k.ms, k.calls
-        );
+        let indent = if crate::bench::nested_scope(&k.name) { "      " } else { "    " };
+        println!("{indent}{:<20} {:>10.3} ms  ({} calls)", k.name, k.ms, k.calls);
     }
 }

@@ -85,11 +85,7 @@ fn mib(bytes: u64) -> f64 {
 
 pub fn stages(ctx: &Arc<Context>, spec: &StagesSpec) -> Result<StagesBench> {
     ensure!(spec.iterations > 0, "--iterations must be at least 1");
-    let dir = std::env::temp_dir().join(format!(
-        "tgs-bench-scene-{}-{}",
-        spec.scene,
-        std::process::id()
-    ));
+    let dir = std::env::temp_dir().join(format!("tgs-bench-scene-{}-{}", spec.scene, std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     crate::scene::make_named(&spec.scene, &dir, |_, _| {})?;
     let result = run(ctx, spec, &dir);
@@ -111,11 +107,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
     cfg.light_field.iterations = spec.train_light_field + timed;
     cfg.light_field.preset = spec.mlp.clone();
     let data = crate::train::run::load_dataset(dir, &cfg)?;
-    let cam = data
-        .train
-        .first()
-        .context("the scene has no training views")?
-        .camera;
+    let cam = data.train.first().context("the scene has no training views")?.camera;
     let mut tr = Trainer::new(ctx, cfg, &data)?;
     let mut out = StagesBench {
         device: ctx.caps().describe(),
@@ -155,11 +147,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
                 Some(t.elapsed().as_secs_f64() * 1e3)
             }
         };
-        let untimed = if stage == Stage::LightField {
-            spec.train_light_field
-        } else {
-            spec.train
-        };
+        let untimed = if stage == Stage::LightField { spec.train_light_field } else { spec.train };
         for _ in 0..untimed + spec.warmup {
             tr.step(false)?;
         }
@@ -173,12 +161,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         let mut phi = Vec::new();
         for _ in 0..profiled {
             let r = tr.step(true)?;
-            ensure!(
-                r.stage == stage,
-                "the schedule is at Stage {}, not {}",
-                r.stage.name(),
-                stage.name()
-            );
+            ensure!(r.stage == stage, "the schedule is at Stage {}, not {}", r.stage.name(), stage.name());
             all.push(r.timings);
             if let Some(f) = tr.light_field.as_mut().and_then(|m| m.take_coverage()) {
                 phi.push(f);
@@ -200,11 +183,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
             wall_ms,
             wall_ms_best: walls.iter().copied().fold(f64::INFINITY, f64::min),
             it_per_s: 1e3 / wall_ms,
-            gpu_ms: kernels
-                .iter()
-                .filter(|k| !nested_scope(&k.name))
-                .map(|k| k.ms)
-                .sum(),
+            gpu_ms: kernels.iter().filter(|k| !nested_scope(&k.name)).map(|k| k.ms).sum(),
             kernels,
             switch_ms,
             memory_mib: mib(mem.live_bytes),
@@ -221,28 +200,15 @@ pub fn print_stages(b: &StagesBench) {
         b.scene, b.width, b.height, b.train_views, b.mlp, b.train, b.train_light_field, b.warmup, b.iterations
     );
     for s in &b.stages {
-        let refl = s
-            .reflection_gaussians
-            .map(|n| format!(", {n} reflection"))
-            .unwrap_or_default();
-        let phi = s
-            .phi_fraction
-            .map(|f| format!(", Φ on {:.1}% of pixels", 100.0 * f))
-            .unwrap_or_default();
-        let switch = s
-            .switch_ms
-            .map(|m| format!("; switch into it {m:.0} ms"))
-            .unwrap_or_default();
+        let refl = s.reflection_gaussians.map(|n| format!(", {n} reflection")).unwrap_or_default();
+        let phi = s.phi_fraction.map(|f| format!(", Φ on {:.1}% of pixels", 100.0 * f)).unwrap_or_default();
+        let switch = s.switch_ms.map(|m| format!("; switch into it {m:.0} ms")).unwrap_or_default();
         println!(
             "Stage {}: {:.1} ms/iteration wall (best {:.1}), {:.2} it/s; GPU {:.1} ms; {} scattering Gaussians{refl}{phi}; memory {:.1} MiB (peak {:.1}){switch}",
             s.stage, s.wall_ms, s.wall_ms_best, s.it_per_s, s.gpu_ms, s.scattering_gaussians, s.memory_mib, s.peak_memory_mib
         );
         for k in &s.kernels {
-            let indent = if nested_scope(&k.name) {
-                "      "
-            } else {
-                "    "
-            };
+            let indent = if nested_scope(&k.name) { "      " } else { "    " };
             println!("{indent}{:26} {:9.3} ms  ({} calls)", k.name, k.ms, k.calls);
         }
     }

@@ -79,20 +79,9 @@ fn stage_of(name: &str) -> Option<&'static str> {
 /// Time `iterations` training iterations (after `warmup`) on the spheres
 /// scene at `res`² with `points` Gaussians, Adam fused into the reduce
 /// where the device can (`fuse_adam`) or in its own pass.
-pub fn train(
-    ctx: &Arc<Context>,
-    res: u32,
-    points: u32,
-    warmup: u32,
-    iterations: u32,
-    fuse_adam: bool,
-) -> Result<TrainBench> {
+pub fn train(ctx: &Arc<Context>, res: u32, points: u32, warmup: u32, iterations: u32, fuse_adam: bool) -> Result<TrainBench> {
     ensure!(iterations > 0, "--iterations must be at least 1");
-    let spec = SpheresSpec {
-        res,
-        points,
-        ..SpheresSpec::NAMED[0].1
-    };
+    let spec = SpheresSpec { res, points, ..SpheresSpec::NAMED[0].1 };
     let data = spheres::dataset(&spec)?;
     let profiled = iterations.clamp(1, 5);
     // SH degree 3 is active from iteration 3 on (sh_interval 1).
@@ -132,19 +121,8 @@ pub fn train(
         intersections = tr.scattering.last_intersections();
     }
     let kernels = average(all);
-    let stage = |s: &str| {
-        kernels
-            .iter()
-            .filter(|k| stage_of(&k.name) == Some(s))
-            .map(|k| k.ms)
-            .sum::<f64>()
-    };
-    let (forward_ms, loss_ms, backward_ms, adam_ms) = (
-        stage("forward"),
-        stage("loss"),
-        stage("backward"),
-        stage("adam"),
-    );
+    let stage = |s: &str| kernels.iter().filter(|k| stage_of(&k.name) == Some(s)).map(|k| k.ms).sum::<f64>();
+    let (forward_ms, loss_ms, backward_ms, adam_ms) = (stage("forward"), stage("loss"), stage("backward"), stage("adam"));
     let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
     Ok(TrainBench {
         device: ctx.caps().describe(),
@@ -169,10 +147,7 @@ pub fn train(
         intersections,
         bytes_per_intersection: tr.scattering.rasterizer().bytes_per_intersection(),
         peak_memory_mib: ctx.memory_use().peak_bytes as f64 / 1048576.0,
-        brush_lavapipe_s: BRUSH_LAVAPIPE_S
-            .iter()
-            .find(|(k, _)| *k == (res, points))
-            .map(|(_, s)| *s),
+        brush_lavapipe_s: BRUSH_LAVAPIPE_S.iter().find(|(k, _)| *k == (res, points)).map(|(_, s)| *s),
     })
 }
 
@@ -193,10 +168,7 @@ pub fn print_train(b: &TrainBench) {
         if b.adam_fused { " (the gate)" } else { "" },
         b.gpu_ms
     );
-    println!(
-        "  device memory: peak {:.1} MiB; {} bytes per intersection of frame capacity",
-        b.peak_memory_mib, b.bytes_per_intersection
-    );
+    println!("  device memory: peak {:.1} MiB; {} bytes per intersection of frame capacity", b.peak_memory_mib, b.bytes_per_intersection);
     if let Some(s) = b.brush_lavapipe_s {
         println!(
             "  Brush, as timed on the reference lavapipe machine (not here): {:.0} ms/iteration; ratio {:.2}x (goal 10x: {:.0} ms) holds only if this machine is as fast as that one",

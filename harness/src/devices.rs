@@ -35,40 +35,14 @@ pub fn to_json(d: &DeviceInfo) -> serde_json::Value {
 /// The devices `sel` names (all of them for the default): an index or a
 /// name that matches none is an error listing what there is.
 pub fn select(devs: Vec<DeviceInfo>, sel: &DeviceSelector) -> Result<Vec<DeviceInfo>> {
-    let names = || {
-        devs.iter()
-            .map(|d| format!("[{}] {}", d.index, d.caps.device_name))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
+    let names = || devs.iter().map(|d| format!("[{}] {}", d.index, d.caps.device_name)).collect::<Vec<_>>().join(", ");
     let picked: Vec<DeviceInfo> = match sel {
         DeviceSelector::Best => return Ok(devs),
         DeviceSelector::Index(i) => devs.iter().filter(|d| d.index == *i).cloned().collect(),
-        DeviceSelector::Name(n) => devs
-            .iter()
-            .filter(|d| {
-                d.caps
-                    .device_name
-                    .to_lowercase()
-                    .contains(&n.to_lowercase())
-            })
-            .cloned()
-            .collect(),
+        DeviceSelector::Name(n) => devs.iter().filter(|d| d.caps.device_name.to_lowercase().contains(&n.to_lowercase())).cloned().collect(),
     };
     if picked.is_empty() {
-        anyhow::bail!(
-            "--device {}: no such Vulkan device (there are: {})",
-            match sel {
-                DeviceSelector::Index(i) => i.to_string(),
-                DeviceSelector::Name(n) => n.clone(),
-                _ => String::new(),
-            },
-            if devs.is_empty() {
-                "none".to_string()
-            } else {
-                names()
-            }
-        );
+        anyhow::bail!("--device {}: no such Vulkan device (there are: {})", match sel { DeviceSelector::Index(i) => i.to_string(), DeviceSelector::Name(n) => n.clone(), _ => String::new() }, if devs.is_empty() { "none".to_string() } else { names() });
     }
     Ok(picked)
 }
@@ -76,10 +50,7 @@ pub fn select(devs: Vec<DeviceInfo>, sel: &DeviceSelector) -> Result<Vec<DeviceI
 pub fn run(json_out: bool, sel: &DeviceSelector) -> Result<()> {
     let devs = select(list_devices()?, sel)?;
     if json_out {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&devs.iter().map(to_json).collect::<Vec<_>>())?
-        );
+        println!("{}", serde_json::to_string_pretty(&devs.iter().map(to_json).collect::<Vec<_>>())?);
         return Ok(());
     }
     if devs.is_empty() {
@@ -88,22 +59,13 @@ pub fn run(json_out: bool, sel: &DeviceSelector) -> Result<()> {
     for d in &devs {
         let c = &d.caps;
         println!("[{}] {} ({:?})", d.index, c.device_name, c.device_type);
-        println!(
-            "    driver        {} — {} (Vulkan {})",
-            c.driver_name,
-            c.driver_info,
-            c.api_version_string()
-        );
+        println!("    driver        {} — {} (Vulkan {})", c.driver_name, c.driver_info, c.api_version_string());
         println!(
             "    subgroup      {} (range {}..{}{})",
             c.subgroup_size,
             c.min_subgroup_size,
             c.max_subgroup_size,
-            if c.subgroup_size_control {
-                ", size control"
-            } else {
-                ""
-            }
+            if c.subgroup_size_control { ", size control" } else { "" }
         );
         println!(
             "    limits        shared {} KiB, storage range {} MiB, workgroups {:?}, invocations {}, push {} B",

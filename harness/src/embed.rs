@@ -26,32 +26,15 @@ use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::{Buffer, BufferBinding, Context, Recorder};
 use tgs_pipelines::{
-    Camera, EnvMap, Features, Frame, Fresnel, Gaussians, LightFieldShading, Mlp, MlpScratch,
-    MlpShape, Plane, Rasterizer, ReflectionShading, SampleScratch, ShadeParams,
+    Camera, EnvMap, Features, Frame, Fresnel, Gaussians, LightFieldShading, Mlp, MlpScratch, MlpShape, Plane, Rasterizer, ReflectionShading, SampleScratch, ShadeParams,
 };
 
 /// The reflection layer of a run past Stage I.
 enum Layer {
     /// Stage II: reflection set coloured by the environment map.
-    Env {
-        set: Gaussians,
-        env: EnvMap,
-        fresnel: Fresnel,
-        shading: ReflectionShading,
-        raster: Rasterizer,
-        feat: Buffer<f32>,
-    },
+    Env { set: Gaussians, env: EnvMap, fresnel: Fresnel, shading: ReflectionShading, raster: Rasterizer, feat: Buffer<f32> },
     /// Stage III: reflection set's material, Φ on the reflecting pixels.
-    Light {
-        set: Gaussians,
-        params: Buffer<f32>,
-        shape: MlpShape,
-        shade: ShadeParams,
-        shading: LightFieldShading,
-        mlp: Mlp,
-        raster: Rasterizer,
-        feat: Buffer<f32>,
-    },
+    Light { set: Gaussians, params: Buffer<f32>, shape: MlpShape, shade: ShadeParams, shading: LightFieldShading, mlp: Mlp, raster: Rasterizer, feat: Buffer<f32> },
 }
 
 /// Per image size: both sets' frames, the sample list, the composite.
@@ -85,15 +68,9 @@ impl SceneRenderer {
     /// Load `run`'s checkpoint (`RUN/checkpoint.bin`; a run directory or the
     /// file itself).
     pub fn load(ctx: &Arc<Context>, run: &Path) -> Result<SceneRenderer> {
-        let path = if run.is_dir() {
-            run.join(crate::train::run::CHECKPOINT)
-        } else {
-            run.to_path_buf()
-        };
+        let path = if run.is_dir() { run.join(crate::train::run::CHECKPOINT) } else { run.to_path_buf() };
         let (h, arrays) = checkpoint::read(&path)?;
-        let bad = |e: anyhow::Error| {
-            e.context(format!("{}: cannot render this checkpoint", path.display()))
-        };
+        let bad = |e: anyhow::Error| e.context(format!("{}: cannot render this checkpoint", path.display()));
         let state = checkpoint::render_state(&h, arrays).map_err(bad)?;
         let cfg = &h.config;
         // As the trainer renders a checkpoint (Trainer::render).
@@ -108,20 +85,11 @@ impl SceneRenderer {
                     shading: ReflectionShading::new(ctx)?,
                     raster: Rasterizer::new(ctx, fresnel.channels(), Features::Plain)?,
                     // The colour kernel writes every Gaussian's features before the rasterizer reads them.
-                    feat: Buffer::uninit(
-                        ctx,
-                        "embed.refl_features",
-                        fresnel.channels() as usize * n,
-                    )?,
+                    feat: Buffer::uninit(ctx, "embed.refl_features", fresnel.channels() as usize * n)?,
                     fresnel,
                 })
             }
-            checkpoint::RenderLayer::LightField {
-                set,
-                shape,
-                params,
-                shade,
-            } => {
+            checkpoint::RenderLayer::LightField { set, shape, params, shade } => {
                 let n = set.len().max(1);
                 Some(Layer::Light {
                     set: Gaussians::upload(ctx, &set)?,
@@ -130,17 +98,9 @@ impl SceneRenderer {
                     shade,
                     shading: LightFieldShading::new(ctx)?,
                     mlp: Mlp::new(ctx)?,
-                    raster: Rasterizer::new(
-                        ctx,
-                        tgs_pipelines::lightfield::CHANNELS,
-                        Features::Plain,
-                    )?,
+                    raster: Rasterizer::new(ctx, tgs_pipelines::lightfield::CHANNELS, Features::Plain)?,
                     // The material kernel writes every Gaussian's features first.
-                    feat: Buffer::uninit(
-                        ctx,
-                        "embed.lf_features",
-                        tgs_pipelines::lightfield::CHANNELS as usize * n,
-                    )?,
+                    feat: Buffer::uninit(ctx, "embed.lf_features", tgs_pipelines::lightfield::CHANNELS as usize * n)?,
                 })
             }
         };
@@ -149,13 +109,7 @@ impl SceneRenderer {
             scat: Gaussians::upload(ctx, &state.scattering)?,
             sh_degree,
             background: cfg.background_rgb()?,
-            raster: Rasterizer::new(
-                ctx,
-                3,
-                Features::Sh {
-                    degree: cfg.sh_degree,
-                },
-            )?,
+            raster: Rasterizer::new(ctx, 3, Features::Sh { degree: cfg.sh_degree })?,
             stage: state.stage,
             last_samples: None,
             layer,
@@ -174,39 +128,15 @@ impl SceneRenderer {
             let planes = (Plane::count(3) * w * h) as usize;
             let (refl, samples) = match &self.layer {
                 None => (None, None),
-                Some(Layer::Env { set, raster, .. }) => {
-                    (Some(frame_for(raster, set.n, w, h)?), None)
-                }
-                Some(Layer::Light {
-                    set,
-                    raster,
-                    shading,
-                    mlp,
-                    shape,
-                    ..
-                }) => {
+                Some(Layer::Env { set, raster, .. }) => (Some(frame_for(raster, set.n, w, h)?), None),
+                Some(Layer::Light { set, raster, shading, mlp, shape, .. }) => {
                     let cap = (w * h).min(mlp.max_capacity(shape));
-                    (
-                        Some(frame_for(raster, set.n, w, h)?),
-                        Some((shading.sample_scratch(w, h)?, mlp.scratch(*shape, cap)?)),
-                    )
+                    (Some(frame_for(raster, set.n, w, h)?), Some((shading.sample_scratch(w, h)?, mlp.scratch(*shape, cap)?)))
                 }
             };
             // The composite kernel writes every plane of every pixel.
-            let composite = if self.layer.is_some() {
-                Some(Buffer::uninit(&self.ctx, "embed.composite", planes)?)
-            } else {
-                None
-            };
-            self.views.insert(
-                (w, h),
-                View {
-                    scat,
-                    refl,
-                    samples,
-                    composite,
-                },
-            );
+            let composite = if self.layer.is_some() { Some(Buffer::uninit(&self.ctx, "embed.composite", planes)?) } else { None };
+            self.views.insert((w, h), View { scat, refl, samples, composite });
         }
         Ok(self.views.get_mut(&(w, h)).expect("view buffers"))
     }
@@ -219,83 +149,27 @@ impl SceneRenderer {
         cam.validate()?;
         let need = 4 * Self::output_len(cam.width, cam.height) as u64;
         if out.range < need {
-            bail!(
-                "the output binding holds {} bytes; a {}x{} view needs {need}",
-                out.range,
-                cam.width,
-                cam.height
-            );
+            bail!("the output binding holds {} bytes; a {}x{} view needs {need}", out.range, cam.width, cam.height);
         }
         let (sh, bg) = (self.sh_degree, self.background);
         self.view(cam.width, cam.height)?;
         let v = &self.views[&(cam.width, cam.height)];
-        self.raster
-            .record_forward(rec, &self.scat, cam, &bg, sh, &v.scat)?;
+        self.raster.record_forward(rec, &self.scat, cam, &bg, sh, &v.scat)?;
         let colour = match (&self.layer, v.refl.as_ref(), v.composite.as_ref()) {
             (None, _, _) => &v.scat.out,
-            (
-                Some(Layer::Env {
-                    set,
-                    env,
-                    fresnel,
-                    shading,
-                    raster,
-                    feat,
-                }),
-                Some(frame),
-                Some(comp),
-            ) => {
+            (Some(Layer::Env { set, env, fresnel, shading, raster, feat }), Some(frame), Some(comp)) => {
                 shading.record_color(rec, set, env, cam, *fresnel, feat)?;
-                raster.record_forward_with(
-                    rec,
-                    set,
-                    feat,
-                    cam,
-                    &vec![0.0; fresnel.channels() as usize],
-                    0,
-                    frame,
-                )?;
+                raster.record_forward_with(rec, set, feat, cam, &vec![0.0; fresnel.channels() as usize], 0, frame)?;
                 shading.record_composite(rec, cam, *fresnel, &v.scat.out, &frame.out, comp)?;
                 comp
             }
-            (
-                Some(Layer::Light {
-                    set,
-                    params,
-                    shade,
-                    shading,
-                    mlp,
-                    raster,
-                    feat,
-                    ..
-                }),
-                Some(frame),
-                Some(comp),
-            ) => {
-                let (samples, scratch) =
-                    v.samples.as_ref().context("light-field sample buffers")?;
+            (Some(Layer::Light { set, params, shade, shading, mlp, raster, feat, .. }), Some(frame), Some(comp)) => {
+                let (samples, scratch) = v.samples.as_ref().context("light-field sample buffers")?;
                 shading.record_material(rec, &set.features, set.n, feat)?;
-                raster.record_forward_with(
-                    rec,
-                    set,
-                    feat,
-                    cam,
-                    &[0.0; tgs_pipelines::lightfield::CHANNELS as usize],
-                    0,
-                    frame,
-                )?;
+                raster.record_forward_with(rec, set, feat, cam, &[0.0; tgs_pipelines::lightfield::CHANNELS as usize], 0, frame)?;
                 shading.record_samples(rec, cam, shade, &frame.out, samples, &scratch.samples)?;
                 mlp.record_forward_counted(rec, params, &samples.count, scratch)?;
-                shading.record_composite(
-                    rec,
-                    cam,
-                    shade,
-                    &v.scat.out,
-                    &frame.out,
-                    samples,
-                    &scratch.out,
-                    comp,
-                )?;
+                shading.record_composite(rec, cam, shade, &v.scat.out, &frame.out, samples, &scratch.out, comp)?;
                 comp
             }
             _ => bail!("view buffers missing for the reflection layer"),
@@ -308,10 +182,7 @@ impl SceneRenderer {
     /// completed: `true` when the frame was whole; `false` when a buffer
     /// was too small (it has been grown): record the view again.
     pub fn complete(&mut self, cam: &Camera) -> Result<bool> {
-        let v = self
-            .views
-            .get_mut(&(cam.width, cam.height))
-            .context("this view size was never recorded")?;
+        let v = self.views.get_mut(&(cam.width, cam.height)).context("this view size was never recorded")?;
         let mut whole = self.raster.fit(&mut v.scat)?;
         match (&self.layer, v.refl.as_mut()) {
             (Some(Layer::Env { raster, .. }), Some(f)) => whole &= raster.fit(f)?,
@@ -340,11 +211,7 @@ impl SceneRenderer {
     /// Render `cam` on this context's own queue (recording, submitting and
     /// re-recording until the frame is whole); the colour planes.
     pub fn render(&mut self, cam: &Camera) -> Result<Vec<f32>> {
-        let out = Buffer::<f32>::uninit(
-            &self.ctx,
-            "embed.out",
-            Self::output_len(cam.width, cam.height),
-        )?;
+        let out = Buffer::<f32>::uninit(&self.ctx, "embed.out", Self::output_len(cam.width, cam.height))?;
         loop {
             let mut rec = Recorder::new(&self.ctx)?;
             self.record(&mut rec, cam, &out.binding())?;
@@ -360,12 +227,7 @@ impl SceneRenderer {
 /// test views), with the views' names, at the run's resolution.
 pub fn run_cameras(run: &Path) -> Result<Vec<(String, Camera)>> {
     let (h, _) = checkpoint::read(&run.join(crate::train::run::CHECKPOINT))?;
-    let data = crate::train::run::load_dataset(Path::new(&h.dataset), &h.config)
-        .with_context(|| format!("loading the run's dataset {}", h.dataset))?;
-    let views = if data.test.is_empty() {
-        &data.train
-    } else {
-        &data.test
-    };
+    let data = crate::train::run::load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
+    let views = if data.test.is_empty() { &data.train } else { &data.test };
     Ok(views.iter().map(|v| (v.name.clone(), v.camera)).collect())
 }

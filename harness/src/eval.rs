@@ -8,8 +8,8 @@
 
 use crate::data::image_io::{write_exr, write_png, ImageF};
 use crate::data::View;
-use crate::outdir::OutDir;
 use crate::train::trainer::Rendered;
+use crate::outdir::OutDir;
 use crate::train::Trainer;
 use anyhow::Result;
 use serde::Serialize;
@@ -89,21 +89,14 @@ pub struct Metrics {
 }
 
 pub fn psnr(a: &[f32], b: &[f32]) -> f64 {
-    let mse = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| ((x.clamp(0.0, 1.0) - y) as f64).powi(2))
-        .sum::<f64>()
-        / a.len().max(1) as f64;
+    let mse = a.iter().zip(b).map(|(x, y)| ((x.clamp(0.0, 1.0) - y) as f64).powi(2)).sum::<f64>() / a.len().max(1) as f64;
     -10.0 * mse.max(1e-20).log10()
 }
 
 /// Mean SSIM over channels and pixels of two planar images (f64).
 pub fn ssim(a: &[f32], b: &[f32], w: usize, h: usize, channels: usize) -> f64 {
     let g: Vec<f64> = {
-        let raw: Vec<f64> = (-5..=5)
-            .map(|t: i32| (-(t * t) as f64 / (2.0 * 1.5 * 1.5)).exp())
-            .collect();
+        let raw: Vec<f64> = (-5..=5).map(|t: i32| (-(t * t) as f64 / (2.0 * 1.5 * 1.5)).exp()).collect();
         let s: f64 = raw.iter().sum();
         raw.iter().map(|v| v / s).collect()
     };
@@ -112,24 +105,18 @@ pub fn ssim(a: &[f32], b: &[f32], w: usize, h: usize, channels: usize) -> f64 {
         let mut out = vec![0.0; w * h];
         for y in 0..h {
             for x in 0..w {
-                tmp[y * w + x] = (-5i64..=5)
-                    .filter_map(|t| {
-                        let xx = x as i64 + t;
-                        (xx >= 0 && xx < w as i64)
-                            .then(|| g[(t + 5) as usize] * src[y * w + xx as usize])
-                    })
-                    .sum();
+                tmp[y * w + x] = (-5i64..=5).filter_map(|t| {
+                    let xx = x as i64 + t;
+                    (xx >= 0 && xx < w as i64).then(|| g[(t + 5) as usize] * src[y * w + xx as usize])
+                }).sum();
             }
         }
         for y in 0..h {
             for x in 0..w {
-                out[y * w + x] = (-5i64..=5)
-                    .filter_map(|t| {
-                        let yy = y as i64 + t;
-                        (yy >= 0 && yy < h as i64)
-                            .then(|| g[(t + 5) as usize] * tmp[yy as usize * w + x])
-                    })
-                    .sum();
+                out[y * w + x] = (-5i64..=5).filter_map(|t| {
+                    let yy = y as i64 + t;
+                    (yy >= 0 && yy < h as i64).then(|| g[(t + 5) as usize] * tmp[yy as usize * w + x])
+                }).sum();
             }
         }
         out
@@ -138,26 +125,14 @@ pub fn ssim(a: &[f32], b: &[f32], w: usize, h: usize, channels: usize) -> f64 {
     let n = w * h;
     let mut total = 0.0;
     for c in 0..channels {
-        let x: Vec<f64> = a[c * n..(c + 1) * n]
-            .iter()
-            .map(|v| v.clamp(0.0, 1.0) as f64)
-            .collect();
+        let x: Vec<f64> = a[c * n..(c + 1) * n].iter().map(|v| v.clamp(0.0, 1.0) as f64).collect();
         let y: Vec<f64> = b[c * n..(c + 1) * n].iter().map(|&v| v as f64).collect();
         let prod = |p: &[f64], q: &[f64]| p.iter().zip(q).map(|(a, b)| a * b).collect::<Vec<_>>();
         let (mx, my) = (blur(&x), blur(&y));
-        let (exx, eyy, exy) = (
-            blur(&prod(&x, &x)),
-            blur(&prod(&y, &y)),
-            blur(&prod(&x, &y)),
-        );
+        let (exx, eyy, exy) = (blur(&prod(&x, &x)), blur(&prod(&y, &y)), blur(&prod(&x, &y)));
         for i in 0..n {
-            let (sx, sy, sxy) = (
-                exx[i] - mx[i] * mx[i],
-                eyy[i] - my[i] * my[i],
-                exy[i] - mx[i] * my[i],
-            );
-            total += ((2.0 * mx[i] * my[i] + c1) * (2.0 * sxy + c2))
-                / ((mx[i] * mx[i] + my[i] * my[i] + c1) * (sx + sy + c2));
+            let (sx, sy, sxy) = (exx[i] - mx[i] * mx[i], eyy[i] - my[i] * my[i], exy[i] - mx[i] * my[i]);
+            total += ((2.0 * mx[i] * my[i] + c1) * (2.0 * sxy + c2)) / ((mx[i] * mx[i] + my[i] * my[i] + c1) * (sx + sy + c2));
         }
     }
     total / (n * channels).max(1) as f64
@@ -165,14 +140,7 @@ pub fn ssim(a: &[f32], b: &[f32], w: usize, h: usize, channels: usize) -> f64 {
 
 /// World-space unit normals (interleaved) of a render; zero where empty.
 pub fn world_normals(r: &Rendered, cam: &Camera) -> Vec<[f32; 3]> {
-    world_normals_of(
-        [
-            r.plane(Plane::Normal(0)),
-            r.plane(Plane::Normal(1)),
-            r.plane(Plane::Normal(2)),
-        ],
-        cam,
-    )
+    world_normals_of([r.plane(Plane::Normal(0)), r.plane(Plane::Normal(1)), r.plane(Plane::Normal(2))], cam)
 }
 
 /// Unit world-space normals from three view-space normal planes (zero where empty).
@@ -198,12 +166,8 @@ pub fn world_normals_of([nx, ny, nz]: [&[f32]; 3], cam: &Camera) -> Vec<[f32; 3]
 pub fn ray_facing_normals(cam: &Camera) -> Vec<[f32; 3]> {
     // In view space the ray through pixel (u, v) is ((u - cx) / fx, (v - cy) / fy, 1).
     let (w, n) = (cam.width as usize, (cam.width * cam.height) as usize);
-    let nx: Vec<f32> = (0..n)
-        .map(|i| -((i % w) as f32 - cam.cx) / cam.fx)
-        .collect();
-    let ny: Vec<f32> = (0..n)
-        .map(|i| -((i / w) as f32 - cam.cy) / cam.fy)
-        .collect();
+    let nx: Vec<f32> = (0..n).map(|i| -((i % w) as f32 - cam.cx) / cam.fx).collect();
+    let ny: Vec<f32> = (0..n).map(|i| -((i / w) as f32 - cam.cy) / cam.fy).collect();
     world_normals_of([&nx, &ny, &vec![-1.0; n]], cam)
 }
 
@@ -213,11 +177,7 @@ pub fn normal_mae(normals: &[[f32; 3]], view: &View) -> Option<f64> {
 }
 
 /// [`normal_mae`] on the mask pixels `i` with `keep(i)`.
-fn normal_mae_where(
-    normals: &[[f32; 3]],
-    view: &View,
-    keep: impl Fn(usize) -> bool,
-) -> Option<f64> {
+fn normal_mae_where(normals: &[[f32; 3]], view: &View, keep: impl Fn(usize) -> bool) -> Option<f64> {
     let (gt, mask) = (view.normals.as_ref()?, view.mask.as_ref()?);
     let mut sum = 0.0;
     let mut count = 0usize;
@@ -233,11 +193,7 @@ fn normal_mae_where(
         let n = normals[i];
         let d = (0..3).map(|k| n[k] as f64 * g[k] as f64).sum::<f64>() / gl;
         let empty = n == [0.0; 3];
-        sum += if empty {
-            90.0
-        } else {
-            d.clamp(-1.0, 1.0).acos().to_degrees()
-        };
+        sum += if empty { 90.0 } else { d.clamp(-1.0, 1.0).acos().to_degrees() };
         count += 1;
     }
     (count > 0).then(|| sum / count as f64)
@@ -252,27 +208,15 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
         let rgb = &r.planes[..3 * w * h];
         let target = v.image.planar();
         let normals = world_normals(&r, &v.camera);
-        let scat_mae = r
-            .layers
-            .as_ref()
-            .and_then(|l| normal_mae(&world_normals(&l.0, &v.camera), v));
-        let covered = |i: usize| {
-            r.layers
-                .as_ref()
-                .is_some_and(|l| l.1.refl_plane(Plane::Alpha)[i] >= 0.5)
-        };
+        let scat_mae = r.layers.as_ref().and_then(|l| normal_mae(&world_normals(&l.0, &v.camera), v));
+        let covered = |i: usize| r.layers.as_ref().is_some_and(|l| l.1.refl_plane(Plane::Alpha)[i] >= 0.5);
         let coverage = match (&r.layers, &v.mask) {
-            (Some(_), Some(mask)) if mask.iter().any(|&m| m) => Some(
-                (0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64
-                    / mask.iter().filter(|&&m| m).count() as f64,
-            ),
+            (Some(_), Some(mask)) if mask.iter().any(|&m| m) => Some((0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64 / mask.iter().filter(|&&m| m).count() as f64),
             _ => None,
         };
         let outside = match (&r.layers, &v.mask) {
             (Some(_), Some(mask)) => {
-                let (all, off) = (0..mask.len())
-                    .filter(|&i| covered(i))
-                    .fold((0usize, 0usize), |(a, o), i| (a + 1, o + !mask[i] as usize));
+                let (all, off) = (0..mask.len()).filter(|&i| covered(i)).fold((0usize, 0usize), |(a, o), i| (a + 1, o + !mask[i] as usize));
                 (all > 0).then(|| off as f64 / all as f64)
             }
             _ => None,
@@ -281,27 +225,14 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
             name: v.name.clone(),
             psnr: psnr(rgb, &target),
             ssim: ssim(rgb, &target, w, h, 3),
-            lpips: crate::lpips::shared().and_then(|net| {
-                net.distance(
-                    &rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>(),
-                    &target,
-                    w,
-                    h,
-                )
-            }),
+            lpips: crate::lpips::shared().and_then(|net| net.distance(&rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>(), &target, w, h)),
             normals: NormalMetrics {
                 normal_mae_deg: normal_mae(&normals, v),
                 normal_mae_scattering_deg: scat_mae,
                 reflection_coverage: coverage,
                 reflection_outside_mask: outside,
-                normal_mae_covered_deg: r
-                    .layers
-                    .as_ref()
-                    .and_then(|_| normal_mae_where(&normals, v, covered)),
-                normal_mae_ray_facing_deg: v
-                    .normals
-                    .as_ref()
-                    .and_then(|_| normal_mae(&ray_facing_normals(&v.camera), v)),
+                normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
+                normal_mae_ray_facing_deg: v.normals.as_ref().and_then(|_| normal_mae(&ray_facing_normals(&v.camera), v)),
             },
         };
         if let Some(dir) = out.as_deref_mut() {
@@ -313,8 +244,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
     Ok(Metrics {
         normals: NormalMetrics::mean(per_view.iter().map(|m| &m.normals)),
         iteration: tr.iteration,
-        gaussians: tr.scattering.set.len()
-            + tr.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0),
+        gaussians: tr.scattering.set.len() + tr.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0),
         views: per_view.len(),
         psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,
@@ -329,59 +259,17 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
 /// `NAME.png` (colour), `NAME_normal.png` (world normal * 0.5 + 0.5),
 /// `NAME_depth.exr` (expected depth, 0 where empty) and `NAME_depth.png`
 /// (normalised to the view's depth range).
-pub fn write_outputs(
-    dir: &mut OutDir,
-    name: &str,
-    r: &Rendered,
-    normals: &[[f32; 3]],
-    cam: &Camera,
-) -> Result<()> {
+pub fn write_outputs(dir: &mut OutDir, name: &str, r: &Rendered, normals: &[[f32; 3]], cam: &Camera) -> Result<()> {
     let (w, h) = (r.width, r.height);
     let n = (w * h) as usize;
-    write_png(
-        &dir.file(&format!("{name}.png"))?,
-        &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]),
-    )?;
-    write_png(
-        &dir.file(&format!("{name}_normal.png"))?,
-        &normal_image(w, h, normals),
-    )?;
+    write_png(&dir.file(&format!("{name}.png"))?, &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]))?;
+    write_png(&dir.file(&format!("{name}_normal.png"))?, &normal_image(w, h, normals))?;
     let (a, d) = (r.plane(Plane::Alpha), r.plane(Plane::Depth));
-    let depth: Vec<f32> = (0..n)
-        .map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 })
-        .collect();
-    write_exr(
-        &dir.file(&format!("{name}_depth.exr"))?,
-        &ImageF {
-            width: w,
-            height: h,
-            channels: 1,
-            data: depth.clone(),
-        },
-    )?;
-    let (lo, hi) = depth
-        .iter()
-        .filter(|v| **v > 0.0)
-        .fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
-    let scaled = depth
-        .iter()
-        .map(|&v| {
-            if v > 0.0 && hi > lo {
-                1.0 - (v - lo) / (hi - lo)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    write_png(
-        &dir.file(&format!("{name}_depth.png"))?,
-        &ImageF {
-            width: w,
-            height: h,
-            channels: 1,
-            data: scaled,
-        },
-    )?;
+    let depth: Vec<f32> = (0..n).map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 }).collect();
+    write_exr(&dir.file(&format!("{name}_depth.exr"))?, &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
+    let (lo, hi) = depth.iter().filter(|v| **v > 0.0).fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
+    let scaled = depth.iter().map(|&v| if v > 0.0 && hi > lo { 1.0 - (v - lo) / (hi - lo) } else { 0.0 }).collect();
+    write_png(&dir.file(&format!("{name}_depth.png"))?, &ImageF { width: w, height: h, channels: 1, data: scaled })?;
     if let Some(l) = &r.layers {
         write_layers(dir, name, &l.0, &l.1, cam)?;
     }
@@ -393,40 +281,22 @@ pub fn write_outputs(
 /// Stage III's F Phi), `NAME_R.png` (reflectivity map), `NAME_F0.png`
 /// (blended F0, when the stage has it), `NAME_phi_mask.png` (Stage III:
 /// where Phi was evaluated), `NAME_normal_scat.png`, `NAME_normal_refl.png`.
-fn write_layers(
-    dir: &mut OutDir,
-    name: &str,
-    scat: &Rendered,
-    refl: &crate::train::trainer::ReflRendered,
-    cam: &Camera,
-) -> Result<()> {
+fn write_layers(dir: &mut OutDir, name: &str, scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Result<()> {
     let (w, h) = (scat.width, scat.height);
     let n = (w * h) as usize;
-    let mut png = |suffix: &str, channels: u32, data: &[f32]| {
-        write_png(
-            &dir.file(&format!("{name}_{suffix}.png"))?,
-            &ImageF::from_planar(w, h, channels, data),
-        )
-    };
+    let mut png = |suffix: &str, channels: u32, data: &[f32]| write_png(&dir.file(&format!("{name}_{suffix}.png"))?, &ImageF::from_planar(w, h, channels, data));
     png("scat", 3, &scat.planes[..3 * n])?;
     png("refl", 3, refl.i_refl())?;
     png("R", 1, refl.r())?;
     let alpha = refl.refl_plane(Plane::Alpha);
     if let Some(f0s) = refl.f0_sum() {
-        let f0: Vec<f32> = (0..3 * n)
-            .map(|k| f0s[k] / alpha[k % n].max(1e-6))
-            .collect();
+        let f0: Vec<f32> = (0..3 * n).map(|k| f0s[k] / alpha[k % n].max(1e-6)).collect();
         png("F0", 3, &f0)?;
     }
     if let Some(p) = &refl.phi {
         png("phi_mask", 1, &p.mask)?;
     }
-    let mut normal_png = |suffix: &str, normals: &[[f32; 3]]| {
-        write_png(
-            &dir.file(&format!("{name}_{suffix}.png"))?,
-            &normal_image(w, h, normals),
-        )
-    };
+    let mut normal_png = |suffix: &str, normals: &[[f32; 3]]| write_png(&dir.file(&format!("{name}_{suffix}.png"))?, &normal_image(w, h, normals));
     normal_png("normal_scat", &world_normals(scat, cam))?;
     let rn = [0, 1, 2].map(|k| refl.refl_plane(Plane::Normal(k)));
     normal_png("normal_refl", &world_normals_of(rn, cam))
@@ -434,13 +304,5 @@ fn write_layers(
 
 /// World normals as an image (n * 0.5 + 0.5; black where empty).
 fn normal_image(w: u32, h: u32, normals: &[[f32; 3]]) -> ImageF {
-    ImageF {
-        width: w,
-        height: h,
-        channels: 3,
-        data: normals
-            .iter()
-            .flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 }))
-            .collect(),
-    }
+    ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() }
 }

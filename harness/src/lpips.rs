@@ -23,13 +23,7 @@ pub const MIN_SIDE: usize = 31;
 const SHIFT: [f32; 3] = [-0.030, -0.088, -0.188];
 const SCALE: [f32; 3] = [0.458, 0.448, 0.450];
 /// (kernel, stride, pad, in, out) of AlexNet's convolutions.
-pub const CONVS: [(usize, usize, usize, usize, usize); 5] = [
-    (11, 4, 2, 3, 64),
-    (5, 1, 2, 64, 192),
-    (3, 1, 1, 192, 384),
-    (3, 1, 1, 384, 256),
-    (3, 1, 1, 256, 256),
-];
+pub const CONVS: [(usize, usize, usize, usize, usize); 5] = [(11, 4, 2, 3, 64), (5, 1, 2, 64, 192), (3, 1, 1, 192, 384), (3, 1, 1, 384, 256), (3, 1, 1, 256, 256)];
 
 /// Where the weights are looked for: `TGS_LPIPS_WEIGHTS`, else
 /// `$XDG_CACHE_HOME/tgs/lpips-alex-v0.1.safetensors`, else under `~/.cache`.
@@ -37,10 +31,7 @@ pub fn weights_path() -> PathBuf {
     if let Some(p) = std::env::var_os("TGS_LPIPS_WEIGHTS") {
         return PathBuf::from(p);
     }
-    let cache = std::env::var_os("XDG_CACHE_HOME")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-        .unwrap_or_else(|| PathBuf::from(".cache"));
+    let cache = std::env::var_os("XDG_CACHE_HOME").map(PathBuf::from).or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache"))).unwrap_or_else(|| PathBuf::from(".cache"));
     cache.join("tgs").join("lpips-alex-v0.1.safetensors")
 }
 
@@ -63,38 +54,18 @@ impl Lpips {
     /// Reads the safetensors file at `path`, checking every tensor's name,
     /// type and shape.
     pub fn load(path: &Path) -> Result<Lpips> {
-        let bytes = std::fs::read(path)
-            .with_context(|| format!("reading the LPIPS weights {}", path.display()))?;
-        let tensors = parse_safetensors(&bytes).with_context(|| {
-            format!(
-                "{}: not a safetensors file of the LPIPS weights",
-                path.display()
-            )
-        })?;
+        let bytes = std::fs::read(path).with_context(|| format!("reading the LPIPS weights {}", path.display()))?;
+        let tensors = parse_safetensors(&bytes).with_context(|| format!("{}: not a safetensors file of the LPIPS weights", path.display()))?;
         let get = |name: &str, shape: &[usize]| -> Result<Vec<f32>> {
-            let (s, v) = tensors
-                .iter()
-                .find(|(n, _, _)| n == name)
-                .map(|(_, s, v)| (s, v))
-                .with_context(|| format!("{}: no tensor {name}", path.display()))?;
-            ensure!(
-                s == shape,
-                "{}: {name} has shape {s:?}, not {shape:?}",
-                path.display()
-            );
+            let (s, v) = tensors.iter().find(|(n, _, _)| n == name).map(|(_, s, v)| (s, v)).with_context(|| format!("{}: no tensor {name}", path.display()))?;
+            ensure!(s == shape, "{}: {name} has shape {s:?}, not {shape:?}", path.display());
             Ok(v.clone())
         };
         let mut conv = Vec::new();
         let mut lin = Vec::new();
         for (l, &(k, _, _, ci, co)) in CONVS.iter().enumerate() {
-            conv.push((
-                get(&format!("AlexNet_0/Conv_{l}/kernel"), &[k, k, ci, co])?,
-                get(&format!("AlexNet_0/Conv_{l}/bias"), &[co])?,
-            ));
-            lin.push(get(
-                &format!("NetLinLayer_{l}/Conv_0/kernel"),
-                &[1, 1, co, 1],
-            )?);
+            conv.push((get(&format!("AlexNet_0/Conv_{l}/kernel"), &[k, k, ci, co])?, get(&format!("AlexNet_0/Conv_{l}/bias"), &[co])?));
+            lin.push(get(&format!("NetLinLayer_{l}/Conv_0/kernel"), &[1, 1, co, 1])?);
         }
         Ok(Lpips { conv, lin })
     }
@@ -106,12 +77,7 @@ impl Lpips {
             return None;
         }
         let n = w * h;
-        let mut x = Map {
-            h,
-            w,
-            c: 3,
-            v: vec![0.0; 3 * n],
-        };
+        let mut x = Map { h, w, c: 3, v: vec![0.0; 3 * n] };
         for i in 0..n {
             for c in 0..3 {
                 x.v[3 * i + c] = (2.0 * rgb[c * n + i] - 1.0 - SHIFT[c]) / SCALE[c];
@@ -140,12 +106,7 @@ impl Lpips {
         for (l, (a, b)) in fa.iter().zip(fb).enumerate() {
             let mut sum = 0.0f64;
             for (pa, pb) in a.v.chunks_exact(a.c).zip(b.v.chunks_exact(b.c)) {
-                let d: f32 = pa
-                    .iter()
-                    .zip(pb)
-                    .zip(&self.lin[l])
-                    .map(|((x, y), w)| w * (x - y) * (x - y))
-                    .sum();
+                let d: f32 = pa.iter().zip(pb).zip(&self.lin[l]).map(|((x, y), w)| w * (x - y) * (x - y)).sum();
                 sum += d as f64;
             }
             total += sum / (a.h * a.w) as f64;
@@ -199,12 +160,7 @@ fn normalised(x: &Map) -> Map {
         let n = p.iter().map(|a| a * a).sum::<f32>().sqrt() + 1e-10;
         p.iter_mut().for_each(|a| *a /= n);
     }
-    Map {
-        h: x.h,
-        w: x.w,
-        c: x.c,
-        v,
-    }
+    Map { h: x.h, w: x.w, c: x.c, v }
 }
 
 /// Output pixels a thread sums at once: each weight row loaded serves them
@@ -219,11 +175,7 @@ fn conv_relu(x: &Map, wt: &[f32], bias: &[f32], k: usize, s: usize, p: usize, co
     let kk = k * k * x.c;
     let n = h * w;
     let mut v = vec![0.0f32; n * co];
-    let threads = std::thread::available_parallelism()
-        .map(|t| t.get())
-        .unwrap_or(1)
-        .min(n.div_ceil(ROWS))
-        .max(1);
+    let threads = std::thread::available_parallelism().map(|t| t.get()).unwrap_or(1).min(n.div_ceil(ROWS)).max(1);
     let per = n.div_ceil(threads).div_ceil(ROWS) * ROWS;
     std::thread::scope(|sc| {
         for (t, chunk) in v.chunks_mut(per * co).enumerate() {
@@ -244,9 +196,7 @@ fn conv_relu(x: &Map, wt: &[f32], bias: &[f32], k: usize, s: usize, p: usize, co
                                 if iy < 0 || ix < 0 || iy >= x.h as isize || ix >= x.w as isize {
                                     dst.fill(0.0);
                                 } else {
-                                    dst.copy_from_slice(
-                                        &x.v[(iy as usize * x.w + ix as usize) * x.c..][..x.c],
-                                    );
+                                    dst.copy_from_slice(&x.v[(iy as usize * x.w + ix as usize) * x.c..][..x.c]);
                                 }
                             }
                         }
@@ -281,12 +231,8 @@ type Tensor = (String, Vec<usize>, Vec<f32>);
 fn parse_safetensors(b: &[u8]) -> Result<Vec<Tensor>> {
     ensure!(b.len() >= 8, "{} bytes", b.len());
     let n = u64::from_le_bytes(b[..8].try_into().unwrap());
-    ensure!(
-        n <= (b.len() - 8) as u64,
-        "header length {n} past the end of the file"
-    );
-    let header: serde_json::Value =
-        serde_json::from_slice(&b[8..8 + n as usize]).context("header is not JSON")?;
+    ensure!(n <= (b.len() - 8) as u64, "header length {n} past the end of the file");
+    let header: serde_json::Value = serde_json::from_slice(&b[8..8 + n as usize]).context("header is not JSON")?;
     let data = &b[8 + n as usize..];
     let mut out = Vec::new();
     for (name, t) in header.as_object().context("header is not a JSON object")? {
@@ -296,38 +242,12 @@ fn parse_safetensors(b: &[u8]) -> Result<Vec<Tensor>> {
         if t["dtype"] != "F32" {
             bail!("{name}: dtype {}, not F32", t["dtype"]);
         }
-        let shape: Vec<usize> = t["shape"]
-            .as_array()
-            .context("shape")?
-            .iter()
-            .map(|d| d.as_u64().map(|d| d as usize))
-            .collect::<Option<_>>()
-            .with_context(|| format!("{name}: bad shape"))?;
-        let off: Vec<usize> = t["data_offsets"]
-            .as_array()
-            .context("data_offsets")?
-            .iter()
-            .map(|d| d.as_u64().map(|d| d as usize))
-            .collect::<Option<_>>()
-            .with_context(|| format!("{name}: bad data_offsets"))?;
-        ensure!(
-            off.len() == 2 && off[0] <= off[1] && off[1] <= data.len(),
-            "{name}: data_offsets {off:?} outside the {} data bytes",
-            data.len()
-        );
-        let count = shape
-            .iter()
-            .try_fold(1usize, |a, &d| a.checked_mul(d))
-            .context("shape overflows")?;
-        ensure!(
-            off[1] - off[0] == 4 * count,
-            "{name}: {} bytes for shape {shape:?}",
-            off[1] - off[0]
-        );
-        let v = data[off[0]..off[1]]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-            .collect();
+        let shape: Vec<usize> = t["shape"].as_array().context("shape")?.iter().map(|d| d.as_u64().map(|d| d as usize)).collect::<Option<_>>().with_context(|| format!("{name}: bad shape"))?;
+        let off: Vec<usize> = t["data_offsets"].as_array().context("data_offsets")?.iter().map(|d| d.as_u64().map(|d| d as usize)).collect::<Option<_>>().with_context(|| format!("{name}: bad data_offsets"))?;
+        ensure!(off.len() == 2 && off[0] <= off[1] && off[1] <= data.len(), "{name}: data_offsets {off:?} outside the {} data bytes", data.len());
+        let count = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).context("shape overflows")?;
+        ensure!(off[1] - off[0] == 4 * count, "{name}: {} bytes for shape {shape:?}", off[1] - off[0]);
+        let v = data[off[0]..off[1]].chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect();
         out.push((name.clone(), shape, v));
     }
     Ok(out)

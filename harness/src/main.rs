@@ -1,7 +1,7 @@
 use anyhow::{Context as _, Result};
-use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use tgs::train::run::TrainArgs;
+use clap::{Parser, Subcommand};
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
 use tgs_pipelines::SortConfig;
 
@@ -298,25 +298,8 @@ fn context(cli: &Cli) -> Result<std::sync::Arc<Context>> {
 
 fn run(cli: Cli) -> Result<()> {
     match &cli.cmd {
-        Cmd::Devices { json } => tgs::devices::run(
-            *json,
-            &DeviceSelector::from_arg_or_env(cli.device.as_deref()),
-        ),
-        Cmd::Train {
-            dataset,
-            out,
-            preset,
-            config,
-            set,
-            iterations,
-            downscale,
-            background,
-            resume,
-            stages,
-            from,
-            profile,
-            quiet,
-        } => {
+        Cmd::Devices { json } => tgs::devices::run(*json, &DeviceSelector::from_arg_or_env(cli.device.as_deref())),
+        Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, stages, from, profile, quiet } => {
             let ctx = context(&cli)?;
             let args = TrainArgs {
                 dataset: dataset.clone(),
@@ -353,46 +336,18 @@ fn run(cli: Cli) -> Result<()> {
             println!("{}", serde_json::to_string_pretty(&m)?);
             Ok(())
         }
-        Cmd::Render {
-            run,
-            cameras,
-            frames,
-            out,
-        } => {
+        Cmd::Render { run, cameras, frames, out } => {
             let ctx = context(&cli)?;
-            let dir = out
-                .clone()
-                .unwrap_or_else(|| run.join("renders").join(cameras));
+            let dir = out.clone().unwrap_or_else(|| run.join("renders").join(cameras));
             let n = tgs::render::render(&ctx, run, cameras, *frames, &dir)?;
             eprintln!("{n} views written to {}", dir.display());
             Ok(())
         }
-        Cmd::Mesh {
-            run,
-            voxel,
-            resolution,
-            trunc,
-            depth_max,
-            max_mib,
-            out,
-        } => {
+        Cmd::Mesh { run, voxel, resolution, trunc, depth_max, max_mib, out } => {
             let ctx = context(&cli)?;
-            let args = tgs::mesh::MeshArgs {
-                voxel: *voxel,
-                resolution: *resolution,
-                trunc: *trunc,
-                depth_max: *depth_max,
-                max_bytes: max_mib.saturating_mul(1 << 20),
-                out: out.clone(),
-                progress: true,
-            };
+            let args = tgs::mesh::MeshArgs { voxel: *voxel, resolution: *resolution, trunc: *trunc, depth_max: *depth_max, max_bytes: max_mib.saturating_mul(1 << 20), out: out.clone(), progress: true };
             for r in tgs::mesh::mesh(&ctx, run, &args)? {
-                eprintln!(
-                    "{}: {} vertices, {} triangles",
-                    r.path.display(),
-                    r.mesh.positions.len(),
-                    r.mesh.triangles.len()
-                );
+                eprintln!("{}: {} vertices, {} triangles", r.path.display(), r.mesh.positions.len(), r.mesh.triangles.len());
             }
             Ok(())
         }
@@ -414,74 +369,32 @@ fn run(cli: Cli) -> Result<()> {
                 Ok(())
             }
         },
-        Cmd::Sweep {
-            dataset,
-            out,
-            grid,
-            print_grid,
-            quiet,
-        } => {
+        Cmd::Sweep { dataset, out, grid, print_grid, quiet } => {
             if *print_grid {
                 print!("{}", tgs::sweep::DEFAULT_GRID.trim_start());
                 return Ok(());
             }
             let ctx = context(&cli)?;
             let out = out.as_ref().context("--out DIR is needed")?;
-            let a = tgs::sweep::SweepArgs {
-                dataset: dataset.clone(),
-                out: out.clone(),
-                grid: grid.clone(),
-                quiet: *quiet,
-            };
+            let a = tgs::sweep::SweepArgs { dataset: dataset.clone(), out: out.clone(), grid: grid.clone(), quiet: *quiet };
             let o = tgs::sweep::sweep(&ctx, &a)?;
             if o.interrupted {
-                eprintln!(
-                    "sweep interrupted after {} new run(s); run the same command again to resume",
-                    o.trained
-                );
+                eprintln!("sweep interrupted after {} new run(s); run the same command again to resume", o.trained);
                 std::process::exit(130);
             }
-            eprintln!(
-                "sweep: {} runs ({} trained now); {} and plots in {}",
-                o.rows.len(),
-                o.trained,
-                out.join("sweep.csv").display(),
-                out.display()
-            );
+            eprintln!("sweep: {} runs ({} trained now); {} and plots in {}", o.rows.len(), o.trained, out.join("sweep.csv").display(), out.display());
             let front = tgs::sweep::pareto(&o.rows, |r| r.psnr);
-            println!(
-                "{:48} {:>9} {:>8} {:>8} {:>8} {:>9}  pareto",
-                "run", "wall s", "PSNR", "SSIM", "LPIPS", "MAE °"
-            );
+            println!("{:48} {:>9} {:>8} {:>8} {:>8} {:>9}  pareto", "run", "wall s", "PSNR", "SSIM", "LPIPS", "MAE °");
             for (i, r) in o.rows.iter().enumerate() {
-                println!(
-                    "{:48} {:9.1} {:8.3} {:8.4} {:8.4} {:9.2}  {}",
-                    r.name,
-                    r.wall_s,
-                    r.psnr,
-                    r.ssim,
-                    r.lpips,
-                    r.normal_mae_deg,
-                    if front.contains(&i) { "*" } else { "" }
-                );
+                println!("{:48} {:9.1} {:8.3} {:8.4} {:8.4} {:9.2}  {}", r.name, r.wall_s, r.psnr, r.ssim, r.lpips, r.normal_mae_deg, if front.contains(&i) { "*" } else { "" });
             }
             Ok(())
         }
-        Cmd::Bench {
-            what: Bench::Lpips { size, reps, json },
-        } => tgs::bench::lpips(*size, *reps, *json),
+        Cmd::Bench { what: Bench::Lpips { size, reps, json } } => tgs::bench::lpips(*size, *reps, *json),
         Cmd::Bench { what } => {
             let ctx = context(&cli)?;
             match what {
-                Bench::Sort {
-                    n,
-                    bits,
-                    reps,
-                    radix_bits,
-                    wg,
-                    kpt,
-                    json,
-                } => {
+                Bench::Sort { n, bits, reps, radix_bits, wg, kpt, json } => {
                     let cfg = if radix_bits.is_some() || wg.is_some() || kpt.is_some() {
                         let d = SortConfig::for_device(ctx.caps());
                         Some(SortConfig {
@@ -503,13 +416,7 @@ fn run(cli: Cli) -> Result<()> {
                         anyhow::bail!("the GPU sort produced unsorted output");
                     }
                 }
-                Bench::Raster {
-                    n,
-                    width,
-                    height,
-                    reps,
-                    json,
-                } => {
+                Bench::Raster { n, width, height, reps, json } => {
                     let b = tgs::bench_raster::raster(&ctx, *n, *width, *height, *reps)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);
@@ -517,47 +424,16 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_raster::print_raster(&b);
                     }
                 }
-                Bench::Train {
-                    res,
-                    points,
-                    iterations,
-                    warmup,
-                    separate_adam,
-                    json,
-                } => {
-                    let b = tgs::bench_train::train(
-                        &ctx,
-                        *res,
-                        *points,
-                        *warmup,
-                        *iterations,
-                        !*separate_adam,
-                    )?;
+                Bench::Train { res, points, iterations, warmup, separate_adam, json } => {
+                    let b = tgs::bench_train::train(&ctx, *res, *points, *warmup, *iterations, !*separate_adam)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);
                     } else {
                         tgs::bench_train::print_train(&b);
                     }
                 }
-                Bench::Mlp {
-                    preset,
-                    depth,
-                    width,
-                    skip,
-                    levels,
-                    n,
-                    reps,
-                    gemm,
-                    json,
-                } => {
-                    let gemm = if gemm == "auto" {
-                        None
-                    } else {
-                        Some(
-                            tgs_pipelines::mlp::Gemm::parse(gemm)
-                                .context("--gemm (auto, tiled, rows)")?,
-                        )
-                    };
+                Bench::Mlp { preset, depth, width, skip, levels, n, reps, gemm, json } => {
+                    let gemm = if gemm == "auto" { None } else { Some(tgs_pipelines::mlp::Gemm::parse(gemm).context("--gemm (auto, tiled, rows)")?) };
                     let mut shape = tgs_pipelines::MlpShape::preset(preset)?;
                     shape.depth = depth.unwrap_or(shape.depth);
                     shape.width = width.unwrap_or(shape.width);
@@ -574,23 +450,8 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_mlp::print_mlp(&b);
                     }
                 }
-                Bench::Stages {
-                    scene,
-                    train,
-                    train_light_field,
-                    warmup,
-                    iterations,
-                    mlp,
-                    json,
-                } => {
-                    let spec = tgs::bench_stages::StagesSpec {
-                        scene: scene.clone(),
-                        train: *train,
-                        train_light_field: *train_light_field,
-                        warmup: *warmup,
-                        iterations: *iterations,
-                        mlp: mlp.clone(),
-                    };
+                Bench::Stages { scene, train, train_light_field, warmup, iterations, mlp, json } => {
+                    let spec = tgs::bench_stages::StagesSpec { scene: scene.clone(), train: *train, train_light_field: *train_light_field, warmup: *warmup, iterations: *iterations, mlp: mlp.clone() };
                     let b = tgs::bench_stages::stages(&ctx, &spec)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);

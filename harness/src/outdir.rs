@@ -16,30 +16,14 @@ pub const MANIFEST: &str = ".tgs-written";
 /// A directory that holds a dataset: the Blender layout's transforms or a
 /// COLMAP model directory.
 pub fn is_dataset_dir(dir: &Path) -> bool {
-    [
-        "transforms_train.json",
-        "transforms_test.json",
-        "transforms.json",
-    ]
-    .iter()
-    .any(|f| dir.join(f).is_file())
-        || [dir.join("sparse/0"), dir.join("sparse")].iter().any(|d| {
-            ["cameras.txt", "cameras.bin"]
-                .iter()
-                .any(|f| d.join(f).is_file())
-        })
+    ["transforms_train.json", "transforms_test.json", "transforms.json"].iter().any(|f| dir.join(f).is_file())
+        || [dir.join("sparse/0"), dir.join("sparse")].iter().any(|d| ["cameras.txt", "cameras.bin"].iter().any(|f| d.join(f).is_file()))
 }
 
 /// `path` made absolute with `.` and `..` resolved through the file system
 /// as far as it exists (symbolic links followed), the rest appended.
 pub fn resolved(path: &Path) -> Result<PathBuf> {
-    let abs = if path.is_absolute() {
-        path.to_path_buf()
-    } else {
-        std::env::current_dir()
-            .context("the current directory")?
-            .join(path)
-    };
+    let abs = if path.is_absolute() { path.to_path_buf() } else { std::env::current_dir().context("the current directory")?.join(path) };
     let mut base = abs.as_path();
     let mut rest: Vec<&std::ffi::OsStr> = Vec::new();
     loop {
@@ -63,12 +47,7 @@ pub fn resolved(path: &Path) -> Result<PathBuf> {
             }
             (Some(p), None) => {
                 // A trailing `..` or `.`.
-                rest.push(
-                    base.components()
-                        .next_back()
-                        .map(|c| c.as_os_str())
-                        .unwrap_or_default(),
-                );
+                rest.push(base.components().next_back().map(|c| c.as_os_str()).unwrap_or_default());
                 base = p;
             }
             _ => return Ok(abs),
@@ -106,25 +85,13 @@ impl OutDir {
     /// Open `dir` (created if missing) for outputs, after [`refuse_dataset`].
     pub fn open(dir: &Path, dataset: Option<&Path>) -> Result<OutDir> {
         refuse_dataset(dir, dataset)?;
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
         let written = match std::fs::read_to_string(dir.join(MANIFEST)) {
-            Ok(t) => t
-                .lines()
-                .filter(|l| !l.is_empty())
-                .map(String::from)
-                .collect(),
+            Ok(t) => t.lines().filter(|l| !l.is_empty()).map(String::from).collect(),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => BTreeSet::new(),
-            Err(e) => {
-                return Err(e)
-                    .with_context(|| format!("{}: cannot read", dir.join(MANIFEST).display()))
-            }
+            Err(e) => return Err(e).with_context(|| format!("{}: cannot read", dir.join(MANIFEST).display())),
         };
-        Ok(OutDir {
-            dir: dir.to_path_buf(),
-            written,
-            manifest: None,
-        })
+        Ok(OutDir { dir: dir.to_path_buf(), written, manifest: None })
     }
 
     pub fn path(&self) -> &Path {
@@ -147,33 +114,17 @@ impl OutDir {
     /// The path to write `name` (a file directly in the directory) to,
     /// recorded as tgs's before it is written; refused per [`Self::check`].
     pub fn file(&mut self, name: &str) -> Result<PathBuf> {
-        if name.is_empty()
-            || name.contains('/')
-            || name.contains('\\')
-            || name == MANIFEST
-            || name == "."
-            || name == ".."
-        {
-            bail!(
-                "'{name}' is not a plain file name for {}",
-                self.dir.display()
-            );
+        if name.is_empty() || name.contains('/') || name.contains('\\') || name == MANIFEST || name == "." || name == ".." {
+            bail!("'{name}' is not a plain file name for {}", self.dir.display());
         }
         self.check(name)?;
         if self.written.insert(name.to_string()) {
             if self.manifest.is_none() {
                 let m = self.dir.join(MANIFEST);
-                self.manifest = Some(
-                    std::fs::OpenOptions::new()
-                        .create(true)
-                        .append(true)
-                        .open(&m)
-                        .with_context(|| format!("{}: cannot write", m.display()))?,
-                );
+                self.manifest = Some(std::fs::OpenOptions::new().create(true).append(true).open(&m).with_context(|| format!("{}: cannot write", m.display()))?);
             }
             let f = self.manifest.as_mut().unwrap();
-            writeln!(f, "{name}")
-                .with_context(|| format!("{}: cannot write", self.dir.join(MANIFEST).display()))?;
+            writeln!(f, "{name}").with_context(|| format!("{}: cannot write", self.dir.join(MANIFEST).display()))?;
         }
         Ok(self.dir.join(name))
     }

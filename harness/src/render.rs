@@ -3,8 +3,8 @@
 //! cameras' mean height, looking at the point nearest all their optical axes).
 
 use crate::eval::{world_normals, write_outputs};
-use crate::outdir::OutDir;
 use crate::scene::trace::{cross, dot, sub};
+use crate::outdir::OutDir;
 use crate::train::run::open_run;
 use anyhow::{bail, Result};
 use std::path::Path;
@@ -12,20 +12,13 @@ use std::sync::Arc;
 use tgs_engine::Context;
 use tgs_pipelines::Camera;
 
+
 /// `frames` cameras orbiting the training cameras (intrinsics of the first).
 pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
-    let Some(c0) = train.first() else {
-        bail!("no training cameras to orbit")
-    };
+    let Some(c0) = train.first() else { bail!("no training cameras to orbit") };
     let centres: Vec<[f64; 3]> = train.iter().map(|c| c.centre().map(f64::from)).collect();
-    let axes: Vec<[f64; 3]> = train
-        .iter()
-        .map(|c| [0, 1, 2].map(|j| c.world_to_view[2][j] as f64))
-        .collect();
-    let ups: Vec<[f64; 3]> = train
-        .iter()
-        .map(|c| [0, 1, 2].map(|j| -c.world_to_view[1][j] as f64))
-        .collect();
+    let axes: Vec<[f64; 3]> = train.iter().map(|c| [0, 1, 2].map(|j| c.world_to_view[2][j] as f64)).collect();
+    let ups: Vec<[f64; 3]> = train.iter().map(|c| [0, 1, 2].map(|j| -c.world_to_view[1][j] as f64)).collect();
     // Point nearest all axes: sum (I - d d^T) x = sum (I - d d^T) c.
     let mut a = [[0f64; 3]; 3];
     let mut b = [0f64; 3];
@@ -38,11 +31,7 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
             }
         }
     }
-    let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
+    let det = |m: &[[f64; 3]; 3]| m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
     let d = det(&a);
     let n = centres.len() as f64;
     let mean = [0, 1, 2].map(|k| centres.iter().map(|c| c[k]).sum::<f64>() / n);
@@ -65,14 +54,10 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
     // Orbit in the plane perpendicular to `up` at the cameras' mean height.
     let rel: Vec<[f64; 3]> = centres.iter().map(|c| sub(*c, target)).collect();
     let height = rel.iter().map(|r| dot(*r, up)).sum::<f64>() / n;
-    let radius = rel
-        .iter()
-        .map(|r| {
-            let h = dot(*r, up);
-            (dot(*r, *r) - h * h).max(0.0).sqrt()
-        })
-        .sum::<f64>()
-        / n;
+    let radius = rel.iter().map(|r| {
+        let h = dot(*r, up);
+        (dot(*r, *r) - h * h).max(0.0).sqrt()
+    }).sum::<f64>() / n;
     let e0 = {
         let r = rel[0];
         let h = dot(r, up);
@@ -85,48 +70,21 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
     Ok((0..frames.max(1))
         .map(|i| {
             let t = i as f64 / frames.max(1) as f64 * std::f64::consts::TAU;
-            let eye = [0, 1, 2].map(|k| {
-                (target[k] + up[k] * height + radius * (t.cos() * e0[k] + t.sin() * e1[k])) as f32
-            });
-            Camera::look_at(
-                eye,
-                target.map(|v| v as f32),
-                up.map(|v| v as f32),
-                fov_y,
-                c0.width,
-                c0.height,
-            )
+            let eye = [0, 1, 2].map(|k| (target[k] + up[k] * height + radius * (t.cos() * e0[k] + t.sin() * e1[k])) as f32);
+            Camera::look_at(eye, target.map(|v| v as f32), up.map(|v| v as f32), fov_y, c0.width, c0.height)
         })
         .collect())
 }
 
 /// Render `which` (test, train or orbit) from `run` into `out`.
-pub fn render(
-    ctx: &Arc<Context>,
-    run: &Path,
-    which: &str,
-    frames: u32,
-    out: &Path,
-) -> Result<usize> {
+pub fn render(ctx: &Arc<Context>, run: &Path, which: &str, frames: u32, out: &Path) -> Result<usize> {
     let (mut tr, data) = open_run(ctx, run)?;
     let cams: Vec<(String, Camera)> = match which {
-        "test" => data
-            .test
-            .iter()
-            .map(|v| (v.name.clone(), v.camera))
-            .collect(),
-        "train" => data
-            .train
-            .iter()
-            .map(|v| (v.name.clone(), v.camera))
-            .collect(),
+        "test" => data.test.iter().map(|v| (v.name.clone(), v.camera)).collect(),
+        "train" => data.train.iter().map(|v| (v.name.clone(), v.camera)).collect(),
         "orbit" => {
             let train: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
-            orbit(&train, frames)?
-                .into_iter()
-                .enumerate()
-                .map(|(i, c)| (format!("orbit_{i:04}"), c))
-                .collect()
+            orbit(&train, frames)?.into_iter().enumerate().map(|(i, c)| (format!("orbit_{i:04}"), c)).collect()
         }
         _ => bail!("--cameras must be test, train or orbit, not '{which}'"),
     };

@@ -5,19 +5,11 @@
 use std::process::{Command, Output};
 
 fn tgs(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tgs"))
-        .args(args)
-        .env_remove("TGS_DEVICE")
-        .output()
-        .expect("running tgs")
+    Command::new(env!("CARGO_BIN_EXE_tgs")).args(args).env_remove("TGS_DEVICE").output().expect("running tgs")
 }
 
 fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
 /// Fails with a message holding every needle.
@@ -25,44 +17,18 @@ fn refused(args: &[&str], needles: &[&str]) {
     let o = tgs(args);
     let t = text(&o);
     assert!(!o.status.success(), "tgs {args:?} should fail:\n{t}");
-    assert!(
-        o.status.code().is_some(),
-        "tgs {args:?} ended by a signal (an abort?):\n{t}"
-    );
+    assert!(o.status.code().is_some(), "tgs {args:?} ended by a signal (an abort?):\n{t}");
     for n in needles {
         assert!(t.contains(n), "tgs {args:?}: '{n}' missing from:\n{t}");
     }
-    assert!(
-        !t.contains("panicked") && !t.contains("memory allocation"),
-        "tgs {args:?}:\n{t}"
-    );
+    assert!(!t.contains("panicked") && !t.contains("memory allocation"), "tgs {args:?}:\n{t}");
 }
 
 #[test]
 fn render_frames_are_bounded() {
     // Before: --frames 0 rendered one frame, 4294967295 aborted allocating 309 GB.
-    refused(
-        &[
-            "render",
-            "no-such-run",
-            "--cameras",
-            "orbit",
-            "--frames",
-            "0",
-        ],
-        &["--frames", "0"],
-    );
-    refused(
-        &[
-            "render",
-            "no-such-run",
-            "--cameras",
-            "orbit",
-            "--frames",
-            "4294967295",
-        ],
-        &["--frames"],
-    );
+    refused(&["render", "no-such-run", "--cameras", "orbit", "--frames", "0"], &["--frames", "0"]);
+    refused(&["render", "no-such-run", "--cameras", "orbit", "--frames", "4294967295"], &["--frames"]);
 }
 
 #[test]
@@ -79,14 +45,8 @@ fn devices_honours_device() {
     assert!(all.status.success(), "{}", text(&all));
     let list: serde_json::Value = serde_json::from_slice(&all.stdout).unwrap();
     let n = list.as_array().unwrap().len();
-    refused(
-        &["devices", "--device", "7"],
-        &["--device 7", "no such Vulkan device"],
-    );
-    refused(
-        &["devices", "--device", "no-such-gpu-name"],
-        &["no-such-gpu-name"],
-    );
+    refused(&["devices", "--device", "7"], &["--device 7", "no such Vulkan device"]);
+    refused(&["devices", "--device", "no-such-gpu-name"], &["no-such-gpu-name"]);
     if n > 0 {
         let one = tgs(&["devices", "--json", "--device", "0"]);
         let v: serde_json::Value = serde_json::from_slice(&one.stdout).unwrap();
@@ -98,17 +58,11 @@ fn devices_honours_device() {
 #[test]
 fn benches_refuse_sizes_that_cannot_run() {
     // Before: 19 GB of host memory and no output; an error after 45 s; -inf and NaN rates.
-    refused(
-        &["bench", "raster", "--n", "2147483648"],
-        &["--n 2147483648", "MiB"],
-    );
+    refused(&["bench", "raster", "--n", "2147483648"], &["--n 2147483648", "MiB"]);
     refused(&["bench", "sort", "--n", "4294967295"], &["--n 4294967295"]);
     refused(&["bench", "sort", "--reps", "0"], &["--reps"]);
     refused(&["bench", "scan", "--reps", "0"], &["--reps"]);
     refused(&["bench", "mlp", "--n", "0"], &["--n 0"]);
-    refused(
-        &["bench", "mlp", "--reps", "0", "--preset", "small"],
-        &["--reps"],
-    );
+    refused(&["bench", "mlp", "--reps", "0", "--preset", "small"], &["--reps"]);
     refused(&["bench", "raster", "--width", "0"], &["--width"]);
 }

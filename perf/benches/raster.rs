@@ -9,9 +9,7 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
     let ctx = tgs_perf::context()?;
-    let large = std::env::var("TGS_BENCH_RASTER_LARGE")
-        .map(|v| v != "0")
-        .unwrap_or(true);
+    let large = std::env::var("TGS_BENCH_RASTER_LARGE").map(|v| v != "0").unwrap_or(true);
     let reps = if ctx.caps().is_cpu() { 2 } else { 10 };
     let mut sizes = vec![(10_000u32, 128u32, 128u32), (100_000, 256, 256)];
     if large {

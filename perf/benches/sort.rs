@@ -11,10 +11,7 @@ fn main() -> anyhow::Result<()> {
     if !wanted("sort") && !wanted("scan") {
         return Ok(());
     }
-    let max_log2: u32 = std::env::var("TGS_BENCH_MAX_LOG2")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(22);
+    let max_log2: u32 = std::env::var("TGS_BENCH_MAX_LOG2").ok().and_then(|v| v.parse().ok()).unwrap_or(22);
     let ctx = tgs_perf::context()?;
     if wanted("sort") {
         let mut runs = Vec::new();

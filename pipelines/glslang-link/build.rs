@@ -26,9 +26,7 @@ fn main() {
     dirs.push(format!("/usr/lib/{arch}-linux-gnu"));
     dirs.push("/usr/lib".into());
     dirs.push("/usr/local/lib".into());
-    let dir = dirs
-        .iter()
-        .find(|d| Path::new(d).join("libglslang.a").exists());
+    let dir = dirs.iter().find(|d| Path::new(d).join("libglslang.a").exists());
     match dir {
         Some(d) => {
             println!("cargo:rustc-link-search=native={d}");

@@ -14,15 +14,9 @@ pub use scan::{Count, PrefixSum, ScanScratch};
 pub use sort::{RadixSort, SortConfig, SortScratch};
 pub use util::Iota;
 pub mod raster;
-pub use raster::{
-    Camera, Features, Frame, Gaussians, HostGaussians, Plane, RasterKernels, Rasterizer,
-    RecordAccess, GATE_SLOTS,
-};
+pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, RasterKernels, Rasterizer, RecordAccess, GATE_SLOTS};
 pub mod train;
-pub use train::{
-    Adam, AdamGroup, Densifier, DensifyParams, DensifyReport, HfLoss, HfStats, ImageLoss,
-    LossScratch, LossValues, LossWeights, TrainableSet,
-};
+pub use train::{Adam, AdamGroup, DensifyParams, DensifyReport, Densifier, HfLoss, HfStats, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};
 pub mod reflection;
 pub use reflection::{EnvMap, EnvProxy, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
 pub mod mlp;

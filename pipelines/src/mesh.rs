@@ -36,21 +36,9 @@ impl TsdfGrid {
     pub fn voxels(&self) -> Result<u32> {
         let n = self.dims.iter().map(|&d| d as u64).product::<u64>();
         if n == 0 {
-            bail!(
-                "a {}x{}x{} voxel grid is empty",
-                self.dims[0],
-                self.dims[1],
-                self.dims[2]
-            );
+            bail!("a {}x{}x{} voxel grid is empty", self.dims[0], self.dims[1], self.dims[2]);
         }
-        u32::try_from(n).map_err(|_| {
-            anyhow::anyhow!(
-                "a {}x{}x{} voxel grid has {n} voxels, more than 2^32",
-                self.dims[0],
-                self.dims[1],
-                self.dims[2]
-            )
-        })
+        u32::try_from(n).map_err(|_| anyhow::anyhow!("a {}x{}x{} voxel grid has {n} voxels, more than 2^32", self.dims[0], self.dims[1], self.dims[2]))
     }
 
     /// The grid's rules: positive finite voxel and truncation, a positive
@@ -60,10 +48,7 @@ impl TsdfGrid {
             bail!("voxel size {} must be positive and finite", self.voxel);
         }
         if !(self.trunc > 0.0 && self.trunc.is_finite()) {
-            bail!(
-                "truncation distance {} must be positive and finite",
-                self.trunc
-            );
+            bail!("truncation distance {} must be positive and finite", self.trunc);
         }
         if self.depth_max.is_nan() || self.depth_max <= 0.0 {
             bail!("maximum depth {} must be positive", self.depth_max);
@@ -100,11 +85,7 @@ impl TsdfVolume {
             dims: self.grid.dims,
             tsdf: self.tsdf.download()?,
             weight: self.weight.download()?,
-            rgb: [
-                self.rgb[0].download()?,
-                self.rgb[1].download()?,
-                self.rgb[2].download()?,
-            ],
+            rgb: [self.rgb[0].download()?, self.rgb[1].download()?, self.rgb[2].download()?],
         })
     }
 }
@@ -132,15 +113,7 @@ pub struct TsdfFusion {
 
 impl TsdfFusion {
     pub fn new(ctx: &Arc<Context>) -> Result<TsdfFusion> {
-        Ok(TsdfFusion {
-            ctx: ctx.clone(),
-            fuse: kernel(
-                ctx,
-                "mesh.tsdf_fuse",
-                shaders::MESH_TSDF_FUSE,
-                std::mem::size_of::<Push>() as u32,
-            )?,
-        })
+        Ok(TsdfFusion { ctx: ctx.clone(), fuse: kernel(ctx, "mesh.tsdf_fuse", shaders::MESH_TSDF_FUSE, std::mem::size_of::<Push>() as u32)? })
     }
 
     /// Allocate a zeroed volume for `grid`, refused (naming the sizes)
@@ -169,25 +142,13 @@ impl TsdfFusion {
             grid,
             tsdf: Buffer::new(&self.ctx, "mesh.tsdf", n)?,
             weight: Buffer::new(&self.ctx, "mesh.weight", n)?,
-            rgb: [
-                Buffer::new(&self.ctx, "mesh.red", n)?,
-                Buffer::new(&self.ctx, "mesh.green", n)?,
-                Buffer::new(&self.ctx, "mesh.blue", n)?,
-            ],
+            rgb: [Buffer::new(&self.ctx, "mesh.red", n)?, Buffer::new(&self.ctx, "mesh.green", n)?, Buffer::new(&self.ctx, "mesh.blue", n)?],
         })
     }
 
     /// Record the fusion of one view: `depth` and `weight` (one value per
     /// pixel, row-major) and `colour` (three planes) of `cam`'s image.
-    pub fn record(
-        &self,
-        rec: &mut Recorder,
-        vol: &TsdfVolume,
-        cam: &Camera,
-        depth: &Buffer<f32>,
-        weight: &Buffer<f32>,
-        colour: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn record(&self, rec: &mut Recorder, vol: &TsdfVolume, cam: &Camera, depth: &Buffer<f32>, weight: &Buffer<f32>, colour: &Buffer<f32>) -> Result<()> {
         let npix = cam.width as usize * cam.height as usize;
         if npix == 0 {
             bail!("TSDF fusion of an empty {}x{} view", cam.width, cam.height);
@@ -209,21 +170,7 @@ impl TsdfFusion {
             depth_max: g.depth_max,
             pad: 0,
         };
-        let b = [
-            depth.binding(),
-            weight.binding(),
-            colour.binding(),
-            vol.tsdf.binding(),
-            vol.weight.binding(),
-            vol.rgb[0].binding(),
-            vol.rgb[1].binding(),
-            vol.rgb[2].binding(),
-        ];
-        rec.dispatch(
-            &self.fuse,
-            &b,
-            bytemuck::bytes_of(&pc),
-            grid(&self.ctx, g.voxels()?),
-        )
+        let b = [depth.binding(), weight.binding(), colour.binding(), vol.tsdf.binding(), vol.weight.binding(), vol.rgb[0].binding(), vol.rgb[1].binding(), vol.rgb[2].binding()];
+        rec.dispatch(&self.fuse, &b, bytemuck::bytes_of(&pc), grid(&self.ctx, g.voxels()?))
     }
 }

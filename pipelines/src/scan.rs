@@ -106,17 +106,7 @@ impl PrefixSum {
     pub fn new(ctx: &Arc<Context>) -> Result<PrefixSum> {
         let s = spec(ctx);
         let k = |name, spirv, push_bytes, spec: &[(u32, u32)], full| {
-            Kernel::new(
-                ctx,
-                &KernelDesc {
-                    name,
-                    spirv,
-                    spec,
-                    push_bytes,
-                    subgroup_size: None,
-                    full_subgroups: full,
-                },
-            )
+            Kernel::new(ctx, &KernelDesc { name, spirv, spec, push_bytes, subgroup_size: None, full_subgroups: full })
         };
         Ok(PrefixSum {
             ctx: ctx.clone(),
@@ -131,16 +121,7 @@ impl PrefixSum {
     }
 
     /// Record the plan kernel: n from `count`, lengths and dispatch grids into scratch.
-    pub(crate) fn record_plan(
-        &self,
-        rec: &mut Recorder,
-        s: &ScanScratch,
-        count: &Count,
-        mode: u32,
-        part_size: u32,
-        radix: u32,
-        capacity: u32,
-    ) -> Result<()> {
+    pub(crate) fn record_plan(&self, rec: &mut Recorder, s: &ScanScratch, count: &Count, mode: u32, part_size: u32, radix: u32, capacity: u32) -> Result<()> {
         let (cbuf, index) = match count {
             Count::Host(n) => {
                 if *n > capacity {
@@ -151,34 +132,12 @@ impl PrefixSum {
             }
             Count::Gpu { buffer, index } => (buffer.clone(), *index),
         };
-        let push = PlanPush {
-            count_index: index,
-            mode,
-            part_size,
-            radix,
-            block: BLOCK,
-            levels: s.levels,
-            max_x: self.max_x(),
-            capacity,
-        };
-        rec.dispatch(
-            &self.plan,
-            &[cbuf, s.params.binding(), s.args.binding()],
-            bytemuck::bytes_of(&push),
-            [1, 1, 1],
-        )
+        let push = PlanPush { count_index: index, mode, part_size, radix, block: BLOCK, levels: s.levels, max_x: self.max_x(), capacity };
+        rec.dispatch(&self.plan, &[cbuf, s.params.binding(), s.args.binding()], bytemuck::bytes_of(&push), [1, 1, 1])
     }
 
     /// Record the scan levels from level `l` on (lengths already planned).
-    pub(crate) fn record_levels(
-        &self,
-        rec: &mut Recorder,
-        s: &ScanScratch,
-        l: u32,
-        src: BufferBinding,
-        dst: BufferBinding,
-        scopes: bool,
-    ) -> Result<()> {
+    pub(crate) fn record_levels(&self, rec: &mut Recorder, s: &ScanScratch, l: u32, src: BufferBinding, dst: BufferBinding, scopes: bool) -> Result<()> {
         let args = |slot: u32| {
             let mut b = s.args.binding();
             b.offset += 16 * slot as u64;
@@ -188,68 +147,30 @@ impl PrefixSum {
         let len_slot = 2 + l;
         let last = l + 1 == s.levels;
         if last {
-            let sc = if scopes {
-                rec.begin_scope("scan.block")
-            } else {
-                None
-            };
+            let sc = if scopes { rec.begin_scope("scan.block") } else { None };
             let push = [len_slot, 0u32];
-            rec.dispatch_indirect(
-                &self.block,
-                &[s.params.binding(), src, dst, s.params.binding()],
-                bytemuck::bytes_of(&push),
-                &args(1 + l),
-            )?;
+            rec.dispatch_indirect(&self.block, &[s.params.binding(), src, dst, s.params.binding()], bytemuck::bytes_of(&push), &args(1 + l))?;
             rec.end_scope(sc);
             return Ok(());
         }
         let sums = s.sums[l as usize].binding();
-        let sc = if scopes {
-            rec.begin_scope("scan.reduce")
-        } else {
-            None
-        };
-        rec.dispatch_indirect(
-            &self.reduce,
-            &[s.params.binding(), src.clone(), sums.clone()],
-            bytemuck::bytes_of(&len_slot),
-            &args(1 + l),
-        )?;
+        let sc = if scopes { rec.begin_scope("scan.reduce") } else { None };
+        rec.dispatch_indirect(&self.reduce, &[s.params.binding(), src.clone(), sums.clone()], bytemuck::bytes_of(&len_slot), &args(1 + l))?;
         rec.end_scope(sc);
         self.record_levels(rec, s, l + 1, sums.clone(), sums.clone(), scopes)?;
-        let sc = if scopes {
-            rec.begin_scope("scan.block")
-        } else {
-            None
-        };
+        let sc = if scopes { rec.begin_scope("scan.block") } else { None };
         let push = [len_slot, 1u32];
-        rec.dispatch_indirect(
-            &self.block,
-            &[s.params.binding(), src, dst, sums],
-            bytemuck::bytes_of(&push),
-            &args(1 + l),
-        )?;
+        rec.dispatch_indirect(&self.block, &[s.params.binding(), src, dst, sums], bytemuck::bytes_of(&push), &args(1 + l))?;
         rec.end_scope(sc);
         Ok(())
     }
 
     /// Record an exclusive prefix sum of `count` u32s from `src` into `dst`
     /// (which may be the same buffer). Both must hold `scratch.capacity()` elements.
-    pub fn record(
-        &self,
-        rec: &mut Recorder,
-        src: &Buffer<u32>,
-        dst: &Buffer<u32>,
-        count: &Count,
-        scratch: &ScanScratch,
-    ) -> Result<()> {
+    pub fn record(&self, rec: &mut Recorder, src: &Buffer<u32>, dst: &Buffer<u32>, count: &Count, scratch: &ScanScratch) -> Result<()> {
         let cap = scratch.capacity;
         if (src.len() as u64) < cap as u64 || (dst.len() as u64) < cap as u64 {
-            bail!(
-                "scan buffers ({} / {}) smaller than the scratch capacity {cap}",
-                src.len(),
-                dst.len()
-            );
+            bail!("scan buffers ({} / {}) smaller than the scratch capacity {cap}", src.len(), dst.len());
         }
         let sc = rec.begin_scope("scan.plan");
         self.record_plan(rec, scratch, count, 0, 1, 1, cap)?;

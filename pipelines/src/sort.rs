@@ -43,32 +43,16 @@ impl SortConfig {
         let budget = caps.max_shared_memory.min(28 * 1024);
         let min_sg = caps.min_subgroup_size.max(1);
         let candidates = [
-            SortConfig {
-                wg: 256,
-                kpt: 8,
-                radix_bits: 8,
-            },
-            SortConfig {
-                wg: 128,
-                kpt: 16,
-                radix_bits: 8,
-            },
-            SortConfig {
-                wg: 256,
-                kpt: 8,
-                radix_bits: 4,
-            },
+            SortConfig { wg: 256, kpt: 8, radix_bits: 8 },
+            SortConfig { wg: 128, kpt: 16, radix_bits: 8 },
+            SortConfig { wg: 256, kpt: 8, radix_bits: 4 },
         ];
         for c in candidates {
             if c.shared_bytes(min_sg) <= budget && c.wg % caps.max_subgroup_size.max(1) == 0 {
                 return c;
             }
         }
-        SortConfig {
-            wg: 256,
-            kpt: 8,
-            radix_bits: 4,
-        }
+        SortConfig { wg: 256, kpt: 8, radix_bits: 4 }
     }
 
     pub fn partition(&self) -> u32 {
@@ -80,39 +64,21 @@ impl SortConfig {
         if !(self.radix_bits == 4 || self.radix_bits == 8) {
             bail!("radix_bits must be 4 or 8, not {}", self.radix_bits);
         }
-        if self.wg < (1 << (self.radix_bits - 1))
-            || !self.wg.is_power_of_two()
-            || self.wg > caps.max_workgroup_invocations
-        {
-            bail!(
-                "sort workgroup {} must be a power of two >= {} and <= {}",
-                self.wg,
-                1 << (self.radix_bits - 1),
-                caps.max_workgroup_invocations
-            );
+        if self.wg < (1 << (self.radix_bits - 1)) || !self.wg.is_power_of_two() || self.wg > caps.max_workgroup_invocations {
+            bail!("sort workgroup {} must be a power of two >= {} and <= {}", self.wg, 1 << (self.radix_bits - 1), caps.max_workgroup_invocations);
         }
         if self.wg * self.kpt > 65535 {
-            bail!(
-                "sort partition wg*kpt = {} must be below 65,536 (16-bit counters)",
-                self.wg * self.kpt
-            );
+            bail!("sort partition wg*kpt = {} must be below 65,536 (16-bit counters)", self.wg * self.kpt);
         }
         if self.wg % caps.max_subgroup_size.max(1) != 0 {
-            bail!(
-                "sort workgroup {} is not a multiple of the subgroup size {}",
-                self.wg,
-                caps.max_subgroup_size
-            );
+            bail!("sort workgroup {} is not a multiple of the subgroup size {}", self.wg, caps.max_subgroup_size);
         }
         if self.kpt == 0 || self.kpt > 32 {
             bail!("keys per invocation must be 1..=32, not {}", self.kpt);
         }
         let need = self.shared_bytes(min_sg);
         if need > caps.max_shared_memory {
-            bail!(
-                "sort config {self:?} needs {need} bytes of shared memory; device has {}",
-                caps.max_shared_memory
-            );
+            bail!("sort config {self:?} needs {need} bytes of shared memory; device has {}", caps.max_shared_memory);
         }
         Ok(())
     }
@@ -159,24 +125,9 @@ impl RadixSort {
 
     pub fn with_config(ctx: &Arc<Context>, cfg: SortConfig) -> Result<RadixSort> {
         cfg.check(ctx.caps())?;
-        let spec = [
-            (0, cfg.wg),
-            (1, ctx.caps().min_subgroup_size.max(1)),
-            (2, cfg.kpt),
-            (3, cfg.radix_bits),
-        ];
+        let spec = [(0, cfg.wg), (1, ctx.caps().min_subgroup_size.max(1)), (2, cfg.kpt), (3, cfg.radix_bits)];
         let k = |name, spirv| {
-            Kernel::new(
-                ctx,
-                &KernelDesc {
-                    name,
-                    spirv,
-                    spec: &spec,
-                    push_bytes: 8,
-                    subgroup_size: None,
-                    full_subgroups: true,
-                },
-            )
+            Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes: 8, subgroup_size: None, full_subgroups: true })
         };
         Ok(RadixSort {
             ctx: ctx.clone(),
@@ -200,10 +151,7 @@ impl RadixSort {
     /// Scratch for up to `capacity` keys.
     pub fn scratch(&self, capacity: u32) -> Result<SortScratch> {
         if capacity as u64 > self.max_keys() {
-            bail!(
-                "sort capacity {capacity} exceeds this device's maximum of {} keys",
-                self.max_keys()
-            );
+            bail!("sort capacity {capacity} exceeds this device's maximum of {} keys", self.max_keys());
         }
         let parts = capacity.div_ceil(self.cfg.partition()).max(1);
         let radix = 1u32 << self.cfg.radix_bits;
@@ -220,22 +168,10 @@ impl RadixSort {
     /// Record a stable sort of the first `count` (key, value) pairs by the
     /// low `bits` bits of the key, in place. Keys' higher bits are ignored
     /// for ordering but kept. Both buffers must hold `scratch.capacity()`.
-    pub fn record(
-        &self,
-        rec: &mut Recorder,
-        keys: &Buffer<u32>,
-        vals: &Buffer<u32>,
-        count: &Count,
-        bits: u32,
-        scratch: &SortScratch,
-    ) -> Result<()> {
+    pub fn record(&self, rec: &mut Recorder, keys: &Buffer<u32>, vals: &Buffer<u32>, count: &Count, bits: u32, scratch: &SortScratch) -> Result<()> {
         let cap = scratch.capacity;
         if (keys.len() as u64) < cap as u64 || (vals.len() as u64) < cap as u64 {
-            bail!(
-                "sort buffers ({} keys / {} values) smaller than the scratch capacity {cap}",
-                keys.len(),
-                vals.len()
-            );
+            bail!("sort buffers ({} keys / {} values) smaller than the scratch capacity {cap}", keys.len(), vals.len());
         }
         if bits > 32 {
             bail!("bits must be <= 32, not {bits}");
@@ -245,15 +181,7 @@ impl RadixSort {
         }
         let radix = 1u32 << self.cfg.radix_bits;
         let sc = rec.begin_scope("sort.plan");
-        self.scan.record_plan(
-            rec,
-            &scratch.spine,
-            count,
-            1,
-            self.cfg.partition(),
-            radix,
-            cap,
-        )?;
+        self.scan.record_plan(rec, &scratch.spine, count, 1, self.cfg.partition(), radix, cap)?;
         // (A GPU count over `cap` is clamped; `SortScratch::overflow` reports it.)
         rec.end_scope(sc);
         let params = scratch.spine.params.binding();
@@ -270,36 +198,17 @@ impl RadixSort {
             let (ko, vo) = bufs[((pass + 1) % 2) as usize];
 
             let sc = rec.begin_scope("sort.upsweep");
-            rec.dispatch_indirect(
-                &self.upsweep,
-                &[params.clone(), ki.binding(), scratch.hist.binding()],
-                bytemuck::bytes_of(&push),
-                &parts_args,
-            )?;
+            rec.dispatch_indirect(&self.upsweep, &[params.clone(), ki.binding(), scratch.hist.binding()], bytemuck::bytes_of(&push), &parts_args)?;
             rec.end_scope(sc);
 
             let sc = rec.begin_scope("sort.spine");
-            self.scan.record_levels(
-                rec,
-                &scratch.spine,
-                0,
-                scratch.hist.binding(),
-                scratch.hist.binding(),
-                false,
-            )?;
+            self.scan.record_levels(rec, &scratch.spine, 0, scratch.hist.binding(), scratch.hist.binding(), false)?;
             rec.end_scope(sc);
 
             let sc = rec.begin_scope("sort.downsweep");
             rec.dispatch_indirect(
                 &self.downsweep,
-                &[
-                    params.clone(),
-                    ki.binding(),
-                    vi.binding(),
-                    scratch.hist.binding(),
-                    ko.binding(),
-                    vo.binding(),
-                ],
+                &[params.clone(), ki.binding(), vi.binding(), scratch.hist.binding(), ko.binding(), vo.binding()],
                 bytemuck::bytes_of(&push),
                 &parts_args,
             )?;
@@ -310,13 +219,7 @@ impl RadixSort {
             // Only the first n (known on the GPU) move: the caller's data past n stays.
             rec.dispatch_indirect(
                 &self.copy,
-                &[
-                    params.clone(),
-                    scratch.keys.binding(),
-                    scratch.vals.binding(),
-                    keys.binding(),
-                    vals.binding(),
-                ],
+                &[params.clone(), scratch.keys.binding(), scratch.vals.binding(), keys.binding(), vals.binding()],
                 bytemuck::bytes_of(&[0u32, 0u32]),
                 &parts_args,
             )?;

@@ -26,12 +26,7 @@ impl Host {
         unsafe {
             let entry = ash::Entry::load().unwrap();
             let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
-            let instance = entry
-                .create_instance(
-                    &vk::InstanceCreateInfo::default().application_info(&app),
-                    None,
-                )
-                .unwrap();
+            let instance = entry.create_instance(&vk::InstanceCreateInfo::default().application_info(&app), None).unwrap();
             let pds = instance.enumerate_physical_devices().unwrap();
             let pd = pds[0];
             let qf = instance
@@ -40,25 +35,10 @@ impl Host {
                 .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE))
                 .unwrap() as u32;
             let prio = [1.0f32];
-            let qi = [vk::DeviceQueueCreateInfo::default()
-                .queue_family_index(qf)
-                .queue_priorities(&prio)];
-            let device = instance
-                .create_device(
-                    pd,
-                    &vk::DeviceCreateInfo::default().queue_create_infos(&qi),
-                    None,
-                )
-                .unwrap();
+            let qi = [vk::DeviceQueueCreateInfo::default().queue_family_index(qf).queue_priorities(&prio)];
+            let device = instance.create_device(pd, &vk::DeviceCreateInfo::default().queue_create_infos(&qi), None).unwrap();
             let queue = device.get_device_queue(qf, 0);
-            Host {
-                entry,
-                instance,
-                pd,
-                device,
-                qf,
-                queue,
-            }
+            Host { entry, instance, pd, device, qf, queue }
         }
     }
 
@@ -83,32 +63,13 @@ impl Host {
     pub fn submit(&self, f: impl FnOnce(vk::CommandBuffer)) {
         unsafe {
             let d = &self.device;
-            let pool = d
-                .create_command_pool(
-                    &vk::CommandPoolCreateInfo::default().queue_family_index(self.qf),
-                    None,
-                )
-                .unwrap();
-            let cmd = d
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .command_buffer_count(1),
-                )
-                .unwrap()[0];
-            d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())
-                .unwrap();
+            let pool = d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(self.qf), None).unwrap();
+            let cmd = d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1)).unwrap()[0];
+            d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).unwrap();
             f(cmd);
             d.end_command_buffer(cmd).unwrap();
-            let fence = d
-                .create_fence(&vk::FenceCreateInfo::default(), None)
-                .unwrap();
-            d.queue_submit(
-                self.queue,
-                &[vk::SubmitInfo::default().command_buffers(&[cmd])],
-                fence,
-            )
-            .unwrap();
+            let fence = d.create_fence(&vk::FenceCreateInfo::default(), None).unwrap();
+            d.queue_submit(self.queue, &[vk::SubmitInfo::default().command_buffers(&[cmd])], fence).unwrap();
             d.wait_for_fences(&[fence], true, u64::MAX).unwrap();
             d.destroy_fence(fence, None);
             d.destroy_command_pool(pool, None);
@@ -119,47 +80,20 @@ impl Host {
     pub fn buffer(&self, bytes: u64) -> HostBuffer {
         unsafe {
             let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
-            let buffer = self
-                .device
-                .create_buffer(
-                    &vk::BufferCreateInfo::default().size(bytes).usage(usage),
-                    None,
-                )
-                .unwrap();
+            let buffer = self.device.create_buffer(&vk::BufferCreateInfo::default().size(bytes).usage(usage), None).unwrap();
             let req = self.device.get_buffer_memory_requirements(buffer);
             let props = self.instance.get_physical_device_memory_properties(self.pd);
-            let want =
-                vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
-            let ty = (0..props.memory_type_count)
-                .find(|&i| {
-                    req.memory_type_bits & (1 << i) != 0
-                        && props.memory_types[i as usize].property_flags.contains(want)
-                })
-                .unwrap();
-            let memory = self
-                .device
-                .allocate_memory(
-                    &vk::MemoryAllocateInfo::default()
-                        .allocation_size(req.size)
-                        .memory_type_index(ty),
-                    None,
-                )
-                .unwrap();
+            let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+            let ty = (0..props.memory_type_count).find(|&i| req.memory_type_bits & (1 << i) != 0 && props.memory_types[i as usize].property_flags.contains(want)).unwrap();
+            let memory = self.device.allocate_memory(&vk::MemoryAllocateInfo::default().allocation_size(req.size).memory_type_index(ty), None).unwrap();
             self.device.bind_buffer_memory(buffer, memory, 0).unwrap();
-            HostBuffer {
-                buffer,
-                memory,
-                bytes,
-            }
+            HostBuffer { buffer, memory, bytes }
         }
     }
 
     pub fn read(&self, b: &HostBuffer) -> Vec<f32> {
         unsafe {
-            let p = self
-                .device
-                .map_memory(b.memory, 0, b.bytes, vk::MemoryMapFlags::empty())
-                .unwrap() as *const f32;
+            let p = self.device.map_memory(b.memory, 0, b.bytes, vk::MemoryMapFlags::empty()).unwrap() as *const f32;
             let v = std::slice::from_raw_parts(p, (b.bytes / 4) as usize).to_vec();
             self.device.unmap_memory(b.memory);
             v

@@ -1,13 +1,13 @@
 //! Helpers shared by the integration tests.
 
 pub mod host;
-pub mod lightfield_ref;
-pub mod loss_ref;
-pub mod lpips_ref;
-pub mod mlp_ref;
 pub mod raster_ref;
 pub mod raster_util;
+pub mod loss_ref;
 pub mod reflection_ref;
+pub mod mlp_ref;
+pub mod lightfield_ref;
+pub mod lpips_ref;
 pub mod tsdf_ref;
 
 use std::sync::Arc;
@@ -16,10 +16,7 @@ use tgs_engine::{Context, ContextOptions, DeviceSelector};
 /// A context on the default device (or `TGS_DEVICE`) with validation layers
 /// enabled when installed and `Buffer::uninit` memory poisoned (all bits set). Use [`check_validation`] at the end of a test.
 pub fn ctx() -> Arc<Context> {
-    let opts = ContextOptions {
-        device: DeviceSelector::from_arg_or_env(None),
-        validation: Some(validation_wanted()),
-    };
+    let opts = ContextOptions { device: DeviceSelector::from_arg_or_env(None), validation: Some(validation_wanted()) };
     match Context::new(&opts) {
         Ok(c) => {
             // A kernel that reads memory nobody wrote then fails every run,
@@ -33,20 +30,13 @@ pub fn ctx() -> Arc<Context> {
 
 /// Validation is on unless `TGS_VALIDATION=0`.
 pub fn validation_wanted() -> bool {
-    std::env::var("TGS_VALIDATION")
-        .map(|v| v != "0")
-        .unwrap_or(true)
+    std::env::var("TGS_VALIDATION").map(|v| v != "0").unwrap_or(true)
 }
 
 /// Fail the test if the validation layer reported any error.
 pub fn check_validation(ctx: &Context) {
     let errs = ctx.validation_errors();
-    assert!(
-        errs.is_empty(),
-        "{} Vulkan validation error(s):\n{}",
-        errs.len(),
-        errs.join("\n")
-    );
+    assert!(errs.is_empty(), "{} Vulkan validation error(s):\n{}", errs.len(), errs.join("\n"));
 }
 
 /// Small deterministic PRNG (SplitMix64) so failures can be reproduced from the seed.
@@ -70,15 +60,9 @@ impl Rng {
 
 /// A seed from `TGS_SEED` or the clock; printed so a failure can be re-run.
 pub fn seed(test: &str) -> u64 {
-    let s = std::env::var("TGS_SEED")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_nanos() as u64)
-                .unwrap_or(1)
-        });
+    let s = std::env::var("TGS_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or_else(|| {
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(1)
+    });
     eprintln!("{test}: seed {s} (re-run with TGS_SEED={s})");
     s
 }

@@ -58,14 +58,7 @@ pub fn sample(cam: &Cam, x: f64, y: f64, p: &ReflPixel, centre: V3, half: V3) ->
         d.map(|v| -v)
     };
     let w = norm(cam.to_world_dir(r));
-    [
-        (xw[0] - centre[0]) / half[0],
-        (xw[1] - centre[1]) / half[1],
-        (xw[2] - centre[2]) / half[2],
-        w[0],
-        w[1],
-        w[2],
-    ]
+    [(xw[0] - centre[0]) / half[0], (xw[1] - centre[1]) / half[1], (xw[2] - centre[2]) / half[2], w[0], w[1], w[2]]
 }
 
 /// Schlick's m = (1 - clamp(n.v, 0, 1))^5 at a pixel (0 with Schlick off).
@@ -75,11 +68,7 @@ pub fn schlick_m(cam: &Cam, x: f64, y: f64, p: &ReflPixel, schlick: bool) -> f64
     }
     let v = norm(cam.ray(x, y)).map(|c| -c);
     let len = dot(p.normal, p.normal).sqrt();
-    let c = if len > 1e-12 {
-        dot(p.normal.map(|a| a / len), v)
-    } else {
-        1.0
-    };
+    let c = if len > 1e-12 { dot(p.normal.map(|a| a / len), v) } else { 1.0 };
     (1.0 - c.clamp(0.0, 1.0)).powi(5)
 }
 
@@ -93,13 +82,7 @@ pub fn composite_at(p: &ReflPixel, m: f64, scat: V3, phi: Option<V3>) -> V3 {
 }
 
 /// Gradients of g . I where Phi was not evaluated: only dS = g.
-pub fn composite_grad_at(
-    p: &ReflPixel,
-    m: f64,
-    scat: V3,
-    phi: Option<V3>,
-    g: V3,
-) -> (V3, V3, f64, V3) {
+pub fn composite_grad_at(p: &ReflPixel, m: f64, scat: V3, phi: Option<V3>, g: V3) -> (V3, V3, f64, V3) {
     match phi {
         Some(phi) => composite_grad(p, m, scat, phi, g),
         None => ([0.0; 3], [0.0; 3], 0.0, g),

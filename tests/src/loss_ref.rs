@@ -21,9 +21,7 @@ pub struct LossInput {
 const MIN_ALPHA: f64 = 1e-6;
 
 fn blur(src: &[f64], w: usize, h: usize) -> Vec<f64> {
-    let raw: Vec<f64> = (-5i64..=5)
-        .map(|t| (-((t * t) as f64) / (2.0 * 1.5 * 1.5)).exp())
-        .collect();
+    let raw: Vec<f64> = (-5i64..=5).map(|t| (-((t * t) as f64) / (2.0 * 1.5 * 1.5)).exp()).collect();
     let s: f64 = raw.iter().sum();
     let g: Vec<f64> = raw.iter().map(|v| v / s).collect();
     let mut tmp = vec![0.0; w * h];
@@ -60,21 +58,10 @@ pub fn ssim(x: &[f64], y: &[f64], w: usize, h: usize, c: usize) -> f64 {
         let a = &x[ch * n..(ch + 1) * n];
         let b = &y[ch * n..(ch + 1) * n];
         let p = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(s, t)| s * t).collect::<Vec<_>>();
-        let (mx, my, exx, eyy, exy) = (
-            blur(a, w, h),
-            blur(b, w, h),
-            blur(&p(a, a), w, h),
-            blur(&p(b, b), w, h),
-            blur(&p(a, b), w, h),
-        );
+        let (mx, my, exx, eyy, exy) = (blur(a, w, h), blur(b, w, h), blur(&p(a, a), w, h), blur(&p(b, b), w, h), blur(&p(a, b), w, h));
         for i in 0..n {
-            let (sx, sy, sxy) = (
-                exx[i] - mx[i] * mx[i],
-                eyy[i] - my[i] * my[i],
-                exy[i] - mx[i] * my[i],
-            );
-            total += ((2.0 * mx[i] * my[i] + c1) * (2.0 * sxy + c2))
-                / ((mx[i] * mx[i] + my[i] * my[i] + c1) * (sx + sy + c2));
+            let (sx, sy, sxy) = (exx[i] - mx[i] * mx[i], eyy[i] - my[i] * my[i], exy[i] - mx[i] * my[i]);
+            total += ((2.0 * mx[i] * my[i] + c1) * (2.0 * sxy + c2)) / ((mx[i] * mx[i] + my[i] * my[i] + c1) * (sx + sy + c2));
         }
     }
     total / (n * c) as f64
@@ -88,39 +75,21 @@ pub fn normal_terms(inp: &LossInput, planes: &[f64], alpha_det: &[f64]) -> Vec<f
     let (alpha, depth) = (plane(c), plane(c + 1));
     let point = |x: usize, y: usize| -> [f64; 3] {
         let i = y * w + x;
-        let z = if alpha[i] > MIN_ALPHA {
-            depth[i] / alpha[i]
-        } else {
-            0.0
-        };
-        [
-            z * (x as f64 - inp.cx) / inp.fx,
-            z * (y as f64 - inp.cy) / inp.fy,
-            z,
-        ]
+        let z = if alpha[i] > MIN_ALPHA { depth[i] / alpha[i] } else { 0.0 };
+        [z * (x as f64 - inp.cx) / inp.fx, z * (y as f64 - inp.cy) / inp.fy, z]
     };
     let mut out = vec![1.0; n];
     for y in 1..h.saturating_sub(1) {
         for x in 1..w.saturating_sub(1) {
             let i = y * w + x;
-            let (a, b, p, q) = (
-                point(x, y + 1),
-                point(x, y - 1),
-                point(x + 1, y),
-                point(x - 1, y),
-            );
+            let (a, b, p, q) = (point(x, y + 1), point(x, y - 1), point(x + 1, y), point(x - 1, y));
             let dy = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
             let dx = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-            let cr = [
-                dy[1] * dx[2] - dy[2] * dx[1],
-                dy[2] * dx[0] - dy[0] * dx[2],
-                dy[0] * dx[1] - dy[1] * dx[0],
-            ];
+            let cr = [dy[1] * dx[2] - dy[2] * dx[1], dy[2] * dx[0] - dy[0] * dx[2], dy[0] * dx[1] - dy[1] * dx[0]];
             let len = (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt();
             if len > 1e-20 && alpha_det[i] > 0.0 {
                 let nrm = [plane(c + 2)[i], plane(c + 3)[i], plane(c + 4)[i]];
-                out[i] =
-                    1.0 - alpha_det[i] * (nrm[0] * cr[0] + nrm[1] * cr[1] + nrm[2] * cr[2]) / len;
+                out[i] = 1.0 - alpha_det[i] * (nrm[0] * cr[0] + nrm[1] * cr[1] + nrm[2] * cr[2]) / len;
             }
         }
     }
@@ -132,18 +101,8 @@ pub fn loss(inp: &LossInput, planes: &[f64], alpha_det: &[f64]) -> (f64, [f64; 4
     let (w, h, c) = (inp.width, inp.height, inp.channels);
     let n = w * h;
     let col = &planes[..c * n];
-    let l1 = col
-        .iter()
-        .zip(&inp.target)
-        .map(|(a, b)| (a - b).abs())
-        .sum::<f64>()
-        / (n * c) as f64;
-    let mse = col
-        .iter()
-        .zip(&inp.target)
-        .map(|(a, b)| (a - b) * (a - b))
-        .sum::<f64>()
-        / (n * c) as f64;
+    let l1 = col.iter().zip(&inp.target).map(|(a, b)| (a - b).abs()).sum::<f64>() / (n * c) as f64;
+    let mse = col.iter().zip(&inp.target).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / (n * c) as f64;
     let s = ssim(col, &inp.target, w, h, c);
     let nt = normal_terms(inp, planes, alpha_det).iter().sum::<f64>() / n as f64;
     let dist = planes[(c + 6) * n..(c + 7) * n].iter().sum::<f64>() / n as f64;
@@ -157,11 +116,7 @@ pub fn loss(inp: &LossInput, planes: &[f64], alpha_det: &[f64]) -> (f64, [f64; 4
 /// rank floor(pct (n - 1)); returns (3 tau, count of e >= tau, their mean
 /// e, d mean / d x).
 pub fn hf_loss(x: &[f32], y: &[f32], n: usize, pct: f64) -> (f32, usize, f64, Vec<f64>) {
-    let e: Vec<f32> = (0..n)
-        .map(|i| {
-            (x[i] - y[i]).abs() + (x[n + i] - y[n + i]).abs() + (x[2 * n + i] - y[2 * n + i]).abs()
-        })
-        .collect();
+    let e: Vec<f32> = (0..n).map(|i| (x[i] - y[i]).abs() + (x[n + i] - y[n + i]).abs() + (x[2 * n + i] - y[2 * n + i]).abs()).collect();
     let mut sorted = e.clone();
     sorted.sort_by(f32::total_cmp);
     let tau = sorted[(pct * (n - 1) as f64).floor() as usize];

@@ -28,17 +28,13 @@ fn conv(x: &Map, wt: &[f32], bias: &[f32], k: usize, stride: usize, pad: usize, 
                 let mut s = bias[o] as f64;
                 for ky in 0..k {
                     for kx in 0..k {
-                        let (iy, ix) = (
-                            (oy * stride + ky) as i64 - pad as i64,
-                            (ox * stride + kx) as i64 - pad as i64,
-                        );
+                        let (iy, ix) = ((oy * stride + ky) as i64 - pad as i64, (ox * stride + kx) as i64 - pad as i64);
                         if iy < 0 || ix < 0 || iy >= x.h as i64 || ix >= x.w as i64 {
                             continue;
                         }
                         for ci in 0..x.c {
                             // HWIO: kernel[ky][kx][ci][o]
-                            s += x.at(ci, iy as usize, ix as usize)
-                                * wt[((ky * k + kx) * x.c + ci) * co + o] as f64;
+                            s += x.at(ci, iy as usize, ix as usize) * wt[((ky * k + kx) * x.c + ci) * co + o] as f64;
                         }
                     }
                 }
@@ -55,9 +51,7 @@ fn pool(x: &Map) -> Map {
     for c in 0..x.c {
         for oy in 0..h {
             for ox in 0..w {
-                let m = (0..9)
-                    .map(|i| x.at(c, 2 * oy + i / 3, 2 * ox + i % 3))
-                    .fold(f64::NEG_INFINITY, f64::max);
+                let m = (0..9).map(|i| x.at(c, 2 * oy + i / 3, 2 * ox + i % 3)).fold(f64::NEG_INFINITY, f64::max);
                 v.push(m);
             }
         }
@@ -66,12 +60,7 @@ fn pool(x: &Map) -> Map {
 }
 
 fn unit(x: &Map) -> Map {
-    let mut out = Map {
-        c: x.c,
-        h: x.h,
-        w: x.w,
-        v: x.v.clone(),
-    };
+    let mut out = Map { c: x.c, h: x.h, w: x.w, v: x.v.clone() };
     for y in 0..x.h {
         for xx in 0..x.w {
             let n = (0..x.c).map(|c| x.at(c, y, xx).powi(2)).sum::<f64>().sqrt() + 1e-10;
@@ -87,14 +76,7 @@ fn features(net: &Lpips, rgb: &[f32], w: usize, h: usize) -> Vec<Map> {
     let shift = [-0.030, -0.088, -0.188];
     let scale = [0.458, 0.448, 0.450];
     let n = w * h;
-    let mut x = Map {
-        c: 3,
-        h,
-        w,
-        v: (0..3 * n)
-            .map(|i| ((2.0 * rgb[i] as f64 - 1.0) - shift[i / n]) / scale[i / n])
-            .collect(),
-    };
+    let mut x = Map { c: 3, h, w, v: (0..3 * n).map(|i| ((2.0 * rgb[i] as f64 - 1.0) - shift[i / n]) / scale[i / n]).collect() };
     let mut out = Vec::new();
     for (l, &(k, s, p, _, co)) in CONVS.iter().enumerate() {
         if l == 1 || l == 2 {

@@ -46,9 +46,7 @@ fn layer(shape: &MlpShape, params: &[f64], l: u32, x: &[f64]) -> Vec<f64> {
 /// sides of the kink, and the gradients then differ by a whole step.
 pub fn kink_margin(shape: &MlpShape, params: &[f64], sample: &[f64; 6]) -> f64 {
     let t = forward(shape, params, sample);
-    (0..shape.depth)
-        .flat_map(|l| pre_activations(shape, params, l, &t.inputs[l as usize]))
-        .fold(f64::INFINITY, |m, z| m.min(z.abs()))
+    (0..shape.depth).flat_map(|l| pre_activations(shape, params, l, &t.inputs[l as usize])).fold(f64::INFINITY, |m, z| m.min(z.abs()))
 }
 
 /// Phi(sample) with its trace; sample = (x normalized, w).
@@ -60,9 +58,7 @@ pub fn forward(shape: &MlpShape, params: &[f64], sample: &[f64; 6]) -> Trace {
     for l in 0..shape.layers() {
         let x = match l {
             0 => gx.clone(),
-            l if l == shape.skip => {
-                [outputs[l as usize - 1].clone(), gx.clone(), gw.clone()].concat()
-            }
+            l if l == shape.skip => [outputs[l as usize - 1].clone(), gx.clone(), gw.clone()].concat(),
             _ => outputs[l as usize - 1].clone(),
         };
         outputs.push(layer(shape, params, l, &x));
@@ -72,12 +68,7 @@ pub fn forward(shape: &MlpShape, params: &[f64], sample: &[f64; 6]) -> Trace {
 }
 
 /// d(sum_s d_out[s] . Phi(sample_s)) / d params.
-pub fn backward(
-    shape: &MlpShape,
-    params: &[f64],
-    samples: &[[f64; 6]],
-    d_out: &[[f64; 3]],
-) -> Vec<f64> {
+pub fn backward(shape: &MlpShape, params: &[f64], samples: &[[f64; 6]], d_out: &[[f64; 3]]) -> Vec<f64> {
     let mut g = vec![0.0; shape.params() as usize];
     for (s, d) in samples.iter().zip(d_out) {
         let t = forward(shape, params, s);
@@ -86,17 +77,7 @@ pub fn backward(
             let (k, j) = (shape.fan_in(l) as usize, shape.fan_out(l) as usize);
             let y = &t.outputs[l as usize];
             let x = &t.inputs[l as usize];
-            let dz: Vec<f64> = (0..j)
-                .map(|r| {
-                    if l == shape.depth {
-                        dy[r] * y[r] * (1.0 - y[r])
-                    } else if y[r] > 0.0 {
-                        dy[r]
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
+            let dz: Vec<f64> = (0..j).map(|r| if l == shape.depth { dy[r] * y[r] * (1.0 - y[r]) } else if y[r] > 0.0 { dy[r] } else { 0.0 }).collect();
             let off = shape.offset(l) as usize;
             for r in 0..j {
                 for c in 0..k {
@@ -106,9 +87,7 @@ pub fn backward(
             }
             if l > 0 {
                 let width = shape.width as usize;
-                dy = (0..width)
-                    .map(|c| (0..j).map(|r| dz[r] * params[off + r * (k + 1) + c]).sum())
-                    .collect();
+                dy = (0..width).map(|c| (0..j).map(|r| dz[r] * params[off + r * (k + 1) + c]).sum()).collect();
             }
         }
     }

@@ -68,11 +68,7 @@ fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 fn scale(a: V3, s: f64) -> V3 {
     [a[0] * s, a[1] * s, a[2] * s]
@@ -86,22 +82,8 @@ pub fn sh_basis(d: V3) -> [f64; 16] {
     let (x, y, z) = (d[0], d[1], d[2]);
     let (xx, yy, zz) = (x * x, y * y, z * z);
     let c1 = 0.4886025119029199;
-    let c2 = [
-        1.0925484305920792,
-        -1.0925484305920792,
-        0.31539156525252005,
-        -1.0925484305920792,
-        0.5462742152960396,
-    ];
-    let c3 = [
-        -0.5900435899266435,
-        2.890611442640554,
-        -0.4570457994644658,
-        0.3731763325901154,
-        -0.4570457994644658,
-        1.445305721320277,
-        -0.5900435899266435,
-    ];
+    let c2 = [1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396];
+    let c3 = [-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154, -0.4570457994644658, 1.445305721320277, -0.5900435899266435];
     [
         0.28209479177387814,
         -c1 * y,
@@ -162,24 +144,10 @@ struct Cam64 {
 impl Cam64 {
     fn new(c: &Camera) -> Cam64 {
         let m = c.world_to_view.map(|r| r.map(|x| x as f64));
-        let r = [
-            [m[0][0], m[0][1], m[0][2]],
-            [m[1][0], m[1][1], m[1][2]],
-            [m[2][0], m[2][1], m[2][2]],
-        ];
+        let r = [[m[0][0], m[0][1], m[0][2]], [m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]];
         let t = [m[0][3], m[1][3], m[2][3]];
         let centre = [0, 1, 2].map(|j| -(0..3).map(|i| r[i][j] * t[i]).sum::<f64>());
-        Cam64 {
-            r,
-            t,
-            fx: c.fx as f64,
-            fy: c.fy as f64,
-            cx: c.cx as f64,
-            cy: c.cy as f64,
-            centre,
-            w: c.width as usize,
-            h: c.height as usize,
-        }
+        Cam64 { r, t, fx: c.fx as f64, fy: c.fy as f64, cx: c.cx as f64, cy: c.cy as f64, centre, w: c.width as usize, h: c.height as usize }
     }
     /// The tile grid, as the bounds rectangles are clamped to.
     fn tiles(&self) -> [f64; 2] {
@@ -213,9 +181,7 @@ fn hit(tu: V3, tv: V3, tw: V3, mu: [f64; 2], x: f64, y: f64) -> Option<(f64, f64
 /// depth plus alpha-weighted changes are summed in absolute value, so they
 /// cannot cancel (infinite when a perturbed ray misses).
 fn sensitivity(sp: &RefSplat, x: f64, y: f64, g: f64, z: f64) -> f64 {
-    ulp_sum(sp, x, y, |g2, z2| {
-        (z2 - z).abs() + (sp.o * (g2 - g)).abs() * (1.0 + z.abs())
-    })
+    ulp_sum(sp, x, y, |g2, z2| (z2 - z).abs() + (sp.o * (g2 - g)).abs() * (1.0 + z.abs()))
 }
 
 /// As [`sensitivity`] for alpha alone: the summed absolute change of o G.
@@ -244,17 +210,7 @@ fn ulp_sum(sp: &RefSplat, x: f64, y: f64, change: impl Fn(f64, f64) -> f64) -> f
 /// bit (3 * row + column) of `pattern` says.
 fn perturb(sp: &RefSplat, pattern: u32, ulps: f64) -> (V3, V3, V3) {
     let ulp = ulps / (1u64 << 23) as f64;
-    let e = |row: V3, k: usize| -> V3 {
-        [0, 1, 2].map(|i| {
-            row[i]
-                * (1.0
-                    + if pattern >> (3 * k + i) & 1 == 1 {
-                        ulp
-                    } else {
-                        -ulp
-                    })
-        })
-    };
+    let e = |row: V3, k: usize| -> V3 { [0, 1, 2].map(|i| row[i] * (1.0 + if pattern >> (3 * k + i) & 1 == 1 { ulp } else { -ulp })) };
     (e(sp.tu, 0), e(sp.tv, 1), e(sp.tw, 2))
 }
 
@@ -294,27 +250,14 @@ fn pixel_bounds(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius: f64, k2: f64) -> [
         let f = [t[0] / d, t[1] / d, t[2] / d];
         let fdot = |a: V3, b: V3| f[0] * a[0] * b[0] + f[1] * a[1] * b[1] + f[2] * a[2] * b[2];
         let c = [fdot(tu, tw), fdot(tv, tw)];
-        let e = [
-            (c[0] * c[0] - fdot(tu, tu)).max(0.0).sqrt(),
-            (c[1] * c[1] - fdot(tv, tv)).max(0.0).sqrt(),
-        ];
+        let e = [(c[0] * c[0] - fdot(tu, tu)).max(0.0).sqrt(), (c[1] * c[1] - fdot(tv, tv)).max(0.0).sqrt()];
         let r2 = (k2 / 2.0).sqrt();
-        let b = [
-            (c[0] - e[0]).min(mu[0] - r2),
-            (c[1] - e[1]).min(mu[1] - r2),
-            (c[0] + e[0]).max(mu[0] + r2),
-            (c[1] + e[1]).max(mu[1] + r2),
-        ];
+        let b = [(c[0] - e[0]).min(mu[0] - r2), (c[1] - e[1]).min(mu[1] - r2), (c[0] + e[0]).max(mu[0] + r2), (c[1] + e[1]).max(mu[1] + r2)];
         if b.iter().all(|v| v.is_finite()) {
             return b;
         }
     }
-    [
-        mu[0] - radius,
-        mu[1] - radius,
-        mu[0] + radius,
-        mu[1] + radius,
-    ]
+    [mu[0] - radius, mu[1] - radius, mu[0] + radius, mu[1] + radius]
 }
 
 /// Tile rectangle [x0, x1) x [y0, y1) of the pixels (centres at integers)
@@ -327,12 +270,7 @@ fn rect_of(b: [f64; 4], tiles: [f64; 2]) -> [usize; 4] {
     }
     let lo = |v: f64, g: f64| (v / TILE).floor().clamp(0.0, g) as usize;
     let hi = |v: f64, g: f64| ((v / TILE).floor() + 1.0).clamp(0.0, g) as usize;
-    [
-        lo(first[0], tiles[0]),
-        lo(first[1], tiles[1]),
-        hi(last[0], tiles[0]),
-        hi(last[1], tiles[1]),
-    ]
+    [lo(first[0], tiles[0]), lo(first[1], tiles[1]), hi(last[0], tiles[0]), hi(last[1], tiles[1])]
 }
 
 fn rect_empty(r: [usize; 4]) -> bool {
@@ -341,20 +279,11 @@ fn rect_empty(r: [usize; 4]) -> bool {
 
 /// Every tile of rectangle `b` is in rectangle `a`.
 fn rect_contains(a: [usize; 4], b: [usize; 4]) -> bool {
-    rect_empty(b)
-        || (!rect_empty(a) && a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3])
+    rect_empty(b) || (!rect_empty(a) && a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3])
 }
 
 /// The splat's tile rectangle (raster_project.glsl `tile_rect`).
-fn rect_at(
-    tu: V3,
-    tv: V3,
-    tw: V3,
-    mu: [f64; 2],
-    radius_raw: f64,
-    o: f64,
-    tiles: [f64; 2],
-) -> [usize; 4] {
+fn rect_at(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 2]) -> [usize; 4] {
     match cutoff2(o) {
         Some(k2) => rect_of(pixel_bounds(tu, tv, tw, mu, radius_raw.ceil(), k2), tiles),
         None => [0; 4],
@@ -364,15 +293,7 @@ fn rect_at(
 /// The splat's tile rectangle, and the smallest and largest rectangles that
 /// f32 rounding of its inputs (opacity, the bounds, the radius's ceiling)
 /// could give: (rect, inner, outer).
-fn rects(
-    tu: V3,
-    tv: V3,
-    tw: V3,
-    mu: [f64; 2],
-    radius_raw: f64,
-    o: f64,
-    tiles: [f64; 2],
-) -> ([usize; 4], [usize; 4], [usize; 4]) {
+fn rects(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 2]) -> ([usize; 4], [usize; 4], [usize; 4]) {
     let rect = rect_at(tu, tv, tw, mu, radius_raw, o, tiles);
     let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
     let (mut lo, mut hi) = ([f64::INFINITY; 4], [f64::NEG_INFINITY; 4]);
@@ -394,11 +315,7 @@ fn rects(
     }
     // outer: the lowest lower and highest upper bounds; inner: the reverse.
     let outer = rect_of([lo[0], lo[1], hi[2], hi[3]], tiles);
-    let inner = if maybe_culled {
-        [0; 4]
-    } else {
-        rect_of([hi[0], hi[1], lo[2], lo[3]], tiles)
-    };
+    let inner = if maybe_culled { [0; 4] } else { rect_of([hi[0], hi[1], lo[2], lo[3]], tiles) };
     (rect, inner, outer)
 }
 
@@ -411,21 +328,9 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
     }
     let l = qq.sqrt();
     let (r, x, y, z) = (q[0] / l, q[1] / l, q[2] / l, q[3] / l);
-    let tu_w = [
-        1.0 - 2.0 * (y * y + z * z),
-        2.0 * (x * y + r * z),
-        2.0 * (x * z - r * y),
-    ];
-    let tv_w = [
-        2.0 * (x * y - r * z),
-        1.0 - 2.0 * (x * x + z * z),
-        2.0 * (y * z + r * x),
-    ];
-    let tw_w = [
-        2.0 * (x * z + r * y),
-        2.0 * (y * z - r * x),
-        1.0 - 2.0 * (x * x + y * y),
-    ];
+    let tu_w = [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + r * z), 2.0 * (x * z - r * y)];
+    let tv_w = [2.0 * (x * y - r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + r * x)];
+    let tw_w = [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)];
     let su = s.log_scales[2 * g].exp();
     let sv = s.log_scales[2 * g + 1].exp();
     let pv = {
@@ -437,16 +342,8 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
     }
     let au = cam.rot(scale(tu_w, su));
     let av = cam.rot(scale(tv_w, sv));
-    let tu = [
-        cam.fx * au[0] + cam.cx * au[2],
-        cam.fx * av[0] + cam.cx * av[2],
-        cam.fx * pv[0] + cam.cx * pv[2],
-    ];
-    let tv = [
-        cam.fy * au[1] + cam.cy * au[2],
-        cam.fy * av[1] + cam.cy * av[2],
-        cam.fy * pv[1] + cam.cy * pv[2],
-    ];
+    let tu = [cam.fx * au[0] + cam.cx * au[2], cam.fx * av[0] + cam.cx * av[2], cam.fx * pv[0] + cam.cx * pv[2]];
+    let tv = [cam.fy * au[1] + cam.cy * au[2], cam.fy * av[1] + cam.cy * av[2], cam.fy * pv[1] + cam.cy * pv[2]];
     let tw = [au[2], av[2], pv[2]];
     let nv = cam.rot(tw_w);
     let cosv = -dot(pv, nv);
@@ -456,13 +353,7 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
     let n = if cosv < 0.0 { scale(nv, -1.0) } else { nv };
     let (mu, radius_raw) = bbox(tu, tv, tw)?;
     let radius = radius_raw.ceil();
-    let all = tu
-        .iter()
-        .chain(&tv)
-        .chain(&tw)
-        .chain(&mu)
-        .chain(&n)
-        .chain(std::iter::once(&radius));
+    let all = tu.iter().chain(&tv).chain(&tw).chain(&mu).chain(&n).chain(std::iter::once(&radius));
     if !all.into_iter().all(|v| v.is_finite()) {
         return None;
     }
@@ -478,39 +369,13 @@ fn project(s: &RefScene, g: usize, cam: &Cam64, degree: u32) -> Option<RefSplat>
     } else {
         let dir = sub(p, cam.centre);
         let len = dot(dir, dir).sqrt();
-        let dir = if len > 0.0 {
-            scale(dir, 1.0 / len)
-        } else {
-            [0.0, 0.0, 1.0]
-        };
+        let dir = if len > 0.0 { scale(dir, 1.0 / len) } else { [0.0, 0.0, 1.0] };
         let y = sh_basis(dir);
         let dg = degree.min(3) as usize;
         let nk = ((dg + 1) * (dg + 1)).min(s.coeffs);
-        (0..ch)
-            .map(|c| {
-                (0.5 + (0..nk)
-                    .map(|k| y[k] * s.features[fb + k * ch + c])
-                    .sum::<f64>())
-                .max(0.0)
-            })
-            .collect()
+        (0..ch).map(|c| (0.5 + (0..nk).map(|k| y[k] * s.features[fb + k * ch + c]).sum::<f64>()).max(0.0)).collect()
     };
-    Some(RefSplat {
-        index: g,
-        tu,
-        tv,
-        tw,
-        mu,
-        n,
-        o,
-        depth: pv[2],
-        rect,
-        outer,
-        inner,
-        cos_view: cosv.abs() / dot(pv, pv).sqrt(),
-        feat,
-        radius,
-    })
+    Some(RefSplat { index: g, tu, tv, tw, mu, n, o, depth: pv[2], rect, outer, inner, cos_view: cosv.abs() / dot(pv, pv).sqrt(), feat, radius })
 }
 
 /// The reference render: planes in the GPU layout (CH features, alpha,
@@ -549,19 +414,11 @@ pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> Re
 /// As [`render`], with the tile rectangles taken from the GPU (the binning
 /// decision), so rounding at rectangle edges cannot make the two differ.
 /// Check the GPU's rectangles with [`rects_agree`].
-pub fn render_with_rects(
-    s: &RefScene,
-    cam: &Camera,
-    background: &[f64],
-    degree: u32,
-    rects: Option<&[[u32; 4]]>,
-) -> RefRender {
+pub fn render_with_rects(s: &RefScene, cam: &Camera, background: &[f64], degree: u32, rects: Option<&[[u32; 4]]>) -> RefRender {
     let c = Cam64::new(cam);
     let (w, h) = (c.w, c.h);
     let ch = s.channels;
-    let mut splats: Vec<RefSplat> = (0..s.len())
-        .filter_map(|g| project(s, g, &c, degree))
-        .collect();
+    let mut splats: Vec<RefSplat> = (0..s.len()).filter_map(|g| project(s, g, &c, degree)).collect();
     if let Some(r) = rects {
         for sp in &mut splats {
             let g = r[sp.index].map(|v| v as usize);
@@ -573,12 +430,7 @@ pub fn render_with_rects(
     }
     // Depth order; the GPU's radix sort is stable, so ties keep index order.
     // The GPU sorts the f32 depth, so compare that.
-    splats.sort_by(|a, b| {
-        (a.depth as f32)
-            .partial_cmp(&(b.depth as f32))
-            .unwrap()
-            .then(a.index.cmp(&b.index))
-    });
+    splats.sort_by(|a, b| (a.depth as f32).partial_cmp(&(b.depth as f32)).unwrap().then(a.index.cmp(&b.index)));
     let np = w * h;
     let mut planes = vec![0.0; (ch + 7) * np];
     let mut ambiguous = vec![false; np];
@@ -589,8 +441,7 @@ pub fn render_with_rects(
             let (tx, ty) = (px / 16, py / 16);
             let (xf, yf) = (px as f64, py as f64);
             let mut acc = vec![0.0; ch];
-            let (mut t, mut dsum, mut m1, mut m2, mut dist, mut med) =
-                (1.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let (mut t, mut dsum, mut m1, mut m2, mut dist, mut med) = (1.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
             let mut nsum = [0.0; 3];
             let mut amb = false;
             let mut tol = 1e-4f64;
@@ -610,9 +461,7 @@ pub fn render_with_rects(
                 // it, and a grazing hit's G moves far under one-ulp changes
                 // (measured: alpha 1.1e-6 below the cut with a first-order
                 // f32 sensitivity of 8.9e-6, and the GPU kept the splat).
-                amb |= (alpha * 255.0 - 1.0).abs() < 2e-5
-                    || ((alpha * 255.0 - 1.0).abs() < 1e-2
-                        && (alpha - 1.0 / 255.0).abs() <= 8.0 * alpha_sensitivity(sp, xf, yf, g));
+                amb |= (alpha * 255.0 - 1.0).abs() < 2e-5 || ((alpha * 255.0 - 1.0).abs() < 1e-2 && (alpha - 1.0 / 255.0).abs() <= 8.0 * alpha_sensitivity(sp, xf, yf, g));
                 if alpha < 1.0 / 255.0 {
                     continue;
                 }
@@ -620,8 +469,7 @@ pub fn render_with_rects(
                 // The near-plane decision flips if rounding can carry z across
                 // it (a splat seen edge-on has a hit depth of pure rounding).
                 // Measured: a flip at 0.15x the sensitivity, none beyond 14x.
-                amb |=
-                    sens.is_infinite() || (z - NEAR).abs() <= 1e-5 * (1.0 + z.abs()) + 8.0 * sens;
+                amb |= sens.is_infinite() || (z - NEAR).abs() <= 1e-5 * (1.0 + z.abs()) + 8.0 * sens;
                 if !(z >= NEAR) || z.is_infinite() {
                     continue;
                 }
@@ -663,12 +511,7 @@ pub fn render_with_rects(
             tolerance[i] = tol;
         }
     }
-    RefRender {
-        planes,
-        ambiguous,
-        tolerance,
-        splats,
-    }
+    RefRender { planes, ambiguous, tolerance, splats }
 }
 
 /// Tiles the splats of `s` that can reach alpha 1/255 would cover with a
@@ -679,20 +522,8 @@ pub fn square_box_tiles(s: &RefScene, cam: &Camera, degree: u32) -> usize {
     (0..s.len())
         .filter_map(|g| project(s, g, &c, degree))
         .map(|sp| {
-            let r = rect_of(
-                [
-                    sp.mu[0] - sp.radius,
-                    sp.mu[1] - sp.radius,
-                    sp.mu[0] + sp.radius,
-                    sp.mu[1] + sp.radius,
-                ],
-                c.tiles(),
-            );
-            if rect_empty(r) {
-                0
-            } else {
-                (r[2] - r[0]) * (r[3] - r[1])
-            }
+            let r = rect_of([sp.mu[0] - sp.radius, sp.mu[1] - sp.radius, sp.mu[0] + sp.radius, sp.mu[1] + sp.radius], c.tiles());
+            if rect_empty(r) { 0 } else { (r[2] - r[0]) * (r[3] - r[1]) }
         })
         .sum()
 }
@@ -731,22 +562,15 @@ fn bbox_ill_conditioned(sp: &RefSplat, tiles: [f64; 2]) -> bool {
         return true; // seen edge-on: the bounding conic is degenerate
     }
     let w = sp.tw;
-    let near_zero = |k2: f64| {
-        (k2 * (w[0] * w[0] + w[1] * w[1]) - w[2] * w[2]).abs()
-            < 1e-3 * (k2 * (w[0] * w[0] + w[1] * w[1]) + w[2] * w[2])
-    };
+    let near_zero = |k2: f64| (k2 * (w[0] * w[0] + w[1] * w[1]) - w[2] * w[2]).abs() < 1e-3 * (k2 * (w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]);
     if near_zero(9.0) || cutoff2(sp.o).is_some_and(near_zero) {
         return true;
     }
-    [0b101_010_101u32, 0b110_011_001, 0b011_100_110]
-        .iter()
-        .any(|&pattern| {
-            let (tu, tv, tw) = perturb(sp, pattern, 2.0);
-            match bbox(tu, tv, tw) {
-                Some((mu, r)) => {
-                    !r.is_finite() || rect_at(tu, tv, tw, mu, r, sp.o, tiles) != sp.rect
-                }
-                None => true,
-            }
-        })
+    [0b101_010_101u32, 0b110_011_001, 0b011_100_110].iter().any(|&pattern| {
+        let (tu, tv, tw) = perturb(sp, pattern, 2.0);
+        match bbox(tu, tv, tw) {
+            Some((mu, r)) => !r.is_finite() || rect_at(tu, tv, tw, mu, r, sp.o, tiles) != sp.rect,
+            None => true,
+        }
+    })
 }

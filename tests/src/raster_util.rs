@@ -24,14 +24,7 @@ pub struct SceneSpec {
 
 impl SceneSpec {
     pub fn new(n: usize, channels: u32, features: Features) -> Self {
-        SceneSpec {
-            n,
-            channels,
-            features,
-            extent: 1.0,
-            log_scale: (-3.0, -1.2),
-            opacity: (-1.5, 2.0),
-        }
+        SceneSpec { n, channels, features, extent: 1.0, log_scale: (-3.0, -1.2), opacity: (-1.5, 2.0) }
     }
 }
 
@@ -41,11 +34,7 @@ pub fn splat_normal(q: [f32; 4]) -> [f64; 3] {
     let q = q.map(f64::from);
     let l = q.iter().map(|v| v * v).sum::<f64>().sqrt();
     let [r, x, y, z] = q.map(|v| v / l);
-    [
-        2.0 * (x * z + r * y),
-        2.0 * (y * z - r * x),
-        1.0 - 2.0 * (x * x + y * y),
-    ]
+    [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)]
 }
 
 pub fn random_quat(rng: &mut Rng) -> [f32; 4] {
@@ -79,25 +68,12 @@ pub fn bits(v: &[f32]) -> Vec<u32> {
 
 /// The parameter (or gradient) arrays of a set by name, in layout order.
 pub fn named_arrays(g: &HostGaussians) -> [(&'static str, &[f32]); 5] {
-    [
-        ("means", &g.means),
-        ("log_scales", &g.log_scales),
-        ("quats", &g.quats),
-        ("opacity", &g.opacity),
-        ("features", &g.features),
-    ]
+    [("means", &g.means), ("log_scales", &g.log_scales), ("quats", &g.quats), ("opacity", &g.opacity), ("features", &g.features)]
 }
 
 /// A camera 4 units from the origin in a general pose.
 pub fn default_camera(w: u32, h: u32) -> Camera {
-    Camera::look_at(
-        [0.7, -0.5, -3.8],
-        [0.05, 0.02, 0.0],
-        [0.1, -1.0, 0.05],
-        0.9,
-        w,
-        h,
-    )
+    Camera::look_at([0.7, -0.5, -3.8], [0.05, 0.02, 0.0], [0.1, -1.0, 0.05], 0.9, w, h)
 }
 
 pub struct GpuRun {
@@ -111,31 +87,14 @@ pub struct GpuRun {
 }
 
 /// Forward (and backward when `grad_out` is given) on the GPU.
-pub fn gpu_run(
-    rast: &Rasterizer,
-    host: &HostGaussians,
-    cam: &Camera,
-    bg: &[f32],
-    degree: u32,
-    grad_out: Option<&[f32]>,
-) -> GpuRun {
+pub fn gpu_run(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, grad_out: Option<&[f32]>) -> GpuRun {
     let ctx = ctx_shared();
     let g = Gaussians::upload(ctx, host).unwrap();
-    let mut frame = rast
-        .frame(cam.width, cam.height, host.len() as u32, 1024)
-        .unwrap();
-    rast.forward(&g, cam, bg, degree, &mut frame, false)
-        .unwrap();
+    let mut frame = rast.frame(cam.width, cam.height, host.len() as u32, 1024).unwrap();
+    rast.forward(&g, cam, bg, degree, &mut frame, false).unwrap();
     let out = frame.out.download().unwrap();
     let rects = frame.download_rects(host.len()).unwrap();
-    let mut run = GpuRun {
-        out,
-        grads: None,
-        densify: vec![],
-        intersections: frame.last_intersections,
-        spans: frame.spans,
-        rects,
-    };
+    let mut run = GpuRun { out, grads: None, densify: vec![], intersections: frame.last_intersections, spans: frame.spans, rects };
     if let Some(go) = grad_out {
         frame.grad_out.upload(go).unwrap();
         let grads = Gaussians::zeros(ctx, g.n, g.channels, g.coeffs).unwrap();
@@ -150,12 +109,7 @@ pub fn gpu_run(
 /// error relative to the pixel's tolerance (<= 1 passes) with a description,
 /// the number of ambiguous pixels left out and the number of pixels whose
 /// tolerance was widened. Panics on NaN/Inf on the GPU.
-pub fn compare_forward(
-    gpu: &[f32],
-    cpu: &raster_ref::RefRender,
-    channels: u32,
-    pixels: usize,
-) -> (f64, String, usize, usize) {
+pub fn compare_forward(gpu: &[f32], cpu: &raster_ref::RefRender, channels: u32, pixels: usize) -> (f64, String, usize, usize) {
     let planes = Plane::count(channels) as usize;
     assert_eq!(gpu.len(), planes * pixels);
     let mut worst = (0.0f64, String::new());
@@ -175,13 +129,7 @@ pub fn compare_forward(
             let g = gpu[p * pixels + i];
             let e = (g as f64 - cpu.planes[p * pixels + i]).abs();
             if e / tol > worst.0 {
-                worst = (
-                    e / tol,
-                    format!(
-                        "plane {p} pixel {i}: gpu {g} cpu {} (error {e:.2e}, tolerance {tol:.2e})",
-                        cpu.planes[p * pixels + i]
-                    ),
-                );
+                worst = (e / tol, format!("plane {p} pixel {i}: gpu {g} cpu {} (error {e:.2e}, tolerance {tol:.2e})", cpu.planes[p * pixels + i]));
             }
         }
     }
@@ -190,48 +138,24 @@ pub fn compare_forward(
 
 /// Forward on GPU and CPU: every unambiguous pixel within its tolerance
 /// (1e-4 abs unless ill-conditioned), at most 1% of pixels ambiguous.
-pub fn check_forward(
-    rast: &Rasterizer,
-    host: &HostGaussians,
-    cam: &Camera,
-    bg: &[f32],
-    degree: u32,
-    what: &str,
-) -> GpuRun {
+pub fn check_forward(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, what: &str) -> GpuRun {
     check_forward_with(rast, host, cam, bg, degree, 0.01, what)
 }
 
 /// As [`check_forward`] with at most a fraction `max_ambiguous` of pixels
 /// left out (dense piles of faint splats sit at the 1/255 cut more often).
-pub fn check_forward_with(
-    rast: &Rasterizer,
-    host: &HostGaussians,
-    cam: &Camera,
-    bg: &[f32],
-    degree: u32,
-    max_ambiguous: f64,
-    what: &str,
-) -> GpuRun {
+pub fn check_forward_with(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, max_ambiguous: f64, what: &str) -> GpuRun {
     let run = gpu_run(rast, host, cam, bg, degree, None);
     let scene = RefScene::from_host(host, rast.features() == Features::Plain);
     let bg64: Vec<f64> = bg.iter().map(|&v| v as f64).collect();
     let bad = raster_ref::rects_agree(&scene, cam, degree, &run.rects);
-    assert!(
-        bad.is_empty(),
-        "{what}: tile rectangles of Gaussians {bad:?} differ from the reference beyond rounding"
-    );
+    assert!(bad.is_empty(), "{what}: tile rectangles of Gaussians {bad:?} differ from the reference beyond rounding");
     let cpu = raster_ref::render_with_rects(&scene, cam, &bg64, degree, Some(&run.rects));
     let pixels = (cam.width * cam.height) as usize;
     let (err, at, skipped, widened) = compare_forward(&run.out, &cpu, rast.channels(), pixels);
     eprintln!("{what}: worst error/tolerance {err:.3} ({at}); {skipped} ambiguous and {widened} ill-conditioned pixels of {pixels}; {} intersections", run.intersections);
-    assert!(
-        err <= 1.0,
-        "{what}: forward differs from the CPU reference: {at}"
-    );
-    assert!(
-        skipped as f64 <= max_ambiguous * pixels.max(100) as f64,
-        "{what}: {skipped} of {pixels} pixels ambiguous"
-    );
+    assert!(err <= 1.0, "{what}: forward differs from the CPU reference: {at}");
+    assert!(skipped as f64 <= max_ambiguous * pixels.max(100) as f64, "{what}: {skipped} of {pixels} pixels ambiguous");
     run
 }
 
@@ -251,33 +175,14 @@ pub fn ref_loss(s: &RefScene, cam: &Camera, bg: &[f64], degree: u32, weights: &[
 /// threshold crossed by the perturbation) and are left out and counted (at
 /// most 2%). Groups whose gradient is exactly zero everywhere are reported
 /// and must be in `zero_ok`.
-pub fn check_gradients(
-    rast: &Rasterizer,
-    host: &HostGaussians,
-    cam: &Camera,
-    bg: &[f32],
-    degree: u32,
-    rng: &mut Rng,
-    zero_ok: &[&str],
-    what: &str,
-) {
+pub fn check_gradients(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, rng: &mut Rng, zero_ok: &[&str], what: &str) {
     check_gradients_with(rast, host, cam, bg, degree, rng, zero_ok, 0.02, what)
 }
 
 /// As [`check_gradients`], allowing a fraction `max_unstable` of the
 /// parameters to sit on a discontinuity (e.g. exactly equal depths).
 #[allow(clippy::too_many_arguments)]
-pub fn check_gradients_with(
-    rast: &Rasterizer,
-    host: &HostGaussians,
-    cam: &Camera,
-    bg: &[f32],
-    degree: u32,
-    rng: &mut Rng,
-    zero_ok: &[&str],
-    max_unstable: f64,
-    what: &str,
-) {
+pub fn check_gradients_with(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, rng: &mut Rng, zero_ok: &[&str], max_unstable: f64, what: &str) {
     let plain = rast.features() == Features::Plain;
     let base = RefScene::from_host(host, plain);
     let bg64: Vec<f64> = bg.iter().map(|&v| v as f64).collect();
@@ -326,10 +231,7 @@ pub fn check_gradients_with(
     }
     let n_unstable = unstable.iter().filter(|&&u| u).count();
     eprintln!("{what}: {nparams} parameters, {n_unstable} on a discontinuity (left out)");
-    assert!(
-        n_unstable as f64 <= max_unstable * nparams as f64,
-        "{what}: {n_unstable} of {nparams} finite differences unstable"
-    );
+    assert!(n_unstable as f64 <= max_unstable * nparams as f64, "{what}: {n_unstable} of {nparams} finite differences unstable");
     for group in ["means", "log_scales", "quats", "opacity", "features"] {
         let (mut num, mut den, mut worst) = (0.0f64, 0.0f64, (0.0f64, 0usize));
         for i in 0..nparams {
@@ -344,24 +246,15 @@ pub fn check_gradients_with(
             }
         }
         if den == 0.0 {
-            assert!(
-                num == 0.0,
-                "{what}: {group}: finite differences are zero but the GPU gradient is not"
-            );
-            assert!(
-                zero_ok.contains(&group),
-                "{what}: {group}: gradient is zero everywhere (nothing tested)"
-            );
+            assert!(num == 0.0, "{what}: {group}: finite differences are zero but the GPU gradient is not");
+            assert!(zero_ok.contains(&group), "{what}: {group}: gradient is zero everywhere (nothing tested)");
             eprintln!("{what}: {group}: zero gradient (expected)");
             continue;
         }
         let rel = (num / den).sqrt();
         let wi = worst.1;
         eprintln!("{what}: {group}: relative error {rel:.2e} (|fd| = {:.3e}; worst param {wi}: gpu {} fd {})", den.sqrt(), gpu[wi].1, fd[wi]);
-        assert!(
-            rel <= 1e-2,
-            "{what}: {group}: GPU gradient differs from finite differences: relative error {rel}"
-        );
+        assert!(rel <= 1e-2, "{what}: {group}: GPU gradient differs from finite differences: relative error {rel}");
     }
 }
 
@@ -372,7 +265,5 @@ pub fn constant_grads(channels: u32, pixels: usize, v: f32) -> Vec<f32> {
 
 /// Upstream gradients for every output plane, uniform in [-1, 1).
 pub fn random_grads(rng: &mut Rng, channels: u32, pixels: usize) -> Vec<f32> {
-    (0..Plane::count(channels) as usize * pixels)
-        .map(|_| rng.uniform(-1.0, 1.0) as f32)
-        .collect()
+    (0..Plane::count(channels) as usize * pixels).map(|_| rng.uniform(-1.0, 1.0) as f32).collect()
 }

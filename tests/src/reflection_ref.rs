@@ -17,13 +17,7 @@ fn sigmoid(x: f64) -> f64 {
 /// coordinates (x, y) (method-notes §2.6 table, inverted).
 pub fn cube_coords(d: V3) -> (usize, f64, f64) {
     let a = [d[0].abs(), d[1].abs(), d[2].abs()];
-    let axis = if a[0] >= a[1] && a[0] >= a[2] {
-        0
-    } else if a[1] >= a[2] {
-        1
-    } else {
-        2
-    };
+    let axis = if a[0] >= a[1] && a[0] >= a[2] { 0 } else if a[1] >= a[2] { 1 } else { 2 };
     let ma = a[axis];
     if ma <= 0.0 || !ma.is_finite() {
         return (4, 0.0, 0.0);
@@ -62,11 +56,7 @@ pub fn tap(face: usize, col: i64, row: i64, res: usize) -> usize {
         return (face * res + row.clamp(0, r - 1) as usize) * res + col.clamp(0, r - 1) as usize;
     }
     let s = 2.0 / res as f64;
-    let (f2, x, y) = cube_coords(face_dir(
-        face,
-        (col as f64 + 0.5) * s - 1.0,
-        (row as f64 + 0.5) * s - 1.0,
-    ));
+    let (f2, x, y) = cube_coords(face_dir(face, (col as f64 + 0.5) * s - 1.0, (row as f64 + 0.5) * s - 1.0));
     let c = (((x + 1.0) * 0.5 * res as f64).floor() as i64).clamp(0, r - 1) as usize;
     let rw = (((y + 1.0) * 0.5 * res as f64).floor() as i64).clamp(0, r - 1) as usize;
     (f2 * res + rw) * res + c
@@ -111,24 +101,12 @@ pub struct ReflGaussian {
 /// Mirror direction of the Gaussian's camera-facing normal seen from `centre`.
 pub fn mirror_dir(g: &ReflGaussian, centre: V3) -> V3 {
     let qq: f64 = g.q.iter().map(|v| v * v).sum();
-    let q = if qq > 1e-30 {
-        g.q.map(|v| v / qq.sqrt())
-    } else {
-        [0.0; 4]
-    };
+    let q = if qq > 1e-30 { g.q.map(|v| v / qq.sqrt()) } else { [0.0; 4] };
     let (r, x, y, z) = (q[0], q[1], q[2], q[3]);
-    let t = [
-        2.0 * (x * z + r * y),
-        2.0 * (y * z - r * x),
-        1.0 - 2.0 * (x * x + y * y),
-    ];
+    let t = [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)];
     let dv = [centre[0] - g.p[0], centre[1] - g.p[1], centre[2] - g.p[2]];
     let l = dot(dv, dv).sqrt();
-    let v = if l > 1e-20 {
-        dv.map(|c| c / l)
-    } else {
-        [0.0, 0.0, 1.0]
-    };
+    let v = if l > 1e-20 { dv.map(|c| c / l) } else { [0.0, 0.0, 1.0] };
     let n = if dot(t, v) < 0.0 { t.map(|c| -c) } else { t };
     let nv = dot(n, v);
     [0, 1, 2].map(|k| 2.0 * nv * n[k] - v[k])
@@ -149,11 +127,7 @@ pub fn proxy_dir(p: V3, w: V3, proxy: Option<(V3, f64)>) -> V3 {
     // a t^2 + 2 b t + k = 0 with k < 0: one positive root,
     // (-b + sq) / a = -k / (b + sq); the second form where b >= 0.
     let sq = (b * b - a * k).sqrt();
-    let t = if b >= 0.0 {
-        -k / (b + sq)
-    } else {
-        (sq - b) / a
-    };
+    let t = if b >= 0.0 { -k / (b + sq) } else { (sq - b) / a };
     [0, 1, 2].map(|i| o[i] + t * w[i])
 }
 
@@ -163,22 +137,11 @@ pub fn color(g: &ReflGaussian, env: &[f64], res: usize, centre: V3, schlick: boo
 }
 
 /// [`color`] with the map's parallax proxy ([`proxy_dir`]).
-pub fn color_with_proxy(
-    g: &ReflGaussian,
-    env: &[f64],
-    res: usize,
-    centre: V3,
-    proxy: Option<(V3, f64)>,
-    schlick: bool,
-) -> Vec<f64> {
+pub fn color_with_proxy(g: &ReflGaussian, env: &[f64], res: usize, centre: V3, proxy: Option<(V3, f64)>, schlick: bool) -> Vec<f64> {
     let e = env_lookup(env, res, proxy_dir(g.p, mirror_dir(g, centre), proxy));
     let f0 = [0, 1, 2].map(|c| sigmoid(g.material[c]));
     let r = sigmoid(g.material[3]);
-    let c = if schlick {
-        e
-    } else {
-        [0, 1, 2].map(|k| f0[k] * e[k])
-    };
+    let c = if schlick { e } else { [0, 1, 2].map(|k| f0[k] * e[k]) };
     let mut out = vec![c[0], c[1], c[2], r];
     if schlick {
         out.extend(f0);
@@ -207,11 +170,7 @@ pub fn composite(p: &CompositePixel, schlick: bool) -> V3 {
     let i_refl = if schlick {
         let f0 = p.f0s.map(|c| c / p.alpha.max(1e-6));
         let l = dot(p.normal, p.normal).sqrt();
-        let cos = if l > 1e-12 {
-            (dot(p.normal, p.v) / l).clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
+        let cos = if l > 1e-12 { (dot(p.normal, p.v) / l).clamp(0.0, 1.0) } else { 1.0 };
         let m = (1.0 - cos).powi(5);
         [0, 1, 2].map(|k| (f0[k] + (1.0 - f0[k]) * m) * p.a[k])
     } else {

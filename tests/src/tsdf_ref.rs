@@ -28,12 +28,7 @@ pub struct RefTsdf {
 pub fn fuse(grid: &TsdfGrid, views: &[RefView]) -> RefTsdf {
     let [nx, ny, nz] = grid.dims.map(|d| d as usize);
     let n = nx * ny * nz;
-    let mut r = RefTsdf {
-        tsdf: vec![0.0; n],
-        weight: vec![0.0; n],
-        rgb: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
-        ambiguous: vec![false; n],
-    };
+    let mut r = RefTsdf { tsdf: vec![0.0; n], weight: vec![0.0; n], rgb: [vec![0.0; n], vec![0.0; n], vec![0.0; n]], ambiguous: vec![false; n] };
     let trunc = grid.trunc as f64;
     for v in views {
         let c = &v.camera;
@@ -42,13 +37,8 @@ pub fn fuse(grid: &TsdfGrid, views: &[RefView]) -> RefTsdf {
         let npix = w * h;
         for idx in 0..n {
             let (i, j, k) = (idx % nx, (idx / nx) % ny, idx / (nx * ny));
-            let p = [i, j, k]
-                .iter()
-                .zip(grid.origin)
-                .map(|(&a, o)| o as f64 + (a as f64 + 0.5) * grid.voxel as f64)
-                .collect::<Vec<f64>>();
-            let q: [f64; 3] =
-                std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3]);
+            let p = [i, j, k].iter().zip(grid.origin).map(|(&a, o)| o as f64 + (a as f64 + 0.5) * grid.voxel as f64).collect::<Vec<f64>>();
+            let q: [f64; 3] = std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3]);
             let z = q[2];
             if z.abs() < 1e-4 {
                 r.ambiguous[idx] = true;
@@ -58,19 +48,14 @@ pub fn fuse(grid: &TsdfGrid, views: &[RefView]) -> RefTsdf {
             }
             let u = c.fx as f64 * q[0] / z + c.cx as f64;
             let y = c.fy as f64 * q[1] / z + c.cy as f64;
-            let near_border = |t: f64, size: usize| {
-                (t + 0.5 - (t + 0.5).round()).abs() < EPS_PX
-                    || (t + 0.5).abs() < EPS_PX
-                    || (t + 0.5 - size as f64).abs() < EPS_PX
-            };
+            let near_border = |t: f64, size: usize| (t + 0.5 - (t + 0.5).round()).abs() < EPS_PX || (t + 0.5).abs() < EPS_PX || (t + 0.5 - size as f64).abs() < EPS_PX;
             if near_border(u, w) || near_border(y, h) {
                 r.ambiguous[idx] = true;
             }
             if !(u >= -0.5 && u < w as f64 - 0.5 && y >= -0.5 && y < h as f64 - 0.5) {
                 continue;
             }
-            let pix = ((y + 0.5).floor() as usize).min(h - 1) * w
-                + ((u + 0.5).floor() as usize).min(w - 1);
+            let pix = ((y + 0.5).floor() as usize).min(h - 1) * w + ((u + 0.5).floor() as usize).min(w - 1);
             let (d, wt) = (v.depth[pix] as f64, v.weight[pix] as f64);
             if (d - grid.depth_max as f64).abs() < EPS_Z {
                 r.ambiguous[idx] = true;

@@ -9,56 +9,27 @@ fn train_bench_reports_every_stage() {
     let ctx = ctx_shared();
     for fuse in [true, false] {
         let b = tgs::bench_train::train(ctx, 32, 300, 0, 2, fuse).unwrap();
-        assert_eq!(
-            (
-                b.width,
-                b.height,
-                b.gaussians,
-                b.views,
-                b.iterations,
-                b.warmup
-            ),
-            (32, 32, 300, 20, 2, 3)
-        );
+        assert_eq!((b.width, b.height, b.gaussians, b.views, b.iterations, b.warmup), (32, 32, 300, 20, 2, 3));
         assert!(b.intersections > 0);
-        let can = tgs_pipelines::Rasterizer::new(ctx, 3, tgs_pipelines::Features::Sh { degree: 3 })
-            .unwrap()
-            .can_fuse_adam();
+        let can = tgs_pipelines::Rasterizer::new(ctx, 3, tgs_pipelines::Features::Sh { degree: 3 }).unwrap().can_fuse_adam();
         assert_eq!(b.adam_fused, fuse && can);
         // Keys, values, ids, two sort arrays and the 18-float record.
         assert_eq!(b.bytes_per_intersection, 4 * (5 + 18));
         assert!(b.peak_memory_mib > 0.0 && b.peak_memory_mib.is_finite());
-        for (name, v) in [
-            ("wall", b.wall_ms),
-            ("forward", b.forward_ms),
-            ("loss", b.loss_ms),
-            ("backward", b.backward_ms),
-            ("adam", b.adam_ms),
-        ] {
+        for (name, v) in [("wall", b.wall_ms), ("forward", b.forward_ms), ("loss", b.loss_ms), ("backward", b.backward_ms), ("adam", b.adam_ms)] {
             assert!(v.is_finite() && v >= 0.0, "{name}: {v}");
         }
         if ctx.caps().timestamp_valid_bits > 0 {
             assert!(b.forward_ms > 0.0 && b.backward_ms > 0.0 && b.adam_ms > 0.0);
-            assert!(
-                (b.gpu_ms - (b.forward_ms + b.loss_ms + b.backward_ms + b.adam_ms)).abs() < 1e-9
-            );
-            let mut scopes = vec![
-                "raster.forward",
-                "raster.backward",
-                "raster.reduce",
-                "loss.ssim",
-            ];
+            assert!((b.gpu_ms - (b.forward_ms + b.loss_ms + b.backward_ms + b.adam_ms)).abs() < 1e-9);
+            let mut scopes = vec!["raster.forward", "raster.backward", "raster.reduce", "loss.ssim"];
             if !b.adam_fused {
                 scopes.push("adam");
             }
             for k in scopes {
                 assert!(b.kernels.iter().any(|t| t.name == k), "no timing for {k}");
             }
-            assert_eq!(
-                b.kernels.iter().any(|t| t.name == "adam"),
-                !b.adam_fused,
-                "an Adam pass of its own only when not fused"
-            );
+            assert_eq!(b.kernels.iter().any(|t| t.name == "adam"), !b.adam_fused, "an Adam pass of its own only when not fused");
         }
         assert_eq!(b.brush_lavapipe_s, None);
     }
@@ -72,76 +43,30 @@ fn train_bench_reports_every_stage() {
 #[test]
 fn stages_bench_reports_each_stage() {
     let ctx = ctx_shared();
-    let spec = tgs::bench_stages::StagesSpec {
-        scene: "glass-tiny".into(),
-        train: 8,
-        train_light_field: 4,
-        warmup: 1,
-        iterations: 2,
-        mlp: "small".into(),
-    };
+    let spec = tgs::bench_stages::StagesSpec { scene: "glass-tiny".into(), train: 8, train_light_field: 4, warmup: 1, iterations: 2, mlp: "small".into() };
     let b = tgs::bench_stages::stages(ctx, &spec).unwrap();
     assert_eq!((b.width, b.height, b.train_views), (48, 48, 16));
     let names: Vec<&str> = b.stages.iter().map(|s| s.stage.as_str()).collect();
     assert_eq!(names, ["I", "II", "III"], "skipped: {:?}", b.skipped);
-    let own = [
-        ("I", "raster.backward", "refl.color"),
-        ("II", "refl.color_backward", "mlp.forward"),
-        ("III", "mlp.backward", "refl.color"),
-    ];
+    let own = [("I", "raster.backward", "refl.color"), ("II", "refl.color_backward", "mlp.forward"), ("III", "mlp.backward", "refl.color")];
     for (s, (stage, has, lacks)) in b.stages.iter().zip(own) {
-        assert!(
-            s.wall_ms.is_finite() && s.wall_ms > 0.0 && s.wall_ms_best <= s.wall_ms,
-            "{stage}: {s:?}"
-        );
-        assert!(
-            s.memory_mib > 0.0 && s.peak_memory_mib >= s.memory_mib,
-            "{stage}: {s:?}"
-        );
+        assert!(s.wall_ms.is_finite() && s.wall_ms > 0.0 && s.wall_ms_best <= s.wall_ms, "{stage}: {s:?}");
+        assert!(s.memory_mib > 0.0 && s.peak_memory_mib >= s.memory_mib, "{stage}: {s:?}");
         assert_eq!(s.switch_ms.is_some(), stage != "I");
         assert_eq!(s.reflection_gaussians.is_some(), stage != "I");
         assert_eq!(s.phi_fraction.is_some(), stage == "III");
         if ctx.caps().timestamp_valid_bits > 0 {
-            assert!(
-                s.kernels.iter().any(|k| k.name == has),
-                "Stage {stage} has no {has}: {:?}",
-                s.kernels
-            );
-            assert!(
-                !s.kernels.iter().any(|k| k.name == lacks),
-                "Stage {stage} runs {lacks}"
-            );
-            let top: f64 = s
-                .kernels
-                .iter()
-                .filter(|k| !k.name.starts_with("sort.") && !k.name.starts_with("scan."))
-                .map(|k| k.ms)
-                .sum();
+            assert!(s.kernels.iter().any(|k| k.name == has), "Stage {stage} has no {has}: {:?}", s.kernels);
+            assert!(!s.kernels.iter().any(|k| k.name == lacks), "Stage {stage} runs {lacks}");
+            let top: f64 = s.kernels.iter().filter(|k| !k.name.starts_with("sort.") && !k.name.starts_with("scan.")).map(|k| k.ms).sum();
             assert!((s.gpu_ms - top).abs() < 1e-9 && s.gpu_ms > 0.0);
         }
     }
     let f = b.stages[2].phi_fraction.unwrap();
     assert!((0.0..=1.0).contains(&f), "{f}");
     // Stage II's set carries over to Stage III unchanged (geometry frozen, no pruning).
-    assert_eq!(
-        b.stages[1].reflection_gaussians,
-        b.stages[2].reflection_gaussians
-    );
-    assert!(tgs::bench_stages::stages(
-        ctx,
-        &tgs::bench_stages::StagesSpec {
-            iterations: 0,
-            ..spec.clone()
-        }
-    )
-    .is_err());
-    assert!(tgs::bench_stages::stages(
-        ctx,
-        &tgs::bench_stages::StagesSpec {
-            scene: "nope".into(),
-            ..spec
-        }
-    )
-    .is_err());
+    assert_eq!(b.stages[1].reflection_gaussians, b.stages[2].reflection_gaussians);
+    assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { iterations: 0, ..spec.clone() }).is_err());
+    assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { scene: "nope".into(), ..spec }).is_err());
     check_validation(ctx);
 }

@@ -12,20 +12,16 @@ use tgs_engine::{BufferBinding, Recorder};
 use tgs_tests::ctx_shared;
 use tgs_tests::host::Host;
 
+
 fn args(out: &Path, set: &[&str], stages: &str, from: Option<&Path>) -> TrainArgs {
     let _ = std::fs::remove_dir_all(out);
-    let scene =
-        tgs_tests::tiny_glass_scene(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("embed-scene"));
+    let scene = tgs_tests::tiny_glass_scene(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("embed-scene"));
     let mut set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
     set.extend(["test_interval=0", "checkpoint_interval=0"].map(String::from));
     TrainArgs {
         dataset: if from.is_some() { None } else { Some(scene) },
         out: out.to_path_buf(),
-        preset: if from.is_some() {
-            None
-        } else {
-            Some("quick".into())
-        },
+        preset: if from.is_some() { None } else { Some("quick".into()) },
         set,
         stages: Some(stages.into()),
         from: from.map(Path::to_path_buf),
@@ -51,11 +47,7 @@ fn check_run(host: &Host, run: &Path, stage: &str) {
             let mut rec = None;
             host.submit(|cmd| {
                 let mut r = unsafe { Recorder::record_into(&ctx, cmd, 0) }.unwrap();
-                scene
-                    .record(&mut r, cam, &unsafe {
-                        BufferBinding::external(out.buffer, 0, out.bytes)
-                    })
-                    .unwrap();
+                scene.record(&mut r, cam, &unsafe { BufferBinding::external(out.buffer, 0, out.bytes) }).unwrap();
                 r.finish().unwrap();
                 rec = Some(r);
             });
@@ -68,32 +60,16 @@ fn check_run(host: &Host, run: &Path, stage: &str) {
         }
         if stage == "III" {
             let k = scene.last_samples.unwrap();
-            assert!(
-                k > 0 && (k as usize) < n / 3,
-                "{name}: the light field ran on {k} of {} pixels",
-                n / 3
-            );
+            assert!(k > 0 && (k as usize) < n / 3, "{name}: the light field ran on {k} of {} pixels", n / 3);
         }
         let got = host.read(&out);
         host.free(out);
         let want = tr.render(cam).unwrap().planes[..n].to_vec();
         assert!(got.iter().all(|v| v.is_finite()), "{stage} {name}: NaN/Inf");
-        let diff = got
-            .iter()
-            .zip(&want)
-            .filter(|(a, b)| a.to_bits() != b.to_bits())
-            .count();
-        assert_eq!(
-            diff, 0,
-            "Stage {stage} {name}: {diff} of {n} values differ from `tgs render`"
-        );
+        let diff = got.iter().zip(&want).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        assert_eq!(diff, 0, "Stage {stage} {name}: {diff} of {n} values differ from `tgs render`");
         // The same through tgs's own queue, and again (bit-identical reruns).
-        assert!(scene
-            .render(cam)
-            .unwrap()
-            .iter()
-            .zip(&want)
-            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert!(scene.render(cam).unwrap().iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()));
     }
     // A too-small output is refused before anything is recorded.
     let (_, cam) = &cams[0];
@@ -112,17 +88,9 @@ fn host_renders_each_stage_like_tgs_render() {
     // shorter Stage I carves nothing and Stage II copies the whole set).
     train(ctx_shared(), &args(&one, &["iterations=300"], "I", None)).unwrap();
     let two = b.join("two");
-    train(
-        ctx_shared(),
-        &args(&two, &["reflection.iterations=30"], "II", Some(&one)),
-    )
-    .unwrap();
+    train(ctx_shared(), &args(&two, &["reflection.iterations=30"], "II", Some(&one))).unwrap();
     let three = b.join("three");
-    train(
-        ctx_shared(),
-        &args(&three, &["light_field.iterations=30"], "III", Some(&two)),
-    )
-    .unwrap();
+    train(ctx_shared(), &args(&three, &["light_field.iterations=30"], "III", Some(&two))).unwrap();
     check_run(&host, &one, "I");
     check_run(&host, &two, "II");
     check_run(&host, &three, "III");

@@ -20,14 +20,8 @@ fn texel_directions_invert_the_cube_lookup() {
                     let (f, x, y) = rr::cube_coords(d.map(f64::from));
                     let s = 2.0 / res as f64;
                     let want = ((col as f64 + 0.5) * s - 1.0, (row as f64 + 0.5) * s - 1.0);
-                    assert_eq!(
-                        f, face as usize,
-                        "res {res} texel ({face}, {row}, {col}): direction {d:?} looks up face {f}"
-                    );
-                    assert!(
-                        (x - want.0).abs() < 1e-6 && (y - want.1).abs() < 1e-6,
-                        "res {res} texel ({face}, {row}, {col}): ({x}, {y}) against {want:?}"
-                    );
+                    assert_eq!(f, face as usize, "res {res} texel ({face}, {row}, {col}): direction {d:?} looks up face {f}");
+                    assert!((x - want.0).abs() < 1e-6 && (y - want.1).abs() < 1e-6, "res {res} texel ({face}, {row}, {col}): ({x}, {y}) against {want:?}");
                 }
             }
         }
@@ -38,14 +32,7 @@ fn texel_directions_invert_the_cube_lookup() {
 /// first in-plane coordinate (`offset`, from the centre) is negative, so
 /// that a mirrored face shows.
 fn wall_colour(face: usize, offset: f32) -> [f32; 3] {
-    let c = [
-        [0.9, 0.1, 0.1],
-        [0.1, 0.9, 0.1],
-        [0.1, 0.1, 0.9],
-        [0.9, 0.9, 0.1],
-        [0.1, 0.9, 0.9],
-        [0.9, 0.1, 0.9],
-    ][face];
+    let c = [[0.9, 0.1, 0.1], [0.1, 0.9, 0.1], [0.1, 0.1, 0.9], [0.9, 0.9, 0.1], [0.1, 0.9, 0.9], [0.9, 0.1, 0.9]][face];
     if offset < -0.1 {
         c.map(|v| v * 0.5)
     } else {
@@ -82,13 +69,7 @@ fn room(centre: [f32; 3]) -> (HostGaussians, usize) {
         }
     }
     let walls = g.len();
-    push(
-        &mut g,
-        [centre[0] + 0.3, centre[1], centre[2]],
-        [-1.0, 0.0, 0.0],
-        0.3,
-        [1.0, 1.0, 1.0],
-    );
+    push(&mut g, [centre[0] + 0.3, centre[1], centre[2]], [-1.0, 0.0, 0.0], 0.3, [1.0, 1.0, 1.0]);
     (g, walls)
 }
 
@@ -102,20 +83,12 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
     for k in 0..8 {
         refl.extend([0, 1, 2].map(|a| centre[a] + if k >> a & 1 == 1 { 0.5 } else { -0.5 }));
     }
-    assert_eq!(
-        outside_box(&scat, centre, [0.55; 3]).len(),
-        walls,
-        "the box keeps the walls and drops the Gaussian inside"
-    );
+    assert_eq!(outside_box(&scat, centre, [0.55; 3]).len(), walls, "the box keeps the walls and drops the Gaussian inside");
     let res = 8;
     let (env, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15).unwrap();
     assert_eq!(info.rendered, walls, "Gaussians rendered");
     for a in 0..3 {
-        assert!(
-            (info.centre[a] - centre[a]).abs() < 1e-5,
-            "box centre {:?}",
-            info.centre
-        );
+        assert!((info.centre[a] - centre[a]).abs() < 1e-5, "box centre {:?}", info.centre);
     }
     let mut checked = 0;
     for face in 0..6u32 {
@@ -133,10 +106,7 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
                 let got = env.texel_rgb(face, row, col);
                 let want = wall_colour(face as usize, offset);
                 for c in 0..3 {
-                    assert!(
-                        (got[c] - want[c]).abs() < 0.03,
-                        "face {face} texel ({row}, {col}): {got:?}, the wall is {want:?}"
-                    );
+                    assert!((got[c] - want[c]).abs() < 0.03, "face {face} texel ({row}, {col}): {got:?}, the wall is {want:?}");
                 }
                 checked += 1;
             }
@@ -144,19 +114,10 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
     }
     assert_eq!(checked, 6 * 24, "texels checked");
     let (again, _) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15).unwrap();
-    assert!(
-        env.raw
-            .iter()
-            .zip(&again.raw)
-            .all(|(a, b)| a.to_bits() == b.to_bits()),
-        "a second map differs"
-    );
+    assert!(env.raw.iter().zip(&again.raw).all(|(a, b)| a.to_bits() == b.to_bits()), "a second map differs");
     // A reflection set around the whole room leaves nothing to render: the
     // grey map, not an error.
-    let big: Vec<f32> = [-10.0f32, 10.0]
-        .iter()
-        .flat_map(|o| centre.map(|c| c + o))
-        .collect();
+    let big: Vec<f32> = [-10.0f32, 10.0].iter().flat_map(|o| centre.map(|c| c + o)).collect();
     let (grey, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &big, res, 1e-15).unwrap();
     assert_eq!(info.rendered, 0);
     assert!(grey.raw.iter().all(|&v| v == 0.0), "the grey map");

@@ -8,14 +8,7 @@ use tgs::eval::{normal_mae, ray_facing_normals};
 use tgs_pipelines::Camera;
 
 fn camera(w: u32, h: u32) -> Camera {
-    Camera::look_at(
-        [1.0, -2.0, 1.5],
-        [0.2, 0.3, 0.4],
-        [0.0, 0.0, 1.0],
-        0.9,
-        w,
-        h,
-    )
+    Camera::look_at([1.0, -2.0, 1.5], [0.2, 0.3, 0.4], [0.0, 0.0, 1.0], 0.9, w, h)
 }
 
 fn view(cam: Camera, normals: Vec<f32>) -> View {
@@ -24,12 +17,7 @@ fn view(cam: Camera, normals: Vec<f32>) -> View {
         name: "v".into(),
         camera: cam,
         image: ImageF::new(cam.width, cam.height, 3),
-        normals: Some(ImageF {
-            width: cam.width,
-            height: cam.height,
-            channels: 3,
-            data: normals,
-        }),
+        normals: Some(ImageF { width: cam.width, height: cam.height, channels: 3, data: normals }),
         mask: Some(vec![true; n]),
     }
 }
@@ -48,25 +36,17 @@ fn ray_facing_normals_point_back_along_each_pixel_ray() {
         assert_eq!(n.len(), (w * h) as usize);
         for (i, ni) in n.iter().enumerate() {
             // The pixel centre's point at depth 3 lies along -n from the camera.
-            let p = cam
-                .unproject((i as u32 % w) as f32, (i as u32 / w) as f32, 3.0)
-                .map(f64::from);
+            let p = cam.unproject((i as u32 % w) as f32, (i as u32 / w) as f32, 3.0).map(f64::from);
             let ray = unit([p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
             let d: f64 = (0..3).map(|k| ray[k] * ni[k] as f64).sum();
-            assert!(
-                (d + 1.0).abs() < 1e-5,
-                "{w}x{h} pixel {i}: n {ni:?} against ray {ray:?}"
-            );
+            assert!((d + 1.0).abs() < 1e-5, "{w}x{h} pixel {i}: n {ni:?} against ray {ray:?}");
         }
     }
     // The middle pixel of an odd-sized image looks along the optical axis.
     let cam = camera(7, 5);
     let axis = unit([0.2 - 1.0, 0.3 + 2.0, 0.4 - 1.5]);
     let mid = ray_facing_normals(&cam)[2 * 7 + 3];
-    assert!(
-        (0..3).all(|k| (mid[k] as f64 + axis[k]).abs() < 1e-5),
-        "{mid:?} vs {axis:?}"
-    );
+    assert!((0..3).all(|k| (mid[k] as f64 + axis[k]).abs() < 1e-5), "{mid:?} vs {axis:?}");
 }
 
 #[test]
@@ -83,17 +63,11 @@ fn ray_facing_mae_against_a_wall_is_the_mean_off_axis_angle() {
     let f = cam.fx as f64;
     let expect = (0..w * h)
         .map(|i| {
-            let (x, y) = (
-                (i % w) as f64 - (w as f64 - 1.0) * 0.5,
-                (i / w) as f64 - (h as f64 - 1.0) * 0.5,
-            );
+            let (x, y) = ((i % w) as f64 - (w as f64 - 1.0) * 0.5, (i / w) as f64 - (h as f64 - 1.0) * 0.5);
             ((x * x + y * y).sqrt() / f).atan().to_degrees()
         })
         .sum::<f64>()
         / (w * h) as f64;
     let got = normal_mae(&ray_facing_normals(&cam), &view(cam, wall)).unwrap();
-    assert!(
-        expect > 5.0 && (got - expect).abs() < 0.01,
-        "ray-facing MAE {got:.4} against {expect:.4} degrees"
-    );
+    assert!(expect > 5.0 && (got - expect).abs() < 0.01, "ray-facing MAE {got:.4} against {expect:.4} degrees");
 }

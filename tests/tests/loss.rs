@@ -14,19 +14,7 @@ struct Case {
 }
 
 fn camera(w: usize, h: usize) -> Camera {
-    Camera {
-        width: w as u32,
-        height: h as u32,
-        fx: 1.1 * w as f32,
-        fy: 1.05 * w as f32,
-        cx: 0.45 * w as f32,
-        cy: 0.55 * h as f32,
-        world_to_view: [
-            [1.0, 0.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0, 0.0],
-        ],
-    }
+    Camera { width: w as u32, height: h as u32, fx: 1.1 * w as f32, fy: 1.05 * w as f32, cx: 0.45 * w as f32, cy: 0.55 * h as f32, world_to_view: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] }
 }
 
 fn case(rng: &mut Rng64, w: usize, h: usize, weights: &LossWeights) -> Case {
@@ -74,49 +62,19 @@ fn gpu(case: &Case, weights: &LossWeights) -> (Vec<f32>, LossValues) {
     let (w, h) = (case.inp.width as u32, case.inp.height as u32);
     let rast = Rasterizer::new(ctx, 3, Features::Plain).unwrap();
     let frame = rast.frame(w, h, 1, 1).unwrap();
-    frame
-        .out
-        .upload(&case.planes.iter().map(|&v| v as f32).collect::<Vec<_>>())
-        .unwrap();
-    let target = Buffer::from_slice(
-        ctx,
-        "target",
-        &case
-            .inp
-            .target
-            .iter()
-            .map(|&v| v as f32)
-            .collect::<Vec<_>>(),
-    )
-    .unwrap();
+    frame.out.upload(&case.planes.iter().map(|&v| v as f32).collect::<Vec<_>>()).unwrap();
+    let target = Buffer::from_slice(ctx, "target", &case.inp.target.iter().map(|&v| v as f32).collect::<Vec<_>>()).unwrap();
     let lossk = ImageLoss::new(ctx).unwrap();
     let mut scratch = lossk.scratch(w, h, 3).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    lossk
-        .record(
-            &mut rec,
-            &frame,
-            &target,
-            &camera(w as usize, h as usize),
-            weights,
-            &mut scratch,
-        )
-        .unwrap();
+    lossk.record(&mut rec, &frame, &target, &camera(w as usize, h as usize), weights, &mut scratch).unwrap();
     rec.submit_and_wait().unwrap();
     check_validation(ctx);
-    (
-        frame.grad_out.download().unwrap(),
-        scratch.values().unwrap(),
-    )
+    (frame.grad_out.download().unwrap(), scratch.values().unwrap())
 }
 
 fn rel(a: &[f64], b: &[f64]) -> f64 {
-    let d: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let d: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
     let n: f64 = b.iter().map(|y| y * y).sum::<f64>().sqrt();
     d / n.max(1e-30)
 }
@@ -141,134 +99,68 @@ fn central_differences(c: &Case, alpha_det: &[f64], len: usize) -> Vec<f64> {
 #[test]
 fn loss_values_and_gradients_match_the_reference() {
     let mut rng = Rng64(seed("loss_values_and_gradients_match_the_reference"));
-    let weights = LossWeights {
-        ssim: 0.2,
-        normal: 0.05,
-        dist: 0.1,
-    };
+    let weights = LossWeights { ssim: 0.2, normal: 0.05, dist: 0.1 };
     let (w, h) = (21, 13);
     let c = case(&mut rng, w, h, &weights);
     let n = w * h;
     let alpha_det: Vec<f64> = c.planes[3 * n..4 * n].to_vec();
     let (_, parts) = loss(&c.inp, &c.planes, &alpha_det);
     let (grad, vals) = gpu(&c, &weights);
-    for (name, g, r) in [
-        ("l1", vals.l1, parts[0]),
-        ("mse", vals.mse, parts[1]),
-        ("ssim", vals.ssim, parts[2]),
-        ("normal", vals.normal, parts[3]),
-    ] {
-        assert!(
-            (g - r).abs() <= 1e-5 * r.abs().max(1e-3),
-            "{name}: GPU {g} vs reference {r}"
-        );
+    for (name, g, r) in [("l1", vals.l1, parts[0]), ("mse", vals.mse, parts[1]), ("ssim", vals.ssim, parts[2]), ("normal", vals.normal, parts[3])] {
+        assert!((g - r).abs() <= 1e-5 * r.abs().max(1e-3), "{name}: GPU {g} vs reference {r}");
     }
     let fd = central_differences(&c, &alpha_det, c.planes.len());
     let g64: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
-    let groups = [
-        ("colour", 0, 3),
-        ("alpha", 3, 4),
-        ("depth", 4, 5),
-        ("normal", 5, 8),
-        ("median", 8, 9),
-        ("distortion", 9, 10),
-    ];
+    let groups = [("colour", 0, 3), ("alpha", 3, 4), ("depth", 4, 5), ("normal", 5, 8), ("median", 8, 9), ("distortion", 9, 10)];
     for (name, a, b) in groups {
         let (gs, fs) = (&g64[a * n..b * n], &fd[a * n..b * n]);
         if name == "median" {
-            assert!(
-                gs.iter().all(|&v| v == 0.0) && fs.iter().all(|v| v.abs() < 1e-9),
-                "median depth has no loss gradient"
-            );
+            assert!(gs.iter().all(|&v| v == 0.0) && fs.iter().all(|v| v.abs() < 1e-9), "median depth has no loss gradient");
             continue;
         }
         let e = rel(gs, fs);
         eprintln!("{name}: relative gradient error {e:.2e}");
-        assert!(
-            e < 1e-3,
-            "{name}: GPU gradient vs finite differences: relative error {e:.3e}"
-        );
+        assert!(e < 1e-3, "{name}: GPU gradient vs finite differences: relative error {e:.3e}");
     }
 }
 
 #[test]
 fn loss_is_deterministic_and_normal_term_switches_off() {
     let mut rng = Rng64(seed("loss_is_deterministic_and_normal_term_switches_off"));
-    let on = LossWeights {
-        ssim: 0.2,
-        normal: 0.05,
-        dist: 0.0,
-    };
+    let on = LossWeights { ssim: 0.2, normal: 0.05, dist: 0.0 };
     let c = case(&mut rng, 37, 19, &on);
     let (g1, v1) = gpu(&c, &on);
     let (g2, v2) = gpu(&c, &on);
-    assert!(
-        g1.iter().zip(&g2).all(|(a, b)| a.to_bits() == b.to_bits()),
-        "gradients differ between identical runs"
-    );
+    assert!(g1.iter().zip(&g2).all(|(a, b)| a.to_bits() == b.to_bits()), "gradients differ between identical runs");
     assert_eq!(v1, v2);
     let off = LossWeights { normal: 0.0, ..on };
     let (g3, v3) = gpu(&c, &off);
     let n = 37 * 19;
-    for plane in [
-        Plane::Alpha,
-        Plane::Depth,
-        Plane::Normal(0),
-        Plane::Normal(1),
-        Plane::Normal(2),
-        Plane::Distortion,
-    ] {
+    for plane in [Plane::Alpha, Plane::Depth, Plane::Normal(0), Plane::Normal(1), Plane::Normal(2), Plane::Distortion] {
         let i = plane.index(3) as usize;
-        assert!(
-            g3[i * n..(i + 1) * n].iter().all(|&v| v == 0.0),
-            "{plane:?}: gradient without normal/distortion terms"
-        );
+        assert!(g3[i * n..(i + 1) * n].iter().all(|&v| v == 0.0), "{plane:?}: gradient without normal/distortion terms");
     }
     assert!(v3.normal.is_nan());
-    assert_eq!(
-        &g1[..3 * n],
-        &g3[..3 * n],
-        "colour gradients must not depend on the normal term"
-    );
+    assert_eq!(&g1[..3 * n], &g3[..3 * n], "colour gradients must not depend on the normal term");
 }
 
 #[test]
 fn tiny_images_give_finite_losses() {
     let mut rng = Rng64(seed("tiny_images_give_finite_losses"));
-    let weights = LossWeights {
-        ssim: 0.2,
-        normal: 0.05,
-        dist: 0.01,
-    };
+    let weights = LossWeights { ssim: 0.2, normal: 0.05, dist: 0.01 };
     // Images narrower or lower than the 11-tap window, or both: the blur's
     // valid tap ranges are clipped on both sides at once.
     for (w, h) in [(1, 1), (2, 1), (1, 5), (3, 3), (4, 14), (13, 2)] {
         let c = case(&mut rng, w, h, &weights);
         let n = w * h;
         let (grad, vals) = gpu(&c, &weights);
-        assert!(
-            grad.iter().all(|v| v.is_finite()),
-            "{w}x{h}: non-finite gradient"
-        );
+        assert!(grad.iter().all(|v| v.is_finite()), "{w}x{h}: non-finite gradient");
         let (_, parts) = loss(&c.inp, &c.planes, &c.planes[3 * n..4 * n]);
         let fd = central_differences(&c, &c.planes[3 * n..4 * n], 3 * n);
         let g64: Vec<f64> = grad[..3 * n].iter().map(|&v| v as f64).collect();
         let e = rel(&g64, &fd);
-        assert!(
-            e < 1e-3,
-            "{w}x{h}: colour gradient vs finite differences: relative error {e:.3e}"
-        );
-        assert!(
-            (vals.ssim - parts[2]).abs() < 1e-5,
-            "{w}x{h}: SSIM {} vs {}",
-            vals.ssim,
-            parts[2]
-        );
-        assert!(
-            (vals.normal - parts[3]).abs() < 1e-6,
-            "{w}x{h}: normal term {} vs {}",
-            vals.normal,
-            parts[3]
-        );
+        assert!(e < 1e-3, "{w}x{h}: colour gradient vs finite differences: relative error {e:.3e}");
+        assert!((vals.ssim - parts[2]).abs() < 1e-5, "{w}x{h}: SSIM {} vs {}", vals.ssim, parts[2]);
+        assert!((vals.normal - parts[3]).abs() < 1e-6, "{w}x{h}: normal term {} vs {}", vals.normal, parts[3]);
     }
 }

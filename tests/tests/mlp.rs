@@ -32,14 +32,7 @@ fn random_samples(rng: &mut Rng, n: usize, extent: f64) -> Vec<[f64; 6]> {
                 }
             }
             let r = |v: f64| v as f32 as f64;
-            [
-                r(uni(rng, -extent, extent)),
-                r(uni(rng, -extent, extent)),
-                r(uni(rng, -extent, extent)),
-                r(w[0]),
-                r(w[1]),
-                r(w[2]),
-            ]
+            [r(uni(rng, -extent, extent)), r(uni(rng, -extent, extent)), r(uni(rng, -extent, extent)), r(w[0]), r(w[1]), r(w[2])]
         })
         .collect()
 }
@@ -66,15 +59,8 @@ fn gpu(shape: MlpShape, params: &[f32], samples: &[[f64; 6]], d_out: &[[f64; 3]]
     mlp.record_forward(&mut rec, &p, n, &s).unwrap();
     mlp.record_backward(&mut rec, &p, n, &d, &g, &s).unwrap();
     rec.submit_and_wait().unwrap();
-    let out = if n > 0 {
-        s.out.download_range(0, (n * OUT) as usize).unwrap()
-    } else {
-        vec![]
-    };
-    let r = GpuRun {
-        out,
-        grads: g.download().unwrap(),
-    };
+    let out = if n > 0 { s.out.download_range(0, (n * OUT) as usize).unwrap() } else { vec![] };
+    let r = GpuRun { out, grads: g.download().unwrap() };
     check_validation(ctx);
     r
 }
@@ -83,10 +69,7 @@ fn gpu(shape: MlpShape, params: &[f32], samples: &[[f64; 6]], d_out: &[[f64; 3]]
 /// largest |ref|; returns the worst ratio.
 fn compare(what: &str, gpu: &[f32], reference: &[f64], tol: f64) -> f64 {
     assert_eq!(gpu.len(), reference.len(), "{what}: lengths");
-    let scale = reference
-        .iter()
-        .fold(0.0f64, |m, v| m.max(v.abs()))
-        .max(1e-30);
+    let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-30);
     let mut worst = 0.0f64;
     for (i, (g, r)) in gpu.iter().zip(reference).enumerate() {
         assert!(g.is_finite(), "{what}[{i}] = {g}");
@@ -115,42 +98,15 @@ fn check_network(shape: MlpShape, n: usize, extent: f64, rng: &mut Rng) {
             }
         })
         .collect();
-    let d_out: Vec<[f64; 3]> = (0..n)
-        .map(|_| [0, 1, 2].map(|_| uni(rng, -1.0, 1.0) as f32 as f64))
-        .collect();
+    let d_out: Vec<[f64; 3]> = (0..n).map(|_| [0, 1, 2].map(|_| uni(rng, -1.0, 1.0) as f32 as f64)).collect();
     let run = gpu(shape, &params, &samples, &d_out);
-    let out_ref: Vec<f64> = samples
-        .iter()
-        .flat_map(|s| {
-            mlp_ref::forward(&shape, &p64, s)
-                .outputs
-                .last()
-                .unwrap()
-                .clone()
-        })
-        .collect();
-    compare(
-        &format!("{shape:?} n={n} outputs"),
-        &run.out,
-        &out_ref,
-        2e-5,
-    );
+    let out_ref: Vec<f64> = samples.iter().flat_map(|s| mlp_ref::forward(&shape, &p64, s).outputs.last().unwrap().clone()).collect();
+    compare(&format!("{shape:?} n={n} outputs"), &run.out, &out_ref, 2e-5);
     let g_ref = mlp_ref::backward(&shape, &p64, &samples, &d_out);
-    compare(
-        &format!("{shape:?} n={n} gradients"),
-        &run.grads,
-        &g_ref,
-        1e-4,
-    );
+    compare(&format!("{shape:?} n={n} gradients"), &run.grads, &g_ref, 1e-4);
 }
 
-const SMALL: MlpShape = MlpShape {
-    depth: 3,
-    width: 5,
-    skip: 1,
-    levels_x: 2,
-    levels_w: 1,
-};
+const SMALL: MlpShape = MlpShape { depth: 3, width: 5, skip: 1, levels_x: 2, levels_w: 1 };
 
 #[test]
 fn small_networks_match_reference() {
@@ -160,44 +116,11 @@ fn small_networks_match_reference() {
         check_network(SMALL, n, 1.0, &mut rng);
     }
     assert!(weight_chunks(2000).1 > 4);
-    check_network(
-        MlpShape {
-            depth: 4,
-            width: 40,
-            skip: 2,
-            levels_x: 6,
-            levels_w: 4,
-        },
-        2000,
-        1.0,
-        &mut rng,
-    );
+    check_network(MlpShape { depth: 4, width: 40, skip: 2, levels_x: 6, levels_w: 4 }, 2000, 1.0, &mut rng);
     // Width above one tile, skip right before the head.
-    check_network(
-        MlpShape {
-            depth: 2,
-            width: 70,
-            skip: 1,
-            levels_x: 3,
-            levels_w: 2,
-        },
-        65,
-        1.3,
-        &mut rng,
-    );
+    check_network(MlpShape { depth: 2, width: 70, skip: 1, levels_x: 3, levels_w: 2 }, 65, 1.3, &mut rng);
     // The largest GEMM block (128-wide tiles) on partial tiles in every product.
-    check_network(
-        MlpShape {
-            depth: 3,
-            width: 130,
-            skip: 2,
-            levels_x: 4,
-            levels_w: 3,
-        },
-        300,
-        1.0,
-        &mut rng,
-    );
+    check_network(MlpShape { depth: 3, width: 130, skip: 2, levels_x: 4, levels_w: 3 }, 300, 1.0, &mut rng);
 }
 
 #[test]
@@ -212,30 +135,11 @@ fn paper_network_on_a_few_samples() {
 fn reference_gradient_matches_finite_differences() {
     let mut rng = Rng(seed("mlp fd"));
     let shape = SMALL;
-    let params: Vec<f64> = shape
-        .init_params(rng.next_u64())
-        .iter()
-        .map(|&v| v as f64)
-        .collect();
+    let params: Vec<f64> = shape.init_params(rng.next_u64()).iter().map(|&v| v as f64).collect();
     let samples = random_samples(&mut rng, 4, 1.0);
-    let d_out: Vec<[f64; 3]> = (0..4)
-        .map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0)))
-        .collect();
+    let d_out: Vec<[f64; 3]> = (0..4).map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0))).collect();
     let loss = |p: &[f64]| -> f64 {
-        samples
-            .iter()
-            .zip(&d_out)
-            .map(|(s, d)| {
-                mlp_ref::forward(&shape, p, s)
-                    .outputs
-                    .last()
-                    .unwrap()
-                    .iter()
-                    .zip(d)
-                    .map(|(o, d)| o * d)
-                    .sum::<f64>()
-            })
-            .sum()
+        samples.iter().zip(&d_out).map(|(s, d)| mlp_ref::forward(&shape, p, s).outputs.last().unwrap().iter().zip(d).map(|(o, d)| o * d).sum::<f64>()).sum()
     };
     let g = mlp_ref::backward(&shape, &params, &samples, &d_out);
     let h = 1e-6;
@@ -247,11 +151,7 @@ fn reference_gradient_matches_finite_differences() {
         p[i] -= 2.0 * h;
         let fd = (up - loss(&p)) / (2.0 * h);
         // A ReLU kink within h of a sample makes the difference one-sided.
-        assert!(
-            (fd - g[i]).abs() <= 1e-6 + 1e-5 * g[i].abs(),
-            "param {i}: analytic {} vs fd {fd}",
-            g[i]
-        );
+        assert!((fd - g[i]).abs() <= 1e-6 + 1e-5 * g[i].abs(), "param {i}: analytic {} vs fd {fd}", g[i]);
         checked += 1;
     }
     assert_eq!(checked, shape.params() as usize);
@@ -261,13 +161,7 @@ fn reference_gradient_matches_finite_differences() {
 fn encoding_at_twelve_levels_matches_f64() {
     let ctx = ctx_shared();
     let mlp = Mlp::new(ctx).unwrap();
-    let shape = MlpShape {
-        depth: 2,
-        width: 4,
-        skip: 1,
-        levels_x: 12,
-        levels_w: 12,
-    };
+    let shape = MlpShape { depth: 2, width: 4, skip: 1, levels_x: 12, levels_w: 12 };
     let mut rng = Rng(seed("mlp encode"));
     let mut samples: Vec<[f64; 6]> = vec![
         [1.0, -1.0, 0.0, 1.0, 0.0, 0.0],
@@ -286,14 +180,8 @@ fn encoding_at_twelve_levels_matches_f64() {
     let mut rec = Recorder::new(ctx).unwrap();
     mlp.record_forward(&mut rec, &p, n, &s).unwrap();
     rec.submit_and_wait().unwrap();
-    let in0 = s
-        .first_input()
-        .download_range(0, (n * shape.dx()) as usize)
-        .unwrap();
-    let cat = s
-        .skip_input()
-        .download_range(0, (n * shape.cat_width()) as usize)
-        .unwrap();
+    let in0 = s.first_input().download_range(0, (n * shape.dx()) as usize).unwrap();
+    let cat = s.skip_input().download_range(0, (n * shape.cat_width()) as usize).unwrap();
     let mut worst = 0.0f64;
     for (i, smp) in samples.iter().enumerate() {
         let gx = mlp_ref::encode([smp[0], smp[1], smp[2]], 12);
@@ -304,19 +192,12 @@ fn encoding_at_twelve_levels_matches_f64() {
             let b = row[shape.width as usize + f] as f64;
             // f32 sin/cos of a reduced argument: absolute error ~1e-6
             // (unreduced, sin(2^11 pi x) would be off by ~1e-3).
-            assert!(
-                (a - r).abs() < 2e-5 && (b - r).abs() < 2e-5,
-                "sample {i} gamma(x)[{f}]: gpu {a} / {b} vs f64 {r} (x = {:?})",
-                &smp[..3]
-            );
+            assert!((a - r).abs() < 2e-5 && (b - r).abs() < 2e-5, "sample {i} gamma(x)[{f}]: gpu {a} / {b} vs f64 {r} (x = {:?})", &smp[..3]);
             worst = worst.max((a - r).abs());
         }
         for (f, r) in gw.iter().enumerate() {
             let b = row[(shape.width + shape.dx()) as usize + f] as f64;
-            assert!(
-                (b - r).abs() < 2e-5,
-                "sample {i} gamma(w)[{f}]: gpu {b} vs f64 {r}"
-            );
+            assert!((b - r).abs() < 2e-5, "sample {i} gamma(w)[{f}]: gpu {b} vs f64 {r}");
         }
     }
     eprintln!("encoding: worst absolute error {worst:.2e}");
@@ -326,19 +207,9 @@ fn encoding_at_twelve_levels_matches_f64() {
 #[test]
 fn saturated_and_extreme_inputs_stay_finite() {
     let mut rng = Rng(seed("mlp extreme"));
-    let shape = MlpShape {
-        depth: 3,
-        width: 24,
-        skip: 2,
-        levels_x: 12,
-        levels_w: 4,
-    };
+    let shape = MlpShape { depth: 3, width: 24, skip: 2, levels_x: 12, levels_w: 4 };
     // Large weights saturate the sigmoid head (outputs 0 and 1).
-    let params: Vec<f32> = shape
-        .init_params(rng.next_u64())
-        .iter()
-        .map(|v| v * 40.0)
-        .collect();
+    let params: Vec<f32> = shape.init_params(rng.next_u64()).iter().map(|v| v * 40.0).collect();
     let samples: Vec<[f64; 6]> = vec![
         [1e4, -1e4, 3e7, 1.0, 0.0, 0.0],
         [1e-40, -1e-42, 0.0, 0.0, 1.0, 0.0],
@@ -348,62 +219,24 @@ fn saturated_and_extreme_inputs_stay_finite() {
     let samples: Vec<[f64; 6]> = samples.iter().map(|s| s.map(|v| v as f32 as f64)).collect();
     let d_out = vec![[1.0, -1.0, 0.5]; samples.len()];
     let run = gpu(shape, &params, &samples, &d_out);
-    assert!(
-        run.out
-            .iter()
-            .all(|v| v.is_finite() && (0.0..=1.0).contains(v)),
-        "outputs {:?}",
-        run.out
-    );
-    assert!(
-        run.out
-            .iter()
-            .any(|&v| v == 0.0 || v == 1.0 || !(1e-6..=1.0 - 1e-6).contains(&v)),
-        "the head did not saturate: {:?}",
-        run.out
-    );
-    assert!(
-        run.grads.iter().all(|v| v.is_finite()),
-        "non-finite gradient"
-    );
+    assert!(run.out.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)), "outputs {:?}", run.out);
+    assert!(run.out.iter().any(|&v| v == 0.0 || v == 1.0 || !(1e-6..=1.0 - 1e-6).contains(&v)), "the head did not saturate: {:?}", run.out);
+    assert!(run.grads.iter().all(|v| v.is_finite()), "non-finite gradient");
 }
 
 #[test]
 fn no_samples_and_bit_identical_reruns() {
     let mut rng = Rng(seed("mlp determinism"));
-    let shape = MlpShape {
-        depth: 4,
-        width: 48,
-        skip: 2,
-        levels_x: 6,
-        levels_w: 4,
-    };
+    let shape = MlpShape { depth: 4, width: 48, skip: 2, levels_x: 6, levels_w: 4 };
     let params = shape.init_params(rng.next_u64());
     let empty = gpu(shape, &params, &[], &[]);
-    assert!(
-        empty.grads.iter().all(|&v| v == 0.0),
-        "no samples must give zero gradients"
-    );
+    assert!(empty.grads.iter().all(|&v| v == 0.0), "no samples must give zero gradients");
     let samples = random_samples(&mut rng, 3001, 1.0);
-    let d_out: Vec<[f64; 3]> = (0..samples.len())
-        .map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64))
-        .collect();
+    let d_out: Vec<[f64; 3]> = (0..samples.len()).map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64)).collect();
     let a = gpu(shape, &params, &samples, &d_out);
     let b = gpu(shape, &params, &samples, &d_out);
-    assert!(
-        a.out
-            .iter()
-            .zip(&b.out)
-            .all(|(x, y)| x.to_bits() == y.to_bits()),
-        "outputs differ between runs"
-    );
-    assert!(
-        a.grads
-            .iter()
-            .zip(&b.grads)
-            .all(|(x, y)| x.to_bits() == y.to_bits()),
-        "gradients differ between runs"
-    );
+    assert!(a.out.iter().zip(&b.out).all(|(x, y)| x.to_bits() == y.to_bits()), "outputs differ between runs");
+    assert!(a.grads.iter().zip(&b.grads).all(|(x, y)| x.to_bits() == y.to_bits()), "gradients differ between runs");
 }
 
 /// A network of `shape` with seeded parameters (uploaded as `p`) and
@@ -423,13 +256,7 @@ fn counted(name: &str, shape: MlpShape, cap: u32, extent: f64) -> Counted {
     let params = shape.init_params(rng.next_u64());
     let samples = random_samples(&mut rng, cap as usize, extent);
     let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
-    Counted {
-        mlp: Mlp::new(ctx).unwrap(),
-        p: Buffer::from_slice(ctx, "params", &params).unwrap(),
-        params,
-        flat,
-        rng,
-    }
+    Counted { mlp: Mlp::new(ctx).unwrap(), p: Buffer::from_slice(ctx, "params", &params).unwrap(), params, flat, rng }
 }
 
 /// The forward with the sample count read on the GPU (the embedded light
@@ -440,13 +267,7 @@ fn counted(name: &str, shape: MlpShape, cap: u32, extent: f64) -> Counted {
 fn forward_with_a_gpu_count_matches_and_stops_at_it() {
     let ctx = ctx_shared();
     let cap = 700u32;
-    let shape = MlpShape {
-        depth: 4,
-        width: 48,
-        skip: 2,
-        levels_x: 6,
-        levels_w: 4,
-    };
+    let shape = MlpShape { depth: 4, width: 48, skip: 2, levels_x: 6, levels_w: 4 };
     let Counted { mlp, p, flat, .. } = counted("mlp counted", shape, cap, 1.5);
     let host = {
         let s = mlp.scratch(shape, cap).unwrap();
@@ -467,17 +288,8 @@ fn forward_with_a_gpu_count_matches_and_stops_at_it() {
         rec.submit_and_wait().unwrap();
         let out = s.out.download_range(0, (cap * OUT) as usize).unwrap();
         let k = (count.min(cap) * OUT) as usize;
-        assert!(
-            out[..k]
-                .iter()
-                .zip(&host[..k])
-                .all(|(a, b)| a.to_bits() == b.to_bits()),
-            "count {count}: outputs differ from the host-count forward"
-        );
-        assert!(
-            out[k..].iter().all(|&v| v == SENTINEL),
-            "count {count}: wrote past the count"
-        );
+        assert!(out[..k].iter().zip(&host[..k]).all(|(a, b)| a.to_bits() == b.to_bits()), "count {count}: outputs differ from the host-count forward");
+        assert!(out[k..].iter().all(|&v| v == SENTINEL), "count {count}: wrote past the count");
     }
     check_validation(ctx);
 }
@@ -492,30 +304,14 @@ fn forward_with_a_gpu_count_matches_and_stops_at_it() {
 fn backward_with_a_gpu_count_is_bit_identical_to_the_host_count() {
     let ctx = ctx_shared();
     let cap = 5000u32;
-    let shape = MlpShape {
-        depth: 3,
-        width: 40,
-        skip: 2,
-        levels_x: 4,
-        levels_w: 2,
-    };
-    let Counted {
-        mlp,
-        p,
-        flat,
-        params,
-        mut rng,
-    } = counted("mlp counted backward", shape, cap, 1.2);
-    let d_all: Vec<f32> = (0..OUT * cap)
-        .map(|_| uni(&mut rng, -1.0, 1.0) as f32)
-        .collect();
+    let shape = MlpShape { depth: 3, width: 40, skip: 2, levels_x: 4, levels_w: 2 };
+    let Counted { mlp, p, flat, params, mut rng } = counted("mlp counted backward", shape, cap, 1.2);
+    let d_all: Vec<f32> = (0..OUT * cap).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
     let d = Buffer::from_slice(ctx, "d_out", &d_all).unwrap();
     let grads = |count: u32, counted: bool| -> Vec<u32> {
         // Host count: a scratch of exactly `count` samples; GPU count: the
         // full capacity, the samples past the count as well.
-        let s = mlp
-            .scratch(shape, if counted { cap } else { count.max(1) })
-            .unwrap();
+        let s = mlp.scratch(shape, if counted { cap } else { count.max(1) }).unwrap();
         let k = if counted { cap } else { count } as usize;
         if k > 0 {
             s.samples.upload(&flat[..6 * k]).unwrap();
@@ -525,12 +321,10 @@ fn backward_with_a_gpu_count_is_bit_identical_to_the_host_count() {
         let mut rec = Recorder::new(ctx).unwrap();
         if counted {
             mlp.record_forward_counted(&mut rec, &p, &c, &s).unwrap();
-            mlp.record_backward_counted(&mut rec, &p, &c, &d, &g, &s)
-                .unwrap();
+            mlp.record_backward_counted(&mut rec, &p, &c, &d, &g, &s).unwrap();
         } else {
             mlp.record_forward(&mut rec, &p, count, &s).unwrap();
-            mlp.record_backward(&mut rec, &p, count, &d, &g, &s)
-                .unwrap();
+            mlp.record_backward(&mut rec, &p, count, &d, &g, &s).unwrap();
         }
         rec.submit_and_wait().unwrap();
         g.download().unwrap().iter().map(|v| v.to_bits()).collect()
@@ -539,17 +333,11 @@ fn backward_with_a_gpu_count_is_bit_identical_to_the_host_count() {
         let (chunk, chunks) = weight_chunks(count);
         let host = grads(count, false);
         let gpu = grads(count, true);
-        assert!(
-            gpu.iter().all(|&b| f32::from_bits(b).is_finite()),
-            "count {count}: non-finite gradient"
-        );
+        assert!(gpu.iter().all(|&b| f32::from_bits(b).is_finite()), "count {count}: non-finite gradient");
         let diff = host.iter().zip(&gpu).filter(|(a, b)| a != b).count();
         assert_eq!(diff, 0, "count {count} ({chunks} chunks of {chunk}): {diff} gradients differ from the host-count backward");
         if count == 0 {
-            assert!(
-                gpu.iter().all(|&b| f32::from_bits(b) == 0.0),
-                "no samples must give zero gradients"
-            );
+            assert!(gpu.iter().all(|&b| f32::from_bits(b) == 0.0), "no samples must give zero gradients");
         }
     }
     check_validation(ctx);
@@ -558,22 +346,12 @@ fn backward_with_a_gpu_count_is_bit_identical_to_the_host_count() {
 /// Forward and backward of `n` samples on one GEMM kernel; with `cap`, the
 /// GPU-count path on a scratch of `cap` samples (count `n`). Outputs and
 /// gradients as bits.
-fn on_kernel(
-    gemm: Gemm,
-    shape: MlpShape,
-    params: &[f32],
-    flat: &[f32],
-    d_out: &[f32],
-    n: u32,
-    cap: Option<u32>,
-) -> (Vec<u32>, Vec<u32>) {
+fn on_kernel(gemm: Gemm, shape: MlpShape, params: &[f32], flat: &[f32], d_out: &[f32], n: u32, cap: Option<u32>) -> (Vec<u32>, Vec<u32>) {
     let ctx = ctx_shared();
     let mlp = Mlp::with_gemm(ctx, gemm).unwrap();
     assert_eq!(mlp.gemm(), gemm);
     let s = mlp.scratch(shape, cap.unwrap_or(n)).unwrap();
-    s.samples
-        .upload(&flat[..6 * cap.unwrap_or(n) as usize])
-        .unwrap();
+    s.samples.upload(&flat[..6 * cap.unwrap_or(n) as usize]).unwrap();
     let p = Buffer::from_slice(ctx, "params", params).unwrap();
     let d = Buffer::from_slice(ctx, "d_out", d_out).unwrap();
     let g = Buffer::from_slice(ctx, "grads", &vec![f32::NAN; params.len()]).unwrap();
@@ -581,8 +359,7 @@ fn on_kernel(
     let mut rec = Recorder::new(ctx).unwrap();
     if cap.is_some() {
         mlp.record_forward_counted(&mut rec, &p, &c, &s).unwrap();
-        mlp.record_backward_counted(&mut rec, &p, &c, &d, &g, &s)
-            .unwrap();
+        mlp.record_backward_counted(&mut rec, &p, &c, &d, &g, &s).unwrap();
     } else {
         mlp.record_forward(&mut rec, &p, n, &s).unwrap();
         mlp.record_backward(&mut rec, &p, n, &d, &g, &s).unwrap();
@@ -605,56 +382,22 @@ fn tiled_and_row_kernels_are_bit_identical() {
     let cases = [
         (SMALL, 37),
         (MlpShape::SMALL, 1000),
-        (
-            MlpShape {
-                depth: 4,
-                width: 40,
-                skip: 2,
-                levels_x: 6,
-                levels_w: 4,
-            },
-            2000,
-        ),
-        (
-            MlpShape {
-                depth: 3,
-                width: 130,
-                skip: 2,
-                levels_x: 4,
-                levels_w: 3,
-            },
-            300,
-        ),
+        (MlpShape { depth: 4, width: 40, skip: 2, levels_x: 6, levels_w: 4 }, 2000),
+        (MlpShape { depth: 3, width: 130, skip: 2, levels_x: 4, levels_w: 3 }, 300),
         (MlpShape::PAPER, 70),
     ];
     for (shape, n) in cases {
         let params = shape.init_params(rng.next_u64());
         let cap = n + 37;
-        let flat: Vec<f32> = random_samples(&mut rng, cap as usize, 1.2)
-            .iter()
-            .flat_map(|v| v.map(|c| c as f32))
-            .collect();
-        let d_out: Vec<f32> = (0..OUT * cap)
-            .map(|_| uni(&mut rng, -1.0, 1.0) as f32)
-            .collect();
+        let flat: Vec<f32> = random_samples(&mut rng, cap as usize, 1.2).iter().flat_map(|v| v.map(|c| c as f32)).collect();
+        let d_out: Vec<f32> = (0..OUT * cap).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
         for counted in [None, Some(cap)] {
             let (out_t, g_t) = on_kernel(Gemm::Tiled, shape, &params, &flat, &d_out, n, counted);
             let (out_r, g_r) = on_kernel(Gemm::Rows, shape, &params, &flat, &d_out, n, counted);
-            assert!(
-                g_t.iter().all(|&b| f32::from_bits(b).is_finite()),
-                "{shape:?}: non-finite gradient"
-            );
+            assert!(g_t.iter().all(|&b| f32::from_bits(b).is_finite()), "{shape:?}: non-finite gradient");
             let diff = |a: &[u32], b: &[u32]| a.iter().zip(b).filter(|(x, y)| x != y).count();
-            assert_eq!(
-                diff(&out_t, &out_r),
-                0,
-                "{shape:?} n={n} counted={counted:?}: outputs differ between the kernels"
-            );
-            assert_eq!(
-                diff(&g_t, &g_r),
-                0,
-                "{shape:?} n={n} counted={counted:?}: gradients differ between the kernels"
-            );
+            assert_eq!(diff(&out_t, &out_r), 0, "{shape:?} n={n} counted={counted:?}: outputs differ between the kernels");
+            assert_eq!(diff(&g_t, &g_r), 0, "{shape:?} n={n} counted={counted:?}: gradients differ between the kernels");
         }
     }
     assert!(Gemm::parse("rows").is_ok() && Gemm::parse("tiles").is_err());

@@ -17,14 +17,7 @@ fn forward_matches_cpu_random_scenes() {
     for (w, h, n) in [(70, 45, 300), (16, 16, 50), (33, 17, 120)] {
         let scene = random_scene(&mut rng, &SceneSpec::new(n, 3, SH3));
         let cam = default_camera(w, h);
-        check_forward(
-            &rast,
-            &scene,
-            &cam,
-            &[0.1, 0.5, 0.9],
-            3,
-            &format!("{w}x{h} n={n}"),
-        );
+        check_forward(&rast, &scene, &cam, &[0.1, 0.5, 0.9], 3, &format!("{w}x{h} n={n}"));
     }
     check_validation(ctx);
 }
@@ -49,37 +42,20 @@ fn binning_drops_no_pixel_a_splat_reaches() {
         let ref_scene = RefScene::from_host(&scene, false);
         let tiles = [w.div_ceil(16), h.div_ceil(16)];
         let whole = vec![[0, 0, tiles[0], tiles[1]]; scene.len()];
-        let cpu =
-            raster_ref::render_with_rects(&ref_scene, &cam, &[0.1, 0.5, 0.9], 3, Some(&whole));
+        let cpu = raster_ref::render_with_rects(&ref_scene, &cam, &[0.1, 0.5, 0.9], 3, Some(&whole));
         let pixels = (w * h) as usize;
         let (err, at, skipped, _) = compare_forward(&run.out, &cpu, 3, pixels);
-        assert!(
-            err <= 1.0,
-            "{w}x{h}: the binned render differs from the unbinned reference: {at}"
-        );
-        assert!(
-            skipped * 100 <= pixels,
-            "{w}x{h}: {skipped} of {pixels} pixels ambiguous"
-        );
+        assert!(err <= 1.0, "{w}x{h}: the binned render differs from the unbinned reference: {at}");
+        assert!(skipped * 100 <= pixels, "{w}x{h}: {skipped} of {pixels} pixels ambiguous");
         let squares = raster_ref::square_box_tiles(&ref_scene, &cam, 3);
         let faint = |g: usize| 1.0 / (1.0 + (-scene.opacity[g] as f64).exp()) < 1.0 / 255.0;
-        let tiles_of = |r: &[u32; 4]| {
-            if r[2] > r[0] && r[3] > r[1] {
-                ((r[2] - r[0]) * (r[3] - r[1])) as usize
-            } else {
-                0
-            }
-        };
+        let tiles_of = |r: &[u32; 4]| if r[2] > r[0] && r[3] > r[1] { ((r[2] - r[0]) * (r[3] - r[1])) as usize } else { 0 };
         let culled = (0..scene.len()).filter(|&g| faint(g)).count();
         let binned: usize = run.rects.iter().map(tiles_of).sum();
         eprintln!("{w}x{h}: {} intersections (3-sigma squares: {squares}); {culled} of {n} splats below alpha 1/255", run.intersections);
         assert_eq!(binned, run.intersections as usize);
         assert!(culled > 0 && (0..scene.len()).all(|g| !faint(g) || tiles_of(&run.rects[g]) == 0));
-        assert!(
-            run.intersections as usize * 10 < squares * 9,
-            "{w}x{h}: {} intersections, 3-sigma squares {squares}",
-            run.intersections
-        );
+        assert!(run.intersections as usize * 10 < squares * 9, "{w}x{h}: {} intersections, 3-sigma squares {squares}", run.intersections);
     }
     check_validation(ctx);
 }
@@ -106,15 +82,8 @@ fn records_by_binding_and_by_address_agree() {
             })
             .into_iter()
             .collect();
-        assert_eq!(
-            bits(&runs[0].out),
-            bits(&runs[1].out),
-            "{kernels:?}: images differ"
-        );
-        let (a, b) = (
-            runs[0].grads.as_ref().unwrap(),
-            runs[1].grads.as_ref().unwrap(),
-        );
+            assert_eq!(bits(&runs[0].out), bits(&runs[1].out), "{kernels:?}: images differ");
+        let (a, b) = (runs[0].grads.as_ref().unwrap(), runs[1].grads.as_ref().unwrap());
         assert!(a.means.iter().any(|v| *v != 0.0));
         for ((name, x), (_, y)) in named_arrays(a).into_iter().zip(named_arrays(b)) {
             assert_eq!(bits(x), bits(y), "{kernels:?}: {name} gradients differ");
@@ -133,16 +102,7 @@ fn gradients_match_finite_differences_sh3() {
     spec.log_scale = (-2.2, -1.0);
     let scene = random_scene(&mut rng, &spec);
     let cam = default_camera(40, 24);
-    check_gradients(
-        &rast,
-        &scene,
-        &cam,
-        &[0.2, 0.3, 0.7],
-        3,
-        &mut rng,
-        &[],
-        "sh3",
-    );
+    check_gradients(&rast, &scene, &cam, &[0.2, 0.3, 0.7], 3, &mut rng, &[], "sh3");
     check_validation(ctx);
 }
 
@@ -171,16 +131,7 @@ fn plain_features(mut rng: Rng) {
         let cam = default_camera(35, 21);
         let bg: Vec<f32> = (0..ch).map(|c| 0.1 * c as f32).collect();
         check_forward(&rast, &scene, &cam, &bg, 0, &format!("plain C={ch}"));
-        check_gradients(
-            &rast,
-            &scene,
-            &cam,
-            &bg,
-            0,
-            &mut rng,
-            &[],
-            &format!("plain C={ch}"),
-        );
+        check_gradients(&rast, &scene, &cam, &bg, 0, &mut rng, &[], &format!("plain C={ch}"));
     }
     check_validation(ctx);
 }
@@ -205,34 +156,14 @@ fn sh_degree_zero_and_partial_activation() {
     spec.log_scale = (-2.2, -1.0);
     let scene = random_scene(&mut rng, &spec);
     check_forward(&rast, &scene, &cam, &[0.0; 3], 1, "sh3 active 1");
-    check_gradients(
-        &rast,
-        &scene,
-        &cam,
-        &[0.0; 3],
-        1,
-        &mut rng,
-        &[],
-        "sh3 active 1",
-    );
+    check_gradients(&rast, &scene, &cam, &[0.0; 3], 1, &mut rng, &[], "sh3 active 1");
     let pixels = 30 * 20;
-    let run = gpu_run(
-        &rast,
-        &scene,
-        &cam,
-        &[0.0; 3],
-        1,
-        Some(&constant_grads(3, pixels, 1.0)),
-    );
+    let run = gpu_run(&rast, &scene, &cam, &[0.0; 3], 1, Some(&constant_grads(3, pixels, 1.0)));
     let g = run.grads.unwrap();
     for i in 0..scene.len() {
         for k in 4..16 {
             for c in 0..3 {
-                assert_eq!(
-                    g.features[(i * 16 + k) * 3 + c],
-                    0.0,
-                    "inactive SH coefficient {k} got a gradient"
-                );
+                assert_eq!(g.features[(i * 16 + k) * 3 + c], 0.0, "inactive SH coefficient {k} got a gradient");
             }
         }
     }
@@ -252,11 +183,7 @@ fn backward_is_bit_identical_run_to_run() {
     let grads = random_grads(&mut rng, 3, pixels);
     let a = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b = gpu_run(&rast, &scene, &cam, &[0.3; 3], 3, Some(&grads));
-    assert!(
-        a.intersections > 2000,
-        "scene too sparse: {} intersections",
-        a.intersections
-    );
+    assert!(a.intersections > 2000, "scene too sparse: {} intersections", a.intersections);
     assert_eq!(bits(&a.out), bits(&b.out), "forward differs between runs");
     let (ga, gb) = (a.grads.unwrap(), b.grads.unwrap());
     for (name, x, y) in [
@@ -293,19 +220,8 @@ fn multi_span_tiles_match_single_span() {
     let many = Rasterizer::with_span(ctx, 3, SH3, Some(short)).unwrap();
     let a = gpu_run(&one, &scene, &cam, &[0.3; 3], 3, Some(&grads));
     let b = gpu_run(&many, &scene, &cam, &[0.3; 3], 3, Some(&grads));
-    assert!(
-        b.spans >= 4 && b.spans > a.spans,
-        "expected more spans with the short span: {} vs {}",
-        b.spans,
-        a.spans
-    );
-    eprintln!(
-        "{} intersections, {} spans of {short} (default span {}: {})",
-        b.intersections,
-        b.spans,
-        one.span(),
-        a.spans
-    );
+    assert!(b.spans >= 4 && b.spans > a.spans, "expected more spans with the short span: {} vs {}", b.spans, a.spans);
+    eprintln!("{} intersections, {} spans of {short} (default span {}: {})", b.intersections, b.spans, one.span(), a.spans);
     assert_eq!(bits(&a.out), bits(&b.out), "forward differs");
     let (ga, gb) = (a.grads.unwrap(), b.grads.unwrap());
     assert_eq!(bits(&ga.means), bits(&gb.means));
@@ -329,25 +245,13 @@ fn workgroup_and_subgroup_kernels_agree() {
     let mut rng = Rng(seed("workgroup_and_subgroup_kernels_agree"));
     let wg = Rasterizer::with_options(ctx, 3, SH3, None, RasterKernels::Workgroup).unwrap();
     let sg = Rasterizer::with_options(ctx, 3, SH3, None, RasterKernels::Subgroup).unwrap();
-    assert_eq!(
-        (wg.kernels(), sg.kernels()),
-        (RasterKernels::Workgroup, RasterKernels::Subgroup)
-    );
+    assert_eq!((wg.kernels(), sg.kernels()), (RasterKernels::Workgroup, RasterKernels::Subgroup));
     let mut spec = SceneSpec::new(12, 3, SH3);
     spec.log_scale = (-2.2, -1.0);
     let small = random_scene(&mut rng, &spec);
     let cam = default_camera(40, 24);
     check_forward(&wg, &small, &cam, &[0.1, 0.5, 0.9], 3, "workgroup kernels");
-    check_gradients(
-        &wg,
-        &small,
-        &cam,
-        &[0.2, 0.3, 0.7],
-        3,
-        &mut rng,
-        &[],
-        "workgroup kernels",
-    );
+    check_gradients(&wg, &small, &cam, &[0.2, 0.3, 0.7], 3, &mut rng, &[], "workgroup kernels");
 
     let mut spec = SceneSpec::new(2000, 3, SH3);
     spec.opacity = (-4.0, 2.0);
@@ -361,58 +265,27 @@ fn workgroup_and_subgroup_kernels_agree() {
     let (ga, gb, gb2) = (a.grads.unwrap(), b.grads.unwrap(), b2.grads.unwrap());
     for (name, x, y, y2) in [
         ("means", &ga.means, &gb.means, &gb2.means),
-        (
-            "log_scales",
-            &ga.log_scales,
-            &gb.log_scales,
-            &gb2.log_scales,
-        ),
+        ("log_scales", &ga.log_scales, &gb.log_scales, &gb2.log_scales),
         ("quats", &ga.quats, &gb.quats, &gb2.quats),
         ("opacity", &ga.opacity, &gb.opacity, &gb2.opacity),
         ("features", &ga.features, &gb.features, &gb2.features),
     ] {
-        assert_eq!(
-            bits(y),
-            bits(y2),
-            "{name}: subgroup backward not bit-identical run to run"
-        );
+        assert_eq!(bits(y), bits(y2), "{name}: subgroup backward not bit-identical run to run");
         // A few sums are ill-conditioned in f32 (large per-pixel terms that
         // nearly cancel, e.g. a splat seen almost edge-on): any change of
         // summation order moves them, as it moves the FD check's excluded
         // pixels. Measured over 25 seeds: scales have 3-13 of 4,000 elements
         // beyond 1e-4 relative and 0-7 beyond 1e-3, every other group none;
         // a wrong kernel differs almost everywhere.
-        let rms =
-            (x.iter().map(|&t| (t as f64).powi(2)).sum::<f64>() / x.len().max(1) as f64).sqrt();
-        let beyond = |tol: f64| {
-            (0..x.len())
-                .filter(|&i| {
-                    ((x[i] - y[i]).abs() as f64)
-                        > tol * (x[i].abs() + y[i].abs()) as f64 + 1e-6 * rms
-                })
-                .collect::<Vec<_>>()
-        };
+        let rms = (x.iter().map(|&t| (t as f64).powi(2)).sum::<f64>() / x.len().max(1) as f64).sqrt();
+        let beyond = |tol: f64| (0..x.len()).filter(|&i| ((x[i] - y[i]).abs() as f64) > tol * (x[i].abs() + y[i].abs()) as f64 + 1e-6 * rms).collect::<Vec<_>>();
         let (loose, tight) = (beyond(1e-3), beyond(1e-4));
-        eprintln!(
-            "{name}: of {} elements, {} differ by more than 1e-4 relative, {} by more than 1e-3",
-            x.len(),
-            tight.len(),
-            loose.len()
-        );
+        eprintln!("{name}: of {} elements, {} differ by more than 1e-4 relative, {} by more than 1e-3", x.len(), tight.len(), loose.len());
         for &i in loose.iter().take(3) {
-            eprintln!(
-                "   [{i}] workgroup {} subgroup {} (rms {rms:.3e})",
-                x[i], y[i]
-            );
+            eprintln!("   [{i}] workgroup {} subgroup {} (rms {rms:.3e})", x[i], y[i]);
         }
         assert!(rms > 0.0, "{name}: all zero");
-        assert!(
-            loose.len() * 100 <= x.len() && tight.len() * 50 <= x.len(),
-            "{name}: {} (1e-3) and {} (1e-4) of {} elements differ between the two backwards",
-            loose.len(),
-            tight.len(),
-            x.len()
-        );
+        assert!(loose.len() * 100 <= x.len() && tight.len() * 50 <= x.len(), "{name}: {} (1e-3) and {} (1e-4) of {} elements differ between the two backwards", loose.len(), tight.len(), x.len());
     }
     check_validation(ctx);
 }

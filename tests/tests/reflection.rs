@@ -7,10 +7,7 @@
 //! and bit-identical reruns.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{
-    Camera, EnvMap, EnvProxy, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane,
-    ReflectionShading,
-};
+use tgs_pipelines::{EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
 use tgs_tests::reflection_ref::{self as rr, CompositePixel, ReflGaussian, V3};
 use tgs_tests::{check_validation, ctx_shared, seed, Rng};
 
@@ -36,39 +33,19 @@ fn quat_to(n: V3) -> [f64; 4] {
 const CENTRE: V3 = [0.3, -0.2, 4.0];
 
 fn camera() -> Camera {
-    Camera::look_at(
-        [CENTRE[0] as f32, CENTRE[1] as f32, CENTRE[2] as f32],
-        [0.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        0.8,
-        16,
-        16,
-    )
+    Camera::look_at([CENTRE[0] as f32, CENTRE[1] as f32, CENTRE[2] as f32], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.8, 16, 16)
 }
 
 /// A Gaussian at `p` whose mirror direction seen from CENTRE is `w`.
 fn gaussian_reflecting(p: V3, w: V3, material: [f64; 4]) -> ReflGaussian {
     let v = norm([CENTRE[0] - p[0], CENTRE[1] - p[1], CENTRE[2] - p[2]]);
     let n = norm([v[0] + w[0], v[1] + w[1], v[2] + w[2]]);
-    ReflGaussian {
-        p,
-        q: quat_to(n),
-        material,
-    }
+    ReflGaussian { p, q: quat_to(n), material }
 }
 
 fn random_gaussian(rng: &mut Rng, w: V3) -> ReflGaussian {
-    let p = [
-        uni(rng, -1.0, 1.0),
-        uni(rng, -1.0, 1.0),
-        uni(rng, -1.0, 1.0),
-    ];
-    let material = [
-        uni(rng, -3.0, 3.0),
-        uni(rng, -3.0, 3.0),
-        uni(rng, -3.0, 3.0),
-        uni(rng, -3.0, 3.0),
-    ];
+    let p = [uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0)];
+    let material = [uni(rng, -3.0, 3.0), uni(rng, -3.0, 3.0), uni(rng, -3.0, 3.0), uni(rng, -3.0, 3.0)];
     let mut g = gaussian_reflecting(p, w, material);
     // Unnormalized quaternions: the kernels normalize.
     let s = uni(rng, 0.5, 2.0);
@@ -79,20 +56,12 @@ fn random_gaussian(rng: &mut Rng, w: V3) -> ReflGaussian {
 /// The Gaussian as the GPU sees it (every value rounded to f32).
 fn round32(g: &ReflGaussian) -> ReflGaussian {
     let r = |v: f64| v as f32 as f64;
-    ReflGaussian {
-        p: g.p.map(r),
-        q: g.q.map(r),
-        material: g.material.map(r),
-    }
+    ReflGaussian { p: g.p.map(r), q: g.q.map(r), material: g.material.map(r) }
 }
 
 fn random_dir(rng: &mut Rng) -> V3 {
     loop {
-        let d = [
-            uni(rng, -1.0, 1.0),
-            uni(rng, -1.0, 1.0),
-            uni(rng, -1.0, 1.0),
-        ];
+        let d = [uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0)];
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         if l > 0.1 && l < 1.0 {
             return d.map(|c| c / l);
@@ -137,29 +106,18 @@ fn host_set(gs: &[ReflGaussian]) -> HostGaussians {
     let mut h = HostGaussians::new(4, 1);
     for g in gs {
         let m = g.material.map(|v| v as f32);
-        h.push(
-            g.p.map(|v| v as f32),
-            [-3.0, -3.0],
-            g.q.map(|v| v as f32),
-            2.0,
-            &m,
-        );
+        h.push(g.p.map(|v| v as f32), [-3.0, -3.0], g.q.map(|v| v as f32), 2.0, &m);
     }
     h
 }
 
 fn random_env(rng: &mut Rng, res: usize) -> Vec<f64> {
-    (0..6 * res * res * 3)
-        .map(|_| uni(rng, -2.0, 2.0))
-        .collect()
+    (0..6 * res * res * 3).map(|_| uni(rng, -2.0, 2.0)).collect()
 }
 
 /// A parallax proxy (centre, radius) as the GPU takes it.
 fn gpu_proxy(proxy: Option<(V3, f64)>) -> Option<EnvProxy> {
-    proxy.map(|(c, r)| EnvProxy {
-        centre: c.map(|v| v as f32),
-        radius: r as f32,
-    })
+    proxy.map(|(c, r)| EnvProxy { centre: c.map(|v| v as f32), radius: r as f32 })
 }
 
 /// The proxy as the GPU sees it (rounded to f32).
@@ -167,44 +125,22 @@ fn proxy32(proxy: Option<(V3, f64)>) -> Option<(V3, f64)> {
     proxy.map(|(c, r)| (c.map(|v| v as f32 as f64), r as f32 as f64))
 }
 
-fn upload_env_proxy(
-    ctx: &std::sync::Arc<tgs_engine::Context>,
-    res: usize,
-    raw: &[f64],
-    proxy: Option<(V3, f64)>,
-) -> EnvMap {
-    EnvMap::upload(
-        ctx,
-        &HostEnvMap {
-            res: res as u32,
-            raw: raw.iter().map(|&v| v as f32).collect(),
-            proxy: gpu_proxy(proxy),
-        },
-    )
-    .unwrap()
+fn upload_env_proxy(ctx: &std::sync::Arc<tgs_engine::Context>, res: usize, raw: &[f64], proxy: Option<(V3, f64)>) -> EnvMap {
+    EnvMap::upload(ctx, &HostEnvMap { res: res as u32, raw: raw.iter().map(|&v| v as f32).collect(), proxy: gpu_proxy(proxy) }).unwrap()
 }
 
 fn gpu_color(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel) -> Vec<f32> {
     gpu_color_proxy(gs, env, res, fresnel, None)
 }
 
-fn gpu_color_proxy(
-    gs: &[ReflGaussian],
-    env: &[f64],
-    res: usize,
-    fresnel: Fresnel,
-    proxy: Option<(V3, f64)>,
-) -> Vec<f32> {
+fn gpu_color_proxy(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, proxy: Option<(V3, f64)>) -> Vec<f32> {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let g = Gaussians::upload(ctx, &host_set(gs)).unwrap();
     let e = upload_env_proxy(ctx, res, env, proxy);
-    let feat =
-        Buffer::<f32>::new(ctx, "test.feat", fresnel.channels() as usize * gs.len()).unwrap();
+    let feat = Buffer::<f32>::new(ctx, "test.feat", fresnel.channels() as usize * gs.len()).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    shading
-        .record_color(&mut rec, &g, &e, &camera(), fresnel, &feat)
-        .unwrap();
+    shading.record_color(&mut rec, &g, &e, &camera(), fresnel, &feat).unwrap();
     rec.submit_and_wait().unwrap();
     feat.download().unwrap()
 }
@@ -227,12 +163,8 @@ fn color_matches_reference_on_axes_seams_corners_and_random_directions() {
                 let centre = CENTRE.map(|v| v as f32 as f64);
                 let want = rr::color(&g32, &env, res, centre, fresnel == Fresnel::Schlick);
                 let got_i = &got[ch * i..ch * (i + 1)];
-                assert!(
-                    got_i.iter().all(|v| v.is_finite()),
-                    "res {res} {fresnel:?} Gaussian {i}: non-finite {got_i:?}"
-                );
-                let matches =
-                    |want: &[f64]| (0..ch).all(|c| (got_i[c] as f64 - want[c]).abs() < 2e-4);
+                assert!(got_i.iter().all(|v| v.is_finite()), "res {res} {fresnel:?} Gaussian {i}: non-finite {got_i:?}");
+                let matches = |want: &[f64]| (0..ch).all(|c| (got_i[c] as f64 - want[c]).abs() < 2e-4);
                 if matches(&want) {
                     continue;
                 }
@@ -245,18 +177,10 @@ fn color_matches_reference_on_axes_seams_corners_and_random_directions() {
                     d[k / 2] += if k % 2 == 0 { 1e-6 } else { -1e-6 };
                     let e = rr::env_lookup(&env, res, norm(d));
                     let f0 = [0, 1, 2].map(|c| 1.0 / (1.0 + (-g32.material[c]).exp()));
-                    let c3: Vec<f64> = if fresnel == Fresnel::Schlick {
-                        e.to_vec()
-                    } else {
-                        (0..3).map(|c| f0[c] * e[c]).collect()
-                    };
+                    let c3: Vec<f64> = if fresnel == Fresnel::Schlick { e.to_vec() } else { (0..3).map(|c| f0[c] * e[c]).collect() };
                     (0..3).all(|c| (got_i[c] as f64 - c3[c]).abs() < 2e-4)
                 });
-                assert!(
-                    tie_ok,
-                    "res {res} {fresnel:?} Gaussian {i} (w = {:?}): GPU {got_i:?} vs f64 {want:?}",
-                    dirs[i]
-                );
+                assert!(tie_ok, "res {res} {fresnel:?} Gaussian {i} (w = {:?}): GPU {got_i:?} vs f64 {want:?}", dirs[i]);
             }
         }
     }
@@ -274,11 +198,7 @@ fn lookup_is_continuous_across_seams() {
         for row in 0..res {
             for col in 0..res {
                 let s = 2.0 / res as f64;
-                let d = norm(rr::face_dir(
-                    face,
-                    (col as f64 + 0.5) * s - 1.0,
-                    (row as f64 + 0.5) * s - 1.0,
-                ));
+                let d = norm(rr::face_dir(face, (col as f64 + 0.5) * s - 1.0, (row as f64 + 0.5) * s - 1.0));
                 let t = (face * res + row) * res + col;
                 for c in 0..3 {
                     env[3 * t + c] = 2.0 * d[c];
@@ -298,15 +218,9 @@ fn lookup_is_continuous_across_seams() {
         d1[a] *= 1.0 + 1e-4;
         let mut d2 = d;
         d2[b] *= 1.0 + 1e-4;
-        let (e1, e2) = (
-            rr::env_lookup(&env, res, norm(d1)),
-            rr::env_lookup(&env, res, norm(d2)),
-        );
+        let (e1, e2) = (rr::env_lookup(&env, res, norm(d1)), rr::env_lookup(&env, res, norm(d2)));
         for c in 0..3 {
-            assert!(
-                (e1[c] - e2[c]).abs() < 0.05,
-                "seam at {d:?}: {e1:?} vs {e2:?}"
-            );
+            assert!((e1[c] - e2[c]).abs() < 0.05, "seam at {d:?}: {e1:?} vs {e2:?}");
         }
     }
 }
@@ -318,14 +232,7 @@ struct Backward {
     env: Vec<f32>,
 }
 
-fn gpu_backward(
-    gs: &[ReflGaussian],
-    env: &[f64],
-    res: usize,
-    fresnel: Fresnel,
-    dfeat: &[f64],
-    proxy: Option<(V3, f64)>,
-) -> Backward {
+fn gpu_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, dfeat: &[f64], proxy: Option<(V3, f64)>) -> Backward {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let g = Gaussians::upload(ctx, &host_set(gs)).unwrap();
@@ -335,53 +242,22 @@ fn gpu_backward(
     let d = Buffer::from_slice(ctx, "test.dfeat", &df).unwrap();
     let s = shading.texel_scratch(&e, gs.len() as u32).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    shading
-        .record_color_backward(&mut rec, &g, &e, &camera(), fresnel, &d, &grads, &s)
-        .unwrap();
+    shading.record_color_backward(&mut rec, &g, &e, &camera(), fresnel, &d, &grads, &s).unwrap();
     rec.submit_and_wait().unwrap();
     let h = grads.download().unwrap();
-    Backward {
-        material: h.features,
-        means: h.means,
-        quats: h.quats,
-        env: e.grads.download().unwrap(),
-    }
+    Backward { material: h.features, means: h.means, quats: h.quats, env: e.grads.download().unwrap() }
 }
 
-fn ref_loss(
-    gs: &[ReflGaussian],
-    env: &[f64],
-    res: usize,
-    schlick: bool,
-    dfeat: &[f64],
-    proxy: Option<(V3, f64)>,
-) -> f64 {
+fn ref_loss(gs: &[ReflGaussian], env: &[f64], res: usize, schlick: bool, dfeat: &[f64], proxy: Option<(V3, f64)>) -> f64 {
     let ch = if schlick { 7 } else { 4 };
-    gs.iter()
-        .enumerate()
-        .map(|(i, g)| {
-            rr::color_with_proxy(g, env, res, CENTRE, proxy, schlick)
-                .iter()
-                .enumerate()
-                .map(|(c, v)| v * dfeat[ch * i + c])
-                .sum::<f64>()
-        })
-        .sum()
+    gs.iter().enumerate().map(|(i, g)| rr::color_with_proxy(g, env, res, CENTRE, proxy, schlick).iter().enumerate().map(|(c, v)| v * dfeat[ch * i + c]).sum::<f64>()).sum()
 }
 
 fn close(got: f32, want: f64, scale: f64) -> bool {
     got.is_finite() && (got as f64 - want).abs() <= 2e-3 * scale + 1e-3 * want.abs()
 }
 
-fn check_backward(
-    gs: &[ReflGaussian],
-    env: &[f64],
-    res: usize,
-    fresnel: Fresnel,
-    rng: &mut Rng,
-    what: &str,
-    proxy: Option<(V3, f64)>,
-) -> Backward {
+fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, rng: &mut Rng, what: &str, proxy: Option<(V3, f64)>) -> Backward {
     let proxy = proxy32(proxy);
     let schlick = fresnel == Fresnel::Schlick;
     let ch = fresnel.channels() as usize;
@@ -403,34 +279,21 @@ fn check_backward(
         for c in 0..4 {
             let want = fd(&|e| with(&|g, e| g.material[c] += e, e));
             if !close(got.material[4 * i + c], want, 1.0) {
-                bad.push(format!(
-                    "Gaussian {i} material[{c}]: GPU {} vs FD {want}",
-                    got.material[4 * i + c]
-                ));
+                bad.push(format!("Gaussian {i} material[{c}]: GPU {} vs FD {want}", got.material[4 * i + c]));
             }
         }
-        let scale = (0..3)
-            .map(|c| fd(&|e| with(&|g, e| g.p[c] += e, e)).abs())
-            .fold(1.0, f64::max);
+        let scale = (0..3).map(|c| fd(&|e| with(&|g, e| g.p[c] += e, e)).abs()).fold(1.0, f64::max);
         for c in 0..3 {
             let want = fd(&|e| with(&|g, e| g.p[c] += e, e));
             if !close(got.means[3 * i + c], want, scale) {
-                bad.push(format!(
-                    "Gaussian {i} mean[{c}]: GPU {} vs FD {want}",
-                    got.means[3 * i + c]
-                ));
+                bad.push(format!("Gaussian {i} mean[{c}]: GPU {} vs FD {want}", got.means[3 * i + c]));
             }
         }
-        let scale = (0..4)
-            .map(|c| fd(&|e| with(&|g, e| g.q[c] += e, e)).abs())
-            .fold(1.0, f64::max);
+        let scale = (0..4).map(|c| fd(&|e| with(&|g, e| g.q[c] += e, e)).abs()).fold(1.0, f64::max);
         for c in 0..4 {
             let want = fd(&|e| with(&|g, e| g.q[c] += e, e));
             if !close(got.quats[4 * i + c], want, scale) {
-                bad.push(format!(
-                    "Gaussian {i} quat[{c}]: GPU {} vs FD {want}",
-                    got.quats[4 * i + c]
-                ));
+                bad.push(format!("Gaussian {i} quat[{c}]: GPU {} vs FD {want}", got.quats[4 * i + c]));
             }
         }
     }
@@ -448,19 +311,10 @@ fn check_backward(
     if !bad.is_empty() {
         for (i, g) in gs.iter().enumerate() {
             let w = rr::mirror_dir(g, CENTRE);
-            eprintln!(
-                "Gaussian {i}: w {w:?} face {:?} taps {:?}",
-                rr::cube_coords(w),
-                rr::taps(w, res)
-            );
+            eprintln!("Gaussian {i}: w {w:?} face {:?} taps {:?}", rr::cube_coords(w), rr::taps(w, res));
         }
     }
-    assert!(
-        bad.is_empty(),
-        "{what} ({fresnel:?}, res {res}, proxy {proxy:?}): {} mismatches:\n{}",
-        bad.len(),
-        bad[..bad.len().min(20)].join("\n")
-    );
+    assert!(bad.is_empty(), "{what} ({fresnel:?}, res {res}, proxy {proxy:?}): {} mismatches:\n{}", bad.len(), bad[..bad.len().min(20)].join("\n"));
     got
 }
 
@@ -473,11 +327,7 @@ fn parallax_proxy_lookup_matches_reference() {
     // The reference's exit point lies on the sphere, beyond p, along w.
     let mut rng = Rng(seed("proxy_dir"));
     for _ in 0..200 {
-        let p = [
-            uni(&mut rng, -1.0, 1.0),
-            uni(&mut rng, -1.0, 1.0),
-            uni(&mut rng, -1.0, 1.0),
-        ];
+        let p = [uni(&mut rng, -1.0, 1.0), uni(&mut rng, -1.0, 1.0), uni(&mut rng, -1.0, 1.0)];
         let w = random_dir(&mut rng);
         let (c, r) = PROXY;
         let d = rr::proxy_dir(p, w, Some(PROXY));
@@ -487,15 +337,9 @@ fn parallax_proxy_lookup_matches_reference() {
             continue;
         }
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        assert!(
-            (len - r).abs() < 1e-9,
-            "exit point at distance {len} from the centre, not {r}"
-        );
+        assert!((len - r).abs() < 1e-9, "exit point at distance {len} from the centre, not {r}");
         let t: f64 = (0..3).map(|k| (d[k] - o[k]) * w[k]).sum();
-        assert!(
-            t > 0.0 && (0..3).all(|k| (o[k] + t * w[k] - d[k]).abs() < 1e-9),
-            "not ahead along w"
-        );
+        assert!(t > 0.0 && (0..3).all(|k| (o[k] + t * w[k] - d[k]).abs() < 1e-9), "not ahead along w");
         // A huge sphere is the map at infinity: the direction tends to w.
         let far = norm(rr::proxy_dir(p, w, Some((c, 1e7))));
         assert!((0..3).all(|k| (far[k] - w[k]).abs() < 1e-6));
@@ -516,29 +360,12 @@ fn parallax_proxy_lookup_matches_reference() {
             for (i, g) in gs.iter().enumerate() {
                 let g32 = round32(g);
                 let centre = CENTRE.map(|v| v as f32 as f64);
-                let want = rr::color_with_proxy(
-                    &g32,
-                    &env,
-                    res,
-                    centre,
-                    proxy32(Some(PROXY)),
-                    fresnel == Fresnel::Schlick,
-                );
+                let want = rr::color_with_proxy(&g32, &env, res, centre, proxy32(Some(PROXY)), fresnel == Fresnel::Schlick);
                 let got_i = &got[ch * i..ch * (i + 1)];
-                assert!(
-                    got_i.iter().all(|v| v.is_finite()),
-                    "res {res} {fresnel:?} Gaussian {i}: {got_i:?}"
-                );
+                assert!(got_i.iter().all(|v| v.is_finite()), "res {res} {fresnel:?} Gaussian {i}: {got_i:?}");
                 if (0..ch).all(|c| (got_i[c] as f64 - want[c]).abs() < 2e-4) {
-                    let o: f64 = (0..3)
-                        .map(|k| (g32.p[k] - PROXY.0[k]).powi(2))
-                        .sum::<f64>()
-                        .sqrt();
-                    if o < PROXY.1 {
-                        inside += 1
-                    } else {
-                        off += 1
-                    }
+                    let o: f64 = (0..3).map(|k| (g32.p[k] - PROXY.0[k]).powi(2)).sum::<f64>().sqrt();
+                    if o < PROXY.1 { inside += 1 } else { off += 1 }
                     continue;
                 }
                 // A tie on a seam (as in the test without a proxy).
@@ -548,26 +375,11 @@ fn parallax_proxy_lookup_matches_reference() {
                     d2[k / 2] += if k % 2 == 0 { 1e-6 } else { -1e-6 };
                     let e = rr::env_lookup(&env, res, norm(d2));
                     let f0 = [0, 1, 2].map(|c| 1.0 / (1.0 + (-g32.material[c]).exp()));
-                    (0..3).all(|c| {
-                        (got_i[c] as f64
-                            - if fresnel == Fresnel::Schlick {
-                                e[c]
-                            } else {
-                                f0[c] * e[c]
-                            })
-                        .abs()
-                            < 2e-4
-                    })
+                    (0..3).all(|c| (got_i[c] as f64 - if fresnel == Fresnel::Schlick { e[c] } else { f0[c] * e[c] }).abs() < 2e-4)
                 });
-                assert!(
-                    tie_ok,
-                    "res {res} {fresnel:?} Gaussian {i}: GPU {got_i:?} vs f64 {want:?}"
-                );
+                assert!(tie_ok, "res {res} {fresnel:?} Gaussian {i}: GPU {got_i:?} vs f64 {want:?}");
             }
-            assert!(
-                inside > 50 && off > 10,
-                "the cases cover both sides of the sphere: {inside} inside, {off} outside"
-            );
+            assert!(inside > 50 && off > 10, "the cases cover both sides of the sphere: {inside} inside, {off} outside");
         }
     }
     check_validation(ctx_shared());
@@ -581,12 +393,10 @@ fn color_backward_matches_finite_differences() {
     for proxy in [None, Some(PROXY)] {
         for fresnel in [Fresnel::Off, Fresnel::Schlick] {
             let env = random_env(&mut rng, 3);
-            let gs: Vec<_> = (0..24)
-                .map(|_| {
-                    let w = random_dir(&mut rng);
-                    random_gaussian(&mut rng, w)
-                })
-                .collect();
+            let gs: Vec<_> = (0..24).map(|_| {
+                let w = random_dir(&mut rng);
+                random_gaussian(&mut rng, w)
+            }).collect();
             check_backward(&gs, &env, 3, fresnel, &mut rng, "random directions", proxy);
         }
     }
@@ -599,27 +409,16 @@ fn texel_gradients_sum_many_gaussians_per_texel_deterministically() {
     // texel's slots span several reduction chunks.
     let mut rng = Rng(seed("texel_sum"));
     let env = random_env(&mut rng, 1);
-    let gs: Vec<_> = (0..300)
-        .map(|_| {
-            let w = random_dir(&mut rng);
-            random_gaussian(&mut rng, w)
-        })
-        .collect();
+    let gs: Vec<_> = (0..300).map(|_| {
+        let w = random_dir(&mut rng);
+        random_gaussian(&mut rng, w)
+    }).collect();
     let ch = Fresnel::Off.channels() as usize;
-    let dfeat: Vec<f64> = (0..ch * gs.len())
-        .map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64)
-        .collect();
+    let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64).collect();
     let a = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat, None);
     let b = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat, None);
-    assert_eq!(
-        a.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-        b.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-        "texel gradients differ between identical runs"
-    );
-    assert_eq!(
-        a.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-        b.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
-    );
+    assert_eq!(a.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.env.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "texel gradients differ between identical runs");
+    assert_eq!(a.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), b.quats.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
     // Against central differences of the f64 reference.
     let gs32: Vec<ReflGaussian> = gs.iter().map(round32).collect();
     let env32: Vec<f64> = env.iter().map(|&v| v as f32 as f64).collect();
@@ -631,11 +430,7 @@ fn texel_gradients_sum_many_gaussians_per_texel_deterministically() {
             ref_loss(&gs32, &m, 1, false, &dfeat, None)
         };
         let want = (f(h) - f(-h)) / (2.0 * h);
-        assert!(
-            close(a.env[t], want, 1.0 + want.abs()),
-            "texel value {t}: GPU {} vs FD {want}",
-            a.env[t]
-        );
+        assert!(close(a.env[t], want, 1.0 + want.abs()), "texel value {t}: GPU {} vs FD {want}", a.env[t]);
     }
     check_validation(ctx_shared());
 }
@@ -649,59 +444,24 @@ fn degenerate_reflection_gaussians_stay_finite() {
     let v = norm(CENTRE);
     let edge_n = norm([v[1], -v[0], 0.0]);
     let gs = vec![
-        ReflGaussian {
-            p: [0.0; 3],
-            q: [0.0; 4],
-            material: [0.0; 4],
-        },
-        ReflGaussian {
-            p: [0.0; 3],
-            q: [1e19, 0.0, 0.0, 0.0],
-            material: [80.0, -80.0, 80.0, -80.0],
-        },
-        ReflGaussian {
-            p: CENTRE,
-            q: [1.0, 0.0, 0.0, 0.0],
-            material: [0.0; 4],
-        },
-        ReflGaussian {
-            p: [0.0; 3],
-            q: quat_to(edge_n),
-            material: [1.0; 4],
-        },
-        ReflGaussian {
-            p: [1e-30, 0.0, 0.0],
-            q: [1e-20, 0.0, 0.0, 0.0],
-            material: [0.0; 4],
-        },
+        ReflGaussian { p: [0.0; 3], q: [0.0; 4], material: [0.0; 4] },
+        ReflGaussian { p: [0.0; 3], q: [1e19, 0.0, 0.0, 0.0], material: [80.0, -80.0, 80.0, -80.0] },
+        ReflGaussian { p: CENTRE, q: [1.0, 0.0, 0.0, 0.0], material: [0.0; 4] },
+        ReflGaussian { p: [0.0; 3], q: quat_to(edge_n), material: [1.0; 4] },
+        ReflGaussian { p: [1e-30, 0.0, 0.0], q: [1e-20, 0.0, 0.0, 0.0], material: [0.0; 4] },
     ];
     let mut gs = gs;
     // Exactly on a parallax proxy's sphere (radius 1 about the origin).
-    gs.push(ReflGaussian {
-        p: [1.0, 0.0, 0.0],
-        q: quat_to(v),
-        material: [0.0; 4],
-    });
+    gs.push(ReflGaussian { p: [1.0, 0.0, 0.0], q: quat_to(v), material: [0.0; 4] });
     // The proxy centred on Gaussians at the origin, and one too small to hold any.
     for proxy in [None, Some(([0.0; 3], 1.0)), Some(([0.0; 3], 1e-30))] {
         for fresnel in [Fresnel::Off, Fresnel::Schlick] {
             let feat = gpu_color_proxy(&gs, &env, 4, fresnel, proxy);
-            assert!(
-                feat.iter().all(|v| v.is_finite()),
-                "{fresnel:?} {proxy:?}: non-finite colour {feat:?}"
-            );
+            assert!(feat.iter().all(|v| v.is_finite()), "{fresnel:?} {proxy:?}: non-finite colour {feat:?}");
             let dfeat = vec![1.0; fresnel.channels() as usize * gs.len()];
             let b = gpu_backward(&gs, &env, 4, fresnel, &dfeat, proxy);
-            for (name, v) in [
-                ("material", &b.material),
-                ("means", &b.means),
-                ("quats", &b.quats),
-                ("env", &b.env),
-            ] {
-                assert!(
-                    v.iter().all(|x| x.is_finite()),
-                    "{fresnel:?} {proxy:?}: non-finite {name} gradient {v:?}"
-                );
+            for (name, v) in [("material", &b.material), ("means", &b.means), ("quats", &b.quats), ("env", &b.env)] {
+                assert!(v.iter().all(|x| x.is_finite()), "{fresnel:?} {proxy:?}: non-finite {name} gradient {v:?}");
             }
         }
     }
@@ -711,19 +471,7 @@ fn degenerate_reflection_gaussians_stay_finite() {
 // ---- the deferred composite ----
 
 fn comp_camera(w: u32, h: u32) -> Camera {
-    Camera {
-        width: w,
-        height: h,
-        fx: 1.1 * w as f32,
-        fy: 1.05 * w as f32,
-        cx: 0.45 * w as f32,
-        cy: 0.55 * h as f32,
-        world_to_view: [
-            [1.0, 0.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0, 0.0],
-        ],
-    }
+    Camera { width: w, height: h, fx: 1.1 * w as f32, fy: 1.05 * w as f32, cx: 0.45 * w as f32, cy: 0.55 * h as f32, world_to_view: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] }
 }
 
 /// Random per-pixel inputs with the hard cases in the first pixels: no
@@ -732,35 +480,17 @@ fn composite_inputs(rng: &mut Rng, cam: &Camera) -> Vec<CompositePixel> {
     let n = (cam.width * cam.height) as usize;
     (0..n)
         .map(|i| {
-            let (x, y) = (
-                (i % cam.width as usize) as f64,
-                (i / cam.width as usize) as f64,
-            );
-            let v = rr::pixel_view_dir(
-                x,
-                y,
-                cam.fx as f64,
-                cam.fy as f64,
-                cam.cx as f64,
-                cam.cy as f64,
-            );
+            let (x, y) = ((i % cam.width as usize) as f64, (i / cam.width as usize) as f64);
+            let v = rr::pixel_view_dir(x, y, cam.fx as f64, cam.fy as f64, cam.cx as f64, cam.cy as f64);
             let alpha = uni(rng, 0.2, 1.0);
             let mut nrm = norm([uni(rng, -0.5, 0.5) + v[0], uni(rng, -0.5, 0.5) + v[1], v[2]]);
             let k = uni(rng, 0.3, 1.0);
             nrm = nrm.map(|c| c * alpha * k);
             let mut p = CompositePixel {
                 scat: [uni(rng, 0.0, 1.0), uni(rng, 0.0, 1.0), uni(rng, 0.0, 1.0)],
-                a: [
-                    uni(rng, 0.0, alpha),
-                    uni(rng, 0.0, alpha),
-                    uni(rng, 0.0, alpha),
-                ],
+                a: [uni(rng, 0.0, alpha), uni(rng, 0.0, alpha), uni(rng, 0.0, alpha)],
                 r: uni(rng, 0.0, alpha),
-                f0s: [
-                    uni(rng, 0.0, alpha),
-                    uni(rng, 0.0, alpha),
-                    uni(rng, 0.0, alpha),
-                ],
+                f0s: [uni(rng, 0.0, alpha), uni(rng, 0.0, alpha), uni(rng, 0.0, alpha)],
                 alpha,
                 normal: nrm,
                 v,
@@ -815,14 +545,7 @@ fn planes(px: &[CompositePixel], fresnel: Fresnel, extra: &mut Rng) -> (Vec<f32>
     (scat, refl)
 }
 
-fn gpu_composite(
-    cam: &Camera,
-    fresnel: Fresnel,
-    scat: &[f32],
-    refl: &[f32],
-    g_in: &[f32],
-    r_prior: f32,
-) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_in: &[f32], r_prior: f32) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let n = (cam.width * cam.height) as usize;
@@ -833,18 +556,10 @@ fn gpu_composite(
     let gr = Buffer::<f32>::new(ctx, "test.refl_grad", refl.len()).unwrap();
     let gs = Buffer::<f32>::new(ctx, "test.scat_grad", 3 * n).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    shading
-        .record_composite(&mut rec, cam, fresnel, &s, &r, &li)
-        .unwrap();
-    shading
-        .record_composite_backward(&mut rec, cam, fresnel, &s, &r, &gi, &gr, Some(&gs), r_prior)
-        .unwrap();
+    shading.record_composite(&mut rec, cam, fresnel, &s, &r, &li).unwrap();
+    shading.record_composite_backward(&mut rec, cam, fresnel, &s, &r, &gi, &gr, Some(&gs), r_prior).unwrap();
     rec.submit_and_wait().unwrap();
-    (
-        li.download().unwrap(),
-        gr.download().unwrap(),
-        gs.download().unwrap(),
-    )
+    (li.download().unwrap(), gr.download().unwrap(), gs.download().unwrap())
 }
 
 #[test]
@@ -866,56 +581,33 @@ fn composite_matches_reference_and_finite_differences() {
                         scat: [0, 1, 2].map(|c| scat[c * n + i] as f64),
                         a: [g(0), g(1), g(2)],
                         r: g(3),
-                        f0s: if ch == 7 {
-                            [g(4), g(5), g(6)]
-                        } else {
-                            [0.0; 3]
-                        },
+                        f0s: if ch == 7 { [g(4), g(5), g(6)] } else { [0.0; 3] },
                         alpha: g(Plane::Alpha.index(ch)),
                         normal: [0, 1, 2].map(|k| g(Plane::Normal(k).index(ch))),
                         v: px[i].v,
                     }
                 })
                 .collect();
-            let g_in: Vec<f32> = (0..10 * n)
-                .map(|_| uni(&mut rng, -1.0, 1.0) as f32)
-                .collect();
+            let g_in: Vec<f32> = (0..10 * n).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
             // The loss also holds r_prior * R per pixel (a penalty on R's mean).
             let r_prior = uni(&mut rng, 0.1, 0.5) as f32;
             let (li, gr, gs) = gpu_composite(&cam, fresnel, &scat, &refl, &g_in, r_prior);
-            for (name, v) in [
-                ("composite", &li),
-                ("reflection gradient", &gr),
-                ("scattering gradient", &gs),
-            ] {
-                assert!(
-                    v.iter().all(|x| x.is_finite()),
-                    "{fresnel:?} {w}x{h}: non-finite {name}"
-                );
+            for (name, v) in [("composite", &li), ("reflection gradient", &gr), ("scattering gradient", &gs)] {
+                assert!(v.iter().all(|x| x.is_finite()), "{fresnel:?} {w}x{h}: non-finite {name}");
             }
             for i in 0..n {
                 let want = rr::composite(&px[i], schlick);
                 for c in 0..3 {
-                    assert!(
-                        (li[c * n + i] as f64 - want[c]).abs() < 1e-5,
-                        "{fresnel:?} pixel {i} channel {c}: GPU {} vs f64 {}",
-                        li[c * n + i],
-                        want[c]
-                    );
+                    assert!((li[c * n + i] as f64 - want[c]).abs() < 1e-5, "{fresnel:?} pixel {i} channel {c}: GPU {} vs f64 {}", li[c * n + i], want[c]);
                 }
                 // Pass-through planes.
                 for k in 0..7u32 {
-                    assert_eq!(
-                        li[(3 + k) as usize * n + i],
-                        refl[(ch + k) as usize * n + i],
-                        "plane {k} of pixel {i} not passed through"
-                    );
+                    assert_eq!(li[(3 + k) as usize * n + i], refl[(ch + k) as usize * n + i], "plane {k} of pixel {i} not passed through");
                 }
                 // Gradients: d(sum_c g_c I_c)/d(input) by central differences.
                 let loss = |p: &CompositePixel| {
                     let v = rr::composite(p, schlick);
-                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>()
-                        + r_prior as f64 * p.r
+                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>() + r_prior as f64 * p.r
                 };
                 let step = 1e-7;
                 let fd = |f: &dyn Fn(&mut CompositePixel, f64)| {
@@ -926,11 +618,7 @@ fn composite_matches_reference_and_finite_differences() {
                 };
                 let mut checks: Vec<(String, f64, f32)> = Vec::new();
                 for c in 0..3 {
-                    checks.push((
-                        format!("scat[{c}]"),
-                        fd(&|p, e| p.scat[c] += e),
-                        gs[c * n + i],
-                    ));
+                    checks.push((format!("scat[{c}]"), fd(&|p, e| p.scat[c] += e), gs[c * n + i]));
                     checks.push((format!("A[{c}]"), fd(&|p, e| p.a[c] += e), gr[c * n + i]));
                 }
                 checks.push(("R".into(), fd(&|p, e| p.r += e), gr[3 * n + i]));
@@ -939,44 +627,21 @@ fn composite_matches_reference_and_finite_differences() {
                 // exist: values and finiteness are checked above.
                 if schlick && i > 3 {
                     for c in 0..3 {
-                        checks.push((
-                            format!("F0 sum[{c}]"),
-                            fd(&|p, e| p.f0s[c] += e),
-                            gr[(4 + c) * n + i],
-                        ));
+                        checks.push((format!("F0 sum[{c}]"), fd(&|p, e| p.f0s[c] += e), gr[(4 + c) * n + i]));
                     }
                     let ga = g_in[3 * n + i] as f64;
-                    checks.push((
-                        "alpha".into(),
-                        fd(&|p, e| p.alpha += e) + ga,
-                        gr[Plane::Alpha.index(ch) as usize * n + i],
-                    ));
+                    checks.push(("alpha".into(), fd(&|p, e| p.alpha += e) + ga, gr[Plane::Alpha.index(ch) as usize * n + i]));
                     for k in 0..3u32 {
                         let gn = g_in[(5 + k) as usize * n + i] as f64;
-                        checks.push((
-                            format!("normal[{k}]"),
-                            fd(&|p, e| p.normal[k as usize] += e) + gn,
-                            gr[Plane::Normal(k).index(ch) as usize * n + i],
-                        ));
+                        checks.push((format!("normal[{k}]"), fd(&|p, e| p.normal[k as usize] += e) + gn, gr[Plane::Normal(k).index(ch) as usize * n + i]));
                     }
                 }
                 for (name, want, got) in checks {
-                    assert!(
-                        (got as f64 - want).abs() <= 1e-4 * (1.0 + want.abs()),
-                        "{fresnel:?} {w}x{h} pixel {i} d/d{name}: GPU {got} vs FD {want}"
-                    );
+                    assert!((got as f64 - want).abs() <= 1e-4 * (1.0 + want.abs()), "{fresnel:?} {w}x{h} pixel {i} d/d{name}: GPU {got} vs FD {want}");
                 }
                 // Depth, median, distortion pass their gradients through.
-                for (p, k) in [
-                    (Plane::Depth, 4u32),
-                    (Plane::Median, 8),
-                    (Plane::Distortion, 9),
-                ] {
-                    assert_eq!(
-                        gr[p.index(ch) as usize * n + i],
-                        g_in[k as usize * n + i],
-                        "{p:?} gradient of pixel {i}"
-                    );
+                for (p, k) in [(Plane::Depth, 4u32), (Plane::Median, 8), (Plane::Distortion, 9)] {
+                    assert_eq!(gr[p.index(ch) as usize * n + i], g_in[k as usize * n + i], "{p:?} gradient of pixel {i}");
                 }
             }
         }

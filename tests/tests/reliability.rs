@@ -18,9 +18,7 @@ static DRIVER: Mutex<()> = Mutex::new(());
 
 /// A private copy of the tiny glass scene (tests here change datasets).
 fn own_scene(base: &Path) -> PathBuf {
-    let shared = tgs_tests::tiny_glass_scene(
-        &Path::new(env!("CARGO_TARGET_TMPDIR")).join("reliability-scene"),
-    );
+    let shared = tgs_tests::tiny_glass_scene(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("reliability-scene"));
     let dir = base.join("dataset");
     tgs_tests::copy_dir(&shared, &dir);
     dir
@@ -52,13 +50,7 @@ fn trained_run(name: &str) -> (tgs_tests::TempDir, PathBuf, PathBuf) {
 
 /// A 12-iteration Stage I run with a checkpoint.
 fn tiny_args(dataset: &Path, out: &Path, iterations: u32) -> TrainArgs {
-    let set = [
-        "stages=\"I\"",
-        "background=\"black\"",
-        "test_interval=0",
-        "checkpoint_interval=0",
-        "densify_from=1000",
-    ];
+    let set = ["stages=\"I\"", "background=\"black\"", "test_interval=0", "checkpoint_interval=0", "densify_from=1000"];
     TrainArgs {
         dataset: Some(dataset.to_path_buf()),
         out: out.to_path_buf(),
@@ -84,17 +76,9 @@ fn renders_never_go_into_a_dataset_or_over_other_files() {
     let before = snapshot(&ds);
 
     // Into the dataset, its split directories or the dataset itself: refused with the path.
-    for (cams, out) in [
-        ("train", ds.join("train")),
-        ("test", ds.join("test")),
-        ("test", ds.clone()),
-        ("train", ds.join("new/deeper")),
-    ] {
+    for (cams, out) in [("train", ds.join("train")), ("test", ds.join("test")), ("test", ds.clone()), ("train", ds.join("new/deeper"))] {
         let e = err(tgs::render::render(ctx, &run, cams, 1, &out));
-        assert!(
-            e.contains("never writes into a dataset") && e.contains(&*out.to_string_lossy()),
-            "{e}"
-        );
+        assert!(e.contains("never writes into a dataset") && e.contains(&*out.to_string_lossy()), "{e}");
     }
     // eval --out into the dataset, through the same door.
     let (mut tr, data) = open_run(ctx, &run).unwrap();
@@ -103,13 +87,7 @@ fn renders_never_go_into_a_dataset_or_over_other_files() {
     // A dataset that is not the run's is recognised by its transforms.
     let other = base.join("other-dataset");
     tgs_tests::copy_dir(&ds, &other);
-    let e = err(tgs::render::render(
-        ctx,
-        &run,
-        "test",
-        1,
-        &other.join("test"),
-    ));
+    let e = err(tgs::render::render(ctx, &run, "test", 1, &other.join("test")));
     assert!(e.contains("never writes into a dataset"), "{e}");
     // Training into a dataset is refused before anything is written.
     let e = err(train(ctx, &tiny_args(&ds, &ds.join("run"), 12)));
@@ -122,56 +100,26 @@ fn renders_never_go_into_a_dataset_or_over_other_files() {
     std::fs::create_dir_all(&mine).unwrap();
     let name = &data.test[0].name;
     std::fs::write(mine.join(format!("{name}_depth.png")), b"my own file").unwrap();
-    let e = err(tgs::eval::evaluate(
-        &mut tr,
-        &data.test,
-        Some(&mut OutDir::open(&mine, Some(&data.root)).unwrap()),
-    ));
-    assert!(
-        e.contains(&format!("{name}_depth.png")) && e.contains("not written by tgs"),
-        "{e}"
-    );
-    assert_eq!(
-        std::fs::read(mine.join(format!("{name}_depth.png"))).unwrap(),
-        b"my own file"
-    );
+    let e = err(tgs::eval::evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&mine, Some(&data.root)).unwrap())));
+    assert!(e.contains(&format!("{name}_depth.png")) && e.contains("not written by tgs"), "{e}");
+    assert_eq!(std::fs::read(mine.join(format!("{name}_depth.png"))).unwrap(), b"my own file");
     // A new directory: written, listed, and written again (tgs's own files).
     let fresh = base.join("fresh");
     let n = tgs::render::render(ctx, &run, "test", 1, &fresh).unwrap();
     assert_eq!(n, data.test.len());
     let listed = std::fs::read_to_string(fresh.join(MANIFEST)).unwrap();
-    assert!(
-        listed.lines().any(|l| l == format!("{name}.png")),
-        "{listed}"
-    );
+    assert!(listed.lines().any(|l| l == format!("{name}.png")), "{listed}");
     tgs::render::render(ctx, &run, "test", 1, &fresh).unwrap();
     // A training run's own test renders are tgs's: `tgs render RUN` may replace them.
-    let o = train(
-        ctx,
-        &TrainArgs {
-            iterations: Some(2),
-            ..tiny_args(&ds, &base.join("run2"), 2)
-        },
-    )
-    .unwrap();
+    let o = train(ctx, &TrainArgs { iterations: Some(2), ..tiny_args(&ds, &base.join("run2"), 2) }).unwrap();
     assert!(o.metrics.is_some());
-    tgs::render::render(
-        ctx,
-        &base.join("run2"),
-        "test",
-        1,
-        &base.join("run2/renders/test"),
-    )
-    .unwrap();
+    tgs::render::render(ctx, &base.join("run2"), "test", 1, &base.join("run2/renders/test")).unwrap();
     // A new run in a directory that holds a file of a run's names that tgs did not write.
     let foreign = base.join("foreign");
     std::fs::create_dir_all(&foreign).unwrap();
     std::fs::write(foreign.join("metrics.json"), b"{}").unwrap();
     let e = err(train(ctx, &tiny_args(&ds, &foreign, 2)));
-    assert!(
-        e.contains("metrics.json") && e.contains("not written by tgs"),
-        "{e}"
-    );
+    assert!(e.contains("metrics.json") && e.contains("not written by tgs"), "{e}");
     assert_eq!(std::fs::read(foreign.join("metrics.json")).unwrap(), b"{}");
     check_validation(ctx);
 }
@@ -183,11 +131,7 @@ fn array_offsets(bytes: &[u8]) -> Vec<(String, usize, usize)> {
     let h: checkpoint::Header = serde_json::from_slice(&bytes[12..12 + hlen]).unwrap();
     let mut at = 12 + hlen + 4;
     let mut out = Vec::new();
-    let refl = h
-        .reflection
-        .iter()
-        .flat_map(|r| r.arrays.iter())
-        .chain(h.light_field.iter().flat_map(|l| l.arrays.iter()));
+    let refl = h.reflection.iter().flat_map(|r| r.arrays.iter()).chain(h.light_field.iter().flat_map(|l| l.arrays.iter()));
     for (name, len) in h.arrays.iter().chain(refl) {
         out.push((name.clone(), at, 4 * len));
         at += 4 * len + 4;
@@ -214,10 +158,7 @@ fn damaged_checkpoints_are_refused_naming_the_part() {
     let mut b = good.clone();
     b[20] ^= 0x01;
     let e = err(read_with(&b));
-    assert!(
-        e.contains("damaged.bin") && (e.contains("header") || e.contains("corrupt")),
-        "{e}"
-    );
+    assert!(e.contains("damaged.bin") && (e.contains("header") || e.contains("corrupt")), "{e}");
     // An exponent bit of one value in each array: refused, naming the array.
     let arrays = array_offsets(&good);
     assert!(arrays.len() >= 5);
@@ -228,10 +169,7 @@ fn damaged_checkpoints_are_refused_naming_the_part() {
         let mut b = good.clone();
         b[at + len / 2 / 4 * 4 + 3] ^= 0x40;
         let e = err(read_with(&b));
-        assert!(
-            e.contains(&format!("array {name}'s checksum")),
-            "{name}: {e}"
-        );
+        assert!(e.contains(&format!("array {name}'s checksum")), "{name}: {e}");
     }
     // Random 8-byte corruptions anywhere: every one refused.
     let mut rng = tgs_tests::Rng(tgs_tests::seed("damaged_checkpoints"));
@@ -256,19 +194,8 @@ fn damaged_checkpoints_are_refused_naming_the_part() {
     let (_, at, _) = &arrays[0];
     b[*at] ^= 0x10;
     std::fs::write(&ck, &b).unwrap();
-    let e = err(train(
-        ctx,
-        &TrainArgs {
-            resume: true,
-            dataset: None,
-            set: Vec::new(),
-            ..tiny_args(&ds, &run, 20)
-        },
-    ));
-    assert!(
-        e.contains(&format!("array {}'s checksum", arrays[0].0)),
-        "{e}"
-    );
+    let e = err(train(ctx, &TrainArgs { resume: true, dataset: None, set: Vec::new(), ..tiny_args(&ds, &run, 20) }));
+    assert!(e.contains(&format!("array {}'s checksum", arrays[0].0)), "{e}");
     check_validation(ctx);
 }
 
@@ -277,17 +204,7 @@ fn resume_refuses_a_changed_dataset_and_another_runs_checkpoint() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();
     let (base, ds, run) = trained_run("reliability-resume");
-    let resume = || {
-        train(
-            ctx,
-            &TrainArgs {
-                resume: true,
-                dataset: None,
-                set: Vec::new(),
-                ..tiny_args(&ds, &run, 14)
-            },
-        )
-    };
+    let resume = || train(ctx, &TrainArgs { resume: true, dataset: None, set: Vec::new(), ..tiny_args(&ds, &run, 14) });
 
     // One training image replaced (a pixel changed): refused, naming it.
     let img = ds.join("train/r_1.png");
@@ -309,10 +226,7 @@ fn resume_refuses_a_changed_dataset_and_another_runs_checkpoint() {
     doc["frames"].as_array_mut().unwrap().truncate(2);
     std::fs::write(&tf, serde_json::to_string(&doc).unwrap()).unwrap();
     let e = err(resume());
-    assert!(
-        e.contains("transforms_train.json") && e.contains("no longer used"),
-        "{e}"
-    );
+    assert!(e.contains("transforms_train.json") && e.contains("no longer used"), "{e}");
     std::fs::write(&tf, &text).unwrap();
     // Restored: it resumes.
     assert_eq!(resume().unwrap().iteration, 14);
@@ -324,11 +238,7 @@ fn resume_refuses_a_changed_dataset_and_another_runs_checkpoint() {
     let log_before = std::fs::read(run.join("log.jsonl")).unwrap();
     let e = err(resume());
     assert!(e.contains("belongs to another run"), "{e}");
-    assert_eq!(
-        std::fs::read(run.join("log.jsonl")).unwrap(),
-        log_before,
-        "the log was touched"
-    );
+    assert_eq!(std::fs::read(run.join("log.jsonl")).unwrap(), log_before, "the log was touched");
     check_validation(ctx);
 }
 
@@ -342,12 +252,7 @@ fn sweep_rows_follow_the_settings_and_the_dataset() {
         std::fs::write(&g, format!("[base]\nstages = \"I\"\niterations = {iters}\ntest_interval = 0\ncheckpoint_interval = 0\n[knobs]\nsh_degree = [1]\n")).unwrap();
         g
     };
-    let a = |g: PathBuf| SweepArgs {
-        dataset: Some(ds.clone()),
-        out: base.join("sweep"),
-        grid: Some(g),
-        quiet: true,
-    };
+    let a = |g: PathBuf| SweepArgs { dataset: Some(ds.clone()), out: base.join("sweep"), grid: Some(g), quiet: true };
     let first = sweep(ctx_shared(), &a(grid(6))).unwrap();
     assert_eq!(first.trained, 2);
     // The same grid: nothing trained.
@@ -355,11 +260,7 @@ fn sweep_rows_follow_the_settings_and_the_dataset() {
     // The base changed: the rows of the same names are stale and trained again.
     let changed = sweep(ctx_shared(), &a(grid(8))).unwrap();
     assert_eq!(changed.trained, 2);
-    assert!(
-        changed.rows.iter().all(|r| r.iterations == 8),
-        "{:?}",
-        changed.rows
-    );
+    assert!(changed.rows.iter().all(|r| r.iterations == 8), "{:?}", changed.rows);
     // The dataset changed (one test image): trained again.
     let img = ds.join("test/r_0.png");
     let mut im = image::open(&img).unwrap().to_rgba8();

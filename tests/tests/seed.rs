@@ -6,10 +6,7 @@
 //! radial normals; no residual gives no seeds, and neither does residual
 //! over every view (glass that fills the frame: nothing is carved).
 
-use tgs::train::seed::{
-    hull_seeding, jacobi_eigen, min_hits, quat_for_normal, residual_hull_seeds, HullSeeding, Seed,
-    SeedNormal, SeedParams, SeedView,
-};
+use tgs::train::seed::{hull_seeding, jacobi_eigen, min_hits, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView};
 use tgs_pipelines::Camera;
 use tgs_tests::raster_util::splat_normal;
 use tgs_tests::{seed, Rng};
@@ -33,27 +30,15 @@ fn norm(a: V3) -> V3 {
 #[test]
 fn quaternion_for_a_normal_has_that_normal() {
     let mut rng = Rng(seed("quaternion_for_a_normal_has_that_normal"));
-    let mut normals: Vec<V3> = vec![
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-        [1.0, 0.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [1e-9, 0.0, -1.0],
-    ];
+    let mut normals: Vec<V3> = vec![[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [1e-9, 0.0, -1.0]];
     for _ in 0..200 {
-        normals.push(norm([
-            uniform(&mut rng) - 0.5,
-            uniform(&mut rng) - 0.5,
-            uniform(&mut rng) - 0.5,
-        ]));
+        normals.push(norm([uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5]));
     }
     for n in normals {
         let q = quat_for_normal(n.map(|c| c as f32));
         assert!(q.iter().all(|v| v.is_finite()), "{n:?} -> {q:?}");
         let got = splat_normal(q);
-        let err = (0..3)
-            .map(|k| (got[k] - norm(n)[k]).abs())
-            .fold(0.0, f64::max);
+        let err = (0..3).map(|k| (got[k] - norm(n)[k]).abs()).fold(0.0, f64::max);
         assert!(err < 1e-5, "normal {n:?}: quaternion {q:?} has t_w {got:?}");
     }
 }
@@ -61,11 +46,7 @@ fn quaternion_for_a_normal_has_that_normal() {
 #[test]
 fn jacobi_eigenpairs_of_symmetric_matrices() {
     let mut rng = Rng(seed("jacobi_eigenpairs_of_symmetric_matrices"));
-    let mut cases = vec![
-        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        [[0.0; 3]; 3],
-        [[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 0.0]],
-    ];
+    let mut cases = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], [[0.0; 3]; 3], [[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 0.0]]];
     for _ in 0..100 {
         let mut a = [[0.0; 3]; 3];
         for r in 0..3 {
@@ -80,16 +61,10 @@ fn jacobi_eigenpairs_of_symmetric_matrices() {
         let (vals, vecs) = jacobi_eigen(a);
         for k in 0..3 {
             let v = [vecs[0][k], vecs[1][k], vecs[2][k]];
-            assert!(
-                (dot(v, v) - 1.0).abs() < 1e-9,
-                "{a:?}: eigenvector {k} not unit"
-            );
+            assert!((dot(v, v) - 1.0).abs() < 1e-9, "{a:?}: eigenvector {k} not unit");
             for r in 0..3 {
                 let av = dot(a[r], v);
-                assert!(
-                    (av - vals[k] * v[r]).abs() < 1e-9,
-                    "{a:?}: A v != lambda v for {k}"
-                );
+                assert!((av - vals[k] * v[r]).abs() < 1e-9, "{a:?}: A v != lambda v for {k}");
             }
         }
     }
@@ -127,24 +102,13 @@ fn ring(count: usize, noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, V
         let a = i as f64 * std::f64::consts::TAU / count as f64;
         let h = if i % 2 == 0 { 0.4 } else { 1.0 };
         let e = [3.0 * a.cos(), 3.0 * a.sin(), h];
-        let cam = Camera::look_at(
-            e.map(|c| c as f32),
-            [0.0; 3],
-            [0.0, 0.0, 1.0],
-            0.7,
-            SIZE,
-            SIZE,
-        );
+        let cam = Camera::look_at(e.map(|c| c as f32), [0.0; 3], [0.0, 0.0, 1.0], 0.7, SIZE, SIZE);
         let m = cam.world_to_view;
         let n = (SIZE * SIZE) as usize;
         let (mut r, mut z) = (vec![0.0f32; n], vec![0.0f32; n]);
         for p in 0..n {
             let (u, v) = ((p as u32 % SIZE) as f64, (p as u32 / SIZE) as f64);
-            let dv = [
-                (u - cam.cx as f64) / cam.fx as f64,
-                (v - cam.cy as f64) / cam.fy as f64,
-                1.0,
-            ];
+            let dv = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
             // World direction R^T d_view.
             let d = norm([0, 1, 2].map(|j| (0..3).map(|k| m[k][j] as f64 * dv[k]).sum::<f64>()));
             if glass && hit(e, d, SPHERE_R).is_some() {
@@ -166,17 +130,11 @@ fn ring(count: usize, noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, V
 /// Each seed's angle in degrees between its normal and the sphere's radial
 /// direction at its position, sorted.
 fn radial_error(set: &[Seed]) -> Vec<f64> {
-    let mut e: Vec<f64> = set
-        .iter()
-        .map(|s| {
-            let x = s.position.map(f64::from);
-            let r = dot(x, x).sqrt();
-            dot(s.normal.map(f64::from), x.map(|c| c / r))
-                .clamp(-1.0, 1.0)
-                .acos()
-                .to_degrees()
-        })
-        .collect();
+    let mut e: Vec<f64> = set.iter().map(|s| {
+        let x = s.position.map(f64::from);
+        let r = dot(x, x).sqrt();
+        dot(s.normal.map(f64::from), x.map(|c| c / r)).clamp(-1.0, 1.0).acos().to_degrees()
+    }).collect();
     e.sort_by(f64::total_cmp);
     e
 }
@@ -184,21 +142,9 @@ fn radial_error(set: &[Seed]) -> Vec<f64> {
 #[test]
 fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     let (cams, res, depth) = views(0.05, true);
-    let sv: Vec<SeedView> = cams
-        .iter()
-        .zip(res.iter().zip(&depth))
-        .map(|(c, (r, z))| SeedView {
-            camera: *c,
-            residual: r,
-            depth: z,
-        })
-        .collect();
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
     // On this ideal hull the seeds' plane is the sphere's tangent plane.
-    let p = SeedParams {
-        max_rays: 3000,
-        normal: SeedNormal::Plane,
-        ..SeedParams::default()
-    };
+    let p = SeedParams { max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
     let seeds = residual_hull_seeds(&sv, &p);
     assert!(seeds.len() > 1000, "{} seeds from 3000 rays", seeds.len());
     let mut off = Vec::new();
@@ -206,10 +152,7 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
         let x = s.position.map(f64::from);
         off.push(dot(x, x).sqrt() - SPHERE_R);
         let n = s.normal.map(f64::from);
-        assert!(
-            (dot(n, n) - 1.0).abs() < 1e-4 && s.scale > 0.0 && s.scale.is_finite(),
-            "{s:?}"
-        );
+        assert!((dot(n, n) - 1.0).abs() < 1e-4 && s.scale > 0.0 && s.scale.is_finite(), "{s:?}");
     }
     off.sort_by(f64::total_cmp);
     let radial = radial_error(&seeds);
@@ -217,32 +160,16 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     eprintln!("distance to the sphere: 5% {:.3} median {:.3} 95% {:.3}; normal error median {:.1} 90% {:.1} deg", pct(&off, 0.05), pct(&off, 0.5), pct(&off, 0.95), pct(&radial, 0.5), pct(&radial, 0.9));
     // A visual hull encloses the surface: seeds are on or just outside it
     // (never inside by more than the march step), mostly within 10% of its radius.
-    assert!(
-        pct(&off, 0.01) > -0.03,
-        "seeds inside the glass: {:.3}",
-        pct(&off, 0.01)
-    );
-    assert!(
-        pct(&off, 0.9) < 0.05,
-        "90% of seeds within 0.05 of the glass: {:.3}",
-        pct(&off, 0.9)
-    );
-    assert!(
-        pct(&radial, 0.5) < 10.0 && pct(&radial, 0.9) < 25.0,
-        "normals: median {:.1}, 90% {:.1} deg",
-        pct(&radial, 0.5),
-        pct(&radial, 0.9)
-    );
+    assert!(pct(&off, 0.01) > -0.03, "seeds inside the glass: {:.3}", pct(&off, 0.01));
+    assert!(pct(&off, 0.9) < 0.05, "90% of seeds within 0.05 of the glass: {:.3}", pct(&off, 0.9));
+    assert!(pct(&radial, 0.5) < 10.0 && pct(&radial, 0.9) < 25.0, "normals: median {:.1}, 90% {:.1} deg", pct(&radial, 0.5), pct(&radial, 0.9));
     // Deterministic.
     assert_eq!(seeds, residual_hull_seeds(&sv, &p));
 
     // The default normal faces the camera whose ray found the seed: the
     // same seeds, each normal the unit direction to one of the cameras
     // (and not to the same one for all).
-    let pv = SeedParams {
-        normal: SeedNormal::View,
-        ..p
-    };
+    let pv = SeedParams { normal: SeedNormal::View, ..p };
     let view = residual_hull_seeds(&sv, &pv);
     assert_eq!(view.len(), seeds.len());
     let mut used = std::collections::BTreeSet::new();
@@ -250,20 +177,11 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
         assert_eq!((v.position, v.scale), (s.position, s.scale));
         let n = v.normal.map(f64::from);
         let x = v.position.map(f64::from);
-        let best = cams
-            .iter()
-            .enumerate()
-            .map(|(i, c)| {
-                let d = sub(c.centre().map(f64::from), x);
-                (dot(n, d) / dot(d, d).sqrt(), i)
-            })
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-            .unwrap();
-        assert!(
-            best.0 > 1.0 - 1e-5,
-            "seed normal {n:?} faces no camera (best cosine {})",
-            best.0
-        );
+        let best = cams.iter().enumerate().map(|(i, c)| {
+            let d = sub(c.centre().map(f64::from), x);
+            (dot(n, d) / dot(d, d).sqrt(), i)
+        }).max_by(|a, b| a.0.total_cmp(&b.0)).unwrap();
+        assert!(best.0 > 1.0 - 1e-5, "seed normal {n:?} faces no camera (best cosine {})", best.0);
         used.insert(best.1);
     }
     assert!(used.len() > 1, "every seed faces one camera");
@@ -273,10 +191,7 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     // at the seed's projections, the silhouette cones' normal. The same
     // seeds; on the sphere far closer to radial than the camera direction
     // (measured: median 11.6 / 45.6 degrees, 90% 16.4 / 72.0).
-    let pg = SeedParams {
-        normal: SeedNormal::Gradient,
-        ..p
-    };
+    let pg = SeedParams { normal: SeedNormal::Gradient, ..p };
     let grad = residual_hull_seeds(&sv, &pg);
     assert_eq!(grad.len(), seeds.len());
     let (eg, ev) = (radial_error(&grad), radial_error(&view));
@@ -285,66 +200,30 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
         let n = g.normal.map(f64::from);
         assert!((dot(n, n) - 1.0).abs() < 1e-4, "{g:?}");
     }
-    assert!(
-        pct(&eg, 0.5) < 20.0 && pct(&eg, 0.9) < 30.0,
-        "gradient normals: median {:.1}, 90% {:.1} deg",
-        pct(&eg, 0.5),
-        pct(&eg, 0.9)
-    );
-    assert!(
-        pct(&eg, 0.5) + 20.0 < pct(&ev, 0.5),
-        "gradient median {:.1} against view {:.1} deg",
-        pct(&eg, 0.5),
-        pct(&ev, 0.5)
-    );
+    assert!(pct(&eg, 0.5) < 20.0 && pct(&eg, 0.9) < 30.0, "gradient normals: median {:.1}, 90% {:.1} deg", pct(&eg, 0.5), pct(&eg, 0.9));
+    assert!(pct(&eg, 0.5) + 20.0 < pct(&ev, 0.5), "gradient median {:.1} against view {:.1} deg", pct(&eg, 0.5), pct(&ev, 0.5));
     assert_eq!(grad, residual_hull_seeds(&sv, &pg));
 }
 
 #[test]
 fn no_residual_no_seeds() {
     let (cams, res, depth) = views(0.05, false);
-    let sv: Vec<SeedView> = cams
-        .iter()
-        .zip(res.iter().zip(&depth))
-        .map(|(c, (r, z))| SeedView {
-            camera: *c,
-            residual: r,
-            depth: z,
-        })
-        .collect();
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
     // Only scattered noise: blurred below the threshold everywhere.
     assert!(residual_hull_seeds(&sv, &SeedParams::default()).is_empty());
     // Nothing at all, one view, empty and 1-pixel images: no seeds, no panic.
     let zero = vec![0.0f32; (SIZE * SIZE) as usize];
-    let sv0: Vec<SeedView> = cams
-        .iter()
-        .map(|c| SeedView {
-            camera: *c,
-            residual: &zero,
-            depth: &zero,
-        })
-        .collect();
+    let sv0: Vec<SeedView> = cams.iter().map(|c| SeedView { camera: *c, residual: &zero, depth: &zero }).collect();
     assert!(residual_hull_seeds(&sv0, &SeedParams::default()).is_empty());
     let one = [1.0f32];
     let tiny = Camera::look_at([3.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0], 0.7, 1, 1);
-    let sv1 = [SeedView {
-        camera: tiny,
-        residual: &one,
-        depth: &one,
-    }];
+    let sv1 = [SeedView { camera: tiny, residual: &one, depth: &one }];
     assert!(residual_hull_seeds(&sv1, &SeedParams::default()).is_empty());
     assert!(residual_hull_seeds(&[], &SeedParams::default()).is_empty());
     // Residual everywhere, no Stage I surface anywhere: rays run to the
     // largest depth seen (none: no seeds) without NaN.
     let all = vec![1.0f32; (SIZE * SIZE) as usize];
-    let sv2: Vec<SeedView> = cams
-        .iter()
-        .map(|c| SeedView {
-            camera: *c,
-            residual: &all,
-            depth: &zero,
-        })
-        .collect();
+    let sv2: Vec<SeedView> = cams.iter().map(|c| SeedView { camera: *c, residual: &all, depth: &zero }).collect();
     assert!(residual_hull_seeds(&sv2, &SeedParams::default()).is_empty());
 }
 
@@ -357,35 +236,15 @@ fn no_residual_no_seeds() {
 fn residual_over_every_view_seeds_nothing() {
     let (cams, _, depth) = views(0.0, false);
     let all = vec![0.03f32; (SIZE * SIZE) as usize];
-    let sv: Vec<SeedView> = cams
-        .iter()
-        .zip(&depth)
-        .map(|(c, z)| SeedView {
-            camera: *c,
-            residual: &all,
-            depth: z,
-        })
-        .collect();
+    let sv: Vec<SeedView> = cams.iter().zip(&depth).map(|(c, z)| SeedView { camera: *c, residual: &all, depth: z }).collect();
     // Without the significance test, which alone would empty this hull
     // (masks that cover every pixel make no agreement significant): the
     // carving is what is tested here.
-    let p = SeedParams {
-        max_rays: 2000,
-        significance: 1.0,
-        ..SeedParams::default()
-    };
+    let p = SeedParams { max_rays: 2000, significance: 1.0, ..SeedParams::default() };
     assert!(residual_hull_seeds(&sv, &p).is_empty());
     // The silhouette case still seeds (its rays cross carved air first).
     let (cams, res, depth) = views(0.0, true);
-    let sv: Vec<SeedView> = cams
-        .iter()
-        .zip(res.iter().zip(&depth))
-        .map(|(c, (r, z))| SeedView {
-            camera: *c,
-            residual: r,
-            depth: z,
-        })
-        .collect();
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
     assert!(residual_hull_seeds(&sv, &p).len() > 500);
 }
 
@@ -395,19 +254,10 @@ fn residual_over_every_view_seeds_nothing() {
 #[test]
 fn min_hits_is_the_binomial_tail_quantile() {
     fn tail(n: usize, k: usize, p: f64) -> f64 {
-        let choose =
-            |n: usize, j: usize| (0..j).fold(1.0f64, |c, i| c * (n - i) as f64 / (i + 1) as f64);
-        (k..=n)
-            .map(|j| choose(n, j) * p.powi(j as i32) * (1.0 - p).powi((n - j) as i32))
-            .sum()
+        let choose = |n: usize, j: usize| (0..j).fold(1.0f64, |c, i| c * (n - i) as f64 / (i + 1) as f64);
+        (k..=n).map(|j| choose(n, j) * p.powi(j as i32) * (1.0 - p).powi((n - j) as i32)).sum()
     }
-    for &(p, alpha) in &[
-        (0.3, 1e-3),
-        (0.6, 1e-6),
-        (0.65, 1e-10),
-        (0.05, 0.05),
-        (0.9, 1e-3),
-    ] {
+    for &(p, alpha) in &[(0.3, 1e-3), (0.6, 1e-6), (0.65, 1e-10), (0.05, 0.05), (0.9, 1e-3)] {
         let k = min_hits(120, p, alpha);
         assert_eq!(k.len(), 121);
         assert_eq!(k[0], 1, "no view: never significant");
@@ -416,41 +266,23 @@ fn min_hits_is_the_binomial_tail_quantile() {
             assert!(kn <= n + 1, "n {n}: k {kn}");
             if kn <= n {
                 let t = tail(n, kn, p);
-                assert!(
-                    t <= alpha * (1.0 + 1e-9),
-                    "p {p} alpha {alpha} n {n}: tail at k {kn} is {t}"
-                );
+                assert!(t <= alpha * (1.0 + 1e-9), "p {p} alpha {alpha} n {n}: tail at k {kn} is {t}");
             }
             if kn > 0 {
                 let t = tail(n, kn - 1, p);
-                assert!(
-                    t > alpha * (1.0 - 1e-9),
-                    "p {p} alpha {alpha} n {n}: k {kn} is not the fewest (tail at {} is {t})",
-                    kn - 1
-                );
+                assert!(t > alpha * (1.0 - 1e-9), "p {p} alpha {alpha} n {n}: k {kn} is not the fewest (tail at {} is {t})", kn - 1);
             }
             if n > 0 {
-                assert!(
-                    k[n] >= k[n - 1] && k[n] <= k[n - 1] + 1,
-                    "p {p} alpha {alpha}: k jumps at n {n}: {} -> {}",
-                    k[n - 1],
-                    k[n]
-                );
+                assert!(k[n] >= k[n - 1] && k[n] <= k[n - 1] + 1, "p {p} alpha {alpha}: k jumps at n {n}: {} -> {}", k[n - 1], k[n]);
             }
         }
         // Enough views always suffice.
-        assert!(
-            k[120] <= 120,
-            "p {p} alpha {alpha}: 120 agreeing views not significant"
-        );
+        assert!(k[120] <= 120, "p {p} alpha {alpha}: 120 agreeing views not significant");
     }
     // No test, masks that cover nothing or everything.
     assert!(min_hits(10, 0.5, 1.0).iter().all(|&k| k == 0));
     assert!(min_hits(10, 0.0, 1e-6).iter().all(|&k| k == 0));
-    assert!(min_hits(10, 1.0, 1e-6)
-        .iter()
-        .enumerate()
-        .all(|(n, &k)| k == n as u32 + 1));
+    assert!(min_hits(10, 1.0, 1e-6).iter().enumerate().all(|(n, &k)| k == n as u32 + 1));
     assert!(min_hits(0, 0.5, 1e-6) == vec![1]);
 }
 
@@ -464,94 +296,27 @@ fn min_hits_is_the_binomial_tail_quantile() {
 #[test]
 fn seeds_on_the_glass_through_dense_residual_noise() {
     let (cams, res, depth) = ring(48, 0.3, true);
-    let sv: Vec<SeedView> = cams
-        .iter()
-        .zip(res.iter().zip(&depth))
-        .map(|(c, (r, z))| SeedView {
-            camera: *c,
-            residual: r,
-            depth: z,
-        })
-        .collect();
-    let near = |set: &[Seed]| {
-        set.iter()
-            .filter(|s| {
-                let x = s.position.map(f64::from);
-                (dot(x, x).sqrt() - SPHERE_R).abs() < 0.05
-            })
-            .count() as f64
-            / set.len().max(1) as f64
-    };
-    let base = SeedParams {
-        max_rays: 3000,
-        ..SeedParams::default()
-    };
-    let at = |a: f64| {
-        residual_hull_seeds(
-            &sv,
-            &SeedParams {
-                significance: a,
-                ..base
-            },
-        )
-    };
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let near = |set: &[Seed]| set.iter().filter(|s| {
+        let x = s.position.map(f64::from);
+        (dot(x, x).sqrt() - SPHERE_R).abs() < 0.05
+    }).count() as f64 / set.len().max(1) as f64;
+    let base = SeedParams { max_rays: 3000, ..SeedParams::default() };
+    let at = |a: f64| residual_hull_seeds(&sv, &SeedParams { significance: a, ..base });
     let (loose, default, tight) = (at(1.0), at(base.significance), at(1e-8));
     eprintln!("within 0.05 of the glass: {:.1}% of {} seeds without the test, {:.1}% of {} at {:e}, {:.1}% of {} at 1e-8", 100.0 * near(&loose), loose.len(), 100.0 * near(&default), default.len(), base.significance, 100.0 * near(&tight), tight.len());
-    assert!(
-        near(&loose) < 0.2,
-        "without the test: {:.2} on the glass",
-        near(&loose)
-    );
-    assert!(
-        near(&default) > 2.0 * near(&loose),
-        "default {:.2} against {:.2} without",
-        near(&default),
-        near(&loose)
-    );
-    assert!(
-        tight.len() > 300 && near(&tight) > 0.75,
-        "at 1e-8: {} seeds, {:.2} on the glass",
-        tight.len(),
-        near(&tight)
-    );
+    assert!(near(&loose) < 0.2, "without the test: {:.2} on the glass", near(&loose));
+    assert!(near(&default) > 2.0 * near(&loose), "default {:.2} against {:.2} without", near(&default), near(&loose));
+    assert!(tight.len() > 300 && near(&tight) > 0.75, "at 1e-8: {} seeds, {:.2} on the glass", tight.len(), near(&tight));
     assert_eq!(tight, at(1e-8));
     // Stage II's seeding (one march for both hulls): the test's seeds where
     // any point beats chance; where none can (1e-300 needs more than 48
     // views), the hull's without the test, and it says so.
-    let seeding = |a: f64| {
-        hull_seeding(
-            &sv,
-            &SeedParams {
-                significance: a,
-                ..base
-            },
-        )
-    };
-    assert_eq!(
-        seeding(1e-8),
-        HullSeeding {
-            seeds: tight.clone(),
-            significance_dropped: false
-        }
-    );
-    assert_eq!(
-        seeding(1.0),
-        HullSeeding {
-            seeds: loose.clone(),
-            significance_dropped: false
-        }
-    );
-    assert!(
-        at(1e-300).is_empty(),
-        "1e-300 is beaten by chance with 48 views"
-    );
-    assert_eq!(
-        seeding(1e-300),
-        HullSeeding {
-            seeds: loose,
-            significance_dropped: true
-        }
-    );
+    let seeding = |a: f64| hull_seeding(&sv, &SeedParams { significance: a, ..base });
+    assert_eq!(seeding(1e-8), HullSeeding { seeds: tight.clone(), significance_dropped: false });
+    assert_eq!(seeding(1.0), HullSeeding { seeds: loose.clone(), significance_dropped: false });
+    assert!(at(1e-300).is_empty(), "1e-300 is beaten by chance with 48 views");
+    assert_eq!(seeding(1e-300), HullSeeding { seeds: loose, significance_dropped: true });
 }
 
 /// The march and the normals run on threads, each on a contiguous run of
@@ -561,33 +326,11 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
 #[test]
 fn seeds_are_the_same_at_any_thread_count() {
     let (cams, res, depth) = ring(24, 0.1, true);
-    let sv: Vec<SeedView> = cams
-        .iter()
-        .zip(res.iter().zip(&depth))
-        .map(|(c, (r, z))| SeedView {
-            camera: *c,
-            residual: r,
-            depth: z,
-        })
-        .collect();
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
     for normal in [SeedNormal::View, SeedNormal::Plane, SeedNormal::Gradient] {
-        let at = |threads: usize| {
-            hull_seeding(
-                &sv,
-                &SeedParams {
-                    max_rays: 1500,
-                    normal,
-                    threads,
-                    ..SeedParams::default()
-                },
-            )
-        };
+        let at = |threads: usize| hull_seeding(&sv, &SeedParams { max_rays: 1500, normal, threads, ..SeedParams::default() });
         let one = at(1);
-        assert!(
-            one.seeds.len() > 200,
-            "{normal:?}: {} seeds",
-            one.seeds.len()
-        );
+        assert!(one.seeds.len() > 200, "{normal:?}: {} seeds", one.seeds.len());
         for threads in [2, 3, 7, 0] {
             assert_eq!(at(threads), one, "{normal:?}: {threads} threads against 1");
         }

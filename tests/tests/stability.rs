@@ -15,22 +15,11 @@ fn args(base: &Path, out: &str, set: &[&str]) -> TrainArgs {
     let _ = std::fs::remove_dir_all(&out);
     let mut set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
     set.extend(["test_interval=0", "checkpoint_interval=0"].map(String::from));
-    TrainArgs {
-        dataset: Some(tgs_tests::tiny_glass_scene(&base.join("scene"))),
-        out,
-        preset: Some("quick".into()),
-        set,
-        quiet: true,
-        ..Default::default()
-    }
+    TrainArgs { dataset: Some(tgs_tests::tiny_glass_scene(&base.join("scene"))), out, preset: Some("quick".into()), set, quiet: true, ..Default::default() }
 }
 
 fn log(out: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(out.join("log.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
+    std::fs::read_to_string(out.join("log.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
 }
 
 /// Largest |v| of an array.
@@ -41,22 +30,11 @@ fn max_abs(v: &[f32]) -> f32 {
 #[test]
 fn long_run_of_every_stage_stays_finite_and_bounded() {
     let base = tgs_tests::TempDir::new("stability");
-    let a = args(
-        &base,
-        "long",
-        &[
-            "iterations=1200",
-            "reflection.iterations=400",
-            "light_field.iterations=400",
-        ],
-    );
+    let a = args(&base, "long", &["iterations=1200", "reflection.iterations=400", "light_field.iterations=400"]);
     let out = a.out.clone();
     let o = train(ctx_shared(), &a).unwrap();
     assert_eq!(o.iteration, 2000);
-    let lines: Vec<serde_json::Value> = log(&out)
-        .into_iter()
-        .filter(|l| l.get("loss").is_some())
-        .collect();
+    let lines: Vec<serde_json::Value> = log(&out).into_iter().filter(|l| l.get("loss").is_some()).collect();
     assert_eq!(lines.len(), 2000);
     for l in &lines {
         for k in ["loss", "l1", "ssim", "psnr"] {
@@ -68,80 +46,41 @@ fn long_run_of_every_stage_stays_finite_and_bounded() {
         }
     }
     assert_eq!(lines.iter().filter(|l| l["stage"] == "III").count(), 400);
-    let m: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
     for s in m["stages"].as_array().unwrap() {
         let t = &s["test"];
-        assert!(
-            t["psnr"].as_f64().unwrap() > 15.0
-                && t["ssim"].as_f64().unwrap().is_finite()
-                && t["normal_mae_deg"].as_f64().unwrap().is_finite(),
-            "{s}"
-        );
+        assert!(t["psnr"].as_f64().unwrap() > 15.0 && t["ssim"].as_f64().unwrap().is_finite() && t["normal_mae_deg"].as_f64().unwrap().is_finite(), "{s}");
     }
     // Every array of the final state (parameters and Adam moments) finite and bounded.
     let (h, arrays) = checkpoint::read(&out.join("checkpoint.bin")).unwrap();
-    let names: Vec<String> = h
-        .arrays
-        .iter()
-        .chain(h.light_field.as_ref().unwrap().arrays.iter())
-        .map(|a| a.0.clone())
-        .collect();
+    let names: Vec<String> = h.arrays.iter().chain(h.light_field.as_ref().unwrap().arrays.iter()).map(|a| a.0.clone()).collect();
     assert_eq!(names.len(), arrays.len());
     for (name, v) in names.iter().zip(&arrays) {
         assert!(v.iter().all(|x| x.is_finite()), "{name}: NaN/Inf");
     }
-    let get = |n: &str| {
-        &arrays[names
-            .iter()
-            .position(|x| x == n)
-            .unwrap_or_else(|| panic!("no array {n}: {names:?}"))]
-    };
+    let get = |n: &str| &arrays[names.iter().position(|x| x == n).unwrap_or_else(|| panic!("no array {n}: {names:?}"))];
     // Bounds: positions within 10 scene extents of the origin, no splat wider
     // than the scene, colours and material logits and MLP weights moderate.
     let e = h.extent;
     for set in ["", "refl."] {
         let means = get(&format!("{set}param.means"));
-        assert!(
-            max_abs(means) < 10.0 * e,
-            "{set}means up to {} (extent {e})",
-            max_abs(means)
-        );
+        assert!(max_abs(means) < 10.0 * e, "{set}means up to {} (extent {e})", max_abs(means));
         let ls = get(&format!("{set}param.log_scales"));
-        assert!(
-            ls.iter().all(|&s| s < e.ln() && s > -30.0),
-            "{set}log_scales in [{}, {}]",
-            ls.iter().cloned().fold(f32::INFINITY, f32::min),
-            ls.iter().cloned().fold(f32::NEG_INFINITY, f32::max)
-        );
+        assert!(ls.iter().all(|&s| s < e.ln() && s > -30.0), "{set}log_scales in [{}, {}]", ls.iter().cloned().fold(f32::INFINITY, f32::min), ls.iter().cloned().fold(f32::NEG_INFINITY, f32::max));
         assert!(max_abs(get(&format!("{set}param.opacity"))) < 50.0);
-        assert!(
-            max_abs(get(&format!("{set}param.features"))) < 50.0,
-            "{set}features up to {}",
-            max_abs(get(&format!("{set}param.features")))
-        );
+        assert!(max_abs(get(&format!("{set}param.features"))) < 50.0, "{set}features up to {}", max_abs(get(&format!("{set}param.features"))));
     }
     eprintln!(
         "extent {e}; |means| {} / {}, log_scale max {} / {}, |features| {} / {}, |mlp| {}",
         max_abs(get("param.means")),
         max_abs(get("refl.param.means")),
-        get("param.log_scales")
-            .iter()
-            .cloned()
-            .fold(f32::NEG_INFINITY, f32::max),
-        get("refl.param.log_scales")
-            .iter()
-            .cloned()
-            .fold(f32::NEG_INFINITY, f32::max),
+        get("param.log_scales").iter().cloned().fold(f32::NEG_INFINITY, f32::max),
+        get("refl.param.log_scales").iter().cloned().fold(f32::NEG_INFINITY, f32::max),
         max_abs(get("param.features")),
         max_abs(get("refl.param.features")),
         max_abs(get("mlp.param"))
     );
-    assert!(
-        max_abs(get("mlp.param")) < 20.0,
-        "MLP weights up to {}",
-        max_abs(get("mlp.param"))
-    );
+    assert!(max_abs(get("mlp.param")) < 20.0, "MLP weights up to {}", max_abs(get("mlp.param")));
     let _ = std::fs::remove_dir_all(&base);
 }
 
@@ -151,22 +90,10 @@ fn long_run_of_every_stage_stays_finite_and_bounded() {
 #[test]
 fn light_field_with_no_reflecting_pixel() {
     let base = tgs_tests::TempDir::new("stability-none");
-    let a = args(
-        &base,
-        "none",
-        &[
-            "iterations=150",
-            "reflection.iterations=20",
-            "light_field.iterations=40",
-            "light_field.threshold=0.9999",
-        ],
-    );
+    let a = args(&base, "none", &["iterations=150", "reflection.iterations=20", "light_field.iterations=40", "light_field.threshold=0.9999"]);
     let out = a.out.clone();
     train(ctx_shared(), &a).unwrap();
-    let third: Vec<serde_json::Value> = log(&out)
-        .into_iter()
-        .filter(|l| l["stage"] == "III" && l.get("loss").is_some())
-        .collect();
+    let third: Vec<serde_json::Value> = log(&out).into_iter().filter(|l| l["stage"] == "III" && l.get("loss").is_some()).collect();
     assert_eq!(third.len(), 40);
     for l in &third {
         assert_eq!(l["phi_fraction"].as_f64(), Some(0.0), "{l}");
@@ -176,20 +103,8 @@ fn light_field_with_no_reflecting_pixel() {
     let lf = h.light_field.as_ref().unwrap();
     let k = h.arrays.len() + lf.arrays.iter().position(|a| a.0 == "mlp.param").unwrap();
     let [depth, width, skip, levels_x, levels_w] = lf.shape;
-    let shape = tgs_pipelines::MlpShape {
-        depth,
-        width,
-        skip,
-        levels_x,
-        levels_w,
-    };
+    let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
     let init = shape.init_params(h.config.seed ^ 0x4c46);
-    assert!(
-        arrays[k]
-            .iter()
-            .zip(&init)
-            .all(|(a, b)| a.to_bits() == b.to_bits()),
-        "the network moved without a sample"
-    );
+    assert!(arrays[k].iter().zip(&init).all(|(a, b)| a.to_bits() == b.to_bits()), "the network moved without a sample");
     let _ = std::fs::remove_dir_all(&base);
 }

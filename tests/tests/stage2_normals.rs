@@ -15,10 +15,7 @@ use tgs::train::reflection::{ReflStepInput, ReflectionModel};
 use tgs::train::seed::quat_for_normal;
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Context, Recorder};
-use tgs_pipelines::{
-    Camera, EnvMap, Features, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, Rasterizer,
-    ReflectionShading,
-};
+use tgs_pipelines::{Camera, EnvMap, Features, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, Rasterizer, ReflectionShading};
 use tgs_tests::raster_util::splat_normal;
 use tgs_tests::{check_validation, ctx_shared, Rng};
 
@@ -29,11 +26,7 @@ fn norm(v: V3) -> V3 {
     v.map(|c| c / l)
 }
 fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -45,11 +38,7 @@ fn logit(p: f64) -> f32 {
 /// A smooth but everywhere-varying sky: each channel a different low-order
 /// function of the direction, in (0.1, 0.9).
 fn sky(d: V3) -> [f64; 3] {
-    [
-        0.5 + 0.4 * d[1],
-        0.5 + 0.4 * (0.8 * d[0] + 0.6 * d[2]) * d[1].abs().max(0.3),
-        0.5 + 0.4 * (1.7 * d[2]).sin() * (1.3 * d[0]).cos(),
-    ]
+    [0.5 + 0.4 * d[1], 0.5 + 0.4 * (0.8 * d[0] + 0.6 * d[2]) * d[1].abs().max(0.3), 0.5 + 0.4 * (1.7 * d[2]).sin() * (1.3 * d[0]).cos()]
 }
 
 /// The cube map of `sky` at its texel centres.
@@ -83,11 +72,7 @@ fn scene(views: usize, points: usize, side: u32) -> Scene {
         .map(|i| {
             let y = 1.0 - 2.0 * (i as f64 + 0.5) / points as f64;
             let r = (1.0 - y * y).sqrt();
-            [
-                r * (golden * i as f64).cos(),
-                y,
-                r * (golden * i as f64).sin(),
-            ]
+            [r * (golden * i as f64).cos(), y, r * (golden * i as f64).sin()]
         })
         .collect();
     // Cameras on a ring at two heights, looking at the sphere.
@@ -101,11 +86,7 @@ fn scene(views: usize, points: usize, side: u32) -> Scene {
         .collect();
     // Splats wide enough to overlap their neighbours on the unit sphere.
     let scale = (2.2 * (4.0 * std::f64::consts::PI / points as f64).sqrt() / 2.0) as f32;
-    Scene {
-        cams,
-        points: pts,
-        scale,
-    }
+    Scene { cams, points: pts, scale }
 }
 
 /// Turn `n` by `angle` about a random axis perpendicular to it.
@@ -113,22 +94,14 @@ fn tilt(rng: &mut Rng, n: V3, angle: f64) -> V3 {
     let r = norm([0; 3].map(|_| rng.uniform(-1.0, 1.0)));
     // A unit vector perpendicular to n, and n turned towards it.
     let t = norm(cross(cross(n, r), n));
-    norm(std::array::from_fn(|k| {
-        n[k] * angle.cos() + t[k] * angle.sin()
-    }))
+    norm(std::array::from_fn(|k| n[k] * angle.cos() + t[k] * angle.sin()))
 }
 
 fn set_with(s: &Scene, normals: &[V3], radius: f64) -> HostGaussians {
     let mut h = HostGaussians::new(4, 1);
     let ls = s.scale.ln();
     for (p, n) in s.points.iter().zip(normals) {
-        h.push(
-            p.map(|v| (v * radius) as f32),
-            [ls, ls],
-            quat_for_normal(n.map(|v| v as f32)),
-            logit(0.95),
-            &[logit(0.9), logit(0.9), logit(0.9), logit(0.6)],
-        );
+        h.push(p.map(|v| (v * radius) as f32), [ls, ls], quat_for_normal(n.map(|v| v as f32)), logit(0.95), &[logit(0.9), logit(0.9), logit(0.9), logit(0.6)]);
     }
     h
 }
@@ -136,21 +109,7 @@ fn set_with(s: &Scene, normals: &[V3], radius: f64) -> HostGaussians {
 /// Mean angle (degrees) between the set's normals and the true ones, sign
 /// ignored (the kernels turn every normal to face the camera).
 fn mae(h: &HostGaussians, s: &Scene) -> f64 {
-    let e: f64 = s
-        .points
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            dot(
-                splat_normal(std::array::from_fn(|k| h.quats[4 * i + k])),
-                *n,
-            )
-            .abs()
-            .min(1.0)
-            .acos()
-            .to_degrees()
-        })
-        .sum();
+    let e: f64 = s.points.iter().enumerate().map(|(i, n)| dot(splat_normal(std::array::from_fn(|k| h.quats[4 * i + k])), *n).abs().min(1.0).acos().to_degrees()).sum();
     e / s.points.len() as f64
 }
 
@@ -162,48 +121,25 @@ struct Outcome {
 /// The training views of `cams`: the splats of `geometry` rasterized with
 /// the colours the splats of `truth` (true normals) fetch from `env`,
 /// composited over `scat`.
-fn targets(
-    ctx: &Arc<Context>,
-    truth: &HostGaussians,
-    geometry: &HostGaussians,
-    env: &HostEnvMap,
-    cams: &[Camera],
-    scat: &Buffer<f32>,
-) -> Vec<Buffer<f32>> {
+fn targets(ctx: &Arc<Context>, truth: &HostGaussians, geometry: &HostGaussians, env: &HostEnvMap, cams: &[Camera], scat: &Buffer<f32>) -> Vec<Buffer<f32>> {
     let fresnel = Fresnel::Off;
     let ch = fresnel.channels();
     let shading = ReflectionShading::new(ctx).unwrap();
     let raster = Rasterizer::new(ctx, ch, Features::Plain).unwrap();
-    let (truth, geometry) = (
-        Gaussians::upload(ctx, truth).unwrap(),
-        Gaussians::upload(ctx, geometry).unwrap(),
-    );
+    let (truth, geometry) = (Gaussians::upload(ctx, truth).unwrap(), Gaussians::upload(ctx, geometry).unwrap());
     let env = EnvMap::upload(ctx, env).unwrap();
     let n = geometry.n;
     let feat = Buffer::<f32>::new(ctx, "test.features", ch as usize * n as usize).unwrap();
     let background = vec![0.0; ch as usize];
     let mut out = Vec::new();
     for cam in cams {
-        let mut frame = raster
-            .frame(cam.width, cam.height, n, raster.initial_capacity(n))
-            .unwrap();
-        let img = Buffer::<f32>::new(
-            ctx,
-            "test.target",
-            (Plane::count(3) * cam.width * cam.height) as usize,
-        )
-        .unwrap();
+        let mut frame = raster.frame(cam.width, cam.height, n, raster.initial_capacity(n)).unwrap();
+        let img = Buffer::<f32>::new(ctx, "test.target", (Plane::count(3) * cam.width * cam.height) as usize).unwrap();
         loop {
             let mut rec = Recorder::new(ctx).unwrap();
-            shading
-                .record_color(&mut rec, &truth, &env, cam, fresnel, &feat)
-                .unwrap();
-            raster
-                .record_forward_with(&mut rec, &geometry, &feat, cam, &background, 0, &frame)
-                .unwrap();
-            shading
-                .record_composite(&mut rec, cam, fresnel, scat, &frame.out, &img)
-                .unwrap();
+            shading.record_color(&mut rec, &truth, &env, cam, fresnel, &feat).unwrap();
+            raster.record_forward_with(&mut rec, &geometry, &feat, cam, &background, 0, &frame).unwrap();
+            shading.record_composite(&mut rec, cam, fresnel, scat, &frame.out, &img).unwrap();
             rec.submit_and_wait().unwrap();
             if raster.fit(&mut frame).unwrap() {
                 break;
@@ -234,32 +170,14 @@ struct Setup {
 
 impl Default for Setup {
     fn default() -> Self {
-        Setup {
-            tilt_deg: 20.0,
-            radius: 1.0,
-            iterations: 1000,
-            env_known: false,
-            env_res: ENV_RES,
-            lr_quats: 1e-2,
-            lambda_normal: 0.0,
-            colours_only: false,
-        }
+        Setup { tilt_deg: 20.0, radius: 1.0, iterations: 1000, env_known: false, env_res: ENV_RES, lr_quats: 1e-2, lambda_normal: 0.0, colours_only: false }
     }
 }
 
 const ENV_RES: u32 = 16;
 
 fn run(ctx: &Arc<Context>, x: &Setup) -> Outcome {
-    let Setup {
-        tilt_deg,
-        radius,
-        iterations,
-        env_known,
-        env_res,
-        lr_quats,
-        lambda_normal,
-        colours_only,
-    } = *x;
+    let Setup { tilt_deg, radius, iterations, env_known, env_res, lr_quats, lambda_normal, colours_only } = *x;
     let s = scene(16, 600, 40);
     let env = sky_map(ENV_RES);
     let truth = s.points.clone();
@@ -268,24 +186,14 @@ fn run(ctx: &Arc<Context>, x: &Setup) -> Outcome {
     let scat = Buffer::<f32>::new(ctx, "test.scat", 3 * n_px).unwrap();
     scat.upload(&vec![0.5; 3 * n_px]).unwrap();
     let mut rng = Rng(0x5eed_0002);
-    let tilted: Vec<V3> = truth
-        .iter()
-        .map(|n| tilt(&mut rng, *n, tilt_deg.to_radians()))
-        .collect();
+    let tilted: Vec<V3> = truth.iter().map(|n| tilt(&mut rng, *n, tilt_deg.to_radians())).collect();
     let start = set_with(&s, &tilted, radius);
     let before = mae(&start, &s);
     let true_set = set_with(&s, &truth, 1.0);
     let geometry = if colours_only { &start } else { &true_set };
     let targets = targets(ctx, &true_set, geometry, &env, &s.cams, &scat);
     let grey = HostEnvMap::constant(env_res, 0.0).unwrap();
-    let mut model = ReflectionModel::new(
-        ctx,
-        &start,
-        if env_known { &env } else { &grey },
-        Fresnel::Off,
-        1e-15,
-    )
-    .unwrap();
+    let mut model = ReflectionModel::new(ctx, &start, if env_known { &env } else { &grey }, Fresnel::Off, 1e-15).unwrap();
     let mut cfg = TrainConfig::quick();
     let rc = &mut cfg.reflection;
     rc.lr_quats = lr_quats;
@@ -300,14 +208,7 @@ fn run(ctx: &Arc<Context>, x: &Setup) -> Outcome {
     }
     for it in 1..=iterations {
         let v = (it as usize * 7) % s.cams.len();
-        let x = ReflStepInput {
-            iteration: it,
-            camera: &s.cams[v],
-            target: &targets[v],
-            scat: Some(&scat),
-            lr_means: 0.0,
-            profile: false,
-        };
+        let x = ReflStepInput { iteration: it, camera: &s.cams[v], target: &targets[v], scat: Some(&scat), lr_means: 0.0, profile: false };
         model.step(&cfg, &x, None).unwrap();
     }
     let after = mae(&model.set.params.download().unwrap(), &s);
@@ -323,29 +224,10 @@ fn run(ctx: &Arc<Context>, x: &Setup) -> Outcome {
 /// to the quaternions cut they end at 21.8.
 #[test]
 fn the_mirror_direction_turns_normals_towards_the_surface() {
-    let o = run(
-        ctx_shared(),
-        &Setup {
-            env_known: true,
-            colours_only: true,
-            ..Setup::default()
-        },
-    );
-    println!(
-        "colours only, true map: normal error {:.2} -> {:.2} degrees",
-        o.before, o.after
-    );
-    assert!(
-        (o.before - 20.0).abs() < 0.01,
-        "the start is tilted by {:.3} degrees, not 20",
-        o.before
-    );
-    assert!(
-        o.after.is_finite() && o.after < 17.0,
-        "Stage II left the normals {:.2} degrees off the sphere (from {:.2})",
-        o.after,
-        o.before
-    );
+    let o = run(ctx_shared(), &Setup { env_known: true, colours_only: true, ..Setup::default() });
+    println!("colours only, true map: normal error {:.2} -> {:.2} degrees", o.before, o.after);
+    assert!((o.before - 20.0).abs() < 0.01, "the start is tilted by {:.3} degrees, not 20", o.before);
+    assert!(o.after.is_finite() && o.after < 17.0, "Stage II left the normals {:.2} degrees off the sphere (from {:.2})", o.after, o.before);
 }
 
 /// The whole of Stage II's training on splats that lie on the surface: the
@@ -358,17 +240,8 @@ fn the_mirror_direction_turns_normals_towards_the_surface() {
 #[test]
 fn stage_two_turns_tilted_normals_back_to_a_mirror_sphere() {
     for lambda_normal in [0.0, 0.05] {
-        let o = run(
-            ctx_shared(),
-            &Setup {
-                lambda_normal,
-                ..Setup::default()
-            },
-        );
-        println!(
-            "grey map, normal consistency {lambda_normal}: normal error {:.2} -> {:.2} degrees",
-            o.before, o.after
-        );
+        let o = run(ctx_shared(), &Setup { lambda_normal, ..Setup::default() });
+        println!("grey map, normal consistency {lambda_normal}: normal error {:.2} -> {:.2} degrees", o.before, o.after);
         assert!(o.after.is_finite() && o.after < 8.0, "with normal consistency {lambda_normal} Stage II left the normals {:.2} degrees off the sphere (from {:.2})", o.after, o.before);
     }
 }
@@ -407,43 +280,20 @@ fn a_penalty_on_r_joins_the_loss_and_lowers_r() {
         let mut first_loss = f64::NAN;
         for it in 1..=300u32 {
             let v = view_of(it);
-            let x = ReflStepInput {
-                iteration: it,
-                camera: &s.cams[v],
-                target: &targets[v],
-                scat: Some(&scat),
-                lr_means: 0.0,
-                profile: false,
-            };
+            let x = ReflStepInput { iteration: it, camera: &s.cams[v], target: &targets[v], scat: Some(&scat), lr_means: 0.0, profile: false };
             let out = model.step(&cfg, &x, None).unwrap();
-            assert!(
-                out.loss.is_finite(),
-                "lambda_r {lambda_r}: loss {} at step {it}",
-                out.loss
-            );
+            assert!(out.loss.is_finite(), "lambda_r {lambda_r}: loss {} at step {it}", out.loss);
             if it == 1 {
                 first_loss = out.loss;
             }
         }
-        let r_after = (0..s.cams.len())
-            .map(|v| mean_r(&mut model, v))
-            .sum::<f64>()
-            / s.cams.len() as f64;
+        let r_after = (0..s.cams.len()).map(|v| mean_r(&mut model, v)).sum::<f64>() / s.cams.len() as f64;
         runs.push((first_loss, r_first, r_after));
     }
-    let [(l0, r_first, r0), (l1, _, r1)] = runs[..] else {
-        unreachable!()
-    };
+    let [(l0, r_first, r0), (l1, _, r1)] = runs[..] else { unreachable!() };
     println!("first step's loss {l0:.6} without the penalty, {l1:.6} with lambda_r {lambda} (mean R {r_first:.5}); mean R after 300 steps {r0:.5} without, {r1:.5} with");
     let want = lambda as f64 * r_first;
-    assert!(
-        ((l1 - l0) - want).abs() < 1e-5 * (1.0 + want),
-        "the first step's loss rose by {} with the penalty, not lambda * mean R = {want}",
-        l1 - l0
-    );
-    assert!(
-        r1 < 0.75 * r0,
-        "the penalty left the mean R at {r1:.5} (without it {r0:.5})"
-    );
+    assert!(((l1 - l0) - want).abs() < 1e-5 * (1.0 + want), "the first step's loss rose by {} with the penalty, not lambda * mean R = {want}", l1 - l0);
+    assert!(r1 < 0.75 * r0, "the penalty left the mean R at {r1:.5} (without it {r0:.5})");
     check_validation(ctx);
 }

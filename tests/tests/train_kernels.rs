@@ -1,7 +1,7 @@
 //! Adam and adaptive density control on the GPU against CPU expectations.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Adam, AdamGroup, Densifier, DensifyParams, HostGaussians, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, DensifyParams, Densifier, HostGaussians, TrainableSet};
 use tgs_tests::Rng;
 use tgs_tests::{check_validation, ctx_shared, seed};
 
@@ -13,27 +13,15 @@ fn adam_matches_f64_reference_and_ignores_non_finite_gradients() {
     let group = AdamGroup::split(0.01, 0.001, 4, 1);
     let adam = Adam::new(ctx, 1e-15).unwrap();
     let p0: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
-    let (param, grad, m, v) = (
-        Buffer::from_slice(ctx, "p", &p0).unwrap(),
-        Buffer::<f32>::new(ctx, "g", n).unwrap(),
-        Buffer::<f32>::new(ctx, "m", n).unwrap(),
-        Buffer::<f32>::new(ctx, "v", n).unwrap(),
-    );
-    let (mut p, mut m64, mut v64) = (
-        p0.iter().map(|&x| x as f64).collect::<Vec<_>>(),
-        vec![0f64; n],
-        vec![0f64; n],
-    );
+    let (param, grad, m, v) = (Buffer::from_slice(ctx, "p", &p0).unwrap(), Buffer::<f32>::new(ctx, "g", n).unwrap(), Buffer::<f32>::new(ctx, "m", n).unwrap(), Buffer::<f32>::new(ctx, "v", n).unwrap());
+    let (mut p, mut m64, mut v64) = (p0.iter().map(|&x| x as f64).collect::<Vec<_>>(), vec![0f64; n], vec![0f64; n]);
     for t in 1..=6u64 {
-        let mut g: Vec<f32> = (0..n)
-            .map(|_| rng.uniform(-1.0, 1.0) as f32 * if rng.below(10) == 0 { 0.0 } else { 1.0 })
-            .collect();
+        let mut g: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32 * if rng.below(10) == 0 { 0.0 } else { 1.0 }).collect();
         g[7] = f32::NAN;
         g[11] = f32::INFINITY;
         grad.upload(&g).unwrap();
         let mut rec = Recorder::new(ctx).unwrap();
-        adam.record(&mut rec, &param, &grad, &m, &v, n, &group, t)
-            .unwrap();
+        adam.record(&mut rec, &param, &grad, &m, &v, n, &group, t).unwrap();
         rec.submit_and_wait().unwrap();
         let (b1, b2) = (0.9f64, 0.999f64);
         for i in 0..n {
@@ -47,12 +35,7 @@ fn adam_matches_f64_reference_and_ignores_non_finite_gradients() {
     }
     let got = param.download().unwrap();
     for i in 0..n {
-        assert!(
-            (got[i] as f64 - p[i]).abs() < 2e-6,
-            "element {i}: GPU {} vs reference {}",
-            got[i],
-            p[i]
-        );
+        assert!((got[i] as f64 - p[i]).abs() < 2e-6, "element {i}: GPU {} vs reference {}", got[i], p[i]);
     }
     assert!(got.iter().all(|v| v.is_finite()));
     check_validation(ctx);
@@ -64,25 +47,19 @@ fn cases() -> (HostGaussians, Vec<f32>, Vec<f32>, Vec<f32>) {
     let logit = |o: f32| (o / (1.0 - o)).ln();
     // (opacity, log-scale, mean grad, views, max radius)
     let spec: [(f32, f32, f32, f32, f32); 8] = [
-        (0.5, -4.0, 1e-5, 3.0, 4.0),  // 0 keep
-        (0.5, -4.0, 5e-4, 2.0, 4.0),  // 1 clone
-        (0.5, -1.0, 5e-4, 2.0, 4.0),  // 2 split
+        (0.5, -4.0, 1e-5, 3.0, 4.0), // 0 keep
+        (0.5, -4.0, 5e-4, 2.0, 4.0), // 1 clone
+        (0.5, -1.0, 5e-4, 2.0, 4.0), // 2 split
         (0.01, -4.0, 1e-5, 2.0, 4.0), // 3 prune: opacity
-        (0.5, 0.5, 1e-5, 2.0, 4.0),   // 4 prune: world size
+        (0.5, 0.5, 1e-5, 2.0, 4.0),  // 4 prune: world size
         (0.5, -4.0, 1e-5, 2.0, 40.0), // 5 prune: screen size
-        (0.5, -4.0, 1.0, 0.0, 0.0),   // 6 never seen: keep
-        (0.5, -2.5, 3e-4, 1.0, 4.0),  // 7 split (scale 0.082 > 0.01 * extent)
+        (0.5, -4.0, 1.0, 0.0, 0.0),  // 6 never seen: keep
+        (0.5, -2.5, 3e-4, 1.0, 4.0), // 7 split (scale 0.082 > 0.01 * extent)
     ];
     let (mut acc, mut den, mut rad) = (vec![], vec![], vec![]);
     for (i, &(o, ls, gr, views, r)) in spec.iter().enumerate() {
         let feats: Vec<f32> = (0..12).map(|k| (i * 12 + k) as f32 * 0.01).collect();
-        g.push(
-            [i as f32, 0.5 * i as f32, -0.25 * i as f32],
-            [ls, ls - 0.3],
-            [0.9, 0.1 * i as f32, 0.2, -0.3],
-            logit(o),
-            &feats,
-        );
+        g.push([i as f32, 0.5 * i as f32, -0.25 * i as f32], [ls, ls - 0.3], [0.9, 0.1 * i as f32, 0.2, -0.3], logit(o), &feats);
         acc.push(if views > 0.0 { gr * views } else { 1.0 });
         den.push(views);
         rad.push(r);
@@ -99,16 +76,7 @@ fn densify(seed_value: u32) -> (HostGaussians, HostGaussians, HostGaussians, [Ve
     set.max_radii.upload(&rad).unwrap();
     // Moments: recognisable values per Gaussian.
     let mut mh = g.clone();
-    for (k, arr) in [
-        &mut mh.means,
-        &mut mh.log_scales,
-        &mut mh.quats,
-        &mut mh.opacity,
-        &mut mh.features,
-    ]
-    .into_iter()
-    .enumerate()
-    {
+    for (k, arr) in [&mut mh.means, &mut mh.log_scales, &mut mh.quats, &mut mh.opacity, &mut mh.features].into_iter().enumerate() {
         let w = arr.len() / 8;
         for (j, v) in arr.iter_mut().enumerate() {
             *v = 100.0 * (j / w + 1) as f32 + k as f32;
@@ -122,34 +90,12 @@ fn densify(seed_value: u32) -> (HostGaussians, HostGaussians, HostGaussians, [Ve
         dst.features.upload(&src.features).unwrap();
     }
     let d = Densifier::new(ctx).unwrap();
-    let p = DensifyParams {
-        grad_threshold: 2e-4,
-        dense_scale: 0.01 * 5.0,
-        opacity_min: 0.05,
-        prune_big: true,
-        big_screen: 20.0,
-        big_world: 0.1 * 5.0,
-        grow: true,
-        seed: seed_value,
-    };
+    let p = DensifyParams { grad_threshold: 2e-4, dense_scale: 0.01 * 5.0, opacity_min: 0.05, prune_big: true, big_screen: 20.0, big_world: 0.1 * 5.0, grow: true, seed: seed_value };
     let r = d.densify(&mut set, &p).unwrap();
-    assert_eq!(
-        (r.before, r.after),
-        (8, 8),
-        "kept 0, 6 (2) + clone 1 (2) + split 2, 7 (4) = 8"
-    );
+    assert_eq!((r.before, r.after), (8, 8), "kept 0, 6 (2) + clone 1 (2) + split 2, 7 (4) = 8");
     check_validation(ctx);
-    let stats = [
-        set.accum.download().unwrap(),
-        set.denom.download().unwrap(),
-        set.max_radii.download().unwrap(),
-    ];
-    (
-        set.params.download().unwrap(),
-        set.m.download().unwrap(),
-        set.v.download().unwrap(),
-        stats,
-    )
+    let stats = [set.accum.download().unwrap(), set.denom.download().unwrap(), set.max_radii.download().unwrap()];
+    (set.params.download().unwrap(), set.m.download().unwrap(), set.v.download().unwrap(), stats)
 }
 
 #[test]
@@ -163,66 +109,33 @@ fn densify_clones_splits_and_prunes() {
     for (o, (&s, (&is_new, &is_split))) in src.iter().zip(fresh.iter().zip(&split)).enumerate() {
         assert_eq!(out.opacity[o], g.opacity[s], "output {o}: opacity of {s}");
         assert_eq!(&out.quats[4 * o..4 * o + 4], &g.quats[4 * s..4 * s + 4]);
-        assert_eq!(
-            &out.features[12 * o..12 * o + 12],
-            &g.features[12 * s..12 * s + 12]
-        );
+        assert_eq!(&out.features[12 * o..12 * o + 12], &g.features[12 * s..12 * s + 12]);
         for k in 0..2 {
             let want = g.log_scales[2 * s + k] - if is_split { 1.6f32.ln() } else { 0.0 };
-            assert!(
-                (out.log_scales[2 * o + k] - want).abs() < 1e-6,
-                "output {o}: log-scale {} vs {want}",
-                out.log_scales[2 * o + k]
-            );
+            assert!((out.log_scales[2 * o + k] - want).abs() < 1e-6, "output {o}: log-scale {} vs {want}", out.log_scales[2 * o + k]);
         }
-        let d: Vec<f32> = (0..3)
-            .map(|k| out.means[3 * o + k] - g.means[3 * s + k])
-            .collect();
+        let d: Vec<f32> = (0..3).map(|k| out.means[3 * o + k] - g.means[3 * s + k]).collect();
         if is_split {
             // Offset in the splat's plane: orthogonal to t_w (third column of R).
             let q = &g.quats[4 * s..4 * s + 4];
             let l = q.iter().map(|x| x * x).sum::<f32>().sqrt();
             let (r, x, y, z) = (q[0] / l, q[1] / l, q[2] / l, q[3] / l);
-            let tw = [
-                2.0 * (x * z + r * y),
-                2.0 * (y * z - r * x),
-                1.0 - 2.0 * (x * x + y * y),
-            ];
+            let tw = [2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)];
             let dot: f32 = (0..3).map(|k| d[k] * tw[k]).sum();
             let len = d.iter().map(|v| v * v).sum::<f32>().sqrt();
             let smax = g.log_scales[2 * s].max(g.log_scales[2 * s + 1]).exp();
-            assert!(
-                dot.abs() < 1e-5 && len > 0.0 && len < 6.0 * smax,
-                "output {o}: split offset {d:?} (normal component {dot}, scale {smax})"
-            );
+            assert!(dot.abs() < 1e-5 && len > 0.0 && len < 6.0 * smax, "output {o}: split offset {d:?} (normal component {dot}, scale {smax})");
         } else {
             assert!(d.iter().all(|&v| v == 0.0), "output {o}: mean moved");
         }
         for (name, mom) in [("m", &m), ("v", &v)] {
-            let want = if is_new {
-                0.0
-            } else {
-                100.0 * (s + 1) as f32 + 3.0
-            };
-            assert_eq!(
-                mom.opacity[o], want,
-                "output {o}: Adam {name} of the opacity"
-            );
-            let want = if is_new {
-                0.0
-            } else {
-                100.0 * (s + 1) as f32 + 4.0
-            };
-            assert!(
-                mom.features[12 * o..12 * o + 12].iter().all(|&x| x == want),
-                "output {o}: Adam {name} of the features"
-            );
+            let want = if is_new { 0.0 } else { 100.0 * (s + 1) as f32 + 3.0 };
+            assert_eq!(mom.opacity[o], want, "output {o}: Adam {name} of the opacity");
+            let want = if is_new { 0.0 } else { 100.0 * (s + 1) as f32 + 4.0 };
+            assert!(mom.features[12 * o..12 * o + 12].iter().all(|&x| x == want), "output {o}: Adam {name} of the features");
         }
     }
-    assert!(
-        stats.iter().all(|s| s.iter().all(|&x| x == 0.0)),
-        "statistics start at zero after densification"
-    );
+    assert!(stats.iter().all(|s| s.iter().all(|&x| x == 0.0)), "statistics start at zero after densification");
     // Deterministic per seed; another seed moves the split children.
     let (again, _, _, _) = densify(7);
     assert_eq!(out, again);
@@ -239,26 +152,11 @@ fn densify_prune_only_and_empty_result() {
     set.accum.upload(&acc).unwrap();
     set.denom.upload(&den).unwrap();
     set.max_radii.upload(&rad).unwrap();
-    let p = DensifyParams {
-        grad_threshold: 2e-4,
-        dense_scale: 0.05,
-        opacity_min: 0.05,
-        prune_big: false,
-        big_screen: 20.0,
-        big_world: 0.5,
-        grow: false,
-        seed: 1,
-    };
+    let p = DensifyParams { grad_threshold: 2e-4, dense_scale: 0.05, opacity_min: 0.05, prune_big: false, big_screen: 20.0, big_world: 0.5, grow: false, seed: 1 };
     let r = d.densify(&mut set, &p).unwrap();
-    assert_eq!(
-        r.after, 7,
-        "only the transparent Gaussian goes without growth or size pruning"
-    );
+    assert_eq!(r.after, 7, "only the transparent Gaussian goes without growth or size pruning");
     // Everything below the opacity threshold: an empty set, then still usable.
-    let p = DensifyParams {
-        opacity_min: 0.99,
-        ..p
-    };
+    let p = DensifyParams { opacity_min: 0.99, ..p };
     let r = d.densify(&mut set, &p).unwrap();
     assert_eq!(r.after, 0);
     assert!(set.is_empty());
@@ -285,18 +183,8 @@ fn opacity_reset_caps_opacity_and_clears_its_moments() {
     for (a, b) in got.iter().zip(&g.opacity) {
         assert_eq!(*a, b.min(cap));
     }
-    assert!(set
-        .m
-        .opacity
-        .download()
-        .unwrap()
-        .iter()
-        .chain(&set.v.opacity.download().unwrap())
-        .all(|&x| x == 0.0));
-    assert!(
-        set.m.means.download().unwrap().iter().all(|&x| x == 1.0),
-        "other moments untouched"
-    );
+    assert!(set.m.opacity.download().unwrap().iter().chain(&set.v.opacity.download().unwrap()).all(|&x| x == 0.0));
+    assert!(set.m.means.download().unwrap().iter().all(|&x| x == 1.0), "other moments untouched");
     check_validation(ctx);
 }
 
@@ -316,26 +204,13 @@ fn adam_steps_only_the_active_elements_of_each_block() {
     let grad_seed = rng.next_u64();
     let run = |group: AdamGroup, zero_inactive: bool| -> [Vec<u32>; 3] {
         let mut rng = Rng(grad_seed);
-        let bufs = [
-            Buffer::from_slice(ctx, "p", &p0).unwrap(),
-            Buffer::<f32>::new(ctx, "m", n).unwrap(),
-            Buffer::<f32>::new(ctx, "v", n).unwrap(),
-        ];
+        let bufs = [Buffer::from_slice(ctx, "p", &p0).unwrap(), Buffer::<f32>::new(ctx, "m", n).unwrap(), Buffer::<f32>::new(ctx, "v", n).unwrap()];
         let grad = Buffer::<f32>::new(ctx, "g", n).unwrap();
         for t in 1..=3u64 {
-            let g: Vec<f32> = (0..n)
-                .map(|i| {
-                    if zero_inactive && !live(i) {
-                        0.0
-                    } else {
-                        rng.uniform(-1.0, 1.0) as f32
-                    }
-                })
-                .collect();
+            let g: Vec<f32> = (0..n).map(|i| if zero_inactive && !live(i) { 0.0 } else { rng.uniform(-1.0, 1.0) as f32 }).collect();
             grad.upload(&g).unwrap();
             let mut rec = Recorder::new(ctx).unwrap();
-            adam.record(&mut rec, &bufs[0], &grad, &bufs[1], &bufs[2], n, &group, t)
-                .unwrap();
+            adam.record(&mut rec, &bufs[0], &grad, &bufs[1], &bufs[2], n, &group, t).unwrap();
             rec.submit_and_wait().unwrap();
         }
         bufs.map(|b| b.download().unwrap().iter().map(|v| v.to_bits()).collect())
@@ -348,37 +223,15 @@ fn adam_steps_only_the_active_elements_of_each_block() {
     let [pa, ma, va] = run(all, false);
     for i in 0..n {
         if live(i) {
-            assert_eq!(
-                (p[i], m[i], v[i]),
-                (pa[i], ma[i], va[i]),
-                "active element {i} differs from stepping everything"
-            );
+            assert_eq!((p[i], m[i], v[i]), (pa[i], ma[i], va[i]), "active element {i} differs from stepping everything");
         } else {
-            assert_eq!(
-                (p[i], m[i], v[i]),
-                (p0[i].to_bits(), 0, 0),
-                "inactive element {i} was stepped"
-            );
+            assert_eq!((p[i], m[i], v[i]), (p0[i].to_bits(), 0, 0), "inactive element {i} was stepped");
         }
     }
     // Zero gradients where inactive: the same as stepping every element.
-    assert!(
-        run(some, true) == run(all, true),
-        "skipping zero-gradient elements changed the result"
-    );
+    assert!(run(some, true) == run(all, true), "skipping zero-gradient elements changed the result");
     // Blocks must be whole.
-    assert!(adam
-        .record(
-            &mut Recorder::new(ctx).unwrap(),
-            &Buffer::<f32>::new(ctx, "p", 50).unwrap(),
-            &Buffer::<f32>::new(ctx, "g", 50).unwrap(),
-            &Buffer::<f32>::new(ctx, "m", 50).unwrap(),
-            &Buffer::<f32>::new(ctx, "v", 50).unwrap(),
-            50,
-            &some,
-            1
-        )
-        .is_err());
+    assert!(adam.record(&mut Recorder::new(ctx).unwrap(), &Buffer::<f32>::new(ctx, "p", 50).unwrap(), &Buffer::<f32>::new(ctx, "g", 50).unwrap(), &Buffer::<f32>::new(ctx, "m", 50).unwrap(), &Buffer::<f32>::new(ctx, "v", 50).unwrap(), 50, &some, 1).is_err());
     check_validation(ctx);
 }
 
@@ -392,9 +245,7 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
     use tgs_pipelines::{Features, RasterKernels, Rasterizer, RecordAccess};
     use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
     let ctx = ctx_shared();
-    let mut rng = Rng(seed(
-        "the_reduce_with_adam_fused_matches_the_backward_then_adam",
-    ));
+    let mut rng = Rng(seed("the_reduce_with_adam_fused_matches_the_backward_then_adam"));
     let sh3 = Features::Sh { degree: 3 };
     let host = random_scene(&mut rng, &SceneSpec::new(400, 3, sh3));
     let cam = default_camera(70, 45);
@@ -405,30 +256,16 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
         AdamGroup::single(5e-3),
         AdamGroup::single(1e-3),
         AdamGroup::single(0.05),
-        AdamGroup {
-            active: 3 * 4,
-            ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3)
-        },
+        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
     ];
     let mut access = vec![RecordAccess::Binding];
     if ctx.caps().buffer_device_address {
         access.push(RecordAccess::Address);
     }
     for records in access {
-        let rast = Rasterizer::with_records(
-            ctx,
-            3,
-            sh3,
-            None,
-            RasterKernels::for_device(ctx.caps()),
-            records,
-        )
-        .unwrap();
+        let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
         if !rast.can_fuse_adam() {
-            eprintln!(
-                "{} cannot run the fused reduce: skipped",
-                ctx.caps().device_name
-            );
+            eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
             return;
         }
         let run = |fused: bool| -> Vec<(String, Vec<u32>)> {
@@ -436,78 +273,32 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
             let mut frame = rast.frame(cam.width, cam.height, set.len(), 1024).unwrap();
             let mut out = Vec::new();
             for t in 1..=2u64 {
-                rast.forward(&set.params, &cam, &[0.1, 0.5, 0.9], 1, &mut frame, false)
-                    .unwrap();
+                rast.forward(&set.params, &cam, &[0.1, 0.5, 0.9], 1, &mut frame, false).unwrap();
                 frame.grad_out.upload(&grad_out).unwrap();
                 let mut rec = Recorder::new(ctx).unwrap();
                 if fused {
                     let c = adam.reduce_constants(&set, &groups, t).unwrap();
-                    rast.record_backward_adam(
-                        &mut rec,
-                        &set.params,
-                        &set.m,
-                        &set.v,
-                        &c,
-                        1,
-                        &frame,
-                        None,
-                    )
-                    .unwrap();
+                    rast.record_backward_adam(&mut rec, &set.params, &set.m, &set.v, &c, 1, &frame, None).unwrap();
                 } else {
-                    rast.record_backward(&mut rec, &set.params, &set.grads, 1, &frame)
-                        .unwrap();
+                    rast.record_backward(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
                     adam.record_set(&mut rec, &set, &groups, t).unwrap();
                 }
                 rec.submit_and_wait().unwrap();
-                let densify = frame
-                    .densify
-                    .download_range(0, 2 * set.len() as usize)
-                    .unwrap();
-                out.push((
-                    format!("step {t}: densify"),
-                    densify.iter().map(|v| v.to_bits()).collect(),
-                ));
+                let densify = frame.densify.download_range(0, 2 * set.len() as usize).unwrap();
+                out.push((format!("step {t}: densify"), densify.iter().map(|v| v.to_bits()).collect()));
             }
-            out.extend(set.arrays().into_iter().map(|(name, b, _)| {
-                (
-                    name,
-                    b.download().unwrap().iter().map(|v| v.to_bits()).collect(),
-                )
-            }));
+            out.extend(set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())));
             out
         };
         let (fused, separate) = (run(true), run(false));
         for ((name, a), (_, b)) in fused.iter().zip(&separate) {
-            assert!(
-                a == b,
-                "{records:?}: {name} differs between the fused and the separate step"
-            );
+            assert!(a == b, "{records:?}: {name} differs between the fused and the separate step");
         }
         let before = TrainableSet::new(ctx, &host).unwrap();
-        let params =
-            |s: &[(String, Vec<u32>)], k: &str| s.iter().find(|a| a.0 == k).unwrap().1.clone();
-        let initial: Vec<(String, Vec<u32>)> = before
-            .arrays()
-            .into_iter()
-            .map(|(name, b, _)| {
-                (
-                    name,
-                    b.download().unwrap().iter().map(|v| v.to_bits()).collect(),
-                )
-            })
-            .collect();
-        for k in [
-            "param.means",
-            "param.log_scales",
-            "param.quats",
-            "param.opacity",
-            "param.features",
-        ] {
-            assert_ne!(
-                params(&fused, k),
-                params(&initial, k),
-                "{records:?}: {k} did not move"
-            );
+        let params = |s: &[(String, Vec<u32>)], k: &str| s.iter().find(|a| a.0 == k).unwrap().1.clone();
+        let initial: Vec<(String, Vec<u32>)> = before.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect();
+        for k in ["param.means", "param.log_scales", "param.quats", "param.opacity", "param.features"] {
+            assert_ne!(params(&fused, k), params(&initial, k), "{records:?}: {k} did not move");
         }
     }
     // Groups the fused step cannot express are refused, not approximated.

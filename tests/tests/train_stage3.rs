@@ -19,46 +19,21 @@ use tgs_tests::raster_util::bits;
 use tgs_tests::{check_validation, ctx_shared};
 
 fn scene() -> PathBuf {
-    tgs_tests::tiny_glass_scene(
-        &std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("stage3-scene"),
-    )
+    tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("stage3-scene"))
 }
 
 fn args(out: &Path) -> TrainArgs {
-    let set: Vec<String> = [
-        "iterations=300",
-        "reflection.iterations=100",
-        "light_field.iterations=120",
-        "test_interval=0",
-        "checkpoint_interval=0",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
+    let set: Vec<String> = ["iterations=300", "reflection.iterations=100", "light_field.iterations=120", "test_interval=0", "checkpoint_interval=0"].iter().map(|s| s.to_string()).collect();
     let _ = std::fs::remove_dir_all(out);
-    TrainArgs {
-        dataset: Some(scene()),
-        out: out.to_path_buf(),
-        preset: Some("quick".into()),
-        set,
-        quiet: true,
-        ..Default::default()
-    }
+    TrainArgs { dataset: Some(scene()), out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }
 }
 
 fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_slice(
-        &std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
-    )
-    .unwrap()
+    serde_json::from_slice(&std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
 
 fn log_lines(out: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(out.join("log.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
+    std::fs::read_to_string(out.join("log.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
 }
 
 #[test]
@@ -70,32 +45,15 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     assert_eq!(o.iteration, 520);
     let m = json(&full.join("metrics.json"));
     let stages = m["stages"].as_array().unwrap();
-    assert_eq!(
-        stages
-            .iter()
-            .map(|s| s["stage"].as_str().unwrap())
-            .collect::<Vec<_>>(),
-        ["I", "II", "III"]
-    );
+    assert_eq!(stages.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II", "III"]);
     let psnr = |i: usize| stages[i]["test"]["psnr"].as_f64().unwrap();
-    assert!(
-        psnr(2) > psnr(1) - 0.3,
-        "Stage III test PSNR {} vs Stage II {}",
-        psnr(2),
-        psnr(1)
-    );
+    assert!(psnr(2) > psnr(1) - 0.3, "Stage III test PSNR {} vs Stage II {}", psnr(2), psnr(1));
     assert_eq!(stages[2]["iterations"], 120);
-    assert!(stages[2]["test"]["normal_mae_deg"]
-        .as_f64()
-        .unwrap()
-        .is_finite());
+    assert!(stages[2]["test"]["normal_mae_deg"].as_f64().unwrap().is_finite());
     assert_eq!(m["test"]["psnr"], stages[2]["test"]["psnr"]);
     // Log: Stage III lines with the fraction of pixels Phi ran on.
     let lines = log_lines(&full);
-    let third: Vec<&serde_json::Value> = lines
-        .iter()
-        .filter(|l| l["stage"] == "III" && l.get("loss").is_some())
-        .collect();
+    let third: Vec<&serde_json::Value> = lines.iter().filter(|l| l["stage"] == "III" && l.get("loss").is_some()).collect();
     assert_eq!(third.len(), 120);
     for l in &third {
         let f = l["phi_fraction"].as_f64().unwrap();
@@ -103,37 +61,18 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
         assert!(l["loss"].as_f64().unwrap().is_finite());
     }
     // Outputs: the network reads back as the quick preset's, with its box.
-    let (shape, shade, params) =
-        tgs::export::mlp::read(&full.join("light_field.safetensors")).unwrap();
+    let (shape, shade, params) = tgs::export::mlp::read(&full.join("light_field.safetensors")).unwrap();
     assert_eq!(shape, tgs_pipelines::MlpShape::SMALL);
     assert!(params.iter().all(|v| v.is_finite()) && params.len() == shape.params() as usize);
-    assert!(
-        shade.half_extent.iter().all(|&h| h > 0.0) && (shade.threshold - 0.01).abs() < 1e-9,
-        "{shade:?}"
-    );
-    for f in [
-        "reflection.ply",
-        "point_cloud.ply",
-        "renders/stage1/r_0.png",
-        "renders/stage2/r_0.png",
-        "renders/test/r_0_phi_mask.png",
-        "renders/test/r_0_refl.png",
-        "renders/test/r_0_F0.png",
-    ] {
+    assert!(shade.half_extent.iter().all(|&h| h > 0.0) && (shade.threshold - 0.01).abs() < 1e-9, "{shade:?}");
+    for f in ["reflection.ply", "point_cloud.ply", "renders/stage1/r_0.png", "renders/stage2/r_0.png", "renders/test/r_0_phi_mask.png", "renders/test/r_0_refl.png", "renders/test/r_0_F0.png"] {
         assert!(full.join(f).is_file(), "missing {f}");
     }
-    assert!(
-        !full.join("envmap.exr").exists(),
-        "Stage III drops the environment map"
-    );
+    assert!(!full.join("envmap.exr").exists(), "Stage III drops the environment map");
     // `tgs eval` from the checkpoint measures what training reported.
     let (mut tr, data) = tgs::train::run::open_run(ctx, &full).unwrap();
     let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
-    assert_eq!(
-        Some(again.psnr),
-        m["test"]["psnr"].as_f64(),
-        "evaluation from the checkpoint differs"
-    );
+    assert_eq!(Some(again.psnr), m["test"]["psnr"].as_f64(), "evaluation from the checkpoint differs");
     drop(tr);
 
     // Stopped inside Stage III, then resumed: the same final state.
@@ -142,11 +81,7 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     let watch = part.join("log.jsonl");
     let stopper = std::thread::spawn(move || loop {
         let s = std::fs::read_to_string(&watch).unwrap_or_default();
-        if s.lines()
-            .filter(|l| l.contains("\"stage\":\"III\"") && l.contains("\"loss\""))
-            .count()
-            >= 40
-        {
+        if s.lines().filter(|l| l.contains("\"stage\":\"III\"") && l.contains("\"loss\"")).count() >= 40 {
             request_stop();
             return;
         }
@@ -154,32 +89,17 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     });
     let o = train(ctx, &a).unwrap();
     stopper.join().unwrap();
-    assert!(
-        o.interrupted && o.iteration > 440 && o.iteration < 520,
-        "stopped at {}",
-        o.iteration
-    );
+    assert!(o.interrupted && o.iteration > 440 && o.iteration < 520, "stopped at {}", o.iteration);
     let o = train(ctx, &TrainArgs { resume: true, ..a }).unwrap();
     assert_eq!((o.iteration, o.interrupted), (520, false));
     let (ha, aa) = checkpoint::read(&full.join("checkpoint.bin")).unwrap();
     let (hb, ab) = checkpoint::read(&part.join("checkpoint.bin")).unwrap();
-    assert_eq!(
-        (ha.iteration, ha.rng, &ha.stack),
-        (hb.iteration, hb.rng, &hb.stack)
-    );
-    let names: Vec<&String> = ha
-        .arrays
-        .iter()
-        .chain(ha.light_field.as_ref().unwrap().arrays.iter())
-        .map(|a| &a.0)
-        .collect();
+    assert_eq!((ha.iteration, ha.rng, &ha.stack), (hb.iteration, hb.rng, &hb.stack));
+    let names: Vec<&String> = ha.arrays.iter().chain(ha.light_field.as_ref().unwrap().arrays.iter()).map(|a| &a.0).collect();
     assert!(names.iter().any(|n| *n == "mlp.adam_v"));
     assert_eq!(aa.len(), ab.len());
     for (name, (x, y)) in names.iter().zip(aa.iter().zip(&ab)) {
-        assert!(
-            x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()),
-            "{name} differs after resume"
-        );
+        assert!(x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()), "{name} differs after resume");
     }
     let m2 = json(&part.join("metrics.json"));
     assert_eq!(m2["test"]["psnr"], m["test"]["psnr"]);
@@ -196,49 +116,21 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     let (h_two, a_two) = checkpoint::read(&two.join("checkpoint.bin")).unwrap();
     for (k, (name, _)) in h_two.arrays.iter().enumerate().take(15) {
         let same = bits(&aa[k]) == bits(&a_two[k]);
-        assert_eq!(
-            same,
-            !name.ends_with(".features"),
-            "default Stage III: scattering array {name} {}",
-            if same {
-                "did not train"
-            } else {
-                "moved though frozen"
-            }
-        );
+        assert_eq!(same, !name.ends_with(".features"), "default Stage III: scattering array {name} {}", if same { "did not train" } else { "moved though frozen" });
     }
     let from = base.join("from");
     let _ = std::fs::remove_dir_all(&from);
-    let af = TrainArgs {
-        dataset: None,
-        out: from.clone(),
-        preset: None,
-        set: vec!["light_field.iterations=120".into()],
-        quiet: true,
-        from: Some(two.clone()),
-        stages: Some("III".into()),
-        ..Default::default()
-    };
+    let af = TrainArgs { dataset: None, out: from.clone(), preset: None, set: vec!["light_field.iterations=120".into()], quiet: true, from: Some(two.clone()), stages: Some("III".into()), ..Default::default() };
     assert_eq!(train(ctx, &af).unwrap().iteration, 520);
     let (hc, ac) = checkpoint::read(&from.join("checkpoint.bin")).unwrap();
     assert_eq!((ha.iteration, ha.rng), (hc.iteration, hc.rng));
     for (name, (x, y)) in names.iter().zip(aa.iter().zip(&ac)) {
-        assert!(
-            x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()),
-            "{name} differs between --from --stages III and one run"
-        );
+        assert!(x.len() == y.len() && x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()), "{name} differs between --from --stages III and one run");
     }
     let mf = json(&from.join("metrics.json"));
     let st = mf["stages"].as_array().unwrap();
-    assert_eq!(
-        st.iter()
-            .map(|s| s["stage"].as_str().unwrap())
-            .collect::<Vec<_>>(),
-        ["I", "II", "III"]
-    );
-    assert!(
-        st[0].get("from").is_some() && st[1].get("from").is_some() && st[2].get("from").is_none()
-    );
+    assert_eq!(st.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II", "III"]);
+    assert!(st[0].get("from").is_some() && st[1].get("from").is_some() && st[2].get("from").is_none());
     // Refused: Stage II not finished there, or a Stage II setting changed.
     let refused = |a: TrainArgs, words: &[&str]| {
         let e = format!("{:#}", train(ctx, &a).unwrap_err());
@@ -252,48 +144,19 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     // run again.
     let again2 = base.join("again2");
     let _ = std::fs::remove_dir_all(&again2);
-    let a_again2 = TrainArgs {
-        out: again2.clone(),
-        from: Some(full.clone()),
-        stages: Some("II".into()),
-        set: vec![],
-        ..af.clone()
-    };
+    let a_again2 = TrainArgs { out: again2.clone(), from: Some(full.clone()), stages: Some("II".into()), set: vec![], ..af.clone() };
     assert_eq!(train(ctx, &a_again2).unwrap().iteration, 400);
     let (_, a_re2) = checkpoint::read(&again2.join("checkpoint.bin")).unwrap();
     assert_eq!(a_re2.len(), a_two.len());
-    for (k, (name, _)) in h_two
-        .arrays
-        .iter()
-        .chain(h_two.reflection.as_ref().unwrap().arrays.iter())
-        .enumerate()
-    {
-        assert!(
-            bits(&a_re2[k]) == bits(&a_two[k]),
-            "{name}: Stage II from a finished three-stage run differs from the Stage I + II run"
-        );
+    for (k, (name, _)) in h_two.arrays.iter().chain(h_two.reflection.as_ref().unwrap().arrays.iter()).enumerate() {
+        assert!(bits(&a_re2[k]) == bits(&a_two[k]), "{name}: Stage II from a finished three-stage run differs from the Stage I + II run");
     }
     let again3 = base.join("again3");
     let _ = std::fs::remove_dir_all(&again3);
-    assert_eq!(
-        train(
-            ctx,
-            &TrainArgs {
-                out: again3.clone(),
-                from: Some(full.clone()),
-                ..af.clone()
-            }
-        )
-        .unwrap()
-        .iteration,
-        520
-    );
+    assert_eq!(train(ctx, &TrainArgs { out: again3.clone(), from: Some(full.clone()), ..af.clone() }).unwrap().iteration, 520);
     let (_, a_re3) = checkpoint::read(&again3.join("checkpoint.bin")).unwrap();
     for (name, (x, y)) in names.iter().zip(aa.iter().zip(&a_re3)) {
-        assert!(
-            bits(x) == bits(y),
-            "{name} differs between --from a three-stage run --stages III and one run"
-        );
+        assert!(bits(x) == bits(y), "{name} differs between --from a three-stage run --stages III and one run");
     }
     // Without those states (a run from before they were written) both are
     // refused: its checkpoint holds neither stage's end.
@@ -307,124 +170,46 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     let _ = std::fs::remove_dir_all(&one);
     tgs_tests::copy_dir(&from, &one);
     let _ = std::fs::remove_dir_all(&from);
-    refused(
-        TrainArgs {
-            from: Some(old.clone()),
-            ..af.clone()
-        },
-        &["finished Stage II", "520", "checkpoint-stage2.bin"],
-    );
-    refused(
-        TrainArgs {
-            from: Some(old.clone()),
-            out: from.clone(),
-            ..a_again2.clone()
-        },
-        &["trained the scattering set", "checkpoint-stage1.bin"],
-    );
-    refused(
-        TrainArgs {
-            set: vec!["reflection.lr_r=0.01".into()],
-            ..af.clone()
-        },
-        &["reflection.lr_r", "light_field.*"],
-    );
+    refused(TrainArgs { from: Some(old.clone()), ..af.clone() }, &["finished Stage II", "520", "checkpoint-stage2.bin"]);
+    refused(TrainArgs { from: Some(old.clone()), out: from.clone(), ..a_again2.clone() }, &["trained the scattering set", "checkpoint-stage1.bin"]);
+    refused(TrainArgs { set: vec!["reflection.lr_r=0.01".into()], ..af.clone() }, &["reflection.lr_r", "light_field.*"]);
 
     // reflection.reseed: after Stage III, Stages II and III run again
     // ("II.2", "III.2"), Stage II seeded afresh from the residual of the
     // scattering set as Stage III left it. The first round is the one run's.
     let rs = base.join("reseed");
     let _ = std::fs::remove_dir_all(&rs);
-    let mut ar = TrainArgs {
-        out: rs.clone(),
-        ..af.clone()
-    };
+    let mut ar = TrainArgs { out: rs.clone(), ..af.clone() };
     ar.set.push("reflection.reseed=true".into());
     assert_eq!(train(ctx, &ar).unwrap().iteration, 740);
     let mr = json(&rs.join("metrics.json"));
     let st = mr["stages"].as_array().unwrap();
-    assert_eq!(
-        st.iter()
-            .map(|s| s["stage"].as_str().unwrap())
-            .collect::<Vec<_>>(),
-        ["I", "II", "III", "II.2", "III.2"]
-    );
-    assert_eq!(
-        st[2]["test"], stages[2]["test"],
-        "the first round's Stage III is the one run's"
-    );
-    assert_eq!(
-        (st[3]["iterations"].as_u64(), st[4]["iterations"].as_u64()),
-        (Some(100), Some(120))
-    );
+    assert_eq!(st.iter().map(|s| s["stage"].as_str().unwrap()).collect::<Vec<_>>(), ["I", "II", "III", "II.2", "III.2"]);
+    assert_eq!(st[2]["test"], stages[2]["test"], "the first round's Stage III is the one run's");
+    assert_eq!((st[3]["iterations"].as_u64(), st[4]["iterations"].as_u64()), (Some(100), Some(120)));
     assert_eq!(mr["test"]["psnr"], st[4]["test"]["psnr"]);
-    assert!(
-        st[3..].iter().all(|s| s["test"]["psnr"]
-            .as_f64()
-            .is_some_and(|p| p.is_finite() && p > psnr(0) - 1.0)),
-        "{st:?}"
-    );
+    assert!(st[3..].iter().all(|s| s["test"]["psnr"].as_f64().is_some_and(|p| p.is_finite() && p > psnr(0) - 1.0)), "{st:?}");
     let d = &mr["reflection"];
     // (On this tiny scene Stage III's colour leaves residual nearly
     // everywhere, so no ray crosses carved space: the copy fallback.)
     let n = |k: &str| d[k].as_u64().unwrap();
-    assert!(
-        d["round"] == 2
-            && d["run"] == true
-            && n("reflection_gaussians") > 0
-            && n("seeds") + n("copied") == n("reflection_gaussians"),
-        "{d}"
-    );
-    assert_ne!(
-        d["residual_mean"], m["reflection"]["residual_mean"],
-        "the second round's residual is measured on the scattering set Stage III trained"
-    );
-    for f in [
-        "residual/round2/r_0.exr",
-        "renders/stage3/r_0.png",
-        "renders/stage2.2/r_0.png",
-        "reflection.ply",
-        "light_field.safetensors",
-    ] {
+    assert!(d["round"] == 2 && d["run"] == true && n("reflection_gaussians") > 0 && n("seeds") + n("copied") == n("reflection_gaussians"), "{d}");
+    assert_ne!(d["residual_mean"], m["reflection"]["residual_mean"], "the second round's residual is measured on the scattering set Stage III trained");
+    for f in ["residual/round2/r_0.exr", "renders/stage3/r_0.png", "renders/stage2.2/r_0.png", "reflection.ply", "light_field.safetensors"] {
         assert!(rs.join(f).is_file(), "missing {f}");
     }
     let lines = log_lines(&rs);
-    let count = |s: &str| {
-        lines
-            .iter()
-            .filter(|l| l["stage"] == s && l["loss"].as_f64().is_some_and(f64::is_finite))
-            .count()
-    };
-    assert_eq!(
-        (count("III"), count("II.2"), count("III.2")),
-        (120, 100, 120)
-    );
+    let count = |s: &str| lines.iter().filter(|l| l["stage"] == s && l["loss"].as_f64().is_some_and(f64::is_finite)).count();
+    assert_eq!((count("III"), count("II.2"), count("III.2")), (120, 100, 120));
     // The stage snapshots keep the first round's ends.
-    assert_eq!(
-        checkpoint::read(&rs.join("checkpoint-stage2.bin"))
-            .unwrap()
-            .0
-            .iteration,
-        400
-    );
+    assert_eq!(checkpoint::read(&rs.join("checkpoint-stage2.bin")).unwrap().0.iteration, 400);
     // A finished one-round run resumed with reflection.reseed on goes on
     // into the second round and ends as the reseed run did, bit for bit.
-    let resume = TrainArgs {
-        out: one.clone(),
-        resume: true,
-        from: None,
-        stages: None,
-        dataset: None,
-        set: vec!["reflection.reseed=true".into()],
-        ..af.clone()
-    };
+    let resume = TrainArgs { out: one.clone(), resume: true, from: None, stages: None, dataset: None, set: vec!["reflection.reseed=true".into()], ..af.clone() };
     assert_eq!(train(ctx, &resume).unwrap().iteration, 740);
     let (hr, ar_) = checkpoint::read(&rs.join("checkpoint.bin")).unwrap();
     let (ho, ao) = checkpoint::read(&one.join("checkpoint.bin")).unwrap();
-    assert_eq!(
-        (hr.iteration, hr.rng, &hr.stack),
-        (ho.iteration, ho.rng, &ho.stack)
-    );
+    assert_eq!((hr.iteration, hr.rng, &hr.stack), (ho.iteration, ho.rng, &ho.stack));
     assert_eq!(ar_.len(), ao.len());
     for (k, (x, y)) in ar_.iter().zip(&ao).enumerate() {
         assert!(bits(x) == bits(y), "array {k} differs between one reseed run and a finished run resumed with reflection.reseed");
@@ -435,63 +220,25 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     // The paper's joint training: the scattering set moves too.
     let joint = base.join("joint");
     let _ = std::fs::remove_dir_all(&joint);
-    let aj = TrainArgs {
-        out: joint.clone(),
-        set: vec![
-            "light_field.iterations=30".into(),
-            "light_field.scattering_params=\"all\"".into(),
-        ],
-        ..af.clone()
-    };
+    let aj = TrainArgs { out: joint.clone(), set: vec!["light_field.iterations=30".into(), "light_field.scattering_params=\"all\"".into()], ..af.clone() };
     assert_eq!(train(ctx, &aj).unwrap().iteration, 430);
     let (_, a_joint) = checkpoint::read(&joint.join("checkpoint.bin")).unwrap();
     assert!(a_joint.iter().flatten().all(|v| v.is_finite()));
-    assert!(
-        a_joint[0].iter().zip(&a_two[0]).any(|(p, q)| p != q),
-        "the scattering set did not train in Stage III"
-    );
+    assert!(a_joint[0].iter().zip(&a_two[0]).any(|(p, q)| p != q), "the scattering set did not train in Stage III");
     let mj = json(&joint.join("metrics.json"));
-    assert!(
-        mj["test"]["psnr"].as_f64().unwrap()
-            > mj["stages"][1]["test"]["psnr"].as_f64().unwrap() - 1.0
-    );
+    assert!(mj["test"]["psnr"].as_f64().unwrap() > mj["stages"][1]["test"]["psnr"].as_f64().unwrap() - 1.0);
 
     // Frozen: every scattering array stays bit-identical.
     let frozen = base.join("frozen");
     let _ = std::fs::remove_dir_all(&frozen);
-    let mut set = vec![
-        "light_field.iterations=30".to_string(),
-        "light_field.train_scattering=false".into(),
-    ];
-    assert_eq!(
-        train(
-            ctx,
-            &TrainArgs {
-                out: frozen.clone(),
-                set: set.clone(),
-                ..af.clone()
-            }
-        )
-        .unwrap()
-        .iteration,
-        430
-    );
+    let mut set = vec!["light_field.iterations=30".to_string(), "light_field.train_scattering=false".into()];
+    assert_eq!(train(ctx, &TrainArgs { out: frozen.clone(), set: set.clone(), ..af.clone() }).unwrap().iteration, 430);
     let (_, a_frozen) = checkpoint::read(&frozen.join("checkpoint.bin")).unwrap();
     for (k, (name, _)) in h_two.arrays.iter().enumerate().take(15) {
-        assert!(
-            bits(&a_frozen[k]) == bits(&a_two[k]),
-            "scattering array {name} moved though the set is frozen"
-        );
+        assert!(bits(&a_frozen[k]) == bits(&a_two[k]), "scattering array {name} moved though the set is frozen");
     }
     let _ = std::fs::remove_dir_all(&frozen);
     set.push("light_field.scattering_params=\"geometry\"".into());
-    refused(
-        TrainArgs {
-            out: frozen.clone(),
-            set,
-            ..af.clone()
-        },
-        &["light_field.scattering_params", "geometry"],
-    );
+    refused(TrainArgs { out: frozen.clone(), set, ..af.clone() }, &["light_field.scattering_params", "geometry"]);
     check_validation(ctx);
 }

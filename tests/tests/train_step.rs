@@ -7,12 +7,12 @@
 //! must change nothing before the host grows the frame and runs the step
 //! again.
 
-use tgs::train::config::LightFieldConfig;
 use tgs::train::init::{gaussians_from_points, random_points};
 use tgs::train::lightfield::{LightFieldModel, LightFieldStepInput};
 use tgs::train::reflection::{ReflStepInput, ReflectionModel};
 use tgs::train::rng::Rng;
 use tgs::train::scattering::{ScatteringModel, StepInput};
+use tgs::train::config::LightFieldConfig;
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::mlp::MlpShape;
@@ -49,10 +49,7 @@ fn buffer_bits(b: &Buffer<f32>) -> Vec<u32> {
 }
 
 fn bits(set: &tgs_pipelines::TrainableSet) -> Bits {
-    set.arrays()
-        .into_iter()
-        .map(|(name, b, _)| (name, buffer_bits(b)))
-        .collect()
+    set.arrays().into_iter().map(|(name, b, _)| (name, buffer_bits(b))).collect()
 }
 
 /// A model's bits: its Gaussian set's arrays, then the named `extra`
@@ -67,41 +64,23 @@ fn model_bits(set: &tgs_pipelines::TrainableSet, extra: [(&str, &Buffer<f32>); 3
 /// over the 3 colour planes of a SIZE x SIZE view.
 fn target_and_scat(ctx: &std::sync::Arc<tgs_engine::Context>) -> (Buffer<f32>, Buffer<f32>) {
     let pixels = (SIZE * SIZE) as usize;
-    let plane = |k: usize| -> Vec<f32> {
-        (0..3 * pixels)
-            .map(|i| 0.1 + 0.8 * (((i + k) * 7919) % 1000) as f32 / 1000.0)
-            .collect()
-    };
-    (
-        Buffer::from_slice(ctx, "target", &plane(0)).unwrap(),
-        Buffer::from_slice(ctx, "scat", &plane(311)).unwrap(),
-    )
+    let plane = |k: usize| -> Vec<f32> { (0..3 * pixels).map(|i| 0.1 + 0.8 * (((i + k) * 7919) % 1000) as f32 / 1000.0).collect() };
+    (Buffer::from_slice(ctx, "target", &plane(0)).unwrap(), Buffer::from_slice(ctx, "scat", &plane(311)).unwrap())
 }
 
 /// Model A's step overflowed, grew its frame and ran again; model B's fitted
 /// at once. Both must end bit-identical (no update ran twice or not at all)
 /// with the same loss, and the `changed` arrays must have moved from
 /// `before` (one update did run).
-fn assert_one_step(
-    before: &Bits,
-    (after_a, loss_a): (&Bits, f64),
-    (after_b, loss_b): (&Bits, f64),
-    changed: &[&str],
-) {
+fn assert_one_step(before: &Bits, (after_a, loss_a): (&Bits, f64), (after_b, loss_b): (&Bits, f64), changed: &[&str]) {
     for ((name, x), (_, y)) in after_a.iter().zip(after_b) {
         assert!(x == y, "{name}: the overflowed-then-rerun step differs from a step that fitted (an update ran twice or not at all)");
     }
     assert_eq!(loss_a.to_bits(), loss_b.to_bits());
     assert!(loss_a.is_finite() && loss_a > 0.0);
     for name in changed {
-        let (i, j) = (
-            before.iter().position(|a| a.0 == *name).unwrap(),
-            after_a.iter().position(|a| a.0 == *name).unwrap(),
-        );
-        assert_ne!(
-            before[i].1, after_a[j].1,
-            "{name} did not change in the step"
-        );
+        let (i, j) = (before.iter().position(|a| a.0 == *name).unwrap(), after_a.iter().position(|a| a.0 == *name).unwrap());
+        assert_ne!(before[i].1, after_a[j].1, "{name} did not change in the step");
     }
 }
 
@@ -113,20 +92,9 @@ fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
     let g = big_splats(n);
     let cfg = TrainConfig::default();
     let cam = camera();
-    let target: Vec<f32> = (0..3 * SIZE * SIZE)
-        .map(|i| 0.2 + 0.6 * ((i * 7919) % 1000) as f32 / 1000.0)
-        .collect();
+    let target: Vec<f32> = (0..3 * SIZE * SIZE).map(|i| 0.2 + 0.6 * ((i * 7919) % 1000) as f32 / 1000.0).collect();
     let target = Buffer::from_slice(ctx, "target", &target).unwrap();
-    let input = StepInput {
-        iteration: 1,
-        camera: &cam,
-        target: &target,
-        sh_degree: 3,
-        lr_means: 1e-3,
-        background: [0.0; 3],
-        extent: 2.0,
-        profile: false,
-    };
+    let input = StepInput { iteration: 1, camera: &cam, target: &target, sh_degree: 3, lr_means: 1e-3, background: [0.0; 3], extent: 2.0, profile: false };
 
     // A: the step's first frame overflows; the GPU skips Adam and the
     // statistics, the host grows the frame and runs the step again.
@@ -134,41 +102,19 @@ fn an_overflowed_step_updates_nothing_before_it_is_run_again() {
     let before = bits(&a.set);
     let out_a = a.step(&cfg, &input).unwrap();
     let first_capacity = a.rasterizer().initial_capacity(n + n / 2 + 1024);
-    assert!(
-        a.last_intersections() > first_capacity,
-        "the scene must overflow the first frame: {} intersections, capacity {first_capacity}",
-        a.last_intersections()
-    );
+    assert!(a.last_intersections() > first_capacity, "the scene must overflow the first frame: {} intersections, capacity {first_capacity}", a.last_intersections());
 
     // B: a render grew the frame first, so the same step fits at once.
     let mut b = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
     b.render(&cam, 3, &[0.0; 3]).unwrap();
     let submitted = ctx.submissions();
     let out_b = b.step(&cfg, &input).unwrap();
-    assert_eq!(
-        ctx.submissions() - submitted,
-        1,
-        "a step that fits is one submission (loss and frame statistics ride it back)"
-    );
+    assert_eq!(ctx.submissions() - submitted, 1, "a step that fits is one submission (loss and frame statistics ride it back)");
 
     // One Adam step and one statistics update happened.
-    assert_one_step(
-        &before,
-        (&bits(&a.set), out_a.loss),
-        (&bits(&b.set), out_b.loss),
-        &[
-            "param.means",
-            "param.opacity",
-            "adam_v.features",
-            "stats.denom",
-        ],
-    );
+    assert_one_step(&before, (&bits(&a.set), out_a.loss), (&bits(&b.set), out_b.loss), &["param.means", "param.opacity", "adam_v.features", "stats.denom"]);
     let denom = a.set.denom.download().unwrap();
-    assert!(
-        denom.iter().all(|&d| d == 0.0 || d == 1.0),
-        "a Gaussian's statistics were counted twice: {:?}",
-        denom.iter().fold(0f32, |m, &d| m.max(d))
-    );
+    assert!(denom.iter().all(|&d| d == 0.0 || d == 1.0), "a Gaussian's statistics were counted twice: {:?}", denom.iter().fold(0f32, |m, &d| m.max(d)));
     check_validation(ctx);
 }
 
@@ -182,74 +128,30 @@ fn the_fused_adam_step_matches_the_separate_pass_bit_for_bit() {
     let ctx = ctx_shared();
     let g = big_splats(1500);
     let cfg = TrainConfig::default();
-    let target: Vec<f32> = (0..3 * SIZE * SIZE)
-        .map(|i| 0.2 + 0.6 * ((i * 7919) % 1000) as f32 / 1000.0)
-        .collect();
+    let target: Vec<f32> = (0..3 * SIZE * SIZE).map(|i| 0.2 + 0.6 * ((i * 7919) % 1000) as f32 / 1000.0).collect();
     let target = Buffer::from_slice(ctx, "target", &target).unwrap();
     let mut fused = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
     let mut separate = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
     if !fused.rasterizer().can_fuse_adam() {
-        eprintln!(
-            "{} cannot run the fused reduce: skipped",
-            ctx.caps().device_name
-        );
+        eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
         return;
     }
     separate.fuse_adam = false;
     let before = bits(&fused.set);
     for (it, sh) in [(1, 0), (2, 0), (3, 3), (4, 3)] {
-        let cam = Camera::look_at(
-            [0.3 * it as f32, 0.5, 4.0],
-            [0.0; 3],
-            [0.0, 1.0, 0.0],
-            0.9,
-            SIZE,
-            SIZE,
-        );
-        let input = StepInput {
-            iteration: it,
-            camera: &cam,
-            target: &target,
-            sh_degree: sh,
-            lr_means: 1e-3,
-            background: [0.0; 3],
-            extent: 2.0,
-            profile: false,
-        };
-        let (a, b) = (
-            fused.step(&cfg, &input).unwrap(),
-            separate.step(&cfg, &input).unwrap(),
-        );
+        let cam = Camera::look_at([0.3 * it as f32, 0.5, 4.0], [0.0; 3], [0.0, 1.0, 0.0], 0.9, SIZE, SIZE);
+        let input = StepInput { iteration: it, camera: &cam, target: &target, sh_degree: sh, lr_means: 1e-3, background: [0.0; 3], extent: 2.0, profile: false };
+        let (a, b) = (fused.step(&cfg, &input).unwrap(), separate.step(&cfg, &input).unwrap());
         assert_eq!(a.loss.to_bits(), b.loss.to_bits(), "iteration {it}: loss");
         for ((name, x), (_, y)) in bits(&fused.set).iter().zip(&bits(&separate.set)) {
-            assert!(
-                x == y,
-                "iteration {it}: {name} differs between the fused and the separate Adam step"
-            );
+            assert!(x == y, "iteration {it}: {name} differs between the fused and the separate Adam step");
         }
     }
     let after = bits(&fused.set);
-    let features = |b: &Bits| {
-        b.iter()
-            .find(|a| a.0 == "param.features")
-            .unwrap()
-            .1
-            .clone()
-    };
+    let features = |b: &Bits| b.iter().find(|a| a.0 == "param.features").unwrap().1.clone();
     assert_ne!(features(&before), features(&after));
-    for name in [
-        "param.means",
-        "param.log_scales",
-        "param.quats",
-        "param.opacity",
-        "adam_m.features",
-        "adam_v.quats",
-        "stats.accum",
-    ] {
-        let (i, j) = (
-            before.iter().position(|a| a.0 == name).unwrap(),
-            after.iter().position(|a| a.0 == name).unwrap(),
-        );
+    for name in ["param.means", "param.log_scales", "param.quats", "param.opacity", "adam_m.features", "adam_v.quats", "stats.accum"] {
+        let (i, j) = (before.iter().position(|a| a.0 == name).unwrap(), after.iter().position(|a| a.0 == name).unwrap());
         assert_ne!(before[i].1, after[j].1, "{name} did not change");
     }
     check_validation(ctx);
@@ -269,40 +171,22 @@ fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
         let mut frame = raster.frame(SIZE, SIZE, n, capacity).unwrap();
         if capacity > 64 {
             // Settle the span passes so that only the capacity decides.
-            raster
-                .forward(&set, &cam, &[0.0; 3], 3, &mut frame, false)
-                .unwrap();
+            raster.forward(&set, &cam, &[0.0; 3], 3, &mut frame, false).unwrap();
         }
         let mut rec = Recorder::new(ctx).unwrap();
-        raster
-            .record_forward(&mut rec, &set, &cam, &[0.0; 3], 3, &frame)
-            .unwrap();
+        raster.record_forward(&mut rec, &set, &cam, &[0.0; 3], 3, &frame).unwrap();
         let slots = raster.record_fit_gate(&mut rec, &frame, &grids).unwrap();
         rec.submit_and_wait().unwrap();
         let fits = raster.fit(&mut frame).unwrap();
-        assert_eq!(
-            fits,
-            capacity > 64,
-            "capacity {capacity}: {} intersections",
-            frame.last_intersections
-        );
+        assert_eq!(fits, capacity > 64, "capacity {capacity}: {} intersections", frame.last_intersections);
         for (k, s) in slots.iter().enumerate() {
             assert_eq!((s.offset, s.range), (12 * k as u64, 12));
         }
         let args = frame.gate_args().unwrap();
-        let want: Vec<u32> = grids
-            .iter()
-            .flat_map(|g| if fits { *g } else { [0; 3] })
-            .collect();
+        let want: Vec<u32> = grids.iter().flat_map(|g| if fits { *g } else { [0; 3] }).collect();
         assert_eq!(&args[..want.len()], &want[..], "capacity {capacity}");
     }
-    assert!(raster
-        .record_fit_gate(
-            &mut Recorder::new(ctx).unwrap(),
-            &raster.frame(SIZE, SIZE, n, 64).unwrap(),
-            &[[1, 1, 1]; 9]
-        )
-        .is_err());
+    assert!(raster.record_fit_gate(&mut Recorder::new(ctx).unwrap(), &raster.frame(SIZE, SIZE, n, 64).unwrap(), &[[1, 1, 1]; 9]).is_err());
     check_validation(ctx);
 }
 
@@ -310,10 +194,7 @@ fn the_fit_gate_zeroes_its_dispatches_when_the_view_overflowed() {
 /// environment map.
 fn reflection_bits(m: &ReflectionModel) -> Bits {
     let e = &m.env;
-    model_bits(
-        &m.set,
-        [("env.params", &e.params), ("env.m", &e.m), ("env.v", &e.v)],
-    )
+    model_bits(&m.set, [("env.params", &e.params), ("env.m", &e.m), ("env.v", &e.v)])
 }
 
 #[test]
@@ -328,25 +209,8 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     cfg.reflection.lambda_r = 0.5;
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
-    let input = ReflStepInput {
-        iteration: 1,
-        camera: &cam,
-        target: &target,
-        scat: Some(&scat),
-        lr_means: 1e-3,
-        profile: false,
-    };
-    let model = || {
-        ReflectionModel::from_scattering(
-            ctx,
-            Some(&g),
-            &[],
-            HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(),
-            &cfg.reflection,
-            1e-15,
-        )
-        .unwrap()
-    };
+    let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: Some(&scat), lr_means: 1e-3, profile: false };
+    let model = || ReflectionModel::from_scattering(ctx, Some(&g), &[], HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(), &cfg.reflection, 1e-15).unwrap();
 
     // A: the first frame overflows (more than one submission), nothing is
     // updated, the frame grows and the step runs again.
@@ -354,10 +218,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     let before = reflection_bits(&a);
     let submitted = ctx.submissions();
     let out_a = a.step(&cfg, &input, None).unwrap();
-    assert!(
-        ctx.submissions() - submitted > 1,
-        "the scene must overflow the first frame"
-    );
+    assert!(ctx.submissions() - submitted > 1, "the scene must overflow the first frame");
 
     // B: a render grew the frame first; the same step is one submission.
     let mut b = model();
@@ -367,19 +228,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     assert_eq!(ctx.submissions() - submitted, 1, "a Stage II step that fits is one submission (loss and high-frequency statistics ride it back)");
 
     // One Adam step moved the geometry, the material and the map.
-    assert_one_step(
-        &before,
-        (&reflection_bits(&a), out_a.loss),
-        (&reflection_bits(&b), out_b.loss),
-        &[
-            "param.means",
-            "param.quats",
-            "param.features",
-            "adam_v.features",
-            "env.params",
-            "env.v",
-        ],
-    );
+    assert_one_step(&before, (&reflection_bits(&a), out_a.loss), (&reflection_bits(&b), out_b.loss), &["param.means", "param.quats", "param.features", "adam_v.features", "env.params", "env.v"]);
     check_validation(ctx);
 }
 
@@ -387,10 +236,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
 /// (material trained) and the light field's network.
 fn light_field_bits(m: &LightFieldModel) -> Bits {
     let n = &m.net;
-    model_bits(
-        &m.set,
-        [("net.params", &n.params), ("net.m", &n.m), ("net.v", &n.v)],
-    )
+    model_bits(&m.set, [("net.params", &n.params), ("net.m", &n.m), ("net.v", &n.v)])
 }
 
 #[test]
@@ -406,49 +252,12 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
     let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
-    let input = LightFieldStepInput {
-        iteration: 1,
-        global_iteration: 1,
-        camera: &cam,
-        target: &target,
-        scat: Some(&scat),
-        sh_degree: 3,
-        background: [0.0; 3],
-        lr_means: 1e-3,
-        profile: false,
-    };
-    let shape = MlpShape {
-        depth: 2,
-        width: 32,
-        skip: 1,
-        levels_x: 4,
-        levels_w: 2,
-    };
-    let shade = ShadeParams {
-        centre: [0.0; 3],
-        half_extent: [1.5; 3],
-        threshold: 0.01,
-        schlick: true,
-    };
+    let input = LightFieldStepInput { iteration: 1, global_iteration: 1, camera: &cam, target: &target, scat: Some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: false };
+    let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
+    let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true };
     let model = || {
-        let set = ReflectionModel::from_scattering(
-            ctx,
-            Some(&g),
-            &[],
-            HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(),
-            &cfg.reflection,
-            1e-15,
-        )
-        .unwrap()
-        .into_set();
-        LightFieldModel::new(
-            ctx,
-            set,
-            LightFieldModel::init_net(ctx, shape, 5).unwrap(),
-            shade,
-            1e-15,
-        )
-        .unwrap()
+        let set = ReflectionModel::from_scattering(ctx, Some(&g), &[], HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(), &cfg.reflection, 1e-15).unwrap().into_set();
+        LightFieldModel::new(ctx, set, LightFieldModel::init_net(ctx, shape, 5).unwrap(), shade, 1e-15).unwrap()
     };
 
     // A: the first frame overflows, nothing is updated, the frame grows
@@ -457,15 +266,9 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let before = light_field_bits(&a);
     let submitted = ctx.submissions();
     let out_a = a.step(&cfg, &mut scattering, &input).unwrap();
-    assert!(
-        ctx.submissions() - submitted > 1,
-        "the scene must overflow the first frame"
-    );
+    assert!(ctx.submissions() - submitted > 1, "the scene must overflow the first frame");
     let coverage = a.take_coverage().unwrap();
-    assert!(
-        coverage > 0.1 && coverage <= 1.0,
-        "Phi ran on {coverage} of the pixels"
-    );
+    assert!(coverage > 0.1 && coverage <= 1.0, "Phi ran on {coverage} of the pixels");
 
     // B: a render grew the frame first; the same step is one submission.
     let mut b = model();
@@ -477,27 +280,12 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     assert_eq!(ctx.submissions() - submitted, 1, "a Stage III step that fits is one submission (sample count, loss and statistics ride it back)");
     // The same step without the penalty: the loss is lambda_r * mean R lower.
     let mut d = model();
-    let cfg_d = TrainConfig {
-        light_field: LightFieldConfig {
-            lambda_r: 0.0,
-            ..cfg.light_field.clone()
-        },
-        ..cfg.clone()
-    };
+    let cfg_d = TrainConfig { light_field: LightFieldConfig { lambda_r: 0.0, ..cfg.light_field.clone() }, ..cfg.clone() };
     let out_d = d.step(&cfg_d, &mut scattering, &input).unwrap();
     let want = 0.5 * mean_r;
-    assert!(
-        mean_r > 0.01 && ((out_b.loss - out_d.loss) - want).abs() < 1e-6,
-        "the penalty added {} to the loss, not lambda_r * mean R = {want}",
-        out_b.loss - out_d.loss
-    );
+    assert!(mean_r > 0.01 && ((out_b.loss - out_d.loss) - want).abs() < 1e-6, "the penalty added {} to the loss, not lambda_r * mean R = {want}", out_b.loss - out_d.loss);
     assert_eq!(b.take_coverage(), Some(coverage));
-    assert_one_step(
-        &before,
-        (&light_field_bits(&a), out_a.loss),
-        (&light_field_bits(&b), out_b.loss),
-        &["param.features", "adam_v.features", "net.params", "net.v"],
-    );
+    assert_one_step(&before, (&light_field_bits(&a), out_a.loss), (&light_field_bits(&b), out_b.loss), &["param.features", "adam_v.features", "net.params", "net.v"]);
 
     // C: the host reads the sample count first (three submissions: the
     // forward, the count's download, the rest): the same step, bit for bit.
@@ -507,11 +295,6 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let submitted = ctx.submissions();
     let out_c = c.step(&cfg, &mut scattering, &input).unwrap();
     assert_eq!(ctx.submissions() - submitted, 3);
-    assert_one_step(
-        &before,
-        (&light_field_bits(&c), out_c.loss),
-        (&light_field_bits(&b), out_b.loss),
-        &[],
-    );
+    assert_one_step(&before, (&light_field_bits(&c), out_c.loss), (&light_field_bits(&b), out_b.loss), &[]);
     check_validation(ctx);
 }

@@ -4,9 +4,7 @@
 //! background, and this project's optional `normal_path` / `mask_path`.
 
 use super::image_io::{border_colour, read_mask, read_normals, read_rgb_alpha};
-use super::{
-    downscale_camera, downscale_mask, downscale_normals, Dataset, LoadOptions, Points, View,
-};
+use super::{downscale_camera, downscale_mask, downscale_normals, Dataset, LoadOptions, Points, View};
 use anyhow::{bail, Context as _, Result};
 use serde::Deserialize;
 use std::path::Path;
@@ -46,9 +44,7 @@ impl Num {
         match self {
             Num::Number(v) if v.is_finite() => Ok(*v),
             Num::Number(v) => bail!("{what} is {v}"),
-            Num::Word(w) if ["NaN", "Infinity", "-Infinity"].contains(&w.as_str()) => {
-                bail!("{what} is {w}")
-            }
+            Num::Word(w) if ["NaN", "Infinity", "-Infinity"].contains(&w.as_str()) => bail!("{what} is {w}"),
             Num::Word(w) => bail!("{what} is '{w}', not a number"),
         }
     }
@@ -71,10 +67,7 @@ fn quote_non_finite(text: &str) -> String {
             }
         } else if c == '"' {
             in_string = true;
-        } else if let Some(word) = ["NaN", "Infinity", "-Infinity"]
-            .into_iter()
-            .find(|w| rest.starts_with(w))
-        {
+        } else if let Some(word) = ["NaN", "Infinity", "-Infinity"].into_iter().find(|w| rest.starts_with(w)) {
             out.push('"');
             out.push_str(word);
             out.push('"');
@@ -93,10 +86,7 @@ fn quote_non_finite(text: &str) -> String {
 fn check_rigid(m: &[[f64; 4]; 4]) -> Result<()> {
     let bottom = [0.0, 0.0, 0.0, 1.0];
     if m[3].iter().zip(bottom).any(|(a, b)| (a - b).abs() > 1e-4) {
-        bail!(
-            "transform_matrix's bottom row is {:?}, not [0, 0, 0, 1]",
-            m[3]
-        );
+        bail!("transform_matrix's bottom row is {:?}, not [0, 0, 0, 1]", m[3]);
     }
     let mut dev = 0.0f64;
     for i in 0..3 {
@@ -105,9 +95,7 @@ fn check_rigid(m: &[[f64; 4]; 4]) -> Result<()> {
             dev = dev.max((dot - if i == j { 1.0 } else { 0.0 }).abs());
         }
     }
-    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
     if dev > 1e-3 || det < 0.0 {
         bail!("transform_matrix is not a rigid camera pose: its 3x3 rotation part has determinant {det:.4} and is off orthonormal by {dev:.3} (tgs needs a rotation and a translation, without scale, shear or mirroring)");
     }
@@ -116,65 +104,38 @@ fn check_rigid(m: &[[f64; 4]; 4]) -> Result<()> {
 
 pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let (mut files, mut all_alpha) = (Vec::new(), true);
-    let train = load_split(root, "train", opts, &mut files, &mut all_alpha)?
-        .context("transforms_train.json vanished")?;
+    let train = load_split(root, "train", opts, &mut files, &mut all_alpha)?.context("transforms_train.json vanished")?;
     let test = load_split(root, "test", opts, &mut files, &mut all_alpha)?.unwrap_or_default();
     let mut warnings = Vec::new();
     if !all_alpha {
-        warnings.extend(
-            backdrop_warning(&train, opts.background).map(|w| format!("{}: {w}", root.display())),
-        );
+        warnings.extend(backdrop_warning(&train, opts.background).map(|w| format!("{}: {w}", root.display())));
     }
     check_one_pose_per_file(root, &train, &test)?;
-    let (train, test) = (
-        train.into_iter().map(|(v, _)| v).collect(),
-        test.into_iter().map(|(v, _)| v).collect(),
-    );
+    let (train, test) = (train.into_iter().map(|(v, _)| v).collect(), test.into_iter().map(|(v, _)| v).collect());
     let ply = root.join("points3d.ply");
     let points = if ply.is_file() {
         files.push(ply.clone());
         let (pts, skipped) = crate::export::ply::read_points(&ply)?;
         if skipped > 0 {
-            warnings.push(format!(
-                "{}: {skipped} of {} points have NaN or infinite coordinates and are skipped",
-                ply.display(),
-                skipped + pts.positions.len()
-            ));
+            warnings.push(format!("{}: {skipped} of {} points have NaN or infinite coordinates and are skipped", ply.display(), skipped + pts.positions.len()));
         }
         Some(pts)
     } else {
         None::<Points>
     };
-    Ok(Dataset {
-        root: root.to_path_buf(),
-        format: "blender",
-        train,
-        test,
-        points,
-        background: opts.background,
-        files,
-        warnings,
-    })
+    Ok(Dataset { root: root.to_path_buf(), format: "blender", train, test, points, background: opts.background, files, warnings })
 }
 
 /// Images without alpha whose borders are one flat colour far from the
 /// background: a rendered backdrop (black, say) that the render's
 /// background (white by default) cannot match. Judged by the median view.
 fn backdrop_warning(views: &[(View, String)], background: [f32; 3]) -> Option<String> {
-    let mut flat: Vec<([f32; 3], f32)> = views
-        .iter()
-        .map(|(v, _)| border_colour(&v.image))
-        .filter(|(_, spread)| *spread < 0.05)
-        .collect();
+    let mut flat: Vec<([f32; 3], f32)> = views.iter().map(|(v, _)| border_colour(&v.image)).filter(|(_, spread)| *spread < 0.05).collect();
     // A photograph's border is not flat: then nothing is said.
     if flat.len() * 2 <= views.len() {
         return None;
     }
-    let off = |c: &[f32; 3]| {
-        (0..3)
-            .map(|k| (c[k] - background[k]).abs())
-            .fold(0f32, f32::max)
-    };
+    let off = |c: &[f32; 3]| (0..3).map(|k| (c[k] - background[k]).abs()).fold(0f32, f32::max);
     flat.sort_by(|a, b| off(&a.0).total_cmp(&off(&b.0)));
     let (c, _) = flat[flat.len() / 2];
     (off(&c) > 0.25).then(|| {
@@ -187,11 +148,7 @@ fn backdrop_warning(views: &[(View, String)], background: [f32; 3]) -> Option<St
 
 /// An image named in both splits must have one pose (the same file seen
 /// from two places is a broken dataset, not two views).
-fn check_one_pose_per_file(
-    root: &Path,
-    train: &[(View, String)],
-    test: &[(View, String)],
-) -> Result<()> {
+fn check_one_pose_per_file(root: &Path, train: &[(View, String)], test: &[(View, String)]) -> Result<()> {
     for (v, p) in test {
         if let Some((t, _)) = train.iter().find(|(_, q)| q == p) {
             if t.camera.world_to_view != v.camera.world_to_view {
@@ -213,20 +170,14 @@ fn resolve(root: &Path, rel: &str, default_ext: &str) -> Result<std::path::PathB
             std::path::Component::Normal(_) => depth += 1,
             std::path::Component::CurDir => {}
             std::path::Component::ParentDir => depth -= 1,
-            _ => bail!(
-                "'{rel}' is an absolute path: file paths must be relative to the dataset directory"
-            ),
+            _ => bail!("'{rel}' is an absolute path: file paths must be relative to the dataset directory"),
         }
         if depth < 0 {
             bail!("'{rel}' leaves the dataset directory (through '..'): file paths must stay inside it");
         }
     }
     let p = root.join(rel.trim_start_matches("./"));
-    Ok(if p.extension().is_none() {
-        p.with_extension(default_ext)
-    } else {
-        p
-    })
+    Ok(if p.extension().is_none() { p.with_extension(default_ext) } else { p })
 }
 
 /// Convert a Blender/OpenGL camera-to-world matrix to our world-to-view rows.
@@ -238,44 +189,21 @@ pub fn gl_c2w_to_w2v(m: &[[f64; 4]; 4]) -> [[f32; 4]; 3] {
     for (j, row) in rows.iter_mut().enumerate() {
         // Row j of R^T is column j of R.
         let col = [r(0, j), r(1, j), r(2, j)];
-        *row = [
-            col[0] as f32,
-            col[1] as f32,
-            col[2] as f32,
-            -(col[0] * t[0] + col[1] * t[1] + col[2] * t[2]) as f32,
-        ];
+        *row = [col[0] as f32, col[1] as f32, col[2] as f32, -(col[0] * t[0] + col[1] * t[1] + col[2] * t[2]) as f32];
     }
     rows
 }
 
-fn load_split(
-    root: &Path,
-    split: &str,
-    opts: &LoadOptions,
-    files: &mut Vec<std::path::PathBuf>,
-    all_alpha: &mut bool,
-) -> Result<Option<Vec<(View, String)>>> {
+fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std::path::PathBuf>, all_alpha: &mut bool) -> Result<Option<Vec<(View, String)>>> {
     let path = root.join(format!("transforms_{split}.json"));
     if !path.is_file() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?;
     files.push(path.clone());
-    let tf: Transforms = serde_json::from_str(&quote_non_finite(&text))
-        .with_context(|| format!("{}: not a valid transforms file", path.display()))?;
-    let opt = |v: &Option<Num>, name: &str| {
-        v.as_ref()
-            .map(|n| n.finite(name))
-            .transpose()
-            .with_context(|| path.display().to_string())
-    };
-    let (fl_x, fl_y, cx, cy) = (
-        opt(&tf.fl_x, "fl_x")?,
-        opt(&tf.fl_y, "fl_y")?,
-        opt(&tf.cx, "cx")?,
-        opt(&tf.cy, "cy")?,
-    );
+    let tf: Transforms = serde_json::from_str(&quote_non_finite(&text)).with_context(|| format!("{}: not a valid transforms file", path.display()))?;
+    let opt = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose().with_context(|| path.display().to_string());
+    let (fl_x, fl_y, cx, cy) = (opt(&tf.fl_x, "fl_x")?, opt(&tf.fl_y, "fl_y")?, opt(&tf.cx, "cx")?, opt(&tf.cy, "cy")?);
     let angle_x = opt(&tf.camera_angle_x, "camera_angle_x")?;
     if tf.frames.is_empty() {
         bail!("{}: the {split} split has no frames", path.display());
@@ -289,16 +217,11 @@ fn load_split(
         let mut m = [[0f64; 4]; 4];
         for (i, row) in f.transform_matrix.iter().enumerate() {
             for (j, v) in row.iter().enumerate() {
-                m[i][j] = v
-                    .finite(&format!("transform_matrix[{i}][{j}]"))
-                    .with_context(what)?;
+                m[i][j] = v.finite(&format!("transform_matrix[{i}][{j}]")).with_context(what)?;
             }
         }
         check_rigid(&m).with_context(what)?;
-        if let Some(j) = tf.frames[..i]
-            .iter()
-            .position(|g| g.file_path == f.file_path)
-        {
+        if let Some(j) = tf.frames[..i].iter().position(|g| g.file_path == f.file_path) {
             bail!("{}: file_path '{}' is given twice (frames {j} and {i}): each image must be one frame", path.display(), f.file_path);
         }
         let img_path = resolve(root, &f.file_path, "png").with_context(what)?;
@@ -306,33 +229,18 @@ fn load_split(
         let (image, alpha) = read_rgb_alpha(&img_path, opts.background).with_context(what)?;
         *all_alpha &= alpha;
         let (w, h) = (image.width, image.height);
-        let image = image
-            .downscale(opts.downscale)
-            .with_context(|| format!("{}: {}", what(), img_path.display()))?;
+        let image = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
         let fx = match (fl_x, angle_x) {
             (Some(fx), _) => fx,
-            (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => {
-                0.5 * w as f64 / (0.5 * a).tan()
-            }
+            (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),
             (None, Some(a)) => bail!("{}: camera_angle_x {a} is not in (0, pi)", path.display()),
-            (None, None) => bail!(
-                "{}: neither camera_angle_x nor fl_x is given",
-                path.display()
-            ),
+            (None, None) => bail!("{}: neither camera_angle_x nor fl_x is given", path.display()),
         };
         let fy = fl_y.unwrap_or(fx);
         // Principal point in pixel-edge coordinates (centre W/2), shifted to centres at integers.
         let cx = cx.unwrap_or(0.5 * w as f64) - 0.5;
         let cy = cy.unwrap_or(0.5 * h as f64) - 0.5;
-        let cam = Camera {
-            width: w,
-            height: h,
-            fx: fx as f32,
-            fy: fy as f32,
-            cx: cx as f32,
-            cy: cy as f32,
-            world_to_view: gl_c2w_to_w2v(&m),
-        };
+        let cam = Camera { width: w, height: h, fx: fx as f32, fy: fy as f32, cx: cx as f32, cy: cy as f32, world_to_view: gl_c2w_to_w2v(&m) };
         cam.validate().with_context(what)?;
         super::check_field_of_view(&cam).with_context(what)?;
         let normals = match &f.normal_path {
@@ -341,12 +249,7 @@ fn load_split(
                 files.push(np.clone());
                 let n = read_normals(&np).with_context(what)?;
                 if (n.width, n.height) != (w, h) {
-                    bail!(
-                        "{}: normals are {}x{} but the image is {w}x{h}",
-                        np.display(),
-                        n.width,
-                        n.height
-                    );
+                    bail!("{}: normals are {}x{} but the image is {w}x{h}", np.display(), n.width, n.height);
                 }
                 Some(downscale_normals(&n, opts.downscale)?)
             }
@@ -358,29 +261,14 @@ fn load_split(
                 files.push(mp.clone());
                 let (mw, mh, m) = read_mask(&mp).with_context(what)?;
                 if (mw, mh) != (w, h) {
-                    bail!(
-                        "{}: mask is {mw}x{mh} but the image is {w}x{h}",
-                        mp.display()
-                    );
+                    bail!("{}: mask is {mw}x{mh} but the image is {w}x{h}", mp.display());
                 }
                 Some(downscale_mask(w, h, &m, opts.downscale))
             }
             None => None,
         };
-        let name = Path::new(&f.file_path)
-            .file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| format!("{split}_{i}"));
-        views.push((
-            View {
-                name,
-                camera: downscale_camera(&cam, opts.downscale),
-                image,
-                normals,
-                mask,
-            },
-            img_path.to_string_lossy().into_owned(),
-        ));
+        let name = Path::new(&f.file_path).file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| format!("{split}_{i}"));
+        views.push((View { name, camera: downscale_camera(&cam, opts.downscale), image, normals, mask }, img_path.to_string_lossy().into_owned()));
     }
     Ok(Some(views))
 }

@@ -47,14 +47,11 @@ const MODELS: [(&str, usize); 11] = [
 
 /// The sparse model directory: sparse/0 or sparse.
 pub fn find_model(root: &Path) -> Option<PathBuf> {
-    [root.join("sparse/0"), root.join("sparse")]
-        .into_iter()
-        .find(|d| d.join("cameras.bin").is_file() || d.join("cameras.txt").is_file())
+    [root.join("sparse/0"), root.join("sparse")].into_iter().find(|d| d.join("cameras.bin").is_file() || d.join("cameras.txt").is_file())
 }
 
 pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
-    let dir = find_model(root)
-        .context("no COLMAP model (sparse/0 or sparse/ with cameras.bin or cameras.txt)")?;
+    let dir = find_model(root).context("no COLMAP model (sparse/0 or sparse/ with cameras.bin or cameras.txt)")?;
     let (cameras, images, points) = read_model(&dir)?;
     let cams: HashMap<u32, ColmapCamera> = cameras.into_iter().map(|c| (c.id, c)).collect();
     let mut images = images;
@@ -65,98 +62,39 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     if let Some(w) = images.windows(2).find(|w| w[0].name == w[1].name) {
         bail!("{}: image '{}' is in the model twice (image ids {} and {}): each image must have one pose", dir.display(), w[0].name, w[0].id, w[1].id);
     }
-    let ext = if dir.join("cameras.bin").is_file() {
-        "bin"
-    } else {
-        "txt"
-    };
-    let mut files: Vec<std::path::PathBuf> = ["cameras", "images", "points3D"]
-        .iter()
-        .map(|n| dir.join(format!("{n}.{ext}")))
-        .filter(|p| p.is_file())
-        .collect();
+    let ext = if dir.join("cameras.bin").is_file() { "bin" } else { "txt" };
+    let mut files: Vec<std::path::PathBuf> = ["cameras", "images", "points3D"].iter().map(|n| dir.join(format!("{n}.{ext}"))).filter(|p| p.is_file()).collect();
     let scaled_dir = root.join(format!("images_{}", opts.downscale));
-    let (img_dir, prescaled) = if opts.downscale > 1 && scaled_dir.is_dir() {
-        (scaled_dir, true)
-    } else {
-        (root.join("images"), false)
-    };
+    let (img_dir, prescaled) = if opts.downscale > 1 && scaled_dir.is_dir() { (scaled_dir, true) } else { (root.join("images"), false) };
     let mut train = Vec::new();
     let mut test = Vec::new();
     for (i, im) in images.iter().enumerate() {
-        let cc = cams.get(&im.camera_id).with_context(|| {
-            format!(
-                "{}: image '{}' refers to camera {} which is not in the model",
-                dir.display(),
-                im.name,
-                im.camera_id
-            )
-        })?;
-        let cam =
-            to_camera(cc, im).with_context(|| format!("{}: image '{}'", dir.display(), im.name))?;
-        super::check_field_of_view(&cam).with_context(|| {
-            format!("{}: image '{}' (camera {})", dir.display(), im.name, cc.id)
-        })?;
+        let cc = cams.get(&im.camera_id).with_context(|| format!("{}: image '{}' refers to camera {} which is not in the model", dir.display(), im.name, im.camera_id))?;
+        let cam = to_camera(cc, im).with_context(|| format!("{}: image '{}'", dir.display(), im.name))?;
+        super::check_field_of_view(&cam).with_context(|| format!("{}: image '{}' (camera {})", dir.display(), im.name, cc.id))?;
         let path = img_dir.join(&im.name);
         let image = read_rgb(&path, opts.background)?;
         files.push(path.clone());
         let (image, cam) = if prescaled {
             let want = downscale_camera(&cam, opts.downscale);
             if (image.width, image.height) != (want.width, want.height) {
-                bail!(
-                    "{}: image is {}x{} but camera {} at 1/{} is {}x{}",
-                    path.display(),
-                    image.width,
-                    image.height,
-                    cc.id,
-                    opts.downscale,
-                    want.width,
-                    want.height
-                );
+                bail!("{}: image is {}x{} but camera {} at 1/{} is {}x{}", path.display(), image.width, image.height, cc.id, opts.downscale, want.width, want.height);
             }
             (image, want)
         } else {
             if (image.width, image.height) != (cam.width, cam.height) {
-                bail!(
-                    "{}: image is {}x{} but camera {} says {}x{}",
-                    path.display(),
-                    image.width,
-                    image.height,
-                    cc.id,
-                    cam.width,
-                    cam.height
-                );
+                bail!("{}: image is {}x{} but camera {} says {}x{}", path.display(), image.width, image.height, cc.id, cam.width, cam.height);
             }
-            (
-                image
-                    .downscale(opts.downscale)
-                    .with_context(|| path.display().to_string())?,
-                downscale_camera(&cam, opts.downscale),
-            )
+            (image.downscale(opts.downscale).with_context(|| path.display().to_string())?, downscale_camera(&cam, opts.downscale))
         };
-        let view = View {
-            name: im.name.clone(),
-            camera: cam,
-            image,
-            normals: None,
-            mask: None,
-        };
+        let view = View { name: im.name.clone(), camera: cam, image, normals: None, mask: None };
         if opts.holdout > 0 && i % opts.holdout as usize == 0 {
             test.push(view);
         } else {
             train.push(view);
         }
     }
-    Ok(Dataset {
-        root: root.to_path_buf(),
-        format: "colmap",
-        train,
-        test,
-        points: Some(points),
-        background: opts.background,
-        files,
-        warnings: Vec::new(),
-    })
+    Ok(Dataset { root: root.to_path_buf(), format: "colmap", train, test, points: Some(points), background: opts.background, files, warnings: Vec::new() })
 }
 
 /// Our camera from a COLMAP camera and image pose.
@@ -170,49 +108,20 @@ pub fn to_camera(c: &ColmapCamera, im: &ColmapImage) -> Result<Camera> {
     let [w, x, y, z] = im.qvec;
     let norm = (w * w + x * x + y * y + z * z).sqrt();
     if !(norm > 1e-12) || im.tvec.iter().chain(im.qvec.iter()).any(|v| !v.is_finite()) {
-        bail!(
-            "pose has a non-finite or zero quaternion/translation (q {:?}, t {:?})",
-            im.qvec,
-            im.tvec
-        );
+        bail!("pose has a non-finite or zero quaternion/translation (q {:?}, t {:?})", im.qvec, im.tvec);
     }
     let (w, x, y, z) = (w / norm, x / norm, y / norm, z / norm);
     let r = [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
     ];
     let mut rows = [[0f32; 4]; 3];
     for i in 0..3 {
-        rows[i] = [
-            r[i][0] as f32,
-            r[i][1] as f32,
-            r[i][2] as f32,
-            im.tvec[i] as f32,
-        ];
+        rows[i] = [r[i][0] as f32, r[i][1] as f32, r[i][2] as f32, im.tvec[i] as f32];
     }
     // COLMAP puts the centre of the top-left pixel at (0.5, 0.5).
-    let cam = Camera {
-        width: c.width,
-        height: c.height,
-        fx: fx as f32,
-        fy: fy as f32,
-        cx: (cx - 0.5) as f32,
-        cy: (cy - 0.5) as f32,
-        world_to_view: rows,
-    };
+    let cam = Camera { width: c.width, height: c.height, fx: fx as f32, fy: fy as f32, cx: (cx - 0.5) as f32, cy: (cy - 0.5) as f32, world_to_view: rows };
     cam.validate()?;
     Ok(cam)
 }
@@ -223,36 +132,28 @@ pub fn read_model(dir: &Path) -> Result<(Vec<ColmapCamera>, Vec<ColmapImage>, Po
     if bin {
         let read = |name: &str| {
             let p = dir.join(name);
-            std::fs::read(&p)
-                .with_context(|| format!("{}: cannot read", p.display()))
-                .map(|b| (p, b))
+            std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display())).map(|b| (p, b))
         };
         let (p, b) = read("cameras.bin")?;
         let cams = parse_cameras_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?;
         let (p, b) = read("images.bin")?;
         let ims = parse_images_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?;
         let pts = match read("points3D.bin") {
-            Ok((p, b)) => {
-                parse_points_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?
-            }
+            Ok((p, b)) => parse_points_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?,
             Err(_) => Points::default(),
         };
         Ok((cams, ims, pts))
     } else {
         let read = |name: &str| {
             let p = dir.join(name);
-            std::fs::read_to_string(&p)
-                .with_context(|| format!("{}: cannot read", p.display()))
-                .map(|t| (p, t))
+            std::fs::read_to_string(&p).with_context(|| format!("{}: cannot read", p.display())).map(|t| (p, t))
         };
         let (p, t) = read("cameras.txt")?;
         let cams = parse_cameras_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?;
         let (p, t) = read("images.txt")?;
         let ims = parse_images_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?;
         let pts = match read("points3D.txt") {
-            Ok((p, t)) => {
-                parse_points_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?
-            }
+            Ok((p, t)) => parse_points_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?,
             Err(_) => Points::default(),
         };
         Ok((cams, ims, pts))
@@ -260,16 +161,12 @@ pub fn read_model(dir: &Path) -> Result<(Vec<ColmapCamera>, Vec<ColmapImage>, Po
 }
 
 fn content_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    text.lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim()))
-        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+    text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
 }
 
 fn num<T: std::str::FromStr>(tok: Option<&str>, line: usize, what: &str) -> Result<T> {
     let t = tok.with_context(|| format!("line {line}: missing {what}"))?;
-    t.parse::<T>()
-        .map_err(|_| anyhow::anyhow!("line {line}: {what} '{t}' is not a number"))
+    t.parse::<T>().map_err(|_| anyhow::anyhow!("line {line}: {what} '{t}' is not a number"))
 }
 
 pub fn parse_cameras_txt(text: &str) -> Result<Vec<ColmapCamera>> {
@@ -277,25 +174,11 @@ pub fn parse_cameras_txt(text: &str) -> Result<Vec<ColmapCamera>> {
     for (ln, l) in content_lines(text) {
         let mut it = l.split_whitespace();
         let id = num(it.next(), ln, "camera id")?;
-        let model = it
-            .next()
-            .with_context(|| format!("line {ln}: missing model"))?
-            .to_string();
+        let model = it.next().with_context(|| format!("line {ln}: missing model"))?.to_string();
         let width = num(it.next(), ln, "width")?;
         let height = num(it.next(), ln, "height")?;
-        let params = it
-            .map(|t| {
-                t.parse::<f64>()
-                    .map_err(|_| anyhow::anyhow!("line {ln}: parameter '{t}' is not a number"))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        out.push(ColmapCamera {
-            id,
-            model,
-            width,
-            height,
-            params,
-        });
+        let params = it.map(|t| t.parse::<f64>().map_err(|_| anyhow::anyhow!("line {ln}: parameter '{t}' is not a number"))).collect::<Result<Vec<_>>>()?;
+        out.push(ColmapCamera { id, model, width, height, params });
     }
     Ok(out)
 }
@@ -303,10 +186,7 @@ pub fn parse_cameras_txt(text: &str) -> Result<Vec<ColmapCamera>> {
 pub fn parse_images_txt(text: &str) -> Result<Vec<ColmapImage>> {
     // Two lines per image; the second (2-D points) may be empty, so walk raw lines.
     let mut out = Vec::new();
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim_start().starts_with('#'));
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim_start().starts_with('#'));
     while let Some((i, l)) = lines.next() {
         let ln = i + 1;
         if l.trim().is_empty() {
@@ -327,13 +207,7 @@ pub fn parse_images_txt(text: &str) -> Result<Vec<ColmapImage>> {
         if name.is_empty() {
             bail!("line {ln}: missing image name");
         }
-        out.push(ColmapImage {
-            id,
-            qvec: q,
-            tvec: t,
-            camera_id,
-            name,
-        });
+        out.push(ColmapImage { id, qvec: q, tvec: t, camera_id, name });
         // The 2-D points line (possibly empty). COLMAP always writes it; a
         // file without it would otherwise lose every second image silently.
         if let Some((j, pl)) = lines.next() {
@@ -353,12 +227,7 @@ pub fn parse_images_txt(text: &str) -> Result<Vec<ColmapImage>> {
 /// (the id an integer, -1 for none).
 fn is_points2d_line(l: &str) -> bool {
     let t: Vec<&str> = l.split_whitespace().collect();
-    t.len() % 3 == 0
-        && t.chunks(3).all(|p| {
-            p[0].parse::<f64>().is_ok()
-                && p[1].parse::<f64>().is_ok()
-                && p[2].parse::<i64>().is_ok()
-        })
+    t.len() % 3 == 0 && t.chunks(3).all(|p| p[0].parse::<f64>().is_ok() && p[1].parse::<f64>().is_ok() && p[2].parse::<i64>().is_ok())
 }
 
 pub fn parse_points_txt(text: &str) -> Result<Points> {
@@ -366,16 +235,8 @@ pub fn parse_points_txt(text: &str) -> Result<Points> {
     for (ln, l) in content_lines(text) {
         let mut it = l.split_whitespace();
         let _id: u64 = num(it.next(), ln, "point id")?;
-        let p: [f32; 3] = [
-            num(it.next(), ln, "x")?,
-            num(it.next(), ln, "y")?,
-            num(it.next(), ln, "z")?,
-        ];
-        let c: [f32; 3] = [
-            num::<u8>(it.next(), ln, "r")? as f32 / 255.0,
-            num::<u8>(it.next(), ln, "g")? as f32 / 255.0,
-            num::<u8>(it.next(), ln, "b")? as f32 / 255.0,
-        ];
+        let p: [f32; 3] = [num(it.next(), ln, "x")?, num(it.next(), ln, "y")?, num(it.next(), ln, "z")?];
+        let c: [f32; 3] = [num::<u8>(it.next(), ln, "r")? as f32 / 255.0, num::<u8>(it.next(), ln, "g")? as f32 / 255.0, num::<u8>(it.next(), ln, "b")? as f32 / 255.0];
         if p.iter().all(|v| v.is_finite()) {
             pts.positions.push(p);
             pts.colors.push(c);
@@ -391,11 +252,7 @@ struct Cursor<'a> {
 
 impl<'a> Cursor<'a> {
     fn take(&mut self, n: usize) -> Result<&'a [u8]> {
-        let end = self
-            .at
-            .checked_add(n)
-            .filter(|&e| e <= self.b.len())
-            .with_context(|| format!("truncated at byte {} (wanted {n} more)", self.at))?;
+        let end = self.at.checked_add(n).filter(|&e| e <= self.b.len()).with_context(|| format!("truncated at byte {} (wanted {n} more)", self.at))?;
         let s = &self.b[self.at..end];
         self.at = end;
         Ok(s)
@@ -413,10 +270,7 @@ impl<'a> Cursor<'a> {
         let n = self.u64()?;
         let left = (self.b.len() - self.at) as u64;
         if n.saturating_mul(each as u64) > left {
-            bail!(
-                "truncated: count {n} at byte {} exceeds the file",
-                self.at - 8
-            );
+            bail!("truncated: count {n} at byte {} exceeds the file", self.at - 8);
         }
         Ok(n as usize)
     }
@@ -429,21 +283,11 @@ pub fn parse_cameras_bin(b: &[u8]) -> Result<Vec<ColmapCamera>> {
     for _ in 0..n {
         let id = c.i32()? as u32;
         let model_id = c.i32()?;
-        let &(model, np) = MODELS
-            .get(model_id as usize)
-            .with_context(|| format!("camera {id}: unknown model id {model_id}"))?;
-        let width =
-            u32::try_from(c.u64()?).with_context(|| format!("camera {id}: width out of range"))?;
-        let height =
-            u32::try_from(c.u64()?).with_context(|| format!("camera {id}: height out of range"))?;
+        let &(model, np) = MODELS.get(model_id as usize).with_context(|| format!("camera {id}: unknown model id {model_id}"))?;
+        let width = u32::try_from(c.u64()?).with_context(|| format!("camera {id}: width out of range"))?;
+        let height = u32::try_from(c.u64()?).with_context(|| format!("camera {id}: height out of range"))?;
         let params = (0..np).map(|_| c.f64()).collect::<Result<Vec<_>>>()?;
-        out.push(ColmapCamera {
-            id,
-            model: model.into(),
-            width,
-            height,
-            params,
-        });
+        out.push(ColmapCamera { id, model: model.into(), width, height, params });
     }
     Ok(out)
 }
@@ -468,13 +312,7 @@ pub fn parse_images_bin(b: &[u8]) -> Result<Vec<ColmapImage>> {
         let name = String::from_utf8(name).context("image name is not UTF-8")?;
         let np = c.count(24)?;
         c.take(np * 24)?;
-        out.push(ColmapImage {
-            id,
-            qvec,
-            tvec,
-            camera_id,
-            name,
-        });
+        out.push(ColmapImage { id, qvec, tvec, camera_id, name });
     }
     Ok(out)
 }
@@ -492,11 +330,7 @@ pub fn parse_points_bin(b: &[u8]) -> Result<Points> {
         c.take(tl * 8)?;
         if p.iter().all(|v| v.is_finite()) {
             pts.positions.push(p);
-            pts.colors.push([
-                rgb[0] as f32 / 255.0,
-                rgb[1] as f32 / 255.0,
-                rgb[2] as f32 / 255.0,
-            ]);
+            pts.colors.push([rgb[0] as f32 / 255.0, rgb[1] as f32 / 255.0, rgb[2] as f32 / 255.0]);
         }
     }
     Ok(pts)

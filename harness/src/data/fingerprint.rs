@@ -26,15 +26,12 @@ pub struct Fingerprint {
 
 /// The CRC-32 and length of a file's bytes, read in 1 MiB blocks.
 pub fn crc32_file(path: &Path) -> Result<(u64, u32)> {
-    let mut f =
-        std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let mut f = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
     let mut h = crc32fast::Hasher::new();
     let mut buf = vec![0u8; 1 << 20];
     let mut size = 0u64;
     loop {
-        let n = f
-            .read(&mut buf)
-            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let n = f.read(&mut buf).with_context(|| format!("{}: cannot read", path.display()))?;
         if n == 0 {
             break;
         }
@@ -49,9 +46,7 @@ pub const FNV_START: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// 64-bit FNV-1a of `bytes`, continuing from `h`.
 pub fn fnv1a(h: u64, bytes: &[u8]) -> u64 {
-    bytes
-        .iter()
-        .fold(h, |h, b| (h ^ *b as u64).wrapping_mul(0x0100_0000_01b3))
+    bytes.iter().fold(h, |h, b| (h ^ *b as u64).wrapping_mul(0x0100_0000_01b3))
 }
 
 impl Fingerprint {
@@ -61,11 +56,7 @@ impl Fingerprint {
         for p in files {
             let (size, crc32) = crc32_file(p)?;
             let rel = p.strip_prefix(root).unwrap_or(p);
-            let path = rel
-                .components()
-                .map(|c| c.as_os_str().to_string_lossy())
-                .collect::<Vec<_>>()
-                .join("/");
+            let path = rel.components().map(|c| c.as_os_str().to_string_lossy()).collect::<Vec<_>>().join("/");
             entries.push(FileEntry { path, size, crc32 });
         }
         entries.sort_by(|a, b| a.path.cmp(&b.path));
@@ -86,55 +77,22 @@ impl Fingerprint {
     /// naming up to three files of each kind; None when nothing did.
     pub fn changes(&self, now: &Fingerprint) -> Option<String> {
         let names = |v: &[&str]| {
-            let mut s = v
-                .iter()
-                .take(3)
-                .map(|p| p.to_string())
-                .collect::<Vec<_>>()
-                .join(", ");
+            let mut s = v.iter().take(3).map(|p| p.to_string()).collect::<Vec<_>>().join(", ");
             if v.len() > 3 {
                 s.push_str(&format!(" and {} more", v.len() - 3));
             }
             s
         };
-        let find = |set: &Fingerprint, p: &str| {
-            set.files
-                .binary_search_by(|f| f.path.as_str().cmp(p))
-                .ok()
-                .map(|i| set.files[i].clone())
-        };
-        let removed: Vec<&str> = self
-            .files
-            .iter()
-            .filter(|f| find(now, &f.path).is_none())
-            .map(|f| f.path.as_str())
-            .collect();
-        let added: Vec<&str> = now
-            .files
-            .iter()
-            .filter(|f| find(self, &f.path).is_none())
-            .map(|f| f.path.as_str())
-            .collect();
-        let changed: Vec<&str> = self
-            .files
-            .iter()
-            .filter(|f| find(now, &f.path).is_some_and(|g| g != **f))
-            .map(|f| f.path.as_str())
-            .collect();
+        let find = |set: &Fingerprint, p: &str| set.files.binary_search_by(|f| f.path.as_str().cmp(p)).ok().map(|i| set.files[i].clone());
+        let removed: Vec<&str> = self.files.iter().filter(|f| find(now, &f.path).is_none()).map(|f| f.path.as_str()).collect();
+        let added: Vec<&str> = now.files.iter().filter(|f| find(self, &f.path).is_none()).map(|f| f.path.as_str()).collect();
+        let changed: Vec<&str> = self.files.iter().filter(|f| find(now, &f.path).is_some_and(|g| g != **f)).map(|f| f.path.as_str()).collect();
         let mut parts = Vec::new();
         if !changed.is_empty() {
-            parts.push(format!(
-                "{} file(s) changed ({})",
-                changed.len(),
-                names(&changed)
-            ));
+            parts.push(format!("{} file(s) changed ({})", changed.len(), names(&changed)));
         }
         if !removed.is_empty() {
-            parts.push(format!(
-                "{} file(s) no longer used or gone ({})",
-                removed.len(),
-                names(&removed)
-            ));
+            parts.push(format!("{} file(s) no longer used or gone ({})", removed.len(), names(&removed)));
         }
         if !added.is_empty() {
             parts.push(format!("{} file(s) new ({})", added.len(), names(&added)));

@@ -16,12 +16,7 @@ pub struct ImageF {
 
 impl ImageF {
     pub fn new(width: u32, height: u32, channels: u32) -> ImageF {
-        ImageF {
-            width,
-            height,
-            channels,
-            data: vec![0.0; (width * height * channels) as usize],
-        }
+        ImageF { width, height, channels, data: vec![0.0; (width * height * channels) as usize] }
     }
     pub fn pixels(&self) -> usize {
         self.width as usize * self.height as usize
@@ -46,12 +41,7 @@ impl ImageF {
                 data[p * c + k] = planes[k * n + p];
             }
         }
-        ImageF {
-            width,
-            height,
-            channels,
-            data,
-        }
+        ImageF { width, height, channels, data }
     }
 
     /// Box-filter downscale by an integer factor (the size is floored).
@@ -61,11 +51,7 @@ impl ImageF {
         }
         let (w, h) = (self.width / factor, self.height / factor);
         if w == 0 || h == 0 {
-            bail!(
-                "--downscale {factor} leaves nothing of a {}x{} image",
-                self.width,
-                self.height
-            );
+            bail!("--downscale {factor} leaves nothing of a {}x{} image", self.width, self.height);
         }
         let c = self.channels as usize;
         let mut out = ImageF::new(w, h, self.channels);
@@ -95,8 +81,7 @@ pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<ImageF> {
 
 /// [`read_rgb`], and whether the file had an alpha channel.
 pub fn read_rgb_alpha(path: &Path, background: [f32; 3]) -> Result<(ImageF, bool)> {
-    let img =
-        image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?;
+    let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?;
     let rgba = img.to_rgba32f();
     let has_alpha = img.color().has_alpha();
     let (w, h) = rgba.dimensions();
@@ -116,36 +101,21 @@ pub fn read_rgb_alpha(path: &Path, background: [f32; 3]) -> Result<(ImageF, bool
 /// The mean colour of an image's one-pixel border and the largest
 /// deviation of a border pixel from it (any channel).
 pub fn border_colour(img: &ImageF) -> ([f32; 3], f32) {
-    let (w, h, c) = (
-        img.width as usize,
-        img.height as usize,
-        img.channels as usize,
-    );
-    let idx: Vec<usize> = (0..h)
-        .flat_map(|y| {
-            (0..w)
-                .filter(move |&x| y == 0 || y + 1 == h || x == 0 || x + 1 == w)
-                .map(move |x| y * w + x)
-        })
-        .collect();
+    let (w, h, c) = (img.width as usize, img.height as usize, img.channels as usize);
+    let idx: Vec<usize> = (0..h).flat_map(|y| (0..w).filter(move |&x| y == 0 || y + 1 == h || x == 0 || x + 1 == w).map(move |x| y * w + x)).collect();
     let mut mean = [0f32; 3];
     for &i in &idx {
         for k in 0..3 {
             mean[k] += img.data[c * i + k.min(c - 1)] / idx.len() as f32;
         }
     }
-    let spread = idx
-        .iter()
-        .flat_map(|&i| (0..3).map(move |k| (i, k)))
-        .map(|(i, k)| (img.data[c * i + k.min(c - 1)] - mean[k]).abs())
-        .fold(0f32, f32::max);
+    let spread = idx.iter().flat_map(|&i| (0..3).map(move |k| (i, k))).map(|(i, k)| (img.data[c * i + k.min(c - 1)] - mean[k]).abs()).fold(0f32, f32::max);
     (mean, spread)
 }
 
 /// An 8-bit mask (grey or the first channel): true where the value is >= 128.
 pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
-    let img =
-        image::open(path).with_context(|| format!("{}: cannot read the mask", path.display()))?;
+    let img = image::open(path).with_context(|| format!("{}: cannot read the mask", path.display()))?;
     let g = img.to_luma8();
     let (w, h) = g.dimensions();
     Ok((w, h, g.pixels().map(|p| p.0[0] >= 128).collect()))
@@ -154,29 +124,18 @@ pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
 /// Per-pixel unit normals (HxWx3) from `.npy` (float32/float64), `.exr`
 /// (RGB) or a Shiny-Blender `_normal.png` (n = rgb * 2 / 255 - 1).
 pub fn read_normals(path: &Path) -> Result<ImageF> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let img = match ext.as_str() {
         "npy" => read_npy(path)?,
         "exr" => read_exr(path)?,
         "png" => {
             let rgb = read_rgb(path, [0.0; 3])?;
-            ImageF {
-                data: rgb.data.iter().map(|v| v * 2.0 - 1.0).collect(),
-                ..rgb
-            }
+            ImageF { data: rgb.data.iter().map(|v| v * 2.0 - 1.0).collect(), ..rgb }
         }
         _ => bail!("{}: normals must be .npy, .exr or .png", path.display()),
     };
     if img.channels != 3 {
-        bail!(
-            "{}: normals need 3 channels, the file has {}",
-            path.display(),
-            img.channels
-        );
+        bail!("{}: normals need 3 channels, the file has {}", path.display(), img.channels);
     }
     if img.data.iter().any(|v| !v.is_finite()) {
         bail!("{}: normals contain NaN or infinite values", path.display());
@@ -201,23 +160,15 @@ pub fn parse_npy(bytes: &[u8]) -> Result<ImageF> {
             if bytes.len() < 12 {
                 bail!("truncated header");
             }
-            (
-                u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-                12,
-            )
+            (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
         }
         v => bail!("unsupported .npy version {v}"),
     };
     let header = bytes.get(start..start + hlen).context("truncated header")?;
     let header = std::str::from_utf8(header).context("header is not text")?;
     let field = |key: &str| -> Result<&str> {
-        let i = header
-            .find(&format!("'{key}'"))
-            .with_context(|| format!("header has no '{key}'"))?;
-        Ok(header[i + key.len() + 2..]
-            .trim_start()
-            .trim_start_matches(':')
-            .trim_start())
+        let i = header.find(&format!("'{key}'")).with_context(|| format!("header has no '{key}'"))?;
+        Ok(header[i + key.len() + 2..].trim_start().trim_start_matches(':').trim_start())
     };
     let descr = field("descr")?;
     let elem = if descr.starts_with("'<f4'") {
@@ -225,27 +176,14 @@ pub fn parse_npy(bytes: &[u8]) -> Result<ImageF> {
     } else if descr.starts_with("'<f8'") {
         8
     } else {
-        bail!(
-            "dtype {} is not little-endian float32/float64",
-            descr.split(',').next().unwrap_or("")
-        );
+        bail!("dtype {} is not little-endian float32/float64", descr.split(',').next().unwrap_or(""));
     };
     if field("fortran_order")?.starts_with("True") {
         bail!("Fortran-order arrays are not supported");
     }
     let shape = field("shape")?;
-    let inner = shape
-        .trim_start_matches('(')
-        .split(')')
-        .next()
-        .unwrap_or("");
-    let dims: Vec<usize> = inner
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>())
-        .collect::<Result<_, _>>()
-        .context("bad shape")?;
+    let inner = shape.trim_start_matches('(').split(')').next().unwrap_or("");
+    let dims: Vec<usize> = inner.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse::<usize>()).collect::<Result<_, _>>().context("bad shape")?;
     let (h, w, c) = match dims.as_slice() {
         [h, w] => (*h, *w, 1),
         [h, w, c] => (*h, *w, *c),
@@ -255,43 +193,24 @@ pub fn parse_npy(bytes: &[u8]) -> Result<ImageF> {
     let count = h.checked_mul(w).and_then(|v| v.checked_mul(c));
     let need = count.and_then(|n| n.checked_mul(elem));
     let data = &bytes[start + hlen..];
-    let (Some(count), Some(need)) = (count, need) else {
-        bail!("shape {dims:?} is too large")
-    };
+    let (Some(count), Some(need)) = (count, need) else { bail!("shape {dims:?} is too large") };
     if u32::try_from(h).is_err() || u32::try_from(w).is_err() || u32::try_from(c).is_err() {
         bail!("shape {dims:?} is too large");
     }
     if data.len() < need {
-        bail!(
-            "holds {} bytes of data; shape {dims:?} needs {need}",
-            data.len()
-        );
+        bail!("holds {} bytes of data; shape {dims:?} needs {need}", data.len());
     }
     let values: Vec<f32> = if elem == 4 {
-        data[..count * 4]
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect()
+        data[..count * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
     } else {
-        data[..count * 8]
-            .chunks_exact(8)
-            .map(|b| f64::from_le_bytes(b.try_into().unwrap()) as f32)
-            .collect()
+        data[..count * 8].chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap()) as f32).collect()
     };
-    Ok(ImageF {
-        width: w as u32,
-        height: h as u32,
-        channels: c as u32,
-        data: values,
-    })
+    Ok(ImageF { width: w as u32, height: h as u32, channels: c as u32, data: values })
 }
 
 /// Write a float32 `.npy` of shape (H, W, C).
 pub fn write_npy(path: &Path, img: &ImageF) -> Result<()> {
-    let mut header = format!(
-        "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
-        img.height, img.width, img.channels
-    );
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}", img.height, img.width, img.channels);
     while (10 + header.len() + 1) % 64 != 0 {
         header.push(' ');
     }
@@ -324,11 +243,7 @@ pub fn read_exr(path: &Path) -> Result<ImageF> {
 
 /// Write 1 (as Y) or 3 (RGB) float channels to EXR.
 pub fn write_exr(path: &Path, img: &ImageF) -> Result<()> {
-    let (w, h, c) = (
-        img.width as usize,
-        img.height as usize,
-        img.channels as usize,
-    );
+    let (w, h, c) = (img.width as usize, img.height as usize, img.channels as usize);
     let res = match c {
         1 => exr::prelude::write_rgb_file(path, w, h, |x, y| {
             let v = img.data[y * w + x];
@@ -346,24 +261,18 @@ pub fn write_exr(path: &Path, img: &ImageF) -> Result<()> {
 /// Write an 8-bit PNG (values clamped to [0, 1] and rounded); 1 or 3 channels.
 pub fn write_png(path: &Path, img: &ImageF) -> Result<()> {
     let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    let bytes: Vec<u8> = img
-        .data
-        .iter()
-        .map(|&v| q(if v.is_finite() { v } else { 0.0 }))
-        .collect();
+    let bytes: Vec<u8> = img.data.iter().map(|&v| q(if v.is_finite() { v } else { 0.0 })).collect();
     let color = match img.channels {
         1 => image::ExtendedColorType::L8,
         3 => image::ExtendedColorType::Rgb8,
         4 => image::ExtendedColorType::Rgba8,
         c => bail!("PNG output takes 1, 3 or 4 channels, not {c}"),
     };
-    image::save_buffer(path, &bytes, img.width, img.height, color)
-        .with_context(|| format!("{}: cannot write the PNG", path.display()))
+    image::save_buffer(path, &bytes, img.width, img.height, color).with_context(|| format!("{}: cannot write the PNG", path.display()))
 }
 
 /// Write a grey 8-bit mask.
 pub fn write_mask(path: &Path, width: u32, height: u32, mask: &[bool]) -> Result<()> {
     let bytes: Vec<u8> = mask.iter().map(|&m| if m { 255 } else { 0 }).collect();
-    image::save_buffer(path, &bytes, width, height, image::ExtendedColorType::L8)
-        .with_context(|| format!("{}: cannot write the PNG", path.display()))
+    image::save_buffer(path, &bytes, width, height, image::ExtendedColorType::L8).with_context(|| format!("{}: cannot write the PNG", path.display()))
 }

@@ -60,11 +60,7 @@ pub struct LoadOptions {
 
 impl Default for LoadOptions {
     fn default() -> Self {
-        LoadOptions {
-            downscale: 1,
-            background: [1.0; 3],
-            holdout: 8,
-        }
+        LoadOptions { downscale: 1, background: [1.0; 3], holdout: 8 }
     }
 }
 
@@ -81,10 +77,7 @@ impl Dataset {
             blender::load(root, opts)?
         } else if colmap::find_model(root).is_some() {
             colmap::load(root, opts)?
-        } else if let Some(d) = [root.join("sparse/0"), root.join("sparse")]
-            .into_iter()
-            .find(|d| d.is_dir())
-        {
+        } else if let Some(d) = [root.join("sparse/0"), root.join("sparse")].into_iter().find(|d| d.is_dir()) {
             bail!("{}: a COLMAP model directory without cameras.txt or cameras.bin (it needs cameras, images and optionally points3D, as .txt or .bin)", d.display());
         } else {
             bail!("{}: neither transforms_train.json (Blender layout) nor sparse/0 or sparse/ (COLMAP) found", root.display());
@@ -111,10 +104,7 @@ impl Dataset {
                 mean[k] += c[k] / n;
             }
         }
-        let far = centres
-            .iter()
-            .map(|c| (0..3).map(|k| (c[k] - mean[k]).powi(2)).sum::<f32>().sqrt())
-            .fold(0.0f32, f32::max);
+        let far = centres.iter().map(|c| (0..3).map(|k| (c[k] - mean[k]).powi(2)).sum::<f32>().sqrt()).fold(0.0f32, f32::max);
         (1.1 * far.max(1e-6), mean)
     }
 }

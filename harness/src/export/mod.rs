@@ -11,14 +11,8 @@ use std::path::Path;
 /// never a torn one: write `PATH.tmp` beside it through `fill`, flush it to
 /// disk, rename it over `path`, then sync the directory so the rename itself
 /// survives a power loss.
-pub fn atomic_write_with(
-    path: &Path,
-    fill: impl FnOnce(&mut dyn Write) -> Result<()>,
-) -> Result<()> {
-    let mut tmp_name = path
-        .file_name()
-        .with_context(|| format!("{}: not a file path", path.display()))?
-        .to_os_string();
+pub fn atomic_write_with(path: &Path, fill: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    let mut tmp_name = path.file_name().with_context(|| format!("{}: not a file path", path.display()))?.to_os_string();
     tmp_name.push(".tmp");
     let tmp = path.with_file_name(tmp_name);
     let write = || -> Result<()> {
@@ -31,13 +25,7 @@ pub fn atomic_write_with(
         let _ = std::fs::remove_file(&tmp);
         return Err(e.context(format!("{}: cannot write", tmp.display())));
     }
-    std::fs::rename(&tmp, path).with_context(|| {
-        format!(
-            "{}: cannot move {} into place",
-            path.display(),
-            tmp.display()
-        )
-    })?;
+    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot move {} into place", path.display(), tmp.display()))?;
     sync_dir(path)
 }
 
@@ -55,8 +43,7 @@ pub fn sync_dir(path: &Path) -> Result<()> {
     // Directories cannot be opened for syncing on every platform; where they
     // can, a failure to sync is an I/O error worth reporting.
     if let Ok(d) = std::fs::File::open(dir) {
-        d.sync_all()
-            .with_context(|| format!("{}: cannot sync the directory", dir.display()))?;
+        d.sync_all().with_context(|| format!("{}: cannot sync the directory", dir.display()))?;
     }
     Ok(())
 }

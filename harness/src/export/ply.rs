@@ -20,11 +20,7 @@ pub fn write_splats(path: &Path, g: &HostGaussians) -> Result<()> {
 pub fn write_splats_with(path: &Path, g: &HostGaussians, extra: &[(&str, Vec<f32>)]) -> Result<()> {
     g.validate()?;
     if let Some((name, v)) = extra.iter().find(|(_, v)| v.len() != g.len()) {
-        bail!(
-            "PLY property '{name}' has {} values for {} splats",
-            v.len(),
-            g.len()
-        );
+        bail!("PLY property '{name}' has {} values for {} splats", v.len(), g.len());
     }
     let c = g.channels as usize;
     let k = g.coeffs as usize;
@@ -34,17 +30,13 @@ pub fn write_splats_with(path: &Path, g: &HostGaussians, extra: &[(&str, Vec<f32
     let rest = (k - 1) * 3;
     let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
     header += &format!("element vertex {}\n", g.len());
-    for p in [
-        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-    ] {
+    for p in ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] {
         header += &format!("property float {p}\n");
     }
     for i in 0..rest {
         header += &format!("property float f_rest_{i}\n");
     }
-    for p in [
-        "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
-    ] {
+    for p in ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"] {
         header += &format!("property float {p}\n");
     }
     for (p, _) in extra {
@@ -77,31 +69,15 @@ pub fn write_splats_with(path: &Path, g: &HostGaussians, extra: &[(&str, Vec<f32
 /// Read a splat PLY written by [`write_splats`] (or 3DGS/2DGS) back.
 pub fn read_splats(path: &Path) -> Result<HostGaussians> {
     let (names, n, body) = read_binary(path)?;
-    let idx = |name: &str| {
-        names
-            .iter()
-            .position(|p| p == name)
-            .with_context(|| format!("{}: no property '{name}'", path.display()))
-    };
+    let idx = |name: &str| names.iter().position(|p| p == name).with_context(|| format!("{}: no property '{name}'", path.display()));
     let rest = names.iter().filter(|p| p.starts_with("f_rest_")).count();
     if rest % 3 != 0 {
-        bail!(
-            "{}: {rest} f_rest properties is not a multiple of 3",
-            path.display()
-        );
+        bail!("{}: {rest} f_rest properties is not a multiple of 3", path.display());
     }
     let k = rest / 3 + 1;
     let mut g = HostGaussians::new(3, k as u32);
     let stride = names.len();
-    let (ix, idc, irest, iop, is0, is1, ir) = (
-        idx("x")?,
-        idx("f_dc_0")?,
-        idx("f_rest_0").unwrap_or(0),
-        idx("opacity")?,
-        idx("scale_0")?,
-        idx("scale_1")?,
-        idx("rot_0")?,
-    );
+    let (ix, idc, irest, iop, is0, is1, ir) = (idx("x")?, idx("f_dc_0")?, idx("f_rest_0").unwrap_or(0), idx("opacity")?, idx("scale_0")?, idx("scale_1")?, idx("rot_0")?);
     for i in 0..n {
         let row = &body[i * stride..(i + 1) * stride];
         let mut feats = vec![0.0; 3 * k];
@@ -111,13 +87,7 @@ pub fn read_splats(path: &Path) -> Result<HostGaussians> {
                 feats[kk * 3 + ch] = row[irest + ch * (k - 1) + kk - 1];
             }
         }
-        g.push(
-            [row[ix], row[ix + 1], row[ix + 2]],
-            [row[is0], row[is1]],
-            [row[ir], row[ir + 1], row[ir + 2], row[ir + 3]],
-            row[iop],
-            &feats,
-        );
+        g.push([row[ix], row[ix + 1], row[ix + 2]], [row[is0], row[is1]], [row[ir], row[ir + 1], row[ir + 2], row[ir + 3]], row[iop], &feats);
     }
     Ok(g)
 }
@@ -134,12 +104,8 @@ struct Property {
 /// stride bytes).
 fn read_vertices(path: &Path) -> Result<(Vec<Property>, usize, Vec<u8>, usize)> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .with_context(|| format!("{}: not a PLY (no end_header)", path.display()))?;
-    let header = std::str::from_utf8(&bytes[..end])
-        .with_context(|| format!("{}: header is not text", path.display()))?;
+    let end = bytes.windows(11).position(|w| w == b"end_header\n").with_context(|| format!("{}: not a PLY (no end_header)", path.display()))?;
+    let header = std::str::from_utf8(&bytes[..end]).with_context(|| format!("{}: header is not text", path.display()))?;
     if !header.contains("format binary_little_endian") {
         bail!("{}: only binary little-endian PLY is read", path.display());
     }
@@ -152,9 +118,7 @@ fn read_vertices(path: &Path) -> Result<(Vec<Property>, usize, Vec<u8>, usize)> 
             ["element", name, c] => {
                 in_vertex = *name == "vertex";
                 if in_vertex {
-                    n = c
-                        .parse()
-                        .with_context(|| format!("{}: bad vertex count", path.display()))?;
+                    n = c.parse().with_context(|| format!("{}: bad vertex count", path.display()))?;
                 }
             }
             ["property", ty, name] if in_vertex => {
@@ -165,11 +129,7 @@ fn read_vertices(path: &Path) -> Result<(Vec<Property>, usize, Vec<u8>, usize)> 
                     "short" | "ushort" | "int16" | "uint16" => 2,
                     _ => bail!("{}: property type {ty} not supported", path.display()),
                 };
-                props.push(Property {
-                    name: name.to_string(),
-                    ty: ty.to_string(),
-                    size,
-                });
+                props.push(Property { name: name.to_string(), ty: ty.to_string(), size });
             }
             _ => {}
         }
@@ -191,16 +151,9 @@ fn read_binary(path: &Path) -> Result<(Vec<String>, usize, Vec<f32>)> {
     let (props, n, bytes, start) = read_vertices(path)?;
     let body = &bytes[start..];
     if let Some(p) = props.iter().find(|p| p.ty != "float") {
-        bail!(
-            "{}: property type {} not supported here",
-            path.display(),
-            p.ty
-        );
+        bail!("{}: property type {} not supported here", path.display(), p.ty);
     }
-    let vals = body[..n * props.len() * 4]
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
+    let vals = body[..n * props.len() * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     Ok((props.into_iter().map(|p| p.name).collect(), n, vals))
 }
 
@@ -208,10 +161,8 @@ fn read_binary(path: &Path) -> Result<(Vec<String>, usize, Vec<f32>)> {
 pub fn write_points(path: &Path, pts: &Points) -> Result<()> {
     let mut out = format!("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n", pts.positions.len()).into_bytes();
     for (p, c) in pts.positions.iter().zip(&pts.colors) {
-        p.iter()
-            .for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
-        c.iter()
-            .for_each(|v| out.push((v.clamp(0.0, 1.0) * 255.0).round() as u8));
+        p.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+        c.iter().for_each(|v| out.push((v.clamp(0.0, 1.0) * 255.0).round() as u8));
     }
     super::atomic_write(path, &out)
 }
@@ -235,21 +186,15 @@ pub fn read_points(path: &Path) -> Result<(Points, usize)> {
         }
         None
     };
-    let xyz: Vec<(usize, &str)> = ["x", "y", "z"]
-        .iter()
-        .map(|a| find(a).with_context(|| format!("{}: no '{a}' property", path.display())))
-        .collect::<Result<_>>()?;
-    let rgb: Option<Vec<(usize, &str)>> =
-        ["red", "green", "blue"].iter().map(|a| find(a)).collect();
+    let xyz: Vec<(usize, &str)> = ["x", "y", "z"].iter().map(|a| find(a).with_context(|| format!("{}: no '{a}' property", path.display()))).collect::<Result<_>>()?;
+    let rgb: Option<Vec<(usize, &str)>> = ["red", "green", "blue"].iter().map(|a| find(a)).collect();
     let mut pts = Points::default();
     let mut skipped = 0usize;
     for i in 0..n {
         let row = &body[i * stride..(i + 1) * stride];
         let read = |(off, ty): (usize, &str)| -> f32 {
             match ty {
-                "double" | "float64" => {
-                    f64::from_le_bytes(row[off..off + 8].try_into().unwrap()) as f32
-                }
+                "double" | "float64" => f64::from_le_bytes(row[off..off + 8].try_into().unwrap()) as f32,
                 "uchar" | "uint8" => row[off] as f32 / 255.0,
                 _ => f32::from_le_bytes(row[off..off + 4].try_into().unwrap()),
             }
@@ -266,10 +211,7 @@ pub fn read_points(path: &Path) -> Result<(Points, usize)> {
         });
     }
     if skipped > 0 && pts.positions.is_empty() {
-        bail!(
-            "{}: all {n} points have NaN or infinite coordinates",
-            path.display()
-        );
+        bail!("{}: all {n} points have NaN or infinite coordinates", path.display());
     }
     Ok((pts, skipped))
 }
@@ -279,34 +221,15 @@ pub fn read_points(path: &Path) -> Result<(Points, usize)> {
 pub fn write_reflection_splats(path: &Path, g: &HostGaussians) -> Result<()> {
     g.validate()?;
     if g.channels != 4 || g.coeffs != 1 {
-        bail!(
-            "a reflection set has 4 material values per splat, not {} x {}",
-            g.channels,
-            g.coeffs
-        );
+        bail!("a reflection set has 4 material values per splat, not {} x {}", g.channels, g.coeffs);
     }
     let sig = |x: f32| 1.0 / (1.0 + (-x).exp());
     let n = g.len();
-    let m = |c: usize| {
-        (0..n)
-            .map(|i| sig(g.features[4 * i + c]))
-            .collect::<Vec<f32>>()
-    };
+    let m = |c: usize| (0..n).map(|i| sig(g.features[4 * i + c])).collect::<Vec<f32>>();
     let (f0, r) = ([m(0), m(1), m(2)], m(3));
     const SH_C0: f32 = 0.282_094_8;
-    let features = (0..n)
-        .flat_map(|i| [0, 1, 2].map(|c| (f0[c][i] - 0.5) / SH_C0))
-        .collect();
-    let base = HostGaussians {
-        channels: 3,
-        coeffs: 1,
-        features,
-        ..g.clone()
-    };
+    let features = (0..n).flat_map(|i| [0, 1, 2].map(|c| (f0[c][i] - 0.5) / SH_C0)).collect();
+    let base = HostGaussians { channels: 3, coeffs: 1, features, ..g.clone() };
     let [a, b, c] = f0;
-    write_splats_with(
-        path,
-        &base,
-        &[("f0_0", a), ("f0_1", b), ("f0_2", c), ("reflectivity", r)],
-    )
+    write_splats_with(path, &base, &[("f0_0", a), ("f0_1", b), ("f0_2", c), ("reflectivity", r)])
 }

@@ -23,25 +23,14 @@ pub struct Mesh {
 
 /// The six tetrahedra of a cell; corner c is at offset (c & 1, c >> 1 & 1,
 /// c >> 2 & 1). Each contains the diagonal 0-7.
-const TETS: [[usize; 4]; 6] = [
-    [0, 1, 3, 7],
-    [0, 3, 2, 7],
-    [0, 2, 6, 7],
-    [0, 6, 4, 7],
-    [0, 4, 5, 7],
-    [0, 5, 1, 7],
-];
+const TETS: [[usize; 4]; 6] = [[0, 1, 3, 7], [0, 3, 2, 7], [0, 2, 6, 7], [0, 6, 4, 7], [0, 4, 5, 7], [0, 5, 1, 7]];
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 /// Extract the zero level set of `grid` (voxel centres at `origin +
@@ -70,9 +59,7 @@ pub fn extract(grid: &HostTsdf, origin: [f32; 3], voxel: f32, min_weight: f32) -
         let p = [0, 1, 2].map(|k| pa[k] + t * (pb[k] - pa[k]));
         let id = *vertex_of.entry(key).or_insert_with(|| {
             mesh.positions.push(p.map(|v| v as f32));
-            mesh.colors.push([0, 1, 2].map(|c| {
-                (grid.rgb[c][a] as f64 + t * (grid.rgb[c][b] as f64 - grid.rgb[c][a] as f64)) as f32
-            }));
+            mesh.colors.push([0, 1, 2].map(|c| (grid.rgb[c][a] as f64 + t * (grid.rgb[c][b] as f64 - grid.rgb[c][a] as f64)) as f32));
             (mesh.positions.len() - 1) as u32
         });
         (id, p)
@@ -80,26 +67,18 @@ pub fn extract(grid: &HostTsdf, origin: [f32; 3], voxel: f32, min_weight: f32) -
     for k in 0..nz - 1 {
         for j in 0..ny - 1 {
             for i in 0..nx - 1 {
-                let corner: [usize; 8] =
-                    std::array::from_fn(|c| index(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1)));
+                let corner: [usize; 8] = std::array::from_fn(|c| index(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1)));
                 let inside = corner.map(|v| grid.tsdf[v] < 0.0);
-                if inside.iter().all(|&s| s)
-                    || inside.iter().all(|&s| !s)
-                    || !corner.iter().all(|&v| observed(v))
-                {
+                if inside.iter().all(|&s| s) || inside.iter().all(|&s| !s) || !corner.iter().all(|&v| observed(v)) {
                     continue;
                 }
                 for tet in TETS {
                     let v = tet.map(|c| corner[c]);
-                    let (ins, outs): (Vec<usize>, Vec<usize>) =
-                        v.iter().partition(|&&x| grid.tsdf[x] < 0.0);
+                    let (ins, outs): (Vec<usize>, Vec<usize>) = v.iter().partition(|&&x| grid.tsdf[x] < 0.0);
                     let tris: Vec<[(usize, usize); 3]> = match ins.len() {
                         1 => vec![[(ins[0], outs[0]), (ins[0], outs[1]), (ins[0], outs[2])]],
                         3 => vec![[(ins[0], outs[0]), (ins[1], outs[0]), (ins[2], outs[0])]],
-                        2 => vec![
-                            [(ins[0], outs[0]), (ins[0], outs[1]), (ins[1], outs[1])],
-                            [(ins[0], outs[0]), (ins[1], outs[1]), (ins[1], outs[0])],
-                        ],
+                        2 => vec![[(ins[0], outs[0]), (ins[0], outs[1]), (ins[1], outs[1])], [(ins[0], outs[0]), (ins[1], outs[1]), (ins[1], outs[0])]],
                         _ => continue,
                     };
                     // Outwards: from the inside corners towards the outside ones.
@@ -121,8 +100,7 @@ pub fn extract(grid: &HostTsdf, origin: [f32; 3], voxel: f32, min_weight: f32) -
                         if i0 == i1 || i1 == i2 || i0 == i2 || d == 0.0 {
                             continue;
                         }
-                        mesh.triangles
-                            .push(if d > 0.0 { [i0, i1, i2] } else { [i0, i2, i1] });
+                        mesh.triangles.push(if d > 0.0 { [i0, i1, i2] } else { [i0, i2, i1] });
                     }
                 }
             }

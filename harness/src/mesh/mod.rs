@@ -52,15 +52,7 @@ pub struct MeshArgs {
 
 impl Default for MeshArgs {
     fn default() -> Self {
-        MeshArgs {
-            voxel: None,
-            resolution: 512,
-            trunc: None,
-            depth_max: None,
-            max_bytes: 2 << 30,
-            out: None,
-            progress: false,
-        }
+        MeshArgs { voxel: None, resolution: 512, trunc: None, depth_max: None, max_bytes: 2 << 30, out: None, progress: false }
     }
 }
 
@@ -82,22 +74,11 @@ fn view_planes(tr: &mut Trainer, cam: &Camera) -> Result<(Planes, Option<Planes>
     let n = (cam.width * cam.height) as usize;
     let s = r.layers.as_ref().map(|l| &l.0).unwrap_or(&r);
     let depth = s.plane(Plane::Median).to_vec();
-    let weight = depth
-        .iter()
-        .map(|&d| if d > 0.0 && d.is_finite() { 1.0 } else { 0.0 })
-        .collect();
+    let weight = depth.iter().map(|&d| if d > 0.0 && d.is_finite() { 1.0 } else { 0.0 }).collect();
     let scene = (depth, weight, s.planes[..3 * n].to_vec());
     let glass = r.layers.as_ref().map(|l| {
         let (depth, alpha) = (l.1.refl_plane(Plane::Median), l.1.refl_plane(Plane::Alpha));
-        let weight = (0..n)
-            .map(|i| {
-                if depth[i] > 0.0 && depth[i].is_finite() && alpha[i] >= 0.5 {
-                    alpha[i]
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let weight = (0..n).map(|i| if depth[i] > 0.0 && depth[i].is_finite() && alpha[i] >= 0.5 { alpha[i] } else { 0.0 }).collect();
         (depth.to_vec(), weight, l.1.composite[..3 * n].to_vec())
     });
     Ok((scene, glass))
@@ -125,11 +106,7 @@ impl Points {
         let step = n.div_ceil(20_000).max(1);
         for i in (0..n).step_by(step) {
             if weight[i] > 0.0 && depth[i] <= depth_max {
-                let p = cam.unproject(
-                    (i % cam.width as usize) as f32,
-                    (i / cam.width as usize) as f32,
-                    depth[i],
-                );
+                let p = cam.unproject((i % cam.width as usize) as f32, (i / cam.width as usize) as f32, depth[i]);
                 if p.iter().all(|v| v.is_finite()) {
                     for (axis, v) in self.axes.iter_mut().zip(p) {
                         axis.push(v);
@@ -154,29 +131,19 @@ impl Points {
             hi[k] = q(0.99);
         }
         self.footprint.sort_by(f32::total_cmp);
-        Some(Extent {
-            lo,
-            hi,
-            pixel: self.footprint[self.footprint.len() / 2],
-        })
+        Some(Extent { lo, hi, pixel: self.footprint[self.footprint.len() / 2] })
     }
 }
 
 /// One pass over the views: the scene's extent and, when the run renders
 /// a reflection layer, the glass's.
-fn bounds(
-    tr: &mut Trainer,
-    cams: &[Camera],
-    depth_max: f32,
-) -> Result<(Option<Extent>, Option<Extent>)> {
+fn bounds(tr: &mut Trainer, cams: &[Camera], depth_max: f32) -> Result<(Option<Extent>, Option<Extent>)> {
     let (mut scene, mut glass) = (Points::default(), None::<Points>);
     for cam in cams {
         let (s, g) = view_planes(tr, cam)?;
         scene.add(cam, &s, depth_max);
         if let Some(g) = g {
-            glass
-                .get_or_insert_with(Points::default)
-                .add(cam, &g, depth_max);
+            glass.get_or_insert_with(Points::default).add(cam, &g, depth_max);
         }
     }
     Ok((scene.extent(), glass.and_then(Points::extent)))
@@ -203,27 +170,13 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
     let trunc = args.trunc.unwrap_or(4.0 * voxel);
     let pad: [f32; 3] = std::array::from_fn(|_| 0.05 * side.max(1e-3) + 2.0 * voxel);
     let origin: [f32; 3] = std::array::from_fn(|k| lo[k] - pad[k]);
-    let dims_f: [f64; 3] = std::array::from_fn(|k| {
-        (((hi[k] + pad[k]) - origin[k]) as f64 / voxel as f64)
-            .ceil()
-            .max(2.0)
-    });
+    let dims_f: [f64; 3] = std::array::from_fn(|k| (((hi[k] + pad[k]) - origin[k]) as f64 / voxel as f64).ceil().max(2.0));
     if dims_f.iter().any(|&d| d > u32::MAX as f64) {
-        bail!(
-            "voxel {voxel} over a {:?} box gives {:?} voxels per axis: choose a larger --voxel",
-            [0, 1, 2].map(|k| hi[k] - lo[k]),
-            dims_f
-        );
+        bail!("voxel {voxel} over a {:?} box gives {:?} voxels per axis: choose a larger --voxel", [0, 1, 2].map(|k| hi[k] - lo[k]), dims_f);
     }
     // Its sizes and rules are checked where it is allocated
     // (TsdfFusion::volume), naming its size in MiB.
-    Ok(TsdfGrid {
-        origin,
-        voxel,
-        dims: dims_f.map(|d| d as u32),
-        trunc,
-        depth_max: args.depth_max.unwrap_or(f32::INFINITY),
-    })
+    Ok(TsdfGrid { origin, voxel, dims: dims_f.map(|d| d as u32), trunc, depth_max: args.depth_max.unwrap_or(f32::INFINITY) })
 }
 
 /// The options against the grid's rules ([`TsdfGrid::validate`]), before
@@ -232,16 +185,8 @@ fn check_options(args: &MeshArgs) -> Result<()> {
     if args.voxel.is_none() && args.resolution == 0 {
         bail!("--resolution must be at least 1");
     }
-    let probe = TsdfGrid {
-        origin: [0.0; 3],
-        voxel: args.voxel.unwrap_or(1.0),
-        dims: [1; 3],
-        trunc: args.trunc.unwrap_or(1.0),
-        depth_max: args.depth_max.unwrap_or(f32::INFINITY),
-    };
-    probe
-        .validate()
-        .context("tgs mesh options (--voxel, --trunc, --depth-max)")
+    let probe = TsdfGrid { origin: [0.0; 3], voxel: args.voxel.unwrap_or(1.0), dims: [1; 3], trunc: args.trunc.unwrap_or(1.0), depth_max: args.depth_max.unwrap_or(f32::INFINITY) };
+    probe.validate().context("tgs mesh options (--voxel, --trunc, --depth-max)")
 }
 
 /// A surface being fused: its volume and its three per-view planes on the
@@ -252,32 +197,13 @@ struct Fusing {
 }
 
 impl Fusing {
-    fn new(
-        ctx: &Arc<Context>,
-        fusion: &TsdfFusion,
-        grid: TsdfGrid,
-        args: &MeshArgs,
-        npix: usize,
-        label: &str,
-    ) -> Result<Fusing> {
-        let vol = fusion
-            .volume(grid, args.max_bytes)
-            .with_context(|| format!("the {label} mesh's grid"))?;
-        let planes = [
-            Buffer::uninit(ctx, "mesh.depth", npix)?,
-            Buffer::uninit(ctx, "mesh.pix_weight", npix)?,
-            Buffer::uninit(ctx, "mesh.colour", 3 * npix)?,
-        ];
+    fn new(ctx: &Arc<Context>, fusion: &TsdfFusion, grid: TsdfGrid, args: &MeshArgs, npix: usize, label: &str) -> Result<Fusing> {
+        let vol = fusion.volume(grid, args.max_bytes).with_context(|| format!("the {label} mesh's grid"))?;
+        let planes = [Buffer::uninit(ctx, "mesh.depth", npix)?, Buffer::uninit(ctx, "mesh.pix_weight", npix)?, Buffer::uninit(ctx, "mesh.colour", 3 * npix)?];
         Ok(Fusing { vol, planes })
     }
 
-    fn record(
-        &self,
-        fusion: &TsdfFusion,
-        rec: &mut Recorder,
-        cam: &Camera,
-        (d, w, c): &Planes,
-    ) -> Result<()> {
+    fn record(&self, fusion: &TsdfFusion, rec: &mut Recorder, cam: &Camera, (d, w, c): &Planes) -> Result<()> {
         let [bd, bw, bc] = &self.planes;
         bd.upload(d)?;
         bw.upload(w)?;
@@ -295,10 +221,7 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
     let (mut tr, data) = open_run(ctx, run)?;
     let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
     if cams.is_empty() {
-        bail!(
-            "{}: the run's dataset has no training views to fuse",
-            data.root.display()
-        );
+        bail!("{}: the run's dataset has no training views to fuse", data.root.display());
     }
     let out = args.out.clone().unwrap_or_else(|| run.to_path_buf());
     let mut dir = OutDir::open(&out, Some(&data.root))?;
@@ -309,40 +232,21 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
     let depth_max = args.depth_max.unwrap_or(f32::INFINITY);
     let (scene, glass) = bounds(&mut tr, &cams, depth_max)?;
     let Some(scene) = scene else {
-        bail!(
-            "{}: no training view sees a surface (within --depth-max): nothing to mesh",
-            run.display()
-        );
+        bail!("{}: no training view sees a surface (within --depth-max): nothing to mesh", run.display());
     };
-    let npix = cams
-        .iter()
-        .map(|c| c.width as usize * c.height as usize)
-        .max()
-        .unwrap_or(1);
+    let npix = cams.iter().map(|c| c.width as usize * c.height as usize).max().unwrap_or(1);
     let fusion = TsdfFusion::new(ctx)?;
     let mut surfaces = Vec::new();
-    for (extent, name, label) in [
-        (Some(scene), "mesh_scene.ply", "scene"),
-        (glass, "mesh_glass.ply", "glass"),
-    ] {
+    for (extent, name, label) in [(Some(scene), "mesh_scene.ply", "scene"), (glass, "mesh_glass.ply", "glass")] {
         let Some(extent) = extent else { continue };
         let grid = grid_for(&extent, args).with_context(|| format!("the {label} mesh's grid"))?;
         if args.progress {
             let [x, y, z] = grid.dims;
-            eprintln!(
-                "{label}: {x}x{y}x{z} voxels of {:.4} ({:.0} MiB), truncation {:.4}",
-                grid.voxel,
-                (x as f64 * y as f64 * z as f64 * BYTES_PER_VOXEL as f64) / 1048576.0,
-                grid.trunc
-            );
+            eprintln!("{label}: {x}x{y}x{z} voxels of {:.4} ({:.0} MiB), truncation {:.4}", grid.voxel, (x as f64 * y as f64 * z as f64 * BYTES_PER_VOXEL as f64) / 1048576.0, grid.trunc);
         }
         surfaces.push((Fusing::new(ctx, &fusion, grid, args, npix, label)?, name));
     }
-    let bar = if args.progress {
-        indicatif::ProgressBar::new(cams.len() as u64).with_message("fusing")
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
+    let bar = if args.progress { indicatif::ProgressBar::new(cams.len() as u64).with_message("fusing") } else { indicatif::ProgressBar::hidden() };
     for cam in &cams {
         let (s, g) = view_planes(&mut tr, cam)?;
         let mut rec = Recorder::new(ctx)?;

@@ -8,11 +8,11 @@
 //! numpy's, so positions differ from the Python script's; the workload
 //! (sizes, counts, coverage) is the same.
 
-use super::trace::{cross, dot, hit_sphere, norm};
 use crate::data::blender::gl_c2w_to_w2v;
 use crate::data::image_io::{write_png, ImageF};
 use crate::data::{Dataset, Points, View};
 use crate::export::ply::write_points;
+use super::trace::{cross, dot, hit_sphere, norm};
 use crate::train::rng::Rng;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
@@ -41,33 +41,12 @@ pub struct SpheresSpec {
 impl SpheresSpec {
     /// Brush's two workloads.
     pub const NAMED: [(&'static str, SpheresSpec); 2] = [
-        (
-            "spheres-128",
-            SpheresSpec {
-                res: 128,
-                train: 20,
-                test: 4,
-                points: 10_000,
-                fov_x: 0.69,
-            },
-        ),
-        (
-            "spheres-256",
-            SpheresSpec {
-                res: 256,
-                train: 20,
-                test: 4,
-                points: 50_000,
-                fov_x: 0.69,
-            },
-        ),
+        ("spheres-128", SpheresSpec { res: 128, train: 20, test: 4, points: 10_000, fov_x: 0.69 }),
+        ("spheres-256", SpheresSpec { res: 256, train: 20, test: 4, points: 50_000, fov_x: 0.69 }),
     ];
 
     pub fn named(name: &str) -> Option<SpheresSpec> {
-        Self::NAMED
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, s)| *s)
+        Self::NAMED.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
     }
 
     fn validate(&self) -> Result<()> {
@@ -75,10 +54,7 @@ impl SpheresSpec {
             bail!("spheres scene: resolution, training views and points must be at least 1 ({self:?})");
         }
         if !(self.fov_x > 0.0 && self.fov_x < std::f64::consts::PI) {
-            bail!(
-                "spheres scene: field of view {} is not in (0, pi)",
-                self.fov_x
-            );
+            bail!("spheres scene: field of view {} is not in (0, pi)", self.fov_x);
         }
         Ok(())
     }
@@ -92,11 +68,7 @@ fn positions(n: u32, radius: f64, seed: u64) -> Vec<[f64; 3]> {
             let phi = k as f64 * 2.399963 + (rng.uniform() as f64 * 0.2 - 0.1);
             let zf = 0.1 + 0.8 * (k as f64 + 0.5) / n as f64;
             let rr = (1.0 - zf * zf).sqrt();
-            [
-                radius * rr * phi.cos(),
-                radius * rr * phi.sin(),
-                radius * zf,
-            ]
+            [radius * rr * phi.cos(), radius * rr * phi.sin(), radius * zf]
         })
         .collect()
 }
@@ -104,19 +76,10 @@ fn positions(n: u32, radius: f64, seed: u64) -> Vec<[f64; 3]> {
 /// Blender/OpenGL camera-to-world looking at the origin, z up.
 fn look_at_c2w(pos: [f64; 3]) -> [[f64; 4]; 4] {
     let z = norm(pos); // the camera looks down -z, at the origin
-    let up = if dot([0.0, 0.0, 1.0], z).abs() > 0.99 {
-        [0.0, 1.0, 0.0]
-    } else {
-        [0.0, 0.0, 1.0]
-    };
+    let up = if dot([0.0, 0.0, 1.0], z).abs() > 0.99 { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] };
     let x = norm(cross(up, z));
     let y = cross(z, x);
-    [
-        [x[0], y[0], z[0], pos[0]],
-        [x[1], y[1], z[1], pos[1]],
-        [x[2], y[2], z[2], pos[2]],
-        [0.0, 0.0, 0.0, 1.0],
-    ]
+    [[x[0], y[0], z[0], pos[0]], [x[1], y[1], z[1], pos[1]], [x[2], y[2], z[2], pos[2]], [0.0, 0.0, 0.0, 1.0]]
 }
 
 /// Render one view (one ray through each pixel centre, RGB on black).
@@ -128,19 +91,13 @@ fn render(c2w: &[[f64; 4]; 4], res: u32, fov_x: f64) -> ImageF {
     let half = res as f64 / 2.0;
     for i in 0..res {
         for j in 0..res {
-            let dc = [
-                (j as f64 + 0.5 - half) / f,
-                -(i as f64 + 0.5 - half) / f,
-                -1.0,
-            ];
+            let dc = [(j as f64 + 0.5 - half) / f, -(i as f64 + 0.5 - half) / f, -1.0];
             let d = norm([0, 1, 2].map(|r| dot([c2w[r][0], c2w[r][1], c2w[r][2]], dc)));
             let mut best = f64::INFINITY;
             let mut col = [0.0; 3];
             for (c, r, rgb) in SPHERES {
                 // The camera is outside every sphere: the nearer hit is the entry.
-                let Some(&t) = hit_sphere(c, r, o, d).first() else {
-                    continue;
-                };
+                let Some(&t) = hit_sphere(c, r, o, d).first() else { continue };
                 if t >= best {
                     continue;
                 }
@@ -177,32 +134,22 @@ fn points(n: u32, seed: u64) -> Points {
         let a = rng.uniform() as f64 * std::f64::consts::TAU;
         let rr = (1.0 - z * z).max(0.0).sqrt();
         let v = [rr * a.cos(), rr * a.sin(), z];
-        pts.positions
-            .push([0, 1, 2].map(|k| (c[k] + r * v[k]) as f32));
+        pts.positions.push([0, 1, 2].map(|k| (c[k] + r * v[k]) as f32));
         // The script stores uint8(rgb * 200).
-        pts.colors
-            .push(rgb.map(|x| (x * 200.0).floor() as f32 / 255.0));
+        pts.colors.push(rgb.map(|x| (x * 200.0).floor() as f32 / 255.0));
     }
     pts
 }
 
 /// The views of one split: (file stem, camera-to-world, image).
 fn split(spec: &SpheresSpec, test: bool) -> Vec<(String, [[f64; 4]; 4], ImageF)> {
-    let (n, seed, name) = if test {
-        (spec.test, 2, "test")
-    } else {
-        (spec.train, 1, "train")
-    };
+    let (n, seed, name) = if test { (spec.test, 2, "test") } else { (spec.train, 1, "train") };
     positions(n, 4.0, seed)
         .into_iter()
         .enumerate()
         .map(|(k, pos)| {
             let c2w = look_at_c2w(pos);
-            (
-                format!("{name}/r_{k}"),
-                c2w,
-                render(&c2w, spec.res, spec.fov_x),
-            )
+            (format!("{name}/r_{k}"), c2w, render(&c2w, spec.res, spec.fov_x))
         })
         .collect()
 }
@@ -210,42 +157,16 @@ fn split(spec: &SpheresSpec, test: bool) -> Vec<(String, [[f64; 4]; 4], ImageF)>
 fn camera(spec: &SpheresSpec, c2w: &[[f64; 4]; 4]) -> Camera {
     let f = (0.5 * spec.res as f64 / (0.5 * spec.fov_x).tan()) as f32;
     let c = spec.res as f32 * 0.5 - 0.5;
-    Camera {
-        width: spec.res,
-        height: spec.res,
-        fx: f,
-        fy: f,
-        cx: c,
-        cy: c,
-        world_to_view: gl_c2w_to_w2v(c2w),
-    }
+    Camera { width: spec.res, height: spec.res, fx: f, fy: f, cx: c, cy: c, world_to_view: gl_c2w_to_w2v(c2w) }
 }
 
 /// The scene as an in-memory dataset (black background), without files.
 pub fn dataset(spec: &SpheresSpec) -> Result<Dataset> {
     spec.validate()?;
     let views = |test: bool| -> Vec<View> {
-        split(spec, test)
-            .into_iter()
-            .map(|(stem, c2w, image)| View {
-                name: stem.rsplit('/').next().unwrap_or(&stem).to_string(),
-                camera: camera(spec, &c2w),
-                image,
-                normals: None,
-                mask: None,
-            })
-            .collect()
+        split(spec, test).into_iter().map(|(stem, c2w, image)| View { name: stem.rsplit('/').next().unwrap_or(&stem).to_string(), camera: camera(spec, &c2w), image, normals: None, mask: None }).collect()
     };
-    Ok(Dataset {
-        root: "spheres (in memory)".into(),
-        format: "spheres",
-        train: views(false),
-        test: views(true),
-        points: Some(points(spec.points, 3)),
-        background: [0.0; 3],
-        files: Vec::new(),
-        warnings: Vec::new(),
-    })
+    Ok(Dataset { root: "spheres (in memory)".into(), format: "spheres", train: views(false), test: views(true), points: Some(points(spec.points, 3)), background: [0.0; 3], files: Vec::new(), warnings: Vec::new() })
 }
 
 /// Write the scene in the Blender layout (RGB PNGs on black, transforms,
@@ -255,8 +176,7 @@ pub fn write(spec: &SpheresSpec, dir: &Path, mut progress: impl FnMut(u32, u32))
     let total = spec.train + spec.test;
     let mut done = 0;
     for (name, test) in [("train", false), ("test", true)] {
-        std::fs::create_dir_all(dir.join(name))
-            .with_context(|| format!("{}: cannot create", dir.join(name).display()))?;
+        std::fs::create_dir_all(dir.join(name)).with_context(|| format!("{}: cannot create", dir.join(name).display()))?;
         let mut frames = Vec::new();
         for (stem, c2w, image) in split(spec, test) {
             write_png(&dir.join(format!("{stem}.png")), &image)?;
@@ -265,13 +185,7 @@ pub fn write(spec: &SpheresSpec, dir: &Path, mut progress: impl FnMut(u32, u32))
             progress(done, total);
         }
         let path = dir.join(format!("transforms_{name}.json"));
-        crate::export::atomic_write(
-            &path,
-            serde_json::to_string_pretty(
-                &json!({ "camera_angle_x": spec.fov_x, "frames": frames }),
-            )?
-            .as_bytes(),
-        )?;
+        crate::export::atomic_write(&path, serde_json::to_string_pretty(&json!({ "camera_angle_x": spec.fov_x, "frames": frames }))?.as_bytes())?;
     }
     write_points(&dir.join("points3d.ply"), &points(spec.points, 3))
 }

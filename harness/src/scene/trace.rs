@@ -19,11 +19,7 @@ pub fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 pub fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 pub fn norm(a: V3) -> V3 {
     mul(a, 1.0 / dot(a, a).sqrt())
@@ -86,19 +82,11 @@ impl Scene {
             let a = i as f64 * std::f64::consts::TAU / 8.0 + 0.2;
             let c = [3.3 * a.cos(), 3.3 * a.sin()];
             let h = 0.7 + 0.35 * ((i * 5) % 3) as f64;
-            blocks.push(Box3 {
-                lo: [c[0] - 0.35, c[1] - 0.35, 0.0],
-                hi: [c[0] + 0.35, c[1] + 0.35, h],
-                color: hue(i as f64 / 8.0),
-            });
+            blocks.push(Box3 { lo: [c[0] - 0.35, c[1] - 0.35, 0.0], hi: [c[0] + 0.35, c[1] + 0.35, h], color: hue(i as f64 / 8.0) });
         }
         Scene {
             blocks,
-            inner_box: Box3 {
-                lo: [-0.38, -0.3, 0.05],
-                hi: [-0.04, 0.04, 0.39],
-                color: [0.15, 0.6, 0.55],
-            },
+            inner_box: Box3 { lo: [-0.38, -0.3, 0.05], hi: [-0.04, 0.04, 0.39], color: [0.15, 0.6, 0.55] },
             ball: ([0.18, 0.15, 0.33], 0.26),
             glass: true,
         }
@@ -119,25 +107,12 @@ impl Scene {
             let p = add(o, mul(d, t));
             if p[0] * p[0] + p[1] * p[1] < WALL_R * WALL_R {
                 let check = ((p[0] * 2.0).floor() + (p[1] * 2.0).floor()) as i64 & 1;
-                let c = if check == 0 {
-                    [0.78, 0.74, 0.66]
-                } else {
-                    [0.32, 0.3, 0.34]
-                };
-                take(Hit {
-                    t,
-                    p,
-                    n: [0.0, 0.0, 1.0],
-                    mat: Material::Diffuse(c),
-                });
+                let c = if check == 0 { [0.78, 0.74, 0.66] } else { [0.32, 0.3, 0.34] };
+                take(Hit { t, p, n: [0.0, 0.0, 1.0], mat: Material::Diffuse(c) });
             }
         }
         // Wall: inside of a vertical cylinder.
-        let (a, b, c) = (
-            d[0] * d[0] + d[1] * d[1],
-            o[0] * d[0] + o[1] * d[1],
-            o[0] * o[0] + o[1] * o[1] - WALL_R * WALL_R,
-        );
+        let (a, b, c) = (d[0] * d[0] + d[1] * d[1], o[0] * d[0] + o[1] * d[1], o[0] * o[0] + o[1] * o[1] - WALL_R * WALL_R);
         if a > 1e-12 {
             let disc = b * b - a * c;
             if disc >= 0.0 {
@@ -148,12 +123,7 @@ impl Scene {
                     let stripe = ((ang * 12.0 / std::f64::consts::PI).floor() as i64 & 1) as f64;
                     let base = hue((ang / std::f64::consts::TAU + 1.0) % 1.0);
                     let k = 0.55 + 0.3 * stripe + 0.15 * (p[2] / WALL_H);
-                    take(Hit {
-                        t,
-                        p,
-                        n: norm([-p[0], -p[1], 0.0]),
-                        mat: Material::Diffuse(mul(base, k)),
-                    });
+                    take(Hit { t, p, n: norm([-p[0], -p[1], 0.0]), mat: Material::Diffuse(mul(base, k)) });
                 }
             }
         }
@@ -161,12 +131,7 @@ impl Scene {
             if let Some((t, n)) = hit_box(bx, o, d) {
                 let p = add(o, mul(d, t));
                 let stripe = (((p[2] * 6.0).floor() as i64) & 1) as f64;
-                take(Hit {
-                    t,
-                    p,
-                    n,
-                    mat: Material::Diffuse(mul(bx.color, 0.75 + 0.25 * stripe)),
-                });
+                take(Hit { t, p, n, mat: Material::Diffuse(mul(bx.color, 0.75 + 0.25 * stripe)) });
             }
         }
         // The ball is opaque: only its nearest hit counts.
@@ -174,22 +139,12 @@ impl Scene {
             let p = add(o, mul(d, t));
             let n = norm(sub(p, self.ball.0));
             let band = (((n[2] * 4.0).floor() as i64) & 1) as f64;
-            take(Hit {
-                t,
-                p,
-                n,
-                mat: Material::Diffuse([0.9, 0.45 + 0.25 * band, 0.15]),
-            });
+            take(Hit { t, p, n, mat: Material::Diffuse([0.9, 0.45 + 0.25 * band, 0.15]) });
         }
         if glass && self.glass {
             for t in hit_sphere(GLASS_C, GLASS_R, o, d) {
                 let p = add(o, mul(d, t));
-                take(Hit {
-                    t,
-                    p,
-                    n: norm(sub(p, GLASS_C)),
-                    mat: Material::Glass,
-                });
+                take(Hit { t, p, n: norm(sub(p, GLASS_C)), mat: Material::Glass });
             }
         }
         best
@@ -200,25 +155,15 @@ impl Scene {
     /// is measured against.
     pub fn surface_distance(&self, p: V3) -> f64 {
         let box_dist = |b: &Box3| {
-            let q: [f64; 3] = std::array::from_fn(|k| {
-                (p[k] - 0.5 * (b.lo[k] + b.hi[k])).abs() - 0.5 * (b.hi[k] - b.lo[k])
-            });
+            let q: [f64; 3] = std::array::from_fn(|k| (p[k] - 0.5 * (b.lo[k] + b.hi[k])).abs() - 0.5 * (b.hi[k] - b.lo[k]));
             let outside = q.iter().map(|v| v.max(0.0).powi(2)).sum::<f64>().sqrt();
             (outside + q[0].max(q[1]).max(q[2]).min(0.0)).abs()
         };
         let r = p[0].hypot(p[1]);
-        let floor = if r < WALL_R {
-            p[2].abs()
-        } else {
-            (r - WALL_R).hypot(p[2])
-        };
+        let floor = if r < WALL_R { p[2].abs() } else { (r - WALL_R).hypot(p[2]) };
         let wall = (r - WALL_R).hypot(p[2] - p[2].clamp(0.0, WALL_H));
         let ball = (dot(sub(p, self.ball.0), sub(p, self.ball.0)).sqrt() - self.ball.1).abs();
-        self.blocks
-            .iter()
-            .chain(std::iter::once(&self.inner_box))
-            .map(box_dist)
-            .fold(floor.min(wall).min(ball), f64::min)
+        self.blocks.iter().chain(std::iter::once(&self.inner_box)).map(box_dist).fold(floor.min(wall).min(ball), f64::min)
     }
 
     /// Distance from `p` to the glass sphere's surface.
@@ -231,24 +176,12 @@ impl Scene {
         let Some(h) = self.intersect(o, d, f64::INFINITY, true) else {
             return [0.9, 0.93, 1.0];
         };
-        let n = if dot(h.n, d) > 0.0 {
-            mul(h.n, -1.0)
-        } else {
-            h.n
-        };
+        let n = if dot(h.n, d) > 0.0 { mul(h.n, -1.0) } else { h.n };
         match h.mat {
             Material::Diffuse(albedo) => {
                 let l = norm(SUN);
                 let lit = dot(n, l).max(0.0);
-                let shadow = if lit > 0.0
-                    && self
-                        .intersect(add(h.p, mul(n, 1e-5)), l, f64::INFINITY, false)
-                        .is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3)
-                {
-                    0.0
-                } else {
-                    1.0
-                };
+                let shadow = if lit > 0.0 && self.intersect(add(h.p, mul(n, 1e-5)), l, f64::INFINITY, false).is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3) { 0.0 } else { 1.0 };
                 mul(albedo, 0.35 + 0.65 * lit * shadow)
             }
             Material::Glass => {

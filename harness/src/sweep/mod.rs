@@ -77,14 +77,8 @@ fn plain(v: &toml::Value) -> String {
 
 impl Grid {
     pub fn parse(text: &str, what: &str) -> Result<Grid> {
-        let t: toml::Table =
-            toml::from_str(text).with_context(|| format!("{what}: not valid TOML"))?;
-        let mut g = Grid {
-            preset: "quick".into(),
-            product: false,
-            base: Vec::new(),
-            knobs: Vec::new(),
-        };
+        let t: toml::Table = toml::from_str(text).with_context(|| format!("{what}: not valid TOML"))?;
+        let mut g = Grid { preset: "quick".into(), product: false, base: Vec::new(), knobs: Vec::new() };
         for (k, v) in &t {
             match (k.as_str(), v) {
                 ("preset", toml::Value::String(s)) => g.preset = s.clone(),
@@ -92,9 +86,7 @@ impl Grid {
                     g.product = match s.as_str() {
                         "product" => true,
                         "one_at_a_time" => false,
-                        _ => bail!(
-                            "{what}: mode = \"{s}\": expected \"one_at_a_time\" or \"product\""
-                        ),
+                        _ => bail!("{what}: mode = \"{s}\": expected \"one_at_a_time\" or \"product\""),
                     }
                 }
                 ("base", toml::Value::Table(b)) => g.base = crate::train::config::flatten(b),
@@ -121,13 +113,7 @@ impl Grid {
         let mut sets: Vec<Settings> = vec![Vec::new()];
         if self.product {
             for (k, vals) in &self.knobs {
-                sets = sets
-                    .iter()
-                    .flat_map(|s| {
-                        vals.iter()
-                            .map(move |v| [s.clone(), vec![(k.clone(), v.clone())]].concat())
-                    })
-                    .collect();
+                sets = sets.iter().flat_map(|s| vals.iter().map(move |v| [s.clone(), vec![(k.clone(), v.clone())]].concat())).collect();
             }
         } else {
             for (k, vals) in &self.knobs {
@@ -137,9 +123,7 @@ impl Grid {
         let mut out: Vec<(String, Settings)> = Vec::new();
         let mut seen: Vec<crate::train::TrainConfig> = Vec::new();
         for s in sets {
-            let cfg = self
-                .config(&s)
-                .with_context(|| format!("grid run {}", name_of(&s)))?;
+            let cfg = self.config(&s).with_context(|| format!("grid run {}", name_of(&s)))?;
             // A knob value equal to the base's is the base run.
             if seen.contains(&cfg) {
                 continue;
@@ -151,19 +135,11 @@ impl Grid {
     }
 
     fn set_args(&self, run: &[(String, toml::Value)]) -> Vec<String> {
-        self.base
-            .iter()
-            .chain(run)
-            .map(|(k, v)| format!("{k}={}", show(v)))
-            .collect()
+        self.base.iter().chain(run).map(|(k, v)| format!("{k}={}", show(v))).collect()
     }
 
     fn config(&self, run: &[(String, toml::Value)]) -> Result<crate::train::TrainConfig> {
-        let a = TrainArgs {
-            preset: Some(self.preset.clone()),
-            set: self.set_args(run),
-            ..Default::default()
-        };
+        let a = TrainArgs { preset: Some(self.preset.clone()), set: self.set_args(run), ..Default::default() };
         crate::train::run::config_from_args(&a)
     }
 }
@@ -172,23 +148,12 @@ fn name_of(run: &[(String, toml::Value)]) -> String {
     if run.is_empty() {
         return "base".into();
     }
-    run.iter()
-        .map(|(k, v)| format!("{k}={}", plain(v)))
-        .collect::<Vec<_>>()
-        .join(",")
+    run.iter().map(|(k, v)| format!("{k}={}", plain(v))).collect::<Vec<_>>().join(",")
 }
 
 /// A directory name for a run name.
 fn dir_name(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || "._-=,".contains(c) {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || "._-=,".contains(c) { c } else { '_' }).collect()
 }
 
 /// One run's row.
@@ -214,40 +179,13 @@ pub struct Row {
 const STAGES: [&str; 3] = ["I", "II", "III"];
 
 impl Row {
-    fn from_metrics(
-        name: &str,
-        key: &str,
-        settings: BTreeMap<String, String>,
-        m: &serde_json::Value,
-    ) -> Result<Row> {
+    fn from_metrics(name: &str, key: &str, settings: BTreeMap<String, String>, m: &serde_json::Value) -> Result<Row> {
         let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
-        let gpu = m["gpu_ms_per_iteration"]
-            .as_object()
-            .map(|k| {
-                k.iter()
-                    .filter(|(n, _)| !crate::bench::nested_scope(n))
-                    .map(|(_, v)| f(v))
-                    .sum()
-            })
-            .unwrap_or(f64::NAN);
+        let gpu = m["gpu_ms_per_iteration"].as_object().map(|k| k.iter().filter(|(n, _)| !crate::bench::nested_scope(n)).map(|(_, v)| f(v)).sum()).unwrap_or(f64::NAN);
         let mut stages = BTreeMap::new();
-        for s in m["stages"]
-            .as_array()
-            .context("metrics.json has no stages")?
-        {
+        for s in m["stages"].as_array().context("metrics.json has no stages")? {
             let t = &s["test"];
-            stages.insert(
-                s["stage"].as_str().unwrap_or("?").to_string(),
-                (
-                    [
-                        f(&t["psnr"]),
-                        f(&t["ssim"]),
-                        f(&t["normal_mae_deg"]),
-                        f(&t["lpips"]),
-                    ],
-                    f(&s["wall_s"]),
-                ),
-            );
+            stages.insert(s["stage"].as_str().unwrap_or("?").to_string(), ([f(&t["psnr"]), f(&t["ssim"]), f(&t["normal_mae_deg"]), f(&t["lpips"])], f(&s["wall_s"])));
         }
         let t = &m["test"];
         Ok(Row {
@@ -269,26 +207,9 @@ impl Row {
 fn header(keys: &[String]) -> Vec<String> {
     let mut h = vec!["run".to_string(), "key".to_string()];
     h.extend(keys.iter().cloned());
-    h.extend(
-        [
-            "wall_s",
-            "gpu_ms_per_iteration",
-            "total_iterations",
-            "psnr",
-            "ssim",
-            "normal_mae_deg",
-            "lpips",
-        ]
-        .map(String::from),
-    );
+    h.extend(["wall_s", "gpu_ms_per_iteration", "total_iterations", "psnr", "ssim", "normal_mae_deg", "lpips"].map(String::from));
     for s in STAGES {
-        h.extend([
-            format!("{s}_psnr"),
-            format!("{s}_ssim"),
-            format!("{s}_normal_mae_deg"),
-            format!("{s}_lpips"),
-            format!("{s}_wall_s"),
-        ]);
+        h.extend([format!("{s}_psnr"), format!("{s}_ssim"), format!("{s}_normal_mae_deg"), format!("{s}_lpips"), format!("{s}_wall_s")]);
     }
     h
 }
@@ -313,19 +234,8 @@ fn field(s: &str) -> String {
 
 fn csv_line(r: &Row, keys: &[String]) -> String {
     let mut v = vec![field(&r.name), field(&r.key)];
-    v.extend(
-        keys.iter()
-            .map(|k| field(r.settings.get(k).map(String::as_str).unwrap_or(""))),
-    );
-    v.extend([
-        num(r.wall_s),
-        num(r.gpu_ms_per_iteration),
-        r.iterations.to_string(),
-        num(r.psnr),
-        num(r.ssim),
-        num(r.normal_mae_deg),
-        num(r.lpips),
-    ]);
+    v.extend(keys.iter().map(|k| field(r.settings.get(k).map(String::as_str).unwrap_or(""))));
+    v.extend([num(r.wall_s), num(r.gpu_ms_per_iteration), r.iterations.to_string(), num(r.psnr), num(r.ssim), num(r.normal_mae_deg), num(r.lpips)]);
     for s in STAGES {
         match r.stages.get(s) {
             Some((t, w)) => v.extend([num(t[0]), num(t[1]), num(t[2]), num(t[3]), num(*w)]),
@@ -337,8 +247,7 @@ fn csv_line(r: &Row, keys: &[String]) -> String {
 
 /// Split one CSV line (fields quoted as [`field`] writes them).
 fn split_csv(line: &str) -> Vec<String> {
-    let (mut out, mut cur, mut quoted, mut chars) =
-        (Vec::new(), String::new(), false, line.chars().peekable());
+    let (mut out, mut cur, mut quoted, mut chars) = (Vec::new(), String::new(), false, line.chars().peekable());
     while let Some(c) = chars.next() {
         match (c, quoted) {
             ('"', true) if chars.peek() == Some(&'"') => {
@@ -371,40 +280,18 @@ fn read_csv(path: &Path, keys: &[String]) -> Result<Vec<Row>> {
     for (i, line) in lines.enumerate() {
         let v = split_csv(line);
         if v.len() != want.len() {
-            bail!(
-                "{}: line {} has {} fields, expected {}",
-                path.display(),
-                i + 2,
-                v.len(),
-                want.len()
-            );
+            bail!("{}: line {} has {} fields, expected {}", path.display(), i + 2, v.len(), want.len());
         }
         let k = keys.len() + 1;
-        let mut r = Row {
-            name: v[0].clone(),
-            key: v[1].clone(),
-            ..Default::default()
-        };
-        r.settings = keys
-            .iter()
-            .cloned()
-            .zip(v[2..=k].iter().cloned())
-            .filter(|(_, s)| !s.is_empty())
-            .collect();
+        let mut r = Row { name: v[0].clone(), key: v[1].clone(), ..Default::default() };
+        r.settings = keys.iter().cloned().zip(v[2..=k].iter().cloned()).filter(|(_, s)| !s.is_empty()).collect();
         (r.wall_s, r.gpu_ms_per_iteration) = (p(&v[k + 1]), p(&v[k + 2]));
         r.iterations = v[k + 3].parse().unwrap_or(0);
-        (r.psnr, r.ssim, r.normal_mae_deg, r.lpips) =
-            (p(&v[k + 4]), p(&v[k + 5]), p(&v[k + 6]), p(&v[k + 7]));
+        (r.psnr, r.ssim, r.normal_mae_deg, r.lpips) = (p(&v[k + 4]), p(&v[k + 5]), p(&v[k + 6]), p(&v[k + 7]));
         for (j, s) in STAGES.iter().enumerate() {
             let b = k + 8 + 5 * j;
             if !v[b].is_empty() {
-                r.stages.insert(
-                    s.to_string(),
-                    (
-                        [p(&v[b]), p(&v[b + 1]), p(&v[b + 2]), p(&v[b + 3])],
-                        p(&v[b + 4]),
-                    ),
-                );
+                r.stages.insert(s.to_string(), ([p(&v[b]), p(&v[b + 1]), p(&v[b + 2]), p(&v[b + 3])], p(&v[b + 4])));
             }
         }
         rows.push(r);
@@ -413,11 +300,7 @@ fn read_csv(path: &Path, keys: &[String]) -> Result<Vec<Row>> {
 }
 
 fn write_csv(path: &Path, rows: &[Row], keys: &[String]) -> Result<()> {
-    let mut s = header(keys)
-        .iter()
-        .map(|h| field(h))
-        .collect::<Vec<_>>()
-        .join(",");
+    let mut s = header(keys).iter().map(|h| field(h)).collect::<Vec<_>>().join(",");
     s.push('\n');
     for r in rows {
         s.push_str(&csv_line(r, keys));
@@ -443,43 +326,22 @@ pub struct SweepOutcome {
 
 pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
     let grid = match &a.grid {
-        Some(p) => Grid::parse(
-            &std::fs::read_to_string(p)
-                .with_context(|| format!("{}: cannot read the grid", p.display()))?,
-            &p.display().to_string(),
-        )?,
+        Some(p) => Grid::parse(&std::fs::read_to_string(p).with_context(|| format!("{}: cannot read the grid", p.display()))?, &p.display().to_string())?,
         None => Grid::parse(DEFAULT_GRID, "the default grid")?,
     };
     let runs = grid.runs()?;
     let keys: Vec<String> = grid.knobs.iter().map(|k| k.0.clone()).collect();
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("{}: cannot create the sweep directory", a.out.display()))?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the sweep directory", a.out.display()))?;
     // Without a dataset: the built-in scene, written once to OUT/scene as `tgs train` does.
-    let dataset = crate::train::run::dataset_dir(
-        &TrainArgs {
-            dataset: a.dataset.clone(),
-            out: a.out.clone(),
-            ..Default::default()
-        },
-        a.quiet,
-    )?;
+    let dataset = crate::train::run::dataset_dir(&TrainArgs { dataset: a.dataset.clone(), out: a.out.clone(), ..Default::default() }, a.quiet)?;
     let csv = a.out.join("sweep.csv");
     let mut rows = read_csv(&csv, &keys)?;
     // Each run's key: its complete settings and the dataset's fingerprint.
     let base_cfg = grid.config(&[])?;
-    let digest = crate::train::run::load_dataset(&dataset, &base_cfg)?
-        .fingerprint()?
-        .digest();
-    let run_keys: Vec<String> = runs
-        .iter()
-        .map(|(_, s)| Ok(run_key(&toml::to_string(&grid.config(s)?)?, digest)))
-        .collect::<Result<_>>()?;
+    let digest = crate::train::run::load_dataset(&dataset, &base_cfg)?.fingerprint()?.digest();
+    let run_keys: Vec<String> = runs.iter().map(|(_, s)| Ok(run_key(&toml::to_string(&grid.config(s)?)?, digest))).collect::<Result<_>>()?;
     let before = rows.len();
-    rows.retain(|r| {
-        runs.iter()
-            .zip(&run_keys)
-            .any(|((n, _), k)| &r.name == n && &r.key == k)
-    });
+    rows.retain(|r| runs.iter().zip(&run_keys).any(|((n, _), k)| &r.name == n && &r.key == k));
     if rows.len() < before && !a.quiet {
         eprintln!("sweep: {} row(s) of {} were trained with other settings or another dataset (the base, preset, defaults or data changed): dropped, their runs train again", before - rows.len(), csv.display());
     }
@@ -494,30 +356,14 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         let dir = a.out.join("runs").join(dir_name(name));
         // An interrupted run trains again from the start: its wall time is one run's.
         if dir.exists() {
-            std::fs::remove_dir_all(&dir)
-                .with_context(|| format!("{}: cannot remove the unfinished run", dir.display()))?;
+            std::fs::remove_dir_all(&dir).with_context(|| format!("{}: cannot remove the unfinished run", dir.display()))?;
         }
-        let args = TrainArgs {
-            dataset: Some(dataset.clone()),
-            out: dir.clone(),
-            preset: Some(grid.preset.clone()),
-            set: grid.set_args(set),
-            profile: true,
-            quiet: a.quiet,
-            ..Default::default()
-        };
+        let args = TrainArgs { dataset: Some(dataset.clone()), out: dir.clone(), preset: Some(grid.preset.clone()), set: grid.set_args(set), profile: true, quiet: a.quiet, ..Default::default() };
         let o = train(ctx, &args).with_context(|| format!("sweep run {name}"))?;
         if o.interrupted {
-            return Ok(SweepOutcome {
-                rows,
-                trained,
-                interrupted: true,
-            });
+            return Ok(SweepOutcome { rows, trained, interrupted: true });
         }
-        let m: serde_json::Value = serde_json::from_slice(
-            &std::fs::read(dir.join("metrics.json"))
-                .with_context(|| format!("{}: no metrics.json", dir.display()))?,
-        )?;
+        let m: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).with_context(|| format!("{}: no metrics.json", dir.display()))?)?;
         let settings = set.iter().map(|(k, v)| (k.clone(), plain(v))).collect();
         rows.push(Row::from_metrics(name, &run_keys[i], settings, &m)?);
         trained += 1;
@@ -529,42 +375,27 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         write_csv(&csv, &rows, &keys)?;
         plot::draw(&a.out, &rows)?;
     }
-    Ok(SweepOutcome {
-        rows,
-        trained,
-        interrupted: false,
-    })
+    Ok(SweepOutcome { rows, trained, interrupted: false })
 }
 
 /// A run's key: FNV-1a over its settings (TOML) and the dataset digest.
 fn run_key(settings_toml: &str, dataset_digest: u64) -> String {
     use crate::data::fingerprint::{fnv1a, FNV_START};
-    format!(
-        "{:016x}",
-        fnv1a(
-            fnv1a(FNV_START, settings_toml.as_bytes()),
-            &dataset_digest.to_le_bytes()
-        )
-    )
+    format!("{:016x}", fnv1a(fnv1a(FNV_START, settings_toml.as_bytes()), &dataset_digest.to_le_bytes()))
 }
 
 /// Indices of the rows on the Pareto front of (wall time down, `score` up):
 /// no other row is at least as fast and at least as good, and strictly
 /// better in one. Sorted by wall time.
 pub fn pareto(rows: &[Row], score: impl Fn(&Row) -> f64) -> Vec<usize> {
-    let ok: Vec<usize> = (0..rows.len())
-        .filter(|&i| rows[i].wall_s.is_finite() && score(&rows[i]).is_finite())
-        .collect();
+    let ok: Vec<usize> = (0..rows.len()).filter(|&i| rows[i].wall_s.is_finite() && score(&rows[i]).is_finite()).collect();
     let mut front: Vec<usize> = ok
         .iter()
         .copied()
         .filter(|&i| {
             !ok.iter().any(|&j| {
                 let (a, b) = (&rows[j], &rows[i]);
-                j != i
-                    && a.wall_s <= b.wall_s
-                    && score(a) >= score(b)
-                    && (a.wall_s < b.wall_s || score(a) > score(b))
+                j != i && a.wall_s <= b.wall_s && score(a) >= score(b) && (a.wall_s < b.wall_s || score(a) > score(b))
             })
         })
         .collect();

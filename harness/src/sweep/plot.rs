@@ -21,40 +21,18 @@ const FONT: u32 = 13;
 const CHAR_W: i32 = 8;
 
 pub fn draw(dir: &Path, rows: &[Row]) -> Result<()> {
-    one(
-        &dir.join("psnr_vs_time.png"),
-        rows,
-        ("test PSNR (dB)", "higher is better"),
-        |r| r.psnr,
-        true,
-    )?;
-    one(
-        &dir.join("normal_mae_vs_time.png"),
-        rows,
-        ("test normal MAE on the glass (degrees)", "lower is better"),
-        |r| r.normal_mae_deg,
-        false,
-    )?;
+    one(&dir.join("psnr_vs_time.png"), rows, ("test PSNR (dB)", "higher is better"), |r| r.psnr, true)?;
+    one(&dir.join("normal_mae_vs_time.png"), rows, ("test normal MAE on the glass (degrees)", "lower is better"), |r| r.normal_mae_deg, false)?;
     // Without the LPIPS weights every row's is NaN: no empty chart.
     if rows.iter().any(|r| r.lpips.is_finite()) {
-        one(
-            &dir.join("lpips_vs_time.png"),
-            rows,
-            ("test LPIPS (AlexNet)", "lower is better"),
-            |r| r.lpips,
-            false,
-        )?;
+        one(&dir.join("lpips_vs_time.png"), rows, ("test LPIPS (AlexNet)", "lower is better"), |r| r.lpips, false)?;
     }
     Ok(())
 }
 
 /// Lower and upper bounds of `v` with 8% margins (a unit span when flat).
 fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = v
-        .filter(|x| x.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-            (a.min(x), b.max(x))
-        });
+    let (lo, hi) = v.filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
     if !lo.is_finite() {
         return (0.0, 1.0);
     }
@@ -69,9 +47,7 @@ pub fn log_time_axis(t: &[f64]) -> bool {
     if pos.is_empty() || pos.iter().any(|&x| x <= 0.0) {
         return false;
     }
-    let (lo, hi) = pos
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
+    let (lo, hi) = pos.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
     hi > LOG_SPAN * lo
 }
 
@@ -89,18 +65,8 @@ fn overlap(a: Rect, b: Rect) -> bool {
 /// `area`: the first of the candidate places around the point that is free,
 /// then the same further out. A label with no free place takes the first
 /// candidate (the table still names it).
-pub fn place_labels(
-    at: &[(i32, i32)],
-    sizes: &[(i32, i32)],
-    others: &[(i32, i32)],
-    marker: i32,
-    area: Rect,
-) -> Vec<(i32, i32)> {
-    let markers: Vec<Rect> = at
-        .iter()
-        .chain(others)
-        .map(|&(x, y)| (x - marker, y - marker, x + marker + 1, y + marker + 1))
-        .collect();
+pub fn place_labels(at: &[(i32, i32)], sizes: &[(i32, i32)], others: &[(i32, i32)], marker: i32, area: Rect) -> Vec<(i32, i32)> {
+    let markers: Vec<Rect> = at.iter().chain(others).map(|&(x, y)| (x - marker, y - marker, x + marker + 1, y + marker + 1)).collect();
     let mut placed: Vec<Rect> = Vec::new();
     let mut out = Vec::with_capacity(at.len());
     for (&(x, y), &(w, h)) in at.iter().zip(sizes) {
@@ -108,30 +74,13 @@ pub fn place_labels(
         let mut candidates = Vec::new();
         for ring in 0..4 {
             let d = g + ring * h;
-            candidates.extend([
-                (d, -d - h),
-                (d, d),
-                (-d - w, -d - h),
-                (-d - w, d),
-                (d, -h / 2),
-                (-d - w, -h / 2),
-                (-w / 2, -d - h),
-                (-w / 2, d),
-            ]);
+            candidates.extend([(d, -d - h), (d, d), (-d - w, -d - h), (-d - w, d), (d, -h / 2), (-d - w, -h / 2), (-w / 2, -d - h), (-w / 2, d)]);
         }
         let free = |&(dx, dy): &(i32, i32)| {
             let r = (x + dx, y + dy, x + dx + w, y + dy + h);
-            r.0 >= area.0
-                && r.1 >= area.1
-                && r.2 <= area.2
-                && r.3 <= area.3
-                && !placed.iter().chain(&markers).any(|&p| overlap(p, r))
+            r.0 >= area.0 && r.1 >= area.1 && r.2 <= area.2 && r.3 <= area.3 && !placed.iter().chain(&markers).any(|&p| overlap(p, r))
         };
-        let pick = candidates
-            .iter()
-            .copied()
-            .find(free)
-            .unwrap_or(candidates[0]);
+        let pick = candidates.iter().copied().find(free).unwrap_or(candidates[0]);
         placed.push((x + pick.0, y + pick.1, x + pick.0 + w, y + pick.1 + h));
         out.push(pick);
     }
@@ -147,13 +96,7 @@ fn cut(name: &str, max: usize) -> String {
     }
 }
 
-fn one(
-    path: &Path,
-    rows: &[Row],
-    (what, better): (&str, &str),
-    y: impl Fn(&Row) -> f64,
-    higher_better: bool,
-) -> Result<()> {
+fn one(path: &Path, rows: &[Row], (what, better): (&str, &str), y: impl Fn(&Row) -> f64, higher_better: bool) -> Result<()> {
     let err = |e: &dyn std::fmt::Display| anyhow!("{}: drawing the plot: {e}", path.display());
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
@@ -162,18 +105,11 @@ fn one(
     let log = log_time_axis(&times);
     // On a log axis the chart's x is log10(seconds), labelled in seconds.
     let tx = |t: f64| if log { t.log10() } else { t };
-    let (x0, x1) = if log {
-        range(times.iter().map(|&t| t.log10()))
-    } else {
-        range(times.iter().copied().chain([0.0]))
-    };
+    let (x0, x1) = if log { range(times.iter().map(|&t| t.log10())) } else { range(times.iter().copied().chain([0.0])) };
     let x0 = if log { x0 } else { x0.max(0.0) };
     let (y0, y1) = range(rows.iter().map(&y));
     let mut chart = ChartBuilder::on(&left)
-        .caption(
-            format!("{what} vs training wall time ({better})"),
-            ("sans-serif", 20),
-        )
+        .caption(format!("{what} vs training wall time ({better})"), ("sans-serif", 20))
         .margin(16)
         .x_label_area_size(44)
         .y_label_area_size(64)
@@ -181,112 +117,43 @@ fn one(
         .map_err(|e| err(&e))?;
     let seconds = |v: &f64| {
         let s = if log { 10f64.powf(*v) } else { *v };
-        if s >= 100.0 {
-            format!("{s:.0}")
-        } else if s >= 1.0 {
-            format!("{s:.1}")
-        } else {
-            format!("{s:.2}")
-        }
+        if s >= 100.0 { format!("{s:.0}") } else if s >= 1.0 { format!("{s:.1}") } else { format!("{s:.2}") }
     };
-    let x_desc = if log {
-        "training wall time (s, log scale)"
-    } else {
-        "training wall time (s)"
-    };
-    chart
-        .configure_mesh()
-        .x_desc(x_desc)
-        .y_desc(what)
-        .x_label_formatter(&seconds)
-        .draw()
-        .map_err(|e| err(&e))?;
-    let pts: Vec<(f64, f64)> = rows
-        .iter()
-        .map(|r| (tx(r.wall_s), y(r)))
-        .filter(|p| p.0.is_finite() && p.1.is_finite())
-        .collect();
-    chart
-        .draw_series(
-            pts.iter()
-                .map(|&p| Circle::new(p, 4, BLUE.mix(0.7).filled())),
-        )
-        .map_err(|e| err(&e))?
-        .label("run")
-        .legend(|(x, y)| Circle::new((x, y), 4, BLUE.filled()));
-    let front: Vec<usize> = pareto(rows, |r| if higher_better { y(r) } else { -y(r) })
-        .into_iter()
-        .filter(|&i| rows[i].wall_s.is_finite() && y(&rows[i]).is_finite())
-        .collect();
-    let line: Vec<(f64, f64)> = front
-        .iter()
-        .map(|&i| (tx(rows[i].wall_s), y(&rows[i])))
-        .collect();
-    chart
-        .draw_series(LineSeries::new(line.clone(), RED.stroke_width(2)))
-        .map_err(|e| err(&e))?
-        .label("Pareto front")
-        .legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], RED.stroke_width(2)));
-    chart
-        .draw_series(line.iter().map(|&p| Circle::new(p, 6, RED.stroke_width(2))))
-        .map_err(|e| err(&e))?;
+    let x_desc = if log { "training wall time (s, log scale)" } else { "training wall time (s)" };
+    chart.configure_mesh().x_desc(x_desc).y_desc(what).x_label_formatter(&seconds).draw().map_err(|e| err(&e))?;
+    let pts: Vec<(f64, f64)> = rows.iter().map(|r| (tx(r.wall_s), y(r))).filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
+    chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, BLUE.mix(0.7).filled()))).map_err(|e| err(&e))?.label("run").legend(|(x, y)| Circle::new((x, y), 4, BLUE.filled()));
+    let front: Vec<usize> = pareto(rows, |r| if higher_better { y(r) } else { -y(r) }).into_iter().filter(|&i| rows[i].wall_s.is_finite() && y(&rows[i]).is_finite()).collect();
+    let line: Vec<(f64, f64)> = front.iter().map(|&i| (tx(rows[i].wall_s), y(&rows[i]))).collect();
+    chart.draw_series(LineSeries::new(line.clone(), RED.stroke_width(2))).map_err(|e| err(&e))?.label("Pareto front").legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], RED.stroke_width(2)));
+    chart.draw_series(line.iter().map(|&p| Circle::new(p, 6, RED.stroke_width(2)))).map_err(|e| err(&e))?;
     // Numbers beside the front's points, placed clear of each other and of
     // every point (all runs' markers count).
     let px: Vec<(i32, i32)> = line.iter().map(|&p| chart.backend_coord(&p)).collect();
     let all_px: Vec<(i32, i32)> = pts.iter().map(|&p| chart.backend_coord(&p)).collect();
     let labels: Vec<String> = (1..=front.len()).map(|k| k.to_string()).collect();
-    let sizes: Vec<(i32, i32)> = labels
-        .iter()
-        .map(|l| (CHAR_W * l.len() as i32, FONT as i32 + 2))
-        .collect();
+    let sizes: Vec<(i32, i32)> = labels.iter().map(|l| (CHAR_W * l.len() as i32, FONT as i32 + 2)).collect();
     let (xr, yr) = chart.plotting_area().get_pixel_range();
     let area = (xr.start, yr.start, xr.end, yr.end);
     let offsets = place_labels(&px, &sizes, &all_px, 6, area);
     let font = ("sans-serif", FONT).into_font().color(&BLACK);
     for ((&(x, y), &(dx, dy)), label) in px.iter().zip(&offsets).zip(&labels) {
-        left.draw(&Text::new(label.clone(), (x + dx, y + dy), font.clone()))
-            .map_err(|e| err(&e))?;
+        left.draw(&Text::new(label.clone(), (x + dx, y + dy), font.clone())).map_err(|e| err(&e))?;
     }
-    chart
-        .configure_series_labels()
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.8))
-        .position(SeriesLabelPosition::LowerRight)
-        .draw()
-        .map_err(|e| err(&e))?;
+    chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.8)).position(SeriesLabelPosition::LowerRight).draw().map_err(|e| err(&e))?;
     // The table: each front run's number, name, time and value.
     let head = ("sans-serif", 15).into_font().color(&BLACK);
     let body = ("sans-serif", 12).into_font().color(&BLACK);
-    right
-        .draw(&Text::new("Pareto front", (8, 40), head))
-        .map_err(|e| err(&e))?;
+    right.draw(&Text::new("Pareto front", (8, 40), head)).map_err(|e| err(&e))?;
     let per_row = 30;
     let fits = ((SIZE.1 as i32 - 80) / per_row).max(1) as usize;
     for (k, &i) in front.iter().enumerate().take(fits) {
         let top = 64 + per_row * k as i32;
-        right
-            .draw(&Text::new(
-                format!("{}  {}", k + 1, cut(&rows[i].name, 34)),
-                (8, top),
-                body.clone(),
-            ))
-            .map_err(|e| err(&e))?;
-        right
-            .draw(&Text::new(
-                format!("    {:.1} s, {:.3}", rows[i].wall_s, y(&rows[i])),
-                (8, top + 14),
-                body.clone(),
-            ))
-            .map_err(|e| err(&e))?;
+        right.draw(&Text::new(format!("{}  {}", k + 1, cut(&rows[i].name, 34)), (8, top), body.clone())).map_err(|e| err(&e))?;
+        right.draw(&Text::new(format!("    {:.1} s, {:.3}", rows[i].wall_s, y(&rows[i])), (8, top + 14), body.clone())).map_err(|e| err(&e))?;
     }
     if front.len() > fits {
-        right
-            .draw(&Text::new(
-                format!("… and {} more (sweep.csv)", front.len() - fits),
-                (8, 64 + per_row * fits as i32),
-                body,
-            ))
-            .map_err(|e| err(&e))?;
+        right.draw(&Text::new(format!("… and {} more (sweep.csv)", front.len() - fits), (8, 64 + per_row * fits as i32), body)).map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))?;
     Ok(())
@@ -300,10 +167,7 @@ mod tests {
     fn log_axis_only_when_times_span_more_than_five_times() {
         assert!(!log_time_axis(&[10.0, 20.0, 49.0]));
         assert!(log_time_axis(&[10.0, 20.0, 51.0]));
-        assert!(
-            !log_time_axis(&[0.0, 100.0]),
-            "a zero time has no logarithm"
-        );
+        assert!(!log_time_axis(&[0.0, 100.0]), "a zero time has no logarithm");
         assert!(!log_time_axis(&[]));
         assert!(log_time_axis(&[f64::NAN, 1.0, 6.0]));
     }
@@ -312,31 +176,18 @@ mod tests {
     fn labels_of_crowded_points_do_not_overlap() {
         // Twelve points within a few pixels of each other (runs of nearly
         // the same time and score), two-digit labels.
-        let at: Vec<(i32, i32)> = (0..12)
-            .map(|k| (300 + 3 * (k % 4), 200 + 2 * (k / 4)))
-            .collect();
+        let at: Vec<(i32, i32)> = (0..12).map(|k| (300 + 3 * (k % 4), 200 + 2 * (k / 4))).collect();
         let sizes = vec![(16, 15); at.len()];
         let area = (0, 0, 690, 640);
         let off = place_labels(&at, &sizes, &[], 6, area);
-        let boxes: Vec<Rect> = at
-            .iter()
-            .zip(&off)
-            .zip(&sizes)
-            .map(|((&(x, y), &(dx, dy)), &(w, h))| (x + dx, y + dy, x + dx + w, y + dy + h))
-            .collect();
+        let boxes: Vec<Rect> = at.iter().zip(&off).zip(&sizes).map(|((&(x, y), &(dx, dy)), &(w, h))| (x + dx, y + dy, x + dx + w, y + dy + h)).collect();
         for (i, a) in boxes.iter().enumerate() {
-            assert!(
-                a.0 >= area.0 && a.1 >= area.1 && a.2 <= area.2 && a.3 <= area.3,
-                "label {i} leaves the chart: {a:?}"
-            );
+            assert!(a.0 >= area.0 && a.1 >= area.1 && a.2 <= area.2 && a.3 <= area.3, "label {i} leaves the chart: {a:?}");
             for (j, b) in boxes.iter().enumerate().skip(i + 1) {
                 assert!(!overlap(*a, *b), "labels {i} and {j} overlap: {a:?} {b:?}");
             }
             for (j, &(x, y)) in at.iter().enumerate() {
-                assert!(
-                    !overlap(*a, (x - 6, y - 6, x + 7, y + 7)),
-                    "label {i} covers point {j}"
-                );
+                assert!(!overlap(*a, (x - 6, y - 6, x + 7, y + 7)), "label {i} covers point {j}");
             }
         }
         // Unlabelled points obstruct only with their markers: a label may
@@ -364,24 +215,9 @@ mod drawn {
         let dir = std::env::temp_dir().join(format!("tgs-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let mut rows: Vec<Row> = (0..10)
-            .map(|k| Row {
-                name: format!(
-                    "reflection.lr_quats=1e-{k},reflection.iterations={}",
-                    100 * k
-                ),
-                wall_s: 30.0 + k as f64,
-                psnr: 28.0 + 0.02 * k as f64,
-                normal_mae_deg: 40.0 - 0.1 * k as f64,
-                ..Row::default()
-            })
+            .map(|k| Row { name: format!("reflection.lr_quats=1e-{k},reflection.iterations={}", 100 * k), wall_s: 30.0 + k as f64, psnr: 28.0 + 0.02 * k as f64, normal_mae_deg: 40.0 - 0.1 * k as f64, ..Row::default() })
             .collect();
-        rows.push(Row {
-            name: "paper".into(),
-            wall_s: 700.0,
-            psnr: 28.5,
-            normal_mae_deg: 30.0,
-            ..Row::default()
-        });
+        rows.push(Row { name: "paper".into(), wall_s: 700.0, psnr: 28.5, normal_mae_deg: 30.0, ..Row::default() });
         draw(&dir, &rows).unwrap();
         for p in ["psnr_vs_time.png", "normal_mae_vs_time.png"] {
             let img = image::open(dir.join(p)).unwrap();

@@ -8,14 +8,7 @@ use std::collections::BTreeMap;
 
 /// Settings a resumed run may change: they do not alter what was already
 /// trained (the schedule is a function of the iteration count).
-pub const RESUMABLE_SETTINGS: [&str; 6] = [
-    "iterations",
-    "reflection.iterations",
-    "light_field.iterations",
-    "reflection.reseed",
-    "test_interval",
-    "checkpoint_interval",
-];
+pub const RESUMABLE_SETTINGS: [&str; 6] = ["iterations", "reflection.iterations", "light_field.iterations", "reflection.reseed", "test_interval", "checkpoint_interval"];
 
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
     let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
@@ -61,13 +54,11 @@ pub(crate) fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainCon
     }
     if let Some(b) = &a.background {
         cfg.background = b.clone();
-        cfg.validate()
-            .with_context(|| format!("--background '{b}'"))?;
+        cfg.validate().with_context(|| format!("--background '{b}'"))?;
     }
     if let Some(n) = a.iterations {
         cfg.iterations = n;
-        cfg.validate()
-            .with_context(|| format!("--iterations {n}"))?;
+        cfg.validate().with_context(|| format!("--iterations {n}"))?;
     }
     cfg.validate()?;
     Ok(cfg)
@@ -109,22 +100,12 @@ pub(crate) fn settings(c: &TrainConfig) -> Result<BTreeMap<String, toml::Value>>
 
 /// The settings of `new` that differ from `saved`, except those `free`
 /// lets change, as "key = old in the checkpoint, new given" lines.
-pub(crate) fn changed_settings(
-    saved: &TrainConfig,
-    new: &TrainConfig,
-    free: impl Fn(&str) -> bool,
-) -> Result<Vec<String>> {
+pub(crate) fn changed_settings(saved: &TrainConfig, new: &TrainConfig, free: impl Fn(&str) -> bool) -> Result<Vec<String>> {
     let old = settings(saved)?;
     let new = settings(new)?;
     Ok(new
         .iter()
         .filter(|(k, v)| !free(k) && old.get(*k) != Some(*v))
-        .map(|(k, v)| {
-            format!(
-                "{k} = {} in the checkpoint, {} given",
-                old.get(k).map(show).unwrap_or_default(),
-                show(v)
-            )
-        })
+        .map(|(k, v)| format!("{k} = {} in the checkpoint, {} given", old.get(k).map(show).unwrap_or_default(), show(v)))
         .collect())
 }

@@ -35,10 +35,7 @@ pub struct Identity {
 /// A new run's id: the time and the process, hashed (unique per run
 /// directory in practice; it only has to tell two runs apart).
 pub fn new_run_id() -> String {
-    let t = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
+    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
     let mut h = crc32fast::Hasher::new();
     h.update(&t.to_le_bytes());
     h.update(&std::process::id().to_le_bytes());
@@ -96,32 +93,18 @@ const ENV_ARRAYS: [&str; 3] = ["env.param", "env.adam_m", "env.adam_v"];
 impl LightFieldHeader {
     pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
         let [depth, width, skip, levels_x, levels_w] = self.shape;
-        let shape = tgs_pipelines::MlpShape {
-            depth,
-            width,
-            skip,
-            levels_x,
-            levels_w,
-        };
+        let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
         shape.validate()?;
         Ok(shape)
     }
     pub fn shade(&self) -> tgs_pipelines::ShadeParams {
-        tgs_pipelines::ShadeParams {
-            centre: self.centre,
-            half_extent: self.half_extent,
-            threshold: self.threshold,
-            schlick: self.schlick,
-        }
+        tgs_pipelines::ShadeParams { centre: self.centre, half_extent: self.half_extent, threshold: self.threshold, schlick: self.schlick }
     }
     /// The arrays this state must hold (the reflection set's, then the
     /// network's parameters and Adam moments), checked against `arrays`.
     fn check(&self, shape: &tgs_pipelines::MlpShape, arrays: &[Vec<f32>]) -> Result<()> {
         let p = shape.params() as usize;
-        let want: Vec<(String, usize)> = refl_layout(self.n)
-            .into_iter()
-            .chain(MLP_ARRAYS.map(|n| (n.to_string(), p)))
-            .collect();
+        let want: Vec<(String, usize)> = refl_layout(self.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
         check_arrays(&want, &self.arrays, arrays)
     }
 }
@@ -134,10 +117,7 @@ impl ReflHeader {
         let layout = refl_layout(self.n);
         let env_len = 18 * self.env_res as usize * self.env_res as usize;
         let k = layout.len();
-        let want: Vec<(String, usize)> = layout
-            .into_iter()
-            .chain(ENV_ARRAYS.map(|n| (n.to_string(), env_len)))
-            .collect();
+        let want: Vec<(String, usize)> = layout.into_iter().chain(ENV_ARRAYS.map(|n| (n.to_string(), env_len))).collect();
         check_arrays(&want, &self.arrays, arrays)?;
         Ok(k)
     }
@@ -145,10 +125,7 @@ impl ReflHeader {
 
 fn refl_layout(n: u32) -> Vec<(String, usize)> {
     use tgs_pipelines::reflection::MATERIAL;
-    TrainableSet::layout(MATERIAL as usize)
-        .into_iter()
-        .map(|(name, w)| (format!("refl.{name}"), w * n as usize))
-        .collect()
+    TrainableSet::layout(MATERIAL as usize).into_iter().map(|(name, w)| (format!("refl.{name}"), w * n as usize)).collect()
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -173,10 +150,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         channels: set.params.channels,
         coeffs: set.params.coeffs,
         extent: tr.extent,
-        arrays: arrays
-            .iter()
-            .map(|(name, _, w)| (name.clone(), w * n))
-            .collect(),
+        arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
         identity: Some(identity.clone()),
         reflection: None,
         light_field: None,
@@ -191,12 +165,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
             names.push((name.to_string(), m.env.len()));
             refl_arrays.push((buf, m.env.len()));
         }
-        header.reflection = Some(ReflHeader {
-            n: m.set.len(),
-            env_res: m.env.res,
-            decision: d.clone(),
-            arrays: names,
-        });
+        header.reflection = Some(ReflHeader { n: m.set.len(), env_res: m.env.res, decision: d.clone(), arrays: names });
     }
     if let (Some(m), Some(d)) = (&tr.light_field, &tr.decision) {
         let mut names = Vec::new();
@@ -224,10 +193,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         f.write_all(&(json.len() as u32).to_le_bytes())?;
         f.write_all(&json)?;
         f.write_all(&crc32fast::hash(&json).to_le_bytes())?;
-        let bufs = arrays
-            .iter()
-            .map(|(_, buf, w)| (*buf, w * n))
-            .chain(refl_arrays.iter().map(|(b, l)| (*b, *l)));
+        let bufs = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).chain(refl_arrays.iter().map(|(b, l)| (*b, *l)));
         for (buf, len) in bufs {
             let data = buf.download_range(0, len)?;
             let bytes: &[u8] = bytemuck::cast_slice(&data);
@@ -241,11 +207,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
 
 /// The reflection set's arrays (names prefixed `refl.`, lengths) and
 /// buffers, in `TrainableSet::layout` order.
-fn push_reflection_set<'a>(
-    set: &'a TrainableSet,
-    names: &mut Vec<(String, usize)>,
-    bufs: &mut Vec<(&'a tgs_engine::Buffer<f32>, usize)>,
-) {
+fn push_reflection_set<'a>(set: &'a TrainableSet, names: &mut Vec<(String, usize)>, bufs: &mut Vec<(&'a tgs_engine::Buffer<f32>, usize)>) {
     let n = set.len() as usize;
     for (name, buf, w) in set.arrays() {
         names.push((format!("refl.{name}"), w * n));
@@ -255,66 +217,36 @@ fn push_reflection_set<'a>(
 
 /// Read a checkpoint's header and arrays.
 pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
-    let bytes = std::fs::read(path)
-        .with_context(|| format!("{}: cannot read the checkpoint", path.display()))?;
-    let bad = |what: &str| {
-        anyhow::anyhow!(
-            "{}: not a tgs checkpoint or corrupt ({what})",
-            path.display()
-        )
-    };
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read the checkpoint", path.display()))?;
+    let bad = |what: &str| anyhow::anyhow!("{}: not a tgs checkpoint or corrupt ({what})", path.display());
     if bytes.len() < 12 || (&bytes[..8] != MAGIC && &bytes[..8] != MAGIC_V1) {
         return Err(bad("magic"));
     }
     // Version 2 has a CRC-32 after the header and after every array.
     let sums = &bytes[..8] == MAGIC;
-    let crc_at = |at: usize| -> Option<u32> {
-        bytes
-            .get(at..at + 4)
-            .map(|b| u32::from_le_bytes(b.try_into().unwrap()))
-    };
+    let crc_at = |at: usize| -> Option<u32> { bytes.get(at..at + 4).map(|b| u32::from_le_bytes(b.try_into().unwrap())) };
     let hlen = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
-    let hbytes = 12usize
-        .checked_add(hlen)
-        .and_then(|end| bytes.get(12..end))
-        .ok_or_else(|| bad("header length"))?;
+    let hbytes = 12usize.checked_add(hlen).and_then(|end| bytes.get(12..end)).ok_or_else(|| bad("header length"))?;
     let mut at = 12 + hlen;
     if sums {
         if crc_at(at) != Some(crc32fast::hash(hbytes)) {
-            return Err(bad(
-                "the header's checksum does not match: the file was damaged",
-            ));
+            return Err(bad("the header's checksum does not match: the file was damaged"));
         }
         at += 4;
     }
-    let header: Header =
-        serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
+    let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut arrays = Vec::new();
-    let refl = header
-        .reflection
-        .iter()
-        .flat_map(|r| r.arrays.iter())
-        .chain(header.light_field.iter().flat_map(|l| l.arrays.iter()));
+    let refl = header.reflection.iter().flat_map(|r| r.arrays.iter()).chain(header.light_field.iter().flat_map(|l| l.arrays.iter()));
     for (name, len) in header.arrays.iter().chain(refl) {
-        let b = len
-            .checked_mul(4)
-            .and_then(|n| at.checked_add(n))
-            .and_then(|end| bytes.get(at..end))
-            .ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
+        let b = len.checked_mul(4).and_then(|n| at.checked_add(n)).and_then(|end| bytes.get(at..end)).ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
         at += 4 * len;
         if sums {
             if crc_at(at) != Some(crc32fast::hash(b)) {
-                return Err(bad(&format!(
-                    "array {name}'s checksum does not match: the file was damaged"
-                )));
+                return Err(bad(&format!("array {name}'s checksum does not match: the file was damaged")));
             }
             at += 4;
         }
-        arrays.push(
-            b.chunks_exact(4)
-                .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-                .collect(),
-        );
+        arrays.push(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect());
     }
     if at != bytes.len() {
         return Err(bad("trailing bytes"));
@@ -325,10 +257,7 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
 /// Parameters (the first five arrays) of a checkpoint as a host set.
 pub fn gaussians(h: &Header, arrays: &[Vec<f32>]) -> Result<HostGaussians> {
     if arrays.len() < 5 {
-        bail!(
-            "checkpoint has {} arrays, expected at least 5",
-            arrays.len()
-        );
+        bail!("checkpoint has {} arrays, expected at least 5", arrays.len());
     }
     let g = host_set(h.channels, h.coeffs, arrays);
     g.validate()?;
@@ -363,12 +292,7 @@ fn upload_set(set: &TrainableSet, arrays: &[Vec<f32>]) -> Result<()> {
 /// dataset), given its header and arrays as [`read`] returned them (the
 /// caller needs the header first, to find the dataset). Every array must
 /// have exactly the length its header's Gaussian count implies.
-pub fn restore(
-    ctx: &Arc<Context>,
-    path: &Path,
-    (h, arrays): (Header, Vec<Vec<f32>>),
-    data: &Dataset,
-) -> Result<Trainer> {
+pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f32>>), data: &Dataset) -> Result<Trainer> {
     let bad = |what: String| anyhow::anyhow!("{}: corrupt checkpoint ({what})", path.display());
     if let Some(id) = &h.identity {
         let now = data.fingerprint()?;
@@ -376,52 +300,30 @@ pub fn restore(
             bail!("{}: the dataset {} changed since this checkpoint was written: {c}; the run cannot continue on other data (train a new run)", path.display(), data.root.display());
         }
     }
-    h.config
-        .validate()
-        .map_err(|e| bad(format!("settings: {e:#}")))?;
+    h.config.validate().map_err(|e| bad(format!("settings: {e:#}")))?;
     let k = (h.config.sh_degree + 1).pow(2);
     if h.channels != 3 || h.coeffs != k {
-        return Err(bad(format!(
-            "{} channels x {} coefficients; sh_degree {} needs 3 x {k}",
-            h.channels, h.coeffs, h.config.sh_degree
-        )));
+        return Err(bad(format!("{} channels x {} coefficients; sh_degree {} needs 3 x {k}", h.channels, h.coeffs, h.config.sh_degree)));
     }
     if !(h.extent.is_finite() && h.extent > 0.0) {
         return Err(bad(format!("scene extent {}", h.extent)));
     }
     if let Some(v) = h.stack.iter().find(|&&v| v as usize >= data.train.len()) {
-        return Err(bad(format!(
-            "view {v} in the view order, the dataset has {} training views",
-            data.train.len()
-        )));
+        return Err(bad(format!("view {v} in the view order, the dataset has {} training views", data.train.len())));
     }
     let layout = TrainableSet::layout((h.channels * h.coeffs) as usize);
     let mut arrays = arrays;
     let refl_arrays = arrays.split_off(layout.len().min(arrays.len()));
     if layout.len() != arrays.len() {
-        bail!(
-            "{}: {} arrays, this version of tgs expects {}",
-            path.display(),
-            arrays.len(),
-            layout.len()
-        );
+        bail!("{}: {} arrays, this version of tgs expects {}", path.display(), arrays.len(), layout.len());
     }
-    for ((name, width), (hname, data)) in layout
-        .iter()
-        .zip(h.arrays.iter().map(|a| &a.0).zip(&arrays))
-    {
+    for ((name, width), (hname, data)) in layout.iter().zip(h.arrays.iter().map(|a| &a.0).zip(&arrays)) {
         if name != hname {
             return Err(bad(format!("array '{hname}' where '{name}' was expected")));
         }
-        let want = (h.n as usize)
-            .checked_mul(*width)
-            .ok_or_else(|| bad(format!("{} Gaussians", h.n)))?;
+        let want = (h.n as usize).checked_mul(*width).ok_or_else(|| bad(format!("{} Gaussians", h.n)))?;
         if data.len() != want {
-            return Err(bad(format!(
-                "array '{name}' has {} values, {} Gaussians need {want}",
-                data.len(),
-                h.n
-            )));
+            return Err(bad(format!("array '{name}' has {} values, {} Gaussians need {want}", data.len(), h.n)));
         }
         if data.iter().any(|v| !v.is_finite()) {
             return Err(bad(format!("array '{name}' holds NaN or infinite values")));
@@ -431,17 +333,10 @@ pub fn restore(
     let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
     upload_set(&tr.scattering.set, &arrays)?;
     match (&h.reflection, &h.light_field) {
-        (Some(r), None) => restore_reflection(&mut tr, r, refl_arrays)
-            .map_err(|e| bad(format!("Stage II state: {e:#}")))?,
-        (None, Some(l)) => restore_light_field(&mut tr, l, refl_arrays)
-            .map_err(|e| bad(format!("Stage III state: {e:#}")))?,
+        (Some(r), None) => restore_reflection(&mut tr, r, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?,
+        (None, Some(l)) => restore_light_field(&mut tr, l, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?,
         (Some(_), Some(_)) => return Err(bad("both a Stage II and a Stage III state".into())),
-        (None, None) if !refl_arrays.is_empty() => {
-            return Err(bad(format!(
-                "{} arrays after the scattering set without a Stage II or III header",
-                refl_arrays.len()
-            )))
-        }
+        (None, None) if !refl_arrays.is_empty() => return Err(bad(format!("{} arrays after the scattering set without a Stage II or III header", refl_arrays.len()))),
         (None, None) => {}
     }
     tr.iteration = h.iteration;
@@ -451,24 +346,13 @@ pub fn restore(
 }
 
 /// Every array named and sized as `want`, all finite.
-fn check_arrays(
-    want: &[(String, usize)],
-    have: &[(String, usize)],
-    arrays: &[Vec<f32>],
-) -> Result<()> {
+fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], arrays: &[Vec<f32>]) -> Result<()> {
     if want != have || arrays.len() != want.len() {
-        bail!(
-            "arrays {:?} do not match the expected {:?}",
-            have.iter().map(|a| &a.0).collect::<Vec<_>>(),
-            want.iter().map(|a| &a.0).collect::<Vec<_>>()
-        );
+        bail!("arrays {:?} do not match the expected {:?}", have.iter().map(|a| &a.0).collect::<Vec<_>>(), want.iter().map(|a| &a.0).collect::<Vec<_>>());
     }
     for ((name, len), data) in want.iter().zip(arrays) {
         if data.len() != *len || data.iter().any(|v| !v.is_finite()) {
-            bail!(
-                "array '{name}' has {} values (expected {len}) or non-finite ones",
-                data.len()
-            );
+            bail!("array '{name}' has {} values (expected {len}) or non-finite ones", data.len());
         }
     }
     Ok(())
@@ -476,37 +360,18 @@ fn check_arrays(
 
 /// The reflection set of a Stage II or III state (its first arrays).
 fn reflection_set(tr: &Trainer, arrays: &[Vec<f32>]) -> Result<TrainableSet> {
-    let set = TrainableSet::new(
-        &tr.context(),
-        &host_set(tgs_pipelines::reflection::MATERIAL, 1, arrays),
-    )?;
+    let set = TrainableSet::new(&tr.context(), &host_set(tgs_pipelines::reflection::MATERIAL, 1, arrays))?;
     upload_set(&set, arrays)?;
     Ok(set)
 }
 
-fn restore_light_field(
-    tr: &mut Trainer,
-    l: &LightFieldHeader,
-    arrays: Vec<Vec<f32>>,
-) -> Result<()> {
+fn restore_light_field(tr: &mut Trainer, l: &LightFieldHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
     let shape = l.shape()?;
     l.check(&shape, &arrays)?;
     let k = arrays.len() - 3;
     let set = reflection_set(tr, &arrays)?;
-    let net = super::lightfield::MlpParams::new(
-        &tr.context(),
-        shape,
-        &arrays[k],
-        &arrays[k + 1],
-        &arrays[k + 2],
-    )?;
-    tr.light_field = Some(super::lightfield::LightFieldModel::new(
-        &tr.context(),
-        set,
-        net,
-        l.shade(),
-        tr.cfg.adam_eps,
-    )?);
+    let net = super::lightfield::MlpParams::new(&tr.context(), shape, &arrays[k], &arrays[k + 1], &arrays[k + 2])?;
+    tr.light_field = Some(super::lightfield::LightFieldModel::new(&tr.context(), set, net, l.shade(), tr.cfg.adam_eps)?);
     tr.decision = Some(l.decision.clone());
     Ok(())
 }
@@ -515,18 +380,8 @@ fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -
     use tgs_pipelines::reflection::MATERIAL;
     let k = r.check(&arrays)?;
     let g = host_set(MATERIAL, 1, &arrays);
-    let env = tgs_pipelines::HostEnvMap {
-        res: r.env_res,
-        raw: arrays[k].clone(),
-        proxy: r.decision.proxy(),
-    };
-    let m = super::reflection::ReflectionModel::new(
-        &tr.context(),
-        &g,
-        &env,
-        tr.cfg.reflection.fresnel.pipeline(),
-        tr.cfg.adam_eps,
-    )?;
+    let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone(), proxy: r.decision.proxy() };
+    let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel.pipeline(), tr.cfg.adam_eps)?;
     upload_set(&m.set, &arrays)?;
     m.env.m.upload(&arrays[k + 1])?;
     m.env.v.upload(&arrays[k + 2])?;
@@ -540,18 +395,9 @@ pub enum RenderLayer {
     /// A Stage I run: the scattering set alone.
     Scattering,
     /// Stage II: the reflection set and the environment map.
-    Env {
-        set: HostGaussians,
-        env: tgs_pipelines::HostEnvMap,
-        fresnel: tgs_pipelines::Fresnel,
-    },
+    Env { set: HostGaussians, env: tgs_pipelines::HostEnvMap, fresnel: tgs_pipelines::Fresnel },
     /// Stage III: the reflection set, the network and its shading.
-    LightField {
-        set: HostGaussians,
-        shape: tgs_pipelines::MlpShape,
-        params: Vec<f32>,
-        shade: tgs_pipelines::ShadeParams,
-    },
+    LightField { set: HostGaussians, shape: tgs_pipelines::MlpShape, params: Vec<f32>, shade: tgs_pipelines::ShadeParams },
 }
 
 /// What rendering a checkpoint needs: the parameters only (no Adam moments,
@@ -566,18 +412,11 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
     h.config.validate().context("settings")?;
     let layout = TrainableSet::layout((h.channels * h.coeffs) as usize);
     if arrays.len() < layout.len() {
-        bail!(
-            "{} arrays, the scattering set alone has {}",
-            arrays.len(),
-            layout.len()
-        );
+        bail!("{} arrays, the scattering set alone has {}", arrays.len(), layout.len());
     }
     let refl = arrays.split_off(layout.len());
     let have: Vec<(String, usize)> = h.arrays.clone();
-    let want: Vec<(String, usize)> = layout
-        .iter()
-        .map(|(name, w)| (name.clone(), w * h.n as usize))
-        .collect();
+    let want: Vec<(String, usize)> = layout.iter().map(|(name, w)| (name.clone(), w * h.n as usize)).collect();
     check_arrays(&want, &have, &arrays)?;
     let scattering = gaussians(h, &arrays)?;
     let (stage, layer) = match (&h.reflection, &h.light_field) {
@@ -586,19 +425,8 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
             let k = r.check(&refl).context("Stage II state")?;
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
-            let env = tgs_pipelines::HostEnvMap {
-                res: r.env_res,
-                raw: refl[k].clone(),
-                proxy: r.decision.proxy(),
-            };
-            (
-                "II",
-                RenderLayer::Env {
-                    set,
-                    env,
-                    fresnel: h.config.reflection.fresnel.pipeline(),
-                },
-            )
+            let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[k].clone(), proxy: r.decision.proxy() };
+            ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel.pipeline() })
         }
         (None, Some(l)) => {
             let shape = l.shape().context("Stage III state")?;
@@ -606,23 +434,9 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
             let params = refl[refl.len() - 3].clone();
-            (
-                "III",
-                RenderLayer::LightField {
-                    set,
-                    shape,
-                    params,
-                    shade: l.shade(),
-                },
-            )
+            ("III", RenderLayer::LightField { set, shape, params, shade: l.shade() })
         }
-        _ => bail!(
-            "the arrays after the scattering set match neither a Stage II nor a Stage III state"
-        ),
+        _ => bail!("the arrays after the scattering set match neither a Stage II nor a Stage III state"),
     };
-    Ok(RenderState {
-        stage,
-        scattering,
-        layer,
-    })
+    Ok(RenderState { stage, scattering, layer })
 }

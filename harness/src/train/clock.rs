@@ -32,16 +32,8 @@ impl Before {
         std::fs::read(out.join(CLOCK_FILE))
             .ok()
             .and_then(|b| serde_json::from_slice::<Before>(&b).ok())
-            .filter(|b| {
-                b.iteration == iteration
-                    && [b.stage_s, b.train_s, b.total_s]
-                        .iter()
-                        .all(|s| s.is_finite() && *s >= 0.0)
-            })
-            .unwrap_or(Before {
-                iteration,
-                ..Before::default()
-            })
+            .filter(|b| b.iteration == iteration && [b.stage_s, b.train_s, b.total_s].iter().all(|s| s.is_finite() && *s >= 0.0))
+            .unwrap_or(Before { iteration, ..Before::default() })
     }
 }
 
@@ -58,11 +50,7 @@ impl Clocks {
     /// resumed run had spent.
     pub fn new(total_start: Instant, before: Before) -> Clocks {
         let now = Instant::now();
-        Clocks {
-            total: (total_start, before.total_s),
-            train: (now, before.train_s),
-            stage: (now, before.stage_s),
-        }
+        Clocks { total: (total_start, before.total_s), train: (now, before.train_s), stage: (now, before.stage_s) }
     }
     pub fn total_s(&self) -> f64 {
         self.total.1 + self.total.0.elapsed().as_secs_f64()
@@ -79,15 +67,7 @@ impl Clocks {
     }
     /// Write checkpoint-time.json for the checkpoint just saved at `iteration`.
     pub fn save(&self, out: &Path, iteration: u32) -> Result<()> {
-        let b = Before {
-            iteration,
-            stage_s: self.stage_s(),
-            train_s: self.train_s(),
-            total_s: self.total_s(),
-        };
-        crate::export::atomic_write(
-            &out.join(CLOCK_FILE),
-            serde_json::to_string_pretty(&b)?.as_bytes(),
-        )
+        let b = Before { iteration, stage_s: self.stage_s(), train_s: self.train_s(), total_s: self.total_s() };
+        crate::export::atomic_write(&out.join(CLOCK_FILE), serde_json::to_string_pretty(&b)?.as_bytes())
     }
 }

@@ -2,13 +2,11 @@
 //! `paper` preset), a `quick` preset for minutes on a CPU driver, a TOML
 //! file, and `--set key=value` overrides, applied in that order.
 
-use super::seed::SeedNormal;
-use super::settings::{
-    EnvStart, LightFresnel, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams,
-};
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+use super::seed::SeedNormal;
+use super::settings::{EnvStart, LightFresnel, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -158,17 +156,14 @@ impl Default for LightFieldConfig {
 
 impl LightFieldConfig {
     pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
-        let mut shape =
-            tgs_pipelines::MlpShape::preset(&self.preset).context("light_field.preset")?;
+        let mut shape = tgs_pipelines::MlpShape::preset(&self.preset).context("light_field.preset")?;
         if self.levels_x > 0 {
             shape.levels_x = self.levels_x;
         }
         if self.levels_w > 0 {
             shape.levels_w = self.levels_w;
         }
-        shape
-            .validate()
-            .context("light_field.levels_x / levels_w")?;
+        shape.validate().context("light_field.levels_x / levels_w")?;
         Ok(shape)
     }
     pub fn schlick(&self) -> bool {
@@ -184,22 +179,13 @@ impl LightFieldConfig {
         if self.iterations == 0 {
             bail!("light_field.iterations must be at least 1 (leave Stage III out with stages = \"I,II\")");
         }
-        for (k, v) in [
-            ("lr", self.lr),
-            ("lr_final", self.lr_final),
-            ("lr_f0", self.lr_f0),
-            ("lr_r", self.lr_r),
-            ("lambda_r", self.lambda_r),
-        ] {
+        for (k, v) in [("lr", self.lr), ("lr_final", self.lr_final), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lambda_r", self.lambda_r)] {
             if !(v >= 0.0 && v.is_finite()) {
                 bail!("light_field.{k} must be non-negative and finite, not {v}");
             }
         }
         if !(0.0..1.0).contains(&self.threshold) {
-            bail!(
-                "light_field.threshold must be in [0, 1), not {}",
-                self.threshold
-            );
+            bail!("light_field.threshold must be in [0, 1), not {}", self.threshold);
         }
         check_hf("light_field", self.lambda_hf, self.hf_percentile)
     }
@@ -399,34 +385,19 @@ impl ReflectionConfig {
             bail!("reflection.env_radius must be 0 (light infinitely far) or a positive multiple of the camera distance up to 1e6, not {}", self.env_radius);
         }
         if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
-            bail!(
-                "reflection.seed_agree must be in (0, 1], not {}",
-                self.seed_agree
-            );
+            bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);
         }
         if !(self.seed_significance > 0.0 && self.seed_significance <= 1.0) {
-            bail!(
-                "reflection.seed_significance must be in (0, 1], not {}",
-                self.seed_significance
-            );
+            bail!("reflection.seed_significance must be in (0, 1], not {}", self.seed_significance);
         }
         if !(self.seed_opacity > 0.0 && self.seed_opacity < 1.0) {
-            bail!(
-                "reflection.seed_opacity must be in (0, 1), not {}",
-                self.seed_opacity
-            );
+            bail!("reflection.seed_opacity must be in (0, 1), not {}", self.seed_opacity);
         }
         if self.iterations == 0 {
-            bail!(
-                "reflection.iterations must be at least 1 (leave Stage II out with stages = \"I\")"
-            );
+            bail!("reflection.iterations must be at least 1 (leave Stage II out with stages = \"I\")");
         }
         if self.env_res == 0 || self.env_res > tgs_pipelines::reflection::MAX_ENV_RES {
-            bail!(
-                "reflection.env_res must be 1..={}, not {}",
-                tgs_pipelines::reflection::MAX_ENV_RES,
-                self.env_res
-            );
+            bail!("reflection.env_res must be 1..={}, not {}", tgs_pipelines::reflection::MAX_ENV_RES, self.env_res);
         }
         for (k, v) in [("f0_init", self.f0_init), ("r_init", self.r_init)] {
             if !(v > 0.0 && v < 1.0) {
@@ -434,25 +405,13 @@ impl ReflectionConfig {
             }
         }
         check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
-        for (k, v) in [
-            ("lr_env", self.lr_env),
-            ("lr_f0", self.lr_f0),
-            ("lr_r", self.lr_r),
-            ("lr_opacity", self.lr_opacity),
-            ("lr_quats", self.lr_quats),
-            ("lr_scales", self.lr_scales),
-            ("lambda_normal", self.lambda_normal),
-            ("lambda_r", self.lambda_r),
-        ] {
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r)] {
             if !(v >= 0.0 && v.is_finite()) {
                 bail!("reflection.{k} must be non-negative and finite, not {v}");
             }
         }
         // Thresholds may be infinite (never run Stage II), not NaN.
-        for (k, v) in [
-            ("min_residual", self.min_residual),
-            ("min_view_dependence", self.min_view_dependence),
-        ] {
+        for (k, v) in [("min_residual", self.min_residual), ("min_view_dependence", self.min_view_dependence)] {
             if !(v >= 0.0) {
                 bail!("reflection.{k} must be non-negative, not {v}");
             }
@@ -535,17 +494,8 @@ impl TrainConfig {
             max_gaussians: 200_000,
             test_interval: 1000,
             checkpoint_interval: 500,
-            reflection: ReflectionConfig {
-                iterations: 1000,
-                env_res: 16,
-                prune_interval: 100,
-                ..ReflectionConfig::default()
-            },
-            light_field: LightFieldConfig {
-                iterations: 1000,
-                preset: "small".into(),
-                ..LightFieldConfig::default()
-            },
+            reflection: ReflectionConfig { iterations: 1000, env_res: 16, prune_interval: 100, ..ReflectionConfig::default() },
+            light_field: LightFieldConfig { iterations: 1000, preset: "small".into(), ..LightFieldConfig::default() },
             ..Self::paper()
         }
     }
@@ -560,26 +510,16 @@ impl TrainConfig {
 
     /// Overlay the keys of a TOML file.
     pub fn merge_toml_file(&mut self, path: &Path) -> Result<()> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read the config", path.display()))?;
-        let table: toml::Table = text
-            .parse()
-            .with_context(|| format!("{}: not valid TOML", path.display()))?;
-        self.merge(table)
-            .with_context(|| format!("{}", path.display()))
+        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the config", path.display()))?;
+        let table: toml::Table = text.parse().with_context(|| format!("{}: not valid TOML", path.display()))?;
+        self.merge(table).with_context(|| format!("{}", path.display()))
     }
 
     /// Apply `key=value` (value in TOML syntax; bare words are strings).
     pub fn set(&mut self, kv: &str) -> Result<()> {
-        let (k, v) = kv
-            .split_once('=')
-            .with_context(|| format!("--set '{kv}': expected KEY=VALUE"))?;
+        let (k, v) = kv.split_once('=').with_context(|| format!("--set '{kv}': expected KEY=VALUE"))?;
         let (k, v) = (k.trim(), v.trim());
-        let value: toml::Value = format!("x = {v}")
-            .parse::<toml::Table>()
-            .ok()
-            .and_then(|mut t| t.remove("x"))
-            .unwrap_or_else(|| toml::Value::String(v.to_string()));
+        let value: toml::Value = format!("x = {v}").parse::<toml::Table>().ok().and_then(|mut t| t.remove("x")).unwrap_or_else(|| toml::Value::String(v.to_string()));
         let mut table = toml::Table::new();
         table.insert(k.to_string(), value);
         self.merge(table).with_context(|| format!("--set '{kv}'"))
@@ -596,9 +536,7 @@ impl TrainConfig {
                 },
                 None => (&mut base, k.clone()),
             };
-            let Some(old) = table.get(&key) else {
-                bail!("unknown setting '{k}'")
-            };
+            let Some(old) = table.get(&key) else { bail!("unknown setting '{k}'") };
             // Integers given for float settings are fine.
             let v = match (old, v) {
                 (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(i as f64),
@@ -630,16 +568,12 @@ impl TrainConfig {
 
     /// Whether Stage II is scheduled.
     pub fn wants_reflection(&self) -> bool {
-        self.stage_list()
-            .map(|s| s.contains(&"II"))
-            .unwrap_or(false)
+        self.stage_list().map(|s| s.contains(&"II")).unwrap_or(false)
     }
 
     /// Whether Stage III is scheduled.
     pub fn wants_light_field(&self) -> bool {
-        self.stage_list()
-            .map(|s| s.contains(&"III"))
-            .unwrap_or(false)
+        self.stage_list().map(|s| s.contains(&"III")).unwrap_or(false)
     }
 
     /// Whether the opacity reset follows iteration `it` (2DGS: every
@@ -651,8 +585,7 @@ impl TrainConfig {
         let due = it > 0
             && it < self.densify_until
             && self.opacity_reset_interval > 0
-            && (it % self.opacity_reset_interval == 0
-                || (white_background && it == self.densify_from));
+            && (it % self.opacity_reset_interval == 0 || (white_background && it == self.densify_from));
         due && self.iterations.saturating_sub(it) >= self.opacity_reset_min_after.max(1)
     }
 
@@ -673,12 +606,7 @@ impl TrainConfig {
         if self.sh_degree > 3 {
             bail!("sh_degree must be 0..=3, not {}", self.sh_degree);
         }
-        for (k, v) in [
-            ("sh_interval", self.sh_interval),
-            ("densify_interval", self.densify_interval),
-            ("init_points", self.init_points),
-            ("max_gaussians", self.max_gaussians),
-        ] {
+        for (k, v) in [("sh_interval", self.sh_interval), ("densify_interval", self.densify_interval), ("init_points", self.init_points), ("max_gaussians", self.max_gaussians)] {
             if v == 0 {
                 bail!("{k} must be at least 1");
             }
@@ -708,27 +636,16 @@ impl TrainConfig {
                 bail!("{k} must be non-negative, not {v}");
             }
         }
-        for (k, v) in [
-            ("init_half_extent", self.init_half_extent),
-            ("init_far_depth", self.init_far_depth),
-            ("max_screen_size", self.max_screen_size),
-            ("max_world_size", self.max_world_size),
-        ] {
+        for (k, v) in [("init_half_extent", self.init_half_extent), ("init_far_depth", self.init_far_depth), ("max_screen_size", self.max_screen_size), ("max_world_size", self.max_world_size)] {
             if v <= 0.0 {
                 bail!("{k} must be positive, not {v}");
             }
         }
         if !(0.0..=10.0).contains(&self.init_far_fraction) {
-            bail!(
-                "init_far_fraction must be in [0, 10] (a fraction of init_points), not {}",
-                self.init_far_fraction
-            );
+            bail!("init_far_fraction must be in [0, 10] (a fraction of init_points), not {}", self.init_far_fraction);
         }
         if !(0.0..1.0).contains(&self.prune_opacity) {
-            bail!(
-                "prune_opacity must be in [0, 1), not {}",
-                self.prune_opacity
-            );
+            bail!("prune_opacity must be in [0, 1), not {}", self.prune_opacity);
         }
         self.background_rgb()?;
         self.stage_list()?;
@@ -742,13 +659,7 @@ impl TrainConfig {
             "white" => Ok([1.0; 3]),
             "black" => Ok([0.0; 3]),
             s => {
-                let v: Vec<f32> = s
-                    .split(',')
-                    .map(|t| t.trim().parse::<f32>())
-                    .collect::<Result<_, _>>()
-                    .map_err(|_| {
-                        anyhow::anyhow!("background '{s}' is not white, black or r,g,b")
-                    })?;
+                let v: Vec<f32> = s.split(',').map(|t| t.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|_| anyhow::anyhow!("background '{s}' is not white, black or r,g,b"))?;
                 match v.as_slice() {
                     [r, g, b] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b]),
                     _ => bail!("background '{s}' must be three values in [0, 1]"),
@@ -802,9 +713,7 @@ pub fn flatten(t: &toml::Table) -> Vec<(String, toml::Value)> {
     let mut out = Vec::new();
     for (k, v) in t {
         match v {
-            toml::Value::Table(sub) => {
-                out.extend(sub.iter().map(|(k2, v2)| (format!("{k}.{k2}"), v2.clone())))
-            }
+            toml::Value::Table(sub) => out.extend(sub.iter().map(|(k2, v2)| (format!("{k}.{k2}"), v2.clone()))),
             v => out.push((k.clone(), v.clone())),
         }
     }

@@ -40,13 +40,7 @@ pub fn outside_box(scat: &HostGaussians, centre: [f32; 3], half: [f32; 3]) -> Ho
         }
         let ls = [scat.log_scales[2 * i], scat.log_scales[2 * i + 1]];
         let q = std::array::from_fn(|k| scat.quats[4 * i + k]);
-        h.push(
-            p,
-            ls,
-            q,
-            scat.opacity[i],
-            &scat.features[f * i..f * (i + 1)],
-        );
+        h.push(p, ls, q, scat.opacity[i], &scat.features[f * i..f * (i + 1)]);
     }
     h
 }
@@ -56,11 +50,7 @@ fn face_camera(eye: [f32; 3], face: u32, px: u32) -> Camera {
     // The face's axis: the direction through its centre (one texel a side).
     let axis = HostEnvMap::texel_direction(1, face, 0, 0);
     // Any up not along the axis: the projection below is generic.
-    let up = if face < 2 {
-        [0.0, 1.0, 0.0]
-    } else {
-        [1.0, 0.0, 0.0]
-    };
+    let up = if face < 2 { [0.0, 1.0, 0.0] } else { [1.0, 0.0, 0.0] };
     let target = [eye[0] + axis[0], eye[1] + axis[1], eye[2] + axis[2]];
     // A 45-degree rotation of the face in the image would need tan = sqrt 2.
     Camera::look_at(eye, target, up, 2.0 * 1.5f32.atan(), px, px)
@@ -77,59 +67,35 @@ fn sample(planes: [&[f32]; 3], w: u32, h: u32, u: f32, v: f32) -> [f32; 3] {
     std::array::from_fn(|c| {
         let p = planes[c];
         let at = |x: u32, y: u32| p[(y * w + x) as usize];
-        (at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx) * (1.0 - fy)
-            + (at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx) * fy
+        (at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx) * (1.0 - fy) + (at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx) * fy
     })
 }
 
 /// The cube map of face size `res` seen from the reflection set's box
 /// (`refl_means`) with the scattering Gaussians `scat` outside it, at SH
 /// degree `sh` over `background`.
-pub fn scene_env_map(
-    ctx: &Arc<Context>,
-    scat: &HostGaussians,
-    sh: u32,
-    background: &[f32; 3],
-    refl_means: &[f32],
-    res: u32,
-    adam_eps: f32,
-) -> Result<(HostEnvMap, EnvInit)> {
+pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, background: &[f32; 3], refl_means: &[f32], res: u32, adam_eps: f32) -> Result<(HostEnvMap, EnvInit)> {
     let (centre, half) = normalization_box(refl_means);
     let outside = outside_box(scat, centre, half);
-    let info = EnvInit {
-        centre,
-        half_extent: half,
-        rendered: outside.len(),
-    };
+    let info = EnvInit { centre, half_extent: half, rendered: outside.len() };
     let mut env = HostEnvMap::constant(res, 0.0)?;
     if outside.is_empty() {
         return Ok((env, info));
     }
     // The set's own SH degree (its coefficient count); `sh` of it are active.
-    let degree = (1..=4)
-        .find(|d| d * d == scat.coeffs)
-        .context("the scattering set's SH coefficient count is not a square")?
-        - 1;
-    let mut model = ScatteringModel::new(ctx, &outside, degree, adam_eps)
-        .context("the scattering set for the environment map")?;
+    let degree = (1..=4).find(|d| d * d == scat.coeffs).context("the scattering set's SH coefficient count is not a square")? - 1;
+    let mut model = ScatteringModel::new(ctx, &outside, degree, adam_eps).context("the scattering set for the environment map")?;
     // Render at least 64 pixels a side so that small maps still average a few.
     let px = (res + res / 2).max(64);
     for face in 0..6u32 {
         let cam = face_camera(centre, face, px);
-        let r = model
-            .render(&cam, sh, background)
-            .with_context(|| format!("rendering cube face {face} for the environment map"))?;
-        let planes = [
-            r.plane(Plane::Feature(0)),
-            r.plane(Plane::Feature(1)),
-            r.plane(Plane::Feature(2)),
-        ];
+        let r = model.render(&cam, sh, background).with_context(|| format!("rendering cube face {face} for the environment map"))?;
+        let planes = [r.plane(Plane::Feature(0)), r.plane(Plane::Feature(1)), r.plane(Plane::Feature(2))];
         let m = &cam.world_to_view;
         for row in 0..res {
             for col in 0..res {
                 let d = HostEnvMap::texel_direction(res, face, row, col);
-                let v: [f32; 3] =
-                    std::array::from_fn(|k| m[k][0] * d[0] + m[k][1] * d[1] + m[k][2] * d[2]);
+                let v: [f32; 3] = std::array::from_fn(|k| m[k][0] * d[0] + m[k][1] * d[1] + m[k][2] * d[2]);
                 let (u, w) = (cam.fx * v[0] / v[2] + cam.cx, cam.fy * v[1] / v[2] + cam.cy);
                 let c = sample(planes, px, px, u, w);
                 let t = ((face * res + row) * res + col) as usize;

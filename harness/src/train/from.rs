@@ -17,26 +17,17 @@ use tgs_engine::Context;
 /// Settings that only shape the stages after Stage I: `--from RUN` may
 /// change them (everything else trained RUN's Stage I and must stay).
 fn later_stage_setting(k: &str) -> bool {
-    k.starts_with("reflection.")
-        || k.starts_with("light_field.")
-        || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
+    k.starts_with("reflection.") || k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
 }
 
 /// `--from RUN --stages III`: Stage III starts from RUN's finished Stage II.
 fn from_stage_two(a: &TrainArgs) -> bool {
-    a.from.is_some()
-        && a.stages
-            .as_deref()
-            .is_some_and(|s| s.split(',').next().unwrap_or("").trim() == "III")
+    a.from.is_some() && a.stages.as_deref().is_some_and(|s| s.split(',').next().unwrap_or("").trim() == "III")
 }
 
 /// Settings `--from RUN --stages III` may change: only Stage III's.
 fn stage_three_setting(k: &str) -> bool {
-    k.starts_with("light_field.")
-        || matches!(
-            k,
-            "stages" | "test_interval" | "checkpoint_interval" | "reflection.reseed"
-        )
+    k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval" | "reflection.reseed")
 }
 
 /// The later-stage settings a `--from` run takes from RUN unchanged
@@ -47,42 +38,18 @@ fn stage_three_setting(k: &str) -> bool {
 /// `stage_three` (`--stages III`) only those that may still change are
 /// listed (Stage III's and `reflection.reseed`), and Stage III's only when
 /// it runs.
-pub fn inherited_settings(
-    saved: &TrainConfig,
-    cfg: &TrainConfig,
-    stage_three: bool,
-) -> Result<Vec<String>> {
+pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, stage_three: bool) -> Result<Vec<String>> {
     let (old, new) = (settings(saved)?, settings(cfg)?);
-    let presets = [
-        settings(&TrainConfig::preset("quick")?)?,
-        settings(&TrainConfig::preset("paper")?)?,
-    ];
+    let presets = [settings(&TrainConfig::preset("quick")?)?, settings(&TrainConfig::preset("paper")?)?];
     // What this `--from` may change (the refusals' own lists), of the stages' settings.
-    let may_change: fn(&str) -> bool = if stage_three {
-        stage_three_setting
-    } else {
-        later_stage_setting
-    };
-    let later = |k: &str| {
-        may_change(k)
-            && (k.starts_with("reflection.")
-                || (cfg.wants_light_field() && k.starts_with("light_field.")))
-    };
+    let may_change: fn(&str) -> bool = if stage_three { stage_three_setting } else { later_stage_setting };
+    let later = |k: &str| may_change(k) && (k.starts_with("reflection.") || (cfg.wants_light_field() && k.starts_with("light_field.")));
     Ok(new
         .iter()
-        .filter(|(k, v)| {
-            later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v))
-        })
+        .filter(|(k, v)| later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
         .map(|(k, v)| {
-            let d: Vec<String> = presets
-                .iter()
-                .map(|p| p.get(k).map(show).unwrap_or_else(|| "none".into()))
-                .collect();
-            let d = if d[0] == d[1] {
-                d[0].clone()
-            } else {
-                format!("{} quick, {} paper", d[0], d[1])
-            };
+            let d: Vec<String> = presets.iter().map(|p| p.get(k).map(show).unwrap_or_else(|| "none".into())).collect();
+            let d = if d[0] == d[1] { d[0].clone() } else { format!("{} quick, {} paper", d[0], d[1]) };
             format!("{k} = {} (default {d})", show(v))
         })
         .collect())
@@ -93,33 +60,17 @@ pub fn inherited_settings(
 /// of RUN's Stage II (both sets), the dataset, its path, and RUN's records
 /// of the stages kept, for metrics.json. RUN's settings are the base;
 /// options may change only the later stages' settings.
-pub(crate) fn start_from(
-    ctx: &Arc<Context>,
-    a: &TrainArgs,
-    run: &Path,
-) -> Result<(Trainer, Dataset, String, Vec<serde_json::Value>)> {
+pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer, Dataset, String, Vec<serde_json::Value>)> {
     let keep_two = from_stage_two(a);
     // The state at the end of the stage kept, where the run went past it.
-    let snapshot = run.join(if keep_two {
-        STAGE_TWO_CHECKPOINT
-    } else {
-        STAGE_ONE_CHECKPOINT
-    });
-    let ckpt = if snapshot.is_file() {
-        snapshot
-    } else {
-        run.join(CHECKPOINT)
-    };
+    let snapshot = run.join(if keep_two { STAGE_TWO_CHECKPOINT } else { STAGE_ONE_CHECKPOINT });
+    let ckpt = if snapshot.is_file() { snapshot } else { run.join(CHECKPOINT) };
     if !ckpt.is_file() {
-        bail!(
-            "--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)",
-            run.display()
-        );
+        bail!("--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)", run.display());
     }
     let (mut h, mut arrays) = checkpoint::read(&ckpt)?;
     // Past Stage I, a stage that trained the scattering set changed it.
-    let stage_two_trained =
-        h.iteration > h.config.iterations && h.config.reflection.train_scattering;
+    let stage_two_trained = h.iteration > h.config.iterations && h.config.reflection.train_scattering;
     let stage_three_trained = h.light_field.is_some() && h.config.light_field.train_scattering;
     if !keep_two && (stage_two_trained || stage_three_trained) {
         bail!(
@@ -160,36 +111,19 @@ pub(crate) fn start_from(
         bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
     }
     if !cfg.wants_reflection() {
-        bail!(
-            "--from {}: stages = \"{}\" leaves nothing to run after its Stage I",
-            run.display(),
-            cfg.stages
-        );
+        bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
     }
     let inherited = inherited_settings(&h.config, &cfg, keep_two)?;
     if !a.quiet && !inherited.is_empty() {
         eprintln!("--from {}: these settings are that run's, not today's defaults (change them with --set KEY=VALUE):\n  {}", run.display(), inherited.join("\n  "));
     }
     if let Some(given) = &a.dataset {
-        let same = std::fs::canonicalize(given)
-            .map(|g| g == Path::new(&h.dataset))
-            .unwrap_or(false);
+        let same = std::fs::canonicalize(given).map(|g| g == Path::new(&h.dataset)).unwrap_or(false);
         if !same {
-            bail!(
-                "--from {} trained on {}; {} was given (leave the dataset out)",
-                run.display(),
-                h.dataset,
-                given.display()
-            );
+            bail!("--from {} trained on {}; {} was given (leave the dataset out)", run.display(), h.dataset, given.display());
         }
     }
-    let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| {
-        format!(
-            "--from {}: loading its dataset {}",
-            run.display(),
-            h.dataset
-        )
-    })?;
+    let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("--from {}: loading its dataset {}", run.display(), h.dataset))?;
     if !keep_two {
         if let Some(r) = h.reflection.take() {
             arrays.truncate(arrays.len().saturating_sub(r.arrays.len()));
@@ -200,11 +134,7 @@ pub(crate) fn start_from(
     }
     let dataset = h.dataset.clone();
     let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
-    tr.iteration = if keep_two {
-        cfg.iterations + cfg.reflection.iterations
-    } else {
-        cfg.iterations
-    };
+    tr.iteration = if keep_two { cfg.iterations + cfg.reflection.iterations } else { cfg.iterations };
     tr.cfg = cfg;
     tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
     let abs = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
@@ -213,11 +143,7 @@ pub(crate) fn start_from(
     let recs = kept
         .iter()
         .map(|st| {
-            let mut rec = records
-                .iter()
-                .find(|s| s["stage"] == *st)
-                .cloned()
-                .unwrap_or_else(|| json!({"stage": st}));
+            let mut rec = records.iter().find(|s| s["stage"] == *st).cloned().unwrap_or_else(|| json!({"stage": st}));
             rec["from"] = json!(abs.to_string_lossy());
             rec
         })
@@ -228,11 +154,7 @@ pub(crate) fn start_from(
 /// A finished run's stage records: stages.json (written when Stage II
 /// begins), else metrics.json's `stages`.
 fn stage_records_of(run: &Path) -> Vec<serde_json::Value> {
-    let read = |f: &str| {
-        std::fs::read(run.join(f))
-            .ok()
-            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-    };
+    let read = |f: &str| std::fs::read(run.join(f)).ok().and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
     if let Some(serde_json::Value::Array(v)) = read("stages.json") {
         return v;
     }

@@ -3,9 +3,9 @@
 //! the mean squared distance to the 3 nearest neighbours, random rotation,
 //! opacity 0.1, SH DC from the point colour, higher SH zero.
 
-use super::knn::knn3_mean_sq;
 use super::rng::Rng;
 use crate::data::Points;
+use super::knn::knn3_mean_sq;
 use tgs_pipelines::{Camera, HostGaussians};
 
 pub const SH_C0: f32 = 0.282_094_8;
@@ -15,8 +15,7 @@ pub const SH_C0: f32 = 0.282_094_8;
 pub fn random_points(n: u32, half: f32, rng: &mut Rng) -> Points {
     let mut p = Points::default();
     for _ in 0..n {
-        p.positions
-            .push([0; 3].map(|_: i32| (rng.uniform() * 2.0 - 1.0) * half));
+        p.positions.push([0; 3].map(|_: i32| (rng.uniform() * 2.0 - 1.0) * half));
         let c = [0; 3].map(|_: i32| rng.uniform() / 255.0 * SH_C0 + 0.5);
         p.colors.push(c);
     }
@@ -32,14 +31,7 @@ pub fn random_points(n: u32, half: f32, rng: &mut Rng) -> Points {
 /// view on a ring of cameras sees the ring's far side as background, and
 /// Gaussians that paint it there sit in front of any new view taken from
 /// the ring. Colours as in [`random_points`]. Deterministic in `rng`.
-pub fn far_points(
-    n: u32,
-    cameras: &[Camera],
-    half: f32,
-    sphere: ([f32; 3], f32),
-    far: f32,
-    rng: &mut Rng,
-) -> Points {
+pub fn far_points(n: u32, cameras: &[Camera], half: f32, sphere: ([f32; 3], f32), far: f32, rng: &mut Rng) -> Points {
     let mut p = Points::default();
     if cameras.is_empty() || !(far > 0.0) {
         return p;
@@ -47,17 +39,12 @@ pub fn far_points(
     let mut tries = 0u64;
     while p.positions.len() < n as usize && tries < 64 * n as u64 + 64 {
         tries += 1;
-        let cam =
-            &cameras[((rng.uniform() * cameras.len() as f32) as usize).min(cameras.len() - 1)];
-        let (u, v) = (
-            rng.uniform() * cam.width as f32 - 0.5,
-            rng.uniform() * cam.height as f32 - 0.5,
-        );
+        let cam = &cameras[((rng.uniform() * cameras.len() as f32) as usize).min(cameras.len() - 1)];
+        let (u, v) = (rng.uniform() * cam.width as f32 - 0.5, rng.uniform() * cam.height as f32 - 0.5);
         let (o, one) = (cam.centre(), cam.unproject(u, v, 1.0));
         // Ray o + z d, z the view depth.
         let d = [one[0] - o[0], one[1] - o[1], one[2] - o[2]];
-        let cube = cube_exit(o, d, half)
-            .unwrap_or_else(|| (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt());
+        let cube = cube_exit(o, d, half).unwrap_or_else(|| (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt());
         let near = sphere_exit(o, d, sphere).map_or(cube, |s| s.max(cube));
         let r = rng.uniform();
         if !(near > 0.0 && far > near) {
@@ -65,14 +52,12 @@ pub fn far_points(
         }
         let z = 1.0 / (1.0 / far + r * (1.0 / near - 1.0 / far));
         let x = [0, 1, 2].map(|k| o[k] + z * d[k]);
-        let inside =
-            (0..3).map(|k| (x[k] - sphere.0[k]).powi(2)).sum::<f32>() < sphere.1 * sphere.1;
+        let inside = (0..3).map(|k| (x[k] - sphere.0[k]).powi(2)).sum::<f32>() < sphere.1 * sphere.1;
         if inside || x.iter().all(|c| c.abs() <= half) || x.iter().any(|c| !c.is_finite()) {
             continue;
         }
         p.positions.push(x);
-        p.colors
-            .push([0; 3].map(|_: i32| rng.uniform() / 255.0 * SH_C0 + 0.5));
+        p.colors.push([0; 3].map(|_: i32| rng.uniform() / 255.0 * SH_C0 + 0.5));
     }
     p
 }
@@ -125,3 +110,4 @@ pub fn gaussians_from_points(points: &Points, sh_degree: u32, rng: &mut Rng) -> 
     }
     g
 }
+

@@ -32,11 +32,7 @@ struct Tree<'a> {
 
 impl<'a> Tree<'a> {
     fn new(pts: &'a [[f32; 3]]) -> Tree<'a> {
-        let mut t = Tree {
-            pts,
-            order: (0..pts.len() as u32).collect(),
-            nodes: Vec::new(),
-        };
+        let mut t = Tree { pts, order: (0..pts.len() as u32).collect(), nodes: Vec::new() };
         t.build(0, pts.len());
         t
     }
@@ -44,14 +40,7 @@ impl<'a> Tree<'a> {
     /// Build the node of `order[lo..hi]`; returns its index.
     fn build(&mut self, lo: usize, hi: usize) -> usize {
         let id = self.nodes.len();
-        self.nodes.push(Node {
-            lo,
-            hi,
-            axis: 0,
-            split: 0.0,
-            left: 0,
-            right: 0,
-        });
+        self.nodes.push(Node { lo, hi, axis: 0, split: 0.0, left: 0, right: 0 });
         if hi - lo <= LEAF {
             return id;
         }
@@ -64,31 +53,18 @@ impl<'a> Tree<'a> {
                 max[k] = max[k].max(p[k]);
             }
         }
-        let axis = (0..3)
-            .max_by(|&a, &b| (max[a] - min[a]).total_cmp(&(max[b] - min[b])))
-            .unwrap_or(0);
+        let axis = (0..3).max_by(|&a, &b| (max[a] - min[a]).total_cmp(&(max[b] - min[b]))).unwrap_or(0);
         if !(max[axis] > min[axis]) {
             // Every point the same (or non-finite): nothing to split.
             return id;
         }
         let mid = (lo + hi) / 2;
         let pts = self.pts;
-        self.order[lo..hi].select_nth_unstable_by(mid - lo, |&a, &b| {
-            pts[a as usize][axis]
-                .total_cmp(&pts[b as usize][axis])
-                .then(a.cmp(&b))
-        });
+        self.order[lo..hi].select_nth_unstable_by(mid - lo, |&a, &b| pts[a as usize][axis].total_cmp(&pts[b as usize][axis]).then(a.cmp(&b)));
         let split = pts[self.order[mid] as usize][axis];
         let left = self.build(lo, mid);
         let right = self.build(mid, hi);
-        self.nodes[id] = Node {
-            lo,
-            hi,
-            axis,
-            split,
-            left,
-            right,
-        };
+        self.nodes[id] = Node { lo, hi, axis, split, left, right };
         id
     }
 
@@ -112,11 +88,7 @@ impl<'a> Tree<'a> {
             return;
         }
         let diff = p[node.axis] - node.split;
-        let (near, far) = if diff < 0.0 {
-            (node.left, node.right)
-        } else {
-            (node.right, node.left)
-        };
+        let (near, far) = if diff < 0.0 { (node.left, node.right) } else { (node.right, node.left) };
         self.nearest(near, i, best);
         // Every point on the far side is at least |diff| away along the axis.
         if !(diff * diff >= best[2]) {
@@ -137,11 +109,7 @@ pub fn knn3_mean_sq(pts: &[[f32; 3]]) -> Vec<f32> {
             let mut best = [f32::INFINITY; 3];
             tree.nearest(0, i, &mut best);
             let found: Vec<f32> = best.iter().copied().filter(|d| d.is_finite()).collect();
-            if found.is_empty() {
-                1e-7
-            } else {
-                found.iter().sum::<f32>() / found.len() as f32
-            }
+            if found.is_empty() { 1e-7 } else { found.iter().sum::<f32>() / found.len() as f32 }
         })
         .collect()
 }

@@ -18,10 +18,7 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::MATERIAL;
-use tgs_pipelines::{
-    Adam, AdamGroup, Camera, Features, Frame, HfLoss, HfStats, ImageLoss, LossScratch, LossWeights,
-    Plane, Rasterizer, TrainableSet,
-};
+use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, HfLoss, HfStats, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -61,24 +58,11 @@ pub struct MlpParams {
 }
 
 impl MlpParams {
-    pub fn new(
-        ctx: &Arc<Context>,
-        shape: MlpShape,
-        params: &[f32],
-        m: &[f32],
-        v: &[f32],
-    ) -> Result<MlpParams> {
+    pub fn new(ctx: &Arc<Context>, shape: MlpShape, params: &[f32], m: &[f32], v: &[f32]) -> Result<MlpParams> {
         let n = shape.params() as usize;
-        for (what, a) in [
-            ("parameters", params),
-            ("first moments", m),
-            ("second moments", v),
-        ] {
+        for (what, a) in [("parameters", params), ("first moments", m), ("second moments", v)] {
             if a.len() != n {
-                anyhow::bail!(
-                    "light-field {what}: {} values for a network of {n}",
-                    a.len()
-                );
+                anyhow::bail!("light-field {what}: {} values for a network of {n}", a.len());
             }
         }
         Ok(MlpParams {
@@ -131,10 +115,7 @@ pub fn normalization_box(means: &[f32]) -> ([f32; 3], [f32; 3]) {
         return (centre, half);
     }
     for a in 0..3 {
-        let mut v: Vec<f32> = (0..n)
-            .map(|i| means[3 * i + a])
-            .filter(|x| x.is_finite())
-            .collect();
+        let mut v: Vec<f32> = (0..n).map(|i| means[3 * i + a]).filter(|x| x.is_finite()).collect();
         if v.is_empty() {
             continue;
         }
@@ -150,13 +131,7 @@ pub fn normalization_box(means: &[f32]) -> ([f32; 3], [f32; 3]) {
 impl LightFieldModel {
     /// Stage III from the reflection set `set` (its Adam moments kept) and a
     /// network `net`; `shade` fixes the normalization box.
-    pub fn new(
-        ctx: &Arc<Context>,
-        set: TrainableSet,
-        net: MlpParams,
-        shade: ShadeParams,
-        adam_eps: f32,
-    ) -> Result<LightFieldModel> {
+    pub fn new(ctx: &Arc<Context>, set: TrainableSet, net: MlpParams, shade: ShadeParams, adam_eps: f32) -> Result<LightFieldModel> {
         let n = set.len().max(1) as usize;
         let ch = CHANNELS as usize;
         let hf = HfLoss::new(ctx)?;
@@ -200,9 +175,7 @@ impl LightFieldModel {
         if !self.sizes.contains_key(&(w, h)) {
             let n = self.set.len();
             let max_g = n + 1024;
-            let frame = self
-                .raster
-                .frame(w, h, max_g, self.raster.initial_capacity(max_g))?;
+            let frame = self.raster.frame(w, h, max_g, self.raster.initial_capacity(max_g))?;
             let planes = (Plane::count(3) * pixels) as usize;
             let vb = ViewBuffers {
                 frame,
@@ -221,24 +194,11 @@ impl LightFieldModel {
     /// fits; returns the number of samples.
     fn forward(&mut self, cam: &Camera, profile: bool, timings: &mut Vec<Timing>) -> Result<u32> {
         self.view_buffers(cam.width, cam.height)?;
-        let b = self
-            .sizes
-            .get_mut(&(cam.width, cam.height))
-            .context("light-field view buffers")?;
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(
-                &mut rec,
-                &self.shading,
-                &self.raster,
-                &self.set,
-                &self.feat,
-                cam,
-                &self.shade,
-                b,
-                scratch,
-            )?;
+            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
             timings.extend(rec.submit_and_wait()?);
             if self.raster.fit(&mut b.frame)? {
                 break;
@@ -280,12 +240,7 @@ impl LightFieldModel {
     /// updates nothing and runs again after its frame grew). Otherwise the
     /// forward is its own submission: the scattering set's render, or the
     /// sample count the host must check against the list's capacity.
-    pub fn step(
-        &mut self,
-        cfg: &TrainConfig,
-        scattering: &mut ScatteringModel,
-        x: &LightFieldStepInput,
-    ) -> Result<StepOutput> {
+    pub fn step(&mut self, cfg: &TrainConfig, scattering: &mut ScatteringModel, x: &LightFieldStepInput) -> Result<StepOutput> {
         let cam = x.camera;
         let mut timings = Vec::new();
         let train_scat = x.scat.is_none();
@@ -293,15 +248,8 @@ impl LightFieldModel {
             timings.extend(scattering.forward_view(cam, x.sh_degree, &x.background, x.profile)?);
         }
         self.view_buffers(cam.width, cam.height)?;
-        let room = self
-            .scratch
-            .as_ref()
-            .is_some_and(|s| s.capacity() >= cam.width * cam.height);
-        let host_count = if train_scat || !room || !self.one_submission {
-            Some(self.forward(cam, x.profile, &mut timings)?)
-        } else {
-            None
-        };
+        let room = self.scratch.as_ref().is_some_and(|s| s.capacity() >= cam.width * cam.height);
+        let host_count = if train_scat || !room || !self.one_submission { Some(self.forward(cam, x.profile, &mut timings)?) } else { None };
         let (scat, scat_grad) = match x.scat {
             Some(s) => (s, None),
             None => {
@@ -309,11 +257,7 @@ impl LightFieldModel {
                 (out, Some(grad))
             }
         };
-        let weights = LossWeights {
-            ssim: cfg.lambda_ssim,
-            normal: 0.0,
-            dist: 0.0,
-        };
+        let weights = LossWeights { ssim: cfg.lambda_ssim, normal: 0.0, dist: 0.0 };
         let lf = &cfg.light_field;
         let colour_only = lf.scattering_colour_only();
         let it = x.iteration as u64;
@@ -322,70 +266,24 @@ impl LightFieldModel {
         let material_len = (MATERIAL * self.set.len()) as usize;
         let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
         loop {
-            let b = self
-                .sizes
-                .get_mut(&(cam.width, cam.height))
-                .context("light-field view buffers")?;
+            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
             let scratch = self.scratch.as_ref().context("light-field scratch")?;
             let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             match host_count {
-                Some(n) => self
-                    .mlp
-                    .record_forward(&mut rec, &self.net.params, n, scratch)?,
+                Some(n) => self.mlp.record_forward(&mut rec, &self.net.params, n, scratch)?,
                 None => {
-                    record_forward(
-                        &mut rec,
-                        &self.shading,
-                        &self.raster,
-                        &self.set,
-                        &self.feat,
-                        cam,
-                        &self.shade,
-                        b,
-                        scratch,
-                    )?;
-                    self.mlp.record_forward_counted(
-                        &mut rec,
-                        &self.net.params,
-                        &b.samples.count,
-                        scratch,
-                    )?;
+                    record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
+                    self.mlp.record_forward_counted(&mut rec, &self.net.params, &b.samples.count, scratch)?;
                 }
             }
             let sc = rec.begin_scope("lf.composite");
-            self.shading.record_composite(
-                &mut rec,
-                cam,
-                &self.shade,
-                scat,
-                &b.frame.out,
-                &b.samples,
-                &scratch.out,
-                &b.loss_in,
-            )?;
+            self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
             rec.end_scope(sc);
-            self.loss.record_planes(
-                &mut rec,
-                &b.loss_in,
-                &b.loss_grad,
-                x.target,
-                cam,
-                &weights,
-                &mut b.loss,
-            )?;
+            self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
             if lf.lambda_hf > 0.0 {
                 let sc = rec.begin_scope("loss.hf");
-                self.hf.record(
-                    &mut rec,
-                    &b.loss_in,
-                    x.target,
-                    cam.width * cam.height,
-                    lf.hf_percentile / 100.0,
-                    lf.lambda_hf,
-                    &b.loss_grad,
-                    &self.hf_stats,
-                )?;
+                self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, lf.hf_percentile / 100.0, lf.lambda_hf, &b.loss_grad, &self.hf_stats)?;
                 rec.end_scope(sc);
             }
             let sc = rec.begin_scope("lf.composite_backward");
@@ -396,114 +294,34 @@ impl LightFieldModel {
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
             let r_prior = lf.lambda_r / (cam.width * cam.height) as f32;
-            self.shading.record_composite_backward(
-                &mut rec,
-                cam,
-                &self.shade,
-                scat,
-                &b.frame.out,
-                &b.samples,
-                &scratch.out,
-                &b.loss_grad,
-                d_phi,
-                &b.frame.grad_out,
-                scat_grad,
-                r_prior,
-            )?;
+            self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if lf.lambda_r > 0.0 {
-                rec.read_back(
-                    &b.frame.out,
-                    super::reflection::R_PLANE * (cam.width * cam.height) as usize,
-                    &b.r_host,
-                )?;
+                rec.read_back(&b.frame.out, super::reflection::R_PLANE * (cam.width * cam.height) as usize, &b.r_host)?;
             }
             match host_count {
-                Some(n) => self.mlp.record_backward(
-                    &mut rec,
-                    &self.net.params,
-                    n,
-                    d_phi,
-                    &self.net.grads,
-                    scratch,
-                )?,
-                None => self.mlp.record_backward_counted(
-                    &mut rec,
-                    &self.net.params,
-                    &b.samples.count,
-                    d_phi,
-                    &self.net.grads,
-                    scratch,
-                )?,
+                Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
+                None => self.mlp.record_backward_counted(&mut rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
             }
-            self.raster.record_backward_with(
-                &mut rec,
-                &self.set.params,
-                &self.feat,
-                &self.set.grads,
-                &self.dfeat,
-                0,
-                &b.frame,
-            )?;
+            self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
             let sc = rec.begin_scope("lf.material_backward");
-            self.shading.record_material_backward(
-                &mut rec,
-                &self.set.params.features,
-                self.set.len(),
-                &self.dfeat,
-                &self.set.grads.features,
-            )?;
+            self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
             rec.end_scope(sc);
             if train_scat {
-                scattering.record_backward_external(
-                    &mut rec,
-                    cfg,
-                    cam,
-                    x.sh_degree,
-                    x.lr_means,
-                    x.global_iteration,
-                    colour_only,
-                )?;
+                scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration, colour_only)?;
             }
             let (n, s) = (&self.net, &self.set);
             let np = n.shape.params() as usize;
             if host_count.is_some() {
                 let sc = rec.begin_scope("adam");
-                self.adam.record(
-                    &mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it,
-                )?;
-                self.adam.record(
-                    &mut rec,
-                    &s.params.features,
-                    &s.grads.features,
-                    &s.m.features,
-                    &s.v.features,
-                    material_len,
-                    &material_group,
-                    it,
-                )?;
+                self.adam.record(&mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it)?;
+                self.adam.record(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, material_len, &material_group, it)?;
                 rec.end_scope(sc);
             } else {
-                let args = self.raster.record_fit_gate(
-                    &mut rec,
-                    &b.frame,
-                    &[self.adam.grid(np), self.adam.grid(material_len)],
-                )?;
+                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.adam.grid(np), self.adam.grid(material_len)])?;
                 let sc = rec.begin_scope("adam");
-                self.adam.record_gated(
-                    &mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it, &args[0],
-                )?;
-                self.adam.record_gated(
-                    &mut rec,
-                    &s.params.features,
-                    &s.grads.features,
-                    &s.m.features,
-                    &s.v.features,
-                    material_len,
-                    &material_group,
-                    it,
-                    &args[1],
-                )?;
+                self.adam.record_gated(&mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it, &args[0])?;
+                self.adam.record_gated(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, material_len, &material_group, it, &args[1])?;
                 rec.end_scope(sc);
                 rec.read_back(&b.samples.count, 0, &self.count_host)?;
             }
@@ -527,12 +345,7 @@ impl LightFieldModel {
         if lf.lambda_r > 0.0 {
             loss += lf.lambda_r as f64 * super::mean(&b.r_host.read()?);
         }
-        Ok(StepOutput {
-            loss,
-            values,
-            densified: None,
-            timings,
-        })
+        Ok(StepOutput { loss, values, densified: None, timings })
     }
 
     /// Render `cam` composited over the scattering colour `scat` (3 planes).
@@ -542,28 +355,14 @@ impl LightFieldModel {
         let b = &self.sizes[&(cam.width, cam.height)];
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         let mut rec = Recorder::new(&self.ctx)?;
-        self.mlp
-            .record_forward(&mut rec, &self.net.params, count, scratch)?;
-        self.shading.record_composite(
-            &mut rec,
-            cam,
-            &self.shade,
-            scat,
-            &b.frame.out,
-            &b.samples,
-            &scratch.out,
-            &b.loss_in,
-        )?;
+        self.mlp.record_forward(&mut rec, &self.net.params, count, scratch)?;
+        self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
         rec.submit_and_wait()?;
         let n = (cam.width * cam.height) as usize;
         let composite = b.loss_in.download()?;
         let refl = b.frame.out.download()?;
         let sample_of = b.samples.sample_of.download()?;
-        let phi = if count > 0 {
-            scratch.out.download_range(0, (OUT * count) as usize)?
-        } else {
-            Vec::new()
-        };
+        let phi = if count > 0 { scratch.out.download_range(0, (OUT * count) as usize)? } else { Vec::new() };
         // F Phi per pixel (the composite kernel's F, recomputed on the host).
         let mut reflected = vec![0.0; 3 * n];
         let mut mask = vec![0.0; n];
@@ -586,28 +385,16 @@ impl LightFieldModel {
                 reflected[c * n + i] = f * phi[3 * s as usize + c];
             }
         }
-        Ok(ReflRendered {
-            width: cam.width,
-            height: cam.height,
-            composite,
-            refl,
-            channels: CHANNELS,
-            phi: Some(PhiLayers { reflected, mask }),
-        })
+        Ok(ReflRendered { width: cam.width, height: cam.height, composite, refl, channels: CHANNELS, phi: Some(PhiLayers { reflected, mask }) })
     }
 }
 
 /// n . v at pixel `i` of a reflection render (1 without a normal).
 fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
-    let (x, y) = (
-        (i % cam.width as usize) as f32,
-        (i / cam.width as usize) as f32,
-    );
+    let (x, y) = ((i % cam.width as usize) as f32, (i / cam.width as usize) as f32);
     let ray = [(x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0];
     let l = (ray[0] * ray[0] + ray[1] * ray[1] + 1.0).sqrt();
-    let nn: Vec<f32> = (0..3)
-        .map(|k| refl[Plane::Normal(k).index(CHANNELS) as usize * n + i])
-        .collect();
+    let nn: Vec<f32> = (0..3).map(|k| refl[Plane::Normal(k).index(CHANNELS) as usize * n + i]).collect();
     let nl = (nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2]).sqrt();
     if nl <= 1e-12 {
         return 1.0;
@@ -618,29 +405,11 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
 /// Record the reflection set's material features, its rasterization into
 /// `b.frame` and the view's sample list (Phi's inputs, `b.samples.count`).
 #[allow(clippy::too_many_arguments)]
-fn record_forward(
-    rec: &mut Recorder,
-    shading: &LightFieldShading,
-    raster: &Rasterizer,
-    set: &TrainableSet,
-    feat: &Buffer<f32>,
-    cam: &Camera,
-    shade: &ShadeParams,
-    b: &ViewBuffers,
-    scratch: &MlpScratch,
-) -> Result<()> {
+fn record_forward(rec: &mut Recorder, shading: &LightFieldShading, raster: &Rasterizer, set: &TrainableSet, feat: &Buffer<f32>, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
     let sc = rec.begin_scope("lf.material");
     shading.record_material(rec, &set.params.features, set.len(), feat)?;
     rec.end_scope(sc);
-    raster.record_forward_with(
-        rec,
-        &set.params,
-        feat,
-        cam,
-        &[0.0; CHANNELS as usize],
-        0,
-        &b.frame,
-    )?;
+    raster.record_forward_with(rec, &set.params, feat, cam, &[0.0; CHANNELS as usize], 0, &b.frame)?;
     let sc = rec.begin_scope("lf.samples");
     shading.record_samples(rec, cam, shade, &b.frame.out, &b.samples, &scratch.samples)?;
     rec.end_scope(sc);

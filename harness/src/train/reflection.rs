@@ -18,9 +18,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::reflection::{TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamGroup, Camera, Densifier, DensifyParams, EnvMap, Features, Frame, Fresnel, HfLoss,
-    HfStats, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer,
-    ReflectionShading, TrainableSet,
+    Adam, AdamGroup, Camera, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HfLoss, HfStats, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -142,37 +140,18 @@ impl ReflectionModel {
     /// (when given) followed by the residual-hull `seeds` (opacity
     /// `seed_opacity`), f0 and r at their initial values, and the cube map
     /// `env`.
-    pub fn from_scattering(
-        ctx: &Arc<Context>,
-        copy: Option<&HostGaussians>,
-        seeds: &[Seed],
-        env: HostEnvMap,
-        rc: &ReflectionConfig,
-        adam_eps: f32,
-    ) -> Result<ReflectionModel> {
+    pub fn from_scattering(ctx: &Arc<Context>, copy: Option<&HostGaussians>, seeds: &[Seed], env: HostEnvMap, rc: &ReflectionConfig, adam_eps: f32) -> Result<ReflectionModel> {
         let mut h = HostGaussians::new(MATERIAL, 1);
         let (f0, r) = (logit(rc.f0_init), logit(rc.r_init));
         if let Some(scat) = copy {
             for i in 0..scat.len() {
                 let g = |v: &[f32], w: usize| -> Vec<f32> { v[w * i..w * (i + 1)].to_vec() };
-                h.push(
-                    g(&scat.means, 3).try_into().unwrap(),
-                    g(&scat.log_scales, 2).try_into().unwrap(),
-                    g(&scat.quats, 4).try_into().unwrap(),
-                    scat.opacity[i],
-                    &[f0, f0, f0, r],
-                );
+                h.push(g(&scat.means, 3).try_into().unwrap(), g(&scat.log_scales, 2).try_into().unwrap(), g(&scat.quats, 4).try_into().unwrap(), scat.opacity[i], &[f0, f0, f0, r]);
             }
         }
         for s in seeds {
             let ls = s.scale.ln();
-            h.push(
-                s.position,
-                [ls, ls],
-                quat_for_normal(s.normal),
-                logit(rc.seed_opacity),
-                &[f0, f0, f0, r],
-            );
+            h.push(s.position, [ls, ls], quat_for_normal(s.normal), logit(rc.seed_opacity), &[f0, f0, f0, r]);
         }
         if h.is_empty() {
             bail!("the reflection set would be empty (reflection.init = '{}' found nothing to start from)", rc.init);
@@ -180,19 +159,9 @@ impl ReflectionModel {
         Self::new(ctx, &h, &env, rc.fresnel.pipeline(), adam_eps)
     }
 
-    pub fn new(
-        ctx: &Arc<Context>,
-        set: &HostGaussians,
-        env: &HostEnvMap,
-        fresnel: Fresnel,
-        adam_eps: f32,
-    ) -> Result<ReflectionModel> {
+    pub fn new(ctx: &Arc<Context>, set: &HostGaussians, env: &HostEnvMap, fresnel: Fresnel, adam_eps: f32) -> Result<ReflectionModel> {
         if set.channels != MATERIAL || set.coeffs != 1 {
-            bail!(
-                "a reflection set has {MATERIAL} material values per Gaussian, not {} x {}",
-                set.channels,
-                set.coeffs
-            );
+            bail!("a reflection set has {MATERIAL} material values per Gaussian, not {} x {}", set.channels, set.coeffs);
         }
         let shading = ReflectionShading::new(ctx)?;
         let env = EnvMap::upload(ctx, env)?;
@@ -222,16 +191,10 @@ impl ReflectionModel {
 
     fn view_buffers(&mut self, w: u32, h: u32) -> Result<()> {
         let n = self.set.len();
-        let old = self
-            .sizes
-            .get(&(w, h))
-            .map(|b| (b.frame.max_gaussians, b.frame.capacity));
+        let old = self.sizes.get(&(w, h)).map(|b| (b.frame.max_gaussians, b.frame.capacity));
         if old.is_none_or(|(max_g, _)| max_g < n) {
             let max_g = n + 1024;
-            let cap = old
-                .map(|o| o.1)
-                .unwrap_or(0)
-                .max(self.raster.initial_capacity(max_g));
+            let cap = old.map(|o| o.1).unwrap_or(0).max(self.raster.initial_capacity(max_g));
             let frame = self.raster.frame(w, h, max_g, cap)?;
             let planes = (Plane::count(3) * w * h) as usize;
             let vb = ViewBuffers {
@@ -249,23 +212,10 @@ impl ReflectionModel {
     /// Colour + rasterization of `cam`, re-run until the frame fits.
     fn forward(&mut self, cam: &Camera, profile: bool) -> Result<Vec<Timing>> {
         self.view_buffers(cam.width, cam.height)?;
-        let b = self
-            .sizes
-            .get_mut(&(cam.width, cam.height))
-            .context("reflection view buffers")?;
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(
-                &mut rec,
-                &self.shading,
-                &self.raster,
-                &self.set,
-                &self.env,
-                cam,
-                self.fresnel,
-                &self.feat,
-                &b.frame,
-            )?;
+            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let t = rec.submit_and_wait()?;
             if self.raster.fit(&mut b.frame)? {
                 return Ok(t);
@@ -285,22 +235,14 @@ impl ReflectionModel {
     /// submission fits its frame at once: the scattering set's Adam step in
     /// it is not gated), and the composite's gradient to the scattering
     /// colour flows back through its rasterizer to its SH coefficients.
-    pub fn step(
-        &mut self,
-        cfg: &TrainConfig,
-        x: &ReflStepInput,
-        train: Option<ScatTrain>,
-    ) -> Result<StepOutput> {
+    pub fn step(&mut self, cfg: &TrainConfig, x: &ReflStepInput, train: Option<ScatTrain>) -> Result<StepOutput> {
         let rc = &cfg.reflection;
         let cam = x.camera;
         let mut pre = Vec::new();
         // The trained scattering model, its SH degree and Adam step count.
         let scat_model: Option<(&ScatteringModel, u32, u32)> = match train {
             Some(t) => {
-                pre.extend(
-                    t.model
-                        .forward_view(cam, t.sh_degree, &t.background, x.profile)?,
-                );
+                pre.extend(t.model.forward_view(cam, t.sh_degree, &t.background, x.profile)?);
                 pre.extend(self.forward(cam, x.profile)?);
                 Some((&*t.model, t.sh_degree, t.global_iteration))
             }
@@ -311,17 +253,9 @@ impl ReflectionModel {
                 let (out, grad) = m.frame_buffers(cam.width, cam.height)?;
                 (out, Some(grad))
             }
-            None => (
-                x.scat
-                    .context("a frozen Stage II step needs the scattering colour")?,
-                None,
-            ),
+            None => (x.scat.context("a frozen Stage II step needs the scattering colour")?, None),
         };
-        let weights = LossWeights {
-            ssim: cfg.lambda_ssim,
-            normal: rc.lambda_normal,
-            dist: 0.0,
-        };
+        let weights = LossWeights { ssim: cfg.lambda_ssim, normal: rc.lambda_normal, dist: 0.0 };
         let groups = [
             AdamGroup::single(x.lr_means),
             AdamGroup::single(rc.lr_scales),
@@ -333,53 +267,16 @@ impl ReflectionModel {
         let it = x.iteration as u64;
         let (timings, values) = loop {
             self.view_buffers(cam.width, cam.height)?;
-            let b = self
-                .sizes
-                .get_mut(&(cam.width, cam.height))
-                .context("reflection view buffers")?;
+            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
-            record_forward(
-                &mut rec,
-                &self.shading,
-                &self.raster,
-                &self.set,
-                &self.env,
-                cam,
-                self.fresnel,
-                &self.feat,
-                &b.frame,
-            )?;
+            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let sc = rec.begin_scope("refl.composite");
-            self.shading.record_composite(
-                &mut rec,
-                cam,
-                self.fresnel,
-                scat,
-                &b.frame.out,
-                &b.loss_in,
-            )?;
+            self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
             rec.end_scope(sc);
-            self.loss.record_planes(
-                &mut rec,
-                &b.loss_in,
-                &b.loss_grad,
-                x.target,
-                cam,
-                &weights,
-                &mut b.loss,
-            )?;
+            self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
             if rc.lambda_hf > 0.0 {
                 let sc = rec.begin_scope("loss.hf");
-                self.hf.record(
-                    &mut rec,
-                    &b.loss_in,
-                    x.target,
-                    cam.width * cam.height,
-                    rc.hf_percentile / 100.0,
-                    rc.lambda_hf,
-                    &b.loss_grad,
-                    &self.hf_stats,
-                )?;
+                self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, rc.hf_percentile / 100.0, rc.lambda_hf, &b.loss_grad, &self.hf_stats)?;
                 rec.end_scope(sc);
             }
             let sc = rec.begin_scope("refl.composite_backward");
@@ -390,71 +287,29 @@ impl ReflectionModel {
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
             let r_prior = rc.lambda_r / (cam.width * cam.height) as f32;
-            self.shading.record_composite_backward(
-                &mut rec,
-                cam,
-                self.fresnel,
-                scat,
-                &b.frame.out,
-                &b.loss_grad,
-                &b.frame.grad_out,
-                scat_grad,
-                r_prior,
-            )?;
+            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if rc.lambda_r > 0.0 {
-                rec.read_back(
-                    &b.frame.out,
-                    R_PLANE * (cam.width * cam.height) as usize,
-                    &b.r_host,
-                )?;
+                rec.read_back(&b.frame.out, R_PLANE * (cam.width * cam.height) as usize, &b.r_host)?;
             }
             if let Some((m, sh, it)) = scat_model {
                 m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
             }
-            self.raster.record_backward_with(
-                &mut rec,
-                &self.set.params,
-                &self.feat,
-                &self.set.grads,
-                &self.dfeat,
-                0,
-                &b.frame,
-            )?;
+            self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
             if rc.rotation_grad == RotationGrad::Reflection {
                 // The colour's backward adds the mirror direction's part to zeros.
                 rec.fill(&self.set.grads.quats.binding(), 0)?;
             }
             let sc = rec.begin_scope("refl.color_backward");
-            self.shading.record_color_backward(
-                &mut rec,
-                &self.set.params,
-                &self.env,
-                cam,
-                self.fresnel,
-                &self.dfeat,
-                &self.set.grads,
-                &self.texels,
-            )?;
+            self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
             rec.end_scope(sc);
             let e = &self.env;
             let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
             grids.push(self.adam.grid(e.len()));
             let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
             let sc = rec.begin_scope("adam");
-            self.adam
-                .record_set_gated(&mut rec, &self.set, &groups, it, &args[..5])?;
-            self.adam.record_gated(
-                &mut rec,
-                &e.params,
-                &e.grads,
-                &e.m,
-                &e.v,
-                e.len(),
-                &AdamGroup::single(rc.lr_env),
-                it,
-                &args[5],
-            )?;
+            self.adam.record_set_gated(&mut rec, &self.set, &groups, it, &args[..5])?;
+            self.adam.record_gated(&mut rec, &e.params, &e.grads, &e.m, &e.v, e.len(), &AdamGroup::single(rc.lr_env), it, &args[5])?;
             rec.end_scope(sc);
             let t = rec.submit_and_wait()?;
             if self.raster.fit(&mut b.frame)? {
@@ -465,18 +320,12 @@ impl ReflectionModel {
             }
         };
         let timings = pre.into_iter().chain(timings).collect();
-        let mut loss = values.photometric(cfg.lambda_ssim as f64)
-            + if weights.normal != 0.0 {
-                weights.normal as f64 * values.normal
-            } else {
-                0.0
-            };
+        let mut loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
         if rc.lambda_hf > 0.0 {
             loss += rc.lambda_hf as f64 * self.hf_stats.values()?.2;
         }
         if rc.lambda_r > 0.0 {
-            loss += rc.lambda_r as f64
-                * super::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
+            loss += rc.lambda_r as f64 * super::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
         }
 
         let mut densified = None;
@@ -494,12 +343,7 @@ impl ReflectionModel {
             let r = self.densifier.densify(&mut self.set, &p)?;
             densified = Some((r.before, r.after));
         }
-        Ok(StepOutput {
-            loss,
-            values,
-            densified,
-            timings,
-        })
+        Ok(StepOutput { loss, values, densified, timings })
     }
 
     /// Render `cam` composited over the scattering colour `scat` (3 planes).
@@ -507,23 +351,9 @@ impl ReflectionModel {
         self.forward(cam, false)?;
         let b = &self.sizes[&(cam.width, cam.height)];
         let mut rec = Recorder::new(&self.ctx)?;
-        self.shading.record_composite(
-            &mut rec,
-            cam,
-            self.fresnel,
-            scat,
-            &b.frame.out,
-            &b.loss_in,
-        )?;
+        self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
         rec.submit_and_wait()?;
-        Ok(ReflRendered {
-            width: cam.width,
-            height: cam.height,
-            composite: b.loss_in.download()?,
-            refl: b.frame.out.download()?,
-            channels: self.fresnel.channels(),
-            phi: None,
-        })
+        Ok(ReflRendered { width: cam.width, height: cam.height, composite: b.loss_in.download()?, refl: b.frame.out.download()?, channels: self.fresnel.channels(), phi: None })
     }
 }
 
@@ -537,17 +367,7 @@ impl ReflectionModel {
 /// Record the reflection colour of every Gaussian of `set` seen from `cam`
 /// and the rasterization of [colour, r (, f0)] into `frame`.
 #[allow(clippy::too_many_arguments)]
-fn record_forward(
-    rec: &mut Recorder,
-    shading: &ReflectionShading,
-    raster: &Rasterizer,
-    set: &TrainableSet,
-    env: &EnvMap,
-    cam: &Camera,
-    fresnel: Fresnel,
-    feat: &Buffer<f32>,
-    frame: &Frame,
-) -> Result<()> {
+fn record_forward(rec: &mut Recorder, shading: &ReflectionShading, raster: &Rasterizer, set: &TrainableSet, env: &EnvMap, cam: &Camera, fresnel: Fresnel, feat: &Buffer<f32>, frame: &Frame) -> Result<()> {
     let sc = rec.begin_scope("refl.color");
     shading.record_color(rec, &set.params, env, cam, fresnel, feat)?;
     rec.end_scope(sc);
@@ -556,13 +376,7 @@ fn record_forward(
 }
 
 /// The Stage I residual of one view: 4 planes (r (3), mean_c |r_c|).
-pub fn residual(
-    ctx: &Arc<Context>,
-    shading: &ReflectionShading,
-    target: &Buffer<f32>,
-    scat: &Buffer<f32>,
-    pixels: u32,
-) -> Result<Vec<f32>> {
+pub fn residual(ctx: &Arc<Context>, shading: &ReflectionShading, target: &Buffer<f32>, scat: &Buffer<f32>, pixels: u32) -> Result<Vec<f32>> {
     let out = Buffer::<f32>::new(ctx, "refl.residual", 4 * pixels as usize)?;
     let mut rec = Recorder::new(ctx)?;
     shading.record_residual(&mut rec, pixels, target, scat, &out)?;

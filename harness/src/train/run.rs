@@ -7,17 +7,16 @@
 use super::args::resume_config;
 pub use super::args::{config_from_args, RESUMABLE_SETTINGS};
 use super::checkpoint;
-use super::clock::{Before, Clocks};
-use super::config::{paper_schedule_note, TrainConfig};
-pub use super::from::inherited_settings;
 use super::from::start_from;
+pub use super::from::inherited_settings;
+use super::config::{paper_schedule_note, TrainConfig};
 use super::trainer::Trainer;
-use crate::data::image_io::{write_exr, write_png, ImageF};
 use crate::data::{Dataset, LoadOptions};
 use crate::eval::{evaluate, Metrics};
-use crate::export::atomic_write;
-use crate::export::ply::{write_reflection_splats, write_splats};
 use crate::outdir::OutDir;
+use crate::export::atomic_write;
+use crate::data::image_io::{write_exr, write_png, ImageF};
+use crate::export::ply::{write_reflection_splats, write_splats};
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -26,6 +25,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
+use super::clock::{Before, Clocks};
 use tgs_engine::Context;
 
 pub const CHECKPOINT: &str = "checkpoint.bin";
@@ -129,11 +129,7 @@ pub fn dataset_dir(a: &TrainArgs, quiet: bool) -> Result<PathBuf> {
     if !dir.join("transforms_train.json").is_file() {
         let spec = crate::scene::spec(DEFAULT_SCENE)?;
         if !quiet {
-            eprintln!(
-                "no dataset given: writing the built-in scene '{}' to {}",
-                spec.name,
-                dir.display()
-            );
+            eprintln!("no dataset given: writing the built-in scene '{}' to {}", spec.name, dir.display());
         }
         crate::scene::make(&spec, &dir, |_, _| {})?;
     }
@@ -141,11 +137,7 @@ pub fn dataset_dir(a: &TrainArgs, quiet: bool) -> Result<PathBuf> {
 }
 
 pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
-    let opts = LoadOptions {
-        downscale: cfg.downscale,
-        background: cfg.background_rgb()?,
-        holdout: cfg.holdout,
-    };
+    let opts = LoadOptions { downscale: cfg.downscale, background: cfg.background_rgb()?, holdout: cfg.holdout };
     Dataset::load(dir, &opts)
 }
 
@@ -160,8 +152,7 @@ fn show_warnings(data: &Dataset, quiet: bool) {
 
 pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     crate::outdir::refuse_dataset(&a.out, a.dataset.as_deref())?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
     let ckpt = a.out.join(CHECKPOINT);
     let start = Instant::now();
     if a.resume && a.from.is_some() {
@@ -186,9 +177,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let cfg = resume_config(a, &h.config)?;
         let dir = PathBuf::from(&h.dataset);
         if let Some(given) = &a.dataset {
-            let same = std::fs::canonicalize(given)
-                .map(|g| g == dir)
-                .unwrap_or(false);
+            let same = std::fs::canonicalize(given).map(|g| g == dir).unwrap_or(false);
             if !same {
                 bail!("--resume continues the run on its own dataset {}; {} was given (leave it out, or start a new run with another --out)", dir.display(), given.display());
             }
@@ -198,10 +187,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let dataset = h.dataset.clone();
         let identity = match &h.identity {
             Some(id) => id.clone(),
-            None => checkpoint::Identity {
-                run_id: checkpoint::new_run_id(),
-                fingerprint: data.fingerprint()?,
-            },
+            None => checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? },
         };
         let h_stage1 = h.config.iterations;
         let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
@@ -219,10 +205,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     } else if let Some(run) = &a.from {
         let (tr, data, dataset, kept) = start_from(ctx, a, run)?;
         from_record = kept;
-        let identity = checkpoint::Identity {
-            run_id: checkpoint::new_run_id(),
-            fingerprint: data.fingerprint()?,
-        };
+        let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
         (tr, data, dataset, identity)
     } else {
         let cfg = config_from_args(a)?;
@@ -231,63 +214,30 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let tr = Trainer::new(ctx, cfg, &data)?;
         // Absolute, so that --resume, eval and render work from any directory.
         let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
-        let identity = checkpoint::Identity {
-            run_id: checkpoint::new_run_id(),
-            fingerprint: data.fingerprint()?,
-        };
+        let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
         (tr, data, abs.to_string_lossy().into_owned(), identity)
     };
     if !a.resume || !a.out.join(RUN_RECORD).is_file() {
         let rec = json!({"run_id": identity.run_id, "dataset": dataset_str, "dataset_files": identity.fingerprint.files.len(), "dataset_digest": format!("{:016x}", identity.fingerprint.digest())});
-        atomic_write(
-            &a.out.join(RUN_RECORD),
-            serde_json::to_string_pretty(&rec)?.as_bytes(),
-        )?;
+        atomic_write(&a.out.join(RUN_RECORD), serde_json::to_string_pretty(&rec)?.as_bytes())?;
     }
     show_warnings(&data, a.quiet);
-    atomic_write(
-        &a.out.join("config.toml"),
-        toml::to_string(&tr.cfg)?.as_bytes(),
-    )?;
+    atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
     install_signal_handler();
     INTERRUPTED.store(false, Ordering::SeqCst);
 
     let total = tr.schedule.total();
-    let mut log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(a.resume)
-        .write(true)
-        .truncate(!a.resume)
-        .open(a.out.join("log.jsonl"))
-        .context("opening log.jsonl")?;
+    let mut log = std::fs::OpenOptions::new().create(true).append(a.resume).write(true).truncate(!a.resume).open(a.out.join("log.jsonl")).context("opening log.jsonl")?;
     let tty = std::io::stderr().is_terminal() && !a.quiet;
     let bar = if tty {
         let b = indicatif::ProgressBar::new(total as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{bar:30} {pos}/{len} {msg} [{elapsed_precise} < {eta}, {per_sec}]",
-            )
-            .unwrap(),
-        );
+        b.set_style(indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} [{elapsed_precise} < {eta}, {per_sec}]").unwrap());
         b.set_position(tr.iteration as u64);
         Some(b)
     } else {
         None
     };
-    let note = if a.resume {
-        None
-    } else {
-        a.preset.as_deref().and_then(|p| {
-            paper_schedule_note(
-                p,
-                &data
-                    .train
-                    .iter()
-                    .map(|v| (v.camera.width, v.camera.height))
-                    .collect::<Vec<_>>(),
-            )
-        })
-    };
+    let note = if a.resume { None } else { a.preset.as_deref().and_then(|p| paper_schedule_note(p, &data.train.iter().map(|v| (v.camera.width, v.camera.height)).collect::<Vec<_>>())) };
     if let (Some(n), false) = (&note, a.quiet) {
         eprintln!("tgs: {n}");
     }
@@ -310,11 +260,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let mut interrupted = false;
     let mut stages: Vec<serde_json::Value> = read_stage_records(&a.out, a.resume);
     stages.extend(from_record);
-    let before = if a.resume {
-        Before::read(&a.out, tr.iteration)
-    } else {
-        Before::default()
-    };
+    let before = if a.resume { Before::read(&a.out, tr.iteration) } else { Before::default() };
     let mut clocks = Clocks::new(start, before);
     // checkpoint.bin and, beside it, the clocks at its iteration.
     let save_run = |tr: &Trainer, clocks: &Clocks| -> Result<()> {
@@ -331,36 +277,18 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             // Not on a resume inside Stage II (the cache is rebuilt then),
             // nor as Stage II begins again (reflection.reseed).
             if tr.reflection.is_none() && first_round {
-                checkpoint::save(
-                    &tr,
-                    &a.out.join(STAGE_ONE_CHECKPOINT),
-                    &dataset_str,
-                    &identity,
-                )?;
+                checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str, &identity)?;
             }
             let prev = tr.schedule.label(entry.saturating_sub(1));
-            let msg =
-                begin_reflection(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
-            Some((
-                msg,
-                json!({"iteration": tr.iteration, "stage": label, "event": "begin", "reflection": tr.decision}),
-            ))
+            let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
+            Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin", "reflection": tr.decision})))
         } else if tr.at_light_field_start() {
             if first_round {
-                checkpoint::save(
-                    &tr,
-                    &a.out.join(STAGE_TWO_CHECKPOINT),
-                    &dataset_str,
-                    &identity,
-                )?;
+                checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str, &identity)?;
             }
             let prev = tr.schedule.label(entry.saturating_sub(1));
-            let msg =
-                begin_light_field(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
-            Some((
-                msg,
-                json!({"iteration": tr.iteration, "stage": label, "event": "begin"}),
-            ))
+            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
+            Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin"})))
         } else {
             None
         };
@@ -374,25 +302,13 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             writeln!(log, "{event}")?;
             clocks.next_stage();
             last_closed = tr.done();
-            atomic_write(
-                &a.out.join("stages.json"),
-                serde_json::to_string_pretty(&stages)?.as_bytes(),
-            )?;
+            atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
             continue;
         }
         let r = tr.step(a.profile)?;
         if !r.loss.is_finite() {
-            checkpoint::save(
-                &tr,
-                &a.out.join("checkpoint-nonfinite.bin"),
-                &dataset_str,
-                &identity,
-            )?;
-            bail!(
-                "iteration {}: the loss is {} (state saved to checkpoint-nonfinite.bin)",
-                r.iteration,
-                r.loss
-            );
+            checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str, &identity)?;
+            bail!("iteration {}: the loss is {} (state saved to checkpoint-nonfinite.bin)", r.iteration, r.loss);
         }
         first_loss.get_or_insert(r.loss);
         last_loss = r.loss;
@@ -420,39 +336,21 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             line["densified"] = json!({"before": b, "after": a2});
         }
         let cfg = &tr.cfg;
-        if cfg.test_interval > 0
-            && r.iteration % cfg.test_interval == 0
-            && r.iteration < total
-            && !data.test.is_empty()
-        {
+        if cfg.test_interval > 0 && r.iteration % cfg.test_interval == 0 && r.iteration < total && !data.test.is_empty() {
             let m = evaluate(&mut tr, &data.test, None)?;
             line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "lpips": m.lpips, "normal_mae_deg": m.normals.normal_mae_deg, "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg});
             if !tty && !a.quiet {
-                eprintln!(
-                    "[{}] test PSNR {:.2} SSIM {:.4}{}",
-                    r.iteration,
-                    m.psnr,
-                    m.ssim,
-                    lpips_text(m.lpips)
-                );
+                eprintln!("[{}] test PSNR {:.2} SSIM {:.4}{}", r.iteration, m.psnr, m.ssim, lpips_text(m.lpips));
             }
         }
         writeln!(log, "{line}")?;
-        let msg = format!(
-            "loss {:.4} PSNR {:.2} N {}",
-            r.loss,
-            r.values.psnr(),
-            r.gaussians
-        );
+        let msg = format!("loss {:.4} PSNR {:.2} N {}", r.loss, r.values.psnr(), r.gaussians);
         if let Some(b) = &bar {
             b.set_position(r.iteration as u64);
             b.set_message(msg);
         } else if !a.quiet && (r.iteration % 100 == 0 || r.iteration == total) {
             let eta = (total - r.iteration) as f64 / its.max(1e-9);
-            eprintln!(
-                "[{}/{total}] {msg} {its:.2} it/s ETA {eta:.0}s",
-                r.iteration
-            );
+            eprintln!("[{}/{total}] {msg} {its:.2} it/s ETA {eta:.0}s", r.iteration);
         }
         let ck = tr.cfg.checkpoint_interval;
         if ck > 0 && r.iteration % ck == 0 && r.iteration < total {
@@ -469,73 +367,31 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     save_run(&tr, &clocks)?;
     if interrupted {
         if !a.quiet {
-            eprintln!(
-                "stopped at iteration {}; checkpoint {}; continue with --resume",
-                tr.iteration,
-                ckpt.display()
-            );
+            eprintln!("stopped at iteration {}; checkpoint {}; continue with --resume", tr.iteration, ckpt.display());
         }
-        return Ok(Outcome {
-            iteration: tr.iteration,
-            interrupted,
-            first_loss,
-            last_loss,
-            metrics: None,
-            wall_s: clocks.total_s(),
-        });
+        return Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics: None, wall_s: clocks.total_s() });
     }
     let train_s = clocks.train_s();
     write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
     if let Some(m) = &tr.light_field {
         write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
-        crate::export::mlp::write(
-            &a.out.join("light_field.safetensors"),
-            &m.net.shape,
-            &m.shade,
-            &m.net.params.download()?,
-        )?;
+        crate::export::mlp::write(&a.out.join("light_field.safetensors"), &m.net.shape, &m.shade, &m.net.params.download()?)?;
     }
     if let Some(m) = &tr.reflection {
         write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
         let env = m.env.download()?;
         let (w, h, px) = env.cross();
-        let img = ImageF {
-            width: w,
-            height: h,
-            channels: 3,
-            data: px.into_iter().flatten().collect(),
-        };
+        let img = ImageF { width: w, height: h, channels: 3, data: px.into_iter().flatten().collect() };
         write_exr(&a.out.join("envmap.exr"), &img)?;
         write_png(&a.out.join("envmap.png"), &img)?;
     }
-    let metrics = if data.test.is_empty() {
-        None
-    } else {
-        Some(evaluate(
-            &mut tr,
-            &data.test,
-            Some(&mut OutDir::open(
-                &a.out.join("renders/test"),
-                Some(&data.root),
-            )?),
-        )?)
-    };
+    let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?) };
     if !last_closed {
-        let last_stage = tr
-            .schedule
-            .label(tr.schedule.stages.len().saturating_sub(1));
+        let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
         stages.retain(|s| s["stage"] != last_stage.as_str());
-        stages.push(stage_record(
-            &last_stage,
-            &tr,
-            clocks.stage_s(),
-            metrics.as_ref(),
-        ));
+        stages.push(stage_record(&last_stage, &tr, clocks.stage_s(), metrics.as_ref()));
     }
-    let timings: BTreeMap<String, f64> = timing_sums
-        .iter()
-        .map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64))
-        .collect();
+    let timings: BTreeMap<String, f64> = timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64)).collect();
     let doc = json!({
         "dataset": dataset_str,
         "device": ctx.caps().describe(),
@@ -550,17 +406,10 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         "reflection": tr.decision,
         "gpu_ms_per_iteration": if a.profile { json!(timings) } else { json!(null) },
     });
-    atomic_write(
-        &a.out.join("metrics.json"),
-        serde_json::to_string_pretty(&doc)?.as_bytes(),
-    )?;
+    atomic_write(&a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?.as_bytes())?;
     if !a.quiet {
         if let Some(m) = &metrics {
-            let mae = m
-                .normals
-                .normal_mae_deg
-                .map(|v| format!(", normal MAE {v:.2}°"))
-                .unwrap_or_default();
+            let mae = m.normals.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
             eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{}{mae}", tr.iteration, tr.scattering.set.len(), m.psnr, m.ssim, lpips_text(m.lpips));
         }
         if a.profile {
@@ -571,14 +420,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         eprintln!("outputs in {}", a.out.display());
     }
-    Ok(Outcome {
-        iteration: tr.iteration,
-        interrupted,
-        first_loss,
-        last_loss,
-        metrics,
-        wall_s: clocks.total_s(),
-    })
+    Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: clocks.total_s() })
 }
 
 /// ", LPIPS 0.123" (nothing without one).
@@ -602,19 +444,13 @@ fn read_stage_records(out: &Path, resume: bool) -> Vec<serde_json::Value> {
     if !resume {
         return Vec::new();
     }
-    std::fs::read(out.join("stages.json"))
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok())
-        .unwrap_or_default()
+    std::fs::read(out.join("stages.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default()
 }
 
 /// Where a closed stage's test renders go: renders/stage1, stage2,
 /// stage3, and stage2.2 / stage3.2 for a second round.
 fn renders_dir(label: &str) -> String {
-    let (name, round) = label
-        .split_once('.')
-        .map(|(n, r)| (n, format!(".{r}")))
-        .unwrap_or((label, String::new()));
+    let (name, round) = label.split_once('.').map(|(n, r)| (n, format!(".{r}"))).unwrap_or((label, String::new()));
     let n = match name {
         "I" => "1",
         "II" => "2",
@@ -627,29 +463,10 @@ fn renders_dir(label: &str) -> String {
 /// its record in `stages`. A stage taken
 /// from another run (--from) keeps that run's record (its wall time, where
 /// it came from); the test metrics are re-measured.
-fn close_stage(
-    tr: &mut Trainer,
-    data: &Dataset,
-    out: &Path,
-    stages: &mut Vec<serde_json::Value>,
-    clock: &Clocks,
-    stage: &str,
-    renders: &str,
-) -> Result<()> {
+fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str, renders: &str) -> Result<()> {
     let dir = out.join("renders").join(renders);
-    let m = if data.test.is_empty() {
-        None
-    } else {
-        Some(evaluate(
-            tr,
-            &data.test,
-            Some(&mut OutDir::open(&dir, Some(&data.root))?),
-        )?)
-    };
-    let from = stages
-        .iter()
-        .find(|s| s["stage"] == stage && s.get("from").is_some())
-        .cloned();
+    let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&mut OutDir::open(&dir, Some(&data.root))?))?) };
+    let from = stages.iter().find(|s| s["stage"] == stage && s.get("from").is_some()).cloned();
     stages.retain(|s| s["stage"] != stage);
     let mut rec = stage_record(stage, tr, clock.stage_s(), m.as_ref());
     if let Some(f) = from {
@@ -662,32 +479,17 @@ fn close_stage(
 
 /// Close Stage I (its test metrics), measure the residual (maps written to
 /// OUT/residual/), and start Stage II or skip it. Returns the message.
-fn begin_reflection(
-    tr: &mut Trainer,
-    data: &Dataset,
-    out: &Path,
-    stages: &mut Vec<serde_json::Value>,
-    clock: &Clocks,
-    quiet: bool,
-    prev: &str,
-) -> Result<String> {
+fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
     let resumed = tr.reflection.is_some();
     let reseed = prev != "I";
     if !resumed {
         close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
         if !quiet {
-            eprintln!(
-                "Stage {prev} done: measuring the residual of {} training views",
-                data.train.len()
-            );
+            eprintln!("Stage {prev} done: measuring the residual of {} training views", data.train.len());
         }
     }
     // The second round's residual (reflection.reseed) beside the first's.
-    let dir = out.join(if reseed {
-        "residual/round2"
-    } else {
-        "residual"
-    });
+    let dir = out.join(if reseed { "residual/round2" } else { "residual" });
     let mut maps = OutDir::open(&dir, Some(&data.root))?;
     let names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
     let d = tr.begin_reflection(|i, cam, r| {
@@ -696,21 +498,10 @@ fn begin_reflection(
         }
         let n = (cam.width * cam.height) as usize;
         let name = &names[i];
-        write_exr(
-            &maps.file(&format!("{name}.exr"))?,
-            &ImageF::from_planar(cam.width, cam.height, 3, &r[..3 * n]),
-        )?;
+        write_exr(&maps.file(&format!("{name}.exr"))?, &ImageF::from_planar(cam.width, cam.height, 3, &r[..3 * n]))?;
         // Heat map of mean |r|: 0 black, >= 0.25 white.
         let heat: Vec<f32> = r[3 * n..4 * n].iter().map(|v| v / 0.25).collect();
-        write_png(
-            &maps.file(&format!("{name}.png"))?,
-            &ImageF {
-                width: cam.width,
-                height: cam.height,
-                channels: 1,
-                data: heat,
-            },
-        )
+        write_png(&maps.file(&format!("{name}.png"))?, &ImageF { width: cam.width, height: cam.height, channels: 1, data: heat })
     })?;
     Ok(if d.run {
         format!(
@@ -753,15 +544,7 @@ fn begin_reflection(
 
 /// Between Stage II and III: Stage II's record (test metrics, renders in
 /// renders/stage2), then the light-field model.
-fn begin_light_field(
-    tr: &mut Trainer,
-    data: &Dataset,
-    out: &Path,
-    stages: &mut Vec<serde_json::Value>,
-    clock: &Clocks,
-    quiet: bool,
-    prev: &str,
-) -> Result<String> {
+fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
     if tr.reflection.is_some() {
         close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
         if !quiet {
@@ -801,9 +584,7 @@ fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
     let mut kept = String::new();
     for line in text.lines() {
         // A line torn by the kill does not parse: it is dropped too.
-        let it = serde_json::from_str::<serde_json::Value>(line)
-            .ok()
-            .and_then(|v| v["iteration"].as_u64());
+        let it = serde_json::from_str::<serde_json::Value>(line).ok().and_then(|v| v["iteration"].as_u64());
         if it.is_some_and(|i| i <= iteration as u64) {
             kept.push_str(line);
             kept.push('\n');
@@ -819,11 +600,8 @@ fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
 /// in run.json (written when the run started) and the checkpoint's agree.
 fn check_run_record(out: &Path, h: &checkpoint::Header) -> Result<()> {
     let path = out.join(RUN_RECORD);
-    let Ok(bytes) = std::fs::read(&path) else {
-        return Ok(());
-    };
-    let rec: serde_json::Value = serde_json::from_slice(&bytes)
-        .with_context(|| format!("{}: not valid JSON", path.display()))?;
+    let Ok(bytes) = std::fs::read(&path) else { return Ok(()) };
+    let rec: serde_json::Value = serde_json::from_slice(&bytes).with_context(|| format!("{}: not valid JSON", path.display()))?;
     let mine = rec["run_id"].as_str().unwrap_or("");
     match &h.identity {
         Some(id) if id.run_id != mine => bail!(
@@ -842,8 +620,7 @@ fn check_run_record(out: &Path, h: &checkpoint::Header) -> Result<()> {
 pub fn open_run(ctx: &Arc<Context>, run: &Path) -> Result<(Trainer, Dataset)> {
     let ckpt = run.join(CHECKPOINT);
     let (h, arrays) = checkpoint::read(&ckpt)?;
-    let data = load_dataset(Path::new(&h.dataset), &h.config)
-        .with_context(|| format!("loading the run's dataset {}", h.dataset))?;
+    let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
     let tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
     Ok((tr, data))
 }

@@ -12,10 +12,7 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
-use tgs_pipelines::{
-    Adam, AdamGroup, Camera, Densifier, DensifyParams, Features, Frame, HostGaussians, ImageLoss,
-    LossScratch, LossValues, LossWeights, Plane, Rasterizer, TrainableSet,
-};
+use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// Render planes of one view, downloaded.
 pub struct Rendered {
@@ -83,12 +80,7 @@ pub struct ScatteringModel {
 }
 
 impl ScatteringModel {
-    pub fn new(
-        ctx: &Arc<Context>,
-        g: &HostGaussians,
-        sh_degree: u32,
-        adam_eps: f32,
-    ) -> Result<ScatteringModel> {
+    pub fn new(ctx: &Arc<Context>, g: &HostGaussians, sh_degree: u32, adam_eps: f32) -> Result<ScatteringModel> {
         Ok(ScatteringModel {
             ctx: ctx.clone(),
             raster: Rasterizer::new(ctx, 3, Features::Sh { degree: sh_degree })?,
@@ -104,23 +96,14 @@ impl ScatteringModel {
     /// Run the forward of `cam` until it fits its frame (Stage III drives
     /// the scattering set through this, [`Self::frame_buffers`] and
     /// [`Self::record_backward_external`]).
-    pub fn forward_view(
-        &mut self,
-        cam: &Camera,
-        sh: u32,
-        background: &[f32; 3],
-        profile: bool,
-    ) -> Result<Vec<Timing>> {
+    pub fn forward_view(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
         self.forward(cam, sh, background, profile)
     }
 
     /// The last forward's output planes (colour first) and their gradient
     /// buffer for a `width` x `height` view.
     pub fn frame_buffers(&self, width: u32, height: u32) -> Result<(&Buffer<f32>, &Buffer<f32>)> {
-        let b = self
-            .sizes
-            .get(&(width, height))
-            .context("no render of this size yet")?;
+        let b = self.sizes.get(&(width, height)).context("no render of this size yet")?;
         Ok((&b.frame.out, &b.frame.grad_out))
     }
 
@@ -131,27 +114,13 @@ impl ScatteringModel {
     /// SH colour alone: the geometry and opacity, and their Adam moments,
     /// stay as they are.
     #[allow(clippy::too_many_arguments)]
-    pub fn record_backward_external(
-        &self,
-        rec: &mut Recorder,
-        cfg: &TrainConfig,
-        cam: &Camera,
-        sh: u32,
-        lr_means: f32,
-        it: u32,
-        colour_only: bool,
-    ) -> Result<()> {
-        let b = self
-            .sizes
-            .get(&(cam.width, cam.height))
-            .context("no render of this size yet")?;
-        self.raster
-            .record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+    pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, sh: u32, lr_means: f32, it: u32, colour_only: bool) -> Result<()> {
+        let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
+        self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
         let sc = rec.begin_scope("adam");
         let groups = self.groups(cfg, lr_means, sh);
         if colour_only {
-            self.adam
-                .record_set_features(rec, &self.set, &groups[4], it as u64)?;
+            self.adam.record_set_features(rec, &self.set, &groups[4], it as u64)?;
         } else {
             self.adam.record_set(rec, &self.set, &groups, it as u64)?;
         }
@@ -169,31 +138,14 @@ impl ScatteringModel {
             AdamGroup::single(cfg.lr_scales),
             AdamGroup::single(cfg.lr_quats),
             AdamGroup::single(cfg.lr_opacity),
-            AdamGroup {
-                active: 3 * active.min(k),
-                ..AdamGroup::split(cfg.lr_features_dc, cfg.lr_features_rest, 3 * k, 3)
-            },
+            AdamGroup { active: 3 * active.min(k), ..AdamGroup::split(cfg.lr_features_dc, cfg.lr_features_rest, 3 * k, 3) },
         ]
     }
 
     /// Run the forward of `cam` until it fits its frame.
-    fn forward(
-        &mut self,
-        cam: &Camera,
-        sh: u32,
-        background: &[f32; 3],
-        profile: bool,
-    ) -> Result<Vec<Timing>> {
-        let b = view_buffers(
-            &mut self.sizes,
-            &self.raster,
-            &self.loss,
-            self.set.len(),
-            cam.width,
-            cam.height,
-        )?;
-        self.raster
-            .forward(&self.set.params, cam, background, sh, &mut b.frame, profile)
+    fn forward(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
+        let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
+        self.raster.forward(&self.set.params, cam, background, sh, &mut b.frame, profile)
     }
 
     /// One training step on one view, in one submission: forward, loss,
@@ -205,72 +157,30 @@ impl ScatteringModel {
         let (it, cam, sh) = (x.iteration, x.camera, x.sh_degree);
         let weights = LossWeights {
             ssim: cfg.lambda_ssim,
-            normal: if it > cfg.normal_from {
-                cfg.lambda_normal
-            } else {
-                0.0
-            },
-            dist: if it > cfg.dist_from {
-                cfg.lambda_dist
-            } else {
-                0.0
-            },
+            normal: if it > cfg.normal_from { cfg.lambda_normal } else { 0.0 },
+            dist: if it > cfg.dist_from { cfg.lambda_dist } else { 0.0 },
         };
         let stats = it < cfg.densify_until;
         let groups = self.groups(cfg, x.lr_means, sh);
         let fused = self.fuse_adam && self.raster.can_fuse_adam();
         let (timings, values) = loop {
-            let b = view_buffers(
-                &mut self.sizes,
-                &self.raster,
-                &self.loss,
-                self.set.len(),
-                cam.width,
-                cam.height,
-            )?;
+            let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
-            self.raster.record_forward(
-                &mut rec,
-                &self.set.params,
-                cam,
-                &x.background,
-                sh,
-                &b.frame,
-            )?;
-            self.loss
-                .record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
+            self.raster.record_forward(&mut rec, &self.set.params, cam, &x.background, sh, &b.frame)?;
+            self.loss.record(&mut rec, &b.frame, x.target, cam, &weights, &mut b.loss)?;
             // The gate's slots: what steps the parameters, then the
             // densification statistics (which read the backward's
             // screen-space gradients).
             let stats_grid = self.densifier.stats_grid(&self.set);
             let args = if fused {
                 // The reduce steps the parameters itself, so it is gated.
-                let args = self.raster.record_fit_gate(
-                    &mut rec,
-                    &b.frame,
-                    &[self.raster.reduce_grid(self.set.len()), stats_grid],
-                )?;
+                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.raster.reduce_grid(self.set.len()), stats_grid])?;
                 let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
                 let s = &self.set;
-                self.raster.record_backward_adam(
-                    &mut rec,
-                    &s.params,
-                    &s.m,
-                    &s.v,
-                    &c,
-                    sh,
-                    &b.frame,
-                    Some(&args[0]),
-                )?;
+                self.raster.record_backward_adam(&mut rec, &s.params, &s.m, &s.v, &c, sh, &b.frame, Some(&args[0]))?;
                 args
             } else {
-                self.raster.record_backward(
-                    &mut rec,
-                    &self.set.params,
-                    &self.set.grads,
-                    sh,
-                    &b.frame,
-                )?;
+                self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
                 let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
                 grids.push(stats_grid);
                 self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?
@@ -278,14 +188,12 @@ impl ScatteringModel {
             let (stats_arg, adam_args) = args.split_last().context("fit gate slots")?;
             if stats {
                 let sc = rec.begin_scope("densify.stats");
-                self.densifier
-                    .record_stats_gated(&mut rec, &self.set, &b.frame, stats_arg)?;
+                self.densifier.record_stats_gated(&mut rec, &self.set, &b.frame, stats_arg)?;
                 rec.end_scope(sc);
             }
             if !fused {
                 let sc = rec.begin_scope("adam");
-                self.adam
-                    .record_set_gated(&mut rec, &self.set, &groups, it as u64, adam_args)?;
+                self.adam.record_set_gated(&mut rec, &self.set, &groups, it as u64, adam_args)?;
                 rec.end_scope(sc);
             }
             let t = rec.submit_and_wait()?;
@@ -293,12 +201,7 @@ impl ScatteringModel {
                 break (t, b.loss.values()?);
             }
         };
-        let loss = values.photometric(cfg.lambda_ssim as f64)
-            + if weights.normal != 0.0 {
-                weights.normal as f64 * values.normal
-            } else {
-                0.0
-            };
+        let loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
 
         let mut densified = None;
         if it < cfg.densify_until && it > cfg.densify_from && it % cfg.densify_interval == 0 {
@@ -322,19 +225,13 @@ impl ScatteringModel {
             }
             densified = Some((r.before, r.after));
         }
-        Ok(StepOutput {
-            loss,
-            values,
-            densified,
-            timings,
-        })
+        Ok(StepOutput { loss, values, densified, timings })
     }
 
     /// Cap every opacity at 0.01 (and clear its Adam moments).
     pub fn reset_opacity(&mut self) -> Result<()> {
         let mut rec = Recorder::new(&self.ctx)?;
-        self.densifier
-            .record_opacity_reset(&mut rec, &self.set, 0.01)?;
+        self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
         rec.submit_and_wait()?;
         Ok(())
     }
@@ -343,30 +240,15 @@ impl ScatteringModel {
     pub fn render(&mut self, cam: &Camera, sh: u32, background: &[f32; 3]) -> Result<Rendered> {
         self.forward(cam, sh, background, false)?;
         let b = &self.sizes[&(cam.width, cam.height)];
-        Ok(Rendered {
-            width: cam.width,
-            height: cam.height,
-            planes: b.frame.out.download()?,
-            layers: None,
-        })
+        Ok(Rendered { width: cam.width, height: cam.height, planes: b.frame.out.download()?, layers: None })
     }
 
     /// Render `cam` and copy its colour (3 planes, background blended in) into `dst`.
-    pub fn render_color_into(
-        &mut self,
-        cam: &Camera,
-        sh: u32,
-        background: &[f32; 3],
-        dst: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn render_color_into(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], dst: &Buffer<f32>) -> Result<()> {
         self.forward(cam, sh, background, false)?;
         let b = &self.sizes[&(cam.width, cam.height)];
         let mut rec = Recorder::new(&self.ctx)?;
-        rec.copy(
-            &b.frame.out.binding(),
-            &dst.binding(),
-            12 * b.frame.pixels() as u64,
-        )?;
+        rec.copy(&b.frame.out.binding(), &dst.binding(), 12 * b.frame.pixels() as u64)?;
         rec.submit_and_wait()?;
         Ok(())
     }
@@ -374,10 +256,7 @@ impl ScatteringModel {
     /// One plane (`Plane` order, 3 colour channels) of the last render of
     /// a `width` x `height` view, downloaded.
     pub fn last_plane(&self, width: u32, height: u32, plane: Plane) -> Result<Vec<f32>> {
-        let b = self
-            .sizes
-            .get(&(width, height))
-            .context("no render of this size yet")?;
+        let b = self.sizes.get(&(width, height)).context("no render of this size yet")?;
         let n = b.frame.pixels() as usize;
         b.frame.out.download_range(plane.index(3) as usize * n, n)
     }
@@ -388,27 +267,14 @@ impl ScatteringModel {
 
     /// Intersections (Gaussian, tile pairs) of the last view rendered.
     pub fn last_intersections(&self) -> u32 {
-        self.sizes
-            .values()
-            .map(|b| b.frame.last_intersections)
-            .max()
-            .unwrap_or(0)
+        self.sizes.values().map(|b| b.frame.last_intersections).max().unwrap_or(0)
     }
 }
 
 /// The frame and loss buffers for one image size, (re)made when the set
 /// outgrew the frame (the intersection capacity carries over).
-fn view_buffers<'a>(
-    sizes: &'a mut HashMap<(u32, u32), ViewBuffers>,
-    raster: &Rasterizer,
-    loss: &ImageLoss,
-    n: u32,
-    w: u32,
-    h: u32,
-) -> Result<&'a mut ViewBuffers> {
-    let old = sizes
-        .get(&(w, h))
-        .map(|b| (b.frame.max_gaussians, b.frame.capacity));
+fn view_buffers<'a>(sizes: &'a mut HashMap<(u32, u32), ViewBuffers>, raster: &Rasterizer, loss: &ImageLoss, n: u32, w: u32, h: u32) -> Result<&'a mut ViewBuffers> {
+    let old = sizes.get(&(w, h)).map(|b| (b.frame.max_gaussians, b.frame.capacity));
     if old.is_none_or(|(max_g, _)| max_g < n) {
         let old_cap = old.map(|o| o.1).unwrap_or(0);
         let max_g = n + n / 2 + 1024;

@@ -102,16 +102,7 @@ crate::train::settings::name_enum!(
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams {
-            threshold: 0.007,
-            blur: 2,
-            agree: 0.9,
-            max_rays: 8192,
-            steps: 128,
-            normal: SeedNormal::View,
-            significance: 1e-6,
-            threads: 0,
-        }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::View, significance: 1e-6, threads: 0 }
     }
 }
 
@@ -133,11 +124,7 @@ fn dot(a: V3, b: V3) -> f64 {
 }
 fn normalize(a: V3) -> V3 {
     let l = dot(a, a).sqrt();
-    if l > 0.0 && l.is_finite() {
-        [a[0] / l, a[1] / l, a[2] / l]
-    } else {
-        [0.0, 0.0, 1.0]
-    }
+    if l > 0.0 && l.is_finite() { [a[0] / l, a[1] / l, a[2] / l] } else { [0.0, 0.0, 1.0] }
 }
 
 /// A view prepared for hull tests: its residual mask and depths.
@@ -158,46 +145,12 @@ impl Prepared {
         // its region, by about half the blur radius at a residual a few
         // times the threshold; eroding by that much brings the boundary back.
         let blurred = box_blur(v.residual, w, h, p.blur as usize);
-        let grown: Vec<f32> = blurred
-            .iter()
-            .map(|&b| (b > p.threshold) as u8 as f32)
-            .collect();
+        let grown: Vec<f32> = blurred.iter().map(|&b| (b > p.threshold) as u8 as f32).collect();
         let r = p.blur as usize / 2;
-        let mask: Vec<bool> = if r == 0 {
-            grown.iter().map(|&g| g > 0.5).collect()
-        } else {
-            box_blur(&grown, w, h, r)
-                .iter()
-                .map(|&m| m > 1.0 - 1e-4)
-                .collect()
-        };
-        let depth = v
-            .depth
-            .iter()
-            .map(|&d| {
-                if d.is_finite() && d > 0.0 {
-                    d
-                } else {
-                    f32::INFINITY
-                }
-            })
-            .collect();
-        let soft = if p.normal == SeedNormal::Gradient {
-            box_blur(
-                &mask.iter().map(|&m| m as u8 as f32).collect::<Vec<f32>>(),
-                w,
-                h,
-                gradient_pixels(w),
-            )
-        } else {
-            Vec::new()
-        };
-        Prepared {
-            cam: v.camera,
-            mask,
-            soft,
-            depth,
-        }
+        let mask: Vec<bool> = if r == 0 { grown.iter().map(|&g| g > 0.5).collect() } else { box_blur(&grown, w, h, r).iter().map(|&m| m > 1.0 - 1e-4).collect() };
+        let depth = v.depth.iter().map(|&d| if d.is_finite() && d > 0.0 { d } else { f32::INFINITY }).collect();
+        let soft = if p.normal == SeedNormal::Gradient { box_blur(&mask.iter().map(|&m| m as u8 as f32).collect::<Vec<f32>>(), w, h, gradient_pixels(w)) } else { Vec::new() };
+        Prepared { cam: v.camera, mask, soft, depth }
     }
 
     /// `soft` sampled bilinearly at the projection of `x` (0 outside the
@@ -210,18 +163,11 @@ impl Prepared {
         if !(u > -1.0 && v > -1.0 && u < w as f64 && v < h as f64) {
             return 0.0;
         }
-        let at = |x: i64, y: i64| {
-            if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-                0.0
-            } else {
-                self.soft[y as usize * w + x as usize] as f64
-            }
-        };
+        let at = |x: i64, y: i64| if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 { 0.0 } else { self.soft[y as usize * w + x as usize] as f64 };
         let (u0, v0) = (u.floor(), v.floor());
         let (fu, fv) = (u - u0, v - v0);
         let (x0, y0) = (u0 as i64, v0 as i64);
-        (at(x0, y0) * (1.0 - fu) + at(x0 + 1, y0) * fu) * (1.0 - fv)
-            + (at(x0, y0 + 1) * (1.0 - fu) + at(x0 + 1, y0 + 1) * fu) * fv
+        (at(x0, y0) * (1.0 - fu) + at(x0 + 1, y0) * fu) * (1.0 - fv) + (at(x0, y0 + 1) * (1.0 - fu) + at(x0 + 1, y0 + 1) * fu) * fv
     }
 
     fn pixel(&self, x: V3) -> Option<(usize, f64)> {
@@ -231,8 +177,7 @@ impl Prepared {
     /// The pixel `x` projects to, if this view sees it in front of its
     /// Stage I surface (the views that take part in the hull test).
     fn in_front(&self, x: V3) -> Option<usize> {
-        self.pixel(x)
-            .and_then(|(i, z)| (z < self.depth[i] as f64 * 0.98).then_some(i))
+        self.pixel(x).and_then(|(i, z)| (z < self.depth[i] as f64 * 0.98).then_some(i))
     }
 
     fn unproject(&self, i: usize, z: f64) -> V3 {
@@ -255,37 +200,20 @@ pub(crate) fn pixel_of(cam: &Camera, x: V3) -> Option<(usize, f64)> {
 /// depth of world point `x` in `cam`, if it is in front of the camera; in f64.
 fn image_point(cam: &Camera, x: V3) -> Option<(f64, f64, f64)> {
     let m = &cam.world_to_view;
-    let p: V3 = [0, 1, 2].map(|r| {
-        m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64
-    });
+    let p: V3 = [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64);
     if !(p[2] > 1e-6) {
         return None;
     }
-    Some((
-        cam.fx as f64 * p[0] / p[2] + cam.cx as f64,
-        cam.fy as f64 * p[1] / p[2] + cam.cy as f64,
-        p[2],
-    ))
+    Some((cam.fx as f64 * p[0] / p[2] + cam.cx as f64, cam.fy as f64 * p[1] / p[2] + cam.cy as f64, p[2]))
 }
 
 /// The world point at pixel `i` (row-major) of `cam`, view depth `z`:
 /// R^T (p_view - t), in f64.
 pub(crate) fn unproject_pixel(cam: &Camera, i: usize, z: f64) -> V3 {
-    let (u, v) = (
-        (i % cam.width as usize) as f64,
-        (i / cam.width as usize) as f64,
-    );
-    let pv = [
-        (u - cam.cx as f64) / cam.fx as f64 * z,
-        (v - cam.cy as f64) / cam.fy as f64 * z,
-        z,
-    ];
+    let (u, v) = ((i % cam.width as usize) as f64, (i / cam.width as usize) as f64);
+    let pv = [(u - cam.cx as f64) / cam.fx as f64 * z, (v - cam.cy as f64) / cam.fy as f64 * z, z];
     let m = &cam.world_to_view;
-    let d = [
-        pv[0] - m[0][3] as f64,
-        pv[1] - m[1][3] as f64,
-        pv[2] - m[2][3] as f64,
-    ];
+    let d = [pv[0] - m[0][3] as f64, pv[1] - m[1][3] as f64, pv[2] - m[2][3] as f64];
     [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
 }
 
@@ -304,14 +232,8 @@ fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     let mut out = vec![0.0f32; w * h];
     for y in 0..h {
         for x in 0..w {
-            let (x0, x1, y0, y1) = (
-                x.saturating_sub(r),
-                (x + r + 1).min(w),
-                y.saturating_sub(r),
-                (y + r + 1).min(h),
-            );
-            let sum = s[y1 * (w + 1) + x1] - s[y0 * (w + 1) + x1] - s[y1 * (w + 1) + x0]
-                + s[y0 * (w + 1) + x0];
+            let (x0, x1, y0, y1) = (x.saturating_sub(r), (x + r + 1).min(w), y.saturating_sub(r), (y + r + 1).min(h));
+            let sum = s[y1 * (w + 1) + x1] - s[y0 * (w + 1) + x1] - s[y1 * (w + 1) + x0] + s[y0 * (w + 1) + x0];
             out[y * w + x] = (sum / ((x1 - x0) * (y1 - y0)) as f64) as f32;
         }
     }
@@ -343,9 +265,7 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict
     } else if (hit as f64) < agree as f64 * seen as f64 {
         Verdict::Carved
     } else {
-        Verdict::Agrees {
-            significant: hit >= min_hits[seen as usize],
-        }
+        Verdict::Agrees { significant: hit >= min_hits[seen as usize] }
     }
 }
 
@@ -360,12 +280,10 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict
 pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
     let p = coverage.clamp(0.0, 1.0);
     // ln n! for n in 0..=views: the whole table is O(views^2) at worst.
-    let ln_fact: Vec<f64> = std::iter::once(0.0)
-        .chain((1..=views).scan(0.0f64, |acc, i| {
-            *acc += (i as f64).ln();
-            Some(*acc)
-        }))
-        .collect();
+    let ln_fact: Vec<f64> = std::iter::once(0.0).chain((1..=views).scan(0.0f64, |acc, i| {
+        *acc += (i as f64).ln();
+        Some(*acc)
+    })).collect();
     (0..=views)
         .map(|n| {
             if alpha >= 1.0 || p <= 0.0 {
@@ -375,11 +293,7 @@ pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
                 return n as u32 + 1;
             }
             // ln C(n, j) + j ln p + (n - j) ln(1 - p), summed from j = n down.
-            let ln_pmf = |j: usize| {
-                ln_fact[n] - ln_fact[j] - ln_fact[n - j]
-                    + j as f64 * p.ln()
-                    + (n - j) as f64 * (1.0 - p).ln()
-            };
+            let ln_pmf = |j: usize| ln_fact[n] - ln_fact[j] - ln_fact[n - j] + j as f64 * p.ln() + (n - j) as f64 * (1.0 - p).ln();
             let mut tail = 0.0f64;
             let mut k = n + 1;
             for j in (0..=n).rev() {
@@ -422,17 +336,9 @@ pub struct HullSeeding {
 pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
     let found = march(&prepared, p);
-    let dropped =
-        found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
-    let chosen = if dropped {
-        &found.agreeing
-    } else {
-        &found.significant
-    };
-    HullSeeding {
-        seeds: surfels(chosen, &prepared, p.normal, p.threads),
-        significance_dropped: dropped,
-    }
+    let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
+    let chosen = if dropped { &found.agreeing } else { &found.significant };
+    HullSeeding { seeds: surfels(chosen, &prepared, p.normal, p.threads), significance_dropped: dropped }
 }
 
 /// Per ray, the first hull point after carved space: with the significance
@@ -443,45 +349,19 @@ struct Found {
 }
 
 fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
-    let mut found = Found {
-        significant: Vec::new(),
-        agreeing: Vec::new(),
-    };
+    let mut found = Found { significant: Vec::new(), agreeing: Vec::new() };
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
-    let far = prepared
-        .iter()
-        .flat_map(|v| v.depth.iter())
-        .filter(|d| d.is_finite())
-        .fold(0.0f32, |a, &b| a.max(b)) as f64;
-    let total: usize = prepared
-        .iter()
-        .map(|v| v.mask.iter().filter(|&&m| m).count())
-        .sum();
+    let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
+    let total: usize = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).sum();
     if total == 0 || far <= 0.0 || p.steps == 0 {
         return found;
     }
     let pixels: usize = prepared.iter().map(|v| v.mask.len()).sum();
-    let min_hits = min_hits(
-        prepared.len(),
-        total as f64 / pixels.max(1) as f64,
-        p.significance,
-    );
+    let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
     // Every `stride`-th residual pixel over the views, in view order.
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
-    let rays: Vec<(usize, usize)> = prepared
-        .iter()
-        .enumerate()
-        .flat_map(|(vi, v)| {
-            (0..v.mask.len())
-                .filter(|&i| v.mask[i])
-                .map(move |i| (vi, i))
-        })
-        .skip(stride - 1)
-        .step_by(stride)
-        .collect();
-    for part in in_parallel(&rays, p.threads, |chunk| {
-        march_rays(prepared, p, chunk, far, &min_hits)
-    }) {
+    let rays: Vec<(usize, usize)> = prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
+    for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits)) {
         found.significant.extend(part.significant);
         found.agreeing.extend(part.agreeing);
     }
@@ -489,24 +369,11 @@ fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
 }
 
 /// [`march`] along `rays` (view, pixel), in order.
-fn march_rays(
-    prepared: &[Prepared],
-    p: &SeedParams,
-    rays: &[(usize, usize)],
-    far: f64,
-    min_hits: &[u32],
-) -> Found {
-    let mut found = Found {
-        significant: Vec::new(),
-        agreeing: Vec::new(),
-    };
+fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32]) -> Found {
+    let mut found = Found { significant: Vec::new(), agreeing: Vec::new() };
     for &(vi, i) in rays {
         let v = &prepared[vi];
-        let z_far = if v.depth[i].is_finite() {
-            v.depth[i] as f64
-        } else {
-            far
-        };
+        let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
         let z_near = 0.05 * z_far;
         // A ray that starts inside the hull has no evidence of where
         // the surface begins (the residual covers what every view sees
@@ -541,18 +408,8 @@ fn march_rays(
 /// `f` over contiguous runs of `items` on up to `threads` scoped threads
 /// (0: the available parallelism), the results in the runs' order: the
 /// same as `f(items)` split at the run boundaries, whatever the count.
-fn in_parallel<T: Sync, R: Send>(
-    items: &[T],
-    threads: usize,
-    f: impl Fn(&[T]) -> R + Sync,
-) -> Vec<R> {
-    let threads = if threads == 0 {
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1)
-    } else {
-        threads
-    };
+fn in_parallel<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&[T]) -> R + Sync) -> Vec<R> {
+    let threads = if threads == 0 { std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) } else { threads };
     let runs = threads.clamp(1, items.len().max(1));
     if runs == 1 {
         return vec![f(items)];
@@ -560,40 +417,22 @@ fn in_parallel<T: Sync, R: Send>(
     let size = items.len().div_ceil(runs);
     std::thread::scope(|scope| {
         let handles: Vec<_> = items.chunks(size).map(|c| scope.spawn(|| f(c))).collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
     })
 }
 
 /// Normals (`normal`, facing the finding camera) and scales (root mean
 /// squared distance to the 3 nearest) of the found points.
-fn surfels(
-    found: &[(V3, usize)],
-    views: &[Prepared],
-    normal: SeedNormal,
-    threads: usize,
-) -> Vec<Seed> {
+fn surfels(found: &[(V3, usize)], views: &[Prepared], normal: SeedNormal, threads: usize) -> Vec<Seed> {
     let index: Vec<usize> = (0..found.len()).collect();
-    in_parallel(&index, threads, |run| {
-        run.iter()
-            .map(|&i| surfel(found, i, views, normal))
-            .collect::<Vec<Seed>>()
-    })
-    .concat()
+    in_parallel(&index, threads, |run| run.iter().map(|&i| surfel(found, i, views, normal)).collect::<Vec<Seed>>()).concat()
 }
 
 /// [`surfels`] for `found[i]`.
 fn surfel(found: &[(V3, usize)], i: usize, views: &[Prepared], normal: SeedNormal) -> Seed {
     const K: usize = 16;
     let (x, vi) = found[i];
-    let mut near: Vec<(f64, usize)> = found
-        .iter()
-        .enumerate()
-        .filter(|&(j, _)| j != i)
-        .map(|(j, &(y, _))| (dot(sub(x, y), sub(x, y)), j))
-        .collect();
+    let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (dot(sub(x, y), sub(x, y)), j)).collect();
     let k = K.min(near.len());
     if k > 0 {
         near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
@@ -611,16 +450,8 @@ fn surfel(found: &[(V3, usize)], i: usize, views: &[Prepared], normal: SeedNorma
         n = n.map(|c| -c);
     }
     let m = near.len().min(3);
-    let scale = if m > 0 {
-        (near[..m].iter().map(|a| a.0).sum::<f64>() / m as f64).sqrt()
-    } else {
-        0.0
-    };
-    Seed {
-        position: x.map(|c| c as f32),
-        normal: n.map(|c| c as f32),
-        scale: scale.max(1e-4) as f32,
-    }
+    let scale = if m > 0 { (near[..m].iter().map(|a| a.0).sum::<f64>() / m as f64).sqrt() } else { 0.0 };
+    Seed { position: x.map(|c| c as f32), normal: n.map(|c| c as f32), scale: scale.max(1e-4) as f32 }
 }
 
 /// [`SeedNormal::Gradient`]'s blur radius and half-step, in pixels: a
@@ -674,9 +505,7 @@ fn plane_normal(x: V3, pts: impl Iterator<Item = V3>) -> V3 {
         }
     }
     let (vals, vecs) = jacobi_eigen(c);
-    let k = (0..3)
-        .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
-        .unwrap_or(2);
+    let k = (0..3).min_by(|&a, &b| vals[a].total_cmp(&vals[b])).unwrap_or(2);
     normalize([vecs[0][k], vecs[1][k], vecs[2][k]])
 }
 

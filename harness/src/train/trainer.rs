@@ -9,11 +9,11 @@
 //! what it needs as arguments.
 
 use super::config::TrainConfig;
-use super::env_init::{scene_env_map, EnvInit};
 use super::init::{far_points, gaussians_from_points, random_points};
 use super::lightfield::{normalization_box, LightFieldModel, LightFieldStepInput};
-use super::reflection::{residual, ReflStepInput, ReflectionModel, ScatTrain};
+use super::env_init::{scene_env_map, EnvInit};
 use super::rng::Rng;
+use super::reflection::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::scattering::{ScatteringModel, StepInput};
 use super::seed::{hull_seeding, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
@@ -21,9 +21,7 @@ use crate::data::Dataset;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Timing};
-use tgs_pipelines::{
-    Camera, EnvProxy, HostEnvMap, HostGaussians, LossValues, Plane, ReflectionShading,
-};
+use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, HostGaussians, LossValues, Plane, ReflectionShading};
 
 pub use super::reflection::ReflRendered;
 pub use super::scattering::Rendered;
@@ -140,10 +138,7 @@ impl Schedule {
     /// Entry `i`'s round: 1, or 2 for a stage run again (reflection.reseed).
     pub fn round(&self, i: usize) -> u32 {
         let s = self.stages.get(i).map(|e| e.0);
-        1 + self.stages[..i.min(self.stages.len())]
-            .iter()
-            .filter(|e| Some(e.0) == s)
-            .count() as u32
+        1 + self.stages[..i.min(self.stages.len())].iter().filter(|e| Some(e.0) == s).count() as u32
     }
     /// Entry `i`'s name in logs and metrics: "II", or "II.2" in round 2.
     pub fn label(&self, i: usize) -> String {
@@ -155,18 +150,11 @@ impl Schedule {
     }
     /// The iterations of the entry named `label`.
     pub fn iterations_of(&self, label: &str) -> u32 {
-        (0..self.stages.len())
-            .find(|&i| self.label(i) == label)
-            .map(|i| self.stages[i].1)
-            .unwrap_or(0)
+        (0..self.stages.len()).find(|&i| self.label(i) == label).map(|i| self.stages[i].1).unwrap_or(0)
     }
     /// First global iteration of `stage` minus one (its iterations are start+1..).
     pub fn start_of(&self, stage: Stage) -> u32 {
-        self.stages
-            .iter()
-            .take_while(|s| s.0 != stage)
-            .map(|s| s.1)
-            .sum()
+        self.stages.iter().take_while(|s| s.0 != stage).map(|s| s.1).sum()
     }
     /// Drop the stages after `stage` (a skipped Stage II).
     pub fn end_after(&mut self, stage: Stage) {
@@ -239,14 +227,7 @@ impl Trainer {
                 let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
                 let (extent, centre) = data.extent();
                 let n = (cfg.init_far_fraction as f64 * cfg.init_points as f64).round() as u32;
-                let far = far_points(
-                    n,
-                    &cams,
-                    cfg.init_half_extent,
-                    (centre, extent),
-                    cfg.init_far_depth * extent,
-                    &mut rng,
-                );
+                let far = far_points(n, &cams, cfg.init_half_extent, (centre, extent), cfg.init_far_depth * extent, &mut rng);
                 p.positions.extend(far.positions);
                 p.colors.extend(far.colors);
                 p
@@ -256,19 +237,9 @@ impl Trainer {
         Self::with_gaussians(ctx, cfg, data, &g, rng)
     }
 
-    pub fn with_gaussians(
-        ctx: &Arc<Context>,
-        cfg: TrainConfig,
-        data: &Dataset,
-        g: &HostGaussians,
-        rng: Rng,
-    ) -> Result<Trainer> {
+    pub fn with_gaussians(ctx: &Arc<Context>, cfg: TrainConfig, data: &Dataset, g: &HostGaussians, rng: Rng) -> Result<Trainer> {
         cfg.validate()?;
-        let targets = data
-            .train
-            .iter()
-            .map(|v| Buffer::from_slice(ctx, "train.target", &v.image.planar()))
-            .collect::<Result<Vec<_>>>()?;
+        let targets = data.train.iter().map(|v| Buffer::from_slice(ctx, "train.target", &v.image.planar())).collect::<Result<Vec<_>>>()?;
         let cameras = data.train.iter().map(|v| v.camera).collect();
         let (extent, centre) = data.extent();
         Ok(Trainer {
@@ -307,11 +278,7 @@ impl Trainer {
 
     /// Position learning rate at iteration `it`: log-linear over the stage, x extent.
     pub fn lr_means(&self, it: u32) -> f32 {
-        (super::log_lerp(
-            self.cfg.lr_means,
-            self.cfg.lr_means_final,
-            it as f64 / self.cfg.iterations.max(1) as f64,
-        ) * self.extent as f64) as f32
+        (super::log_lerp(self.cfg.lr_means, self.cfg.lr_means_final, it as f64 / self.cfg.iterations.max(1) as f64) * self.extent as f64) as f32
     }
 
     fn next_view(&mut self) -> u32 {
@@ -331,20 +298,13 @@ impl Trainer {
     pub fn at_reflection_start(&self) -> bool {
         // A Stage II run again after Stage III starts while the light
         // field is still there.
-        (self.scat_cache.is_empty() || self.light_field.is_some())
-            && matches!(
-                self.schedule.at(self.iteration + 1),
-                Some((Stage::Reflection, _))
-            )
+        (self.scat_cache.is_empty() || self.light_field.is_some()) && matches!(self.schedule.at(self.iteration + 1), Some((Stage::Reflection, _)))
     }
 
     /// The entry of the schedule the next iteration belongs to, and its
     /// name ("II", "II.2", ...).
     pub fn next_entry(&self) -> (usize, String) {
-        let i = self
-            .schedule
-            .entry_at(self.iteration + 1)
-            .unwrap_or(self.schedule.stages.len().saturating_sub(1));
+        let i = self.schedule.entry_at(self.iteration + 1).unwrap_or(self.schedule.stages.len().saturating_sub(1));
         (i, self.schedule.label(i))
     }
 
@@ -354,10 +314,7 @@ impl Trainer {
     /// the scene shows no view-dependent energy worth a reflection set and
     /// the schedule ends after Stage I. `on_view(i, residual planes)` sees
     /// every view's residual (4 planes: r, mean |r|) for saving.
-    pub fn begin_reflection(
-        &mut self,
-        mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>,
-    ) -> Result<ReflDecision> {
+    pub fn begin_reflection(&mut self, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<ReflDecision> {
         let shading = ReflectionShading::new(&self.ctx)?;
         let sh = self.sh_degree(self.cfg.iterations);
         let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
@@ -374,8 +331,7 @@ impl Trainer {
         for (i, cam) in self.cameras.clone().iter().enumerate() {
             let n = (cam.width * cam.height) as usize;
             let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * n)?;
-            self.scattering
-                .render_color_into(cam, sh, &self.background, &buf)?;
+            self.scattering.render_color_into(cam, sh, &self.background, &buf)?;
             let r = residual(&self.ctx, &shading, &self.targets[i], &buf, n as u32)?;
             let mag = &r[3 * n..4 * n];
             sum += mag.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
@@ -384,9 +340,7 @@ impl Trainer {
             on_view(i, cam, &r)?;
             self.scat_cache.push(buf);
             // The frame still holds this view's render.
-            let depth = self
-                .scattering
-                .last_plane(cam.width, cam.height, Plane::Median)?;
+            let depth = self.scattering.last_plane(cam.width, cam.height, Plane::Median)?;
             vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
             if hull && self.reflection.is_none() {
                 maps.push((mag.to_vec(), depth));
@@ -421,30 +375,12 @@ impl Trainer {
         // recorded decision) was decided on when it was made, and the
         // second round (reflection.reseed) runs whatever its residual: the
         // first decided.
-        d.run = reseed
-            || self.reflection.is_some()
-            || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
+        d.run = reseed || self.reflection.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
         if d.run {
             if self.reflection.is_none() {
                 let rc = &self.cfg.reflection;
-                let views: Vec<SeedView> = self
-                    .cameras
-                    .iter()
-                    .zip(&maps)
-                    .map(|(c, (r, z))| SeedView {
-                        camera: *c,
-                        residual: r,
-                        depth: z,
-                    })
-                    .collect();
-                let p = SeedParams {
-                    threshold: rc.min_residual,
-                    agree: rc.seed_agree,
-                    max_rays: rc.seed_rays,
-                    normal: rc.seed_normal,
-                    significance: rc.seed_significance as f64,
-                    ..SeedParams::default()
-                };
+                let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+                let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal, significance: rc.seed_significance as f64, ..SeedParams::default() };
                 let seeds = if hull {
                     let h = hull_seeding(&views, &p);
                     d.significance_dropped = h.significance_dropped;
@@ -456,26 +392,14 @@ impl Trainer {
                 // too short to carve anything): the paper's initialisation,
                 // a copy of the Stage I set, rather than no Stage II.
                 d.hull_empty = hull && seeds.is_empty();
-                let g = if copy || d.hull_empty {
-                    Some(self.scattering.set.params.download()?)
-                } else {
-                    None
-                };
+                let g = if copy || d.hull_empty { Some(self.scattering.set.params.download()?) } else { None };
                 d.seeds = seeds.len() as u32;
                 d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
                 let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
                 means.extend(seeds.iter().flat_map(|s| s.position));
                 let mut env = if rc.env_init == super::settings::EnvStart::Scene {
                     let scat = self.scattering.set.params.download()?;
-                    let (env, info) = scene_env_map(
-                        &self.ctx,
-                        &scat,
-                        sh,
-                        &self.background,
-                        &means,
-                        rc.env_res,
-                        self.cfg.adam_eps,
-                    )?;
+                    let (env, info) = scene_env_map(&self.ctx, &scat, sh, &self.background, &means, rc.env_res, self.cfg.adam_eps)?;
                     d.env_from = Some(info);
                     env
                 } else {
@@ -486,14 +410,7 @@ impl Trainer {
                     d.env_proxy = p.map(|p| EnvProxy::packed(Some(p)));
                     env.proxy = p;
                 }
-                self.reflection = Some(ReflectionModel::from_scattering(
-                    &self.ctx,
-                    g.as_ref(),
-                    &seeds,
-                    env,
-                    rc,
-                    self.cfg.adam_eps,
-                )?);
+                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, g.as_ref(), &seeds, env, rc, self.cfg.adam_eps)?);
             }
             d.reflection_gaussians = self.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0);
         } else {
@@ -507,38 +424,20 @@ impl Trainer {
     /// Whether the next iteration starts Stage III (call
     /// [`Trainer::begin_light_field`] first).
     pub fn at_light_field_start(&self) -> bool {
-        self.light_field.is_none()
-            && matches!(
-                self.schedule.at(self.iteration + 1),
-                Some((Stage::LightField, _))
-            )
+        self.light_field.is_none() && matches!(self.schedule.at(self.iteration + 1), Some((Stage::LightField, _)))
     }
 
     /// Between Stage II and III: the reflection set (with its Adam moments)
     /// moves to a light-field model with a fresh network; the environment
     /// map is dropped. Positions are normalized by the reflection set's box.
     pub fn begin_light_field(&mut self) -> Result<()> {
-        let refl = self
-            .reflection
-            .take()
-            .context("Stage III starts from Stage II's reflection set, and there is none")?;
+        let refl = self.reflection.take().context("Stage III starts from Stage II's reflection set, and there is none")?;
         let set = refl.into_set();
         let (centre, half_extent) = normalization_box(&set.params.means.download()?);
         let lf = &self.cfg.light_field;
-        let shade = tgs_pipelines::ShadeParams {
-            centre,
-            half_extent,
-            threshold: lf.threshold,
-            schlick: lf.schlick(),
-        };
+        let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick() };
         let net = LightFieldModel::init_net(&self.ctx, lf.shape()?, self.cfg.seed ^ 0x4c46)?;
-        self.light_field = Some(LightFieldModel::new(
-            &self.ctx,
-            set,
-            net,
-            shade,
-            self.cfg.adam_eps,
-        )?);
+        self.light_field = Some(LightFieldModel::new(&self.ctx, set, net, shade, self.cfg.adam_eps)?);
         // Stage III renders the scattering colour itself, or caches it
         // again when Stage II changed it.
         if lf.train_scattering || self.cfg.reflection.train_scattering {
@@ -556,13 +455,8 @@ impl Trainer {
         self.scat_cache.clear();
         let sh = self.sh_degree(self.cfg.iterations);
         for cam in self.cameras.clone() {
-            let buf = Buffer::<f32>::new(
-                &self.ctx,
-                "train.scat_cache",
-                3 * (cam.width * cam.height) as usize,
-            )?;
-            self.scattering
-                .render_color_into(&cam, sh, &self.background, &buf)?;
+            let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * (cam.width * cam.height) as usize)?;
+            self.scattering.render_color_into(&cam, sh, &self.background, &buf)?;
             self.scat_cache.push(buf);
         }
         Ok(())
@@ -571,10 +465,7 @@ impl Trainer {
     /// One training iteration.
     pub fn step(&mut self, profile: bool) -> Result<StepReport> {
         let it = self.iteration + 1;
-        let (stage, stage_it) = self
-            .schedule
-            .at(it)
-            .context("training is already complete")?;
+        let (stage, stage_it) = self.schedule.at(it).context("training is already complete")?;
         if stage == Stage::Reflection {
             return self.step_reflection(it, stage_it, profile);
         }
@@ -584,9 +475,7 @@ impl Trainer {
         // The reset that follows iteration it-1 runs here, at the start of
         // the next iteration (the same order of operations as 2DGS), so that
         // a test evaluation or checkpoint at it-1 sees the trained state.
-        let reset = self
-            .cfg
-            .opacity_reset_after(it - 1, self.background == [1.0; 3]);
+        let reset = self.cfg.opacity_reset_after(it - 1, self.background == [1.0; 3]);
         if reset {
             self.scattering.reset_opacity()?;
         }
@@ -620,27 +509,11 @@ impl Trainer {
     fn step_reflection(&mut self, it: u32, stage_it: u32, profile: bool) -> Result<StepReport> {
         let view = self.next_view();
         let cam = self.cameras[view as usize];
-        let model = self
-            .reflection
-            .as_mut()
-            .context("Stage II has not begun (Trainer::begin_reflection)")?;
+        let model = self.reflection.as_mut().context("Stage II has not begun (Trainer::begin_reflection)")?;
         let train = self.cfg.reflection.train_scattering;
-        let scat = if train {
-            None
-        } else {
-            Some(
-                self.scat_cache
-                    .get(view as usize)
-                    .context("the scattering colour cache is missing")?,
-            )
-        };
+        let scat = if train { None } else { Some(self.scat_cache.get(view as usize).context("the scattering colour cache is missing")?) };
         let sh_degree = self.cfg.sh_degree_at(self.cfg.iterations);
-        let scat_train = train.then_some(ScatTrain {
-            model: &mut self.scattering,
-            sh_degree,
-            background: self.background,
-            global_iteration: it,
-        });
+        let scat_train = train.then_some(ScatTrain { model: &mut self.scattering, sh_degree, background: self.background, global_iteration: it });
         let input = ReflStepInput {
             iteration: stage_it,
             camera: &cam,
@@ -674,20 +547,13 @@ impl Trainer {
         let view = self.next_view();
         let cam = self.cameras[view as usize];
         let sh = self.sh_degree(self.cfg.iterations);
-        let model = self
-            .light_field
-            .as_mut()
-            .context("Stage III has not begun (Trainer::begin_light_field)")?;
+        let model = self.light_field.as_mut().context("Stage III has not begun (Trainer::begin_light_field)")?;
         let input = LightFieldStepInput {
             iteration: stage_it,
             global_iteration: it,
             camera: &cam,
             target: &self.targets[view as usize],
-            scat: if frozen {
-                Some(&self.scat_cache[view as usize])
-            } else {
-                None
-            },
+            scat: if frozen { Some(&self.scat_cache[view as usize]) } else { None },
             sh_degree: sh,
             background: self.background,
             // Positions at Stage I's final rate (method-notes §3.7).
@@ -722,36 +588,19 @@ impl Trainer {
         let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
         let refl = match self.light_field.as_mut() {
             Some(model) => model.render(cam, &colour)?,
-            None => self
-                .reflection
-                .as_mut()
-                .context("a Stage II model")?
-                .render(cam, &colour)?,
+            None => self.reflection.as_mut().context("a Stage II model")?.render(cam, &colour)?,
         };
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
         let ra = refl.refl_plane(Plane::Alpha);
-        for p in [
-            Plane::Alpha,
-            Plane::Depth,
-            Plane::Normal(0),
-            Plane::Normal(1),
-            Plane::Normal(2),
-            Plane::Median,
-            Plane::Distortion,
-        ] {
+        for p in [Plane::Alpha, Plane::Depth, Plane::Normal(0), Plane::Normal(1), Plane::Normal(2), Plane::Median, Plane::Distortion] {
             let k = p.index(3) as usize;
             let src = refl.refl_plane(p);
             for i in (0..n).filter(|&i| ra[i] >= 0.5) {
                 planes[k * n + i] = src[i];
             }
         }
-        Ok(Rendered {
-            width: cam.width,
-            height: cam.height,
-            planes,
-            layers: Some(Box::new((scat, refl))),
-        })
+        Ok(Rendered { width: cam.width, height: cam.height, planes, layers: Some(Box::new((scat, refl))) })
     }
 
     /// Current Gaussians on the host.
@@ -763,10 +612,7 @@ impl Trainer {
 impl ReflDecision {
     /// The recorded parallax proxy of the cube map.
     pub fn proxy(&self) -> Option<EnvProxy> {
-        self.env_proxy.map(|p| EnvProxy {
-            centre: [p[0], p[1], p[2]],
-            radius: p[3],
-        })
+        self.env_proxy.map(|p| EnvProxy { centre: [p[0], p[1], p[2]], radius: p[3] })
     }
 }
 
@@ -779,17 +625,10 @@ pub fn env_proxy(means: &[f32], cameras: &[Camera], radius: f32) -> Option<EnvPr
         return None;
     }
     let (centre, _) = normalization_box(means);
-    let dist = cameras
-        .iter()
-        .map(|c| {
-            let e = c.centre();
-            (0..3)
-                .map(|k| ((e[k] - centre[k]) as f64).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
-        .sum::<f64>()
-        / cameras.len() as f64;
+    let dist = cameras.iter().map(|c| {
+        let e = c.centre();
+        (0..3).map(|k| ((e[k] - centre[k]) as f64).powi(2)).sum::<f64>().sqrt()
+    }).sum::<f64>() / cameras.len() as f64;
     let r = (radius as f64 * dist) as f32;
     (r > 0.0 && r.is_finite()).then_some(EnvProxy { centre, radius: r })
 }

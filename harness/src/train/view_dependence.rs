@@ -40,33 +40,19 @@ impl VdMap {
     /// width x height, `depth` one.
     pub fn new(camera: &Camera, residual: &[f32], depth: &[f32], max_side: u32) -> VdMap {
         let (w, h) = (camera.width as usize, camera.height as usize);
-        let f = camera
-            .width
-            .max(camera.height)
-            .div_ceil(max_side.max(1))
-            .max(1);
+        let f = camera.width.max(camera.height).div_ceil(max_side.max(1)).max(1);
         let cam = downscale_camera(camera, f);
         // Box-averaged residual (a side that would round to 0 leaves an empty map).
         let n = w * h;
-        let res = ImageF::from_planar(camera.width, camera.height, 3, &residual[..3 * n])
-            .downscale(f)
-            .map(|r| r.planar())
-            .unwrap_or_default();
+        let res = ImageF::from_planar(camera.width, camera.height, 3, &residual[..3 * n]).downscale(f).map(|r| r.planar()).unwrap_or_default();
         let (cw, ch, f) = (cam.width as usize, cam.height as usize, f as usize);
         let mut dep = vec![0.0f32; cw * ch];
         for y in 0..ch {
             for x in 0..cw {
-                dep[y * cw + x] = depth
-                    .get((y * f + f / 2).min(h - 1) * w + (x * f + f / 2).min(w - 1))
-                    .copied()
-                    .unwrap_or(0.0);
+                dep[y * cw + x] = depth.get((y * f + f / 2).min(h - 1) * w + (x * f + f / 2).min(w - 1)).copied().unwrap_or(0.0);
             }
         }
-        VdMap {
-            camera: cam,
-            residual: res,
-            depth: dep,
-        }
+        VdMap { camera: cam, residual: res, depth: dep }
     }
 
     fn pixels(&self) -> usize {
@@ -77,6 +63,7 @@ impl VdMap {
         let d = self.depth[i];
         (d.is_finite() && d > 0.0).then_some(d as f64)
     }
+
 }
 
 /// The measured view dependence of a residual.
@@ -93,11 +80,7 @@ pub struct ViewDependence {
 /// documentation), from at most `max_samples` sample pixels spread evenly
 /// over the views, at surface points inside `sphere` (centre, radius).
 /// Deterministic.
-pub fn view_dependence(
-    views: &[VdMap],
-    sphere: ([f32; 3], f32),
-    max_samples: usize,
-) -> ViewDependence {
+pub fn view_dependence(views: &[VdMap], sphere: ([f32; 3], f32), max_samples: usize) -> ViewDependence {
     let total: usize = views.iter().map(VdMap::pixels).sum();
     if total == 0 || max_samples == 0 {
         return ViewDependence::default();
@@ -120,9 +103,7 @@ pub fn view_dependence(
             }
             vals.clear();
             for b in views {
-                let Some((j, zb)) = pixel_of(&b.camera, x) else {
-                    continue;
-                };
+                let Some((j, zb)) = pixel_of(&b.camera, x) else { continue };
                 let Some(db) = b.depth_at(j) else { continue };
                 if (db - zb).abs() <= 0.02 * zb {
                     let n = b.pixels();
@@ -134,19 +115,12 @@ pub fn view_dependence(
             }
             let m = vals.len() as f64;
             let mean = [0, 1, 2].map(|c| vals.iter().map(|v| v[c]).sum::<f64>() / m);
-            let mad = vals
-                .iter()
-                .map(|v| (0..3).map(|c| (v[c] - mean[c]).abs()).sum::<f64>())
-                .sum::<f64>()
-                / (3.0 * m);
+            let mad = vals.iter().map(|v| (0..3).map(|c| (v[c] - mean[c]).abs()).sum::<f64>()).sum::<f64>() / (3.0 * m);
             if mad.is_finite() {
                 spreads.push(mad);
             }
         }
     }
     spreads.sort_by(f64::total_cmp);
-    ViewDependence {
-        spread: spreads.get(spreads.len() / 2).copied().unwrap_or(0.0),
-        samples: spreads.len() as u64,
-    }
+    ViewDependence { spread: spreads.get(spreads.len() / 2).copied().unwrap_or(0.0), samples: spreads.len() as u64 }
 }

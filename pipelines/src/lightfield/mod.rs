@@ -100,17 +100,7 @@ impl LightFieldShading {
         let sg = ctx.caps().min_subgroup_size.max(1);
         let backward = |flag: u32| {
             let spec = [(0, WG), (1, sg), (2, 1), (3, flag)];
-            Kernel::new(
-                ctx,
-                &KernelDesc {
-                    name: "lf.composite_backward",
-                    spirv: shaders::LIGHTFIELD_COMPOSITE_BACKWARD,
-                    spec: &spec,
-                    push_bytes: pb,
-                    subgroup_size: None,
-                    full_subgroups: false,
-                },
-            )
+            Kernel::new(ctx, &KernelDesc { name: "lf.composite_backward", spirv: shaders::LIGHTFIELD_COMPOSITE_BACKWARD, spec: &spec, push_bytes: pb, subgroup_size: None, full_subgroups: false })
         };
         Ok(LightFieldShading {
             ctx: ctx.clone(),
@@ -138,51 +128,21 @@ impl LightFieldShading {
     }
 
     /// Record the features sigmoid(material) of `n` Gaussians (4 floats each).
-    pub fn record_material(
-        &self,
-        rec: &mut Recorder,
-        material: &Buffer<f32>,
-        n: u32,
-        feat: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn record_material(&self, rec: &mut Recorder, material: &Buffer<f32>, n: u32, feat: &Buffer<f32>) -> Result<()> {
         let len = n * CHANNELS;
         if material.len() < len as usize || feat.len() < len as usize {
-            bail!(
-                "material '{}' / features '{}' hold fewer than {len} values",
-                material.name(),
-                feat.name()
-            );
+            bail!("material '{}' / features '{}' hold fewer than {len} values", material.name(), feat.name());
         }
-        rec.dispatch(
-            &self.material,
-            &[material.binding(), feat.binding(), feat.binding()],
-            bytemuck::cast_slice(&[len, 0u32]),
-            grid(&self.ctx, len.max(1)),
-        )
+        rec.dispatch(&self.material, &[material.binding(), feat.binding(), feat.binding()], bytemuck::cast_slice(&[len, 0u32]), grid(&self.ctx, len.max(1)))
     }
 
     /// Record the material gradient (overwritten) from the features' gradient.
-    pub fn record_material_backward(
-        &self,
-        rec: &mut Recorder,
-        material: &Buffer<f32>,
-        n: u32,
-        d_feat: &Buffer<f32>,
-        d_material: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn record_material_backward(&self, rec: &mut Recorder, material: &Buffer<f32>, n: u32, d_feat: &Buffer<f32>, d_material: &Buffer<f32>) -> Result<()> {
         let len = n * CHANNELS;
-        if [material.len(), d_feat.len(), d_material.len()]
-            .iter()
-            .any(|&l| l < len as usize)
-        {
+        if [material.len(), d_feat.len(), d_material.len()].iter().any(|&l| l < len as usize) {
             bail!("material gradient buffers hold fewer than {len} values");
         }
-        rec.dispatch(
-            &self.material,
-            &[material.binding(), d_feat.binding(), d_material.binding()],
-            bytemuck::cast_slice(&[len, 1u32]),
-            grid(&self.ctx, len.max(1)),
-        )
+        rec.dispatch(&self.material, &[material.binding(), d_feat.binding(), d_material.binding()], bytemuck::cast_slice(&[len, 1u32]), grid(&self.ctx, len.max(1)))
     }
 
     /// The pixel count of `cam` after checking `bufs` (buffer, planes) and
@@ -191,12 +151,7 @@ impl LightFieldShading {
         check_planes(cam, bufs)?;
         let n = cam.width * cam.height;
         if s.pixels != n {
-            bail!(
-                "sample scratch for {} pixels does not fit a {}x{} view",
-                s.pixels,
-                cam.width,
-                cam.height
-            );
+            bail!("sample scratch for {} pixels does not fit a {}x{} view", s.pixels, cam.width, cam.height);
         }
         Ok(n)
     }
@@ -206,83 +161,24 @@ impl LightFieldShading {
     /// threshold) and the samples (6 floats each, at their rank) into
     /// `samples`, which holds `samples.len() / 6` of them: pixels ranked
     /// beyond are not evaluated (the caller checks the count).
-    pub fn record_samples(
-        &self,
-        rec: &mut Recorder,
-        cam: &Camera,
-        p: &ShadeParams,
-        refl: &Buffer<f32>,
-        s: &SampleScratch,
-        samples: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn record_samples(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, refl: &Buffer<f32>, s: &SampleScratch, samples: &Buffer<f32>) -> Result<()> {
         let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS))])?;
-        let pc = push(
-            cam,
-            p,
-            (samples.len() / 6).min(u32::MAX as usize) as u32,
-            0.0,
-        );
+        let pc = push(cam, p, (samples.len() / 6).min(u32::MAX as usize) as u32, 0.0);
         let g = grid(&self.ctx, n);
-        rec.dispatch(
-            &self.mask,
-            &[refl.binding(), s.flags.binding()],
-            bytemuck::bytes_of(&pc),
-            g,
-        )?;
-        self.scan
-            .record(rec, &s.flags, &s.flags, &Count::Host(n), &s.scan)?;
-        rec.dispatch(
-            &self.compact,
-            &[
-                refl.binding(),
-                s.flags.binding(),
-                s.sample_of.binding(),
-                samples.binding(),
-                s.count.binding(),
-            ],
-            bytemuck::bytes_of(&pc),
-            g,
-        )
+        rec.dispatch(&self.mask, &[refl.binding(), s.flags.binding()], bytemuck::bytes_of(&pc), g)?;
+        self.scan.record(rec, &s.flags, &s.flags, &Count::Host(n), &s.scan)?;
+        rec.dispatch(&self.compact, &[refl.binding(), s.flags.binding(), s.sample_of.binding(), samples.binding(), s.count.binding()], bytemuck::bytes_of(&pc), g)
     }
 
     /// Record the composite into `loss_in` (3-channel render layout) from
     /// the scattering colour (3 planes), the reflection render and Phi at
     /// the samples (3 floats each).
     #[allow(clippy::too_many_arguments)]
-    pub fn record_composite(
-        &self,
-        rec: &mut Recorder,
-        cam: &Camera,
-        p: &ShadeParams,
-        scat: &Buffer<f32>,
-        refl: &Buffer<f32>,
-        s: &SampleScratch,
-        phi: &Buffer<f32>,
-        loss_in: &Buffer<f32>,
-    ) -> Result<()> {
-        let n = Self::check(
-            cam,
-            s,
-            &[
-                (refl, Plane::count(CHANNELS)),
-                (scat, 3),
-                (loss_in, Plane::count(3)),
-            ],
-        )?;
+    pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, scat: &Buffer<f32>, refl: &Buffer<f32>, s: &SampleScratch, phi: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
+        let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_in, Plane::count(3))])?;
         let pc = push(cam, p, 0, 0.0);
-        let b = [
-            refl.binding(),
-            scat.binding(),
-            s.sample_of.binding(),
-            phi.binding(),
-            loss_in.binding(),
-        ];
-        rec.dispatch(
-            &self.composite,
-            &b,
-            bytemuck::bytes_of(&pc),
-            grid(&self.ctx, n),
-        )
+        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_in.binding()];
+        rec.dispatch(&self.composite, &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
 
     /// Record the composite's backward: `loss_grad` (colour planes) to
@@ -306,36 +202,13 @@ impl LightFieldShading {
         scat_grad: Option<&Buffer<f32>>,
         r_prior: f32,
     ) -> Result<()> {
-        let n = Self::check(
-            cam,
-            s,
-            &[
-                (refl, Plane::count(CHANNELS)),
-                (scat, 3),
-                (loss_grad, 3),
-                (refl_grad, Plane::count(CHANNELS)),
-            ],
-        )?;
+        let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_grad, 3), (refl_grad, Plane::count(CHANNELS))])?;
         if let Some(g) = scat_grad {
             check_planes(cam, &[(g, 3)])?;
         }
         let pc = push(cam, p, 0, r_prior);
         let sg = scat_grad.unwrap_or(refl_grad);
-        let b = [
-            refl.binding(),
-            scat.binding(),
-            s.sample_of.binding(),
-            phi.binding(),
-            loss_grad.binding(),
-            d_phi.binding(),
-            refl_grad.binding(),
-            sg.binding(),
-        ];
-        rec.dispatch(
-            &self.composite_backward[scat_grad.is_some() as usize],
-            &b,
-            bytemuck::bytes_of(&pc),
-            grid(&self.ctx, n),
-        )
+        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_grad.binding(), d_phi.binding(), refl_grad.binding(), sg.binding()];
+        rec.dispatch(&self.composite_backward[scat_grad.is_some() as usize], &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
 }

@@ -5,7 +5,8 @@
 //!   (forward with bias and activation; the input gradient dX = dZ W; the
 //!   weight gradient dW = dZ^T [X, 1] as per-chunk partials in their own
 //!   slots), in two kernels with bit-identical results ([`Gemm`]): tiled
-//!   through shared memory on GPUs, a row per invocation on CPU devices;
+//!   through shared memory on GPUs, rows per invocation on CPU devices;
+//! - `relu_grad`: a hidden layer's output gradient turned into dZ in place;
 //! - `reduce`: the partials summed per parameter in a fixed order.
 //!
 //! No atomics: every output has one writer and a fixed summation order that
@@ -51,77 +52,25 @@ struct RowConfig {
 /// 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8 rows (perf/RESULTS.md,
 /// twenty-eighth session).
 const ROW_CONFIGS: [RowConfig; 12] = [
-    RowConfig {
-        nb: 8,
-        rr: 8,
-        wg: 64,
-    },
-    RowConfig {
-        nb: 16,
-        rr: 8,
-        wg: 64,
-    },
-    RowConfig {
-        nb: 32,
-        rr: 8,
-        wg: 64,
-    },
-    RowConfig {
-        nb: 64,
-        rr: 4,
-        wg: 64,
-    },
-    RowConfig {
-        nb: 8,
-        rr: 4,
-        wg: 16,
-    },
-    RowConfig {
-        nb: 16,
-        rr: 4,
-        wg: 16,
-    },
-    RowConfig {
-        nb: 32,
-        rr: 4,
-        wg: 16,
-    },
-    RowConfig {
-        nb: 64,
-        rr: 4,
-        wg: 16,
-    },
-    RowConfig {
-        nb: 8,
-        rr: 1,
-        wg: 8,
-    },
-    RowConfig {
-        nb: 16,
-        rr: 1,
-        wg: 8,
-    },
-    RowConfig {
-        nb: 32,
-        rr: 1,
-        wg: 8,
-    },
-    RowConfig {
-        nb: 64,
-        rr: 1,
-        wg: 8,
-    },
+    RowConfig { nb: 8, rr: 8, wg: 64 },
+    RowConfig { nb: 16, rr: 8, wg: 64 },
+    RowConfig { nb: 32, rr: 8, wg: 64 },
+    RowConfig { nb: 64, rr: 4, wg: 64 },
+    RowConfig { nb: 8, rr: 4, wg: 16 },
+    RowConfig { nb: 16, rr: 4, wg: 16 },
+    RowConfig { nb: 32, rr: 4, wg: 16 },
+    RowConfig { nb: 64, rr: 4, wg: 16 },
+    RowConfig { nb: 8, rr: 1, wg: 8 },
+    RowConfig { nb: 16, rr: 1, wg: 8 },
+    RowConfig { nb: 32, rr: 1, wg: 8 },
+    RowConfig { nb: 64, rr: 1, wg: 8 },
 ];
 
 /// The row configuration for a product of `m` x `n`: 64 columns for
 /// products at least 128 wide, else the smallest block that holds them (8,
 /// 16, 32); the smallest workgroup shape that covers the rows.
 fn row_config(m: u32, n: u32) -> usize {
-    let col = if n >= 128 {
-        3
-    } else {
-        [8, 16, 32].iter().position(|&nb| nb >= n).unwrap_or(2)
-    };
+    let col = if n >= 128 { 3 } else { [8, 16, 32].iter().position(|&nb| nb >= n).unwrap_or(2) };
     let rows = if m <= 8 {
         8
     } else if m <= 64 {
@@ -131,7 +80,6 @@ fn row_config(m: u32, n: u32) -> usize {
     };
     rows + col
 }
-
 /// At most this many sample chunks hold weight-gradient partials (a power
 /// of two: the counted backward walks them in bit-reversed order).
 const MAX_CHUNKS: u32 = 16;
@@ -211,11 +159,7 @@ impl MlpScratch {
     }
     /// Bytes of device memory held.
     pub fn bytes(&self) -> u64 {
-        let mut b = self.samples.bytes()
-            + self.out.bytes()
-            + self.in0.bytes()
-            + self.cat.bytes()
-            + self.part.bytes();
+        let mut b = self.samples.bytes() + self.out.bytes() + self.in0.bytes() + self.cat.bytes() + self.part.bytes();
         b += self.hidden.iter().flatten().map(|h| h.bytes()).sum::<u64>();
         b + self.d.iter().map(|d| d.bytes()).sum::<u64>()
     }
@@ -234,12 +178,7 @@ impl MlpScratch {
         match l {
             0 => (&self.in0, s.dx()),
             l if l == s.skip => (&self.cat, s.cat_width()),
-            _ => (
-                self.hidden[l as usize - 1]
-                    .as_ref()
-                    .expect("hidden layer buffer"),
-                s.width,
-            ),
+            _ => (self.hidden[l as usize - 1].as_ref().expect("hidden layer buffer"), s.width),
         }
     }
     /// Layer `l`'s output buffer and row stride.
@@ -250,12 +189,7 @@ impl MlpScratch {
         } else if l + 1 == s.skip {
             (&self.cat, s.cat_width())
         } else {
-            (
-                self.hidden[l as usize]
-                    .as_ref()
-                    .expect("hidden layer buffer"),
-                s.width,
-            )
+            (self.hidden[l as usize].as_ref().expect("hidden layer buffer"), s.width)
         }
     }
 }
@@ -272,10 +206,13 @@ pub enum Gemm {
     /// memory, B shared across the subgroup by broadcasts; for CPU devices
     /// (lavapipe), where every load a lane makes costs a scalar load and the
     /// tiled kernel's shared-memory reads were the bottleneck. Measured on
-    /// llvmpipe, 4,096 samples, forward + backward: the small network 5,174
-    /// -> 24,558 samples/s, the paper network 447 -> 1,167.
+    /// llvmpipe, 4,096 samples, forward + backward: the small network 5,131
+    /// -> 25,915 samples/s, the paper network 434 -> 1,260.
     Rows,
 }
+
+/// The environment variable that overrides [`Gemm::for_device`].
+pub const GEMM_ENV: &str = "TGS_MLP_GEMM";
 
 impl Gemm {
     /// Rows on CPU devices, tiled elsewhere; the environment variable
@@ -284,11 +221,7 @@ impl Gemm {
         if let Ok(v) = std::env::var(GEMM_ENV) {
             return Gemm::parse(&v).with_context(|| format!("environment variable {GEMM_ENV}"));
         }
-        Ok(if ctx.caps().is_cpu() {
-            Gemm::Rows
-        } else {
-            Gemm::Tiled
-        })
+        Ok(if ctx.caps().is_cpu() { Gemm::Rows } else { Gemm::Tiled })
     }
     /// By name: "tiled" or "rows".
     pub fn parse(name: &str) -> Result<Gemm> {
@@ -306,14 +239,11 @@ impl Gemm {
     }
 }
 
-/// The environment variable that overrides [`Gemm::for_device`].
-pub const GEMM_ENV: &str = "TGS_MLP_GEMM";
-
 pub struct Mlp {
     ctx: Arc<Context>,
     gemm_kind: Gemm,
     /// The GEMM, one pipeline per block size of [`BLOCKS`] (tiled) or
-    /// [`ROW_CONFIGS`] (rows).
+    /// configuration of [`ROW_CONFIGS`] (rows).
     gemm: Vec<Kernel>,
     encode: Kernel,
     relu_grad: Kernel,
@@ -333,39 +263,10 @@ impl Mlp {
         // larger than the device's smallest subgroup (every pipeline's
         // subgroup has at least that many lanes) nor the smallest block.
         let sb = ctx.caps().min_subgroup_size.clamp(1, ROW_CONFIGS[0].nb);
+        let pipeline = |name, spirv, spec: &[(u32, u32)]| Kernel::new(ctx, &KernelDesc { name, spirv, spec, push_bytes: push, subgroup_size: None, full_subgroups: false });
         let gemm = match gemm_kind {
-            Gemm::Tiled => BLOCKS
-                .iter()
-                .map(|&b| {
-                    Kernel::new(
-                        ctx,
-                        &KernelDesc {
-                            name: "mlp.gemm",
-                            spirv: shaders::MLP_GEMM,
-                            spec: &[(3, b)],
-                            push_bytes: push,
-                            subgroup_size: None,
-                            full_subgroups: false,
-                        },
-                    )
-                })
-                .collect::<Result<Vec<_>>>()?,
-            Gemm::Rows => ROW_CONFIGS
-                .iter()
-                .map(|c| {
-                    Kernel::new(
-                        ctx,
-                        &KernelDesc {
-                            name: "mlp.gemm_rows",
-                            spirv: shaders::MLP_GEMM_ROWS,
-                            spec: &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)],
-                            push_bytes: push,
-                            subgroup_size: None,
-                            full_subgroups: false,
-                        },
-                    )
-                })
-                .collect::<Result<Vec<_>>>()?,
+            Gemm::Tiled => BLOCKS.iter().map(|&b| pipeline("mlp.gemm", shaders::MLP_GEMM, &[(3, b)])).collect::<Result<Vec<_>>>()?,
+            Gemm::Rows => ROW_CONFIGS.iter().map(|c| pipeline("mlp.gemm_rows", shaders::MLP_GEMM_ROWS, &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)])).collect::<Result<Vec<_>>>()?,
         };
         Ok(Mlp {
             ctx: ctx.clone(),
@@ -408,13 +309,7 @@ impl Mlp {
         let c = cap as usize;
         let w = shape.width as usize;
         let hidden = (0..shape.depth)
-            .map(|l| {
-                if l + 1 == shape.skip {
-                    Ok(None)
-                } else {
-                    Buffer::uninit(ctx, &format!("mlp.h{l}"), c * w).map(Some)
-                }
-            })
+            .map(|l| if l + 1 == shape.skip { Ok(None) } else { Buffer::uninit(ctx, &format!("mlp.h{l}"), c * w).map(Some) })
             .collect::<Result<Vec<_>>>()?;
         Ok(MlpScratch {
             shape,
@@ -424,86 +319,48 @@ impl Mlp {
             in0: Buffer::uninit(ctx, "mlp.in0", c * shape.dx() as usize)?,
             cat: Buffer::uninit(ctx, "mlp.cat", c * shape.cat_width() as usize)?,
             hidden,
-            d: [
-                Buffer::uninit(ctx, "mlp.d0", c * w)?,
-                Buffer::uninit(ctx, "mlp.d1", c * w)?,
-            ],
+            d: [Buffer::uninit(ctx, "mlp.d0", c * w)?, Buffer::uninit(ctx, "mlp.d1", c * w)?],
             part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
         })
     }
 
     fn check(s: &MlpScratch, params: &Buffer<f32>, n: u32) -> Result<()> {
         if n > s.capacity {
-            bail!(
-                "{n} light-field samples exceed the scratch's {}",
-                s.capacity
-            );
+            bail!("{n} light-field samples exceed the scratch's {}", s.capacity);
         }
         if params.len() < s.shape.params() as usize {
-            bail!(
-                "'{}' holds {} values; the light field has {} parameters",
-                params.name(),
-                params.len(),
-                s.shape.params()
-            );
+            bail!("'{}' holds {} values; the light field has {} parameters", params.name(), params.len(), s.shape.params());
         }
         Ok(())
     }
 
     /// One GEMM; `rows` (binding 4) is read only with `p.m_count` set.
-    fn dispatch(
-        &self,
-        rec: &mut Recorder,
-        p: &Product,
-        bufs: [&Buffer<f32>; 4],
-        chunks: u32,
-        rows: Option<&Buffer<u32>>,
-    ) -> Result<()> {
-        let [a, b, y, c_buf] = bufs.map(|b| b.binding());
+    fn dispatch(&self, rec: &mut Recorder, p: &Product, bufs: [&Buffer<f32>; 4], chunks: u32, rows: Option<&Buffer<u32>>) -> Result<()> {
+        let [a, b, y, c] = bufs.map(|b| b.binding());
         let r = rows.map(|r| r.binding()).unwrap_or_else(|| a.clone());
+        // Counted rows are walked in bit-reversed order over a power-of-two
+        // grid (glsl/mlp/chunks.glsl `spread`); counted chunks are MAX_CHUNKS.
+        let row_groups = |rows_per_group: u32| {
+            let g = p.m.div_ceil(rows_per_group);
+            if p.m_count != 0 {
+                g.next_power_of_two()
+            } else {
+                g
+            }
+        };
         if self.gemm_kind == Gemm::Rows {
             let k = row_config(p.m, p.n);
-            let c = ROW_CONFIGS[k];
-            let groups = p.m.div_ceil(c.wg * c.rr);
-            let groups = if p.m_count != 0 {
-                groups.next_power_of_two()
-            } else {
-                groups
-            };
-            return rec.dispatch(
-                &self.gemm[k],
-                &[a, b, y, c_buf, r],
-                bytemuck::bytes_of(p),
-                [p.n.div_ceil(c.nb), groups, chunks],
-            );
+            let cfg = ROW_CONFIGS[k];
+            return rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(cfg.nb), row_groups(cfg.wg * cfg.rr), chunks]);
         }
         let side = p.m.min(p.n).max(32);
         let k = BLOCKS.iter().rposition(|&rb| 8 * rb <= side).unwrap_or(0);
         let tile = 8 * BLOCKS[k];
-        // Counted rows are walked in bit-reversed order over a power-of-two
-        // grid (glsl/mlp/gemm.comp `spread`); counted chunks are MAX_CHUNKS.
-        let row_tiles = p.m.div_ceil(tile);
-        let row_tiles = if p.m_count != 0 {
-            row_tiles.next_power_of_two()
-        } else {
-            row_tiles
-        };
-        rec.dispatch(
-            &self.gemm[k],
-            &[a, b, y, c_buf, r],
-            bytemuck::bytes_of(p),
-            [p.n.div_ceil(tile), row_tiles, chunks],
-        )
+        rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(tile), row_groups(tile), chunks])
     }
 
     /// Record Phi on the first `n` samples of `s.samples` into `s.out`.
-    pub fn record_forward(
-        &self,
-        rec: &mut Recorder,
-        params: &Buffer<f32>,
-        n: u32,
-        s: &MlpScratch,
-    ) -> Result<()> {
+    pub fn record_forward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, s: &MlpScratch) -> Result<()> {
         self.record_forward_rows(rec, params, n, None, s)
     }
 
@@ -513,24 +370,11 @@ impl Mlp {
     /// host's command buffer, or a Stage III step in one submission). The
     /// grid covers the capacity; workgroups past the count skip their work,
     /// and the busy ones are spread over the grid (glsl/mlp/gemm.comp).
-    pub fn record_forward_counted(
-        &self,
-        rec: &mut Recorder,
-        params: &Buffer<f32>,
-        count: &Buffer<u32>,
-        s: &MlpScratch,
-    ) -> Result<()> {
+    pub fn record_forward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, s: &MlpScratch) -> Result<()> {
         self.record_forward_rows(rec, params, s.capacity, Some(count), s)
     }
 
-    fn record_forward_rows(
-        &self,
-        rec: &mut Recorder,
-        params: &Buffer<f32>,
-        n: u32,
-        rows: Option<&Buffer<u32>>,
-        s: &MlpScratch,
-    ) -> Result<()> {
+    fn record_forward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, s: &MlpScratch) -> Result<()> {
         Self::check(s, params, n)?;
         if n == 0 {
             return Ok(());
@@ -539,15 +383,8 @@ impl Mlp {
         let m_count = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.encode");
         let push = [n, sh.levels_x, sh.levels_w, sh.width, m_count];
-        let r = rows
-            .map(|r| r.binding())
-            .unwrap_or_else(|| s.samples.binding());
-        rec.dispatch(
-            &self.encode,
-            &[s.samples.binding(), s.in0.binding(), s.cat.binding(), r],
-            bytemuck::cast_slice(&push),
-            grid(&self.ctx, n),
-        )?;
+        let r = rows.map(|r| r.binding()).unwrap_or_else(|| s.samples.binding());
+        rec.dispatch(&self.encode, &[s.samples.binding(), s.in0.binding(), s.cat.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n))?;
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.forward");
         for l in 0..sh.layers() {
@@ -581,15 +418,7 @@ impl Mlp {
     /// same parameters): `d_out` (RGB per sample, dL/dPhi) to `grads`
     /// (every parameter, overwritten). The inputs get no gradient (the
     /// reflection geometry is frozen in Stage III).
-    pub fn record_backward(
-        &self,
-        rec: &mut Recorder,
-        params: &Buffer<f32>,
-        n: u32,
-        d_out: &Buffer<f32>,
-        grads: &Buffer<f32>,
-        s: &MlpScratch,
-    ) -> Result<()> {
+    pub fn record_backward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
         self.record_backward_rows(rec, params, n, None, d_out, grads, s)
     }
 
@@ -598,46 +427,19 @@ impl Mlp {
     /// never reading the count: the same products, chunks and summation
     /// order as [`Mlp::record_backward`] with that count, so the gradients
     /// are bit-identical to it.
-    pub fn record_backward_counted(
-        &self,
-        rec: &mut Recorder,
-        params: &Buffer<f32>,
-        count: &Buffer<u32>,
-        d_out: &Buffer<f32>,
-        grads: &Buffer<f32>,
-        s: &MlpScratch,
-    ) -> Result<()> {
+    pub fn record_backward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
         self.record_backward_rows(rec, params, s.capacity, Some(count), d_out, grads, s)
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn record_backward_rows(
-        &self,
-        rec: &mut Recorder,
-        params: &Buffer<f32>,
-        n: u32,
-        rows: Option<&Buffer<u32>>,
-        d_out: &Buffer<f32>,
-        grads: &Buffer<f32>,
-        s: &MlpScratch,
-    ) -> Result<()> {
+    fn record_backward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
         Self::check(s, params, n)?;
         let sh = s.shape;
         if grads.len() < sh.params() as usize {
-            bail!(
-                "'{}' holds {} values; the light field has {} parameters",
-                grads.name(),
-                grads.len(),
-                sh.params()
-            );
+            bail!("'{}' holds {} values; the light field has {} parameters", grads.name(), grads.len(), sh.params());
         }
         if d_out.len() < (n * OUT) as usize {
-            bail!(
-                "'{}' holds {} values; {n} samples need {}",
-                d_out.name(),
-                d_out.len(),
-                n * OUT
-            );
+            bail!("'{}' holds {} values; {n} samples need {}", d_out.name(), d_out.len(), n * OUT);
         }
         if n == 0 {
             rec.fill(&grads.slice(0, sh.params() as usize), 0)?;
@@ -645,11 +447,7 @@ impl Mlp {
         }
         // Counted: every chunk the capacity could need is dispatched; those
         // past the count's skip their work.
-        let (chunk, chunks) = if rows.is_some() {
-            (0, MAX_CHUNKS)
-        } else {
-            weight_chunks(n)
-        };
+        let (chunk, chunks) = if rows.is_some() { (0, MAX_CHUNKS) } else { weight_chunks(n) };
         let counted = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.backward");
         for l in (0..sh.layers()).rev() {
@@ -657,11 +455,7 @@ impl Mlp {
             let (y, y_ld) = s.output(l);
             // This layer's output gradient: d_out for the head, else the
             // ping-pong buffer the layer above wrote (row stride width).
-            let (dy, d_ld) = if l == sh.depth {
-                (d_out, OUT)
-            } else {
-                (&s.d[(l % 2) as usize], sh.width)
-            };
+            let (dy, d_ld) = if l == sh.depth { (d_out, OUT) } else { (&s.d[(l % 2) as usize], sh.width) };
             // A hidden layer's dY becomes dZ in place, once (both products
             // below then read it without Y); the head's sigmoid derivative
             // is taken in the products (d_out is the caller's, 3 wide).
@@ -670,12 +464,7 @@ impl Mlp {
             } else {
                 let push = [n, sh.width, y_ld, counted];
                 let r = rows.map(|r| r.binding()).unwrap_or_else(|| dy.binding());
-                rec.dispatch(
-                    &self.relu_grad,
-                    &[dy.binding(), y.binding(), r],
-                    bytemuck::cast_slice(&push),
-                    grid(&self.ctx, n * sh.width),
-                )?;
+                rec.dispatch(&self.relu_grad, &[dy.binding(), y.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n * sh.width))?;
                 0
             };
             let j = sh.fan_out(l);
@@ -723,30 +512,14 @@ impl Mlp {
                     m_count: counted,
                     ..Default::default()
                 };
-                self.dispatch(
-                    rec,
-                    &pd,
-                    [dy, params, y, &s.d[((l - 1) % 2) as usize]],
-                    1,
-                    rows,
-                )?;
+                self.dispatch(rec, &pd, [dy, params, y, &s.d[((l - 1) % 2) as usize]], 1, rows)?;
             }
         }
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.reduce");
-        let push = [
-            sh.params(),
-            chunks,
-            sh.params(),
-            if rows.is_some() { n } else { 0 },
-        ];
+        let push = [sh.params(), chunks, sh.params(), if rows.is_some() { n } else { 0 }];
         let count = rows.map(|r| r.binding()).unwrap_or_else(|| grads.binding());
-        rec.dispatch(
-            &self.reduce,
-            &[s.part.binding(), grads.binding(), count],
-            bytemuck::cast_slice(&push),
-            grid(&self.ctx, sh.params()),
-        )?;
+        rec.dispatch(&self.reduce, &[s.part.binding(), grads.binding(), count], bytemuck::cast_slice(&push), grid(&self.ctx, sh.params()))?;
         rec.end_scope(sc);
         Ok(())
     }

@@ -21,23 +21,11 @@ pub const SAMPLE: u32 = 6;
 
 impl MlpShape {
     /// The paper's network: 8 x 256, skip at layer 5 (index 4), L = 12.
-    pub const PAPER: MlpShape = MlpShape {
-        depth: 8,
-        width: 256,
-        skip: 4,
-        levels_x: 12,
-        levels_w: 12,
-    };
+    pub const PAPER: MlpShape = MlpShape { depth: 8, width: 256, skip: 4, levels_x: 12, levels_w: 12 };
 
     /// The cheaper network of the accuracy/time table: 4 x 64, skip at
     /// layer 3, L = 8 for x and 4 for w (about 1/30 of the paper's work).
-    pub const SMALL: MlpShape = MlpShape {
-        depth: 4,
-        width: 64,
-        skip: 2,
-        levels_x: 8,
-        levels_w: 4,
-    };
+    pub const SMALL: MlpShape = MlpShape { depth: 4, width: 64, skip: 2, levels_x: 8, levels_w: 4 };
 
     /// A preset by name: "paper" or "small".
     pub fn preset(name: &str) -> Result<MlpShape> {
@@ -53,22 +41,14 @@ impl MlpShape {
             bail!("light field depth {} is outside 2..=16", self.depth);
         }
         if self.skip == 0 || self.skip >= self.depth {
-            bail!(
-                "light field skip layer {} must be in 1..{} (the depth)",
-                self.skip,
-                self.depth
-            );
+            bail!("light field skip layer {} must be in 1..{} (the depth)", self.skip, self.depth);
         }
         if self.width == 0 || self.width > 1024 {
             bail!("light field width {} is outside 1..=1024", self.width);
         }
         // sin(2^k pi a) in f32 needs 2^k a to keep fraction bits.
         if self.levels_x > 16 || self.levels_w > 16 {
-            bail!(
-                "Fourier levels ({}, {}) exceed 16",
-                self.levels_x,
-                self.levels_w
-            );
+            bail!("Fourier levels ({}, {}) exceed 16", self.levels_x, self.levels_w);
         }
         Ok(())
     }
@@ -117,9 +97,7 @@ impl MlpShape {
     }
     /// Multiply-adds per sample, forward.
     pub fn macs(&self) -> u64 {
-        (0..self.layers())
-            .map(|l| self.fan_out(l) as u64 * (self.fan_in(l) + 1) as u64)
-            .sum()
+        (0..self.layers()).map(|l| self.fan_out(l) as u64 * (self.fan_in(l) + 1) as u64).sum()
     }
 
     /// PyTorch's default initialisation of nn.Linear (Kaiming-uniform with

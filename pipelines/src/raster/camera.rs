@@ -22,11 +22,7 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 fn normalize(a: [f64; 3]) -> [f64; 3] {
     let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
@@ -39,14 +35,7 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 impl Camera {
     /// A camera at `eye` looking at `target`, `up` pointing up in the image,
     /// vertical field of view `fov_y` (radians), principal point at the image centre.
-    pub fn look_at(
-        eye: [f32; 3],
-        target: [f32; 3],
-        up: [f32; 3],
-        fov_y: f32,
-        width: u32,
-        height: u32,
-    ) -> Camera {
+    pub fn look_at(eye: [f32; 3], target: [f32; 3], up: [f32; 3], fov_y: f32, width: u32, height: u32) -> Camera {
         let e = eye.map(f64::from);
         let z = normalize(sub(target.map(f64::from), e));
         let x = normalize(cross(z, up.map(f64::from)));
@@ -84,19 +73,12 @@ impl Camera {
     }
 
     pub fn validate(&self) -> Result<()> {
-        let finite = [self.fx, self.fy, self.cx, self.cy]
-            .iter()
-            .chain(self.world_to_view.iter().flatten())
-            .all(|v| v.is_finite());
+        let finite = [self.fx, self.fy, self.cx, self.cy].iter().chain(self.world_to_view.iter().flatten()).all(|v| v.is_finite());
         if !finite {
             bail!("camera has a non-finite intrinsic or pose value: {self:?}");
         }
         if !(self.fx > 0.0 && self.fy > 0.0) {
-            bail!(
-                "camera focal lengths must be positive (fx {}, fy {})",
-                self.fx,
-                self.fy
-            );
+            bail!("camera focal lengths must be positive (fx {}, fy {})", self.fx, self.fy);
         }
         if self.width == 0 || self.height == 0 {
             bail!("camera image size {}x{} is empty", self.width, self.height);

@@ -6,10 +6,10 @@
 //! counters back (8 bytes) and grows the frame when the intersections or the
 //! longest tile outgrew it; the caller then re-runs that view.
 
-use crate::scan::ScanScratch;
 use crate::sort::SortScratch;
-use anyhow::Result;
+use crate::scan::ScanScratch;
 use tgs_engine::{Buffer, Readback};
+use anyhow::Result;
 
 /// Output planes, each `width * height` floats, in this order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -109,12 +109,7 @@ impl Frame {
     /// Tile rectangles [x0, y0, x1, y1) of the first `n` Gaussians from the
     /// last forward (empty for culled ones). One read-back, for inspection.
     pub fn download_rects(&self, n: usize) -> anyhow::Result<Vec<[u32; 4]>> {
-        Ok(self
-            .rects
-            .download_range(0, 4 * n)?
-            .chunks(4)
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect())
+        Ok(self.rects.download_range(0, 4 * n)?.chunks(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
     }
     pub fn pixels(&self) -> usize {
         self.width as usize * self.height as usize

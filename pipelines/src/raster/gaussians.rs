@@ -21,11 +21,7 @@ pub struct HostGaussians {
 
 impl HostGaussians {
     pub fn new(channels: u32, coeffs: u32) -> Self {
-        HostGaussians {
-            channels,
-            coeffs,
-            ..Default::default()
-        }
+        HostGaussians { channels, coeffs, ..Default::default() }
     }
     pub fn len(&self) -> usize {
         self.opacity.len()
@@ -34,14 +30,7 @@ impl HostGaussians {
         self.opacity.is_empty()
     }
     /// Append one Gaussian (`features`: coeffs x channels values).
-    pub fn push(
-        &mut self,
-        mean: [f32; 3],
-        log_scale: [f32; 2],
-        quat: [f32; 4],
-        opacity: f32,
-        features: &[f32],
-    ) {
+    pub fn push(&mut self, mean: [f32; 3], log_scale: [f32; 2], quat: [f32; 4], opacity: f32, features: &[f32]) {
         self.means.extend_from_slice(&mean);
         self.log_scales.extend_from_slice(&log_scale);
         self.quats.extend_from_slice(&quat);
@@ -51,12 +40,7 @@ impl HostGaussians {
     pub fn validate(&self) -> Result<()> {
         let n = self.len();
         let fpg = (self.coeffs * self.channels) as usize;
-        let checks = [
-            ("means", self.means.len(), 3 * n),
-            ("log_scales", self.log_scales.len(), 2 * n),
-            ("quats", self.quats.len(), 4 * n),
-            ("features", self.features.len(), fpg * n),
-        ];
+        let checks = [("means", self.means.len(), 3 * n), ("log_scales", self.log_scales.len(), 2 * n), ("quats", self.quats.len(), 4 * n), ("features", self.features.len(), fpg * n)];
         for (name, got, want) in checks {
             if got != want {
                 bail!("Gaussian set: {name} has {got} values, expected {want} for {n} Gaussians");
@@ -86,22 +70,11 @@ impl Gaussians {
 
     /// Buffers for `n` Gaussians with undefined contents, for callers that
     /// write every element before reading any (see [`Buffer::uninit`]).
-    pub(crate) fn uninit(
-        ctx: &Arc<Context>,
-        n: u32,
-        channels: u32,
-        coeffs: u32,
-    ) -> Result<Gaussians> {
+    pub(crate) fn uninit(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32) -> Result<Gaussians> {
         Self::make(ctx, n, channels, coeffs, Buffer::uninit)
     }
 
-    fn make(
-        ctx: &Arc<Context>,
-        n: u32,
-        channels: u32,
-        coeffs: u32,
-        alloc: fn(&Arc<Context>, &str, usize) -> Result<Buffer<f32>>,
-    ) -> Result<Gaussians> {
+    fn make(ctx: &Arc<Context>, n: u32, channels: u32, coeffs: u32, alloc: fn(&Arc<Context>, &str, usize) -> Result<Buffer<f32>>) -> Result<Gaussians> {
         let m = n.max(1) as usize;
         let f = (coeffs * channels) as usize;
         Ok(Gaussians {

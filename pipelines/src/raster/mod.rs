@@ -8,9 +8,9 @@
 //! checked afterwards by [`Rasterizer::fit`].
 
 mod camera;
+mod reduce_adam;
 mod frame;
 mod gaussians;
-mod reduce_adam;
 
 pub use camera::Camera;
 pub use frame::{Frame, Plane};
@@ -23,9 +23,7 @@ use crate::sort::{RadixSort, SortScratch};
 use anyhow::{bail, Context as _, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use tgs_engine::{
-    groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Readback, Recorder,
-};
+use tgs_engine::{groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Readback, Recorder};
 
 /// How per-Gaussian features become the rasterized channels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -133,9 +131,7 @@ impl RecordAccess {
         match std::env::var("TGS_RASTER_RECORDS").as_deref() {
             Ok("binding") => RecordAccess::Binding,
             Ok("address") if address => RecordAccess::Address,
-            _ if address && caps.max_storage_buffer_range < caps.max_memory_allocation => {
-                RecordAccess::Address
-            }
+            _ if address && caps.max_storage_buffer_range < caps.max_memory_allocation => RecordAccess::Address,
             _ => RecordAccess::Binding,
         }
     }
@@ -144,14 +140,7 @@ impl RecordAccess {
 /// A frame's per-intersection arrays: keys, values, Gaussian ids, tile-sort
 /// scratch, gradient records, and (with [`RecordAccess::Address`]) the
 /// buffer holding the records' device address.
-type IntersectionBuffers = (
-    Buffer<u32>,
-    Buffer<u32>,
-    Buffer<u32>,
-    SortScratch,
-    Buffer<f32>,
-    Option<Buffer<u32>>,
-);
+type IntersectionBuffers = (Buffer<u32>, Buffer<u32>, Buffer<u32>, SortScratch, Buffer<f32>, Option<Buffer<u32>>);
 
 pub struct Rasterizer {
     ctx: Arc<Context>,
@@ -185,50 +174,19 @@ impl Rasterizer {
     /// As [`Rasterizer::new`], with the splats-per-span length forced (a
     /// multiple of 32; tests use it to exercise multi-span tiles cheaply).
     /// On a device with a loop limiter it must not exceed the default span.
-    pub fn with_span(
-        ctx: &Arc<Context>,
-        channels: u32,
-        features: Features,
-        span: Option<u32>,
-    ) -> Result<Rasterizer> {
-        Self::with_options(
-            ctx,
-            channels,
-            features,
-            span,
-            RasterKernels::for_device(ctx.caps()),
-        )
+    pub fn with_span(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>) -> Result<Rasterizer> {
+        Self::with_options(ctx, channels, features, span, RasterKernels::for_device(ctx.caps()))
     }
 
     /// As [`Rasterizer::with_span`], with the backward kernel chosen (tests
     /// run both on one device).
-    pub fn with_options(
-        ctx: &Arc<Context>,
-        channels: u32,
-        features: Features,
-        span: Option<u32>,
-        kernels: RasterKernels,
-    ) -> Result<Rasterizer> {
-        Self::with_records(
-            ctx,
-            channels,
-            features,
-            span,
-            kernels,
-            RecordAccess::for_device(ctx.caps()),
-        )
+    pub fn with_options(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>, kernels: RasterKernels) -> Result<Rasterizer> {
+        Self::with_records(ctx, channels, features, span, kernels, RecordAccess::for_device(ctx.caps()))
     }
 
     /// As [`Rasterizer::with_options`], with the access to the gradient
     /// records chosen (tests run both on one device).
-    pub fn with_records(
-        ctx: &Arc<Context>,
-        channels: u32,
-        features: Features,
-        span: Option<u32>,
-        kernels: RasterKernels,
-        records: RecordAccess,
-    ) -> Result<Rasterizer> {
+    pub fn with_records(ctx: &Arc<Context>, channels: u32, features: Features, span: Option<u32>, kernels: RasterKernels, records: RecordAccess) -> Result<Rasterizer> {
         if records == RecordAccess::Address && !ctx.caps().buffer_device_address {
             bail!("gradient records by device address need bufferDeviceAddress, which {} does not have enabled", ctx.caps().device_name);
         }
@@ -254,16 +212,12 @@ impl Rasterizer {
         }
         // The Subgroup backward's workgroup is exactly one subgroup.
         let sg = caps.subgroup_size;
-        if kernels == RasterKernels::Subgroup
-            && (caps.min_subgroup_size != caps.max_subgroup_size || sg == 0 || WG % sg != 0)
-        {
+        if kernels == RasterKernels::Subgroup && (caps.min_subgroup_size != caps.max_subgroup_size || sg == 0 || WG % sg != 0) {
             bail!("the one-subgroup backward needs a fixed subgroup size dividing {WG}; {} has {}..={}", caps.device_name, caps.min_subgroup_size, caps.max_subgroup_size);
         }
         let ppt = WG / sg.max(1);
         let span = match span {
-            Some(s) if s == 0 || s % SPAN_STEP != 0 => {
-                bail!("span must be a positive multiple of {SPAN_STEP}, not {s}")
-            }
+            Some(s) if s == 0 || s % SPAN_STEP != 0 => bail!("span must be a positive multiple of {SPAN_STEP}, not {s}"),
             Some(s) => s,
             None if caps.is_cpu() => {
                 // Loop iterations per splat in the forward and the backward
@@ -274,12 +228,7 @@ impl Rasterizer {
                     RasterKernels::Subgroup => ppt as f64 * (1.0 + ch) + ch + 2.0,
                 };
                 let bwd = match kernels {
-                    RasterKernels::Workgroup => {
-                        3.0 + 2.0 * ch
-                            + ((batch * krec).div_ceil(WG) as f64 * (1.0 + max_sg_count as f64)
-                                + 1.0)
-                                / batch as f64
-                    }
+                    RasterKernels::Workgroup => 3.0 + 2.0 * ch + ((batch * krec).div_ceil(WG) as f64 * (1.0 + max_sg_count as f64) + 1.0) / batch as f64,
                     RasterKernels::Subgroup => ppt as f64 * (1.0 + ch) + 3.0 * ch + 2.0,
                 };
                 let s = (LOOP_BUDGET / fwd.max(bwd)) as u32 / SPAN_STEP * SPAN_STEP;
@@ -289,63 +238,23 @@ impl Rasterizer {
         };
         let spec = [(0, WG), (1, min_sg), (4, channels), (5, batch)];
         let k = |name, spirv, push_bytes, full| {
-            Kernel::new(
-                ctx,
-                &KernelDesc {
-                    name,
-                    spirv,
-                    spec: &spec,
-                    push_bytes,
-                    subgroup_size: None,
-                    full_subgroups: full,
-                },
-            )
+            Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full })
         };
         let push = std::mem::size_of::<Push>() as u32;
         let by_address = records == RecordAccess::Address;
         let (forward, backward) = match kernels {
             RasterKernels::Workgroup => {
-                let bwd = if by_address {
-                    shaders::RASTER_BACKWARD_RECORDS_BDA
-                } else {
-                    shaders::RASTER_BACKWARD
-                };
-                (
-                    k("raster.forward", shaders::RASTER_FORWARD, push, false)?,
-                    k("raster.backward", bwd, push, true)?,
-                )
+                let bwd = if by_address { shaders::RASTER_BACKWARD_RECORDS_BDA } else { shaders::RASTER_BACKWARD };
+                (k("raster.forward", shaders::RASTER_FORWARD, push, false)?, k("raster.backward", bwd, push, true)?)
             }
             RasterKernels::Subgroup => {
                 let spec = [(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)];
-                let k = |name, spirv| {
-                    Kernel::new(
-                        ctx,
-                        &KernelDesc {
-                            name,
-                            spirv,
-                            spec: &spec,
-                            push_bytes: push,
-                            subgroup_size: None,
-                            full_subgroups: true,
-                        },
-                    )
-                };
-                let bwd = if by_address {
-                    shaders::RASTER_BACKWARD_SG_RECORDS_BDA
-                } else {
-                    shaders::RASTER_BACKWARD_SG
-                };
-                (
-                    k("raster.forward", shaders::RASTER_FORWARD_SG)?,
-                    k("raster.backward", bwd)?,
-                )
+                let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes: push, subgroup_size: None, full_subgroups: true });
+                let bwd = if by_address { shaders::RASTER_BACKWARD_SG_RECORDS_BDA } else { shaders::RASTER_BACKWARD_SG };
+                (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", bwd)?)
             }
         };
-        let reduce = if by_address {
-            shaders::RASTER_REDUCE_RECORDS_BDA
-        } else {
-            shaders::RASTER_REDUCE
-        };
+        let reduce = if by_address { shaders::RASTER_REDUCE_RECORDS_BDA } else { shaders::RASTER_REDUCE };
         Ok(Rasterizer {
             ctx: ctx.clone(),
             channels,
@@ -359,28 +268,8 @@ impl Rasterizer {
             project: k("raster.project", shaders::RASTER_PROJECT, push, false)?,
             gather: k("raster.gather", shaders::RASTER_GATHER, 4, false)?,
             emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
-            plan: Kernel::new(
-                ctx,
-                &KernelDesc {
-                    name: "raster.plan",
-                    spirv: shaders::RASTER_PLAN,
-                    spec: &[],
-                    push_bytes: 16,
-                    subgroup_size: None,
-                    full_subgroups: false,
-                },
-            )?,
-            gate: Kernel::new(
-                ctx,
-                &KernelDesc {
-                    name: "raster.gate",
-                    spirv: shaders::RASTER_GATE,
-                    spec: &[],
-                    push_bytes: 4 * GATE_PUSH_WORDS as u32,
-                    subgroup_size: None,
-                    full_subgroups: false,
-                },
-            )?,
+            plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
+            gate: Kernel::new(ctx, &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 4 * GATE_PUSH_WORDS as u32, subgroup_size: None, full_subgroups: false })?,
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             forward,
             backward,
@@ -431,8 +320,7 @@ impl Rasterizer {
         let by_grads = match self.records {
             RecordAccess::Binding => caps.max_storage_buffer_range / record_bytes,
             // Record floats are indexed with 32-bit integers.
-            RecordAccess::Address => (caps.max_memory_allocation / record_bytes)
-                .min(u32::MAX as u64 / self.record_len() as u64),
+            RecordAccess::Address => (caps.max_memory_allocation / record_bytes).min(u32::MAX as u64 / self.record_len() as u64),
         };
         by_grads.min(self.sort.max_keys()).min(u32::MAX as u64 / 2) as u32
     }
@@ -446,13 +334,7 @@ impl Rasterizer {
 
     /// Working memory for `width` x `height` views of up to `max_gaussians`
     /// Gaussians and `capacity` intersections (grown by [`Rasterizer::fit`]).
-    pub fn frame(
-        &self,
-        width: u32,
-        height: u32,
-        max_gaussians: u32,
-        capacity: u32,
-    ) -> Result<Frame> {
+    pub fn frame(&self, width: u32, height: u32, max_gaussians: u32, capacity: u32) -> Result<Frame> {
         let ctx = &self.ctx;
         if width == 0 || height == 0 {
             bail!("image size {width}x{height} is empty");
@@ -469,17 +351,13 @@ impl Rasterizer {
         }
         let capacity = capacity.max(1);
         if capacity > self.max_capacity() {
-            bail!(
-                "intersection capacity {capacity} exceeds this device's maximum of {}",
-                self.max_capacity()
-            );
+            bail!("intersection capacity {capacity} exceeds this device's maximum of {}", self.max_capacity());
         }
         let n = max_gaussians.max(1) as usize;
         let pixels = (width * height) as usize;
         let planes = Plane::count(self.channels) as usize;
         let buf = |name: &str, len: usize| Buffer::<u32>::new(ctx, name, len);
-        let (isect_keys, isect_vals, isect_gid, tile_scratch, isect_grads, records_address) =
-            self.intersection_buffers(capacity)?;
+        let (isect_keys, isect_vals, isect_gid, tile_scratch, isect_grads, records_address) = self.intersection_buffers(capacity)?;
         let fbuf = |name: &str, len: usize| Buffer::<f32>::new(ctx, name, len);
         Ok(Frame {
             width,
@@ -541,11 +419,7 @@ impl Rasterizer {
 
     fn check_inputs(&self, g: &Gaussians, features: &Buffer<f32>, frame: &Frame) -> Result<()> {
         let own = std::ptr::eq(features, &g.features);
-        let (channels, coeffs) = if own {
-            (g.channels, g.coeffs)
-        } else {
-            (self.channels, self.features.coeffs())
-        };
+        let (channels, coeffs) = if own { (g.channels, g.coeffs) } else { (self.channels, self.features.coeffs()) };
         if channels != self.channels || coeffs != self.features.coeffs() {
             bail!(
                 "Gaussian set has {} channels x {} coefficients; this rasterizer takes {} x {}",
@@ -556,21 +430,10 @@ impl Rasterizer {
             );
         }
         if features.len() < (channels * coeffs * g.n) as usize {
-            bail!(
-                "feature buffer '{}' has {} values; {} Gaussians x {} need {}",
-                features.name(),
-                features.len(),
-                g.n,
-                channels * coeffs,
-                channels * coeffs * g.n
-            );
+            bail!("feature buffer '{}' has {} values; {} Gaussians x {} need {}", features.name(), features.len(), g.n, channels * coeffs, channels * coeffs * g.n);
         }
         if g.n > frame.max_gaussians {
-            bail!(
-                "{} Gaussians exceed the frame's {} (make a larger frame)",
-                g.n,
-                frame.max_gaussians
-            );
+            bail!("{} Gaussians exceed the frame's {} (make a larger frame)", g.n, frame.max_gaussians);
         }
         Ok(())
     }
@@ -588,14 +451,7 @@ impl Rasterizer {
     /// Bindings 0..=5 of the project and reduce kernels: camera, then the
     /// Gaussian parameters.
     fn param_bindings(frame: &Frame, g: &Gaussians, features: &Buffer<f32>) -> Vec<BufferBinding> {
-        vec![
-            frame.cam.binding(),
-            g.means.binding(),
-            g.log_scales.binding(),
-            g.quats.binding(),
-            g.opacity.binding(),
-            features.binding(),
-        ]
+        vec![frame.cam.binding(), g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), features.binding()]
     }
 
     /// Bindings 0..=8 of the per-tile forward and backward kernels.
@@ -615,15 +471,7 @@ impl Rasterizer {
 
     /// Record the forward pass of one view: outputs land in `frame.out`.
     /// `sh_degree` is the active SH degree (ignored for plain features).
-    pub fn record_forward(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        cam: &Camera,
-        background: &[f32],
-        sh_degree: u32,
-        frame: &Frame,
-    ) -> Result<()> {
+    pub fn record_forward(&self, rec: &mut Recorder, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
         self.record_forward_with(rec, g, &g.features, cam, background, sh_degree, frame)
     }
 
@@ -632,40 +480,18 @@ impl Rasterizer {
     /// Gaussian) instead of the set's own (features computed by another
     /// kernel, e.g. the reflection colour).
     #[allow(clippy::too_many_arguments)]
-    pub fn record_forward_with(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        features: &Buffer<f32>,
-        cam: &Camera,
-        background: &[f32],
-        sh_degree: u32,
-        frame: &Frame,
-    ) -> Result<()> {
+    pub fn record_forward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
         self.check_inputs(g, features, frame)?;
         cam.validate()?;
         if cam.width != frame.width || cam.height != frame.height {
-            bail!(
-                "camera is {}x{} but the frame is {}x{}",
-                cam.width,
-                cam.height,
-                frame.width,
-                frame.height
-            );
+            bail!("camera is {}x{} but the frame is {}x{}", cam.width, cam.height, frame.width, frame.height);
         }
         if background.len() != self.channels as usize {
-            bail!(
-                "background has {} values; the rasterizer has {} channels",
-                background.len(),
-                self.channels
-            );
+            bail!("background has {} values; the rasterizer has {} channels", background.len(), self.channels);
         }
         let push = self.push(g, frame, sh_degree);
         let pb = bytemuck::bytes_of(&push);
-        rec.update(
-            &frame.cam.binding(),
-            bytemuck::cast_slice(&cam.pack(background)),
-        )?;
+        rec.update(&frame.cam.binding(), bytemuck::cast_slice(&cam.pack(background)))?;
 
         let sc = rec.begin_scope("raster.project");
         let mut bindings = Self::param_bindings(frame, g, features);
@@ -682,66 +508,25 @@ impl Rasterizer {
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.depth_sort");
-        self.sort
-            .record(
-                rec,
-                &frame.depth_keys,
-                &frame.depth_ids,
-                &Count::Host(g.n),
-                32,
-                &frame.depth_scratch,
-            )
-            .context("depth sort")?;
+        self.sort.record(rec, &frame.depth_keys, &frame.depth_ids, &Count::Host(g.n), 32, &frame.depth_scratch).context("depth sort")?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.gather");
-        rec.dispatch(
-            &self.gather,
-            &[
-                frame.depth_ids.binding(),
-                frame.tiles.binding(),
-                frame.offsets.binding(),
-            ],
-            bytemuck::bytes_of(&g.n),
-            self.groups(g.n + 1),
-        )?;
+        rec.dispatch(&self.gather, &[frame.depth_ids.binding(), frame.tiles.binding(), frame.offsets.binding()], bytemuck::bytes_of(&g.n), self.groups(g.n + 1))?;
         rec.end_scope(sc);
         let sc = rec.begin_scope("raster.scan");
-        self.scan.record(
-            rec,
-            &frame.offsets,
-            &frame.offsets,
-            &Count::Host(g.n + 1),
-            &frame.scan_scratch,
-        )?;
+        self.scan.record(rec, &frame.offsets, &frame.offsets, &Count::Host(g.n + 1), &frame.scan_scratch)?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.plan");
         let plan_push = [g.n, frame.capacity, WG, self.max_x()];
-        rec.dispatch(
-            &self.plan,
-            &[
-                frame.offsets.binding(),
-                frame.params.binding(),
-                frame.args.binding(),
-                frame.stats.binding(),
-            ],
-            bytemuck::cast_slice(&plan_push),
-            [1, 1, 1],
-        )?;
+        rec.dispatch(&self.plan, &[frame.offsets.binding(), frame.params.binding(), frame.args.binding(), frame.stats.binding()], bytemuck::cast_slice(&plan_push), [1, 1, 1])?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.emit");
         rec.dispatch(
             &self.emit,
-            &[
-                frame.depth_ids.binding(),
-                frame.offsets.binding(),
-                frame.rects.binding(),
-                frame.isect_keys.binding(),
-                frame.isect_vals.binding(),
-                frame.isect_gid.binding(),
-            ],
+            &[frame.depth_ids.binding(), frame.offsets.binding(), frame.rects.binding(), frame.isect_keys.binding(), frame.isect_vals.binding(), frame.isect_gid.binding()],
             pb,
             self.groups(g.n),
         )?;
@@ -749,52 +534,23 @@ impl Rasterizer {
 
         let tiles = frame.tiles();
         let tile_bits = 32 - (tiles.max(1) - 1).leading_zeros();
-        let count = Count::Gpu {
-            buffer: frame.params.binding(),
-            index: 0,
-        };
+        let count = Count::Gpu { buffer: frame.params.binding(), index: 0 };
         let sc = rec.begin_scope("raster.tile_sort");
-        self.sort
-            .record(
-                rec,
-                &frame.isect_keys,
-                &frame.isect_vals,
-                &count,
-                tile_bits,
-                &frame.tile_scratch,
-            )
-            .context("tile sort")?;
+        self.sort.record(rec, &frame.isect_keys, &frame.isect_vals, &count, tile_bits, &frame.tile_scratch).context("tile sort")?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.ranges");
         rec.fill(&frame.ranges.binding(), 0)?;
-        rec.dispatch_indirect(
-            &self.ranges,
-            &[
-                frame.params.binding(),
-                frame.isect_keys.binding(),
-                frame.ranges.binding(),
-            ],
-            &[],
-            &frame.args.binding(),
-        )?;
+        rec.dispatch_indirect(&self.ranges, &[frame.params.binding(), frame.isect_keys.binding(), frame.ranges.binding()], &[], &frame.args.binding())?;
         rec.end_scope(sc);
 
         let tile_groups = groups_2d(tiles, self.max_x());
         let mut bindings = Self::tile_bindings(frame);
         bindings.push(frame.stats.binding());
         for k in 0..frame.spans {
-            let p = Push {
-                span_index: k,
-                ..push
-            };
+            let p = Push { span_index: k, ..push };
             let sc = rec.begin_scope("raster.forward");
-            rec.dispatch(
-                &self.forward,
-                &bindings,
-                bytemuck::bytes_of(&p),
-                tile_groups,
-            )?;
+            rec.dispatch(&self.forward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
         // The total and the overflow flag ride this submission back to the host (`fit`).
@@ -808,17 +564,9 @@ impl Rasterizer {
     /// `Recorder::dispatch_indirect`. This is how one submission can hold a
     /// whole training iteration: an overflowed view updates nothing, and the
     /// host grows the frame and runs the iteration again.
-    pub fn record_fit_gate(
-        &self,
-        rec: &mut Recorder,
-        frame: &Frame,
-        grids: &[[u32; 3]],
-    ) -> Result<Vec<BufferBinding>> {
+    pub fn record_fit_gate(&self, rec: &mut Recorder, frame: &Frame, grids: &[[u32; 3]]) -> Result<Vec<BufferBinding>> {
         if grids.len() > GATE_SLOTS {
-            bail!(
-                "{} gated dispatches; the gate holds {GATE_SLOTS}",
-                grids.len()
-            );
+            bail!("{} gated dispatches; the gate holds {GATE_SLOTS}", grids.len());
         }
         let mut push = [0u32; GATE_PUSH_WORDS];
         push[0] = frame.capacity;
@@ -827,47 +575,19 @@ impl Rasterizer {
             push[4 + 3 * k..7 + 3 * k].copy_from_slice(g);
         }
         let sc = rec.begin_scope("raster.gate");
-        rec.dispatch(
-            &self.gate,
-            &[frame.stats.binding(), frame.gate.binding()],
-            bytemuck::cast_slice(&push),
-            [1, 1, 1],
-        )?;
+        rec.dispatch(&self.gate, &[frame.stats.binding(), frame.gate.binding()], bytemuck::cast_slice(&push), [1, 1, 1])?;
         rec.end_scope(sc);
-        Ok((0..grids.len())
-            .map(|k| frame.gate.slice(3 * k, 3))
-            .collect())
+        Ok((0..grids.len()).map(|k| frame.gate.slice(3 * k, 3)).collect())
     }
 
     /// Record the backward of the last forward on `frame` (same Gaussians),
     /// with the loss gradient of every output plane in `frame.grad_out`.
     /// Overwrites every gradient in `grads` (and `frame.densify`).
-    pub fn record_backward(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        grads: &Gaussians,
-        sh_degree: u32,
-        frame: &Frame,
-    ) -> Result<()> {
+    pub fn record_backward(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
         if grads.channels != g.channels || grads.coeffs != g.coeffs {
-            bail!(
-                "gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})",
-                grads.channels,
-                grads.coeffs,
-                g.channels,
-                g.coeffs
-            );
+            bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
         }
-        self.record_backward_with(
-            rec,
-            g,
-            &g.features,
-            grads,
-            &grads.features,
-            sh_degree,
-            frame,
-        )
+        self.record_backward_with(rec, g, &g.features, grads, &grads.features, sh_degree, frame)
     }
 
     /// As [`Rasterizer::record_backward`] for a forward recorded with
@@ -875,27 +595,9 @@ impl Rasterizer {
     /// `d_features` (same layout as `features`), the geometry gradients to
     /// `grads` (whose own feature buffer is left alone).
     #[allow(clippy::too_many_arguments)]
-    pub fn record_backward_with(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        features: &Buffer<f32>,
-        grads: &Gaussians,
-        d_features: &Buffer<f32>,
-        sh_degree: u32,
-        frame: &Frame,
-    ) -> Result<()> {
-        if grads.n != g.n
-            || d_features.len()
-                < features
-                    .len()
-                    .min((self.channels * self.features.coeffs() * g.n) as usize)
-        {
-            bail!(
-                "gradient buffers ({} Gaussians) do not match the Gaussian set ({})",
-                grads.n,
-                g.n
-            );
+    pub fn record_backward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, grads: &Gaussians, d_features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<()> {
+        if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {
+            bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
         }
         let records = self.record_tile_backward(rec, g, features, sh_degree, frame)?;
         let sc = rec.begin_scope("raster.reduce");
@@ -912,12 +614,7 @@ impl Rasterizer {
             frame.densify.binding(),
         ]);
         let push = self.push(g, frame, sh_degree);
-        rec.dispatch(
-            &self.reduce,
-            &bindings,
-            bytemuck::bytes_of(&push),
-            self.groups(g.n),
-        )?;
+        rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
         rec.end_scope(sc);
         Ok(())
     }
@@ -925,14 +622,7 @@ impl Rasterizer {
     /// The per-tile part of the backward (every span, back to front): the
     /// intersection gradient records. Returns the records' binding for the
     /// per-Gaussian reduce.
-    fn record_tile_backward(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        features: &Buffer<f32>,
-        sh_degree: u32,
-        frame: &Frame,
-    ) -> Result<BufferBinding> {
+    fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<BufferBinding> {
         self.check_inputs(g, features, frame)?;
         let push = self.push(g, frame, sh_degree);
         let tile_groups = groups_2d(frame.tiles(), self.max_x());
@@ -945,23 +635,11 @@ impl Rasterizer {
             }
             None => frame.isect_grads.binding(),
         };
-        bindings.extend([
-            frame.grad_out.binding(),
-            frame.bstate.binding(),
-            records.clone(),
-        ]);
+        bindings.extend([frame.grad_out.binding(), frame.bstate.binding(), records.clone()]);
         for k in (0..frame.spans).rev() {
-            let p = Push {
-                span_index: k,
-                ..push
-            };
+            let p = Push { span_index: k, ..push };
             let sc = rec.begin_scope("raster.backward");
-            rec.dispatch(
-                &self.backward,
-                &bindings,
-                bytemuck::bytes_of(&p),
-                tile_groups,
-            )?;
+            rec.dispatch(&self.backward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
         Ok(records)
@@ -987,11 +665,7 @@ impl Rasterizer {
         }
         if span_overflow {
             let r = frame.ranges.download()?;
-            let longest = r
-                .chunks(2)
-                .map(|c| c[1].saturating_sub(c[0]))
-                .max()
-                .unwrap_or(0);
+            let longest = r.chunks(2).map(|c| c[1].saturating_sub(c[0])).max().unwrap_or(0);
             frame.spans = longest.div_ceil(self.span).max(frame.spans + 1);
             fits = false;
         }
@@ -999,14 +673,7 @@ impl Rasterizer {
     }
 
     fn grow(&self, frame: &mut Frame, capacity: u32) -> Result<()> {
-        (
-            frame.isect_keys,
-            frame.isect_vals,
-            frame.isect_gid,
-            frame.tile_scratch,
-            frame.isect_grads,
-            frame.records_address,
-        ) = self.intersection_buffers(capacity)?;
+        (frame.isect_keys, frame.isect_vals, frame.isect_gid, frame.tile_scratch, frame.isect_grads, frame.records_address) = self.intersection_buffers(capacity)?;
         frame.capacity = capacity;
         Ok(())
     }
@@ -1023,11 +690,7 @@ impl Rasterizer {
             RecordAccess::Binding => None,
             RecordAccess::Address => {
                 let a = records.device_address()?;
-                Some(Buffer::from_slice(
-                    ctx,
-                    "raster.records_address",
-                    &[a as u32, (a >> 32) as u32],
-                )?)
+                Some(Buffer::from_slice(ctx, "raster.records_address", &[a as u32, (a >> 32) as u32])?)
             }
         };
         Ok((
@@ -1043,15 +706,7 @@ impl Rasterizer {
     /// Run the forward of one view to completion, growing `frame` and
     /// re-running when it did not fit. Returns the GPU timings of the last run
     /// (empty unless `profile`).
-    pub fn forward(
-        &self,
-        g: &Gaussians,
-        cam: &Camera,
-        background: &[f32],
-        sh_degree: u32,
-        frame: &mut Frame,
-        profile: bool,
-    ) -> Result<Vec<tgs_engine::Timing>> {
+    pub fn forward(&self, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &mut Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
             self.record_forward(&mut rec, g, cam, background, sh_degree, frame)?;
@@ -1063,14 +718,7 @@ impl Rasterizer {
     }
 
     /// Run the backward of the last [`Rasterizer::forward`] on `frame`.
-    pub fn backward(
-        &self,
-        g: &Gaussians,
-        grads: &Gaussians,
-        sh_degree: u32,
-        frame: &Frame,
-        profile: bool,
-    ) -> Result<Vec<tgs_engine::Timing>> {
+    pub fn backward(&self, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
         let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
         self.record_backward(&mut rec, g, grads, sh_degree, frame)?;
         rec.submit_and_wait()
@@ -1085,9 +733,6 @@ mod gate_layout {
     fn gate_shader_array_matches_gate_slots() {
         let src = include_str!("../../../glsl/raster_gate.comp");
         let want = format!("uint grids[{}];", 3 * super::GATE_SLOTS);
-        assert!(
-            src.contains(&want),
-            "glsl/raster_gate.comp should declare `{want}` (3 x GATE_SLOTS)"
-        );
+        assert!(src.contains(&want), "glsl/raster_gate.comp should declare `{want}` (3 x GATE_SLOTS)");
     }
 }

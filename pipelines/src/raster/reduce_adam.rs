@@ -52,8 +52,7 @@ impl Rasterizer {
     /// (20 storage buffers in one shader and a 100-byte push constant).
     pub fn can_fuse_adam(&self) -> bool {
         let caps = self.ctx.caps();
-        caps.max_storage_buffers_per_stage >= BINDINGS
-            && caps.max_push_constants as usize >= std::mem::size_of::<PushAdam>()
+        caps.max_storage_buffers_per_stage >= BINDINGS && caps.max_push_constants as usize >= std::mem::size_of::<PushAdam>()
     }
 
     /// The workgroups of [`Rasterizer::record_backward_adam`]'s reduce for
@@ -70,17 +69,7 @@ impl Rasterizer {
     /// [`Rasterizer::reduce_grid`]) the reduce, and so the step, runs only
     /// when the view fitted its frame.
     #[allow(clippy::too_many_arguments)]
-    pub fn record_backward_adam(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        m: &Gaussians,
-        v: &Gaussians,
-        adam: &ReduceAdam,
-        sh_degree: u32,
-        frame: &Frame,
-        gate: Option<&BufferBinding>,
-    ) -> Result<()> {
+    pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, m: &Gaussians, v: &Gaussians, adam: &ReduceAdam, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
         for (name, s) in [("first", m), ("second", v)] {
             if s.n != g.n || s.channels != g.channels || s.coeffs != g.coeffs {
                 bail!("Adam's {name} moments ({} Gaussians, {} x {} features) do not match the Gaussian set ({}, {} x {})", s.n, s.channels, s.coeffs, g.n, g.channels, g.coeffs);
@@ -88,11 +77,7 @@ impl Rasterizer {
         }
         let per = g.channels * g.coeffs;
         if adam.feat_active > per || adam.feat_split > per {
-            bail!(
-                "Adam steps {} features per Gaussian (rate split at {}); the set has {per}",
-                adam.feat_active,
-                adam.feat_split
-            );
+            bail!("Adam steps {} features per Gaussian (rate split at {}); the set has {per}", adam.feat_active, adam.feat_split);
         }
         if !self.can_fuse_adam() {
             bail!("{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)", self.ctx.caps().device_name, std::mem::size_of::<PushAdam>());
@@ -102,35 +87,13 @@ impl Rasterizer {
         let sc = rec.begin_scope("raster.reduce");
         let mut bindings = Self::param_bindings(frame, g, &g.features);
         bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records]);
-        bindings.extend([
-            m.means.binding(),
-            m.log_scales.binding(),
-            m.quats.binding(),
-            m.opacity.binding(),
-            m.features.binding(),
-        ]);
+        bindings.extend([m.means.binding(), m.log_scales.binding(), m.quats.binding(), m.opacity.binding(), m.features.binding()]);
         bindings.push(frame.densify.binding());
-        bindings.extend([
-            v.means.binding(),
-            v.log_scales.binding(),
-            v.quats.binding(),
-            v.opacity.binding(),
-            v.features.binding(),
-        ]);
-        let push = PushAdam {
-            base: self.push(g, frame, sh_degree),
-            adam: *adam,
-        };
+        bindings.extend([v.means.binding(), v.log_scales.binding(), v.quats.binding(), v.opacity.binding(), v.features.binding()]);
+        let push = PushAdam { base: self.push(g, frame, sh_degree), adam: *adam };
         match gate {
-            Some(args) => {
-                rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(&push), args)?
-            }
-            None => rec.dispatch(
-                kernel,
-                &bindings,
-                bytemuck::bytes_of(&push),
-                self.groups(g.n),
-            )?,
+            Some(args) => rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(&push), args)?,
+            None => rec.dispatch(kernel, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?,
         }
         rec.end_scope(sc);
         Ok(())
@@ -145,24 +108,9 @@ impl Rasterizer {
             super::RecordAccess::Binding => shaders::RASTER_REDUCE_ADAM,
         };
         let min_sg = self.ctx.caps().min_subgroup_size.max(1);
-        let spec = [
-            (0, super::WG),
-            (1, min_sg),
-            (4, self.channels),
-            (5, self.batch),
-        ];
+        let spec = [(0, super::WG), (1, min_sg), (4, self.channels), (5, self.batch)];
         let push_bytes = std::mem::size_of::<PushAdam>() as u32;
-        let k = Kernel::new(
-            &self.ctx,
-            &KernelDesc {
-                name: "raster.reduce_adam",
-                spirv,
-                spec: &spec,
-                push_bytes,
-                subgroup_size: None,
-                full_subgroups: false,
-            },
-        )?;
+        let k = Kernel::new(&self.ctx, &KernelDesc { name: "raster.reduce_adam", spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false })?;
         Ok(self.reduce_adam.get_or_init(|| k))
     }
 }

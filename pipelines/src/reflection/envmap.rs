@@ -35,8 +35,7 @@ pub struct EnvProxy {
 impl EnvProxy {
     /// (centre, radius) for the shaders' push constants; radius 0 = none.
     pub fn packed(p: Option<EnvProxy>) -> [f32; 4] {
-        p.map(|p| [p.centre[0], p.centre[1], p.centre[2], p.radius])
-            .unwrap_or([0.0; 4])
+        p.map(|p| [p.centre[0], p.centre[1], p.centre[2], p.radius]).unwrap_or([0.0; 4])
     }
 }
 
@@ -45,11 +44,7 @@ impl HostEnvMap {
     /// method-notes §3.7).
     pub fn constant(res: u32, raw: f32) -> Result<HostEnvMap> {
         check_res(res)?;
-        Ok(HostEnvMap {
-            res,
-            raw: vec![raw; texels(res) * 3],
-            proxy: None,
-        })
+        Ok(HostEnvMap { res, raw: vec![raw; texels(res) * 3], proxy: None })
     }
 
     pub fn texels(&self) -> usize {
@@ -59,12 +54,7 @@ impl HostEnvMap {
     pub fn validate(&self) -> Result<()> {
         check_res(self.res)?;
         if self.raw.len() != texels(self.res) * 3 {
-            bail!(
-                "environment map of face size {} needs {} values, has {}",
-                self.res,
-                texels(self.res) * 3,
-                self.raw.len()
-            );
+            bail!("environment map of face size {} needs {} values, has {}", self.res, texels(self.res) * 3, self.raw.len());
         }
         if let Some(i) = self.raw.iter().position(|v| !v.is_finite()) {
             bail!("environment map value {i} is {}", self.raw[i]);
@@ -113,19 +103,11 @@ impl HostEnvMap {
         let (w, h) = (4 * r, 3 * r);
         let mut img = vec![[0f32; 3]; (w * h) as usize];
         // (face, cell x, cell y)
-        let cells = [
-            (0u32, 2u32, 1u32),
-            (1, 0, 1),
-            (2, 1, 0),
-            (3, 1, 2),
-            (4, 1, 1),
-            (5, 3, 1),
-        ];
+        let cells = [(0u32, 2u32, 1u32), (1, 0, 1), (2, 1, 0), (3, 1, 2), (4, 1, 1), (5, 3, 1)];
         for (face, cx, cy) in cells {
             for row in 0..r {
                 for col in 0..r {
-                    img[((cy * r + row) * w + cx * r + col) as usize] =
-                        self.texel_rgb(face, row, col);
+                    img[((cy * r + row) * w + cx * r + col) as usize] = self.texel_rgb(face, row, col);
                 }
             }
         }
@@ -181,19 +163,11 @@ impl EnvMap {
     }
 
     pub fn download(&self) -> Result<HostEnvMap> {
-        Ok(HostEnvMap {
-            res: self.res,
-            raw: self.params.download_range(0, self.len())?,
-            proxy: self.proxy,
-        })
+        Ok(HostEnvMap { res: self.res, raw: self.params.download_range(0, self.len())?, proxy: self.proxy })
     }
 
     /// The arrays a checkpoint stores, named, in a fixed order.
     pub fn arrays(&self) -> [(&'static str, &Buffer<f32>); 3] {
-        [
-            ("env.param", &self.params),
-            ("env.adam_m", &self.m),
-            ("env.adam_v", &self.v),
-        ]
+        [("env.param", &self.params), ("env.adam_m", &self.m), ("env.adam_v", &self.v)]
     }
 }

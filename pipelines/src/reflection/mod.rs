@@ -36,14 +36,7 @@ pub(crate) fn check_planes(cam: &Camera, bufs: &[(&Buffer<f32>, u32)]) -> Result
     }
     for (b, planes) in bufs {
         if b.len() < *planes as usize * n {
-            bail!(
-                "'{}' holds {} values; {planes} planes of {}x{} need {}",
-                b.name(),
-                b.len(),
-                cam.width,
-                cam.height,
-                *planes as usize * n
-            );
+            bail!("'{}' holds {} values; {planes} planes of {}x{} need {}", b.name(), b.len(), cam.width, cam.height, *planes as usize * n);
         }
     }
     Ok(())
@@ -141,32 +134,12 @@ impl ReflectionShading {
             ctx: ctx.clone(),
             sort: RadixSort::new(ctx)?,
             color: kernel(ctx, "refl.color", shaders::REFLECTION_COLOR, cp)?,
-            color_backward: kernel(
-                ctx,
-                "refl.color_backward",
-                shaders::REFLECTION_COLOR_BACKWARD,
-                cp,
-            )?,
+            color_backward: kernel(ctx, "refl.color_backward", shaders::REFLECTION_COLOR_BACKWARD, cp)?,
             ranges: kernel(ctx, "refl.texel_ranges", shaders::RASTER_RANGES, 0)?,
-            chunks: kernel(
-                ctx,
-                "refl.texel_chunks",
-                shaders::REFLECTION_TEXEL_CHUNKS,
-                8,
-            )?,
-            reduce: kernel(
-                ctx,
-                "refl.texel_reduce",
-                shaders::REFLECTION_TEXEL_REDUCE,
-                8,
-            )?,
+            chunks: kernel(ctx, "refl.texel_chunks", shaders::REFLECTION_TEXEL_CHUNKS, 8)?,
+            reduce: kernel(ctx, "refl.texel_reduce", shaders::REFLECTION_TEXEL_REDUCE, 8)?,
             composite: kernel(ctx, "refl.composite", shaders::REFLECTION_COMPOSITE, kp)?,
-            composite_backward: kernel(
-                ctx,
-                "refl.composite_backward",
-                shaders::REFLECTION_COMPOSITE_BACKWARD,
-                kp,
-            )?,
+            composite_backward: kernel(ctx, "refl.composite_backward", shaders::REFLECTION_COMPOSITE_BACKWARD, kp)?,
             residual: kernel(ctx, "refl.residual", shaders::REFLECTION_RESIDUAL, 4)?,
         })
     }
@@ -198,66 +171,29 @@ impl ReflectionShading {
     }
 
     fn color_push(g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel) -> ColorPush {
-        ColorPush {
-            n: g.n,
-            channels: fresnel.channels(),
-            res: env.res,
-            schlick: fresnel.flag(),
-            centre: cam.centre(),
-            pad: 0,
-            proxy: envmap::EnvProxy::packed(env.proxy),
-        }
+        ColorPush { n: g.n, channels: fresnel.channels(), res: env.res, schlick: fresnel.flag(), centre: cam.centre(), pad: 0, proxy: envmap::EnvProxy::packed(env.proxy) }
     }
 
     fn check_set(g: &Gaussians, features: &Buffer<f32>, fresnel: Fresnel) -> Result<()> {
         if g.channels != MATERIAL || g.coeffs != 1 {
-            bail!(
-                "a reflection set has {MATERIAL} material floats per Gaussian, not {} x {}",
-                g.channels,
-                g.coeffs
-            );
+            bail!("a reflection set has {MATERIAL} material floats per Gaussian, not {} x {}", g.channels, g.coeffs);
         }
         if features.len() < (fresnel.channels() * g.n) as usize {
-            bail!(
-                "feature buffer '{}' holds {} values; {} Gaussians x {} channels need more",
-                features.name(),
-                features.len(),
-                g.n,
-                fresnel.channels()
-            );
+            bail!("feature buffer '{}' holds {} values; {} Gaussians x {} channels need more", features.name(), features.len(), g.n, fresnel.channels());
         }
         Ok(())
     }
 
     /// Record the reflection colour of every Gaussian of `g` seen from `cam`
     /// into `features` (`fresnel.channels()` per Gaussian).
-    pub fn record_color(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        env: &EnvMap,
-        cam: &Camera,
-        fresnel: Fresnel,
-        features: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn record_color(&self, rec: &mut Recorder, g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel, features: &Buffer<f32>) -> Result<()> {
         Self::check_set(g, features, fresnel)?;
         if g.n == 0 {
             return Ok(());
         }
         let p = Self::color_push(g, env, cam, fresnel);
-        let b = [
-            g.means.binding(),
-            g.quats.binding(),
-            g.features.binding(),
-            env.params.binding(),
-            features.binding(),
-        ];
-        rec.dispatch(
-            &self.color,
-            &b,
-            bytemuck::bytes_of(&p),
-            grid(&self.ctx, g.n),
-        )
+        let b = [g.means.binding(), g.quats.binding(), g.features.binding(), env.params.binding(), features.binding()];
+        rec.dispatch(&self.color, &b, bytemuck::bytes_of(&p), grid(&self.ctx, g.n))
     }
 
     /// Record the colour's backward: from `d_features` (the rasterizer's
@@ -265,31 +201,13 @@ impl ReflectionShading {
     /// `grads.means` and `grads.quats` (added to what the rasterizer's
     /// backward wrote) and `env.grads` (overwritten).
     #[allow(clippy::too_many_arguments)]
-    pub fn record_color_backward(
-        &self,
-        rec: &mut Recorder,
-        g: &Gaussians,
-        env: &EnvMap,
-        cam: &Camera,
-        fresnel: Fresnel,
-        d_features: &Buffer<f32>,
-        grads: &Gaussians,
-        s: &TexelScratch,
-    ) -> Result<()> {
+    pub fn record_color_backward(&self, rec: &mut Recorder, g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel, d_features: &Buffer<f32>, grads: &Gaussians, s: &TexelScratch) -> Result<()> {
         Self::check_set(g, d_features, fresnel)?;
         if grads.n != g.n || grads.channels != MATERIAL {
-            bail!(
-                "reflection gradients ({} Gaussians) do not match the set ({})",
-                grads.n,
-                g.n
-            );
+            bail!("reflection gradients ({} Gaussians) do not match the set ({})", grads.n, g.n);
         }
         if g.n > s.capacity {
-            bail!(
-                "{} reflection Gaussians exceed the texel scratch's {}",
-                g.n,
-                s.capacity
-            );
+            bail!("{} reflection Gaussians exceed the texel scratch's {}", g.n, s.capacity);
         }
         if g.n == 0 {
             rec.fill(&env.grads.binding(), 0)?;
@@ -309,59 +227,26 @@ impl ReflectionShading {
             s.slots.binding(),
             s.grads.binding(),
         ];
-        rec.dispatch(
-            &self.color_backward,
-            &b,
-            bytemuck::bytes_of(&p),
-            grid(&self.ctx, g.n),
-        )?;
+        rec.dispatch(&self.color_backward, &b, bytemuck::bytes_of(&p), grid(&self.ctx, g.n))?;
         self.record_texel_sum(rec, env, 4 * g.n, s)
     }
 
     /// Sort the first `slots` tap slots by texel and sum them per texel into `env.grads`.
-    fn record_texel_sum(
-        &self,
-        rec: &mut Recorder,
-        env: &EnvMap,
-        slots: u32,
-        s: &TexelScratch,
-    ) -> Result<()> {
+    fn record_texel_sum(&self, rec: &mut Recorder, env: &EnvMap, slots: u32, s: &TexelScratch) -> Result<()> {
         let texels = env.texels();
         let bits = 32 - (texels.max(2) - 1).leading_zeros();
         let sc = rec.begin_scope("refl.texel_sort");
-        self.sort
-            .record(rec, &s.keys, &s.slots, &Count::Host(slots), bits, &s.sort)?;
+        self.sort.record(rec, &s.keys, &s.slots, &Count::Host(slots), bits, &s.sort)?;
         rec.end_scope(sc);
         let sc = rec.begin_scope("refl.texel_reduce");
         rec.update(&s.count.binding(), bytemuck::bytes_of(&slots))?;
         rec.fill(&s.ranges.binding(), 0)?;
-        rec.dispatch(
-            &self.ranges,
-            &[s.count.binding(), s.keys.binding(), s.ranges.binding()],
-            &[],
-            grid(&self.ctx, slots),
-        )?;
+        rec.dispatch(&self.ranges, &[s.count.binding(), s.keys.binding(), s.ranges.binding()], &[], grid(&self.ctx, slots))?;
         let chunks = slots.div_ceil(CHUNK);
-        rec.dispatch(
-            &self.chunks,
-            &[
-                s.keys.binding(),
-                s.slots.binding(),
-                s.grads.binding(),
-                s.runs.binding(),
-            ],
-            bytemuck::cast_slice(&[slots, CHUNK]),
-            grid(&self.ctx, chunks),
-        )?;
+        rec.dispatch(&self.chunks, &[s.keys.binding(), s.slots.binding(), s.grads.binding(), s.runs.binding()], bytemuck::cast_slice(&[slots, CHUNK]), grid(&self.ctx, chunks))?;
         rec.dispatch(
             &self.reduce,
-            &[
-                s.ranges.binding(),
-                s.slots.binding(),
-                s.grads.binding(),
-                s.runs.binding(),
-                env.grads.binding(),
-            ],
+            &[s.ranges.binding(), s.slots.binding(), s.grads.binding(), s.runs.binding(), env.grads.binding()],
             bytemuck::cast_slice(&[texels, CHUNK]),
             grid(&self.ctx, texels),
         )?;
@@ -369,12 +254,7 @@ impl ReflectionShading {
         Ok(())
     }
 
-    fn composite_push(
-        cam: &Camera,
-        fresnel: Fresnel,
-        scat_grad: bool,
-        r_prior: f32,
-    ) -> CompositePush {
+    fn composite_push(cam: &Camera, fresnel: Fresnel, scat_grad: bool, r_prior: f32) -> CompositePush {
         CompositePush {
             width: cam.width,
             height: cam.height,
@@ -395,31 +275,11 @@ impl ReflectionShading {
     /// feature channels, `Plane` order) into `loss_in`: the composite colour
     /// followed by the reflection render's alpha..distortion planes, i.e. a
     /// 3-channel render's layout, for `ImageLoss::record_planes`.
-    pub fn record_composite(
-        &self,
-        rec: &mut Recorder,
-        cam: &Camera,
-        fresnel: Fresnel,
-        scat: &Buffer<f32>,
-        refl: &Buffer<f32>,
-        loss_in: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
         let ch = fresnel.channels();
-        check_planes(
-            cam,
-            &[
-                (scat, 3),
-                (refl, Plane::count(ch)),
-                (loss_in, Plane::count(3)),
-            ],
-        )?;
+        check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_in, Plane::count(3))])?;
         let p = Self::composite_push(cam, fresnel, false, 0.0);
-        rec.dispatch(
-            &self.composite,
-            &[scat.binding(), refl.binding(), loss_in.binding()],
-            bytemuck::bytes_of(&p),
-            grid(&self.ctx, cam.width * cam.height),
-        )
+        rec.dispatch(&self.composite, &[scat.binding(), refl.binding(), loss_in.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, cam.width * cam.height))
     }
 
     /// Record the composite's backward: `loss_grad` (gradient of every plane
@@ -441,15 +301,7 @@ impl ReflectionShading {
         r_prior: f32,
     ) -> Result<()> {
         let ch = fresnel.channels();
-        check_planes(
-            cam,
-            &[
-                (scat, 3),
-                (refl, Plane::count(ch)),
-                (loss_grad, Plane::count(3)),
-                (refl_grad, Plane::count(ch)),
-            ],
-        )?;
+        check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_grad, Plane::count(3)), (refl_grad, Plane::count(ch))])?;
         if let Some(s) = scat_grad {
             check_planes(cam, &[(s, 3)])?;
         }
@@ -459,13 +311,7 @@ impl ReflectionShading {
         let sg = scat_grad.unwrap_or(refl_grad);
         rec.dispatch(
             &self.composite_backward,
-            &[
-                scat.binding(),
-                refl.binding(),
-                loss_grad.binding(),
-                refl_grad.binding(),
-                sg.binding(),
-            ],
+            &[scat.binding(), refl.binding(), loss_grad.binding(), refl_grad.binding(), sg.binding()],
             bytemuck::bytes_of(&p),
             grid(&self.ctx, cam.width * cam.height),
         )
@@ -473,30 +319,13 @@ impl ReflectionShading {
 
     /// Record the Stage I residual r = target - scat (3 planes each, `pixels`
     /// per plane) into `residual`: r's 3 planes, then mean_c |r_c|.
-    pub fn record_residual(
-        &self,
-        rec: &mut Recorder,
-        pixels: u32,
-        target: &Buffer<f32>,
-        scat: &Buffer<f32>,
-        residual: &Buffer<f32>,
-    ) -> Result<()> {
+    pub fn record_residual(&self, rec: &mut Recorder, pixels: u32, target: &Buffer<f32>, scat: &Buffer<f32>, residual: &Buffer<f32>) -> Result<()> {
         let n = pixels as usize;
         for (b, planes) in [(target, 3), (scat, 3), (residual, 4)] {
             if b.len() < planes * n {
-                bail!(
-                    "'{}' holds {} values; {planes} planes of {pixels} pixels need {}",
-                    b.name(),
-                    b.len(),
-                    planes * n
-                );
+                bail!("'{}' holds {} values; {planes} planes of {pixels} pixels need {}", b.name(), b.len(), planes * n);
             }
         }
-        rec.dispatch(
-            &self.residual,
-            &[target.binding(), scat.binding(), residual.binding()],
-            bytemuck::bytes_of(&pixels),
-            grid(&self.ctx, pixels),
-        )
+        rec.dispatch(&self.residual, &[target.binding(), scat.binding(), residual.binding()], bytemuck::bytes_of(&pixels), grid(&self.ctx, pixels))
     }
 }

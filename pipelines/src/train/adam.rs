@@ -1,12 +1,12 @@
 //! Fused Adam (PyTorch form) over one parameter buffer per dispatch.
 
-use super::TrainableSet;
 use super::{dispatch_items, grid, kernel};
-use crate::raster::ReduceAdam;
 use crate::shaders;
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
+use super::TrainableSet;
+use crate::raster::ReduceAdam;
 use tgs_engine::{Buffer, BufferBinding, Context, Kernel, Recorder};
 
 /// One parameter group: a learning rate, or two (elements with index modulo
@@ -25,45 +25,23 @@ pub struct AdamGroup {
 
 impl AdamGroup {
     pub fn single(lr: f32) -> AdamGroup {
-        AdamGroup {
-            lr,
-            lr_rest: lr,
-            stride: 1,
-            split: 1,
-            active: 1,
-        }
+        AdamGroup { lr, lr_rest: lr, stride: 1, split: 1, active: 1 }
     }
 
     /// Two rates over blocks of `stride`, every element stepped.
     pub fn split(lr: f32, lr_rest: f32, stride: u32, split: u32) -> AdamGroup {
-        AdamGroup {
-            lr,
-            lr_rest,
-            stride,
-            split,
-            active: stride,
-        }
+        AdamGroup { lr, lr_rest, stride, split, active: stride }
     }
 
     /// The elements stepped of an array of `len`.
     pub fn items(&self, len: usize) -> usize {
-        if self.active >= self.stride {
-            len
-        } else {
-            len / self.stride.max(1) as usize * self.active as usize
-        }
+        if self.active >= self.stride { len } else { len / self.stride.max(1) as usize * self.active as usize }
     }
 }
 
 /// One parameter array of a set: parameter, gradient, first and second
 /// moments, and its length in floats.
-type ParamArrays<'a> = (
-    &'a Buffer<f32>,
-    &'a Buffer<f32>,
-    &'a Buffer<f32>,
-    &'a Buffer<f32>,
-    usize,
-);
+type ParamArrays<'a> = (&'a Buffer<f32>, &'a Buffer<f32>, &'a Buffer<f32>, &'a Buffer<f32>, usize);
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -92,33 +70,12 @@ pub struct Adam {
 impl Adam {
     /// Adam with betas (0.9, 0.999) and the given epsilon.
     pub fn new(ctx: &Arc<Context>, eps: f32) -> Result<Adam> {
-        Ok(Adam {
-            ctx: ctx.clone(),
-            kernel: kernel(
-                ctx,
-                "adam",
-                shaders::ADAM,
-                std::mem::size_of::<Push>() as u32,
-            )?,
-            beta1: 0.9,
-            beta2: 0.999,
-            eps,
-        })
+        Ok(Adam { ctx: ctx.clone(), kernel: kernel(ctx, "adam", shaders::ADAM, std::mem::size_of::<Push>() as u32)?, beta1: 0.9, beta2: 0.999, eps })
     }
 
     /// Record step `t` (1-based) over the first `n` elements.
     #[allow(clippy::too_many_arguments)]
-    pub fn record(
-        &self,
-        rec: &mut Recorder,
-        param: &Buffer<f32>,
-        grad: &Buffer<f32>,
-        m: &Buffer<f32>,
-        v: &Buffer<f32>,
-        n: usize,
-        group: &AdamGroup,
-        t: u64,
-    ) -> Result<()> {
+    pub fn record(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64) -> Result<()> {
         self.record_on(rec, param, grad, m, v, n, group, t, None)
     }
 
@@ -126,18 +83,7 @@ impl Adam {
     /// on the GPU from [`Adam::grid`], e.g. by `Rasterizer::record_fit_gate`;
     /// zero groups skip the step).
     #[allow(clippy::too_many_arguments)]
-    pub fn record_gated(
-        &self,
-        rec: &mut Recorder,
-        param: &Buffer<f32>,
-        grad: &Buffer<f32>,
-        m: &Buffer<f32>,
-        v: &Buffer<f32>,
-        n: usize,
-        group: &AdamGroup,
-        t: u64,
-        args: &BufferBinding,
-    ) -> Result<()> {
+    pub fn record_gated(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64, args: &BufferBinding) -> Result<()> {
         self.record_on(rec, param, grad, m, v, n, group, t, Some(args))
     }
 
@@ -148,40 +94,19 @@ impl Adam {
 
     /// The body of [`Adam::record`] (`args` None) and [`Adam::record_gated`].
     #[allow(clippy::too_many_arguments)]
-    fn record_on(
-        &self,
-        rec: &mut Recorder,
-        param: &Buffer<f32>,
-        grad: &Buffer<f32>,
-        m: &Buffer<f32>,
-        v: &Buffer<f32>,
-        n: usize,
-        group: &AdamGroup,
-        t: u64,
-        args: Option<&BufferBinding>,
-    ) -> Result<()> {
+    fn record_on(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64, args: Option<&BufferBinding>) -> Result<()> {
         if n == 0 {
             return Ok(());
         }
-        if [grad.len(), m.len(), v.len(), param.len()]
-            .iter()
-            .any(|&l| l < n)
-        {
-            bail!(
-                "Adam on '{}': {n} elements but a buffer is shorter",
-                param.name()
-            );
+        if [grad.len(), m.len(), v.len(), param.len()].iter().any(|&l| l < n) {
+            bail!("Adam on '{}': {n} elements but a buffer is shorter", param.name());
         }
         if t == 0 || group.stride == 0 || group.active == 0 {
             bail!("Adam step must be >= 1, stride and active >= 1");
         }
         let active = group.active.min(group.stride);
         if active < group.stride && n % group.stride as usize != 0 {
-            bail!(
-                "Adam on '{}': {n} elements are not whole blocks of {}",
-                param.name(),
-                group.stride
-            );
+            bail!("Adam on '{}': {n} elements are not whole blocks of {}", param.name(), group.stride);
         }
         let items = group.items(n);
         let p = Push {
@@ -197,38 +122,19 @@ impl Adam {
             bc1: 1.0 - self.beta1.powf(t as f32),
             bc2: 1.0 - self.beta2.powf(t as f32),
         };
-        dispatch_items(
-            rec,
-            &self.kernel,
-            &[param.binding(), grad.binding(), m.binding(), v.binding()],
-            bytemuck::bytes_of(&p),
-            items as u32,
-            args,
-        )
+        dispatch_items(rec, &self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), items as u32, args)
     }
 
     /// Record step `t` over every parameter array of `set`, in its layout
     /// order (means, log-scales, quaternions, opacity, features), each with
     /// its group.
-    pub fn record_set(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        groups: &[AdamGroup; 5],
-        t: u64,
-    ) -> Result<()> {
+    pub fn record_set(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64) -> Result<()> {
         self.record_set_on(rec, set, groups, t, None)
     }
 
     /// Record step `t` over `set`'s features (SH colour) alone, with `group`;
     /// the other arrays and their moments are left as they are.
-    pub fn record_set_features(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        group: &AdamGroup,
-        t: u64,
-    ) -> Result<()> {
+    pub fn record_set_features(&self, rec: &mut Recorder, set: &TrainableSet, group: &AdamGroup, t: u64) -> Result<()> {
         let (p, g, m, v, len) = Self::arrays(set)[4];
         self.record_on(rec, p, g, m, v, len, group, t, None)
     }
@@ -243,19 +149,9 @@ impl Adam {
 
     /// As [`Adam::record_set`], dispatch k taking its workgroup counts from
     /// `args[k]` (see [`Adam::set_grids`]).
-    pub fn record_set_gated(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        groups: &[AdamGroup; 5],
-        t: u64,
-        args: &[BufferBinding],
-    ) -> Result<()> {
+    pub fn record_set_gated(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64, args: &[BufferBinding]) -> Result<()> {
         if args.len() != 5 {
-            bail!(
-                "a gated Adam step over a Gaussian set needs 5 argument slots, got {}",
-                args.len()
-            );
+            bail!("a gated Adam step over a Gaussian set needs 5 argument slots, got {}", args.len());
         }
         self.record_set_on(rec, set, groups, t, Some(args))
     }
@@ -264,31 +160,17 @@ impl Adam {
     /// (`Rasterizer::record_backward_adam`), which steps means, log-scales,
     /// rotations and opacity at one rate each and the features in blocks of
     /// the set's features per Gaussian.
-    pub fn reduce_constants(
-        &self,
-        set: &TrainableSet,
-        groups: &[AdamGroup; 5],
-        t: u64,
-    ) -> Result<ReduceAdam> {
+    pub fn reduce_constants(&self, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64) -> Result<ReduceAdam> {
         if t == 0 {
             bail!("Adam step must be >= 1");
         }
-        if let Some(k) = groups[..4]
-            .iter()
-            .position(|g| g.stride != 1 || g.lr != g.lr_rest)
-        {
-            bail!(
-                "the fused Adam step takes one rate for parameter array {k}, got {:?}",
-                groups[k]
-            );
+        if let Some(k) = groups[..4].iter().position(|g| g.stride != 1 || g.lr != g.lr_rest) {
+            bail!("the fused Adam step takes one rate for parameter array {k}, got {:?}", groups[k]);
         }
         let f = &groups[4];
         let per = set.params.channels * set.params.coeffs;
         if f.stride != per {
-            bail!(
-                "the fused Adam step takes the features in blocks of {per} per Gaussian, got {}",
-                f.stride
-            );
+            bail!("the fused Adam step takes the features in blocks of {per} per Gaussian, got {}", f.stride);
         }
         Ok(ReduceAdam {
             lr_means: groups[0].lr,
@@ -313,29 +195,15 @@ impl Adam {
         let (p, g, m, v) = (&set.params, &set.grads, &set.m, &set.v);
         [
             (&p.means, &g.means, &m.means, &v.means, 3 * n),
-            (
-                &p.log_scales,
-                &g.log_scales,
-                &m.log_scales,
-                &v.log_scales,
-                2 * n,
-            ),
+            (&p.log_scales, &g.log_scales, &m.log_scales, &v.log_scales, 2 * n),
             (&p.quats, &g.quats, &m.quats, &v.quats, 4 * n),
             (&p.opacity, &g.opacity, &m.opacity, &v.opacity, n),
             (&p.features, &g.features, &m.features, &v.features, f * n),
         ]
     }
 
-    fn record_set_on(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        groups: &[AdamGroup; 5],
-        t: u64,
-        args: Option<&[BufferBinding]>,
-    ) -> Result<()> {
-        for (k, ((p, g, m, v, len), group)) in Self::arrays(set).into_iter().zip(groups).enumerate()
-        {
+    fn record_set_on(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64, args: Option<&[BufferBinding]>) -> Result<()> {
+        for (k, ((p, g, m, v, len), group)) in Self::arrays(set).into_iter().zip(groups).enumerate() {
             self.record_on(rec, p, g, m, v, len, group, t, args.map(|a| &a[k]))?;
         }
         Ok(())

@@ -68,24 +68,14 @@ impl Densifier {
             ctx: ctx.clone(),
             scan: PrefixSum::new(ctx)?,
             stats: kernel(ctx, "densify.stats", shaders::DENSIFY_STATS, 4)?,
-            mark: kernel(
-                ctx,
-                "densify.mark",
-                shaders::DENSIFY_MARK,
-                std::mem::size_of::<MarkPush>() as u32,
-            )?,
+            mark: kernel(ctx, "densify.mark", shaders::DENSIFY_MARK, std::mem::size_of::<MarkPush>() as u32)?,
             apply: kernel(ctx, "densify.apply", shaders::DENSIFY_APPLY, 16)?,
             reset: kernel(ctx, "densify.opacity_reset", shaders::OPACITY_RESET, 8)?,
         })
     }
 
     /// Record the statistics update from the last forward/backward on `frame`.
-    pub fn record_stats(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        frame: &Frame,
-    ) -> Result<()> {
+    pub fn record_stats(&self, rec: &mut Recorder, set: &TrainableSet, frame: &Frame) -> Result<()> {
         self.record_stats_on(rec, set, frame, None)
     }
 
@@ -96,60 +86,28 @@ impl Densifier {
 
     /// As [`Densifier::record_stats`], with the workgroup counts read from
     /// `args` (see `Rasterizer::record_fit_gate`).
-    pub fn record_stats_gated(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        frame: &Frame,
-        args: &BufferBinding,
-    ) -> Result<()> {
+    pub fn record_stats_gated(&self, rec: &mut Recorder, set: &TrainableSet, frame: &Frame, args: &BufferBinding) -> Result<()> {
         self.record_stats_on(rec, set, frame, Some(args))
     }
 
-    fn record_stats_on(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        frame: &Frame,
-        args: Option<&BufferBinding>,
-    ) -> Result<()> {
+    fn record_stats_on(&self, rec: &mut Recorder, set: &TrainableSet, frame: &Frame, args: Option<&BufferBinding>) -> Result<()> {
         let n = set.len();
         if n == 0 {
             return Ok(());
         }
-        let bindings = [
-            frame.densify.binding(),
-            frame.radii.binding(),
-            set.accum.binding(),
-            set.denom.binding(),
-            set.max_radii.binding(),
-        ];
+        let bindings = [frame.densify.binding(), frame.radii.binding(), set.accum.binding(), set.denom.binding(), set.max_radii.binding()];
         dispatch_items(rec, &self.stats, &bindings, bytemuck::bytes_of(&n), n, args)
     }
 
     /// Record the opacity reset: o <- min(o, cap), opacity moments zeroed.
-    pub fn record_opacity_reset(
-        &self,
-        rec: &mut Recorder,
-        set: &TrainableSet,
-        cap: f32,
-    ) -> Result<()> {
+    pub fn record_opacity_reset(&self, rec: &mut Recorder, set: &TrainableSet, cap: f32) -> Result<()> {
         let n = set.len();
         if n == 0 {
             return Ok(());
         }
         let raw = (cap / (1.0 - cap)).ln();
         let push: [u32; 2] = [n, raw.to_bits()];
-        rec.dispatch(
-            &self.reset,
-            &[
-                set.params.opacity.binding(),
-                set.m.opacity.binding(),
-                set.v.opacity.binding(),
-            ],
-            bytemuck::cast_slice(&push),
-            grid(&self.ctx, n),
-        )
+        rec.dispatch(&self.reset, &[set.params.opacity.binding(), set.m.opacity.binding(), set.v.opacity.binding()], bytemuck::cast_slice(&push), grid(&self.ctx, n))
     }
 
     /// Clone, split and prune `set` (two submissions and a 4-byte read-back).
@@ -175,47 +133,25 @@ impl Densifier {
         let g = &set.params;
         rec.dispatch(
             &self.mark,
-            &[
-                g.opacity.binding(),
-                g.log_scales.binding(),
-                set.accum.binding(),
-                set.denom.binding(),
-                set.max_radii.binding(),
-                counts.binding(),
-                action.binding(),
-            ],
+            &[g.opacity.binding(), g.log_scales.binding(), set.accum.binding(), set.denom.binding(), set.max_radii.binding(), counts.binding(), action.binding()],
             bytemuck::bytes_of(&push),
             grid(ctx, n + 1),
         )?;
-        self.scan
-            .record(&mut rec, &counts, &counts, &Count::Host(n + 1), &scratch)?;
+        self.scan.record(&mut rec, &counts, &counts, &Count::Host(n + 1), &scratch)?;
         rec.submit_and_wait()?;
         let total = counts.download_range(n as usize, 1)?[0];
 
         let (c, k) = (g.channels, g.coeffs);
         // densify_apply writes every element of the new buffers.
-        let (params, m, v) = (
-            Gaussians::uninit(ctx, total, c, k)?,
-            Gaussians::uninit(ctx, total, c, k)?,
-            Gaussians::uninit(ctx, total, c, k)?,
-        );
+        let (params, m, v) = (Gaussians::uninit(ctx, total, c, k)?, Gaussians::uninit(ctx, total, c, k)?, Gaussians::uninit(ctx, total, c, k)?);
         let mut rec = Recorder::new(ctx)?;
         let f = (c * k) as usize;
         // Modes of densify_apply.comp: 0 moments, 1 copy, 2 means, 3 log-scales.
-        for (src, dst, is_param) in [
-            (&set.params, &params, true),
-            (&set.m, &m, false),
-            (&set.v, &v, false),
-        ] {
+        for (src, dst, is_param) in [(&set.params, &params, true), (&set.m, &m, false), (&set.v, &v, false)] {
             let mode = is_param as u32;
             let arrays = [
                 (&src.means, &dst.means, 3usize, if is_param { 2 } else { 0 }),
-                (
-                    &src.log_scales,
-                    &dst.log_scales,
-                    2,
-                    if is_param { 3 } else { 0 },
-                ),
+                (&src.log_scales, &dst.log_scales, 2, if is_param { 3 } else { 0 }),
                 (&src.quats, &dst.quats, 4, mode),
                 (&src.opacity, &dst.opacity, 1, mode),
                 (&src.features, &dst.features, f, mode),
@@ -224,14 +160,7 @@ impl Densifier {
                 let push = [n, width as u32, mode, p.seed];
                 rec.dispatch(
                     &self.apply,
-                    &[
-                        s.binding(),
-                        d.binding(),
-                        counts.binding(),
-                        action.binding(),
-                        g.log_scales.binding(),
-                        g.quats.binding(),
-                    ],
+                    &[s.binding(), d.binding(), counts.binding(), action.binding(), g.log_scales.binding(), g.quats.binding()],
                     bytemuck::cast_slice(&push),
                     grid(ctx, n),
                 )?;
@@ -239,9 +168,6 @@ impl Densifier {
         }
         rec.submit_and_wait()?;
         *set = TrainableSet::from_parts(ctx, params, m, v)?;
-        Ok(DensifyReport {
-            before: n,
-            after: total,
-        })
+        Ok(DensifyReport { before: n, after: total })
     }
 }

@@ -36,51 +36,20 @@ impl HfStats {
 
 impl HfLoss {
     pub fn new(ctx: &Arc<Context>) -> Result<HfLoss> {
-        let spec = [
-            (0, SELECT_WG),
-            (1, ctx.caps().min_subgroup_size.max(1)),
-            (2, 1),
-        ];
-        let select = Kernel::new(
-            ctx,
-            &KernelDesc {
-                name: "loss.hf_select",
-                spirv: shaders::LOSS_HF_SELECT,
-                spec: &spec,
-                push_bytes: 8,
-                subgroup_size: None,
-                full_subgroups: false,
-            },
-        )?;
-        Ok(HfLoss {
-            ctx: ctx.clone(),
-            select,
-            grad: kernel(ctx, "loss.hf_grad", shaders::LOSS_HF_GRAD, 8)?,
-        })
+        let spec = [(0, SELECT_WG), (1, ctx.caps().min_subgroup_size.max(1)), (2, 1)];
+        let select = Kernel::new(ctx, &KernelDesc { name: "loss.hf_select", spirv: shaders::LOSS_HF_SELECT, spec: &spec, push_bytes: 8, subgroup_size: None, full_subgroups: false })?;
+        Ok(HfLoss { ctx: ctx.clone(), select, grad: kernel(ctx, "loss.hf_grad", shaders::LOSS_HF_GRAD, 8)? })
     }
 
     pub fn stats(&self) -> Result<HfStats> {
-        Ok(HfStats {
-            stats: Buffer::new(&self.ctx, "loss.hf_stats", 4)?,
-            stats_host: Readback::new(&self.ctx, "loss.hf_stats_host", 4)?,
-        })
+        Ok(HfStats { stats: Buffer::new(&self.ctx, "loss.hf_stats", 4)?, stats_host: Readback::new(&self.ctx, "loss.hf_stats_host", 4)? })
     }
 
     /// Record the loss of the colour planes of `render` (`pixels` per
     /// plane) against `target` at percentile `pct` (in [0, 1]) into `s`, and
     /// add `weight` x its gradient to the colour planes of `grad`.
     #[allow(clippy::too_many_arguments)]
-    pub fn record(
-        &self,
-        rec: &mut Recorder,
-        render: &Buffer<f32>,
-        target: &Buffer<f32>,
-        pixels: u32,
-        pct: f32,
-        weight: f32,
-        grad: &Buffer<f32>,
-        s: &HfStats,
-    ) -> Result<()> {
+    pub fn record(&self, rec: &mut Recorder, render: &Buffer<f32>, target: &Buffer<f32>, pixels: u32, pct: f32, weight: f32, grad: &Buffer<f32>, s: &HfStats) -> Result<()> {
         if pixels == 0 {
             bail!("high-frequency loss of an empty image");
         }
@@ -90,34 +59,15 @@ impl HfLoss {
         let need = 3 * pixels as usize;
         for b in [render, target, grad] {
             if b.len() < need {
-                bail!(
-                    "'{}' holds {} values; 3 planes of {pixels} pixels need {need}",
-                    b.name(),
-                    b.len()
-                );
+                bail!("'{}' holds {} values; 3 planes of {pixels} pixels need {need}", b.name(), b.len());
             }
         }
         // Four passes over the pixels per invocation, plus the bin scans.
         if self.ctx.caps().is_cpu() && 4 * pixels.div_ceil(SELECT_WG) + 3 * 2048 > 60_000 {
             bail!("the high-frequency loss of {pixels} pixels exceeds a CPU driver's per-invocation loop budget");
         }
-        rec.dispatch(
-            &self.select,
-            &[render.binding(), target.binding(), s.stats.binding()],
-            bytemuck::cast_slice(&[pixels, pct.to_bits()]),
-            [1, 1, 1],
-        )?;
-        rec.dispatch(
-            &self.grad,
-            &[
-                render.binding(),
-                target.binding(),
-                s.stats.binding(),
-                grad.binding(),
-            ],
-            bytemuck::cast_slice(&[pixels, weight.to_bits()]),
-            grid(&self.ctx, pixels),
-        )?;
+        rec.dispatch(&self.select, &[render.binding(), target.binding(), s.stats.binding()], bytemuck::cast_slice(&[pixels, pct.to_bits()]), [1, 1, 1])?;
+        rec.dispatch(&self.grad, &[render.binding(), target.binding(), s.stats.binding(), grad.binding()], bytemuck::cast_slice(&[pixels, weight.to_bits()]), grid(&self.ctx, pixels))?;
         rec.read_back(&s.stats, 0, &s.stats_host)
     }
 }

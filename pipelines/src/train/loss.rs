@@ -104,12 +104,7 @@ impl LossScratch {
         }
         let n = self.width as f64 * self.height as f64;
         let nc = n * self.channels as f64;
-        Ok(LossValues {
-            l1: s[0] / nc,
-            mse: s[1] / nc,
-            ssim: s[2] / nc,
-            normal: if self.normal_on { s[3] / n } else { f64::NAN },
-        })
+        Ok(LossValues { l1: s[0] / nc, mse: s[1] / nc, ssim: s[2] / nc, normal: if self.normal_on { s[3] / n } else { f64::NAN } })
     }
 }
 
@@ -147,23 +142,9 @@ impl ImageLoss {
 
     /// Record the loss of `frame`'s render against `target` (`channels`
     /// planes of width x height, planar) and write `frame.grad_out`.
-    pub fn record(
-        &self,
-        rec: &mut Recorder,
-        frame: &Frame,
-        target: &Buffer<f32>,
-        cam: &Camera,
-        w: &LossWeights,
-        s: &mut LossScratch,
-    ) -> Result<()> {
+    pub fn record(&self, rec: &mut Recorder, frame: &Frame, target: &Buffer<f32>, cam: &Camera, w: &LossWeights, s: &mut LossScratch) -> Result<()> {
         if frame.width != s.width || frame.height != s.height {
-            bail!(
-                "loss scratch is {}x{} but the render is {}x{}",
-                s.width,
-                s.height,
-                frame.width,
-                frame.height
-            );
+            bail!("loss scratch is {}x{} but the render is {}x{}", s.width, s.height, frame.width, frame.height);
         }
         self.record_planes(rec, &frame.out, &frame.grad_out, target, cam, w, s)
     }
@@ -173,16 +154,7 @@ impl ImageLoss {
     /// gradient of every plane to `grad_out` (e.g. a deferred composite
     /// followed by another render's geometry planes).
     #[allow(clippy::too_many_arguments)]
-    pub fn record_planes(
-        &self,
-        rec: &mut Recorder,
-        out: &Buffer<f32>,
-        grad_out: &Buffer<f32>,
-        target: &Buffer<f32>,
-        cam: &Camera,
-        w: &LossWeights,
-        s: &mut LossScratch,
-    ) -> Result<()> {
+    pub fn record_planes(&self, rec: &mut Recorder, out: &Buffer<f32>, grad_out: &Buffer<f32>, target: &Buffer<f32>, cam: &Camera, w: &LossWeights, s: &mut LossScratch) -> Result<()> {
         let (width, height, c) = (s.width, s.height, s.channels);
         let n = width * height;
         let need = (Plane::count(c) * n) as usize;
@@ -190,12 +162,7 @@ impl ImageLoss {
             bail!("loss planes '{}'/'{}' hold {}/{} values; {width}x{height} with {c} channels needs {need}", out.name(), grad_out.name(), out.len(), grad_out.len());
         }
         if target.len() < (c * n) as usize {
-            bail!(
-                "target '{}' has {} values; a {width}x{height} image with {c} channels needs {}",
-                target.name(),
-                target.len(),
-                c * n
-            );
+            bail!("target '{}' has {} values; a {width}x{height} image with {c} channels needs {}", target.name(), target.len(), c * n);
         }
         let base = Push {
             width,
@@ -227,26 +194,10 @@ impl ImageLoss {
         // coefficients, a their rows.
         let blur = |rec: &mut Recorder, mode: u32, src: &Buffer<f32>, dst: &Buffer<f32>| {
             let p = Push { mode, ..base };
-            rec.dispatch(
-                &self.blur,
-                &[out.clone(), tgt.clone(), src.binding(), dst.binding()],
-                bytemuck::bytes_of(&p),
-                grid(&self.ctx, c * n),
-            )
+            rec.dispatch(&self.blur, &[out.clone(), tgt.clone(), src.binding(), dst.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, c * n))
         };
         blur(rec, 0, &s.b, &s.a)?;
-        rec.dispatch(
-            &self.ssim,
-            &[
-                out.clone(),
-                tgt.clone(),
-                s.a.binding(),
-                s.b.binding(),
-                s.partials.binding(),
-            ],
-            bytemuck::bytes_of(&base),
-            grid(&self.ctx, n),
-        )?;
+        rec.dispatch(&self.ssim, &[out.clone(), tgt.clone(), s.a.binding(), s.b.binding(), s.partials.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
         if w.ssim != 0.0 {
             blur(rec, 1, &s.b, &s.a)?;
         }
@@ -254,30 +205,9 @@ impl ImageLoss {
         s.normal_on = w.normal != 0.0;
         let sc = rec.begin_scope("loss.grad");
         if s.normal_on {
-            rec.dispatch(
-                &self.normal,
-                &[
-                    out.clone(),
-                    s.normal.binding(),
-                    grad_out.binding(),
-                    s.partials.binding(),
-                ],
-                bytemuck::bytes_of(&base),
-                grid(&self.ctx, n),
-            )?;
+            rec.dispatch(&self.normal, &[out.clone(), s.normal.binding(), grad_out.binding(), s.partials.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
         }
-        rec.dispatch(
-            &self.grad,
-            &[
-                out,
-                tgt,
-                s.a.binding(),
-                s.normal.binding(),
-                grad_out.binding(),
-            ],
-            bytemuck::bytes_of(&base),
-            grid(&self.ctx, n),
-        )?;
+        rec.dispatch(&self.grad, &[out, tgt, s.a.binding(), s.normal.binding(), grad_out.binding()], bytemuck::bytes_of(&base), grid(&self.ctx, n))?;
         rec.end_scope(sc);
         rec.read_back(&s.partials, 0, &s.partials_host)
     }

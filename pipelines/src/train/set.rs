@@ -23,21 +23,11 @@ impl TrainableSet {
     pub fn new(ctx: &Arc<Context>, h: &HostGaussians) -> Result<TrainableSet> {
         let params = Gaussians::upload(ctx, h)?;
         let (n, c, k) = (params.n, params.channels, params.coeffs);
-        Self::from_parts(
-            ctx,
-            params,
-            Gaussians::zeros(ctx, n, c, k)?,
-            Gaussians::zeros(ctx, n, c, k)?,
-        )
+        Self::from_parts(ctx, params, Gaussians::zeros(ctx, n, c, k)?, Gaussians::zeros(ctx, n, c, k)?)
     }
 
     /// A set from parameters and Adam moments; zero gradients and statistics.
-    pub(crate) fn from_parts(
-        ctx: &Arc<Context>,
-        params: Gaussians,
-        m: Gaussians,
-        v: Gaussians,
-    ) -> Result<TrainableSet> {
+    pub(crate) fn from_parts(ctx: &Arc<Context>, params: Gaussians, m: Gaussians, v: Gaussians) -> Result<TrainableSet> {
         let (n, c, k) = (params.n, params.channels, params.coeffs);
         let len = n.max(1) as usize;
         Ok(TrainableSet {
@@ -65,13 +55,7 @@ impl TrainableSet {
     pub fn layout(features: usize) -> Vec<(String, usize)> {
         let mut out = Vec::new();
         for prefix in ["param", "adam_m", "adam_v"] {
-            for (name, w) in [
-                ("means", 3),
-                ("log_scales", 2),
-                ("quats", 4),
-                ("opacity", 1),
-                ("features", features),
-            ] {
+            for (name, w) in [("means", 3), ("log_scales", 2), ("quats", 4), ("opacity", 1), ("features", features)] {
                 out.push((format!("{prefix}.{name}"), w));
             }
         }
@@ -89,10 +73,6 @@ impl TrainableSet {
             bufs.extend([&g.means, &g.log_scales, &g.quats, &g.opacity, &g.features]);
         }
         bufs.extend([&self.accum, &self.denom, &self.max_radii]);
-        Self::layout(f)
-            .into_iter()
-            .zip(bufs)
-            .map(|((name, w), b)| (name, b, w))
-            .collect()
+        Self::layout(f).into_iter().zip(bufs).map(|((name, w), b)| (name, b, w)).collect()
     }
 }
