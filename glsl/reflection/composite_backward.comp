@@ -2,8 +2,9 @@
 // Deferred composite, backward: from the loss gradient of the loss input
 // (composite colour + the reflection set's alpha..distortion planes) to the
 // reflection render's planes (all written) and, with scat_grad, to the
-// scattering render's colour. pc.r_prior is added to dL/dR everywhere (a
-// penalty on the mean of R).
+// scattering render's colour. pc.r_prior is added to dL/dR and
+// pc.alpha_prior to dL/dalpha everywhere (penalties on the means of R and of
+// the reflection set's alpha, the area it covers).
 #include "reflection/composite_common.glsl"
 
 layout(std430, binding = 2) readonly buffer LossGrad { float g_in[]; };
@@ -56,7 +57,7 @@ void main() {
         g_refl[5u * n + pix] = dF0s.y;
         g_refl[6u * n + pix] = dF0s.z;
     }
-    g_refl[ch * n + pix] = d_alpha;
+    g_refl[ch * n + pix] = d_alpha + pc.alpha_prior;
     g_refl[(ch + 1u) * n + pix] = g_in[4u * n + pix];
     g_refl[(ch + 2u) * n + pix] = dN.x;
     g_refl[(ch + 3u) * n + pix] = dN.y;

@@ -27,7 +27,8 @@ layout(push_constant) uniform Push {
     float fx, fy, cx, cy;
     uint scat_grad;  // backward: 1 also writes dL/dI_scat
     float r_prior;   // backward: added to dL/dR at every pixel
-    uint pad1, pad2;
+    float alpha_prior; // backward: added to dL/dalpha at every pixel
+    uint pad;
 } pc;
 
 const float F0_EPS = 1e-6;

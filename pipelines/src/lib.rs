@@ -18,7 +18,7 @@ pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, Raste
 pub mod train;
 pub use train::{Adam, AdamGroup, DensifyParams, DensifyReport, Densifier, HfLoss, HfStats, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};
 pub mod reflection;
-pub use reflection::{EnvMap, EnvProxy, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
+pub use reflection::{CompositePriors, EnvMap, EnvProxy, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
 pub mod mlp;
 pub use mlp::{Mlp, MlpScratch, MlpShape};
 pub mod lightfield;

@@ -7,7 +7,7 @@
 //! and bit-identical reruns.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
+use tgs_pipelines::{CompositePriors, EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
 use tgs_tests::reflection_ref::{self as rr, CompositePixel, ReflGaussian, V3};
 use tgs_tests::{check_validation, ctx_shared, seed, Rng};
 
@@ -545,7 +545,7 @@ fn planes(px: &[CompositePixel], fresnel: Fresnel, extra: &mut Rng) -> (Vec<f32>
     (scat, refl)
 }
 
-fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_in: &[f32], r_prior: f32) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_in: &[f32], prior: CompositePriors) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let n = (cam.width * cam.height) as usize;
@@ -557,7 +557,7 @@ fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_i
     let gs = Buffer::<f32>::new(ctx, "test.scat_grad", 3 * n).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
     shading.record_composite(&mut rec, cam, fresnel, &s, &r, &li).unwrap();
-    shading.record_composite_backward(&mut rec, cam, fresnel, &s, &r, &gi, &gr, Some(&gs), r_prior).unwrap();
+    shading.record_composite_backward(&mut rec, cam, fresnel, &s, &r, &gi, &gr, Some(&gs), prior).unwrap();
     rec.submit_and_wait().unwrap();
     (li.download().unwrap(), gr.download().unwrap(), gs.download().unwrap())
 }
@@ -589,9 +589,10 @@ fn composite_matches_reference_and_finite_differences() {
                 })
                 .collect();
             let g_in: Vec<f32> = (0..10 * n).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
-            // The loss also holds r_prior * R per pixel (a penalty on R's mean).
-            let r_prior = uni(&mut rng, 0.1, 0.5) as f32;
-            let (li, gr, gs) = gpu_composite(&cam, fresnel, &scat, &refl, &g_in, r_prior);
+            // The loss also holds r * R + alpha * alpha per pixel (penalties
+            // on the means of R and of the reflection set's alpha).
+            let prior = CompositePriors { r: uni(&mut rng, 0.1, 0.5) as f32, alpha: uni(&mut rng, 0.1, 0.5) as f32 };
+            let (li, gr, gs) = gpu_composite(&cam, fresnel, &scat, &refl, &g_in, prior);
             for (name, v) in [("composite", &li), ("reflection gradient", &gr), ("scattering gradient", &gs)] {
                 assert!(v.iter().all(|x| x.is_finite()), "{fresnel:?} {w}x{h}: non-finite {name}");
             }
@@ -607,7 +608,7 @@ fn composite_matches_reference_and_finite_differences() {
                 // Gradients: d(sum_c g_c I_c)/d(input) by central differences.
                 let loss = |p: &CompositePixel| {
                     let v = rr::composite(p, schlick);
-                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>() + r_prior as f64 * p.r
+                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>() + prior.r as f64 * p.r + prior.alpha as f64 * p.alpha
                 };
                 let step = 1e-7;
                 let fd = |f: &dyn Fn(&mut CompositePixel, f64)| {
@@ -625,12 +626,15 @@ fn composite_matches_reference_and_finite_differences() {
                 // The hard-case pixels sit on the clamp's kinks (cos = 0 or
                 // 1) or at zero coverage, where only one-sided derivatives
                 // exist: values and finiteness are checked above.
+                // Without Schlick alpha enters only through the area prior.
+                let ga = g_in[3 * n + i] as f64;
+                if !schlick || i > 3 {
+                    checks.push(("alpha".into(), fd(&|p, e| p.alpha += e) + ga, gr[Plane::Alpha.index(ch) as usize * n + i]));
+                }
                 if schlick && i > 3 {
                     for c in 0..3 {
                         checks.push((format!("F0 sum[{c}]"), fd(&|p, e| p.f0s[c] += e), gr[(4 + c) * n + i]));
                     }
-                    let ga = g_in[3 * n + i] as f64;
-                    checks.push(("alpha".into(), fd(&|p, e| p.alpha += e) + ga, gr[Plane::Alpha.index(ch) as usize * n + i]));
                     for k in 0..3u32 {
                         let gn = g_in[(5 + k) as usize * n + i] as f64;
                         checks.push((format!("normal[{k}]"), fd(&|p, e| p.normal[k as usize] += e) + gn, gr[Plane::Normal(k).index(ch) as usize * n + i]));

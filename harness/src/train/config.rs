@@ -314,6 +314,13 @@ pub struct ReflectionConfig {
     /// stages) the built-in glass lost 0.13 dB after Stage III while Phi's
     /// share of pixels fell from 94% to 48% (perf/RESULTS.md).
     pub lambda_r: f32,
+    /// Weight of a cost on the area the reflection set covers: a penalty
+    /// on the mean of its alpha over the pixels (0: off). A reflection
+    /// surfel then stays only where the colour it adds lowers the image
+    /// loss by more than this per pixel it covers; elsewhere its opacity
+    /// falls and the pruning removes it, so that the normals there are
+    /// Stage I's again.
+    pub lambda_area: f32,
     /// Train the scattering set's SH colour in Stage II too (its geometry
     /// and opacity stay Stage I's), against the composite, at Stage I's
     /// colour rates: the reflection term then takes over the
@@ -373,6 +380,7 @@ impl Default for ReflectionConfig {
             lambda_hf: 0.1,
             hf_percentile: 90.0,
             lambda_r: 0.0,
+            lambda_area: 0.0,
             train_scattering: false,
             reseed: false,
         }
@@ -405,7 +413,7 @@ impl ReflectionConfig {
             }
         }
         check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
-        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r)] {
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r), ("lambda_area", self.lambda_area)] {
             if !(v >= 0.0 && v.is_finite()) {
                 bail!("reflection.{k} must be non-negative and finite, not {v}");
             }

@@ -18,7 +18,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::reflection::{TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamGroup, Camera, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HfLoss, HfStats, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
+    Adam, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HfLoss, HfStats, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -114,6 +114,8 @@ struct ViewBuffers {
     loss_grad: Buffer<f32>,
     /// The R plane, brought back with the step when `lambda_r` > 0.
     r_host: Readback<f32>,
+    /// The alpha plane, brought back with the step when `lambda_area` > 0.
+    alpha_host: Readback<f32>,
 }
 
 pub struct ReflectionModel {
@@ -203,6 +205,7 @@ impl ReflectionModel {
                 loss_in: Buffer::new(&self.ctx, "refl.loss_in", planes)?,
                 loss_grad: Buffer::new(&self.ctx, "refl.loss_grad", planes)?,
                 r_host: Readback::new(&self.ctx, "refl.r_host", (w * h) as usize)?,
+                alpha_host: Readback::new(&self.ctx, "refl.alpha_host", (w * h) as usize)?,
             };
             self.sizes.insert((w, h), vb);
         }
@@ -286,11 +289,15 @@ impl ReflectionModel {
                 let n = (cam.width * cam.height) as usize;
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
-            let r_prior = rc.lambda_r / (cam.width * cam.height) as f32;
-            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, r_prior)?;
+            let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, cam.width * cam.height);
+            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, prior)?;
             rec.end_scope(sc);
+            let n = (cam.width * cam.height) as usize;
             if rc.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, R_PLANE * (cam.width * cam.height) as usize, &b.r_host)?;
+                rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
+            }
+            if rc.lambda_area > 0.0 {
+                rec.read_back(&b.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, &b.alpha_host)?;
             }
             if let Some((m, sh, it)) = scat_model {
                 m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
@@ -326,6 +333,9 @@ impl ReflectionModel {
         }
         if rc.lambda_r > 0.0 {
             loss += rc.lambda_r as f64 * super::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
+        }
+        if rc.lambda_area > 0.0 {
+            loss += rc.lambda_area as f64 * super::mean(&self.sizes[&(cam.width, cam.height)].alpha_host.read()?);
         }
 
         let mut densified = None;

@@ -98,7 +98,28 @@ struct CompositePush {
     scat_grad: u32,
     /// Backward: added to dL/dR at every pixel.
     r_prior: f32,
-    pad: [u32; 2],
+    /// Backward: added to dL/dalpha (the reflection set's) at every pixel.
+    alpha_prior: f32,
+    pad: u32,
+}
+
+/// Penalties on the means of the reflection render's R and alpha planes,
+/// as the per-pixel gradients the composite's backward adds: the gradient
+/// of `lambda * mean(P)` over a view is `lambda / pixels`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CompositePriors {
+    /// Added to dL/dR.
+    pub r: f32,
+    /// Added to dL/dalpha: a cost on the area the reflection set covers.
+    pub alpha: f32,
+}
+
+impl CompositePriors {
+    /// The per-pixel gradients of `lambda_r * mean(R) + lambda_alpha * mean(alpha)` over `pixels`.
+    pub fn of_means(lambda_r: f32, lambda_alpha: f32, pixels: u32) -> CompositePriors {
+        let n = pixels.max(1) as f32;
+        CompositePriors { r: lambda_r / n, alpha: lambda_alpha / n }
+    }
 }
 
 /// Working memory of the texel-gradient reduction for up to `capacity` Gaussians.
@@ -254,7 +275,7 @@ impl ReflectionShading {
         Ok(())
     }
 
-    fn composite_push(cam: &Camera, fresnel: Fresnel, scat_grad: bool, r_prior: f32) -> CompositePush {
+    fn composite_push(cam: &Camera, fresnel: Fresnel, scat_grad: bool, prior: CompositePriors) -> CompositePush {
         CompositePush {
             width: cam.width,
             height: cam.height,
@@ -265,8 +286,9 @@ impl ReflectionShading {
             cx: cam.cx,
             cy: cam.cy,
             scat_grad: scat_grad as u32,
-            r_prior,
-            pad: [0; 2],
+            r_prior: prior.r,
+            alpha_prior: prior.alpha,
+            pad: 0,
         }
     }
 
@@ -278,15 +300,15 @@ impl ReflectionShading {
     pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
         let ch = fresnel.channels();
         check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_in, Plane::count(3))])?;
-        let p = Self::composite_push(cam, fresnel, false, 0.0);
+        let p = Self::composite_push(cam, fresnel, false, CompositePriors::default());
         rec.dispatch(&self.composite, &[scat.binding(), refl.binding(), loss_in.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, cam.width * cam.height))
     }
 
     /// Record the composite's backward: `loss_grad` (gradient of every plane
     /// of `loss_in`) to `refl_grad` (every plane of the reflection render,
     /// overwritten) and, when given, `scat_grad` (the scattering colour's 3
-    /// planes, overwritten). `r_prior` is added to dL/dR at every pixel: the
-    /// gradient of a penalty `lambda * mean(R)` is `lambda / pixels`.
+    /// planes, overwritten). `prior`'s values are added to dL/dR and to
+    /// dL/dalpha at every pixel ([`CompositePriors::of_means`]).
     #[allow(clippy::too_many_arguments)]
     pub fn record_composite_backward(
         &self,
@@ -298,14 +320,14 @@ impl ReflectionShading {
         loss_grad: &Buffer<f32>,
         refl_grad: &Buffer<f32>,
         scat_grad: Option<&Buffer<f32>>,
-        r_prior: f32,
+        prior: CompositePriors,
     ) -> Result<()> {
         let ch = fresnel.channels();
         check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_grad, Plane::count(3)), (refl_grad, Plane::count(ch))])?;
         if let Some(s) = scat_grad {
             check_planes(cam, &[(s, 3)])?;
         }
-        let p = Self::composite_push(cam, fresnel, scat_grad.is_some(), r_prior);
+        let p = Self::composite_push(cam, fresnel, scat_grad.is_some(), prior);
         // Without a scattering gradient the binding is never written; bind
         // the reflection gradient in its place.
         let sg = scat_grad.unwrap_or(refl_grad);
