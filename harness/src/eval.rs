@@ -42,6 +42,12 @@ pub struct NormalMetrics {
     /// only as far as their MAE is below this.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_ray_facing_deg: Option<f64>,
+    /// The MAE of the output normals on the pixels outside the mask that
+    /// have a ground-truth normal (datasets whose normals cover the whole
+    /// image): the rest of the scene, where Stage II must not make Stage
+    /// I's normals worse.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal_mae_outside_deg: Option<f64>,
 }
 
 impl NormalMetrics {
@@ -58,6 +64,7 @@ impl NormalMetrics {
             normal_mae_covered_deg: mean_of(|m| m.normal_mae_covered_deg),
             reflection_outside_mask: mean_of(|m| m.reflection_outside_mask),
             normal_mae_ray_facing_deg: mean_of(|m| m.normal_mae_ray_facing_deg),
+            normal_mae_outside_deg: mean_of(|m| m.normal_mae_outside_deg),
         }
     }
 }
@@ -178,11 +185,24 @@ pub fn normal_mae(normals: &[[f32; 3]], view: &View) -> Option<f64> {
 
 /// [`normal_mae`] on the mask pixels `i` with `keep(i)`.
 fn normal_mae_where(normals: &[[f32; 3]], view: &View, keep: impl Fn(usize) -> bool) -> Option<f64> {
+    normal_mae_of(normals, view, true, keep)
+}
+
+/// Mean angular error (degrees) on the pixels outside the mask that have a
+/// ground-truth normal; None without a GT, a mask or such pixels.
+pub fn normal_mae_outside(normals: &[[f32; 3]], view: &View) -> Option<f64> {
+    normal_mae_of(normals, view, false, |_| true)
+}
+
+/// The mean angular error on the pixels `i` whose mask is `on_mask` and
+/// with `keep(i)`, skipping pixels without a ground-truth normal; an empty
+/// output normal counts 90 degrees.
+fn normal_mae_of(normals: &[[f32; 3]], view: &View, on_mask: bool, keep: impl Fn(usize) -> bool) -> Option<f64> {
     let (gt, mask) = (view.normals.as_ref()?, view.mask.as_ref()?);
     let mut sum = 0.0;
     let mut count = 0usize;
     for (i, &m) in mask.iter().enumerate() {
-        if !m || !keep(i) {
+        if m != on_mask || !keep(i) {
             continue;
         }
         let g = &gt.data[3 * i..3 * i + 3];
@@ -233,6 +253,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
                 reflection_outside_mask: outside,
                 normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
                 normal_mae_ray_facing_deg: v.normals.as_ref().and_then(|_| normal_mae(&ray_facing_normals(&v.camera), v)),
+                normal_mae_outside_deg: normal_mae_outside(&normals, v),
             },
         };
         if let Some(dir) = out.as_deref_mut() {

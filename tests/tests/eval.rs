@@ -1,10 +1,11 @@
 //! The evaluation's normal errors on hand-made views: the reference normal
 //! that faces each pixel's camera ray, and the MAE it scores against a wall
-//! facing the camera (computed here independently, in f64).
+//! facing the camera (computed here independently, in f64); the error off
+//! the mask, on the rest of the scene.
 
 use tgs::data::image_io::ImageF;
 use tgs::data::View;
-use tgs::eval::{normal_mae, ray_facing_normals};
+use tgs::eval::{normal_mae, normal_mae_outside, ray_facing_normals};
 use tgs_pipelines::Camera;
 
 fn camera(w: u32, h: u32) -> Camera {
@@ -70,4 +71,40 @@ fn ray_facing_mae_against_a_wall_is_the_mean_off_axis_angle() {
         / (w * h) as f64;
     let got = normal_mae(&ray_facing_normals(&cam), &view(cam, wall)).unwrap();
     assert!(expect > 5.0 && (got - expect).abs() < 0.01, "ray-facing MAE {got:.4} against {expect:.4} degrees");
+}
+
+#[test]
+fn error_off_the_mask_counts_only_the_pixels_outside_it() {
+    let (w, h) = (6u32, 4u32);
+    let cam = camera(w, h);
+    let n = (w * h) as usize;
+    // Ground truth +z everywhere but one pixel off the mask without a normal.
+    let mut gt: Vec<f32> = (0..n).flat_map(|_| [0.0, 0.0, 1.0]).collect();
+    let hole = 5usize;
+    gt[3 * hole..3 * hole + 3].fill(0.0);
+    let mut v = view(cam, gt);
+    // The left half is the mask.
+    let mask: Vec<bool> = (0..n).map(|i| (i as u32 % w) < w / 2).collect();
+    v.mask = Some(mask.clone());
+    // On the mask the output is wrong by 90 degrees; off it, by 30 degrees
+    // on the first row, exact elsewhere, and empty (90) on one pixel.
+    let t = 30f32.to_radians();
+    let empty = 23usize;
+    let out: Vec<[f32; 3]> = (0..n)
+        .map(|i| match (mask[i], i) {
+            (true, _) => [1.0, 0.0, 0.0],
+            (false, i) if i == empty => [0.0; 3],
+            (false, i) if i < w as usize => [t.sin(), 0.0, t.cos()],
+            _ => [0.0, 0.0, 1.0],
+        })
+        .collect();
+    let off: Vec<usize> = (0..n).filter(|&i| !mask[i] && i != hole).collect();
+    let want = off.iter().map(|&i| if i == empty { 90.0 } else if i < w as usize { 30.0 } else { 0.0 }).sum::<f64>() / off.len() as f64;
+    let got = normal_mae_outside(&out, &v).unwrap();
+    assert!((got - want).abs() < 1e-3, "off-mask MAE {got} vs {want}");
+    // On the mask: 90 everywhere.
+    assert!((normal_mae(&out, &v).unwrap() - 90.0).abs() < 1e-3);
+    // A mask over the whole image leaves nothing outside it.
+    v.mask = Some(vec![true; n]);
+    assert_eq!(normal_mae_outside(&out, &v), None);
 }
