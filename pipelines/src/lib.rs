@@ -6,6 +6,11 @@ pub mod shaders {
     include!(concat!(env!("OUT_DIR"), "/shaders.rs"));
 }
 
+/// The workgroup size of the one-dimensional kernels (specialization
+/// constant 0, which `WG` in `glsl/common.glsl` reads back as
+/// `gl_WorkGroupSize.x`): one value for every kernel family.
+pub(crate) const WG: u32 = 256;
+
 pub mod scan;
 pub mod sort;
 pub mod util;

@@ -21,7 +21,7 @@ pub enum Count {
     Gpu { buffer: BufferBinding, index: u32 },
 }
 
-pub(crate) const WG: u32 = 256;
+use crate::WG;
 pub(crate) const KPT: u32 = 4;
 pub(crate) const BLOCK: u32 = WG * KPT;
 

@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use std::sync::Arc;
 use tgs_engine::{groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Recorder};
 
-const WG: u32 = 256;
+use crate::WG;
 
 pub struct Iota {
     ctx: Arc<Context>,

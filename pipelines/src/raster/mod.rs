@@ -61,7 +61,7 @@ struct Push {
     spans: u32,
 }
 
-const WG: u32 = 256;
+use crate::WG;
 /// Dispatches one [`Rasterizer::record_fit_gate`] can gate.
 pub const GATE_SLOTS: usize = 8;
 /// The gate's push constants: capacity, count, two pads, then x, y, z per
