@@ -11,7 +11,7 @@ PKGS=(
   libshaderc-dev glslang-dev spirv-tools   # static shaderc/glslang/SPIRV-Tools
   pkg-config
   curl ca-certificates python3    # fetching and converting the LPIPS weights (below)
-  libfontconfig-dev libfreetype-dev fonts-dejavu-core   # text in the sweep's plots (plotters)
+  fonts-dejavu-core               # the face of the text in the sweep's plots (read at run time)
 )
 
 missing=()

@@ -345,6 +345,15 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
     if rows.len() < before && !a.quiet {
         eprintln!("sweep: {} row(s) of {} were trained with other settings or another dataset (the base, preset, defaults or data changed): dropped, their runs train again", before - rows.len(), csv.display());
     }
+    // No font for the plots' text: said before any training, and the sweep
+    // goes on without plots (the CSV holds every number they show).
+    let plots = match plot::font_ready() {
+        Ok(()) => true,
+        Err(e) => {
+            eprintln!("sweep: plots not drawn: {e:#}");
+            false
+        }
+    };
     let mut trained = 0;
     for (i, (name, set)) in runs.iter().enumerate() {
         if rows.iter().any(|r| &r.name == name) {
@@ -368,12 +377,16 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         rows.push(Row::from_metrics(name, &run_keys[i], settings, &m)?);
         trained += 1;
         write_csv(&csv, &rows, &keys)?;
-        plot::draw(&a.out, &rows)?;
+        if plots {
+            plot::draw(&a.out, &rows)?;
+        }
     }
     if trained == 0 {
         // Nothing new: the CSV and plots as the rows stand (drawn again if removed).
         write_csv(&csv, &rows, &keys)?;
-        plot::draw(&a.out, &rows)?;
+        if plots {
+            plot::draw(&a.out, &rows)?;
+        }
     }
     Ok(SweepOutcome { rows, trained, interrupted: false })
 }

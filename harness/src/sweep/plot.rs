@@ -6,9 +6,12 @@
 //! than 5x (one slow run would otherwise squeeze the others together).
 
 use super::{pareto, Row};
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
-use std::path::Path;
+use plotters::style::{register_font, FontStyle};
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 /// Plot size; the chart takes the left `CHART_W` pixels, the table the rest.
 const SIZE: (u32, u32) = (960, 640);
@@ -20,7 +23,59 @@ const LOG_SPAN: f64 = 5.0;
 const FONT: u32 = 13;
 const CHAR_W: i32 = 8;
 
+/// Where the text's face is looked for when `TGS_PLOT_FONT` is unset: the
+/// paths of DejaVu Sans, Liberation Sans or FreeSans on Debian/Ubuntu,
+/// Fedora, Arch and Alpine, and Arial on macOS. The text is drawn in pure
+/// Rust (plotters' ab_glyph backend): tgs links no fontconfig or FreeType,
+/// so its binary runs on a bare GPU server; only the plots need a font file.
+const FONT_FILES: &[&str] = &[
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
+    "/usr/share/fonts/ttf-dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
+    "/usr/share/fonts/liberation-sans/LiberationSans-Regular.ttf",
+    "/usr/share/fonts/truetype/freefont/FreeSans.ttf",
+    "/System/Library/Fonts/Supplemental/Arial.ttf",
+    "/Library/Fonts/Arial.ttf",
+];
+
+/// The font file for the plots' text: `TGS_PLOT_FONT` (`env`) if set, which
+/// must exist, else the first of `candidates` that does.
+pub fn font_file(env: Option<OsString>, candidates: &[&str]) -> Result<PathBuf> {
+    if let Some(p) = env.filter(|p| !p.is_empty()) {
+        let p = PathBuf::from(p);
+        if !p.is_file() {
+            bail!("TGS_PLOT_FONT={}: no such file (a TrueType or OpenType font for the plots' text)", p.display());
+        }
+        return Ok(p);
+    }
+    candidates.iter().map(PathBuf::from).find(|p| p.is_file()).ok_or_else(|| {
+        anyhow!("no font for the plots' text: set TGS_PLOT_FONT=FILE.ttf, or install DejaVu Sans (Debian/Ubuntu: fonts-dejavu-core); looked for {}", candidates.join(", "))
+    })
+}
+
+/// Registers the plots' face once per process (its bytes live as long as
+/// the process, as plotters asks); later calls return the first outcome.
+pub fn font_ready() -> Result<()> {
+    static READY: OnceLock<std::result::Result<PathBuf, String>> = OnceLock::new();
+    let r = READY.get_or_init(|| {
+        let load = || -> Result<PathBuf> {
+            let p = font_file(std::env::var_os("TGS_PLOT_FONT"), FONT_FILES)?;
+            let bytes = std::fs::read(&p).with_context(|| format!("{}: cannot read the plots' font", p.display()))?;
+            register_font("sans-serif", FontStyle::Normal, Box::leak(bytes.into_boxed_slice())).map_err(|_| anyhow!("{}: not a TrueType or OpenType font", p.display()))?;
+            Ok(p)
+        };
+        load().map_err(|e| format!("{e:#}"))
+    });
+    r.as_ref().map(|_| ()).map_err(|e| anyhow!("{e}"))
+}
+
+/// Draws the plots into `dir`; an error if no font can be found for their
+/// text (`font_ready`) or a plot cannot be written.
 pub fn draw(dir: &Path, rows: &[Row]) -> Result<()> {
+    font_ready()?;
     one(&dir.join("psnr_vs_time.png"), rows, ("test PSNR (dB)", "higher is better"), |r| r.psnr, true)?;
     one(&dir.join("normal_mae_vs_time.png"), rows, ("test normal MAE on the glass (degrees)", "lower is better"), |r| r.normal_mae_deg, false)?;
     // Without the LPIPS weights every row's is NaN: no empty chart.
@@ -162,6 +217,28 @@ fn one(path: &Path, rows: &[Row], (what, better): (&str, &str), y: impl Fn(&Row)
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_font_is_found_or_named() {
+        let dir = std::env::temp_dir().join(format!("tgs-font-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let face = dir.join("face.ttf");
+        std::fs::write(&face, b"x").unwrap();
+        let face_s = face.to_str().unwrap();
+        let missing = dir.join("none.ttf");
+        let missing_s = missing.to_str().unwrap();
+        // The first existing candidate, when the variable is unset or empty.
+        assert_eq!(font_file(None, &[missing_s, face_s]).unwrap(), face);
+        assert_eq!(font_file(Some("".into()), &[face_s]).unwrap(), face);
+        // The variable wins, and must exist.
+        assert_eq!(font_file(Some(face.clone().into()), &[missing_s]).unwrap(), face);
+        let e = format!("{:#}", font_file(Some(missing.clone().into()), &[face_s]).unwrap_err());
+        assert!(e.contains("TGS_PLOT_FONT") && e.contains(missing_s), "{e}");
+        // None found: the error names the variable, the package and where it looked.
+        let e = format!("{:#}", font_file(None, &[missing_s]).unwrap_err());
+        assert!(e.contains("TGS_PLOT_FONT") && e.contains("fonts-dejavu-core") && e.contains(missing_s), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn log_axis_only_when_times_span_more_than_five_times() {
