@@ -17,7 +17,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
-use tgs_pipelines::reflection::MATERIAL;
+use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
 use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, HfLoss, HfStats, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
@@ -248,7 +248,9 @@ impl LightFieldModel {
             timings.extend(scattering.forward_view(cam, x.sh_degree, &x.background, x.profile)?);
         }
         self.view_buffers(cam.width, cam.height)?;
-        let room = self.scratch.as_ref().is_some_and(|s| s.capacity() >= cam.width * cam.height);
+        let pixels = cam.width * cam.height;
+        let n = pixels as usize;
+        let room = self.scratch.as_ref().is_some_and(|s| s.capacity() >= pixels);
         let host_count = if train_scat || !room || !self.one_submission { Some(self.forward(cam, x.profile, &mut timings)?) } else { None };
         let (scat, scat_grad) = match x.scat {
             Some(s) => (s, None),
@@ -283,21 +285,20 @@ impl LightFieldModel {
             self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
             if lf.lambda_hf > 0.0 {
                 let sc = rec.begin_scope("loss.hf");
-                self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, lf.hf_percentile / 100.0, lf.lambda_hf, &b.loss_grad, &self.hf_stats)?;
+                self.hf.record(&mut rec, &b.loss_in, x.target, pixels, lf.hf_percentile / 100.0, lf.lambda_hf, &b.loss_grad, &self.hf_stats)?;
                 rec.end_scope(sc);
             }
             let sc = rec.begin_scope("lf.composite_backward");
             if let Some(g) = scat_grad {
                 // The composite writes the colour planes; the scattering
                 // geometry planes get no gradient in Stage III.
-                let n = (cam.width * cam.height) as usize;
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
-            let r_prior = lf.lambda_r / (cam.width * cam.height) as f32;
+            let r_prior = CompositePriors::of_means(lf.lambda_r, 0.0, pixels).r;
             self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if lf.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, super::reflection::R_PLANE * (cam.width * cam.height) as usize, &b.r_host)?;
+                rec.read_back(&b.frame.out, super::reflection::R_PLANE * n, &b.r_host)?;
             }
             match host_count {
                 Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,

@@ -271,6 +271,8 @@ impl ReflectionModel {
         let (timings, values) = loop {
             self.view_buffers(cam.width, cam.height)?;
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
+            let pixels = cam.width * cam.height;
+            let n = pixels as usize;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let sc = rec.begin_scope("refl.composite");
@@ -279,20 +281,18 @@ impl ReflectionModel {
             self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
             if rc.lambda_hf > 0.0 {
                 let sc = rec.begin_scope("loss.hf");
-                self.hf.record(&mut rec, &b.loss_in, x.target, cam.width * cam.height, rc.hf_percentile / 100.0, rc.lambda_hf, &b.loss_grad, &self.hf_stats)?;
+                self.hf.record(&mut rec, &b.loss_in, x.target, pixels, rc.hf_percentile / 100.0, rc.lambda_hf, &b.loss_grad, &self.hf_stats)?;
                 rec.end_scope(sc);
             }
             let sc = rec.begin_scope("refl.composite_backward");
             if let Some(g) = scat_grad {
                 // The composite writes the colour planes; the scattering
                 // geometry planes get no gradient.
-                let n = (cam.width * cam.height) as usize;
                 rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
             }
-            let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, cam.width * cam.height);
+            let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, pixels);
             self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, prior)?;
             rec.end_scope(sc);
-            let n = (cam.width * cam.height) as usize;
             if rc.lambda_r > 0.0 {
                 rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
             }

@@ -18,7 +18,7 @@ pub use set::TrainableSet;
 
 use tgs_engine::{groups_2d, BufferBinding, Context, Kernel, Recorder};
 
-pub(crate) use crate::WG;
+use crate::WG;
 
 /// Grid of one invocation per item (2-D beyond the per-dimension limit).
 pub(crate) fn grid(ctx: &Context, items: u32) -> [u32; 3] {
