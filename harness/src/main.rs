@@ -205,18 +205,31 @@ enum Bench {
         /// Image size (square).
         #[arg(long, default_value_t = 128)]
         res: u32,
-        /// Gaussians (initial points on the spheres).
-        #[arg(long, default_value_t = 10_000)]
-        points: u32,
+        /// Gaussians (initial points on the spheres) [default: 10000, or
+        /// 1000000 with --real-scale].
+        #[arg(long)]
+        points: Option<u32>,
+        /// Training views (they hold images only; the work per iteration
+        /// does not depend on their number).
+        #[arg(long, default_value_t = 20)]
+        views: u32,
+        /// The size users train instead of --res/--views: a Mip-NeRF 360
+        /// frame (1237x822), a million Gaussians (unless --points), 8 views.
+        #[arg(long, conflicts_with_all = ["res", "views"])]
+        real_scale: bool,
         /// Timed iterations (after the warm-up).
         #[arg(long, default_value_t = 20)]
         iterations: u32,
         #[arg(long, default_value_t = 3)]
         warmup: u32,
         /// Step Adam in its own pass after the backward instead of fused
-        /// into the per-Gaussian reduce (the same parameters; for comparison).
+        /// into the per-Gaussian reduce (the same parameters; for
+        /// comparison). Default: as training does, fused on CPU devices only.
         #[arg(long)]
         separate_adam: bool,
+        /// Fuse Adam into the per-Gaussian reduce where the device can.
+        #[arg(long, conflicts_with = "separate_adam")]
+        fused_adam: bool,
         #[arg(long)]
         json: bool,
     },
@@ -424,8 +437,11 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_raster::print_raster(&b);
                     }
                 }
-                Bench::Train { res, points, iterations, warmup, separate_adam, json } => {
-                    let b = tgs::bench_train::train(&ctx, *res, *points, *warmup, *iterations, !*separate_adam)?;
+                Bench::Train { res, points, views, real_scale, iterations, warmup, separate_adam, fused_adam, json } => {
+                    use tgs::bench_train::Workload;
+                    let w = if *real_scale { Workload { points: points.unwrap_or(Workload::REAL_SCALE.points), ..Workload::REAL_SCALE } } else { Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) } };
+                    let fuse = if *separate_adam { Some(false) } else if *fused_adam { Some(true) } else { None };
+                    let b = tgs::bench_train::train(&ctx, w, *warmup, *iterations, fuse)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);
                     } else {

@@ -1,6 +1,9 @@
 //! `cargo bench --bench train`: whole training iterations (forward, loss,
 //! backward, reduce, Adam; Gaussian count frozen) on Brush's workload, the
 //! spheres scene: 10k Gaussians at 128² and 50k at 256², 20 views, SH 3.
+//! Then the real-scale workload (a Mip-NeRF 360 frame, 1237x822, and a
+//! million Gaussians) on GPUs, and on CPU devices when
+//! `TGS_BENCH_REAL_SCALE=1` (one timed iteration: minutes on lavapipe).
 //! Prints the device, wall and per-kernel GPU ms per iteration, and Brush's
 //! time on the reference lavapipe machine; JSON to target/tgs-bench/train.json.
 
@@ -11,13 +14,21 @@ fn main() -> anyhow::Result<()> {
     let ctx = tgs_perf::context()?;
     let cpu = ctx.caps().is_cpu();
     let mut runs = Vec::new();
-    for (res, points) in [(128u32, 10_000u32), (256, 50_000)] {
-        let iterations = match (cpu, res) {
-            (true, 128) => 20,
-            (true, _) => 5,
-            (false, _) => 100,
-        };
-        let b = tgs::bench_train::train(&ctx, res, points, 3, iterations, true)?;
+    use tgs::bench_train::Workload;
+    let mut workloads = vec![(Workload::square(128, 10_000), if cpu { 20 } else { 100 }), (Workload::square(256, 50_000), if cpu { 5 } else { 100 })];
+    if !cpu || std::env::var("TGS_BENCH_REAL_SCALE").is_ok_and(|v| v == "1") {
+        // The SH 3 features are one binding of 48 floats a Gaussian: a
+        // device that binds less than a million of them (lavapipe: 128 MiB,
+        // 699,050) runs the most that fit, in whole ten thousands.
+        let fit = (ctx.caps().max_storage_buffer_range / (48 * 4)).min(u32::MAX as u64) as u32 / 10_000 * 10_000;
+        let real = Workload { points: Workload::REAL_SCALE.points.min(fit), ..Workload::REAL_SCALE };
+        if real.points < Workload::REAL_SCALE.points {
+            println!("real scale: {} Gaussians (the most this device's {} MiB storage binding holds at SH 3)", real.points, ctx.caps().max_storage_buffer_range >> 20);
+        }
+        workloads.push((real, if cpu { 1 } else { 20 }));
+    }
+    for (w, iterations) in workloads {
+        let b = tgs::bench_train::train(&ctx, w, 3, iterations, None)?;
         tgs::bench_train::print_train(&b);
         runs.push(b);
     }

@@ -8,7 +8,7 @@ use tgs_tests::{check_validation, ctx_shared};
 fn train_bench_reports_every_stage() {
     let ctx = ctx_shared();
     for fuse in [true, false] {
-        let b = tgs::bench_train::train(ctx, 32, 300, 0, 2, fuse).unwrap();
+        let b = tgs::bench_train::train(ctx, tgs::bench_train::Workload::square(32, 300), 0, 2, Some(fuse)).unwrap();
         assert_eq!((b.width, b.height, b.gaussians, b.views, b.iterations, b.warmup), (32, 32, 300, 20, 2, 3));
         assert!(b.intersections > 0);
         let can = tgs_pipelines::Rasterizer::new(ctx, 3, tgs_pipelines::Features::Sh { degree: 3 }).unwrap().can_fuse_adam();
@@ -33,7 +33,20 @@ fn train_bench_reports_every_stage() {
         }
         assert_eq!(b.brush_lavapipe_s, None);
     }
-    assert!(tgs::bench_train::train(ctx, 32, 300, 0, 0, true).is_err());
+    assert!(tgs::bench_train::train(ctx, tgs::bench_train::Workload::square(32, 300), 0, 0, None).is_err());
+    // A frame that is not square (the real-scale workload's shape, small).
+    let w = tgs::bench_train::Workload { width: 40, height: 24, points: 200, views: 2 };
+    let b = tgs::bench_train::train(ctx, w, 0, 1, None).unwrap();
+    // Training's own choice: fused on CPU devices only.
+    assert_eq!(b.adam_fused, ctx.caps().is_cpu() && tgs_pipelines::Rasterizer::new(ctx, 3, tgs_pipelines::Features::Sh { degree: 3 }).unwrap().can_fuse_adam());
+    assert_eq!((b.width, b.height, b.gaussians, b.views), (40, 24, 200, 2));
+    assert!(b.intersections > 0 && b.wall_ms.is_finite());
+    // Sizes whose images cannot fit are refused before anything is rendered.
+    for w in [tgs::bench_train::Workload { width: 20_000, height: 8, points: 10, views: 1 }, tgs::bench_train::Workload { width: 16_000, height: 16_000, points: 10, views: 20 }] {
+        let e = format!("{:#}", tgs::bench_train::train(ctx, w, 0, 1, None).unwrap_err());
+        assert!(e.contains("host memory"), "{e}");
+    }
+    assert!(tgs::bench_train::train(ctx, tgs::bench_train::Workload { views: 0, ..tgs::bench_train::Workload::square(32, 300) }, 0, 1, None).is_err());
     check_validation(ctx);
 }
 

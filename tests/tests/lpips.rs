@@ -59,7 +59,7 @@ fn check(net: &Lpips, a: &[f32], b: &[f32], w: usize, h: usize, what: &str) -> f
 #[test]
 fn lpips_matches_f64_reference() {
     let net = net();
-    let spec = SpheresSpec { res: 64, train: 2, test: 1, points: 16, fov_x: 0.69 };
+    let spec = SpheresSpec { width: 64, height: 64, train: 2, test: 1, points: 16, fov_x: 0.69 };
     let data = dataset(&spec).unwrap();
     let (w, h) = (64, 64);
     let v0 = data.train[0].image.planar();

@@ -170,7 +170,7 @@ pub fn make_named(name: &str, dir: &Path, progress: impl FnMut(u32, u32)) -> Res
 pub fn list() -> Vec<String> {
     let mut out: Vec<String> = SCENES.iter().map(|s| format!("{:12} {}x{} px, {} train + {} test views, {}", s.name, s.size, s.size, s.train, s.test, if s.glass { "glass sphere in a room" } else { "the same room without the glass (diffuse only)" })).collect();
     for (name, s) in spheres::SpheresSpec::NAMED {
-        out.push(format!("{name:12} {}x{} px, {} train + {} test views, {} initial points (Brush's workload)", s.res, s.res, s.train, s.test, s.points));
+        out.push(format!("{name:12} {}x{} px, {} train + {} test views, {} initial points (Brush's workload)", s.width, s.height, s.train, s.test, s.points));
     }
     out
 }

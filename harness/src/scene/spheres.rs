@@ -31,7 +31,8 @@ const SPHERES: [([f64; 3], f64, [f64; 3]); 5] = [
 /// Image size, view counts, initial points and horizontal field of view.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpheresSpec {
-    pub res: u32,
+    pub width: u32,
+    pub height: u32,
     pub train: u32,
     pub test: u32,
     pub points: u32,
@@ -41,8 +42,8 @@ pub struct SpheresSpec {
 impl SpheresSpec {
     /// Brush's two workloads.
     pub const NAMED: [(&'static str, SpheresSpec); 2] = [
-        ("spheres-128", SpheresSpec { res: 128, train: 20, test: 4, points: 10_000, fov_x: 0.69 }),
-        ("spheres-256", SpheresSpec { res: 256, train: 20, test: 4, points: 50_000, fov_x: 0.69 }),
+        ("spheres-128", SpheresSpec { width: 128, height: 128, train: 20, test: 4, points: 10_000, fov_x: 0.69 }),
+        ("spheres-256", SpheresSpec { width: 256, height: 256, train: 20, test: 4, points: 50_000, fov_x: 0.69 }),
     ];
 
     pub fn named(name: &str) -> Option<SpheresSpec> {
@@ -50,8 +51,14 @@ impl SpheresSpec {
     }
 
     fn validate(&self) -> Result<()> {
-        if self.res == 0 || self.train == 0 || self.points == 0 {
-            bail!("spheres scene: resolution, training views and points must be at least 1 ({self:?})");
+        if self.width == 0 || self.height == 0 || self.train == 0 || self.points == 0 {
+            bail!("spheres scene: width, height, training views and points must be at least 1 ({self:?})");
+        }
+        // The images are rendered in host memory (f32 RGB) before anything
+        // else: refuse sizes that cannot fit rather than abort mid-way.
+        let bytes = 12 * self.width as u64 * self.height as u64 * (self.train as u64 + self.test as u64) + 24 * self.points as u64;
+        if self.width > 16384 || self.height > 16384 || bytes > 16 << 30 {
+            bail!("spheres scene: {}x{} with {} views and {} points needs {:.1} GiB of host memory (at most 16384 pixels a side and 16 GiB)", self.width, self.height, self.train + self.test, self.points, bytes as f64 / (1u64 << 30) as f64);
         }
         if !(self.fov_x > 0.0 && self.fov_x < std::f64::consts::PI) {
             bail!("spheres scene: field of view {} is not in (0, pi)", self.fov_x);
@@ -83,15 +90,15 @@ fn look_at_c2w(pos: [f64; 3]) -> [[f64; 4]; 4] {
 }
 
 /// Render one view (one ray through each pixel centre, RGB on black).
-fn render(c2w: &[[f64; 4]; 4], res: u32, fov_x: f64) -> ImageF {
-    let f = 0.5 * res as f64 / (0.5 * fov_x).tan();
+fn render(c2w: &[[f64; 4]; 4], width: u32, height: u32, fov_x: f64) -> ImageF {
+    let f = 0.5 * width as f64 / (0.5 * fov_x).tan();
     let light = norm([0.5, 0.8, 0.6]);
     let o = [c2w[0][3], c2w[1][3], c2w[2][3]];
-    let mut img = ImageF::new(res, res, 3);
-    let half = res as f64 / 2.0;
-    for i in 0..res {
-        for j in 0..res {
-            let dc = [(j as f64 + 0.5 - half) / f, -(i as f64 + 0.5 - half) / f, -1.0];
+    let mut img = ImageF::new(width, height, 3);
+    let (half_w, half_h) = (width as f64 / 2.0, height as f64 / 2.0);
+    for i in 0..height {
+        for j in 0..width {
+            let dc = [(j as f64 + 0.5 - half_w) / f, -(i as f64 + 0.5 - half_h) / f, -1.0];
             let d = norm([0, 1, 2].map(|r| dot([c2w[r][0], c2w[r][1], c2w[r][2]], dc)));
             let mut best = f64::INFINITY;
             let mut col = [0.0; 3];
@@ -107,7 +114,7 @@ fn render(c2w: &[[f64; 4]; 4], res: u32, fov_x: f64) -> ImageF {
                 let stripes = 0.85 + 0.15 * (12.0 * n[2]).sin().signum();
                 col = rgb.map(|v| v * shade * stripes);
             }
-            let p = (i * res + j) as usize * 3;
+            let p = (i as usize * width as usize + j as usize) * 3;
             for k in 0..3 {
                 img.data[p + k] = col[k].clamp(0.0, 1.0) as f32;
             }
@@ -149,15 +156,15 @@ fn split(spec: &SpheresSpec, test: bool) -> Vec<(String, [[f64; 4]; 4], ImageF)>
         .enumerate()
         .map(|(k, pos)| {
             let c2w = look_at_c2w(pos);
-            (format!("{name}/r_{k}"), c2w, render(&c2w, spec.res, spec.fov_x))
+            (format!("{name}/r_{k}"), c2w, render(&c2w, spec.width, spec.height, spec.fov_x))
         })
         .collect()
 }
 
 fn camera(spec: &SpheresSpec, c2w: &[[f64; 4]; 4]) -> Camera {
-    let f = (0.5 * spec.res as f64 / (0.5 * spec.fov_x).tan()) as f32;
-    let c = spec.res as f32 * 0.5 - 0.5;
-    Camera { width: spec.res, height: spec.res, fx: f, fy: f, cx: c, cy: c, world_to_view: gl_c2w_to_w2v(c2w) }
+    let f = (0.5 * spec.width as f64 / (0.5 * spec.fov_x).tan()) as f32;
+    let (cx, cy) = (spec.width as f32 * 0.5 - 0.5, spec.height as f32 * 0.5 - 0.5);
+    Camera { width: spec.width, height: spec.height, fx: f, fy: f, cx, cy, world_to_view: gl_c2w_to_w2v(c2w) }
 }
 
 /// The scene as an in-memory dataset (black background), without files.
