@@ -16,6 +16,10 @@ use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
 use tgs_engine::Context;
+use tgs_pipelines::Features;
+
+/// The SH degree every workload trains at (active from iteration 3).
+const SH_DEGREE: u32 = 3;
 
 /// Brush's whole-iteration time on this project's 2-core lavapipe machine
 /// (DEVELOPERS.md), seconds, for (resolution, Gaussians).
@@ -86,6 +90,14 @@ impl Workload {
     pub fn square(res: u32, points: u32) -> Workload {
         Workload { width: res, height: res, points, views: 20 }
     }
+
+    /// The most Gaussians, in whole ten thousands, whose features (one
+    /// storage binding of RGB SH coefficients) `ctx` can bind: 699,050 ->
+    /// 690,000 on lavapipe's 128 MiB.
+    pub fn max_points(ctx: &Context) -> u32 {
+        let bytes = 4 * 3 * Features::Sh { degree: SH_DEGREE }.coeffs() as u64;
+        (ctx.caps().max_storage_buffer_range / bytes).min(u32::MAX as u64) as u32 / 10_000 * 10_000
+    }
 }
 
 /// Top-level scopes of a training step, by stage. Scopes named `sort.*`
@@ -117,7 +129,7 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
     let cfg = TrainConfig {
         iterations: warmup + iterations + profiled,
         background: "black".into(),
-        sh_degree: 3,
+        sh_degree: SH_DEGREE,
         sh_interval: 1,
         // Densification off: the count stays fixed, as in Brush's timing.
         densify_until: 0,
@@ -161,7 +173,7 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
         height: w.height,
         views: spec.train,
         gaussians: tr.scattering.set.len(),
-        sh_degree: 3,
+        sh_degree: SH_DEGREE,
         warmup,
         iterations,
         wall_ms,

@@ -17,11 +17,9 @@ fn main() -> anyhow::Result<()> {
     use tgs::bench_train::Workload;
     let mut workloads = vec![(Workload::square(128, 10_000), if cpu { 20 } else { 100 }), (Workload::square(256, 50_000), if cpu { 5 } else { 100 })];
     if !cpu || std::env::var("TGS_BENCH_REAL_SCALE").is_ok_and(|v| v == "1") {
-        // The SH 3 features are one binding of 48 floats a Gaussian: a
-        // device that binds less than a million of them (lavapipe: 128 MiB,
-        // 699,050) runs the most that fit, in whole ten thousands.
-        let fit = (ctx.caps().max_storage_buffer_range / (48 * 4)).min(u32::MAX as u64) as u32 / 10_000 * 10_000;
-        let real = Workload { points: Workload::REAL_SCALE.points.min(fit), ..Workload::REAL_SCALE };
+        // A device that cannot bind the features of a million Gaussians
+        // (lavapipe: 128 MiB) runs the most it can.
+        let real = Workload { points: Workload::REAL_SCALE.points.min(Workload::max_points(&ctx)), ..Workload::REAL_SCALE };
         if real.points < Workload::REAL_SCALE.points {
             println!("real scale: {} Gaussians (the most this device's {} MiB storage binding holds at SH 3)", real.points, ctx.caps().max_storage_buffer_range >> 20);
         }
