@@ -1,6 +1,7 @@
 #version 460
 // Forward of the per-Gaussian reflection colour (color_common.glsl): one
 // invocation per Gaussian writes its rasterized features.
+#define ENV_DEPTH_BINDING 5
 #include "reflection/color_common.glsl"
 
 layout(std430, binding = 4) writeonly buffer Feat { float feat[]; };

@@ -5,6 +5,7 @@
 // own slots, one writer), and the environment texels: each Gaussian writes
 // its four taps' gradients to its own slots 4i..4i+3 (key = texel index)
 // for a sort by texel and a fixed-order per-texel sum (no atomics).
+#define ENV_DEPTH_BINDING 11
 #include "reflection/color_common.glsl"
 
 layout(std430, binding = 4) readonly buffer DFeat { float dfeat[]; };

@@ -14,7 +14,7 @@ layout(push_constant) uniform Push {
     uint res;      // cube face size
     uint schlick;  // 1: c = E(w) (Fresnel applied per pixel); 0: c = f0 E(w)
     vec3 centre;   // camera centre, world space
-    uint pad;
+    uint depth_iters; // > 0: the proxy's radius per direction from the depth map, this many refinements
     vec4 proxy;    // the map's parallax proxy: centre (xyz), radius (w; 0: infinitely far)
 } pc;
 
@@ -56,12 +56,40 @@ ReflGeom refl_geom(vec3 p, vec4 q_raw) {
 // d = o + t w with o = p - c, t = s - b, b = o.w, s = sqrt(b^2 - |o|^2 + R^2)
 // (s > |b| inside, so t > 0). Otherwise d = w. d is not unit length (the
 // cube lookup does not need it).
+//
+// With a depth map (pc.depth_iters > 0: the distance from c to the scene
+// along each texel's direction, `env_depth[]`), the light lies on the
+// scene's surface seen from c, not on one sphere: R is the depth the map
+// gives in the current lookup direction, starting from w's own (light at
+// infinity) and refined depth_iters times (each step intersects the
+// sphere of that radius; a step whose sphere does not hold p keeps the
+// previous direction). The backward differentiates the last step with its
+// radius held fixed (env_dir_backward).
 struct EnvDir {
     vec3 d;
     bool on;
     vec3 o;
     float t, b, s;
 };
+
+// The bilinear depth of the map in direction d.
+float env_depth_at(vec3 d);
+
+// One intersection with the sphere of radius r around the proxy's centre:
+// false (e unchanged) when p is not inside it.
+bool env_sphere(vec3 o, vec3 w, float r, inout EnvDir e) {
+    float k = dot(o, o) - r * r;
+    if (!(k < 0.0)) {
+        return false;
+    }
+    e.on = true;
+    e.o = o;
+    e.b = dot(o, w);
+    e.s = sqrt(e.b * e.b - k);
+    e.t = e.s - e.b;
+    e.d = o + e.t * w;
+    return true;
+}
 
 EnvDir env_dir(vec3 p, vec3 w) {
     EnvDir e;
@@ -74,14 +102,14 @@ EnvDir env_dir(vec3 p, vec3 w) {
     float r = pc.proxy.w;
     if (r > 0.0) {
         vec3 o = p - pc.proxy.xyz;
-        float k = dot(o, o) - r * r;
-        if (k < 0.0) {
-            e.on = true;
-            e.o = o;
-            e.b = dot(o, w);
-            e.s = sqrt(e.b * e.b - k);
-            e.t = e.s - e.b;
-            e.d = o + e.t * w;
+        if (pc.depth_iters == 0u) {
+            env_sphere(o, w, r, e);
+        } else {
+            for (uint k = 0u; k < pc.depth_iters; k++) {
+                if (!env_sphere(o, w, env_depth_at(e.d), e)) {
+                    break;
+                }
+            }
         }
     }
     return e;
@@ -107,6 +135,18 @@ layout(std430, binding = 1) readonly buffer Quats { vec4 quats[]; };
 layout(std430, binding = 2) readonly buffer Material { float material[]; };
 layout(std430, binding = 3) readonly buffer Env { float env[]; };
 #include "reflection/envmap.glsl"
+// The distance from the proxy's centre to the scene per texel (read only
+// when pc.depth_iters > 0; the kernel binds a placeholder otherwise).
+layout(std430, binding = ENV_DEPTH_BINDING) readonly buffer EnvDepth { float env_depth[]; };
+
+float env_depth_at(vec3 d) {
+    EnvTaps t = env_taps(d, pc.res);
+    float z = 0.0;
+    for (uint k = 0u; k < 4u; k++) {
+        z += t.w[k] * env_depth[t.idx[k]];
+    }
+    return z;
+}
 
 vec3 gaussian_mean(uint i) {
     return vec3(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);

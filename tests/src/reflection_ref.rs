@@ -131,6 +131,34 @@ pub fn proxy_dir(p: V3, w: V3, proxy: Option<(V3, f64)>) -> V3 {
     [0, 1, 2].map(|i| o[i] + t * w[i])
 }
 
+/// Bilinear value of a one-channel cube map (`depth`, texel order) in direction `d`.
+pub fn depth_lookup(depth: &[f64], res: usize, d: V3) -> f64 {
+    taps(d, res).iter().map(|&(t, w)| w * depth[t]).sum()
+}
+
+/// A depth-mapped lookup (the shader's `env_dir` with a depth map): the
+/// proxy's radius per direction is the depth map's value there, starting
+/// from the mirror direction `w` and refined `iters` times (a step whose
+/// sphere does not hold p keeps the previous direction). Returns the
+/// lookup direction, the radius of the last step taken (None: none was,
+/// the direction is w) and the smallest |(|o|^2 - r^2)| / r^2 met, how
+/// close a step came to switching.
+pub fn depth_dir(p: V3, w: V3, centre: V3, depth: &[f64], res: usize, iters: u32) -> (V3, Option<f64>, f64) {
+    let o = [p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]];
+    let (mut d, mut last, mut margin) = (w, None, f64::INFINITY);
+    for _ in 0..iters {
+        let r = depth_lookup(depth, res, d);
+        let k = dot(o, o) - r * r;
+        margin = margin.min(k.abs() / (r * r).max(1e-30));
+        if !(k < 0.0) {
+            break;
+        }
+        d = proxy_dir(p, w, Some((centre, r)));
+        last = Some(r);
+    }
+    (d, last, margin)
+}
+
 /// Rasterized features: [c (3), r] plus f0 (3) with Schlick; c = f0 E or E.
 pub fn color(g: &ReflGaussian, env: &[f64], res: usize, centre: V3, schlick: bool) -> Vec<f64> {
     color_with_proxy(g, env, res, centre, None, schlick)
@@ -138,7 +166,12 @@ pub fn color(g: &ReflGaussian, env: &[f64], res: usize, centre: V3, schlick: boo
 
 /// [`color`] with the map's parallax proxy ([`proxy_dir`]).
 pub fn color_with_proxy(g: &ReflGaussian, env: &[f64], res: usize, centre: V3, proxy: Option<(V3, f64)>, schlick: bool) -> Vec<f64> {
-    let e = env_lookup(env, res, proxy_dir(g.p, mirror_dir(g, centre), proxy));
+    color_along(g, env, res, proxy_dir(g.p, mirror_dir(g, centre), proxy), schlick)
+}
+
+/// [`color`] with the lookup direction `d` given.
+pub fn color_along(g: &ReflGaussian, env: &[f64], res: usize, d: V3, schlick: bool) -> Vec<f64> {
+    let e = env_lookup(env, res, d);
     let f0 = [0, 1, 2].map(|c| sigmoid(g.material[c]));
     let r = sigmoid(g.material[3]);
     let c = if schlick { e } else { [0, 1, 2].map(|k| f0[k] * e[k]) };

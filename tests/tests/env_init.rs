@@ -1,7 +1,8 @@
 //! Stage II's cube map started from the scene (harness/src/train/env_init.rs):
 //! the texel directions against the f64 reference's cube lookup, and a room
 //! of six two-tone walls around the reflection set's box, with a Gaussian
-//! inside the box that the map must leave out.
+//! inside the box that the map must leave out, and the distance to each
+//! wall the map's depth records.
 
 use tgs::train::env_init::{outside_box, scene_env_map};
 use tgs::train::init::SH_C0;
@@ -85,7 +86,7 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
     }
     assert_eq!(outside_box(&scat, centre, [0.55; 3]).len(), walls, "the box keeps the walls and drops the Gaussian inside");
     let res = 8;
-    let (env, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15).unwrap();
+    let (env, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15, false).unwrap();
     assert_eq!(info.rendered, walls, "Gaussians rendered");
     for a in 0..3 {
         assert!((info.centre[a] - centre[a]).abs() < 1e-5, "box centre {:?}", info.centre);
@@ -113,12 +114,42 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
         }
     }
     assert_eq!(checked, 6 * 24, "texels checked");
-    let (again, _) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15).unwrap();
+    let (again, _) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15, false).unwrap();
     assert!(env.raw.iter().zip(&again.raw).all(|(a, b)| a.to_bits() == b.to_bits()), "a second map differs");
+    // With depth: each texel's distance from the centre to its wall
+    // (4 / the axis component of the unit direction), the same colours,
+    // and the lookup's proxy at the centre.
+    let (deep, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15, true).unwrap();
+    assert!(deep.raw.iter().zip(&env.raw).all(|(a, b)| a.to_bits() == b.to_bits()), "depth changed the colours");
+    let proxy = deep.proxy.expect("a depth map's proxy");
+    assert!((0..3).all(|a| (proxy.centre[a] - centre[a]).abs() < 1e-5), "proxy {proxy:?}");
+    let depth = deep.depth.as_ref().expect("the depth");
+    let di = info.depth.expect("the depth's summary");
+    assert_eq!(di.surface_share, 1.0, "every texel shows a wall");
+    assert!(di.nearest > 3.9 && di.nearest < 4.2 && di.farthest > 6.0 && di.farthest < 8.0, "{di:?}");
+    let mut checked = 0;
+    for face in 0..6u32 {
+        for row in 0..res {
+            for col in 0..res {
+                let d = HostEnvMap::texel_direction(res, face, row, col);
+                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let axis = face as usize / 2;
+                // Away from the room's edges, where the walls overlap.
+                if (1..3).any(|k| (4.0 * d[(axis + k) % 3] / d[axis].abs()).abs() > 3.0) {
+                    continue;
+                }
+                let want = 4.0 * len / d[axis].abs();
+                let got = depth[((face * res + row) * res + col) as usize];
+                assert!((got - want).abs() < 0.02 * want, "face {face} texel ({row}, {col}): depth {got}, the wall is {want} away");
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, 6 * 36, "texels checked");
     // A reflection set around the whole room leaves nothing to render: the
     // grey map, not an error.
     let big: Vec<f32> = [-10.0f32, 10.0].iter().flat_map(|o| centre.map(|c| c + o)).collect();
-    let (grey, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &big, res, 1e-15).unwrap();
+    let (grey, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &big, res, 1e-15, false).unwrap();
     assert_eq!(info.rendered, 0);
     assert!(grey.raw.iter().all(|&v| v == 0.0), "the grey map");
     check_validation(ctx);

@@ -126,7 +126,13 @@ fn proxy32(proxy: Option<(V3, f64)>) -> Option<(V3, f64)> {
 }
 
 fn upload_env_proxy(ctx: &std::sync::Arc<tgs_engine::Context>, res: usize, raw: &[f64], proxy: Option<(V3, f64)>) -> EnvMap {
-    EnvMap::upload(ctx, &HostEnvMap { res: res as u32, raw: raw.iter().map(|&v| v as f32).collect(), proxy: gpu_proxy(proxy) }).unwrap()
+    upload_env_light(ctx, res, raw, proxy, None)
+}
+
+/// With a depth map (distances from the proxy's centre per texel).
+fn upload_env_light(ctx: &std::sync::Arc<tgs_engine::Context>, res: usize, raw: &[f64], proxy: Option<(V3, f64)>, depth: Option<&[f64]>) -> EnvMap {
+    let depth = depth.map(|d| d.iter().map(|&v| v as f32).collect());
+    EnvMap::upload(ctx, &HostEnvMap { res: res as u32, raw: raw.iter().map(|&v| v as f32).collect(), proxy: gpu_proxy(proxy), depth }).unwrap()
 }
 
 fn gpu_color(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel) -> Vec<f32> {
@@ -134,10 +140,14 @@ fn gpu_color(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel) -> 
 }
 
 fn gpu_color_proxy(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, proxy: Option<(V3, f64)>) -> Vec<f32> {
+    gpu_color_light(gs, env, res, fresnel, proxy, None)
+}
+
+fn gpu_color_light(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, proxy: Option<(V3, f64)>, depth: Option<&[f64]>) -> Vec<f32> {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let g = Gaussians::upload(ctx, &host_set(gs)).unwrap();
-    let e = upload_env_proxy(ctx, res, env, proxy);
+    let e = upload_env_light(ctx, res, env, proxy, depth);
     let feat = Buffer::<f32>::new(ctx, "test.feat", fresnel.channels() as usize * gs.len()).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
     shading.record_color(&mut rec, &g, &e, &camera(), fresnel, &feat).unwrap();
@@ -233,11 +243,15 @@ struct Backward {
 }
 
 fn gpu_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, dfeat: &[f64], proxy: Option<(V3, f64)>) -> Backward {
+    gpu_backward_light(gs, env, res, fresnel, dfeat, proxy, None)
+}
+
+fn gpu_backward_light(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, dfeat: &[f64], proxy: Option<(V3, f64)>, depth: Option<&[f64]>) -> Backward {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let g = Gaussians::upload(ctx, &host_set(gs)).unwrap();
     let grads = Gaussians::zeros(ctx, gs.len() as u32, 4, 1).unwrap();
-    let e = upload_env_proxy(ctx, res, env, proxy);
+    let e = upload_env_light(ctx, res, env, proxy, depth);
     let df: Vec<f32> = dfeat.iter().map(|&v| v as f32).collect();
     let d = Buffer::from_slice(ctx, "test.dfeat", &df).unwrap();
     let s = shading.texel_scratch(&e, gs.len() as u32).unwrap();
@@ -260,13 +274,33 @@ fn close(got: f32, want: f64, scale: f64) -> bool {
 fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, rng: &mut Rng, what: &str, proxy: Option<(V3, f64)>) -> Backward {
     let proxy = proxy32(proxy);
     let schlick = fresnel == Fresnel::Schlick;
+    let what = format!("{what} (proxy {proxy:?})");
+    let gpu = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| gpu_backward(gs, env, res, fresnel, dfeat, proxy);
+    let loss = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| ref_loss(gs, env, res, schlick, dfeat, proxy);
+    check_backward_with(gs, env, res, fresnel, rng, &what, &gpu, &loss)
+}
+
+/// The colour backward `gpu` (Gaussians, texels, feature gradients) against
+/// central differences of the reference `loss` (the same arguments; the
+/// inputs rounded to f32 as the GPU sees them).
+#[allow(clippy::too_many_arguments)]
+fn check_backward_with(
+    gs: &[ReflGaussian],
+    env: &[f64],
+    res: usize,
+    fresnel: Fresnel,
+    rng: &mut Rng,
+    what: &str,
+    gpu: &dyn Fn(&[ReflGaussian], &[f64], &[f64]) -> Backward,
+    loss: &dyn Fn(&[ReflGaussian], &[f64], &[f64]) -> f64,
+) -> Backward {
     let ch = fresnel.channels() as usize;
     let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(rng, -1.0, 1.0)).collect();
     // The reference sees the f32-rounded inputs the GPU sees.
     let gs: Vec<ReflGaussian> = gs.iter().map(round32).collect();
     let env: Vec<f64> = env.iter().map(|&v| v as f32 as f64).collect();
     let dfeat: Vec<f64> = dfeat.iter().map(|&v| v as f32 as f64).collect();
-    let got = gpu_backward(&gs, &env, res, fresnel, &dfeat, proxy);
+    let got = gpu(&gs, &env, &dfeat);
     let h = 1e-6;
     let fd = |f: &dyn Fn(f64) -> f64| (f(h) - f(-h)) / (2.0 * h);
     let mut bad = Vec::new();
@@ -274,7 +308,7 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
         let with = |k: &dyn Fn(&mut ReflGaussian, f64), e: f64| {
             let mut m = gs.clone();
             k(&mut m[i], e);
-            ref_loss(&m, &env, res, schlick, &dfeat, proxy)
+            loss(&m, &env, &dfeat)
         };
         for c in 0..4 {
             let want = fd(&|e| with(&|g, e| g.material[c] += e, e));
@@ -302,7 +336,7 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
         let want = fd(&|e| {
             let mut m = env.clone();
             m[t] += e;
-            ref_loss(&gs, &m, res, schlick, &dfeat, proxy)
+            loss(&gs, &m, &dfeat)
         });
         if !close(got.env[t], want, scale) {
             bad.push(format!("texel value {t}: GPU {} vs FD {want}", got.env[t]));
@@ -314,7 +348,7 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
             eprintln!("Gaussian {i}: w {w:?} face {:?} taps {:?}", rr::cube_coords(w), rr::taps(w, res));
         }
     }
-    assert!(bad.is_empty(), "{what} ({fresnel:?}, res {res}, proxy {proxy:?}): {} mismatches:\n{}", bad.len(), bad[..bad.len().min(20)].join("\n"));
+    assert!(bad.is_empty(), "{what} ({fresnel:?}, res {res}): {} mismatches:\n{}", bad.len(), bad[..bad.len().min(20)].join("\n"));
     got
 }
 
@@ -381,6 +415,131 @@ fn parallax_proxy_lookup_matches_reference() {
             }
             assert!(inside > 50 && off > 10, "the cases cover both sides of the sphere: {inside} inside, {off} outside");
         }
+    }
+    check_validation(ctx_shared());
+}
+
+/// A smooth depth map (distances 0.8 to 2.0 from the centre), rounded to
+/// f32 as the GPU holds it: around the test Gaussians (|p - c| up to
+/// about 2.1), so a lookup holds p in some directions and not in others.
+fn smooth_depth(res: usize) -> Vec<f64> {
+    let mut out = vec![0.0; 6 * res * res];
+    for face in 0..6 {
+        for row in 0..res {
+            for col in 0..res {
+                let s = 2.0 / res as f64;
+                let d = norm(rr::face_dir(face, (col as f64 + 0.5) * s - 1.0, (row as f64 + 0.5) * s - 1.0));
+                out[(face * res + row) * res + col] = (1.4 + 0.6 * (2.0 * d[0]).sin() * (1.5 * d[1] + d[2]).cos()) as f32 as f64;
+            }
+        }
+    }
+    out
+}
+
+const DEPTH_ITERS: u32 = tgs_pipelines::reflection::DEPTH_ITERS;
+
+#[test]
+fn depth_mapped_lookup_matches_reference() {
+    let mut rng = Rng(seed("depth_dir"));
+    let c32 = proxy32(Some(PROXY)).unwrap().0;
+    let centre = CENTRE.map(|v| v as f32 as f64);
+    for res in [3usize, 16] {
+        let env = random_env(&mut rng, res);
+        let depth = smooth_depth(res);
+        let mut dirs = special_dirs();
+        dirs.extend((0..200).map(|_| random_dir(&mut rng)));
+        let mut gs: Vec<_> = dirs.iter().map(|&w| random_gaussian(&mut rng, w)).collect();
+        // At the centre the lookup is w's own direction at every step.
+        gs[0].p = PROXY.0;
+        for fresnel in [Fresnel::Off, Fresnel::Schlick] {
+            let schlick = fresnel == Fresnel::Schlick;
+            let ch = fresnel.channels() as usize;
+            let got = gpu_color_light(&gs, &env, res, fresnel, Some(PROXY), Some(&depth));
+            let (mut moved, mut kept, mut near) = (0, 0, 0);
+            for (i, g) in gs.iter().enumerate() {
+                let g32 = round32(g);
+                let w = rr::mirror_dir(&g32, centre);
+                let (d, last, margin) = rr::depth_dir(g32.p, w, c32, &depth, res, DEPTH_ITERS);
+                let want = rr::color_along(&g32, &env, res, d, schlick);
+                let got_i = &got[ch * i..ch * (i + 1)];
+                assert!(got_i.iter().all(|v| v.is_finite()), "res {res} {fresnel:?} Gaussian {i}: {got_i:?}");
+                if (0..ch).all(|c| (got_i[c] as f64 - want[c]).abs() < 2e-4) {
+                    if last.is_some() { moved += 1 } else { kept += 1 }
+                    continue;
+                }
+                // f32 and f64 may take a different number of steps where a
+                // step is within rounding of switching.
+                if margin < 1e-4 {
+                    near += 1;
+                    continue;
+                }
+                // A tie on a seam or corner, of the final direction or of
+                // the mirror direction the first depth lookup takes.
+                let nudge = |v: V3, k: usize| {
+                    let mut v = norm(v);
+                    v[k / 2] += if k % 2 == 0 { 1e-6 } else { -1e-6 };
+                    v
+                };
+                let matches = |d2: V3| (0..3).all(|c| (got_i[c] as f64 - rr::color_along(&g32, &env, res, d2, schlick)[c]).abs() < 2e-4);
+                let tie_ok = (0..6).any(|k| matches(nudge(d, k)) || matches(rr::depth_dir(g32.p, nudge(w, k), c32, &depth, res, DEPTH_ITERS).0));
+                assert!(tie_ok, "res {res} {fresnel:?} Gaussian {i} (margin {margin}, w {w:?}): GPU {got_i:?} vs f64 {want:?}");
+            }
+            assert!(moved > 50 && kept > 10 && near < 5, "the cases cover both: {moved} looked up through the depth, {kept} kept w, {near} on a switch");
+        }
+        // No surface holds any point (depth 0): every ray leaves every
+        // sphere at once and the lookup is w itself, bit for bit as without
+        // a proxy. A constant depth is the one-sphere proxy of that radius.
+        let fresnel = Fresnel::Schlick;
+        let none = gpu_color_light(&gs, &env, res, fresnel, Some(PROXY), Some(&vec![0.0; 6 * res * res]));
+        assert_eq!(none, gpu_color(&gs, &env, res, fresnel), "an empty depth map must look up the mirror direction");
+        let one = gpu_color_light(&gs, &env, res, fresnel, Some(PROXY), Some(&vec![PROXY.1; 6 * res * res]));
+        let sphere = gpu_color_proxy(&gs, &env, res, fresnel, Some(PROXY));
+        for (i, (a, b)) in one.iter().zip(&sphere).enumerate() {
+            assert!((a - b).abs() < 1e-5, "constant depth {}: value {i} is {a}, the sphere proxy gives {b}", PROXY.1);
+        }
+    }
+    check_validation(ctx_shared());
+}
+
+#[test]
+fn depth_mapped_backward_matches_finite_differences() {
+    // The backward holds the last step's radius fixed: the finite
+    // differences of the reference through a sphere of that radius per
+    // Gaussian. Gaussians within 1e-3 of a step's switch are redrawn (there
+    // the number of steps, and so the radius, can jump).
+    let mut rng = Rng(seed("depth_backward"));
+    let res = 3;
+    let depth = smooth_depth(res);
+    let c32 = proxy32(Some(PROXY)).unwrap().0;
+    let centre = CENTRE.map(|v| v as f32 as f64);
+    for fresnel in [Fresnel::Off, Fresnel::Schlick] {
+        let schlick = fresnel == Fresnel::Schlick;
+        let env = random_env(&mut rng, res);
+        let mut gs = Vec::new();
+        while gs.len() < 24 {
+            let w = random_dir(&mut rng);
+            let g = round32(&random_gaussian(&mut rng, w));
+            if rr::depth_dir(g.p, rr::mirror_dir(&g, centre), c32, &depth, res, DEPTH_ITERS).2 > 1e-3 {
+                gs.push(g);
+            }
+        }
+        let radii: Vec<Option<f64>> = gs.iter().map(|g| rr::depth_dir(g.p, rr::mirror_dir(g, centre), c32, &depth, res, DEPTH_ITERS).1).collect();
+        assert!(radii.iter().filter(|r| r.is_some()).count() > 8 && radii.iter().any(|r| r.is_none()), "both kinds of lookup: {radii:?}");
+        let gpu = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| gpu_backward_light(gs, env, res, fresnel, dfeat, Some(PROXY), Some(&depth));
+        let loss = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| {
+            let ch = fresnel.channels() as usize;
+            gs.iter().enumerate().map(|(i, g)| {
+                let d = rr::proxy_dir(g.p, rr::mirror_dir(g, CENTRE), radii[i].map(|r| (c32, r)));
+                rr::color_along(g, env, res, d, schlick).iter().enumerate().map(|(c, v)| v * dfeat[ch * i + c]).sum::<f64>()
+            }).sum()
+        };
+        let a = check_backward_with(&gs, &env, res, fresnel, &mut rng, "depth-mapped lookup", &gpu, &loss);
+        // Bit-identical on a rerun.
+        let dfeat: Vec<f64> = (0..fresnel.channels() as usize * gs.len()).map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64).collect();
+        let (x, y) = (gpu(&gs, &env, &dfeat), gpu(&gs, &env, &dfeat));
+        let bits = |b: &Backward| [&b.material, &b.means, &b.quats, &b.env].iter().flat_map(|v| v.iter().map(|f| f.to_bits())).collect::<Vec<_>>();
+        assert_eq!(bits(&x), bits(&y), "the depth-mapped backward differs between identical runs");
+        assert!(bits(&a).iter().all(|&b| f32::from_bits(b).is_finite()));
     }
     check_validation(ctx_shared());
 }

@@ -264,6 +264,29 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     drop(tr);
     let _ = std::fs::remove_dir_all(&proxy);
 
+    // reflection.env_init = "scene-depth": the map's depth per texel is
+    // recorded in the checkpoint (env.depth) and restored with it (the
+    // evaluation from the checkpoint gives the run's PSNR), metrics.json
+    // says what it holds, and a sphere radius beside it is refused.
+    let deep = tgs_tests::TempDir::new("stage2-depth");
+    let _ = std::fs::remove_dir_all(&deep);
+    let ad = TrainArgs { out: deep.to_path_buf(), set: vec!["reflection.iterations=20".into(), "test_interval=0".into(), "reflection.env_init=\"scene-depth\"".into()], ..af.clone() };
+    assert_eq!(train(ctx, &ad).unwrap().iteration, 320);
+    let md = json(&deep.join("metrics.json"));
+    let di = &md["reflection"]["env_from"]["depth"];
+    let share = di["surface_share"].as_f64().unwrap_or(0.0);
+    assert!(share > 0.1 && share <= 1.0 && di["nearest"].as_f64().unwrap() > 0.0 && di["farthest"].as_f64() >= di["nearest"].as_f64(), "depth {di}");
+    assert!(md["reflection"]["env_proxy"].as_array().is_some_and(|p| p.len() == 4), "the depth map's proxy: {}", md["reflection"]);
+    let (hd, _) = checkpoint::read(&deep.join("checkpoint.bin")).unwrap();
+    let names: Vec<&str> = hd.reflection.as_ref().unwrap().arrays.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names.last(), Some(&"env.depth"), "{names:?}");
+    let (mut tr, data) = tgs::train::run::open_run(ctx, &deep).unwrap();
+    let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
+    assert_eq!(Some(again.psnr), md["test"]["psnr"].as_f64(), "the depth is not restored from the checkpoint");
+    drop(tr);
+    refused(TrainArgs { set: vec!["reflection.env_radius=1.5".into(), "reflection.env_init=\"scene-depth\"".into()], ..ad.clone() }, &["reflection.env_radius", "scene-depth"]);
+    let _ = std::fs::remove_dir_all(&deep);
+
     // Stage II that trains the scattering colour too: the SH colour and
     // its Adam moments move; positions, scales, rotations, opacity and
     // their moments stay Stage I's. A rerun is bit-identical.

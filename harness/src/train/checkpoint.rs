@@ -89,6 +89,9 @@ pub struct LightFieldHeader {
 
 const MLP_ARRAYS: [&str; 3] = ["mlp.param", "mlp.adam_m", "mlp.adam_v"];
 const ENV_ARRAYS: [&str; 3] = ["env.param", "env.adam_m", "env.adam_v"];
+/// The frozen depth of a depth-mapped cube map (env_init = "scene-depth"),
+/// after [`ENV_ARRAYS`] when the map has one.
+const ENV_DEPTH: &str = "env.depth";
 
 impl LightFieldHeader {
     pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
@@ -117,9 +120,23 @@ impl ReflHeader {
         let layout = refl_layout(self.n);
         let env_len = 18 * self.env_res as usize * self.env_res as usize;
         let k = layout.len();
-        let want: Vec<(String, usize)> = layout.into_iter().chain(ENV_ARRAYS.map(|n| (n.to_string(), env_len))).collect();
+        let mut want: Vec<(String, usize)> = layout.into_iter().chain(ENV_ARRAYS.map(|n| (n.to_string(), env_len))).collect();
+        if self.has_depth() {
+            want.push((ENV_DEPTH.to_string(), env_len / 3));
+        }
         check_arrays(&want, &self.arrays, arrays)?;
         Ok(k)
+    }
+
+    fn has_depth(&self) -> bool {
+        self.arrays.last().is_some_and(|(name, _)| name == ENV_DEPTH)
+    }
+
+    /// The cube map from the arrays [`ReflHeader::check`] passed (`k`: the
+    /// index of its texels).
+    fn env(&self, arrays: &[Vec<f32>], k: usize) -> tgs_pipelines::HostEnvMap {
+        let depth = self.has_depth().then(|| arrays[k + ENV_ARRAYS.len()].clone());
+        tgs_pipelines::HostEnvMap { res: self.env_res, raw: arrays[k].clone(), proxy: self.decision.proxy(), depth }
     }
 }
 
@@ -164,6 +181,10 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         for (name, buf) in m.env.arrays() {
             names.push((name.to_string(), m.env.len()));
             refl_arrays.push((buf, m.env.len()));
+        }
+        if let Some(d) = &m.env.depth {
+            names.push((ENV_DEPTH.to_string(), m.env.texels() as usize));
+            refl_arrays.push((d, m.env.texels() as usize));
         }
         header.reflection = Some(ReflHeader { n: m.set.len(), env_res: m.env.res, decision: d.clone(), arrays: names });
     }
@@ -380,7 +401,7 @@ fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -
     use tgs_pipelines::reflection::MATERIAL;
     let k = r.check(&arrays)?;
     let g = host_set(MATERIAL, 1, &arrays);
-    let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: arrays[k].clone(), proxy: r.decision.proxy() };
+    let env = r.env(&arrays, k);
     let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel.pipeline(), tr.cfg.adam_eps)?;
     upload_set(&m.set, &arrays)?;
     m.env.m.upload(&arrays[k + 1])?;
@@ -425,7 +446,7 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
             let k = r.check(&refl).context("Stage II state")?;
             let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
             set.validate()?;
-            let env = tgs_pipelines::HostEnvMap { res: r.env_res, raw: refl[k].clone(), proxy: r.decision.proxy() };
+            let env = r.env(&refl, k);
             ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel.pipeline() })
         }
         (None, Some(l)) => {

@@ -212,6 +212,9 @@ pub struct ReflectionConfig {
     /// quick preset): "scene" gains after Stage II on `lantern` (+0.21 dB)
     /// and moves the normals no more than grey; after Stage III the two
     /// starts end within 0.002 dB on three scenes: grey stays.
+    /// "scene-depth": "scene" with the distance to the surface each texel
+    /// shows, the lookup's parallax proxy per direction (each surfel's ray
+    /// meets the scene where it would; env_init.rs).
     pub env_init: EnvStart,
     /// Where the cube map's light is: 0, infinitely far (the paper's map);
     /// r > 0, on a sphere around the reflection set's box centre of radius
@@ -391,6 +394,9 @@ impl ReflectionConfig {
     fn validate(&self) -> Result<()> {
         if !(self.env_radius >= 0.0 && self.env_radius <= 1e6) {
             bail!("reflection.env_radius must be 0 (light infinitely far) or a positive multiple of the camera distance up to 1e6, not {}", self.env_radius);
+        }
+        if self.env_radius > 0.0 && self.env_init == EnvStart::SceneDepth {
+            bail!("reflection.env_radius = {} puts the light on one sphere, and reflection.env_init = \"scene-depth\" at the scene's depth per direction: set one of them", self.env_radius);
         }
         if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
             bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);

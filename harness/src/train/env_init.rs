@@ -7,6 +7,16 @@
 //! the colour along its direction. A grey map gives the normals no
 //! gradient until the map has learned something; this one makes a wrong
 //! normal fetch the wrong part of the scene from the first iteration.
+//!
+//! With `depth` (`env_init = "scene-depth"`) each texel also keeps the
+//! distance from the centre to the surface it shows (the median depth of
+//! the face render: where transmittance crossed 0.5), so that a reflection
+//! from a surfel away from the centre looks up where its own ray meets that
+//! surface (the lookup's parallax proxy takes its radius per direction from
+//! this map; glsl/reflection/color_common.glsl `env_dir`): near-field
+//! content lands where each surfel sees it. Texels that show no surface
+//! (the sky, the background) lie [`FAR`] times the farthest surface away,
+//! where the direction alone decides.
 
 use super::lightfield::normalization_box;
 use super::logit;
@@ -14,10 +24,12 @@ use super::scattering::ScatteringModel;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
 use tgs_engine::Context;
-use tgs_pipelines::{Camera, HostEnvMap, HostGaussians, Plane};
+use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, HostGaussians, Plane};
 
 /// Texel colours are clamped into (LO, 1 - LO) before the logit.
 const LO: f32 = 0.01;
+/// Depth of a texel that shows no surface, in units of the farthest one.
+pub const FAR: f32 = 1e3;
 
 /// What [`scene_env_map`] used, for the log.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -26,6 +38,18 @@ pub struct EnvInit {
     pub half_extent: [f32; 3],
     /// Scattering Gaussians rendered (outside the box).
     pub rendered: usize,
+    /// With depth: the share of texels that show a surface, and the
+    /// nearest and farthest such distance from the centre.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth: Option<DepthInfo>,
+}
+
+/// What the depth of a scene-lit map holds.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DepthInfo {
+    pub surface_share: f32,
+    pub nearest: f32,
+    pub farthest: f32,
 }
 
 /// The scattering Gaussians of `scat` outside the box (centre, half).
@@ -71,13 +95,36 @@ fn sample(planes: [&[f32]; 3], w: u32, h: u32, u: f32, v: f32) -> [f32; 3] {
     })
 }
 
+/// The median depth plane at (u, v): the bilinear blend of the taps that
+/// show a surface (median > 0), or None where none does.
+fn sample_depth(plane: &[f32], w: u32, h: u32, u: f32, v: f32) -> Option<f32> {
+    let u = u.clamp(0.0, (w - 1) as f32);
+    let v = v.clamp(0.0, (h - 1) as f32);
+    let (x0, y0) = (u.floor() as u32, v.floor() as u32);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let (fx, fy) = (u - x0 as f32, v - y0 as f32);
+    let taps = [(x0, y0, (1.0 - fx) * (1.0 - fy)), (x1, y0, fx * (1.0 - fy)), (x0, y1, (1.0 - fx) * fy), (x1, y1, fx * fy)];
+    let (mut sum, mut wsum) = (0.0f32, 0.0f32);
+    for (x, y, wt) in taps {
+        let z = plane[(y * w + x) as usize];
+        if z > 0.0 && z.is_finite() && wt > 0.0 {
+            sum += wt * z;
+            wsum += wt;
+        }
+    }
+    (wsum > 0.0).then(|| sum / wsum)
+}
+
 /// The cube map of face size `res` seen from the reflection set's box
 /// (`refl_means`) with the scattering Gaussians `scat` outside it, at SH
-/// degree `sh` over `background`.
-pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, background: &[f32; 3], refl_means: &[f32], res: u32, adam_eps: f32) -> Result<(HostEnvMap, EnvInit)> {
+/// degree `sh` over `background`; with `depth`, also the distance from the
+/// box's centre to the surface each texel shows (`HostEnvMap::depth`,
+/// with the parallax proxy at that centre).
+#[allow(clippy::too_many_arguments)]
+pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, background: &[f32; 3], refl_means: &[f32], res: u32, adam_eps: f32, depth: bool) -> Result<(HostEnvMap, EnvInit)> {
     let (centre, half) = normalization_box(refl_means);
     let outside = outside_box(scat, centre, half);
-    let info = EnvInit { centre, half_extent: half, rendered: outside.len() };
+    let mut info = EnvInit { centre, half_extent: half, rendered: outside.len(), depth: None };
     let mut env = HostEnvMap::constant(res, 0.0)?;
     if outside.is_empty() {
         return Ok((env, info));
@@ -87,10 +134,13 @@ pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, backgrou
     let mut model = ScatteringModel::new(ctx, &outside, degree, adam_eps).context("the scattering set for the environment map")?;
     // Render at least 64 pixels a side so that small maps still average a few.
     let px = (res + res / 2).max(64);
+    // Distance to the surface per texel (None: no surface).
+    let mut dist: Vec<Option<f32>> = vec![None; env.texels()];
     for face in 0..6u32 {
         let cam = face_camera(centre, face, px);
         let r = model.render(&cam, sh, background).with_context(|| format!("rendering cube face {face} for the environment map"))?;
         let planes = [r.plane(Plane::Feature(0)), r.plane(Plane::Feature(1)), r.plane(Plane::Feature(2))];
+        let median = r.plane(Plane::Median);
         let m = &cam.world_to_view;
         for row in 0..res {
             for col in 0..res {
@@ -102,8 +152,21 @@ pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, backgrou
                 for (raw, v) in env.raw[3 * t..3 * t + 3].iter_mut().zip(c) {
                     *raw = logit(v.clamp(LO, 1.0 - LO));
                 }
+                // View depth z along d is at distance z |v| / v_z from the eye.
+                let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                dist[t] = sample_depth(median, px, px, u, w).map(|z| z * len / v[2]).filter(|d| d.is_finite() && *d > 0.0);
             }
         }
+    }
+    if depth {
+        let found: Vec<f32> = dist.iter().flatten().copied().collect();
+        let nearest = found.iter().copied().fold(f32::INFINITY, f32::min);
+        let farthest = found.iter().copied().fold(0.0f32, f32::max);
+        // Nothing found: every texel far beyond the box.
+        let far = FAR * if found.is_empty() { half.iter().copied().fold(1e-3f32, f32::max) * 2.0 } else { farthest };
+        env.depth = Some(dist.iter().map(|d| d.unwrap_or(far)).collect());
+        env.proxy = Some(EnvProxy { centre, radius: far });
+        info.depth = Some(DepthInfo { surface_share: found.len() as f32 / dist.len() as f32, nearest: if found.is_empty() { far } else { nearest }, farthest: if found.is_empty() { far } else { farthest } });
     }
     env.validate()?;
     Ok((env, info))

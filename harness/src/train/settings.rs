@@ -90,6 +90,10 @@ name_enum!(
         Grey = "grey",
         /// The scattering set rendered from the reflection set's box (train/env_init.rs).
         Scene = "scene",
+        /// The same with its depth per texel: each reflection looks up where
+        /// its own ray meets the scene seen from the box, not the direction
+        /// alone (a depth-corrected local cube map, train/env_init.rs).
+        SceneDepth = "scene-depth",
     }
 );
 

@@ -97,8 +97,9 @@ pub struct ReflDecision {
     /// the box it was rendered from and the Gaussians outside it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub env_from: Option<EnvInit>,
-    /// The cube map's parallax proxy (reflection.env_radius > 0): centre
-    /// and radius in world units, fixed when Stage II starts.
+    /// The cube map's parallax proxy (reflection.env_radius > 0, or the
+    /// centre of a map with depth, env_init = "scene-depth"): centre and
+    /// radius in world units, fixed when Stage II starts.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub env_proxy: Option<[f32; 4]>,
 }
@@ -397,10 +398,14 @@ impl Trainer {
                 d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
                 let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
                 means.extend(seeds.iter().flat_map(|s| s.position));
-                let mut env = if rc.env_init == super::settings::EnvStart::Scene {
+                use super::settings::EnvStart;
+                let mut env = if matches!(rc.env_init, EnvStart::Scene | EnvStart::SceneDepth) {
                     let scat = self.scattering.set.params.download()?;
-                    let (env, info) = scene_env_map(&self.ctx, &scat, sh, &self.background, &means, rc.env_res, self.cfg.adam_eps)?;
+                    let depth = rc.env_init == EnvStart::SceneDepth;
+                    let (env, info) = scene_env_map(&self.ctx, &scat, sh, &self.background, &means, rc.env_res, self.cfg.adam_eps, depth)?;
                     d.env_from = Some(info);
+                    // The depth map's proxy: at the centre it was rendered from.
+                    d.env_proxy = env.proxy.map(|p| EnvProxy::packed(Some(p)));
                     env
                 } else {
                     HostEnvMap::constant(rc.env_res, 0.0)?

@@ -19,7 +19,16 @@ pub struct HostEnvMap {
     pub raw: Vec<f32>,
     /// Where the map's light comes from ([`EnvProxy`]); `None`: infinitely far.
     pub proxy: Option<EnvProxy>,
+    /// With a proxy: the distance from its centre to the scene along each
+    /// texel's direction (6 res^2 values, texel order), which replaces the
+    /// proxy's one radius per lookup direction ([`DEPTH_ITERS`] refinements;
+    /// glsl/reflection/color_common.glsl `env_dir`). Frozen: no gradient.
+    pub depth: Option<Vec<f32>>,
 }
+
+/// Refinements of a depth-mapped lookup: the radius from the depth in the
+/// direction found so far, starting from the mirror direction's own.
+pub const DEPTH_ITERS: u32 = 4;
 
 /// A parallax proxy: the map holds the light of a sphere of `radius`
 /// around `centre` (world space), so a reflection from a point p in
@@ -44,7 +53,7 @@ impl HostEnvMap {
     /// method-notes §3.7).
     pub fn constant(res: u32, raw: f32) -> Result<HostEnvMap> {
         check_res(res)?;
-        Ok(HostEnvMap { res, raw: vec![raw; texels(res) * 3], proxy: None })
+        Ok(HostEnvMap { res, raw: vec![raw; texels(res) * 3], proxy: None, depth: None })
     }
 
     pub fn texels(&self) -> usize {
@@ -62,6 +71,17 @@ impl HostEnvMap {
         if let Some(p) = self.proxy {
             if !(p.radius > 0.0 && p.radius.is_finite() && p.centre.iter().all(|c| c.is_finite())) {
                 bail!("environment map proxy {p:?}: the radius must be positive and everything finite");
+            }
+        }
+        if let Some(d) = &self.depth {
+            if self.proxy.is_none() {
+                bail!("environment map depth without a parallax proxy (the depths are distances from its centre)");
+            }
+            if d.len() != texels(self.res) {
+                bail!("environment map depth of face size {} needs {} values, has {}", self.res, texels(self.res), d.len());
+            }
+            if let Some(i) = d.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                bail!("environment map depth {i} is {} (distances must be finite and non-negative)", d[i]);
             }
         }
         Ok(())
@@ -134,6 +154,8 @@ pub struct EnvMap {
     pub m: Buffer<f32>,
     pub v: Buffer<f32>,
     pub proxy: Option<EnvProxy>,
+    /// [`HostEnvMap::depth`] (frozen).
+    pub depth: Option<Buffer<f32>>,
 }
 
 impl EnvMap {
@@ -147,6 +169,7 @@ impl EnvMap {
             m: Buffer::new(ctx, "env.adam_m", n)?,
             v: Buffer::new(ctx, "env.adam_v", n)?,
             proxy: h.proxy,
+            depth: h.depth.as_ref().map(|d| Buffer::from_slice(ctx, "env.depth", d)).transpose()?,
         })
     }
 
@@ -163,10 +186,17 @@ impl EnvMap {
     }
 
     pub fn download(&self) -> Result<HostEnvMap> {
-        Ok(HostEnvMap { res: self.res, raw: self.params.download_range(0, self.len())?, proxy: self.proxy })
+        let depth = self.depth.as_ref().map(|d| d.download_range(0, self.texels() as usize)).transpose()?;
+        Ok(HostEnvMap { res: self.res, raw: self.params.download_range(0, self.len())?, proxy: self.proxy, depth })
     }
 
-    /// The arrays a checkpoint stores, named, in a fixed order.
+    /// Refinements the colour kernels make (0 without a depth map).
+    pub fn depth_iters(&self) -> u32 {
+        if self.depth.is_some() && self.proxy.is_some() { DEPTH_ITERS } else { 0 }
+    }
+
+    /// The arrays a checkpoint stores, named, in a fixed order (the
+    /// frozen depth, when there is one, apart: [`EnvMap::depth`]).
     pub fn arrays(&self) -> [(&'static str, &Buffer<f32>); 3] {
         [("env.param", &self.params), ("env.adam_m", &self.m), ("env.adam_v", &self.v)]
     }

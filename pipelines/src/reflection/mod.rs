@@ -15,7 +15,7 @@
 
 mod envmap;
 
-pub use envmap::{EnvMap, EnvProxy, HostEnvMap, MAX_ENV_RES};
+pub use envmap::{EnvMap, EnvProxy, HostEnvMap, DEPTH_ITERS, MAX_ENV_RES};
 
 use crate::raster::{Camera, Gaussians, Plane};
 use crate::scan::Count;
@@ -79,7 +79,8 @@ struct ColorPush {
     res: u32,
     schlick: u32,
     centre: [f32; 3],
-    pad: u32,
+    /// > 0: the proxy's radius per direction from the map's depth.
+    depth_iters: u32,
     /// The map's parallax proxy: centre, radius (0: infinitely far).
     proxy: [f32; 4],
 }
@@ -192,7 +193,12 @@ impl ReflectionShading {
     }
 
     fn color_push(g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel) -> ColorPush {
-        ColorPush { n: g.n, channels: fresnel.channels(), res: env.res, schlick: fresnel.flag(), centre: cam.centre(), pad: 0, proxy: envmap::EnvProxy::packed(env.proxy) }
+        ColorPush { n: g.n, channels: fresnel.channels(), res: env.res, schlick: fresnel.flag(), centre: cam.centre(), depth_iters: env.depth_iters(), proxy: envmap::EnvProxy::packed(env.proxy) }
+    }
+
+    /// The map's depth, or (never read without one) its texels.
+    fn depth_binding(env: &EnvMap) -> tgs_engine::BufferBinding {
+        env.depth.as_ref().unwrap_or(&env.params).binding()
     }
 
     fn check_set(g: &Gaussians, features: &Buffer<f32>, fresnel: Fresnel) -> Result<()> {
@@ -213,7 +219,7 @@ impl ReflectionShading {
             return Ok(());
         }
         let p = Self::color_push(g, env, cam, fresnel);
-        let b = [g.means.binding(), g.quats.binding(), g.features.binding(), env.params.binding(), features.binding()];
+        let b = [g.means.binding(), g.quats.binding(), g.features.binding(), env.params.binding(), features.binding(), Self::depth_binding(env)];
         rec.dispatch(&self.color, &b, bytemuck::bytes_of(&p), grid(&self.ctx, g.n))
     }
 
@@ -247,6 +253,7 @@ impl ReflectionShading {
             s.keys.binding(),
             s.slots.binding(),
             s.grads.binding(),
+            Self::depth_binding(env),
         ];
         rec.dispatch(&self.color_backward, &b, bytemuck::bytes_of(&p), grid(&self.ctx, g.n))?;
         self.record_texel_sum(rec, env, 4 * g.n, s)
