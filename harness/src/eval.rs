@@ -24,8 +24,9 @@ pub struct NormalMetrics {
     /// the reflection set's where it covers the pixel).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_scattering_deg: Option<f64>,
-    /// In Stage II: the fraction of mask pixels the reflection set covers
-    /// (alpha >= 0.5), and the normal MAE on those pixels alone.
+    /// In Stage II: the fraction of mask pixels the reflection set decides
+    /// (covers with alpha >= 0.5 and R >= `reflection.normal_min_r`:
+    /// `trainer::reflection_decides`), and the normal MAE on those pixels alone.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reflection_coverage: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -229,7 +230,8 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
         let target = v.image.planar();
         let normals = world_normals(&r, &v.camera);
         let scat_mae = r.layers.as_ref().and_then(|l| normal_mae(&world_normals(&l.0, &v.camera), v));
-        let covered = |i: usize| r.layers.as_ref().is_some_and(|l| l.1.refl_plane(Plane::Alpha)[i] >= 0.5);
+        let min_r = tr.cfg.reflection.normal_min_r;
+        let covered = |i: usize| r.layers.as_ref().is_some_and(|l| crate::train::trainer::reflection_decides(&l.1, i, min_r));
         let coverage = match (&r.layers, &v.mask) {
             (Some(_), Some(mask)) if mask.iter().any(|&m| m) => Some((0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64 / mask.iter().filter(|&&m| m).count() as f64),
             _ => None,

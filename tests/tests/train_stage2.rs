@@ -283,7 +283,18 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let (mut tr, data) = tgs::train::run::open_run(ctx, &deep).unwrap();
     let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
     assert_eq!(Some(again.psnr), md["test"]["psnr"].as_f64(), "the depth is not restored from the checkpoint");
+    // reflection.normal_min_r: at 1 no pixel's R reaches it, so the output
+    // normals are Stage I's everywhere and the set decides none of the
+    // glass; at 0 the set decides where it covers (the run's own numbers).
+    let mae = |m: &tgs::eval::Metrics| (m.normals.normal_mae_deg.unwrap(), m.normals.normal_mae_scattering_deg.unwrap(), m.normals.reflection_coverage.unwrap());
+    tr.cfg.reflection.normal_min_r = 1.0;
+    let (o1, scat, cov) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    assert!(o1 == scat && cov == 0.0, "normal_min_r = 1: output MAE {o1}, Stage I's {scat}, coverage {cov}");
+    tr.cfg.reflection.normal_min_r = 0.0;
+    let (out0, scat0, cov0) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    assert!(scat0 == scat && out0 != scat && cov0 > 0.1 && Some(cov0) == md["test"]["reflection_coverage"].as_f64(), "normal_min_r = 0: {out0} {scat0} {cov0}");
     drop(tr);
+    refused(TrainArgs { set: vec!["reflection.normal_min_r=1.5".into()], ..ad.clone() }, &["reflection.normal_min_r", "1.5"]);
     refused(TrainArgs { set: vec!["reflection.env_radius=1.5".into(), "reflection.env_init=\"scene-depth\"".into()], ..ad.clone() }, &["reflection.env_radius", "scene-depth"]);
     let _ = std::fs::remove_dir_all(&deep);
 

@@ -324,6 +324,14 @@ pub struct ReflectionConfig {
     /// falls and the pruning removes it, so that the normals there are
     /// Stage I's again.
     pub lambda_area: f32,
+    /// The output geometry (normal, depth) of a pixel is the reflection
+    /// set's where it covers the pixel (alpha >= 0.5) and its reflection
+    /// weight R = sum w r there reaches this; elsewhere Stage I's (0: where
+    /// it covers). A pixel where the reflection set adds little colour is
+    /// no evidence of a surface there, so its normals do not replace
+    /// Stage I's (issue 42, "do no harm"); `metrics.json`'s
+    /// `reflection_coverage` is the share of the glass it decides.
+    pub normal_min_r: f32,
     /// Train the scattering set's SH colour in Stage II too (its geometry
     /// and opacity stay Stage I's), against the composite, at Stage I's
     /// colour rates: the reflection term then takes over the
@@ -384,6 +392,7 @@ impl Default for ReflectionConfig {
             hf_percentile: 90.0,
             lambda_r: 0.0,
             lambda_area: 0.0,
+            normal_min_r: 0.0,
             train_scattering: false,
             reseed: false,
         }
@@ -419,6 +428,9 @@ impl ReflectionConfig {
             }
         }
         check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
+        if !(0.0..=1.0).contains(&self.normal_min_r) {
+            bail!("reflection.normal_min_r must be in [0, 1] (a reflection weight), not {}", self.normal_min_r);
+        }
         for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r), ("lambda_area", self.lambda_area)] {
             if !(v >= 0.0 && v.is_finite()) {
                 bail!("reflection.{k} must be non-negative and finite, not {v}");

@@ -581,8 +581,8 @@ impl Trainer {
     }
 
     /// Render `cam` with the current model: in Stages II and III the composite, with
-    /// the geometry planes of the reflection set where it covers a pixel
-    /// (alpha >= 0.5) and of the scattering set elsewhere, and both layers.
+    /// the geometry planes of the reflection set where it decides a pixel
+    /// ([`reflection_decides`]) and of the scattering set elsewhere, and both layers.
     pub fn render(&mut self, cam: &Camera) -> Result<Rendered> {
         let sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
         let scat = self.scattering.render(cam, sh, &self.background)?;
@@ -597,11 +597,11 @@ impl Trainer {
         };
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
-        let ra = refl.refl_plane(Plane::Alpha);
+        let decides: Vec<usize> = (0..n).filter(|&i| reflection_decides(&refl, i, self.cfg.reflection.normal_min_r)).collect();
         for p in [Plane::Alpha, Plane::Depth, Plane::Normal(0), Plane::Normal(1), Plane::Normal(2), Plane::Median, Plane::Distortion] {
             let k = p.index(3) as usize;
             let src = refl.refl_plane(p);
-            for i in (0..n).filter(|&i| ra[i] >= 0.5) {
+            for &i in &decides {
                 planes[k * n + i] = src[i];
             }
         }
@@ -612,6 +612,13 @@ impl Trainer {
     pub fn gaussians(&self) -> Result<HostGaussians> {
         self.scattering.set.params.download()
     }
+}
+
+/// Whether the reflection set decides the geometry of pixel `i` of a Stage
+/// II/III render: it covers the pixel (alpha >= 0.5) and its reflection
+/// weight R there reaches `min_r` (`reflection.normal_min_r`).
+pub fn reflection_decides(refl: &ReflRendered, i: usize, min_r: f32) -> bool {
+    refl.refl_plane(Plane::Alpha)[i] >= 0.5 && refl.r()[i] >= min_r
 }
 
 impl ReflDecision {
