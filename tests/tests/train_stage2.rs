@@ -280,6 +280,9 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let (hd, _) = checkpoint::read(&deep.join("checkpoint.bin")).unwrap();
     let names: Vec<&str> = hd.reflection.as_ref().unwrap().arrays.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(names.last(), Some(&"env.depth"), "{names:?}");
+    // The light's depth as images beside envmap.png; a map without depth writes none.
+    assert!(["envmap_depth.exr", "envmap_depth.png"].iter().all(|f| deep.join(f).is_file()), "no envmap_depth images");
+    assert!(!out.join("envmap_depth.png").exists() && out.join("envmap.png").is_file());
     let (mut tr, data) = tgs::train::run::open_run(ctx, &deep).unwrap();
     let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
     assert_eq!(Some(again.psnr), md["test"]["psnr"].as_f64(), "the depth is not restored from the checkpoint");

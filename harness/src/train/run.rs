@@ -44,7 +44,7 @@ pub const RUN_RECORD: &str = "run.json";
 /// residual maps go into directories of their own). A new run claims them
 /// all in the directory's `.tgs-written` before it starts, so a directory
 /// holding a file of these names that tgs did not write is refused.
-pub const RUN_FILES: [&str; 15] = [
+pub const RUN_FILES: [&str; 17] = [
     RUN_RECORD,
     "config.toml",
     "log.jsonl",
@@ -59,6 +59,8 @@ pub const RUN_FILES: [&str; 15] = [
     "light_field.safetensors",
     "envmap.exr",
     "envmap.png",
+    "envmap_depth.exr",
+    "envmap_depth.png",
     "metrics.json",
 ];
 
@@ -384,6 +386,15 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let img = ImageF { width: w, height: h, channels: 3, data: px.into_iter().flatten().collect() };
         write_exr(&a.out.join("envmap.exr"), &img)?;
         write_png(&a.out.join("envmap.png"), &img)?;
+        // The light's depth (env_init = "scene-depth"): distances from the
+        // box centre in the EXR, near white and far black in the PNG.
+        if let Some((w, h, d)) = env.depth_cross() {
+            write_exr(&a.out.join("envmap_depth.exr"), &ImageF { width: w, height: h, channels: 1, data: d.clone() })?;
+            let far = env.proxy.map(|p| p.radius).unwrap_or(f32::INFINITY);
+            let (lo, hi) = d.iter().filter(|v| **v > 0.0 && **v < far).fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
+            let scaled = d.iter().map(|&v| if v > 0.0 && v < far && hi > lo { 1.0 - 0.8 * (v - lo) / (hi - lo) } else { 0.0 }).collect();
+            write_png(&a.out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: scaled })?;
+        }
     }
     let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?) };
     if !last_closed {

@@ -119,15 +119,28 @@ impl HostEnvMap {
     /// ```
     /// (the layout of the usual OpenGL cube cross).
     pub fn cross(&self) -> (u32, u32, Vec<[f32; 3]>) {
+        self.cross_of(|face, row, col| self.texel_rgb(face, row, col))
+    }
+
+    /// The depth ([`HostEnvMap::depth`]) in the layout of [`HostEnvMap::cross`]
+    /// (one value per texel, 0 off the cross), when the map has one.
+    pub fn depth_cross(&self) -> Option<(u32, u32, Vec<f32>)> {
+        let d = self.depth.as_ref()?;
+        let r = self.res;
+        let (w, h, px) = self.cross_of(|face, row, col| [d[((face * r + row) * r + col) as usize]; 3]);
+        Some((w, h, px.into_iter().map(|p| p[0]).collect()))
+    }
+
+    fn cross_of<T: Copy + Default>(&self, texel: impl Fn(u32, u32, u32) -> T) -> (u32, u32, Vec<T>) {
         let r = self.res;
         let (w, h) = (4 * r, 3 * r);
-        let mut img = vec![[0f32; 3]; (w * h) as usize];
+        let mut img = vec![T::default(); (w * h) as usize];
         // (face, cell x, cell y)
         let cells = [(0u32, 2u32, 1u32), (1, 0, 1), (2, 1, 0), (3, 1, 2), (4, 1, 1), (5, 3, 1)];
         for (face, cx, cy) in cells {
             for row in 0..r {
                 for col in 0..r {
-                    img[((cy * r + row) * w + cx * r + col) as usize] = self.texel_rgb(face, row, col);
+                    img[((cy * r + row) * w + cx * r + col) as usize] = texel(face, row, col);
                 }
             }
         }
