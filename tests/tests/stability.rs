@@ -48,7 +48,6 @@ fn long_run_of_every_stage_stays_finite_and_bounded() {
     assert_eq!(lines.iter().filter(|l| l["stage"] == "III").count(), 400);
     let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
     for s in m["stages"].as_array().unwrap() {
-        eprintln!("stage {} wall {} s", s["stage"], s["wall_s"]);
         let t = &s["test"];
         assert!(t["psnr"].as_f64().unwrap() > 15.0 && t["ssim"].as_f64().unwrap().is_finite() && t["normal_mae_deg"].as_f64().unwrap().is_finite(), "{s}");
     }
