@@ -290,9 +290,7 @@ pub fn write_outputs(dir: &mut OutDir, name: &str, r: &Rendered, normals: &[[f32
     let (a, d) = (r.plane(Plane::Alpha), r.plane(Plane::Depth));
     let depth: Vec<f32> = (0..n).map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 }).collect();
     write_exr(&dir.file(&format!("{name}_depth.exr"))?, &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
-    let (lo, hi) = depth.iter().filter(|v| **v > 0.0).fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
-    let scaled = depth.iter().map(|&v| if v > 0.0 && hi > lo { 1.0 - (v - lo) / (hi - lo) } else { 0.0 }).collect();
-    write_png(&dir.file(&format!("{name}_depth.png"))?, &ImageF { width: w, height: h, channels: 1, data: scaled })?;
+    write_png(&dir.file(&format!("{name}_depth.png"))?, &ImageF { width: w, height: h, channels: 1, data: depth_grey(&depth, f32::INFINITY, 1.0) })?;
     if let Some(l) = &r.layers {
         write_layers(dir, name, &l.0, &l.1, cam)?;
     }
@@ -326,6 +324,15 @@ fn write_layers(dir: &mut OutDir, name: &str, scat: &Rendered, refl: &crate::tra
 }
 
 /// World normals as an image (n * 0.5 + 0.5; black where empty).
+/// A depth image as grey levels for a PNG: the depths in (0, `far`)
+/// mapped linearly from 1 (the nearest) to 1 - `span` (the farthest), and
+/// 0 elsewhere (no surface).
+pub fn depth_grey(depth: &[f32], far: f32, span: f32) -> Vec<f32> {
+    let keep = |v: f32| v > 0.0 && v < far;
+    let (lo, hi) = depth.iter().copied().filter(|&v| keep(v)).fold((f32::INFINITY, 0.0f32), |(l, hh), v| (l.min(v), hh.max(v)));
+    depth.iter().map(|&v| if keep(v) && hi > lo { 1.0 - span * (v - lo) / (hi - lo) } else { 0.0 }).collect()
+}
+
 fn normal_image(w: u32, h: u32, normals: &[[f32; 3]]) -> ImageF {
     ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() }
 }

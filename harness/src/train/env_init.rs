@@ -80,14 +80,20 @@ fn face_camera(eye: [f32; 3], face: u32, px: u32) -> Camera {
     Camera::look_at(eye, target, up, 2.0 * 1.5f32.atan(), px, px)
 }
 
-/// Bilinear sample (pixel centres at integer coordinates, clamped) of
-/// three colour planes.
-fn sample(planes: [&[f32]; 3], w: u32, h: u32, u: f32, v: f32) -> [f32; 3] {
+/// The bilinear footprint of (u, v) in a w x h image (pixel centres at
+/// integer coordinates, clamped): the corner pixels (x0, y0), (x1, y1) and
+/// the fractions (fx, fy).
+fn footprint(w: u32, h: u32, u: f32, v: f32) -> (u32, u32, u32, u32, f32, f32) {
     let u = u.clamp(0.0, (w - 1) as f32);
     let v = v.clamp(0.0, (h - 1) as f32);
     let (x0, y0) = (u.floor() as u32, v.floor() as u32);
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = (u - x0 as f32, v - y0 as f32);
+    (x0, y0, x1, y1, u - x0 as f32, v - y0 as f32)
+}
+
+/// Bilinear sample of three colour planes ([`footprint`]).
+fn sample(planes: [&[f32]; 3], w: u32, h: u32, u: f32, v: f32) -> [f32; 3] {
+    let (x0, y0, x1, y1, fx, fy) = footprint(w, h, u, v);
     std::array::from_fn(|c| {
         let p = planes[c];
         let at = |x: u32, y: u32| p[(y * w + x) as usize];
@@ -95,14 +101,10 @@ fn sample(planes: [&[f32]; 3], w: u32, h: u32, u: f32, v: f32) -> [f32; 3] {
     })
 }
 
-/// The median depth plane at (u, v): the bilinear blend of the taps that
-/// show a surface (median > 0), or None where none does.
+/// The median depth plane at (u, v): the bilinear blend ([`footprint`]) of
+/// the taps that show a surface (median > 0), or None where none does.
 fn sample_depth(plane: &[f32], w: u32, h: u32, u: f32, v: f32) -> Option<f32> {
-    let u = u.clamp(0.0, (w - 1) as f32);
-    let v = v.clamp(0.0, (h - 1) as f32);
-    let (x0, y0) = (u.floor() as u32, v.floor() as u32);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = (u - x0 as f32, v - y0 as f32);
+    let (x0, y0, x1, y1, fx, fy) = footprint(w, h, u, v);
     let taps = [(x0, y0, (1.0 - fx) * (1.0 - fy)), (x1, y0, fx * (1.0 - fy)), (x0, y1, (1.0 - fx) * fy), (x1, y1, fx * fy)];
     let (mut sum, mut wsum) = (0.0f32, 0.0f32);
     for (x, y, wt) in taps {
@@ -152,9 +154,11 @@ pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, backgrou
                 for (raw, v) in env.raw[3 * t..3 * t + 3].iter_mut().zip(c) {
                     *raw = logit(v.clamp(LO, 1.0 - LO));
                 }
-                // View depth z along d is at distance z |v| / v_z from the eye.
-                let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                dist[t] = sample_depth(median, px, px, u, w).map(|z| z * len / v[2]).filter(|d| d.is_finite() && *d > 0.0);
+                if depth {
+                    // View depth z along d is at distance z |v| / v_z from the eye.
+                    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    dist[t] = sample_depth(median, px, px, u, w).map(|z| z * len / v[2]).filter(|d| d.is_finite() && *d > 0.0);
+                }
             }
         }
     }

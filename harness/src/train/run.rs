@@ -390,10 +390,9 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         // box centre in the EXR, near white and far black in the PNG.
         if let Some((w, h, d)) = env.depth_cross() {
             write_exr(&a.out.join("envmap_depth.exr"), &ImageF { width: w, height: h, channels: 1, data: d.clone() })?;
+            // The farthest surface at 0.2, apart from the texels that show none.
             let far = env.proxy.map(|p| p.radius).unwrap_or(f32::INFINITY);
-            let (lo, hi) = d.iter().filter(|v| **v > 0.0 && **v < far).fold((f32::INFINITY, 0.0f32), |(l, hh), &v| (l.min(v), hh.max(v)));
-            let scaled = d.iter().map(|&v| if v > 0.0 && v < far && hi > lo { 1.0 - 0.8 * (v - lo) / (hi - lo) } else { 0.0 }).collect();
-            write_png(&a.out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: scaled })?;
+            write_png(&a.out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: crate::eval::depth_grey(&d, far, 0.8) })?;
         }
     }
     let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?) };
