@@ -21,6 +21,9 @@ use std::sync::Arc;
 use tgs_engine::Context;
 use tgs_pipelines::{HostGaussians, TrainableSet};
 
+pub use super::stages::light_field::checkpoint::LightFieldHeader;
+pub use super::stages::reflection::checkpoint::ReflHeader;
+
 const MAGIC: &[u8; 8] = b"TGSCKPT2";
 const MAGIC_V1: &[u8; 8] = b"TGSCKPT1";
 
@@ -74,85 +77,6 @@ pub struct Header {
     pub light_field: Option<LightFieldHeader>,
 }
 
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct LightFieldHeader {
-    pub n: u32,
-    /// depth, width, skip, levels_x, levels_w.
-    pub shape: [u32; 5],
-    pub centre: [f32; 3],
-    pub half_extent: [f32; 3],
-    pub threshold: f32,
-    pub schlick: bool,
-    pub decision: super::trainer::ReflDecision,
-    pub arrays: Vec<(String, usize)>,
-}
-
-const MLP_ARRAYS: [&str; 3] = ["mlp.param", "mlp.adam_m", "mlp.adam_v"];
-const ENV_ARRAYS: [&str; 3] = ["env.param", "env.adam_m", "env.adam_v"];
-/// The frozen depth of a depth-mapped cube map (env_init = "scene-depth"),
-/// after [`ENV_ARRAYS`] when the map has one.
-const ENV_DEPTH: &str = "env.depth";
-
-impl LightFieldHeader {
-    pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
-        let [depth, width, skip, levels_x, levels_w] = self.shape;
-        let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };
-        shape.validate()?;
-        Ok(shape)
-    }
-    pub fn shade(&self) -> tgs_pipelines::ShadeParams {
-        tgs_pipelines::ShadeParams { centre: self.centre, half_extent: self.half_extent, threshold: self.threshold, schlick: self.schlick }
-    }
-    /// The arrays this state must hold (the reflection set's, then the
-    /// network's parameters and Adam moments), checked against `arrays`.
-    fn check(&self, shape: &tgs_pipelines::MlpShape, arrays: &[Vec<f32>]) -> Result<()> {
-        let p = shape.params() as usize;
-        let want: Vec<(String, usize)> = refl_layout(self.n).into_iter().chain(MLP_ARRAYS.map(|n| (n.to_string(), p))).collect();
-        check_arrays(&want, &self.arrays, arrays)
-    }
-}
-
-impl ReflHeader {
-    /// The arrays this state must hold (the reflection set's, then the cube
-    /// map's texels and Adam moments), checked against `arrays`; returns the
-    /// index of the texels.
-    fn check(&self, arrays: &[Vec<f32>]) -> Result<usize> {
-        let layout = refl_layout(self.n);
-        let env_len = 18 * self.env_res as usize * self.env_res as usize;
-        let k = layout.len();
-        let mut want: Vec<(String, usize)> = layout.into_iter().chain(ENV_ARRAYS.map(|n| (n.to_string(), env_len))).collect();
-        if self.has_depth() {
-            want.push((ENV_DEPTH.to_string(), env_len / 3));
-        }
-        check_arrays(&want, &self.arrays, arrays)?;
-        Ok(k)
-    }
-
-    fn has_depth(&self) -> bool {
-        self.arrays.last().is_some_and(|(name, _)| name == ENV_DEPTH)
-    }
-
-    /// The cube map from the arrays [`ReflHeader::check`] passed (`k`: the
-    /// index of its texels).
-    fn env(&self, arrays: &[Vec<f32>], k: usize) -> tgs_pipelines::HostEnvMap {
-        let depth = self.has_depth().then(|| arrays[k + ENV_ARRAYS.len()].clone());
-        tgs_pipelines::HostEnvMap { res: self.env_res, raw: arrays[k].clone(), proxy: self.decision.proxy(), depth }
-    }
-}
-
-fn refl_layout(n: u32) -> Vec<(String, usize)> {
-    use tgs_pipelines::reflection::MATERIAL;
-    TrainableSet::layout(MATERIAL as usize).into_iter().map(|(name, w)| (format!("refl.{name}"), w * n as usize)).collect()
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ReflHeader {
-    pub n: u32,
-    pub env_res: u32,
-    pub decision: super::trainer::ReflDecision,
-    pub arrays: Vec<(String, usize)>,
-}
-
 pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Result<()> {
     let set = &tr.scattering.set;
     let n = set.len() as usize;
@@ -173,40 +97,13 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         light_field: None,
     };
     let mut header = header;
-    // (buffer, values) of the Stage II arrays.
+    // (buffer, values) of the Stage II or III arrays.
     let mut refl_arrays = Vec::new();
     if let (Some(m), Some(d)) = (&tr.reflection, &tr.decision) {
-        let mut names = Vec::new();
-        push_reflection_set(&m.set, &mut names, &mut refl_arrays);
-        for (name, buf) in m.env.arrays() {
-            names.push((name.to_string(), m.env.len()));
-            refl_arrays.push((buf, m.env.len()));
-        }
-        if let Some(d) = &m.env.depth {
-            names.push((ENV_DEPTH.to_string(), m.env.texels() as usize));
-            refl_arrays.push((d, m.env.texels() as usize));
-        }
-        header.reflection = Some(ReflHeader { n: m.set.len(), env_res: m.env.res, decision: d.clone(), arrays: names });
+        header.reflection = Some(ReflHeader::save(m, d, &mut refl_arrays));
     }
     if let (Some(m), Some(d)) = (&tr.light_field, &tr.decision) {
-        let mut names = Vec::new();
-        push_reflection_set(&m.set, &mut names, &mut refl_arrays);
-        let p = m.net.shape.params() as usize;
-        for (name, buf) in MLP_ARRAYS.iter().zip([&m.net.params, &m.net.m, &m.net.v]) {
-            names.push((name.to_string(), p));
-            refl_arrays.push((buf, p));
-        }
-        let s = m.net.shape;
-        header.light_field = Some(LightFieldHeader {
-            n: m.set.len(),
-            shape: [s.depth, s.width, s.skip, s.levels_x, s.levels_w],
-            centre: m.shade.centre,
-            half_extent: m.shade.half_extent,
-            threshold: m.shade.threshold,
-            schlick: m.shade.schlick,
-            decision: d.clone(),
-            arrays: names,
-        });
+        header.light_field = Some(LightFieldHeader::save(m, d, &mut refl_arrays));
     }
     let json = serde_json::to_vec(&header)?;
     crate::export::atomic_write_with(path, |f| {
@@ -224,16 +121,6 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         Ok(())
     })
     .context("writing the checkpoint")
-}
-
-/// The reflection set's arrays (names prefixed `refl.`, lengths) and
-/// buffers, in `TrainableSet::layout` order.
-fn push_reflection_set<'a>(set: &'a TrainableSet, names: &mut Vec<(String, usize)>, bufs: &mut Vec<(&'a tgs_engine::Buffer<f32>, usize)>) {
-    let n = set.len() as usize;
-    for (name, buf, w) in set.arrays() {
-        names.push((format!("refl.{name}"), w * n));
-        bufs.push((buf, w * n));
-    }
 }
 
 /// Read a checkpoint's header and arrays.
@@ -286,7 +173,7 @@ pub fn gaussians(h: &Header, arrays: &[Vec<f32>]) -> Result<HostGaussians> {
 }
 
 /// A host set from the first five arrays of a set's layout (parameters).
-fn host_set(channels: u32, coeffs: u32, arrays: &[Vec<f32>]) -> HostGaussians {
+pub(crate) fn host_set(channels: u32, coeffs: u32, arrays: &[Vec<f32>]) -> HostGaussians {
     HostGaussians {
         channels,
         coeffs,
@@ -300,7 +187,7 @@ fn host_set(channels: u32, coeffs: u32, arrays: &[Vec<f32>]) -> HostGaussians {
 
 /// Upload `arrays` (a set's arrays in `TrainableSet::layout` order, maybe
 /// followed by others) into `set`.
-fn upload_set(set: &TrainableSet, arrays: &[Vec<f32>]) -> Result<()> {
+pub(crate) fn upload_set(set: &TrainableSet, arrays: &[Vec<f32>]) -> Result<()> {
     for ((_, buf, _), data) in set.arrays().iter().zip(arrays) {
         if !data.is_empty() {
             buf.upload(data)?;
@@ -354,8 +241,8 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
     upload_set(&tr.scattering.set, &arrays)?;
     match (&h.reflection, &h.light_field) {
-        (Some(r), None) => restore_reflection(&mut tr, r, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?,
-        (None, Some(l)) => restore_light_field(&mut tr, l, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?,
+        (Some(r), None) => r.restore(&mut tr, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?,
+        (None, Some(l)) => l.restore(&mut tr, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?,
         (Some(_), Some(_)) => return Err(bad("both a Stage II and a Stage III state".into())),
         (None, None) if !refl_arrays.is_empty() => return Err(bad(format!("{} arrays after the scattering set without a Stage II or III header", refl_arrays.len()))),
         (None, None) => {}
@@ -367,7 +254,7 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
 }
 
 /// Every array named and sized as `want`, all finite.
-fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], arrays: &[Vec<f32>]) -> Result<()> {
+pub(crate) fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], arrays: &[Vec<f32>]) -> Result<()> {
     if want != have || arrays.len() != want.len() {
         bail!("arrays {:?} do not match the expected {:?}", have.iter().map(|a| &a.0).collect::<Vec<_>>(), want.iter().map(|a| &a.0).collect::<Vec<_>>());
     }
@@ -376,38 +263,6 @@ fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], arrays: &[Ve
             bail!("array '{name}' has {} values (expected {len}) or non-finite ones", data.len());
         }
     }
-    Ok(())
-}
-
-/// The reflection set of a Stage II or III state (its first arrays).
-fn reflection_set(tr: &Trainer, arrays: &[Vec<f32>]) -> Result<TrainableSet> {
-    let set = TrainableSet::new(&tr.context(), &host_set(tgs_pipelines::reflection::MATERIAL, 1, arrays))?;
-    upload_set(&set, arrays)?;
-    Ok(set)
-}
-
-fn restore_light_field(tr: &mut Trainer, l: &LightFieldHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
-    let shape = l.shape()?;
-    l.check(&shape, &arrays)?;
-    let k = arrays.len() - 3;
-    let set = reflection_set(tr, &arrays)?;
-    let net = super::lightfield::MlpParams::new(&tr.context(), shape, &arrays[k], &arrays[k + 1], &arrays[k + 2])?;
-    tr.light_field = Some(super::lightfield::LightFieldModel::new(&tr.context(), set, net, l.shade(), tr.cfg.adam_eps)?);
-    tr.decision = Some(l.decision.clone());
-    Ok(())
-}
-
-fn restore_reflection(tr: &mut Trainer, r: &ReflHeader, arrays: Vec<Vec<f32>>) -> Result<()> {
-    use tgs_pipelines::reflection::MATERIAL;
-    let k = r.check(&arrays)?;
-    let g = host_set(MATERIAL, 1, &arrays);
-    let env = r.env(&arrays, k);
-    let m = super::reflection::ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel.pipeline(), tr.cfg.adam_eps)?;
-    upload_set(&m.set, &arrays)?;
-    m.env.m.upload(&arrays[k + 1])?;
-    m.env.v.upload(&arrays[k + 2])?;
-    tr.reflection = Some(m);
-    tr.decision = Some(r.decision.clone());
     Ok(())
 }
 

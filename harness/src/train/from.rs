@@ -136,7 +136,7 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
     let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
     tr.iteration = if keep_two { cfg.iterations + cfg.reflection.iterations } else { cfg.iterations };
     tr.cfg = cfg;
-    tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
+    tr.schedule = super::schedule::Schedule::from_config(&tr.cfg);
     let abs = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
     let kept: &[&str] = if keep_two { &["I", "II"] } else { &["I"] };
     let records = stage_records_of(run);

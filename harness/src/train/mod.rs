@@ -1,25 +1,21 @@
-//! Training: configuration, initialisation, the stage-scheduled trainer,
-//! checkpoints, and the `tgs train` driver (progress, logs, outputs).
+//! Training: configuration, the stage-scheduled trainer, the stages (one
+//! folder each under `stages/`), checkpoints, and the `tgs train` driver
+//! (progress, logs, outputs).
 pub mod args;
 pub mod checkpoint;
 pub mod clock;
 pub mod config;
-pub mod env_init;
 pub mod from;
-pub mod init;
-pub mod knn;
-pub mod lightfield;
 pub mod rng;
 pub mod run;
-pub mod reflection;
-pub mod scattering;
-pub mod seed;
+pub mod schedule;
 pub mod settings;
+pub mod stages;
 pub mod trainer;
-pub mod view_dependence;
 
 pub use config::TrainConfig;
-pub use trainer::{Schedule, Stage, StepReport, Trainer};
+pub use schedule::{Schedule, Stage};
+pub use trainer::{StepReport, Trainer};
 
 /// A learning rate log-linear from `a` (t = 0) to `b` (t = 1), t clamped.
 pub(crate) fn log_lerp(a: f32, b: f32, t: f64) -> f64 {

@@ -15,8 +15,8 @@ use crate::data::{Dataset, LoadOptions};
 use crate::eval::{evaluate, Metrics};
 use crate::outdir::OutDir;
 use crate::export::atomic_write;
-use crate::data::image_io::{write_exr, write_png, ImageF};
-use crate::export::ply::{write_reflection_splats, write_splats};
+use crate::export::ply::write_splats;
+use super::stages::reflection::outputs::write_residual;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -193,7 +193,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         };
         let h_stage1 = h.config.iterations;
         let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
-        let total = super::trainer::Schedule::from_config(&cfg).total();
+        let total = super::schedule::Schedule::from_config(&cfg).total();
         if total < tr.iteration || cfg.iterations < tr.iteration.min(h_stage1) {
             bail!("--iterations {} ({total} in all stages): the checkpoint is already at iteration {}", cfg.iterations, tr.iteration);
         }
@@ -201,7 +201,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             bail!("iterations {}: the run finished Stage I at {h_stage1} and is in Stage II; Stage I's length cannot change now", cfg.iterations);
         }
         tr.cfg = cfg;
-        tr.schedule = super::trainer::Schedule::from_config(&tr.cfg);
+        tr.schedule = super::schedule::Schedule::from_config(&tr.cfg);
         truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
         (tr, data, dataset, identity)
     } else if let Some(run) = &a.from {
@@ -376,24 +376,10 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let train_s = clocks.train_s();
     write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
     if let Some(m) = &tr.light_field {
-        write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
-        crate::export::mlp::write(&a.out.join("light_field.safetensors"), &m.net.shape, &m.shade, &m.net.params.download()?)?;
+        m.write_outputs(&a.out)?;
     }
     if let Some(m) = &tr.reflection {
-        write_reflection_splats(&a.out.join("reflection.ply"), &m.set.params.download()?)?;
-        let env = m.env.download()?;
-        let (w, h, px) = env.cross();
-        let img = ImageF { width: w, height: h, channels: 3, data: px.into_iter().flatten().collect() };
-        write_exr(&a.out.join("envmap.exr"), &img)?;
-        write_png(&a.out.join("envmap.png"), &img)?;
-        // The light's depth (env_init = "scene-depth"): distances from the
-        // box centre in the EXR, near white and far black in the PNG.
-        if let Some((w, h, d)) = env.depth_cross() {
-            write_exr(&a.out.join("envmap_depth.exr"), &ImageF { width: w, height: h, channels: 1, data: d.clone() })?;
-            // The farthest surface at 0.2, apart from the texels that show none.
-            let far = env.proxy.map(|p| p.radius).unwrap_or(f32::INFINITY);
-            write_png(&a.out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: crate::eval::depth_grey(&d, far, 0.8) })?;
-        }
+        m.write_outputs(&a.out)?;
     }
     let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?) };
     if !last_closed {
@@ -507,50 +493,9 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
         if resumed {
             return Ok(());
         }
-        let n = (cam.width * cam.height) as usize;
-        let name = &names[i];
-        write_exr(&maps.file(&format!("{name}.exr"))?, &ImageF::from_planar(cam.width, cam.height, 3, &r[..3 * n]))?;
-        // Heat map of mean |r|: 0 black, >= 0.25 white.
-        let heat: Vec<f32> = r[3 * n..4 * n].iter().map(|v| v / 0.25).collect();
-        write_png(&maps.file(&format!("{name}.png"))?, &ImageF { width: cam.width, height: cam.height, channels: 1, data: heat })
+        write_residual(&mut maps, &names[i], cam, r)
     })?;
-    Ok(if d.run {
-        format!(
-            "Stage {}: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I{}), {} iterations",
-            if reseed { "II.2, seeded again after Stage III" } else { "II" },
-            d.residual_mean,
-            d.threshold,
-            100.0 * d.residual_fraction_over_0_05,
-            d.view_dependence,
-            d.view_dependence_threshold,
-            d.reflection_gaussians,
-            d.seeds,
-            d.copied,
-            if d.hull_empty {
-                ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's"
-            } else if d.significance_dropped {
-                ": no hull point beat chance at reflection.seed_significance, so the seeds come from the hull without that test"
-            } else {
-                ""
-            },
-            tr.cfg.reflection.iterations
-        )
-    } else if d.residual_mean < d.threshold {
-        format!(
-            "Stage II skipped: the Stage I residual {:.4} is below reflection.min_residual {:.4} ({:.1}% of pixels above 0.05): the scene shows no view-dependent energy worth a reflection set",
-            d.residual_mean,
-            d.threshold,
-            100.0 * d.residual_fraction_over_0_05
-        )
-    } else {
-        format!(
-            "Stage II skipped: the Stage I residual {:.4} barely changes with the view (view dependence {:.4} over {} surface points, below reflection.min_view_dependence {:.4}): it is Stage I misfit, not reflection",
-            d.residual_mean,
-            d.view_dependence,
-            d.view_dependence_samples,
-            d.view_dependence_threshold
-        )
-    })
+    Ok(d.message(reseed, tr.cfg.reflection.iterations))
 }
 
 /// Between Stage II and III: Stage II's record (test metrics, renders in
@@ -563,25 +508,8 @@ fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut 
         }
     }
     tr.begin_light_field()?;
-    let lf = &tr.cfg.light_field;
     let m = tr.light_field.as_ref().context("Stage III model")?;
-    let s = &m.net.shape;
-    Ok(format!(
-        "Stage {}: light field {} x {} (L {} / {}, {} parameters) on pixels with R > {}, {} iterations{}",
-        tr.next_entry().1,
-        s.depth,
-        s.width,
-        s.levels_x,
-        s.levels_w,
-        s.params(),
-        lf.threshold,
-        lf.iterations,
-        match (lf.train_scattering, lf.scattering_colour_only()) {
-            (false, _) => " (scattering set frozen)",
-            (true, true) => " (scattering colour trained, its geometry frozen)",
-            (true, false) => " (scattering set trained)",
-        }
-    ))
+    Ok(m.start_message(&tr.next_entry().1, &tr.cfg.light_field))
 }
 
 /// Drop the log lines of iterations after `iteration` (those a killed run

@@ -7,7 +7,7 @@
 //! grew when it did not) and densifies when asked. It never refers to the
 //! trainer.
 
-use super::config::TrainConfig;
+use crate::train::config::TrainConfig;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -22,7 +22,7 @@ pub struct Rendered {
     pub planes: Vec<f32>,
     /// In Stage II: the scattering render and the reflection render this
     /// image was composited from.
-    pub layers: Option<Box<(Rendered, super::reflection::ReflRendered)>>,
+    pub layers: Option<Box<(Rendered, crate::train::stages::reflection::ReflRendered)>>,
 }
 
 impl Rendered {

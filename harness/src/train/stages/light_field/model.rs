@@ -8,9 +8,9 @@
 //! I = (1 - R) S + R F Phi, L1 + D-SSIM, and the backward through all of
 //! it. Never refers to the trainer.
 
-use super::config::TrainConfig;
-use super::reflection::{PhiLayers, ReflRendered};
-use super::scattering::{ScatteringModel, StepOutput};
+use crate::train::config::TrainConfig;
+use crate::train::stages::reflection::{PhiLayers, ReflRendered};
+use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -229,7 +229,7 @@ impl LightFieldModel {
     /// The MLP's learning rate at Stage III iteration `it` (of `light_field.iterations`).
     pub fn lr(cfg: &TrainConfig, it: u32) -> f32 {
         let lf = &cfg.light_field;
-        super::log_lerp(lf.lr, lf.lr_final, it as f64 / lf.iterations.max(1) as f64) as f32
+        crate::train::log_lerp(lf.lr, lf.lr_final, it as f64 / lf.iterations.max(1) as f64) as f32
     }
 
     /// One Stage III step on one view. With the scattering set frozen (the
@@ -298,7 +298,7 @@ impl LightFieldModel {
             self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if lf.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, super::reflection::R_PLANE * n, &b.r_host)?;
+                rec.read_back(&b.frame.out, crate::train::stages::reflection::R_PLANE * n, &b.r_host)?;
             }
             match host_count {
                 Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
@@ -344,7 +344,7 @@ impl LightFieldModel {
             loss += lf.lambda_hf as f64 * self.hf_stats.values()?.2;
         }
         if lf.lambda_r > 0.0 {
-            loss += lf.lambda_r as f64 * super::mean(&b.r_host.read()?);
+            loss += lf.lambda_r as f64 * crate::train::mean(&b.r_host.read()?);
         }
         Ok(StepOutput { loss, values, densified: None, timings })
     }

@@ -7,11 +7,12 @@
 //! on the reflection set, the backward through all of it, Adam, and
 //! prune-only density control. Never refers to the trainer.
 
-use super::config::{ReflectionConfig, TrainConfig};
-use super::logit;
-use super::scattering::{ScatteringModel, StepOutput};
+use crate::train::config::TrainConfig;
+use super::config::ReflectionConfig;
+use crate::train::logit;
+use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use super::seed::{quat_for_normal, Seed};
-use super::settings::RotationGrad;
+use crate::train::settings::RotationGrad;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -332,10 +333,10 @@ impl ReflectionModel {
             loss += rc.lambda_hf as f64 * self.hf_stats.values()?.2;
         }
         if rc.lambda_r > 0.0 {
-            loss += rc.lambda_r as f64 * super::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
+            loss += rc.lambda_r as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
         }
         if rc.lambda_area > 0.0 {
-            loss += rc.lambda_area as f64 * super::mean(&self.sizes[&(cam.width, cam.height)].alpha_host.read()?);
+            loss += rc.lambda_area as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].alpha_host.read()?);
         }
 
         let mut densified = None;

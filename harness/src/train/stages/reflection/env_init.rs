@@ -18,9 +18,9 @@
 //! (the sky, the background) lie [`FAR`] times the farthest surface away,
 //! where the direction alone decides.
 
-use super::lightfield::normalization_box;
-use super::logit;
-use super::scattering::ScatteringModel;
+use crate::train::stages::light_field::normalization_box;
+use crate::train::logit;
+use crate::train::stages::scattering::ScatteringModel;
 use anyhow::{Context as _, Result};
 use std::sync::Arc;
 use tgs_engine::Context;

@@ -1,0 +1,97 @@
+//! The stages (paper §3–4) and the schedule that runs them in order: each
+//! entry a stage and its iteration count, a stage maybe run twice
+//! (`reflection.reseed`).
+
+use super::config::TrainConfig;
+
+/// Training stages (paper §3–4).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Stage {
+    /// Stage I: the scattering set alone (2DGS).
+    #[default]
+    Scattering,
+    /// Stage II: reflection set + environment map over the frozen Stage I set.
+    Reflection,
+    /// Stage III: the reflection light field MLP (reflection geometry frozen).
+    LightField,
+}
+
+impl Stage {
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Scattering => "I",
+            Stage::Reflection => "II",
+            Stage::LightField => "III",
+        }
+    }
+}
+
+/// The stage schedule: each stage with its iteration count, run in order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Schedule {
+    pub stages: Vec<(Stage, u32)>,
+}
+
+impl Schedule {
+    pub fn from_config(cfg: &TrainConfig) -> Schedule {
+        let mut stages = vec![(Stage::Scattering, cfg.iterations)];
+        if cfg.wants_reflection() {
+            stages.push((Stage::Reflection, cfg.reflection.iterations));
+        }
+        if cfg.wants_light_field() {
+            stages.push((Stage::LightField, cfg.light_field.iterations));
+            if cfg.reflection.reseed {
+                stages.push((Stage::Reflection, cfg.reflection.iterations));
+                stages.push((Stage::LightField, cfg.light_field.iterations));
+            }
+        }
+        Schedule { stages }
+    }
+    /// The index in `stages` of global iteration `it` (1-based).
+    pub fn entry_at(&self, it: u32) -> Option<usize> {
+        let mut start = 0;
+        for (i, &(_, n)) in self.stages.iter().enumerate() {
+            if it > start && it <= start + n {
+                return Some(i);
+            }
+            start += n;
+        }
+        None
+    }
+    /// Entry `i`'s round: 1, or 2 for a stage run again (reflection.reseed).
+    pub fn round(&self, i: usize) -> u32 {
+        let s = self.stages.get(i).map(|e| e.0);
+        1 + self.stages[..i.min(self.stages.len())].iter().filter(|e| Some(e.0) == s).count() as u32
+    }
+    /// Entry `i`'s name in logs and metrics: "II", or "II.2" in round 2.
+    pub fn label(&self, i: usize) -> String {
+        let name = self.stages.get(i).map(|e| e.0.name()).unwrap_or("?");
+        match self.round(i) {
+            1 => name.to_string(),
+            r => format!("{name}.{r}"),
+        }
+    }
+    /// The iterations of the entry named `label`.
+    pub fn iterations_of(&self, label: &str) -> u32 {
+        (0..self.stages.len()).find(|&i| self.label(i) == label).map(|i| self.stages[i].1).unwrap_or(0)
+    }
+    /// First global iteration of `stage` minus one (its iterations are start+1..).
+    pub fn start_of(&self, stage: Stage) -> u32 {
+        self.stages.iter().take_while(|s| s.0 != stage).map(|s| s.1).sum()
+    }
+    /// Drop the stages after `stage` (a skipped Stage II).
+    pub fn end_after(&mut self, stage: Stage) {
+        if let Some(i) = self.stages.iter().position(|s| s.0 == stage) {
+            self.stages.truncate(i + 1);
+        }
+    }
+    pub fn total(&self) -> u32 {
+        self.stages.iter().map(|s| s.1).sum()
+    }
+    /// The stage of global iteration `it` (1-based) and the iteration within it.
+    pub fn at(&self, it: u32) -> Option<(Stage, u32)> {
+        let i = self.entry_at(it)?;
+        let start: u32 = self.stages[..i].iter().map(|e| e.1).sum();
+        Some((self.stages[i].0, it - start))
+    }
+}

@@ -1,0 +1,9 @@
+//! Stage III: the reflection light field Phi(x, w), an MLP replacing Stage
+//! II's cube map, over the reflection set with its geometry frozen.
+pub mod checkpoint;
+pub mod config;
+pub mod model;
+pub mod outputs;
+mod stage;
+
+pub use model::{normalization_box, LightFieldModel, LightFieldStepInput, MlpParams};

@@ -1,0 +1,12 @@
+//! The three stages, one folder each: `scattering` (Stage I, the 2DGS
+//! scattering set), `reflection` (Stage II, the reflection set lit by a
+//! cube map) and `light_field` (Stage III, the reflection light-field MLP).
+//! Each folder holds the stage's model (`model.rs`), its settings
+//! (`config.rs`, Stages II and III; Stage I's are the top-level ones), its
+//! part of the checkpoint (`checkpoint.rs`), what it writes
+//! (`outputs.rs`) and `stage.rs`: the transition from the previous stage
+//! and one iteration as the trainer calls it. `composite.rs` is the
+//! deferred composite and its losses that Stages II and III share.
+pub mod light_field;
+pub mod reflection;
+pub mod scattering;

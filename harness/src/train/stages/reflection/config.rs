@@ -1,0 +1,262 @@
+//! Stage II's settings (`[reflection]` in TOML, `--set reflection.KEY=V`).
+
+use super::seed::SeedNormal;
+use crate::train::config::check_hf;
+use crate::train::settings::{EnvStart, ReflectionFresnel, ReflectionInit, RotationGrad};
+use anyhow::{bail, Result};
+use serde::{Deserialize, Serialize};
+
+/// Stage II: the reflection set and the environment map (method-notes §3.4, §3.7).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReflectionConfig {
+    pub iterations: u32,
+    /// "off": c = f0 E(w) (the paper's Stage II colour); "schlick": c = E(w)
+    /// and Schlick's F with the blended F0 per pixel.
+    pub fresnel: ReflectionFresnel,
+    /// Cube-map face size. The quick preset's 16 (it was 64): a finer map
+    /// memorises each training sample's colour as texel noise and leaves
+    /// test views worse; measured after Stage II, 16 against 64: +0.20 dB
+    /// on `lantern`, +0.04 `pane`, +0.01 built-in glass, +0.004 `globe`,
+    /// and after Stage III within 0.006 dB (perf/RESULTS.md, eighteenth
+    /// session). The paper preset keeps the issue's 128.
+    pub env_res: u32,
+    /// How the cube map starts: "grey" (every texel sigmoid 0.5,
+    /// method-notes §3.7) or "scene" (the scattering set rendered from the
+    /// reflection set's box, train/env_init.rs). Measured (perf/RESULTS.md,
+    /// quick preset): "scene" gains after Stage II on `lantern` (+0.21 dB)
+    /// and moves the normals no more than grey; after Stage III the two
+    /// starts end within 0.002 dB on three scenes: grey stays.
+    /// "scene-depth": "scene" with the distance to the surface each texel
+    /// shows, the lookup's parallax proxy per direction (each surfel's ray
+    /// meets the scene where it would; env_init.rs).
+    pub env_init: EnvStart,
+    /// Where the cube map's light is: 0, infinitely far (the paper's map);
+    /// r > 0, on a sphere around the reflection set's box centre of radius
+    /// r x the mean distance from that centre to the training cameras, so
+    /// a reflection looks up the direction to where its ray leaves that
+    /// sphere (a parallax-corrected, local cube map; glsl/reflection/
+    /// color_common.glsl `env_dir`). Near-field content then lands where
+    /// each surfel sees it, not where the centre would.
+    pub env_radius: f32,
+    pub lr_env: f32,
+    pub lr_f0: f32,
+    pub lr_r: f32,
+    /// Opacity of the reflection set. R = sum w r lets opacity and r trade
+    /// off; at Stage I's opacity rate (10x lr_r) opacity would do all of
+    /// it and prune the glass away, so it moves at r's pace.
+    pub lr_opacity: f32,
+    /// Rotation (normal) and log-scales of the reflection set. Measured on
+    /// the built-in glass scene (perf/RESULTS.md): at Stage I's rates
+    /// (1e-3, 5e-3) the colour gradient of a distant cube map fitting
+    /// near-field reflections bends the seeded normals (glass MAE 42 -> 46
+    /// degrees over 1,000 iterations) without a PSNR gain; scales frozen
+    /// and rotations at a tenth keep them.
+    pub lr_quats: f32,
+    pub lr_scales: f32,
+    /// What turns the surfels ("all" or "reflection": the reflected colour
+    /// alone, the rasterizer's rotation gradient dropped; settings.rs).
+    pub rotation_grad: RotationGrad,
+    /// Initial f0 (all channels) and reflectivity r of every reflection
+    /// Gaussian. With the paper's c = f0 E the reflection term is R f0 E:
+    /// at f0 = 0.04, r = 0.01 (method-notes' first guess) it starts at 4e-4
+    /// and r hardly moves in 1,000 iterations; f0 = 0.5, r = 0.1 (its
+    /// fallback) lets Stage II show reflections (PSNR +0.15 dB, measured).
+    pub f0_init: f32,
+    pub r_init: f32,
+    /// Normal consistency on the reflection set.
+    pub lambda_normal: f32,
+    /// Prune reflection Gaussians below `prune_opacity` every this many iterations (0: never).
+    pub prune_interval: u32,
+    /// Stage II runs only when the Stage I residual's mean magnitude
+    /// (mean over training views and pixels of mean_c |I_gt - I_scat|)
+    /// reaches this.
+    pub min_residual: f32,
+    /// ... and only when the residual changes with the view: the median
+    /// over Stage I surface points of the spread of the signed residual
+    /// across the views that see the point (train/view_dependence.rs)
+    /// reaches this.
+    pub min_view_dependence: f32,
+    /// How the reflection set starts (method-notes §3.4): "copy" = the whole
+    /// converged Stage I set (the paper's words); "hull" = seeds on the
+    /// residual hull (train/seed.rs) only; "copy+hull" = both. Measured on
+    /// the glass scene: the copy sits behind the glass (normal MAE 70.7
+    /// degrees after Stage II vs Stage I's 63.1); the seeds start at 43.
+    pub init: ReflectionInit,
+    /// Residual hull: rays cast (at most one seed each) and the fraction of
+    /// the views seeing a point that must see residual there.
+    pub seed_rays: u32,
+    pub seed_agree: f32,
+    /// Residual hull: a point also needs more agreeing views than masks
+    /// placed at random would give it this often (binomial tail at the
+    /// masks' mean coverage; 1: no test; train/seed.rs `min_hits`). Where
+    /// path-tracing noise and textures put residual on 60% of the pixels,
+    /// a point near the cameras that ten views see agrees by chance and
+    /// seeds in front of the glass. Measured after Stage II (perf/RESULTS.md,
+    /// twenty-first session), 1 -> 1e-6: share of the reflection set within
+    /// a tenth of the radius of the glass 0.4% -> 10% on `globe` (1e-10:
+    /// 56%, but fewer and worse normals after Stage II), test PSNR +0.01 to
+    /// +0.15 dB on four scenes, glass normal MAE where the set covers the
+    /// glass lower on three (`globe` 39.7 -> 35.1 degrees, `lantern` 45.4
+    /// -> 42.8, `pane` 49.5 -> 48.4; built-in glass 40.1 -> 40.3), with
+    /// less coverage on `lantern` and `pane`.
+    pub seed_significance: f32,
+    /// A seed's normal: "view" (towards the camera whose ray found it) or
+    /// "plane" (the plane of its neighbouring seeds). Measured after Stage
+    /// II (perf/RESULTS.md, quick preset), glass normal MAE plane -> view:
+    /// built-in glass 45.1 -> 40.2 degrees, `lantern` 60.7 -> 47.7, `pane`
+    /// 65.8 -> 46.4, test PSNR within 0.03 dB: a real residual's hull
+    /// places seeds with depth noise that turns their plane nearly random.
+    /// "gradient": against the gradient of the views' blurred residual
+    /// masks summed at the seed's projections (the silhouette cones'
+    /// normal; train/seed.rs). Measured after Stage II, view -> gradient:
+    /// built-in glass 40.2 -> 31.8 degrees (0.50x Stage I's 64.1), but
+    /// `lantern` 47.8 -> 51.1, where the residual is noisy rather than an
+    /// outline of the glass: an option for glass objects seen whole from
+    /// around them, not the default. With `seed_significance` 1e-6 (twenty-
+    /// first session), view -> gradient: built-in glass 40.3 -> 30.7
+    /// (0.48x), path-traced `globe` 35.1 -> 20.5 (0.34x), but `lantern`
+    /// 49.1 -> 64.0 and the flat `pane` 55.6 -> 63.4 (its silhouette
+    /// cones' normal lies in the pane's plane).
+    pub seed_normal: SeedNormal,
+    /// Initial opacity of a seed.
+    pub seed_opacity: f32,
+    /// High-frequency loss (method-notes §3.6): weight of the mean error of
+    /// the pixels at or above the `hf_percentile`-th percentile (0: off).
+    pub lambda_hf: f32,
+    pub hf_percentile: f32,
+    /// Weight of a penalty on the mean of R = sum w r over the pixels
+    /// (0: off), which pulls r down where the reflection term buys little.
+    /// Off by default: the reflection set covers most pixels off the glass,
+    /// where R (I_refl - I_scat) corrects Stage I's misfit; at 1 (both
+    /// stages) the built-in glass lost 0.13 dB after Stage III while Phi's
+    /// share of pixels fell from 94% to 48% (perf/RESULTS.md).
+    pub lambda_r: f32,
+    /// Weight of a cost on the area the reflection set covers: a penalty
+    /// on the mean of its alpha over the pixels (0: off). A reflection
+    /// surfel then stays only where the colour it adds lowers the image
+    /// loss by more than this per pixel it covers; elsewhere its opacity
+    /// falls and the pruning removes it, so that the normals there are
+    /// Stage I's again.
+    pub lambda_area: f32,
+    /// The output geometry (normal, depth) of a pixel is the reflection
+    /// set's where it covers the pixel (alpha >= 0.5) and its reflection
+    /// weight R = sum w r there reaches this; elsewhere Stage I's (0: where
+    /// it covers). A pixel where the reflection set adds little colour is
+    /// no evidence of a surface there, so its normals do not replace
+    /// Stage I's (issue 42, "do no harm"); `metrics.json`'s
+    /// `reflection_coverage` is the share of the glass it decides.
+    pub normal_min_r: f32,
+    /// Train the scattering set's SH colour in Stage II too (its geometry
+    /// and opacity stay Stage I's), against the composite, at Stage I's
+    /// colour rates: the reflection term then takes over the
+    /// view-dependent colour Stage I baked into the scattering set.
+    pub train_scattering: bool,
+    /// After Stage III, run Stages II and III once more ("II.2", "III.2"),
+    /// Stage II seeded afresh from the residual of the scattering set as
+    /// Stage III left it: with its colour trained against the composite
+    /// (light_field.scattering_params = "colour"), that set no longer holds
+    /// the reflections Stage I baked into it, so the residual shows the
+    /// glass more cleanly. Needs Stage III; doubles Stages II and III.
+    pub reseed: bool,
+}
+
+impl Default for ReflectionConfig {
+    fn default() -> Self {
+        ReflectionConfig {
+            iterations: 10_000,
+            fresnel: ReflectionFresnel::Off,
+            env_res: 128,
+            env_init: EnvStart::Grey,
+            env_radius: 0.0,
+            lr_env: 0.01,
+            lr_f0: 0.0075,
+            lr_r: 0.005,
+            lr_opacity: 0.005,
+            lr_quats: 0.0001,
+            lr_scales: 0.0,
+            rotation_grad: RotationGrad::All,
+            f0_init: 0.5,
+            r_init: 0.1,
+            lambda_normal: 0.05,
+            prune_interval: 100,
+            // Measured (lavapipe, quick preset): converged glass 0.0118,
+            // diffuse spheres-128 0.0041 (0.0094 with the sixth session's
+            // defaults, and 0.0146 / 0.0273 on the path-traced `diffuse`:
+            // this gate only stops scenes Stage I fits outright; the view
+            // dependence below is the test that tells misfit from reflection).
+            min_residual: 0.007,
+            // Measured (lavapipe, quick preset, median spread): diffuse
+            // scenes spheres-128 0.0042, Mitsuba `diffuse` 0.0068 (50²) and
+            // 0.0046 (100²); glass scenes `pane` 0.0108 / 0.0096, built-in
+            // glass 0.0120, `lantern` 0.0142, `globe` 0.0145, glass-tiny
+            // 0.047. With the twentieth session's far-field init (a better
+            // Stage I, so less misfit everywhere) `diffuse` 0.0061 and
+            // `pane` 0.0082 / 0.0085 (two seeds), `lantern` 0.0140, `globe`
+            // 0.0115: the geometric mean of the closest pair, 0.007, leaves
+            // ~1.16x on both sides (the residual mean alone does not separate
+            // them: `diffuse` 0.0146 at 50², 0.0273 at 100²).
+            min_view_dependence: 0.007,
+            init: ReflectionInit::Hull,
+            seed_rays: 8192,
+            seed_agree: 0.9,
+            seed_significance: 1e-6,
+            seed_normal: SeedNormal::View,
+            seed_opacity: 0.5,
+            lambda_hf: 0.1,
+            hf_percentile: 90.0,
+            lambda_r: 0.0,
+            lambda_area: 0.0,
+            normal_min_r: 0.0,
+            train_scattering: false,
+            reseed: false,
+        }
+    }
+}
+
+impl ReflectionConfig {
+    pub(crate) fn validate(&self) -> Result<()> {
+        if !(self.env_radius >= 0.0 && self.env_radius <= 1e6) {
+            bail!("reflection.env_radius must be 0 (light infinitely far) or a positive multiple of the camera distance up to 1e6, not {}", self.env_radius);
+        }
+        if self.env_radius > 0.0 && self.env_init == EnvStart::SceneDepth {
+            bail!("reflection.env_radius = {} puts the light on one sphere, and reflection.env_init = \"scene-depth\" at the scene's depth per direction: set one of them", self.env_radius);
+        }
+        if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
+            bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);
+        }
+        if !(self.seed_significance > 0.0 && self.seed_significance <= 1.0) {
+            bail!("reflection.seed_significance must be in (0, 1], not {}", self.seed_significance);
+        }
+        if !(self.seed_opacity > 0.0 && self.seed_opacity < 1.0) {
+            bail!("reflection.seed_opacity must be in (0, 1), not {}", self.seed_opacity);
+        }
+        if self.iterations == 0 {
+            bail!("reflection.iterations must be at least 1 (leave Stage II out with stages = \"I\")");
+        }
+        if self.env_res == 0 || self.env_res > tgs_pipelines::reflection::MAX_ENV_RES {
+            bail!("reflection.env_res must be 1..={}, not {}", tgs_pipelines::reflection::MAX_ENV_RES, self.env_res);
+        }
+        for (k, v) in [("f0_init", self.f0_init), ("r_init", self.r_init)] {
+            if !(v > 0.0 && v < 1.0) {
+                bail!("reflection.{k} must be in (0, 1), not {v}");
+            }
+        }
+        check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
+        if !(0.0..=1.0).contains(&self.normal_min_r) {
+            bail!("reflection.normal_min_r must be in [0, 1] (a reflection weight), not {}", self.normal_min_r);
+        }
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r), ("lambda_area", self.lambda_area)] {
+            if !(v >= 0.0 && v.is_finite()) {
+                bail!("reflection.{k} must be non-negative and finite, not {v}");
+            }
+        }
+        // Thresholds may be infinite (never run Stage II), not NaN.
+        for (k, v) in [("min_residual", self.min_residual), ("min_view_dependence", self.min_view_dependence)] {
+            if !(v >= 0.0) {
+                bail!("reflection.{k} must be non-negative, not {v}");
+            }
+        }
+        Ok(())
+    }
+}

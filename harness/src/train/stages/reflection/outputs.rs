@@ -1,0 +1,89 @@
+//! What Stage II writes: the Stage I residual maps it was decided on
+//! (`residual/NAME.exr`, and a heat map `NAME.png`), the message that
+//! reports the decision, and at the end of a run that stops in Stage II
+//! the reflection set (`reflection.ply`) and its light (`envmap.exr` /
+//! `.png`, with `envmap_depth.exr` / `.png` for a depth-mapped light).
+
+use super::{ReflDecision, ReflectionModel};
+use crate::data::image_io::{write_exr, write_png, ImageF};
+use crate::export::ply::write_reflection_splats;
+use crate::outdir::OutDir;
+use anyhow::Result;
+use std::path::Path;
+use tgs_pipelines::Camera;
+
+/// One training view's residual planes `r` (r, g, b, then mean |r|) into
+/// `maps`: the signed residual as EXR, its magnitude as a heat map.
+pub(crate) fn write_residual(maps: &mut OutDir, name: &str, cam: &Camera, r: &[f32]) -> Result<()> {
+    let n = (cam.width * cam.height) as usize;
+    write_exr(&maps.file(&format!("{name}.exr"))?, &ImageF::from_planar(cam.width, cam.height, 3, &r[..3 * n]))?;
+    // Heat map of mean |r|: 0 black, >= 0.25 white.
+    let heat: Vec<f32> = r[3 * n..4 * n].iter().map(|v| v / 0.25).collect();
+    write_png(&maps.file(&format!("{name}.png"))?, &ImageF { width: cam.width, height: cam.height, channels: 1, data: heat })
+}
+
+impl ReflDecision {
+    /// What was measured and decided, for the progress output (`reseed`:
+    /// the second round, after Stage III; `iterations`: Stage II's).
+    pub fn message(&self, reseed: bool, iterations: u32) -> String {
+        let d = self;
+        if d.run {
+            format!(
+                "Stage {}: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I{}), {} iterations",
+                if reseed { "II.2, seeded again after Stage III" } else { "II" },
+                d.residual_mean,
+                d.threshold,
+                100.0 * d.residual_fraction_over_0_05,
+                d.view_dependence,
+                d.view_dependence_threshold,
+                d.reflection_gaussians,
+                d.seeds,
+                d.copied,
+                if d.hull_empty {
+                    ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's"
+                } else if d.significance_dropped {
+                    ": no hull point beat chance at reflection.seed_significance, so the seeds come from the hull without that test"
+                } else {
+                    ""
+                },
+                iterations
+            )
+        } else if d.residual_mean < d.threshold {
+            format!(
+                "Stage II skipped: the Stage I residual {:.4} is below reflection.min_residual {:.4} ({:.1}% of pixels above 0.05): the scene shows no view-dependent energy worth a reflection set",
+                d.residual_mean,
+                d.threshold,
+                100.0 * d.residual_fraction_over_0_05
+            )
+        } else {
+            format!(
+                "Stage II skipped: the Stage I residual {:.4} barely changes with the view (view dependence {:.4} over {} surface points, below reflection.min_view_dependence {:.4}): it is Stage I misfit, not reflection",
+                d.residual_mean,
+                d.view_dependence,
+                d.view_dependence_samples,
+                d.view_dependence_threshold
+            )
+        }
+    }
+}
+
+impl ReflectionModel {
+    /// The reflection set and its light into the run directory `out`.
+    pub fn write_outputs(&self, out: &Path) -> Result<()> {
+        write_reflection_splats(&out.join("reflection.ply"), &self.set.params.download()?)?;
+        let env = self.env.download()?;
+        let (w, h, px) = env.cross();
+        let img = ImageF { width: w, height: h, channels: 3, data: px.into_iter().flatten().collect() };
+        write_exr(&out.join("envmap.exr"), &img)?;
+        write_png(&out.join("envmap.png"), &img)?;
+        // The light's depth (env_init = "scene-depth"): distances from the
+        // box centre in the EXR, near white and far black in the PNG.
+        if let Some((w, h, d)) = env.depth_cross() {
+            write_exr(&out.join("envmap_depth.exr"), &ImageF { width: w, height: h, channels: 1, data: d.clone() })?;
+            // The farthest surface at 0.2, apart from the texels that show none.
+            let far = env.proxy.map(|p| p.radius).unwrap_or(f32::INFINITY);
+            write_png(&out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: crate::eval::depth_grey(&d, far, 0.8) })?;
+        }
+        Ok(())
+    }
+}
