@@ -7,6 +7,7 @@
 //! (`outputs.rs`) and `stage.rs`: the transition from the previous stage
 //! and one iteration as the trainer calls it. `composite.rs` is the
 //! deferred composite and its losses that Stages II and III share.
+pub mod composite;
 pub mod light_field;
 pub mod reflection;
 pub mod scattering;

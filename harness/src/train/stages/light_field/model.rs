@@ -9,6 +9,7 @@
 //! it. Never refers to the trainer.
 
 use crate::train::config::TrainConfig;
+use crate::train::stages::composite::{CompositeLoss, HfSetting};
 use crate::train::stages::reflection::{PhiLayers, ReflRendered};
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
@@ -18,7 +19,7 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
-use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, HfLoss, HfStats, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -80,9 +81,7 @@ pub struct LightFieldModel {
     raster: Rasterizer,
     shading: LightFieldShading,
     mlp: Mlp,
-    loss: ImageLoss,
-    hf: HfLoss,
-    hf_stats: HfStats,
+    objective: CompositeLoss,
     adam: Adam,
     /// The reflection set (geometry frozen, material trained).
     pub set: TrainableSet,
@@ -134,14 +133,11 @@ impl LightFieldModel {
     pub fn new(ctx: &Arc<Context>, set: TrainableSet, net: MlpParams, shade: ShadeParams, adam_eps: f32) -> Result<LightFieldModel> {
         let n = set.len().max(1) as usize;
         let ch = CHANNELS as usize;
-        let hf = HfLoss::new(ctx)?;
         Ok(LightFieldModel {
-            hf_stats: hf.stats()?,
-            hf,
             raster: Rasterizer::new(ctx, CHANNELS, Features::Plain)?,
             shading: LightFieldShading::new(ctx)?,
             mlp: Mlp::new(ctx)?,
-            loss: ImageLoss::new(ctx)?,
+            objective: CompositeLoss::new(ctx)?,
             adam: Adam::new(ctx, adam_eps)?,
             set,
             net,
@@ -180,7 +176,7 @@ impl LightFieldModel {
             let vb = ViewBuffers {
                 frame,
                 samples: self.shading.sample_scratch(w, h)?,
-                loss: self.loss.scratch(w, h, 3)?,
+                loss: self.objective.scratch(w, h)?,
                 loss_in: Buffer::new(&self.ctx, "lf.loss_in", planes)?,
                 loss_grad: Buffer::new(&self.ctx, "lf.loss_grad", planes)?,
                 r_host: Readback::new(&self.ctx, "lf.r_host", (w * h) as usize)?,
@@ -282,17 +278,13 @@ impl LightFieldModel {
             let sc = rec.begin_scope("lf.composite");
             self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
             rec.end_scope(sc);
-            self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
-            if lf.lambda_hf > 0.0 {
-                let sc = rec.begin_scope("loss.hf");
-                self.hf.record(&mut rec, &b.loss_in, x.target, pixels, lf.hf_percentile / 100.0, lf.lambda_hf, &b.loss_grad, &self.hf_stats)?;
-                rec.end_scope(sc);
-            }
+            let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
+            self.objective.record(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, hf, &mut b.loss)?;
             let sc = rec.begin_scope("lf.composite_backward");
             if let Some(g) = scat_grad {
                 // The composite writes the colour planes; the scattering
                 // geometry planes get no gradient in Stage III.
-                rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
+                CompositeLoss::clear_scattering_geometry(&mut rec, g, n)?;
             }
             let r_prior = CompositePriors::of_means(lf.lambda_r, 0.0, pixels).r;
             self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
@@ -339,10 +331,7 @@ impl LightFieldModel {
         self.evaluated.1 += (cam.width * cam.height) as u64;
         let b = &self.sizes[&(cam.width, cam.height)];
         let values = b.loss.values()?;
-        let mut loss = values.photometric(cfg.lambda_ssim as f64);
-        if lf.lambda_hf > 0.0 {
-            loss += lf.lambda_hf as f64 * self.hf_stats.values()?.2;
-        }
+        let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile })?;
         if lf.lambda_r > 0.0 {
             loss += lf.lambda_r as f64 * crate::train::mean(&b.r_host.read()?);
         }

@@ -8,6 +8,7 @@
 //! prune-only density control. Never refers to the trainer.
 
 use crate::train::config::TrainConfig;
+use crate::train::stages::composite::{CompositeLoss, HfSetting};
 use super::config::ReflectionConfig;
 use crate::train::logit;
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
@@ -19,7 +20,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::reflection::{TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HfLoss, HfStats, HostEnvMap, HostGaussians, ImageLoss, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
+    Adam, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -123,9 +124,7 @@ pub struct ReflectionModel {
     ctx: Arc<Context>,
     raster: Rasterizer,
     shading: ReflectionShading,
-    loss: ImageLoss,
-    hf: HfLoss,
-    hf_stats: HfStats,
+    objective: CompositeLoss,
     adam: Adam,
     densifier: Densifier,
     pub fresnel: Fresnel,
@@ -170,12 +169,9 @@ impl ReflectionModel {
         let env = EnvMap::upload(ctx, env)?;
         let n = set.len().max(1);
         let ch = fresnel.channels() as usize;
-        let hf = HfLoss::new(ctx)?;
         Ok(ReflectionModel {
             raster: Rasterizer::new(ctx, fresnel.channels(), Features::Plain)?,
-            loss: ImageLoss::new(ctx)?,
-            hf_stats: hf.stats()?,
-            hf,
+            objective: CompositeLoss::new(ctx)?,
             adam: Adam::new(ctx, adam_eps)?,
             densifier: Densifier::new(ctx)?,
             texels: shading.texel_scratch(&env, n as u32)?,
@@ -202,7 +198,7 @@ impl ReflectionModel {
             let planes = (Plane::count(3) * w * h) as usize;
             let vb = ViewBuffers {
                 frame,
-                loss: self.loss.scratch(w, h, 3)?,
+                loss: self.objective.scratch(w, h)?,
                 loss_in: Buffer::new(&self.ctx, "refl.loss_in", planes)?,
                 loss_grad: Buffer::new(&self.ctx, "refl.loss_grad", planes)?,
                 r_host: Readback::new(&self.ctx, "refl.r_host", (w * h) as usize)?,
@@ -279,17 +275,13 @@ impl ReflectionModel {
             let sc = rec.begin_scope("refl.composite");
             self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
             rec.end_scope(sc);
-            self.loss.record_planes(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, &mut b.loss)?;
-            if rc.lambda_hf > 0.0 {
-                let sc = rec.begin_scope("loss.hf");
-                self.hf.record(&mut rec, &b.loss_in, x.target, pixels, rc.hf_percentile / 100.0, rc.lambda_hf, &b.loss_grad, &self.hf_stats)?;
-                rec.end_scope(sc);
-            }
+            let hf = HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile };
+            self.objective.record(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, hf, &mut b.loss)?;
             let sc = rec.begin_scope("refl.composite_backward");
             if let Some(g) = scat_grad {
                 // The composite writes the colour planes; the scattering
                 // geometry planes get no gradient.
-                rec.fill(&g.slice(3 * n, g.len() - 3 * n), 0)?;
+                CompositeLoss::clear_scattering_geometry(&mut rec, g, n)?;
             }
             let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, pixels);
             self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, prior)?;
@@ -328,10 +320,7 @@ impl ReflectionModel {
             }
         };
         let timings = pre.into_iter().chain(timings).collect();
-        let mut loss = values.photometric(cfg.lambda_ssim as f64) + if weights.normal != 0.0 { weights.normal as f64 * values.normal } else { 0.0 };
-        if rc.lambda_hf > 0.0 {
-            loss += rc.lambda_hf as f64 * self.hf_stats.values()?.2;
-        }
+        let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile })?;
         if rc.lambda_r > 0.0 {
             loss += rc.lambda_r as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
         }
