@@ -13,10 +13,12 @@ pub(crate) const WG: u32 = 256;
 
 pub mod scan;
 pub mod sort;
+pub mod rng;
 pub mod util;
 
 pub use scan::{Count, PrefixSum, ScanScratch};
 pub use sort::{RadixSort, SortConfig, SortScratch};
+pub use rng::Rng;
 pub use util::Iota;
 pub mod raster;
 pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, RasterKernels, Rasterizer, RecordAccess, GATE_SLOTS};

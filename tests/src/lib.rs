@@ -44,11 +44,10 @@ pub struct Rng(pub u64);
 
 impl Rng {
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        let mut r = tgs_pipelines::Rng(self.0);
+        let v = r.next_u64();
+        self.0 = r.0;
+        v
     }
     pub fn next_u32(&mut self) -> u32 {
         (self.next_u64() >> 32) as u32

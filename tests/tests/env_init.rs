@@ -4,9 +4,9 @@
 //! inside the box that the map must leave out, and the distance to each
 //! wall the map's depth records.
 
-use tgs::train::env_init::{outside_box, scene_env_map};
-use tgs::train::init::SH_C0;
-use tgs::train::seed::quat_for_normal;
+use tgs::train::stages::reflection::env_init::{outside_box, scene_env_map};
+use tgs::train::stages::scattering::init::SH_C0;
+use tgs::train::stages::reflection::seed::quat_for_normal;
 use tgs_pipelines::{HostEnvMap, HostGaussians};
 use tgs_tests::reflection_ref as rr;
 use tgs_tests::{check_validation, ctx_shared};

@@ -3,9 +3,9 @@
 //! and the neighbour distances that size the initial Gaussians
 //! (harness/src/train/knn.rs).
 
-use tgs::train::init::{far_points, random_points};
-use tgs::train::knn::knn3_mean_sq;
-use tgs::train::rng::Rng;
+use tgs::train::stages::scattering::init::{far_points, random_points};
+use tgs::train::stages::scattering::knn::knn3_mean_sq;
+use tgs_pipelines::Rng;
 use tgs_pipelines::Camera;
 use tgs_tests::raster_util::bits;
 

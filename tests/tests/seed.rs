@@ -6,7 +6,7 @@
 //! radial normals; no residual gives no seeds, and neither does residual
 //! over every view (glass that fills the frame: nothing is carved).
 
-use tgs::train::seed::{hull_seeding, jacobi_eigen, min_hits, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView};
+use tgs::train::stages::reflection::seed::{hull_seeding, jacobi_eigen, min_hits, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView};
 use tgs_pipelines::Camera;
 use tgs_tests::raster_util::splat_normal;
 use tgs_tests::{seed, Rng};

@@ -11,8 +11,8 @@
 //! pulling R down.
 
 use std::sync::Arc;
-use tgs::train::reflection::{ReflStepInput, ReflectionModel};
-use tgs::train::seed::quat_for_normal;
+use tgs::train::stages::reflection::{ReflStepInput, ReflectionModel};
+use tgs::train::stages::reflection::seed::quat_for_normal;
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Context, Recorder};
 use tgs_pipelines::{Camera, EnvMap, Features, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, Rasterizer, ReflectionShading};

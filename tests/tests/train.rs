@@ -8,7 +8,7 @@ use std::sync::Mutex;
 use tgs::data::{Dataset, LoadOptions};
 use tgs::train::checkpoint;
 use tgs::train::config::{paper_schedule_note, ReflectionConfig};
-use tgs::train::seed::SeedNormal;
+use tgs::train::stages::reflection::seed::SeedNormal;
 use tgs::train::TrainConfig;
 use tgs::train::run::{request_stop, train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};

@@ -7,11 +7,11 @@
 //! must change nothing before the host grows the frame and runs the step
 //! again.
 
-use tgs::train::init::{gaussians_from_points, random_points};
-use tgs::train::lightfield::{LightFieldModel, LightFieldStepInput};
-use tgs::train::reflection::{ReflStepInput, ReflectionModel};
-use tgs::train::rng::Rng;
-use tgs::train::scattering::{ScatteringModel, StepInput};
+use tgs::train::stages::scattering::init::{gaussians_from_points, random_points};
+use tgs::train::stages::light_field::{LightFieldModel, LightFieldStepInput};
+use tgs::train::stages::reflection::{ReflStepInput, ReflectionModel};
+use tgs_pipelines::Rng;
+use tgs::train::stages::scattering::{ScatteringModel, StepInput};
 use tgs::train::config::LightFieldConfig;
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Recorder};

@@ -4,7 +4,7 @@
 //! surface point only (Stage I misfit), on the view only (reflection), or
 //! come from an occluded view.
 
-use tgs::train::view_dependence::{view_dependence, VdMap};
+use tgs::train::stages::reflection::view_dependence::{view_dependence, VdMap};
 use tgs_pipelines::Camera;
 
 fn ring(n: usize, radius: f32, height: f32, w: u32, h: u32) -> Vec<Camera> {

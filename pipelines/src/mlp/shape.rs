@@ -104,14 +104,8 @@ impl MlpShape {
     /// a = sqrt(5): weights and biases U(-1/sqrt(fan_in), 1/sqrt(fan_in))),
     /// from a SplitMix64 stream seeded with `seed`.
     pub fn init_params(&self, seed: u64) -> Vec<f32> {
-        let mut state = seed;
-        let mut next = || {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::Rng(seed);
+        let mut next = || (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
         let mut out = Vec::with_capacity(self.params() as usize);
         for l in 0..self.layers() {
             let bound = 1.0 / (self.fan_in(l) as f64).sqrt();

@@ -6,7 +6,6 @@ pub mod checkpoint;
 pub mod clock;
 pub mod config;
 pub mod from;
-pub mod rng;
 pub mod run;
 pub mod schedule;
 pub mod settings;

@@ -10,7 +10,7 @@
 //! arguments.
 
 use super::config::TrainConfig;
-use super::rng::Rng;
+use tgs_pipelines::Rng;
 use super::schedule::{Schedule, Stage};
 use super::stages::light_field::LightFieldModel;
 use super::stages::reflection::{reflection_decides, ReflDecision, ReflectionModel};

@@ -13,7 +13,7 @@ use crate::data::image_io::{write_png, ImageF};
 use crate::data::{Dataset, Points, View};
 use crate::export::ply::write_points;
 use super::trace::{cross, dot, hit_sphere, norm};
-use crate::train::rng::Rng;
+use tgs_pipelines::Rng;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::path::Path;

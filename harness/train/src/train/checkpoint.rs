@@ -10,7 +10,7 @@
 //! before the checksums, are still read.)
 
 use super::config::TrainConfig;
-use super::rng::Rng;
+use tgs_pipelines::Rng;
 use super::trainer::Trainer;
 use crate::data::fingerprint::Fingerprint;
 use crate::data::Dataset;

@@ -3,7 +3,7 @@
 //! the mean squared distance to the 3 nearest neighbours, random rotation,
 //! opacity 0.1, SH DC from the point colour, higher SH zero.
 
-use crate::train::rng::Rng;
+use tgs_pipelines::Rng;
 use crate::data::Points;
 use super::knn::knn3_mean_sq;
 use tgs_pipelines::{Camera, HostGaussians};

@@ -1,4 +1,6 @@
-//! SplitMix64: a small, seedable, serialisable generator (checkpoints store
+//! SplitMix64: a small, seedable, serialisable generator, the one tgs
+//! draws every random number with (initial Gaussians, view orders, the
+//! light field's initial weights, the built-in scenes; checkpoints store
 //! its state, so resumed runs draw the same numbers).
 
 #[derive(Clone, Debug, PartialEq, Eq)]
