@@ -163,7 +163,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
             let r = tr.step(true)?;
             ensure!(r.stage == stage, "the schedule is at Stage {}, not {}", r.stage.name(), stage.name());
             all.push(r.timings);
-            if let Some(f) = tr.light_field.as_mut().and_then(|m| m.take_coverage()) {
+            if let Some(f) = tr.later.as_mut().and_then(|m| m.take_coverage()) {
                 phi.push(f);
             }
         }
@@ -171,8 +171,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
         let reflection_gaussians = match stage {
             Stage::Scattering => None,
-            Stage::Reflection => tr.reflection.as_ref().map(|m| m.set.len()),
-            Stage::LightField => tr.light_field.as_ref().map(|m| m.set.len()),
+            _ => tr.later.as_ref().map(|m| m.set().len()),
         };
         let mem = ctx.memory_use();
         out.stages.push(StageTimes {

@@ -125,10 +125,6 @@ fn proxy32(proxy: Option<(V3, f64)>) -> Option<(V3, f64)> {
     proxy.map(|(c, r)| (c.map(|v| v as f32 as f64), r as f32 as f64))
 }
 
-fn upload_env_proxy(ctx: &std::sync::Arc<tgs_engine::Context>, res: usize, raw: &[f64], proxy: Option<(V3, f64)>) -> EnvMap {
-    upload_env_light(ctx, res, raw, proxy, None)
-}
-
 /// With a depth map (distances from the proxy's centre per texel).
 fn upload_env_light(ctx: &std::sync::Arc<tgs_engine::Context>, res: usize, raw: &[f64], proxy: Option<(V3, f64)>, depth: Option<&[f64]>) -> EnvMap {
     let depth = depth.map(|d| d.iter().map(|&v| v as f32).collect());

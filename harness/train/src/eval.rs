@@ -6,7 +6,7 @@
 //! next to the error of a normal that faces each pixel's camera ray.
 //! Also writes the renders: colour PNG, world normals PNG, depth EXR + PNG.
 
-use crate::data::image_io::{write_exr, write_png, ImageF};
+use crate::data::image_io::{depth_grey, write_exr, write_png, ImageF};
 use crate::data::View;
 use crate::train::trainer::Rendered;
 use crate::outdir::OutDir;
@@ -267,7 +267,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
     Ok(Metrics {
         normals: NormalMetrics::mean(per_view.iter().map(|m| &m.normals)),
         iteration: tr.iteration,
-        gaussians: tr.scattering.set.len() + tr.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0),
+        gaussians: tr.scattering.set.len() + tr.reflection().map(|r| r.set.len()).unwrap_or(0),
         views: per_view.len(),
         psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / k,
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / k,
@@ -324,15 +324,6 @@ fn write_layers(dir: &mut OutDir, name: &str, scat: &Rendered, refl: &crate::tra
 }
 
 /// World normals as an image (n * 0.5 + 0.5; black where empty).
-/// A depth image as grey levels for a PNG: the depths in (0, `far`)
-/// mapped linearly from 1 (the nearest) to 1 - `span` (the farthest), and
-/// 0 elsewhere (no surface).
-pub fn depth_grey(depth: &[f32], far: f32, span: f32) -> Vec<f32> {
-    let keep = |v: f32| v > 0.0 && v < far;
-    let (lo, hi) = depth.iter().copied().filter(|&v| keep(v)).fold((f32::INFINITY, 0.0f32), |(l, hh), v| (l.min(v), hh.max(v)));
-    depth.iter().map(|&v| if keep(v) && hi > lo { 1.0 - span * (v - lo) / (hi - lo) } else { 0.0 }).collect()
-}
-
 fn normal_image(w: u32, h: u32, normals: &[[f32; 3]]) -> ImageF {
     ImageF { width: w, height: h, channels: 3, data: normals.iter().flat_map(|v| v.map(|x| if v == &[0.0; 3] { 0.0 } else { x * 0.5 + 0.5 })).collect() }
 }

@@ -276,3 +276,12 @@ pub fn write_mask(path: &Path, width: u32, height: u32, mask: &[bool]) -> Result
     let bytes: Vec<u8> = mask.iter().map(|&m| if m { 255 } else { 0 }).collect();
     image::save_buffer(path, &bytes, width, height, image::ExtendedColorType::L8).with_context(|| format!("{}: cannot write the PNG", path.display()))
 }
+
+/// A depth image as grey levels for a PNG: the depths in (0, `far`)
+/// mapped linearly from 1 (the nearest) to 1 - `span` (the farthest), and
+/// 0 elsewhere (no surface).
+pub fn depth_grey(depth: &[f32], far: f32, span: f32) -> Vec<f32> {
+    let keep = |v: f32| v > 0.0 && v < far;
+    let (lo, hi) = depth.iter().copied().filter(|&v| keep(v)).fold((f32::INFINITY, 0.0f32), |(l, hh), v| (l.min(v), hh.max(v)));
+    depth.iter().map(|&v| if keep(v) && hi > lo { 1.0 - span * (v - lo) / (hi - lo) } else { 0.0 }).collect()
+}

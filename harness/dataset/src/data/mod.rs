@@ -13,6 +13,8 @@ use image_io::ImageF;
 use std::path::{Path, PathBuf};
 use tgs_pipelines::Camera;
 
+pub use crate::export::ply::Points;
+
 /// One image with its camera and optional geometry ground truth.
 #[derive(Clone, Debug)]
 pub struct View {
@@ -24,13 +26,6 @@ pub struct View {
     pub normals: Option<ImageF>,
     /// True where the first hit is transmissive, if given.
     pub mask: Option<Vec<bool>>,
-}
-
-/// Initial points with colours in [0, 1] (SfM points, points3d.ply).
-#[derive(Clone, Debug, Default)]
-pub struct Points {
-    pub positions: Vec<[f32; 3]>,
-    pub colors: Vec<[f32; 3]>,
 }
 
 #[derive(Clone, Debug)]

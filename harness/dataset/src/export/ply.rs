@@ -4,10 +4,16 @@
 //! readers ignore it), rot_0..3 (w x y z)), and point clouds (x y z with
 //! optional uchar red green blue) for initialisation.
 
-use crate::data::Points;
 use anyhow::{bail, Context as _, Result};
 use std::path::Path;
 use tgs_pipelines::HostGaussians;
+
+/// Initial points with colours in [0, 1] (SfM points, points3d.ply).
+#[derive(Clone, Debug, Default)]
+pub struct Points {
+    pub positions: Vec<[f32; 3]>,
+    pub colors: Vec<[f32; 3]>,
+}
 
 /// Log of the third (normal) axis written for viewers that expect 3 scales.
 pub const THIN_LOG_SCALE: f32 = -13.8;

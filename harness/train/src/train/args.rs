@@ -2,9 +2,58 @@
 //! `--set` and the flags on top, and the settings a resumed run keeps.
 
 use super::config::{flatten, TrainConfig};
-use super::run::TrainArgs;
+use super::rundir::DEFAULT_SCENE;
+use crate::data::{Dataset, LoadOptions};
+use std::path::{Path, PathBuf};
 use anyhow::{bail, Context as _, Result};
 use std::collections::BTreeMap;
+
+#[derive(Clone, Debug, Default)]
+pub struct TrainArgs {
+    /// Dataset directory; None trains on the built-in scene (written to OUT/scene).
+    pub dataset: Option<PathBuf>,
+    pub out: PathBuf,
+    pub preset: Option<String>,
+    pub config: Option<PathBuf>,
+    pub set: Vec<String>,
+    pub iterations: Option<u32>,
+    /// `--downscale N` (the `downscale` setting).
+    pub downscale: Option<u32>,
+    /// `--background white|black|r,g,b` (the `background` setting).
+    pub background: Option<String>,
+    pub resume: bool,
+    /// `--stages I|I,II|I,II,III` (the `stages` setting; with `from`, the
+    /// stages after Stage I: "II" or "II,III").
+    pub stages: Option<String>,
+    /// `--from RUN`: start Stage II from RUN's finished Stage I instead of
+    /// training Stage I again.
+    pub from: Option<PathBuf>,
+    /// Collect per-kernel GPU timings for every iteration (timings.json).
+    pub profile: bool,
+    /// No progress bar or periodic lines.
+    pub quiet: bool,
+}
+
+/// The dataset directory, writing the built-in scene first when none is given.
+pub fn dataset_dir(a: &TrainArgs, quiet: bool) -> Result<PathBuf> {
+    if let Some(d) = &a.dataset {
+        return Ok(d.clone());
+    }
+    let dir = a.out.join("scene");
+    if !dir.join("transforms_train.json").is_file() {
+        let spec = crate::scene::spec(DEFAULT_SCENE)?;
+        if !quiet {
+            eprintln!("no dataset given: writing the built-in scene '{}' to {}", spec.name, dir.display());
+        }
+        crate::scene::make(&spec, &dir, |_, _| {})?;
+    }
+    Ok(dir)
+}
+
+pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
+    let opts = LoadOptions { downscale: cfg.downscale, background: cfg.background_rgb()?, holdout: cfg.holdout };
+    Dataset::load(dir, &opts)
+}
 
 /// Settings a resumed run may change: they do not alter what was already
 /// trained (the schedule is a function of the iteration count).

@@ -21,6 +21,7 @@ use std::sync::Arc;
 use tgs_engine::Context;
 use tgs_pipelines::{HostGaussians, TrainableSet};
 
+use super::arrays::{check_arrays, host_set, upload_set};
 pub use super::stages::light_field::checkpoint::LightFieldHeader;
 pub use super::stages::reflection::checkpoint::ReflHeader;
 
@@ -90,7 +91,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         n: set.len(),
         channels: set.params.channels,
         coeffs: set.params.coeffs,
-        extent: tr.extent,
+        extent: tr.views.extent,
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
         identity: Some(identity.clone()),
         reflection: None,
@@ -99,10 +100,10 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
     let mut header = header;
     // (buffer, values) of the Stage II or III arrays.
     let mut refl_arrays = Vec::new();
-    if let (Some(m), Some(d)) = (&tr.reflection, &tr.decision) {
+    if let (Some(m), Some(d)) = (tr.reflection(), &tr.decision) {
         header.reflection = Some(ReflHeader::save(m, d, &mut refl_arrays));
     }
-    if let (Some(m), Some(d)) = (&tr.light_field, &tr.decision) {
+    if let (Some(m), Some(d)) = (tr.light_field(), &tr.decision) {
         header.light_field = Some(LightFieldHeader::save(m, d, &mut refl_arrays));
     }
     let json = serde_json::to_vec(&header)?;
@@ -172,30 +173,6 @@ pub fn gaussians(h: &Header, arrays: &[Vec<f32>]) -> Result<HostGaussians> {
     Ok(g)
 }
 
-/// A host set from the first five arrays of a set's layout (parameters).
-pub(crate) fn host_set(channels: u32, coeffs: u32, arrays: &[Vec<f32>]) -> HostGaussians {
-    HostGaussians {
-        channels,
-        coeffs,
-        means: arrays[0].clone(),
-        log_scales: arrays[1].clone(),
-        quats: arrays[2].clone(),
-        opacity: arrays[3].clone(),
-        features: arrays[4].clone(),
-    }
-}
-
-/// Upload `arrays` (a set's arrays in `TrainableSet::layout` order, maybe
-/// followed by others) into `set`.
-pub(crate) fn upload_set(set: &TrainableSet, arrays: &[Vec<f32>]) -> Result<()> {
-    for ((_, buf, _), data) in set.arrays().iter().zip(arrays) {
-        if !data.is_empty() {
-            buf.upload(data)?;
-        }
-    }
-    Ok(())
-}
-
 /// A trainer restored from the checkpoint `path` on `data` (the same
 /// dataset), given its header and arrays as [`read`] returned them (the
 /// caller needs the header first, to find the dataset). Every array must
@@ -241,29 +218,22 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
     upload_set(&tr.scattering.set, &arrays)?;
     match (&h.reflection, &h.light_field) {
-        (Some(r), None) => r.restore(&mut tr, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?,
-        (None, Some(l)) => l.restore(&mut tr, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?,
+        (Some(r), None) => {
+            tr.later = Some(Box::new(r.restore(ctx, &tr.cfg, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?));
+            tr.decision = Some(r.decision.clone());
+        }
+        (None, Some(l)) => {
+            tr.later = Some(Box::new(l.restore(ctx, &tr.cfg, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?));
+            tr.decision = Some(l.decision.clone());
+        }
         (Some(_), Some(_)) => return Err(bad("both a Stage II and a Stage III state".into())),
         (None, None) if !refl_arrays.is_empty() => return Err(bad(format!("{} arrays after the scattering set without a Stage II or III header", refl_arrays.len()))),
         (None, None) => {}
     }
     tr.iteration = h.iteration;
     tr.stack = h.stack;
-    tr.extent = h.extent;
+    tr.views.extent = h.extent;
     Ok(tr)
-}
-
-/// Every array named and sized as `want`, all finite.
-pub(crate) fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], arrays: &[Vec<f32>]) -> Result<()> {
-    if want != have || arrays.len() != want.len() {
-        bail!("arrays {:?} do not match the expected {:?}", have.iter().map(|a| &a.0).collect::<Vec<_>>(), want.iter().map(|a| &a.0).collect::<Vec<_>>());
-    }
-    for ((name, len), data) in want.iter().zip(arrays) {
-        if data.len() != *len || data.iter().any(|v| !v.is_finite()) {
-            bail!("array '{name}' has {} values (expected {len}) or non-finite ones", data.len());
-        }
-    }
-    Ok(())
 }
 
 /// The reflection layer a renderer needs from a checkpoint.

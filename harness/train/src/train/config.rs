@@ -337,16 +337,6 @@ impl TrainConfig {
     }
 }
 
-pub(crate) fn check_hf(section: &str, lambda: f32, pct: f32) -> Result<()> {
-    if !(lambda >= 0.0 && lambda.is_finite()) {
-        bail!("{section}.lambda_hf must be non-negative and finite, not {lambda}");
-    }
-    if !(0.0..=100.0).contains(&pct) {
-        bail!("{section}.hf_percentile must be in [0, 100], not {pct}");
-    }
-    Ok(())
-}
-
 /// Training pixels the paper preset's schedule was made for: the 2DGS
 /// schedule (30,000 Stage I iterations) on ~100 views at 800x800.
 pub const PAPER_SCHEDULE_PIXELS: u64 = 100 * 800 * 800;

@@ -5,7 +5,8 @@
 use super::args::{apply_args, changed_settings, settings, show};
 use super::checkpoint;
 use super::config::TrainConfig;
-use super::run::{load_dataset, TrainArgs, CHECKPOINT, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
+use super::args::{load_dataset, TrainArgs};
+use super::rundir::{CHECKPOINT, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::trainer::Trainer;
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};

@@ -2,11 +2,13 @@
 //! folder each under `stages/`), checkpoints, and the `tgs train` driver
 //! (progress, logs, outputs).
 pub mod args;
+pub mod arrays;
 pub mod checkpoint;
 pub mod clock;
 pub mod config;
 pub mod from;
 pub mod run;
+pub mod rundir;
 pub mod schedule;
 pub mod settings;
 pub mod stages;

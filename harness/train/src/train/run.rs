@@ -5,13 +5,14 @@
 //! The settings are [`super::args`]'s; `--from RUN` is [`super::from`].
 
 use super::args::resume_config;
-pub use super::args::{config_from_args, RESUMABLE_SETTINGS};
+pub use super::args::{config_from_args, dataset_dir, load_dataset, TrainArgs, RESUMABLE_SETTINGS};
+pub use super::rundir::{CHECKPOINT, DEFAULT_SCENE, RUN_FILES, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::checkpoint;
 use super::from::start_from;
 pub use super::from::inherited_settings;
-use super::config::{paper_schedule_note, TrainConfig};
+use super::config::paper_schedule_note;
 use super::trainer::Trainer;
-use crate::data::{Dataset, LoadOptions};
+use crate::data::Dataset;
 use crate::eval::{evaluate, Metrics};
 use crate::outdir::OutDir;
 use crate::export::atomic_write;
@@ -27,68 +28,6 @@ use std::sync::Arc;
 use std::time::Instant;
 use super::clock::{Before, Clocks};
 use tgs_engine::Context;
-
-pub const CHECKPOINT: &str = "checkpoint.bin";
-/// The run's state at the end of Stage I and of Stage II, written as the
-/// next stage begins: `--from RUN` starts from them, since the later
-/// stages change what checkpoint.bin holds (Stage III trains the
-/// scattering set's colour by default).
-pub const STAGE_ONE_CHECKPOINT: &str = "checkpoint-stage1.bin";
-pub const STAGE_TWO_CHECKPOINT: &str = "checkpoint-stage2.bin";
-pub const DEFAULT_SCENE: &str = "glass";
-/// The run's identity (its id and dataset), written when it starts: a
-/// `--resume` whose checkpoint.bin names another run is refused.
-pub const RUN_RECORD: &str = "run.json";
-
-/// Every file a run writes directly into its directory (renders and
-/// residual maps go into directories of their own). A new run claims them
-/// all in the directory's `.tgs-written` before it starts, so a directory
-/// holding a file of these names that tgs did not write is refused.
-pub const RUN_FILES: [&str; 17] = [
-    RUN_RECORD,
-    "config.toml",
-    "log.jsonl",
-    CHECKPOINT,
-    STAGE_ONE_CHECKPOINT,
-    STAGE_TWO_CHECKPOINT,
-    "checkpoint-nonfinite.bin",
-    super::clock::CLOCK_FILE,
-    "stages.json",
-    "point_cloud.ply",
-    "reflection.ply",
-    "light_field.safetensors",
-    "envmap.exr",
-    "envmap.png",
-    "envmap_depth.exr",
-    "envmap_depth.png",
-    "metrics.json",
-];
-
-#[derive(Clone, Debug, Default)]
-pub struct TrainArgs {
-    /// Dataset directory; None trains on the built-in scene (written to OUT/scene).
-    pub dataset: Option<PathBuf>,
-    pub out: PathBuf,
-    pub preset: Option<String>,
-    pub config: Option<PathBuf>,
-    pub set: Vec<String>,
-    pub iterations: Option<u32>,
-    /// `--downscale N` (the `downscale` setting).
-    pub downscale: Option<u32>,
-    /// `--background white|black|r,g,b` (the `background` setting).
-    pub background: Option<String>,
-    pub resume: bool,
-    /// `--stages I|I,II|I,II,III` (the `stages` setting; with `from`, the
-    /// stages after Stage I: "II" or "II,III").
-    pub stages: Option<String>,
-    /// `--from RUN`: start Stage II from RUN's finished Stage I instead of
-    /// training Stage I again.
-    pub from: Option<PathBuf>,
-    /// Collect per-kernel GPU timings for every iteration (timings.json).
-    pub profile: bool,
-    /// No progress bar or periodic lines.
-    pub quiet: bool,
-}
 
 /// What a finished (or interrupted) run reports.
 #[derive(Clone, Debug)]
@@ -120,27 +59,6 @@ fn install_signal_handler() {
 /// Ask a running `train` in this process to stop at the next iteration (as Ctrl-C does).
 pub fn request_stop() {
     INTERRUPTED.store(true, Ordering::SeqCst);
-}
-
-/// The dataset directory, writing the built-in scene first when none is given.
-pub fn dataset_dir(a: &TrainArgs, quiet: bool) -> Result<PathBuf> {
-    if let Some(d) = &a.dataset {
-        return Ok(d.clone());
-    }
-    let dir = a.out.join("scene");
-    if !dir.join("transforms_train.json").is_file() {
-        let spec = crate::scene::spec(DEFAULT_SCENE)?;
-        if !quiet {
-            eprintln!("no dataset given: writing the built-in scene '{}' to {}", spec.name, dir.display());
-        }
-        crate::scene::make(&spec, &dir, |_, _| {})?;
-    }
-    Ok(dir)
-}
-
-pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
-    let opts = LoadOptions { downscale: cfg.downscale, background: cfg.background_rgb()?, holdout: cfg.holdout };
-    Dataset::load(dir, &opts)
 }
 
 /// The dataset's warnings on stderr (unless quiet).
@@ -278,7 +196,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let begun = if tr.at_reflection_start() {
             // Not on a resume inside Stage II (the cache is rebuilt then),
             // nor as Stage II begins again (reflection.reseed).
-            if tr.reflection.is_none() && first_round {
+            if tr.reflection().is_none() && first_round {
                 checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str, &identity)?;
             }
             let prev = tr.schedule.label(entry.saturating_sub(1));
@@ -331,7 +249,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         if r.opacity_reset {
             line["opacity_reset"] = json!(true);
         }
-        if let Some(f) = tr.light_field.as_mut().and_then(|m| m.take_coverage()) {
+        if let Some(f) = tr.later.as_mut().and_then(|m| m.take_coverage()) {
             line["phi_fraction"] = json!(f);
         }
         if let Some((b, a2)) = r.densified {
@@ -375,10 +293,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     }
     let train_s = clocks.train_s();
     write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
-    if let Some(m) = &tr.light_field {
-        m.write_outputs(&a.out)?;
-    }
-    if let Some(m) = &tr.reflection {
+    if let Some(m) = &tr.later {
         m.write_outputs(&a.out)?;
     }
     let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?) };
@@ -477,7 +392,7 @@ fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<se
 /// Close Stage I (its test metrics), measure the residual (maps written to
 /// OUT/residual/), and start Stage II or skip it. Returns the message.
 fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
-    let resumed = tr.reflection.is_some();
+    let resumed = tr.reflection().is_some();
     let reseed = prev != "I";
     if !resumed {
         close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
@@ -501,14 +416,14 @@ fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut V
 /// Between Stage II and III: Stage II's record (test metrics, renders in
 /// renders/stage2), then the light-field model.
 fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
-    if tr.reflection.is_some() {
+    if tr.reflection().is_some() {
         close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
         if !quiet {
             eprintln!("Stage {prev} done");
         }
     }
     tr.begin_light_field()?;
-    let m = tr.light_field.as_ref().context("Stage III model")?;
+    let m = tr.light_field().context("Stage III model")?;
     Ok(m.start_message(&tr.next_entry().1, &tr.cfg.light_field))
 }
 

@@ -3,7 +3,7 @@
 //! text as when they were strings), parsed once where the settings are
 //! read, with an error that names the key, the value and every choice.
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 
 /// `name_enum!(/// doc, Type, "section.key", { /// doc, Variant = "name", ... })`:
 /// the enum, `name()`, `parse()`, `NAMES`, and serde as the name.
@@ -156,3 +156,15 @@ name_enum!(
         Reflection = "reflection",
     }
 );
+
+/// A stage's high-frequency loss settings (`SECTION.lambda_hf`,
+/// `SECTION.hf_percentile`), checked.
+pub(crate) fn check_hf(section: &str, lambda: f32, pct: f32) -> Result<()> {
+    if !(lambda >= 0.0 && lambda.is_finite()) {
+        bail!("{section}.lambda_hf must be non-negative and finite, not {lambda}");
+    }
+    if !(0.0..=100.0).contains(&pct) {
+        bail!("{section}.hf_percentile must be in [0, 100], not {pct}");
+    }
+    Ok(())
+}

@@ -1,29 +1,27 @@
-//! The trainer: the loop and the schedule. It owns the training views, the
-//! view order, the iteration count and the stage schedule, and drives one
-//! model per stage. Each stage lives in its folder under `stages/`: its
-//! model, settings, checkpoint part, outputs, and `stage.rs`, the
-//! transition from the previous stage and one iteration as this trainer
-//! calls it (`impl Trainer` blocks there). This file holds what every
-//! stage shares: the views and their order, the cached frozen scattering
-//! colour, the dispatch of an iteration to its stage, and the render.
-//! Models never refer to the trainer: each step gets what it needs as
-//! arguments.
+//! The trainer: the loop and the schedule. It owns the training views and
+//! their order, the iteration count, the stage schedule, Stage I's
+//! scattering set (the base every later stage renders over) and the later
+//! stage that is running, which it drives through [`LaterStage`] without
+//! knowing which it is. Each stage lives in its folder under `stages/`:
+//! its model, settings, checkpoint part, outputs, and `stage.rs`, the
+//! transition from the previous stage (`begin`) and one iteration. This
+//! file calls those in schedule order, picks each iteration's view, keeps
+//! the schedule in step with what the stages decide, and renders.
 
 use super::config::TrainConfig;
-use tgs_pipelines::Rng;
 use super::schedule::{Schedule, Stage};
 use super::stages::light_field::LightFieldModel;
 use super::stages::reflection::{reflection_decides, ReflDecision, ReflectionModel};
 use super::stages::scattering::init::{far_points, gaussians_from_points, random_points};
 use super::stages::scattering::ScatteringModel;
+use super::stages::{light_field, reflection, scattering, Iteration, LaterStage, ScatCache, Shared, Views};
 use crate::data::Dataset;
-use anyhow::{Context as _, Result};
+use anyhow::{bail, Context as _, Result};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Timing};
-use tgs_pipelines::{Camera, HostGaussians, LossValues, Plane};
+use tgs_pipelines::{Camera, HostGaussians, LossValues, Plane, Rng};
 
-pub use super::stages::reflection::ReflRendered;
-pub use super::stages::scattering::Rendered;
+pub use super::stages::rendered::{ReflRendered, Rendered};
 
 /// What one iteration did.
 #[derive(Clone, Debug, Default)]
@@ -45,26 +43,20 @@ pub struct Trainer {
     pub schedule: Schedule,
     /// Stage I's model: the scattering set.
     pub scattering: ScatteringModel,
-    /// Stage II's model, from the start of Stage II to the start of Stage III.
-    pub reflection: Option<ReflectionModel>,
-    /// Stage III's model, from the start of Stage III.
-    pub light_field: Option<LightFieldModel>,
+    /// The running stage after Stage I (Stage II's model from its start to
+    /// Stage III's, then Stage III's), None before Stage II.
+    pub later: Option<Box<dyn LaterStage>>,
     /// The Stage I residual's measurement and the Stage II decision.
     pub decision: Option<ReflDecision>,
-    /// The frozen scattering colour of every training view (Stage II).
-    pub(crate) scat_cache: Vec<Buffer<f32>>,
-    pub(crate) ctx: Arc<Context>,
-    pub(crate) targets: Vec<Buffer<f32>>,
-    pub(crate) cameras: Vec<Camera>,
+    /// The frozen scattering colour of every training view (Stages II, III).
+    pub(crate) cache: ScatCache,
+    /// The training views, their targets, the background and the camera sphere.
+    pub views: Views,
     /// Completed iterations.
     pub iteration: u32,
     pub rng: Rng,
     /// Training views not yet used in this pass (popped from the back).
     pub stack: Vec<u32>,
-    pub extent: f32,
-    /// The training cameras' mean: with `extent`, the camera sphere.
-    pub centre: [f32; 3],
-    pub background: [f32; 3],
 }
 
 impl Trainer {
@@ -97,26 +89,20 @@ impl Trainer {
         Ok(Trainer {
             schedule: Schedule::from_config(&cfg),
             scattering: ScatteringModel::new(ctx, g, cfg.sh_degree, cfg.adam_eps)?,
-            reflection: None,
-            light_field: None,
+            later: None,
             decision: None,
-            scat_cache: Vec::new(),
-            ctx: ctx.clone(),
-            targets,
-            cameras,
+            cache: ScatCache::default(),
+            views: Views { ctx: ctx.clone(), cameras, targets, background: data.background, extent, centre },
             iteration: 0,
             rng,
             stack: Vec::new(),
-            extent,
-            centre,
-            background: data.background,
             cfg,
         })
     }
 
     /// The device context the models run on.
     pub fn context(&self) -> Arc<Context> {
-        self.ctx.clone()
+        self.views.ctx.clone()
     }
 
     pub fn done(&self) -> bool {
@@ -130,12 +116,22 @@ impl Trainer {
 
     /// Position learning rate at iteration `it`: log-linear over the stage, x extent.
     pub fn lr_means(&self, it: u32) -> f32 {
-        (super::log_lerp(self.cfg.lr_means, self.cfg.lr_means_final, it as f64 / self.cfg.iterations.max(1) as f64) * self.extent as f64) as f32
+        scattering::stage::lr_means(&self.cfg, self.views.extent, it)
     }
 
-    pub(crate) fn next_view(&mut self) -> u32 {
+    /// Stage II's model, while Stage II runs.
+    pub fn reflection(&self) -> Option<&ReflectionModel> {
+        self.later.as_ref()?.as_any().downcast_ref()
+    }
+
+    /// Stage III's model, while Stage III runs.
+    pub fn light_field(&self) -> Option<&LightFieldModel> {
+        self.later.as_ref()?.as_any().downcast_ref()
+    }
+
+    fn next_view(&mut self) -> u32 {
         if self.stack.is_empty() {
-            let n = self.cameras.len() as u32;
+            let n = self.views.cameras.len() as u32;
             self.stack = (0..n).collect();
             for i in (1..self.stack.len()).rev() {
                 let j = self.rng.below(i as u64 + 1) as usize;
@@ -152,18 +148,66 @@ impl Trainer {
         (i, self.schedule.label(i))
     }
 
-    /// The frozen scattering colour of every training view (rendered again
-    /// after a resume).
-    pub(crate) fn ensure_scat_cache(&mut self) -> Result<()> {
-        if self.scat_cache.len() == self.cameras.len() {
-            return Ok(());
+    fn next_stage(&self) -> Option<Stage> {
+        self.schedule.at(self.iteration + 1).map(|(s, _)| s)
+    }
+
+    fn shared(&mut self) -> Shared<'_> {
+        Shared { cfg: &self.cfg, views: &self.views, scattering: &mut self.scattering, cache: &mut self.cache }
+    }
+
+    /// Whether the next iteration starts Stage II (call
+    /// [`Trainer::begin_reflection`] first).
+    pub fn at_reflection_start(&self) -> bool {
+        // A Stage II run again after Stage III starts while the light
+        // field is still there.
+        (self.cache.is_empty() || self.light_field().is_some()) && self.next_stage() == Some(Stage::Reflection)
+    }
+
+    /// Between Stage I and II ([`reflection::stage::begin`]): the residual,
+    /// the decision, the reflection set; a skipped Stage II ends the
+    /// schedule after Stage I. `on_view(i, camera, residual planes)` sees
+    /// every view's residual for saving.
+    pub fn begin_reflection(&mut self, on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<ReflDecision> {
+        // Stage II again (reflection.reseed): the light field and its
+        // reflection set give way to a set seeded afresh.
+        let reseed = self.light_field().is_some();
+        if reseed {
+            self.later = None;
         }
-        self.scat_cache.clear();
-        let sh = self.sh_degree(self.cfg.iterations);
-        for cam in self.cameras.clone() {
-            let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * (cam.width * cam.height) as usize)?;
-            self.scattering.render_color_into(&cam, sh, &self.background, &buf)?;
-            self.scat_cache.push(buf);
+        let round = self.schedule.round(self.next_entry().0);
+        let existing = self.reflection().map(|m| m.set.len());
+        let kept = self.decision.clone();
+        let (d, model) = reflection::stage::begin(self.shared(), existing, kept.as_ref(), reseed, round, on_view)?;
+        if let Some(m) = model {
+            self.later = Some(Box::new(m));
+        }
+        if !d.run {
+            self.schedule.end_after(Stage::Scattering);
+        }
+        self.decision = Some(d.clone());
+        Ok(d)
+    }
+
+    /// Whether the next iteration starts Stage III (call
+    /// [`Trainer::begin_light_field`] first).
+    pub fn at_light_field_start(&self) -> bool {
+        self.light_field().is_none() && self.next_stage() == Some(Stage::LightField)
+    }
+
+    /// Between Stage II and III ([`light_field::stage::begin`]): Stage II's
+    /// reflection set moves to the light-field model.
+    pub fn begin_light_field(&mut self) -> Result<()> {
+        let prev = match self.later.take() {
+            Some(m) if m.stage() == Stage::Reflection => m,
+            _ => bail!("Stage III starts from Stage II's reflection set, and there is none"),
+        };
+        let m = light_field::stage::begin(&self.cfg, &self.views.ctx, prev.into_set())?;
+        self.later = Some(Box::new(m));
+        // Stage III renders the scattering colour itself, or caches it
+        // again when Stage II changed it.
+        if self.cfg.light_field.train_scattering || self.cfg.reflection.train_scattering {
+            self.cache.clear();
         }
         Ok(())
     }
@@ -172,11 +216,42 @@ impl Trainer {
     pub fn step(&mut self, profile: bool) -> Result<StepReport> {
         let it = self.iteration + 1;
         let (stage, stage_it) = self.schedule.at(it).context("training is already complete")?;
-        match stage {
-            Stage::Scattering => self.step_scattering(it, stage, profile),
-            Stage::Reflection => self.step_reflection(it, stage_it, profile),
-            Stage::LightField => self.step_light_field(it, stage_it, profile),
+        if stage == Stage::Scattering {
+            let view = self.next_view();
+            let (out, reset) = scattering::stage::iterate(&mut self.scattering, &self.cfg, &self.views, it, view, profile)?;
+            self.iteration = it;
+            return Ok(StepReport {
+                iteration: it,
+                stage,
+                view,
+                loss: out.loss,
+                values: out.values,
+                gaussians: self.scattering.set.len(),
+                densified: out.densified,
+                opacity_reset: reset,
+                timings: out.timings,
+            });
         }
+        if self.later.as_ref().map(|m| m.stage()) != Some(stage) {
+            bail!("Stage {} has not begun (Trainer::{})", stage.name(), if stage == Stage::Reflection { "begin_reflection" } else { "begin_light_field" });
+        }
+        let view = self.next_view();
+        let x = Iteration { global: it, stage: stage_it, view, profile };
+        let shared = Shared { cfg: &self.cfg, views: &self.views, scattering: &mut self.scattering, cache: &mut self.cache };
+        let model = self.later.as_mut().context("a later stage")?;
+        let out = model.iterate(shared, &x)?;
+        self.iteration = it;
+        Ok(StepReport {
+            iteration: it,
+            stage,
+            view,
+            loss: out.loss,
+            values: out.values,
+            gaussians: model.set().len(),
+            densified: out.densified,
+            opacity_reset: false,
+            timings: out.timings,
+        })
     }
 
     /// Render `cam` with the current model: in Stages II and III the composite, with
@@ -184,16 +259,13 @@ impl Trainer {
     /// ([`reflection_decides`]) and of the scattering set elsewhere, and both layers.
     pub fn render(&mut self, cam: &Camera) -> Result<Rendered> {
         let sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
-        let scat = self.scattering.render(cam, sh, &self.background)?;
+        let scat = self.scattering.render(cam, sh, &self.views.background)?;
         let n = (cam.width * cam.height) as usize;
-        if self.light_field.is_none() && self.reflection.is_none() {
+        let Some(model) = self.later.as_mut() else {
             return Ok(scat);
-        }
-        let colour = Buffer::from_slice(&self.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
-        let refl = match self.light_field.as_mut() {
-            Some(model) => model.render(cam, &colour)?,
-            None => self.reflection.as_mut().context("a Stage II model")?.render(cam, &colour)?,
         };
+        let colour = Buffer::from_slice(&self.views.ctx, "render.scat_colour", &scat.planes[..3 * n])?;
+        let refl = model.render(cam, &colour)?;
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
         let decides: Vec<usize> = (0..n).filter(|&i| reflection_decides(&refl, i, self.cfg.reflection.normal_min_r)).collect();

@@ -5,9 +5,17 @@
 //! (`config.rs`, Stages II and III; Stage I's are the top-level ones), its
 //! part of the checkpoint (`checkpoint.rs`), what it writes
 //! (`outputs.rs`) and `stage.rs`: the transition from the previous stage
-//! and one iteration as the trainer calls it. `composite.rs` is the
-//! deferred composite and its losses that Stages II and III share.
+//! and one iteration as the trainer calls it. The later stages implement
+//! [`LaterStage`] (`shared.rs`), which the trainer drives them through;
+//! `composite.rs` is the deferred composite's loss they share; `views.rs`
+//! and `rendered.rs` what every stage reads and returns.
 pub mod composite;
 pub mod light_field;
 pub mod reflection;
+pub mod rendered;
 pub mod scattering;
+pub mod shared;
+pub mod views;
+
+pub use shared::{Iteration, LaterStage, ScatCache, Shared};
+pub use views::Views;

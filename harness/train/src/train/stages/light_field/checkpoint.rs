@@ -4,13 +4,14 @@
 //! the shading box and the Stage II decision.
 
 use super::{LightFieldModel, MlpParams};
-use crate::train::checkpoint::check_arrays;
+use crate::train::arrays::check_arrays;
+use crate::train::config::TrainConfig;
 use crate::train::stages::reflection::checkpoint::{push_set, reflection_set, set_layout};
 use crate::train::stages::reflection::ReflDecision;
-use crate::train::trainer::Trainer;
 use anyhow::Result;
 use serde::{Deserialize, Serialize};
-use tgs_engine::Buffer;
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context};
 
 const MLP_ARRAYS: [&str; 3] = ["mlp.param", "mlp.adam_m", "mlp.adam_v"];
 
@@ -67,16 +68,14 @@ impl LightFieldHeader {
         }
     }
 
-    /// The trainer's Stage III model and decision from the arrays after
-    /// the scattering set's.
-    pub(crate) fn restore(&self, tr: &mut Trainer, arrays: Vec<Vec<f32>>) -> Result<()> {
+    /// Stage III's model from the arrays after the scattering set's (its
+    /// decision is this header's).
+    pub(crate) fn restore(&self, ctx: &Arc<Context>, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<LightFieldModel> {
         let shape = self.shape()?;
         self.check(&shape, &arrays)?;
         let k = arrays.len() - 3;
-        let set = reflection_set(&tr.context(), &arrays)?;
-        let net = MlpParams::new(&tr.context(), shape, &arrays[k], &arrays[k + 1], &arrays[k + 2])?;
-        tr.light_field = Some(LightFieldModel::new(&tr.context(), set, net, self.shade(), tr.cfg.adam_eps)?);
-        tr.decision = Some(self.decision.clone());
-        Ok(())
+        let set = reflection_set(ctx, &arrays)?;
+        let net = MlpParams::new(ctx, shape, &arrays[k], &arrays[k + 1], &arrays[k + 2])?;
+        LightFieldModel::new(ctx, set, net, self.shade(), cfg.adam_eps)
     }
 }

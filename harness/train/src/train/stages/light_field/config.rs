@@ -1,6 +1,6 @@
 //! Stage III's settings (`[light_field]` in TOML, `--set light_field.KEY=V`).
 
-use crate::train::config::check_hf;
+use crate::train::settings::check_hf;
 use crate::train::settings::{LightFresnel, ScatteringParams};
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};

@@ -4,6 +4,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod model;
 pub mod outputs;
-mod stage;
+pub mod stage;
 
-pub use model::{normalization_box, LightFieldModel, LightFieldStepInput, MlpParams};
+pub use crate::train::stages::reflection::bounds::normalization_box;
+pub use model::{LightFieldModel, LightFieldStepInput, MlpParams};

@@ -10,7 +10,7 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::composite::{CompositeLoss, HfSetting};
-use crate::train::stages::reflection::{PhiLayers, ReflRendered};
+use crate::train::stages::rendered::{PhiLayers, ReflRendered, R_PLANE};
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
@@ -101,30 +101,6 @@ pub struct LightFieldModel {
     /// the host reads every view's sample count first (the same results,
     /// bit for bit: tests/tests/train_step.rs compares them).
     pub one_submission: bool,
-}
-
-/// The box Phi's positions are normalized by: the reflection set's 1st-99th
-/// percentile per axis, widened by 10% (so that x_refl of the covered
-/// pixels lies mostly inside [-1, 1]^3).
-pub fn normalization_box(means: &[f32]) -> ([f32; 3], [f32; 3]) {
-    let n = means.len() / 3;
-    let mut centre = [0.0; 3];
-    let mut half = [1.0; 3];
-    if n == 0 {
-        return (centre, half);
-    }
-    for a in 0..3 {
-        let mut v: Vec<f32> = (0..n).map(|i| means[3 * i + a]).filter(|x| x.is_finite()).collect();
-        if v.is_empty() {
-            continue;
-        }
-        v.sort_by(f32::total_cmp);
-        let q = |p: f64| v[((p * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
-        let (lo, hi) = (q(0.01), q(0.99));
-        centre[a] = 0.5 * (lo + hi);
-        half[a] = (0.55 * (hi - lo)).max(1e-3);
-    }
-    (centre, half)
 }
 
 impl LightFieldModel {
@@ -290,7 +266,7 @@ impl LightFieldModel {
             self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
             rec.end_scope(sc);
             if lf.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, crate::train::stages::reflection::R_PLANE * n, &b.r_host)?;
+                rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
             }
             match host_count {
                 Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,

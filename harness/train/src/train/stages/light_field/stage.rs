@@ -2,70 +2,85 @@
 //! reflection set moves to a light-field model with a fresh network) and
 //! one iteration of the light field.
 
-use super::model::{normalization_box, LightFieldModel, LightFieldStepInput};
+use super::model::{LightFieldModel, LightFieldStepInput};
+use crate::train::config::TrainConfig;
 use crate::train::schedule::Stage;
-use crate::train::trainer::{StepReport, Trainer};
+use crate::train::stages::reflection::bounds::normalization_box;
+use crate::train::stages::rendered::ReflRendered;
+use crate::train::stages::scattering::StepOutput;
+use crate::train::stages::shared::{Iteration, LaterStage, Shared};
 use anyhow::{Context as _, Result};
+use std::any::Any;
+use std::path::Path;
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context};
+use tgs_pipelines::{Camera, TrainableSet};
 
-impl Trainer {
-    /// Whether the next iteration starts Stage III (call
-    /// [`Trainer::begin_light_field`] first).
-    pub fn at_light_field_start(&self) -> bool {
-        self.light_field.is_none() && matches!(self.schedule.at(self.iteration + 1), Some((Stage::LightField, _)))
+/// Between Stage II and III: the reflection set `set` (with its Adam
+/// moments) moves to a light-field model with a fresh network; Stage II's
+/// environment map is dropped. Positions are normalized by the reflection
+/// set's box.
+pub fn begin(cfg: &TrainConfig, ctx: &Arc<Context>, set: TrainableSet) -> Result<LightFieldModel> {
+    let (centre, half_extent) = normalization_box(&set.params.means.download()?);
+    let lf = &cfg.light_field;
+    let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick() };
+    let net = LightFieldModel::init_net(ctx, lf.shape()?, cfg.seed ^ 0x4c46)?;
+    LightFieldModel::new(ctx, set, net, shade, cfg.adam_eps)
+}
+
+impl LaterStage for LightFieldModel {
+    fn stage(&self) -> Stage {
+        Stage::LightField
     }
 
-    /// Between Stage II and III: the reflection set (with its Adam moments)
-    /// moves to a light-field model with a fresh network; the environment
-    /// map is dropped. Positions are normalized by the reflection set's box.
-    pub fn begin_light_field(&mut self) -> Result<()> {
-        let refl = self.reflection.take().context("Stage III starts from Stage II's reflection set, and there is none")?;
-        let set = refl.into_set();
-        let (centre, half_extent) = normalization_box(&set.params.means.download()?);
-        let lf = &self.cfg.light_field;
-        let shade = tgs_pipelines::ShadeParams { centre, half_extent, threshold: lf.threshold, schlick: lf.schlick() };
-        let net = LightFieldModel::init_net(&self.ctx, lf.shape()?, self.cfg.seed ^ 0x4c46)?;
-        self.light_field = Some(LightFieldModel::new(&self.ctx, set, net, shade, self.cfg.adam_eps)?);
-        // Stage III renders the scattering colour itself, or caches it
-        // again when Stage II changed it.
-        if lf.train_scattering || self.cfg.reflection.train_scattering {
-            self.scat_cache.clear();
-        }
-        Ok(())
-    }
-
-    pub(crate) fn step_light_field(&mut self, it: u32, stage_it: u32, profile: bool) -> Result<StepReport> {
-        let frozen = !self.cfg.light_field.train_scattering;
+    fn iterate(&mut self, s: Shared<'_>, x: &Iteration) -> Result<StepOutput> {
+        let (cfg, v) = (s.cfg, s.views);
+        let frozen = !cfg.light_field.train_scattering;
+        let sh = cfg.sh_degree_at(cfg.iterations);
         if frozen {
-            self.ensure_scat_cache()?;
+            s.cache.ensure(v, s.scattering, sh)?;
         }
-        let view = self.next_view();
-        let cam = self.cameras[view as usize];
-        let sh = self.sh_degree(self.cfg.iterations);
-        let model = self.light_field.as_mut().context("Stage III has not begun (Trainer::begin_light_field)")?;
+        let cam = v.cameras[x.view as usize];
         let input = LightFieldStepInput {
-            iteration: stage_it,
-            global_iteration: it,
+            iteration: x.stage,
+            global_iteration: x.global,
             camera: &cam,
-            target: &self.targets[view as usize],
-            scat: if frozen { Some(&self.scat_cache[view as usize]) } else { None },
+            target: &v.targets[x.view as usize],
+            scat: if frozen { Some(s.cache.get(x.view as usize).context("the scattering colour cache is missing")?) } else { None },
             sh_degree: sh,
-            background: self.background,
+            background: v.background,
             // Positions at Stage I's final rate (method-notes §3.7).
-            lr_means: self.cfg.lr_means_final * self.extent,
-            profile,
+            lr_means: cfg.lr_means_final * v.extent,
+            profile: x.profile,
         };
-        let out = model.step(&self.cfg, &mut self.scattering, &input)?;
-        self.iteration = it;
-        Ok(StepReport {
-            iteration: it,
-            stage: Stage::LightField,
-            view,
-            loss: out.loss,
-            values: out.values,
-            gaussians: model.set.len(),
-            densified: None,
-            opacity_reset: false,
-            timings: out.timings,
-        })
+        self.step(cfg, s.scattering, &input)
+    }
+
+    fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
+        LightFieldModel::render(self, cam, scat)
+    }
+
+    fn set(&self) -> &TrainableSet {
+        &self.set
+    }
+
+    fn write_outputs(&self, out: &Path) -> Result<()> {
+        LightFieldModel::write_outputs(self, out)
+    }
+
+    fn into_set(self: Box<Self>) -> TrainableSet {
+        self.set
+    }
+
+    fn take_coverage(&mut self) -> Option<f64> {
+        LightFieldModel::take_coverage(self)
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
     }
 }

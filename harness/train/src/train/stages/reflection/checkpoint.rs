@@ -5,8 +5,8 @@
 //! and the decision that started the stage.
 
 use super::{ReflDecision, ReflectionModel};
-use crate::train::checkpoint::{check_arrays, host_set, upload_set};
-use crate::train::trainer::Trainer;
+use crate::train::arrays::{check_arrays, host_set, upload_set};
+use crate::train::config::TrainConfig;
 use anyhow::Result;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -69,19 +69,17 @@ impl ReflHeader {
         ReflHeader { n: m.set.len(), env_res: m.env.res, decision: d.clone(), arrays: names }
     }
 
-    /// The trainer's Stage II model and decision from the arrays after the
-    /// scattering set's.
-    pub(crate) fn restore(&self, tr: &mut Trainer, arrays: Vec<Vec<f32>>) -> Result<()> {
+    /// Stage II's model from the arrays after the scattering set's (its
+    /// decision is this header's).
+    pub(crate) fn restore(&self, ctx: &Arc<Context>, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<ReflectionModel> {
         let k = self.check(&arrays)?;
         let g = host_set(MATERIAL, 1, &arrays);
         let env = self.env(&arrays, k);
-        let m = ReflectionModel::new(&tr.context(), &g, &env, tr.cfg.reflection.fresnel.pipeline(), tr.cfg.adam_eps)?;
+        let m = ReflectionModel::new(ctx, &g, &env, cfg.reflection.fresnel.pipeline(), cfg.adam_eps)?;
         upload_set(&m.set, &arrays)?;
         m.env.m.upload(&arrays[k + 1])?;
         m.env.v.upload(&arrays[k + 2])?;
-        tr.reflection = Some(m);
-        tr.decision = Some(self.decision.clone());
-        Ok(())
+        Ok(m)
     }
 }
 

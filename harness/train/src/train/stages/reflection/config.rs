@@ -1,7 +1,7 @@
 //! Stage II's settings (`[reflection]` in TOML, `--set reflection.KEY=V`).
 
 use super::seed::SeedNormal;
-use crate::train::config::check_hf;
+use crate::train::settings::check_hf;
 use crate::train::settings::{EnvStart, ReflectionFresnel, ReflectionInit, RotationGrad};
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};

@@ -18,7 +18,7 @@
 //! (the sky, the background) lie [`FAR`] times the farthest surface away,
 //! where the direction alone decides.
 
-use crate::train::stages::light_field::normalization_box;
+use super::bounds::normalization_box;
 use crate::train::logit;
 use crate::train::stages::scattering::ScatteringModel;
 use anyhow::{Context as _, Result};

@@ -82,7 +82,7 @@ impl ReflectionModel {
             write_exr(&out.join("envmap_depth.exr"), &ImageF { width: w, height: h, channels: 1, data: d.clone() })?;
             // The farthest surface at 0.2, apart from the texels that show none.
             let far = env.proxy.map(|p| p.radius).unwrap_or(f32::INFINITY);
-            write_png(&out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: crate::eval::depth_grey(&d, far, 0.8) })?;
+            write_png(&out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: crate::data::image_io::depth_grey(&d, far, 0.8) })?;
         }
         Ok(())
     }

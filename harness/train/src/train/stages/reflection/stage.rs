@@ -2,18 +2,23 @@
 //! residual, the decision whether the scene calls for a reflection set, the
 //! seeds and the light), and one iteration of the reflection set.
 
+use super::bounds::normalization_box;
 use super::env_init::scene_env_map;
-use super::model::{residual, ReflRendered, ReflStepInput, ReflectionModel, ScatTrain};
+use super::model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::seed::{hull_seeding, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
 use crate::train::schedule::Stage;
-use crate::train::stages::light_field::normalization_box;
-use crate::train::trainer::{StepReport, Trainer};
+use crate::train::stages::rendered::ReflRendered;
+use crate::train::stages::scattering::StepOutput;
+use crate::train::stages::shared::{Iteration, LaterStage, Shared};
 use anyhow::{Context as _, Result};
+use std::any::Any;
+use std::path::Path;
 use tgs_engine::Buffer;
-use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, Plane, ReflectionShading};
+use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, Plane, ReflectionShading, TrainableSet};
 
 pub use super::env_init::EnvInit;
+
 
 /// The view-dependence measure reduces each view to at most this many
 /// pixels a side (box-averaged: Monte Carlo noise in the images, which
@@ -71,164 +76,171 @@ pub struct ReflDecision {
     pub env_proxy: Option<[f32; 4]>,
 }
 
-impl Trainer {
-    /// Whether the next iteration starts Stage II (call
-    /// [`Trainer::begin_reflection`] first).
-    pub fn at_reflection_start(&self) -> bool {
-        // A Stage II run again after Stage III starts while the light
-        // field is still there.
-        (self.scat_cache.is_empty() || self.light_field.is_some()) && matches!(self.schedule.at(self.iteration + 1), Some((Stage::Reflection, _)))
+/// Between Stage I and II: render every training view with the frozen
+/// scattering set (cached in `s.cache` for Stage II), measure the residual
+/// I_gt - I_scat on the GPU, and decide: below `reflection.min_residual`
+/// the scene shows no view-dependent energy worth a reflection set (the
+/// trainer then ends the schedule after Stage I). `existing`: the size of
+/// a reflection set that exists (a resumed Stage II), with the decision it
+/// was started with in `kept`; `reseed`: the second round, after Stage III
+/// (`reflection.reseed`), which runs whatever its residual; `round`: 1 or 2.
+/// `on_view(i, residual planes)` sees every view's residual (4 planes: r,
+/// mean |r|) for saving. Returns the decision and the new reflection set
+/// with its light (None when one exists or the stage does not run).
+pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, reseed: bool, round: u32, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<(ReflDecision, Option<ReflectionModel>)> {
+    let (cfg, v) = (s.cfg, s.views);
+    let shading = ReflectionShading::new(&v.ctx)?;
+    let sh = cfg.sh_degree_at(cfg.iterations);
+    let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
+    s.cache.clear();
+    // Per view: residual magnitude and Stage I surface depth (seeding),
+    // and both reduced for the view-dependence measure.
+    let mut maps: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
+    let mut vd_maps: Vec<VdMap> = Vec::new();
+    let (copy, hull) = cfg.reflection.init.parts();
+    for (i, cam) in v.cameras.iter().enumerate() {
+        let n = (cam.width * cam.height) as usize;
+        let buf = Buffer::<f32>::new(&v.ctx, "train.scat_cache", 3 * n)?;
+        s.scattering.render_color_into(cam, sh, &v.background, &buf)?;
+        let r = residual(&v.ctx, &shading, &v.targets[i], &buf, n as u32)?;
+        let mag = &r[3 * n..4 * n];
+        sum += mag.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
+        over += mag.iter().filter(|&&v| v > 0.05).count();
+        pixels += n;
+        on_view(i, cam, &r)?;
+        s.cache.push(buf);
+        // The frame still holds this view's render.
+        let depth = s.scattering.last_plane(cam.width, cam.height, Plane::Median)?;
+        vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
+        if hull && existing.is_none() {
+            maps.push((mag.to_vec(), depth));
+        }
+    }
+    // A resumed Stage II (its set exists) keeps the decision and seed
+    // counts it was started with; only the cache was needed.
+    if let (Some(kept), true) = (kept, existing.is_some()) {
+        return Ok((kept.clone(), None));
+    }
+    let views = v.cameras.len().max(1);
+    let vd = view_dependence(&vd_maps, (v.centre, v.extent), VD_SAMPLES);
+    drop(vd_maps);
+    let mut d = ReflDecision {
+        residual_mean: sum / views as f64,
+        residual_fraction_over_0_05: over as f64 / pixels.max(1) as f64,
+        threshold: cfg.reflection.min_residual as f64,
+        view_dependence: vd.spread,
+        view_dependence_samples: vd.samples,
+        view_dependence_threshold: cfg.reflection.min_view_dependence as f64,
+        run: false,
+        reflection_gaussians: 0,
+        seeds: 0,
+        copied: 0,
+        hull_empty: false,
+        significance_dropped: false,
+        env_from: None,
+        env_proxy: None,
+        round,
+    };
+    // A reflection set that exists (a resumed Stage II without a
+    // recorded decision) was decided on when it was made, and the
+    // second round (reflection.reseed) runs whatever its residual: the
+    // first decided.
+    d.run = reseed || existing.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
+    let mut model = None;
+    if d.run {
+        if existing.is_none() {
+            let rc = &cfg.reflection;
+            let views: Vec<SeedView> = v.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+            let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal, significance: rc.seed_significance as f64, ..SeedParams::default() };
+            let seeds = if hull {
+                let h = hull_seeding(&views, &p);
+                d.significance_dropped = h.significance_dropped;
+                h.seeds
+            } else {
+                Vec::new()
+            };
+            // No ray crossed carved space into the hull (e.g. a Stage I
+            // too short to carve anything): the paper's initialisation,
+            // a copy of the Stage I set, rather than no Stage II.
+            d.hull_empty = hull && seeds.is_empty();
+            let g = if copy || d.hull_empty { Some(s.scattering.set.params.download()?) } else { None };
+            d.seeds = seeds.len() as u32;
+            d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
+            let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
+            means.extend(seeds.iter().flat_map(|s| s.position));
+            use crate::train::settings::EnvStart;
+            let mut env = if matches!(rc.env_init, EnvStart::Scene | EnvStart::SceneDepth) {
+                let scat = s.scattering.set.params.download()?;
+                let depth = rc.env_init == EnvStart::SceneDepth;
+                let (env, info) = scene_env_map(&v.ctx, &scat, sh, &v.background, &means, rc.env_res, cfg.adam_eps, depth)?;
+                d.env_from = Some(info);
+                // The depth map's proxy: at the centre it was rendered from.
+                d.env_proxy = env.proxy.map(|p| EnvProxy::packed(Some(p)));
+                env
+            } else {
+                HostEnvMap::constant(rc.env_res, 0.0)?
+            };
+            if rc.env_radius > 0.0 {
+                let p = env_proxy(&means, &v.cameras, rc.env_radius);
+                d.env_proxy = p.map(|p| EnvProxy::packed(Some(p)));
+                env.proxy = p;
+            }
+            model = Some(ReflectionModel::from_scattering(&v.ctx, g.as_ref(), &seeds, env, rc, cfg.adam_eps)?);
+        }
+        d.reflection_gaussians = model.as_ref().map(|m| m.set.len()).or(existing).unwrap_or(0);
+    } else {
+        s.cache.clear();
+    }
+    Ok((d, model))
+}
+
+impl LaterStage for ReflectionModel {
+    fn stage(&self) -> Stage {
+        Stage::Reflection
     }
 
-
-    /// Between Stage I and II: render every training view with the frozen
-    /// scattering set (cached for Stage II), measure the residual
-    /// I_gt - I_scat on the GPU, and decide: below `reflection.min_residual`
-    /// the scene shows no view-dependent energy worth a reflection set and
-    /// the schedule ends after Stage I. `on_view(i, residual planes)` sees
-    /// every view's residual (4 planes: r, mean |r|) for saving.
-    pub fn begin_reflection(&mut self, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<ReflDecision> {
-        let shading = ReflectionShading::new(&self.ctx)?;
-        let sh = self.sh_degree(self.cfg.iterations);
-        let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
-        // Stage II again (reflection.reseed): the light field and its
-        // reflection set give way to a set seeded afresh.
-        let reseed = self.light_field.take().is_some();
-        let round = self.schedule.round(self.next_entry().0);
-        self.scat_cache.clear();
-        // Per view: residual magnitude and Stage I surface depth (seeding),
-        // and both reduced for the view-dependence measure.
-        let mut maps: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
-        let mut vd_maps: Vec<VdMap> = Vec::new();
-        let (copy, hull) = self.cfg.reflection.init.parts();
-        for (i, cam) in self.cameras.clone().iter().enumerate() {
-            let n = (cam.width * cam.height) as usize;
-            let buf = Buffer::<f32>::new(&self.ctx, "train.scat_cache", 3 * n)?;
-            self.scattering.render_color_into(cam, sh, &self.background, &buf)?;
-            let r = residual(&self.ctx, &shading, &self.targets[i], &buf, n as u32)?;
-            let mag = &r[3 * n..4 * n];
-            sum += mag.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
-            over += mag.iter().filter(|&&v| v > 0.05).count();
-            pixels += n;
-            on_view(i, cam, &r)?;
-            self.scat_cache.push(buf);
-            // The frame still holds this view's render.
-            let depth = self.scattering.last_plane(cam.width, cam.height, Plane::Median)?;
-            vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
-            if hull && self.reflection.is_none() {
-                maps.push((mag.to_vec(), depth));
-            }
-        }
-        // A resumed Stage II (its set exists) keeps the decision and seed
-        // counts it was started with; only the cache was needed.
-        if let (Some(kept), true) = (&self.decision, self.reflection.is_some()) {
-            return Ok(kept.clone());
-        }
-        let views = self.cameras.len().max(1);
-        let vd = view_dependence(&vd_maps, (self.centre, self.extent), VD_SAMPLES);
-        drop(vd_maps);
-        let mut d = ReflDecision {
-            residual_mean: sum / views as f64,
-            residual_fraction_over_0_05: over as f64 / pixels.max(1) as f64,
-            threshold: self.cfg.reflection.min_residual as f64,
-            view_dependence: vd.spread,
-            view_dependence_samples: vd.samples,
-            view_dependence_threshold: self.cfg.reflection.min_view_dependence as f64,
-            run: false,
-            reflection_gaussians: 0,
-            seeds: 0,
-            copied: 0,
-            hull_empty: false,
-            significance_dropped: false,
-            env_from: None,
-            env_proxy: None,
-            round,
-        };
-        // A reflection set that exists (a resumed Stage II without a
-        // recorded decision) was decided on when it was made, and the
-        // second round (reflection.reseed) runs whatever its residual: the
-        // first decided.
-        d.run = reseed || self.reflection.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
-        if d.run {
-            if self.reflection.is_none() {
-                let rc = &self.cfg.reflection;
-                let views: Vec<SeedView> = self.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-                let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal, significance: rc.seed_significance as f64, ..SeedParams::default() };
-                let seeds = if hull {
-                    let h = hull_seeding(&views, &p);
-                    d.significance_dropped = h.significance_dropped;
-                    h.seeds
-                } else {
-                    Vec::new()
-                };
-                // No ray crossed carved space into the hull (e.g. a Stage I
-                // too short to carve anything): the paper's initialisation,
-                // a copy of the Stage I set, rather than no Stage II.
-                d.hull_empty = hull && seeds.is_empty();
-                let g = if copy || d.hull_empty { Some(self.scattering.set.params.download()?) } else { None };
-                d.seeds = seeds.len() as u32;
-                d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
-                let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
-                means.extend(seeds.iter().flat_map(|s| s.position));
-                use crate::train::settings::EnvStart;
-                let mut env = if matches!(rc.env_init, EnvStart::Scene | EnvStart::SceneDepth) {
-                    let scat = self.scattering.set.params.download()?;
-                    let depth = rc.env_init == EnvStart::SceneDepth;
-                    let (env, info) = scene_env_map(&self.ctx, &scat, sh, &self.background, &means, rc.env_res, self.cfg.adam_eps, depth)?;
-                    d.env_from = Some(info);
-                    // The depth map's proxy: at the centre it was rendered from.
-                    d.env_proxy = env.proxy.map(|p| EnvProxy::packed(Some(p)));
-                    env
-                } else {
-                    HostEnvMap::constant(rc.env_res, 0.0)?
-                };
-                if rc.env_radius > 0.0 {
-                    let p = env_proxy(&means, &self.cameras, rc.env_radius);
-                    d.env_proxy = p.map(|p| EnvProxy::packed(Some(p)));
-                    env.proxy = p;
-                }
-                self.reflection = Some(ReflectionModel::from_scattering(&self.ctx, g.as_ref(), &seeds, env, rc, self.cfg.adam_eps)?);
-            }
-            d.reflection_gaussians = self.reflection.as_ref().map(|r| r.set.len()).unwrap_or(0);
-        } else {
-            self.schedule.end_after(Stage::Scattering);
-            self.scat_cache.clear();
-        }
-        self.decision = Some(d.clone());
-        Ok(d)
-    }
-
-    pub(crate) fn step_reflection(&mut self, it: u32, stage_it: u32, profile: bool) -> Result<StepReport> {
-        let view = self.next_view();
-        let cam = self.cameras[view as usize];
-        let model = self.reflection.as_mut().context("Stage II has not begun (Trainer::begin_reflection)")?;
-        let train = self.cfg.reflection.train_scattering;
-        let scat = if train { None } else { Some(self.scat_cache.get(view as usize).context("the scattering colour cache is missing")?) };
-        let sh_degree = self.cfg.sh_degree_at(self.cfg.iterations);
-        let scat_train = train.then_some(ScatTrain { model: &mut self.scattering, sh_degree, background: self.background, global_iteration: it });
+    fn iterate(&mut self, s: Shared<'_>, x: &Iteration) -> Result<StepOutput> {
+        let (cfg, v) = (s.cfg, s.views);
+        let cam = v.cameras[x.view as usize];
+        let train = cfg.reflection.train_scattering;
+        let scat = if train { None } else { Some(s.cache.get(x.view as usize).context("the scattering colour cache is missing")?) };
+        let sh_degree = cfg.sh_degree_at(cfg.iterations);
+        let scat_train = train.then_some(ScatTrain { model: s.scattering, sh_degree, background: v.background, global_iteration: x.global });
         let input = ReflStepInput {
-            iteration: stage_it,
+            iteration: x.stage,
             camera: &cam,
-            target: &self.targets[view as usize],
+            target: &v.targets[x.view as usize],
             scat,
             // The reflection geometry starts converged: positions move at
             // Stage I's final rate (method-notes §3.7).
-            lr_means: self.cfg.lr_means_final * self.extent,
-            profile,
+            lr_means: cfg.lr_means_final * v.extent,
+            profile: x.profile,
         };
-        let out = model.step(&self.cfg, &input, scat_train)?;
-        self.iteration = it;
-        Ok(StepReport {
-            iteration: it,
-            stage: Stage::Reflection,
-            view,
-            loss: out.loss,
-            values: out.values,
-            gaussians: model.set.len(),
-            densified: out.densified,
-            opacity_reset: false,
-            timings: out.timings,
-        })
+        self.step(cfg, &input, scat_train)
+    }
+
+    fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
+        ReflectionModel::render(self, cam, scat)
+    }
+
+    fn set(&self) -> &TrainableSet {
+        &self.set
+    }
+
+    fn write_outputs(&self, out: &Path) -> Result<()> {
+        ReflectionModel::write_outputs(self, out)
+    }
+
+    fn into_set(self: Box<Self>) -> TrainableSet {
+        ReflectionModel::into_set(*self)
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
     }
 }
 

@@ -2,6 +2,7 @@
 pub mod init;
 pub mod knn;
 pub mod model;
-mod stage;
+pub mod stage;
 
-pub use model::{Rendered, ScatteringModel, StepInput, StepOutput};
+pub use crate::train::stages::rendered::Rendered;
+pub use model::{ScatteringModel, StepInput, StepOutput};

@@ -8,30 +8,12 @@
 //! trainer.
 
 use crate::train::config::TrainConfig;
+use crate::train::stages::rendered::Rendered;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
 use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Plane, Rasterizer, TrainableSet};
-
-/// Render planes of one view, downloaded.
-pub struct Rendered {
-    pub width: u32,
-    pub height: u32,
-    /// Planes in the rasterizer's order (see `Plane`).
-    pub planes: Vec<f32>,
-    /// In Stage II: the scattering render and the reflection render this
-    /// image was composited from.
-    pub layers: Option<Box<(Rendered, crate::train::stages::reflection::ReflRendered)>>,
-}
-
-impl Rendered {
-    pub fn plane(&self, p: Plane) -> &[f32] {
-        let n = (self.width * self.height) as usize;
-        let i = p.index(3) as usize;
-        &self.planes[i * n..(i + 1) * n]
-    }
-}
 
 /// What the trainer passes for one step of this model.
 pub struct StepInput<'a> {
