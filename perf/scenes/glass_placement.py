@@ -3,7 +3,7 @@
 
 Issue 11's question is whether Stage II puts its Gaussians on the glass. The
 datasets carry no depth, so this reads the glass from the scene generators:
-the built-in `glass` scene (harness/src/scene/trace.rs: sphere at
+the built-in `glass` scene (harness/dataset/src/scene/trace.rs: sphere at
 (0, 0, 0.8), radius 0.75) and `perf/scenes/mitsuba_scenes.py`'s `globe`
 (sphere at (0, 0, 0.95), radius 0.95) and `pane` (the plane x = 0,
 |y| <= 1.2, |z - 0.7| <= 0.7).

@@ -1,4 +1,4 @@
-//! Stage II's cube map started from the scene (harness/src/train/env_init.rs):
+//! Stage II's cube map started from the scene (harness/train/src/train/stages/reflection/env_init.rs):
 //! the texel directions against the f64 reference's cube lookup, and a room
 //! of six two-tone walls around the reflection set's box, with a Gaussian
 //! inside the box that the map must leave out, and the distance to each

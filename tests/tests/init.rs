@@ -1,7 +1,7 @@
-//! Initial points (harness/src/train/init.rs), on the CPU: the far-field
+//! Initial points (harness/train/src/train/stages/scattering/init.rs), on the CPU: the far-field
 //! points that random initialisation adds beyond its cube and the cameras,
 //! and the neighbour distances that size the initial Gaussians
-//! (harness/src/train/knn.rs).
+//! (harness/train/src/train/stages/scattering/knn.rs).
 
 use tgs::train::stages::scattering::init::{far_points, random_points};
 use tgs::train::stages::scattering::knn::knn3_mean_sq;

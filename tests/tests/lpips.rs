@@ -1,4 +1,4 @@
-//! LPIPS (harness/src/lpips.rs) against the independent f64 reference
+//! LPIPS (harness/train/src/lpips.rs) against the independent f64 reference
 //! (tests/src/lpips_ref.rs) on the same weights, to 1e-4: ray-traced views,
 //! a blurred and a noisy copy, a non-square crop, the smallest size it is
 //! defined for, constant images; identical images give exactly 0, images

@@ -1,5 +1,5 @@
 //! The view-dependence measure of the Stage I residual
-//! (harness/src/train/view_dependence.rs), on the CPU: a ring of views over
+//! (harness/train/src/train/stages/reflection/view_dependence.rs), on the CPU: a ring of views over
 //! a ground plane with analytic depths, and residuals that depend on the
 //! surface point only (Stage I misfit), on the view only (reflection), or
 //! come from an occluded view.

@@ -88,11 +88,11 @@ name_enum!(
     EnvStart, "reflection.env_init", {
         /// Every texel sigmoid 0.5 (method-notes §3.7).
         Grey = "grey",
-        /// The scattering set rendered from the reflection set's box (train/env_init.rs).
+        /// The scattering set rendered from the reflection set's box (stages/reflection/env_init.rs).
         Scene = "scene",
         /// The same with its depth per texel: each reflection looks up where
         /// its own ray meets the scene seen from the box, not the direction
-        /// alone (a depth-corrected local cube map, train/env_init.rs).
+        /// alone (a depth-corrected local cube map, stages/reflection/env_init.rs).
         SceneDepth = "scene-depth",
     }
 );
@@ -102,7 +102,7 @@ name_enum!(
     ReflectionInit, "reflection.init", {
         /// The whole converged Stage I set (the paper's words).
         Copy = "copy",
-        /// Seeds on the residual hull (train/seed.rs) only.
+        /// Seeds on the residual hull (stages/reflection/seed.rs) only.
         Hull = "hull",
         /// Both.
         CopyHull = "copy+hull",

@@ -37,7 +37,7 @@ pub struct ReflDecision {
     /// The threshold on `residual_mean` (reflection.min_residual).
     pub threshold: f64,
     /// How much the residual changes with the view at a fixed Stage I
-    /// surface point (train/view_dependence.rs), over how many samples,
+    /// surface point (stages/reflection/view_dependence.rs), over how many samples,
     /// and its threshold (reflection.min_view_dependence).
     #[serde(default)]
     pub view_dependence: f64,
