@@ -11,6 +11,10 @@
 //! ill-conditioned hit (a ray grazing a splat: the hit depth then moves far
 //! under one-ulp changes of the f32 inputs) get a tolerance widened in
 //! proportion to that measured sensitivity (see `sensitivity`).
+//!
+//! Longer than 500 lines on purpose: the forward and backward reference of
+//! one kernel family, kept together so that each line of the GLSL has its
+//! f64 counterpart in one file.
 
 use tgs_pipelines::{Camera, HostGaussians};
 

@@ -5,6 +5,10 @@
 //! reduction) against central differences, the deferred composite with and
 //! without Schlick (no coverage, grazing and head-on views), no NaN/Inf,
 //! and bit-identical reruns.
+//!
+//! Longer than 500 lines on purpose: one test binary per kernel family (each
+//! binary is linked separately, and links are a large part of CI's build),
+//! and these cases share the reference's helpers.
 
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::{CompositePriors, EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};

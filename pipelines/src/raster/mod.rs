@@ -7,23 +7,26 @@
 //! Counts stay on the GPU within a view (indirect dispatch); capacities are
 //! checked afterwards by [`Rasterizer::fit`].
 
+mod backward;
+mod binning;
 mod camera;
-mod reduce_adam;
+mod forward;
 mod frame;
 mod gaussians;
+mod reduce_adam;
 
 pub use camera::Camera;
 pub use frame::{Frame, Plane};
 pub use gaussians::{Gaussians, HostGaussians};
 pub use reduce_adam::ReduceAdam;
 
-use crate::scan::{Count, PrefixSum, ScanScratch};
+use crate::scan::{PrefixSum, ScanScratch};
 use crate::shaders;
 use crate::sort::{RadixSort, SortScratch};
-use anyhow::{bail, Context as _, Result};
+use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use tgs_engine::{groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Readback, Recorder};
+use tgs_engine::{groups_2d, Buffer, BufferBinding, Context, Kernel, KernelDesc, Readback};
 
 /// How per-Gaussian features become the rasterized channels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -469,260 +472,6 @@ impl Rasterizer {
         ]
     }
 
-    /// Record the forward pass of one view: outputs land in `frame.out`.
-    /// `sh_degree` is the active SH degree (ignored for plain features).
-    pub fn record_forward(&self, rec: &mut Recorder, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
-        self.record_forward_with(rec, g, &g.features, cam, background, sh_degree, frame)
-    }
-
-    /// As [`Rasterizer::record_forward`], with the per-Gaussian features
-    /// taken from `features` (this rasterizer's channels x coefficients per
-    /// Gaussian) instead of the set's own (features computed by another
-    /// kernel, e.g. the reflection colour).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_forward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
-        self.check_inputs(g, features, frame)?;
-        cam.validate()?;
-        if cam.width != frame.width || cam.height != frame.height {
-            bail!("camera is {}x{} but the frame is {}x{}", cam.width, cam.height, frame.width, frame.height);
-        }
-        if background.len() != self.channels as usize {
-            bail!("background has {} values; the rasterizer has {} channels", background.len(), self.channels);
-        }
-        let push = self.push(g, frame, sh_degree);
-        let pb = bytemuck::bytes_of(&push);
-        rec.update(&frame.cam.binding(), bytemuck::cast_slice(&cam.pack(background)))?;
-
-        let sc = rec.begin_scope("raster.project");
-        let mut bindings = Self::param_bindings(frame, g, features);
-        bindings.extend([
-            frame.proj.binding(),
-            frame.pfeat.binding(),
-            frame.rects.binding(),
-            frame.tiles.binding(),
-            frame.depth_keys.binding(),
-            frame.depth_ids.binding(),
-            frame.radii.binding(),
-        ]);
-        rec.dispatch(&self.project, &bindings, pb, self.groups(g.n))?;
-        rec.end_scope(sc);
-
-        let sc = rec.begin_scope("raster.depth_sort");
-        self.sort.record(rec, &frame.depth_keys, &frame.depth_ids, &Count::Host(g.n), 32, &frame.depth_scratch).context("depth sort")?;
-        rec.end_scope(sc);
-
-        let sc = rec.begin_scope("raster.gather");
-        rec.dispatch(&self.gather, &[frame.depth_ids.binding(), frame.tiles.binding(), frame.offsets.binding()], bytemuck::bytes_of(&g.n), self.groups(g.n + 1))?;
-        rec.end_scope(sc);
-        let sc = rec.begin_scope("raster.scan");
-        self.scan.record(rec, &frame.offsets, &frame.offsets, &Count::Host(g.n + 1), &frame.scan_scratch)?;
-        rec.end_scope(sc);
-
-        let sc = rec.begin_scope("raster.plan");
-        let plan_push = [g.n, frame.capacity, WG, self.max_x()];
-        rec.dispatch(&self.plan, &[frame.offsets.binding(), frame.params.binding(), frame.args.binding(), frame.stats.binding()], bytemuck::cast_slice(&plan_push), [1, 1, 1])?;
-        rec.end_scope(sc);
-
-        let sc = rec.begin_scope("raster.emit");
-        rec.dispatch(
-            &self.emit,
-            &[frame.depth_ids.binding(), frame.offsets.binding(), frame.rects.binding(), frame.isect_keys.binding(), frame.isect_vals.binding(), frame.isect_gid.binding()],
-            pb,
-            self.groups(g.n),
-        )?;
-        rec.end_scope(sc);
-
-        let tiles = frame.tiles();
-        let tile_bits = 32 - (tiles.max(1) - 1).leading_zeros();
-        let count = Count::Gpu { buffer: frame.params.binding(), index: 0 };
-        let sc = rec.begin_scope("raster.tile_sort");
-        self.sort.record(rec, &frame.isect_keys, &frame.isect_vals, &count, tile_bits, &frame.tile_scratch).context("tile sort")?;
-        rec.end_scope(sc);
-
-        let sc = rec.begin_scope("raster.ranges");
-        rec.fill(&frame.ranges.binding(), 0)?;
-        rec.dispatch_indirect(&self.ranges, &[frame.params.binding(), frame.isect_keys.binding(), frame.ranges.binding()], &[], &frame.args.binding())?;
-        rec.end_scope(sc);
-
-        let tile_groups = groups_2d(tiles, self.max_x());
-        let mut bindings = Self::tile_bindings(frame);
-        bindings.push(frame.stats.binding());
-        for k in 0..frame.spans {
-            let p = Push { span_index: k, ..push };
-            let sc = rec.begin_scope("raster.forward");
-            rec.dispatch(&self.forward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
-            rec.end_scope(sc);
-        }
-        // The total and the overflow flag ride this submission back to the host (`fit`).
-        rec.read_back(&frame.stats, 0, &frame.stats_host)
-    }
-
-    /// Record, after the forward of `frame` (same recording), indirect
-    /// arguments for up to [`GATE_SLOTS`] later dispatches: `grids[k]` when
-    /// the view fitted its frame, zero workgroups when it overflowed (see
-    /// [`Rasterizer::fit`]). Returns the argument slot of each grid, for
-    /// `Recorder::dispatch_indirect`. This is how one submission can hold a
-    /// whole training iteration: an overflowed view updates nothing, and the
-    /// host grows the frame and runs the iteration again.
-    pub fn record_fit_gate(&self, rec: &mut Recorder, frame: &Frame, grids: &[[u32; 3]]) -> Result<Vec<BufferBinding>> {
-        if grids.len() > GATE_SLOTS {
-            bail!("{} gated dispatches; the gate holds {GATE_SLOTS}", grids.len());
-        }
-        let mut push = [0u32; GATE_PUSH_WORDS];
-        push[0] = frame.capacity;
-        push[1] = grids.len() as u32;
-        for (k, g) in grids.iter().enumerate() {
-            push[4 + 3 * k..7 + 3 * k].copy_from_slice(g);
-        }
-        let sc = rec.begin_scope("raster.gate");
-        rec.dispatch(&self.gate, &[frame.stats.binding(), frame.gate.binding()], bytemuck::cast_slice(&push), [1, 1, 1])?;
-        rec.end_scope(sc);
-        Ok((0..grids.len()).map(|k| frame.gate.slice(3 * k, 3)).collect())
-    }
-
-    /// Record the backward of the last forward on `frame` (same Gaussians),
-    /// with the loss gradient of every output plane in `frame.grad_out`.
-    /// Overwrites every gradient in `grads` (and `frame.densify`).
-    pub fn record_backward(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
-        if grads.channels != g.channels || grads.coeffs != g.coeffs {
-            bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
-        }
-        self.record_backward_with(rec, g, &g.features, grads, &grads.features, sh_degree, frame)
-    }
-
-    /// As [`Rasterizer::record_backward`] for a forward recorded with
-    /// [`Rasterizer::record_forward_with`]: the feature gradients go to
-    /// `d_features` (same layout as `features`), the geometry gradients to
-    /// `grads` (whose own feature buffer is left alone).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_backward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, grads: &Gaussians, d_features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<()> {
-        if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {
-            bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
-        }
-        let records = self.record_tile_backward(rec, g, features, sh_degree, frame)?;
-        let sc = rec.begin_scope("raster.reduce");
-        let mut bindings = Self::param_bindings(frame, g, features);
-        bindings.extend([
-            frame.depth_ids.binding(),
-            frame.offsets.binding(),
-            records,
-            grads.means.binding(),
-            grads.log_scales.binding(),
-            grads.quats.binding(),
-            grads.opacity.binding(),
-            d_features.binding(),
-            frame.densify.binding(),
-        ]);
-        let push = self.push(g, frame, sh_degree);
-        rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
-        rec.end_scope(sc);
-        Ok(())
-    }
-
-    /// The per-tile part of the backward (every span, back to front): the
-    /// intersection gradient records. Returns the records' binding for the
-    /// per-Gaussian reduce.
-    fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<BufferBinding> {
-        self.check_inputs(g, features, frame)?;
-        let push = self.push(g, frame, sh_degree);
-        let tile_groups = groups_2d(frame.tiles(), self.max_x());
-        let mut bindings = Self::tile_bindings(frame);
-        let records = match &frame.records_address {
-            Some(a) => {
-                // Reached through its address, not bound: keep it alive.
-                rec.keep_alive(frame.isect_grads.binding());
-                a.binding()
-            }
-            None => frame.isect_grads.binding(),
-        };
-        bindings.extend([frame.grad_out.binding(), frame.bstate.binding(), records.clone()]);
-        for k in (0..frame.spans).rev() {
-            let p = Push { span_index: k, ..push };
-            let sc = rec.begin_scope("raster.backward");
-            rec.dispatch(&self.backward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
-            rec.end_scope(sc);
-        }
-        Ok(records)
-    }
-
-    /// After a recorded view's submission completed: read the intersection
-    /// total and the span overflow flag it brought back (no submission).
-    /// Returns `true` when everything fitted; otherwise grows `frame` so that
-    /// a re-run fits and returns `false`.
-    pub fn fit(&self, frame: &mut Frame) -> Result<bool> {
-        let stats = frame.stats_host.read()?;
-        let (total, span_overflow) = (stats[0], stats[1] != 0);
-        frame.last_intersections = total;
-        let mut fits = true;
-        if total > frame.capacity {
-            let max = self.max_capacity();
-            if total > max {
-                bail!("this view has {total} tile-splat intersections; the device allows at most {max} (fewer or smaller Gaussians, or a smaller image)");
-            }
-            let cap = (total as u64 + total as u64 / 4).min(max as u64) as u32;
-            self.grow(frame, cap)?;
-            fits = false;
-        }
-        if span_overflow {
-            let r = frame.ranges.download()?;
-            let longest = r.chunks(2).map(|c| c[1].saturating_sub(c[0])).max().unwrap_or(0);
-            frame.spans = longest.div_ceil(self.span).max(frame.spans + 1);
-            fits = false;
-        }
-        Ok(fits)
-    }
-
-    fn grow(&self, frame: &mut Frame, capacity: u32) -> Result<()> {
-        (frame.isect_keys, frame.isect_vals, frame.isect_gid, frame.tile_scratch, frame.isect_grads, frame.records_address) = self.intersection_buffers(capacity)?;
-        frame.capacity = capacity;
-        Ok(())
-    }
-
-    /// The per-intersection arrays of a frame (keys, values, Gaussian ids,
-    /// tile-sort scratch, gradient records, their address). Emission writes
-    /// entries [0, count) and the backward every record of them (zeros past
-    /// a tile's last contributor) before anything reads them, so they start
-    /// undefined.
-    fn intersection_buffers(&self, capacity: u32) -> Result<IntersectionBuffers> {
-        let (ctx, cap) = (&self.ctx, capacity as usize);
-        let records = Buffer::uninit(ctx, "raster.isect_grads", cap * self.record_len() as usize)?;
-        let address = match self.records {
-            RecordAccess::Binding => None,
-            RecordAccess::Address => {
-                let a = records.device_address()?;
-                Some(Buffer::from_slice(ctx, "raster.records_address", &[a as u32, (a >> 32) as u32])?)
-            }
-        };
-        Ok((
-            Buffer::uninit(ctx, "raster.isect_keys", cap)?,
-            Buffer::uninit(ctx, "raster.isect_vals", cap)?,
-            Buffer::uninit(ctx, "raster.isect_gid", cap)?,
-            self.sort.scratch(capacity)?,
-            records,
-            address,
-        ))
-    }
-
-    /// Run the forward of one view to completion, growing `frame` and
-    /// re-running when it did not fit. Returns the GPU timings of the last run
-    /// (empty unless `profile`).
-    pub fn forward(&self, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &mut Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
-        loop {
-            let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            self.record_forward(&mut rec, g, cam, background, sh_degree, frame)?;
-            let t = rec.submit_and_wait()?;
-            if self.fit(frame)? {
-                return Ok(t);
-            }
-        }
-    }
-
-    /// Run the backward of the last [`Rasterizer::forward`] on `frame`.
-    pub fn backward(&self, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
-        let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-        self.record_backward(&mut rec, g, grads, sh_degree, frame)?;
-        rec.submit_and_wait()
-    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,153 @@
+//! The GEMM the light field's products run on: which kernel (tiled
+//! through shared memory on GPUs, rows per invocation on CPU devices), the
+//! block each product is cut into, and the product's description as the
+//! kernels read it (push constants).
+
+use anyhow::{bail, Context as _, Result};
+use bytemuck::{Pod, Zeroable};
+use tgs_engine::Context;
+
+/// Rows and columns of C per invocation of the tiled GEMM (its tile is 8x
+/// that; glsl/mlp/gemm.comp): the largest whose tile fits the product's
+/// smaller side, up to 16 (measured on llvmpipe, 8 x 256 on 4,096 samples:
+/// blocks of 4 / 8 / 16 give 2.0 / 3.9 / 7.1 GFLOP/s forward).
+pub(super) const BLOCKS: [u32; 3] = [4, 8, 16];
+/// A configuration of the row kernel (glsl/mlp/gemm_rows.comp): `nb`
+/// columns and `rr` rows of C per invocation, `wg` invocations per
+/// workgroup (which covers wg x rr rows).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RowConfig {
+    pub(super) nb: u32,
+    pub(super) rr: u32,
+    pub(super) wg: u32,
+}
+
+/// The row kernel's pipelines: for each column block (8, 16, 32, 64), a
+/// workgroup of 64 invocations with 8 rows each (4 with 64 columns, whose
+/// accumulators would otherwise not fit the registers) for products with
+/// many rows (the forward and the input gradient: a row per sample), one of
+/// 16 with 4 rows for products of at most 64 rows (the weight gradient: a
+/// row per output unit), and one of 8 with 1 row for at most 8 (the head's
+/// weight gradient). Rows per invocation share every broadcast of B:
+/// measured on llvmpipe, the small network's forward on 4,096 samples takes
+/// 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8 rows (perf/RESULTS.md,
+/// twenty-eighth session).
+pub(super) const ROW_CONFIGS: [RowConfig; 12] = [
+    RowConfig { nb: 8, rr: 8, wg: 64 },
+    RowConfig { nb: 16, rr: 8, wg: 64 },
+    RowConfig { nb: 32, rr: 8, wg: 64 },
+    RowConfig { nb: 64, rr: 4, wg: 64 },
+    RowConfig { nb: 8, rr: 4, wg: 16 },
+    RowConfig { nb: 16, rr: 4, wg: 16 },
+    RowConfig { nb: 32, rr: 4, wg: 16 },
+    RowConfig { nb: 64, rr: 4, wg: 16 },
+    RowConfig { nb: 8, rr: 1, wg: 8 },
+    RowConfig { nb: 16, rr: 1, wg: 8 },
+    RowConfig { nb: 32, rr: 1, wg: 8 },
+    RowConfig { nb: 64, rr: 1, wg: 8 },
+];
+
+/// The row configuration for a product of `m` x `n`: 64 columns for
+/// products at least 128 wide, else the smallest block that holds them (8,
+/// 16, 32); the smallest workgroup shape that covers the rows.
+pub(super) fn row_config(m: u32, n: u32) -> usize {
+    let col = if n >= 128 { 3 } else { [8, 16, 32].iter().position(|&nb| nb >= n).unwrap_or(2) };
+    let rows = if m <= 8 {
+        8
+    } else if m <= 64 {
+        4
+    } else {
+        0
+    };
+    rows + col
+}
+/// At most this many sample chunks hold weight-gradient partials (a power
+/// of two: the counted backward walks them in bit-reversed order).
+pub(super) const MAX_CHUNKS: u32 = 16;
+const _: () = assert!(MAX_CHUNKS.is_power_of_two());
+/// Smallest chunk of samples per weight-gradient partial.
+pub(super) const MIN_CHUNK: u32 = 256;
+pub(super) const NONE: u32 = u32::MAX;
+
+/// Push constants of glsl/mlp/gemm.comp: C = pre(A) B with element (i, k)
+/// of A at a_off + i a_rs + k a_cs (column a_ones_k implicitly 1), B(k, j)
+/// likewise (column b_ones_j implicitly 1), C(i, j) at
+/// c_off + z c_zstride + i c_rs + j; the activation derivative (Y at
+/// y_off + i y_rs + k y_cs) multiplies A.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Default)]
+pub(super) struct Product {
+    pub(super) m: u32,
+    pub(super) n: u32,
+    pub(super) kdim: u32,
+    pub(super) k_chunk: u32,
+    pub(super) a_off: u32,
+    pub(super) a_rs: u32,
+    pub(super) a_cs: u32,
+    pub(super) a_ones_k: u32,
+    pub(super) b_off: u32,
+    pub(super) b_rs: u32,
+    pub(super) b_cs: u32,
+    pub(super) b_ones_j: u32,
+    pub(super) y_off: u32,
+    pub(super) y_rs: u32,
+    pub(super) y_cs: u32,
+    pub(super) a_deriv: u32,
+    pub(super) c_off: u32,
+    pub(super) c_rs: u32,
+    pub(super) c_zstride: u32,
+    pub(super) c_act: u32,
+    /// Rows from the GPU: m = min(m, rows[0]) (binding 4).
+    pub(super) m_count: u32,
+    /// The summed dimension from the GPU: kdim = min(kdim, rows[0]), split
+    /// as [`weight_chunks`] would (k_chunk unused).
+    pub(super) k_count: u32,
+}
+
+pub(super) const RELU: u32 = 1;
+pub(super) const SIGMOID: u32 = 2;
+
+/// The kernel the MLP's products run on. Both sum every element of C in
+/// increasing k with one invocation, so their results are bit-identical
+/// (tests/tests/mlp.rs); they differ in where the operands come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gemm {
+    /// glsl/mlp/gemm.comp: tiles of A and B staged in shared memory; for
+    /// GPUs, where shared memory is fast and global loads coalesce.
+    Tiled,
+    /// glsl/mlp/gemm_rows.comp: rows of C per invocation, their A from
+    /// memory, B shared across the subgroup by broadcasts; for CPU devices
+    /// (lavapipe), where every load a lane makes costs a scalar load and the
+    /// tiled kernel's shared-memory reads were the bottleneck. Measured on
+    /// llvmpipe, 4,096 samples, forward + backward: the small network 5,131
+    /// -> 25,915 samples/s, the paper network 434 -> 1,260.
+    Rows,
+}
+
+/// The environment variable that overrides [`Gemm::for_device`].
+pub const GEMM_ENV: &str = "TGS_MLP_GEMM";
+
+impl Gemm {
+    /// Rows on CPU devices, tiled elsewhere; the environment variable
+    /// `TGS_MLP_GEMM` (tiled, rows) overrides the choice.
+    pub fn for_device(ctx: &Context) -> Result<Gemm> {
+        if let Ok(v) = std::env::var(GEMM_ENV) {
+            return Gemm::parse(&v).with_context(|| format!("environment variable {GEMM_ENV}"));
+        }
+        Ok(if ctx.caps().is_cpu() { Gemm::Rows } else { Gemm::Tiled })
+    }
+    /// By name: "tiled" or "rows".
+    pub fn parse(name: &str) -> Result<Gemm> {
+        match name {
+            "tiled" => Ok(Gemm::Tiled),
+            "rows" => Ok(Gemm::Rows),
+            _ => bail!("unknown MLP kernel '{name}' (tiled, rows)"),
+        }
+    }
+    pub fn name(&self) -> &'static str {
+        match self {
+            Gemm::Tiled => "tiled",
+            Gemm::Rows => "rows",
+        }
+    }
+}

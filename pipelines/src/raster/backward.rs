@@ -1,0 +1,81 @@
+//! The atomic-free backward of a view: per tile, back to front, one
+//! gradient record per intersection; then a fixed-order per-Gaussian
+//! reduction of those records fused with the projection backward.
+
+use super::{Frame, Gaussians, Push, Rasterizer};
+use anyhow::{bail, Result};
+use tgs_engine::{groups_2d, Buffer, BufferBinding, Recorder};
+
+impl Rasterizer {
+    /// Record the backward of the last forward on `frame` (same Gaussians),
+    /// with the loss gradient of every output plane in `frame.grad_out`.
+    /// Overwrites every gradient in `grads` (and `frame.densify`).
+    pub fn record_backward(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
+        if grads.channels != g.channels || grads.coeffs != g.coeffs {
+            bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
+        }
+        self.record_backward_with(rec, g, &g.features, grads, &grads.features, sh_degree, frame)
+    }
+
+    /// As [`Rasterizer::record_backward`] for a forward recorded with
+    /// [`Rasterizer::record_forward_with`]: the feature gradients go to
+    /// `d_features` (same layout as `features`), the geometry gradients to
+    /// `grads` (whose own feature buffer is left alone).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, grads: &Gaussians, d_features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<()> {
+        if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {
+            bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
+        }
+        let records = self.record_tile_backward(rec, g, features, sh_degree, frame)?;
+        let sc = rec.begin_scope("raster.reduce");
+        let mut bindings = Self::param_bindings(frame, g, features);
+        bindings.extend([
+            frame.depth_ids.binding(),
+            frame.offsets.binding(),
+            records,
+            grads.means.binding(),
+            grads.log_scales.binding(),
+            grads.quats.binding(),
+            grads.opacity.binding(),
+            d_features.binding(),
+            frame.densify.binding(),
+        ]);
+        let push = self.push(g, frame, sh_degree);
+        rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
+        rec.end_scope(sc);
+        Ok(())
+    }
+
+    /// The per-tile part of the backward (every span, back to front): the
+    /// intersection gradient records. Returns the records' binding for the
+    /// per-Gaussian reduce.
+    pub(super) fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<BufferBinding> {
+        self.check_inputs(g, features, frame)?;
+        let push = self.push(g, frame, sh_degree);
+        let tile_groups = groups_2d(frame.tiles(), self.max_x());
+        let mut bindings = Self::tile_bindings(frame);
+        let records = match &frame.records_address {
+            Some(a) => {
+                // Reached through its address, not bound: keep it alive.
+                rec.keep_alive(frame.isect_grads.binding());
+                a.binding()
+            }
+            None => frame.isect_grads.binding(),
+        };
+        bindings.extend([frame.grad_out.binding(), frame.bstate.binding(), records.clone()]);
+        for k in (0..frame.spans).rev() {
+            let p = Push { span_index: k, ..push };
+            let sc = rec.begin_scope("raster.backward");
+            rec.dispatch(&self.backward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
+            rec.end_scope(sc);
+        }
+        Ok(records)
+    }
+
+    /// Run the backward of the last [`Rasterizer::forward`] on `frame`.
+    pub fn backward(&self, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame, profile: bool) -> Result<Vec<tgs_engine::Timing>> {
+        let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
+        self.record_backward(&mut rec, g, grads, sh_degree, frame)?;
+        rec.submit_and_wait()
+    }
+}

@@ -1,0 +1,69 @@
+//! Tile binning, the first half of a view's forward: projection of every
+//! Gaussian, the depth sort, per-Gaussian tile counts and their prefix sum,
+//! the plan of the emission (capacity check, indirect arguments), emission
+//! of one (tile, depth) key per intersection, the stable tile sort, and
+//! each tile's range of intersections. Counts stay on the GPU.
+
+use super::{Frame, Gaussians, Rasterizer};
+use crate::scan::Count;
+use crate::WG;
+use anyhow::{Context as _, Result};
+use tgs_engine::{Buffer, Recorder};
+
+impl Rasterizer {
+    /// Record the binning of the Gaussians `g` (features `features`) into
+    /// `frame`, with the forward's push constants `pb`.
+    pub(super) fn record_binning(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, pb: &[u8], frame: &Frame) -> Result<()> {
+        let sc = rec.begin_scope("raster.project");
+        let mut bindings = Self::param_bindings(frame, g, features);
+        bindings.extend([
+            frame.proj.binding(),
+            frame.pfeat.binding(),
+            frame.rects.binding(),
+            frame.tiles.binding(),
+            frame.depth_keys.binding(),
+            frame.depth_ids.binding(),
+            frame.radii.binding(),
+        ]);
+        rec.dispatch(&self.project, &bindings, pb, self.groups(g.n))?;
+        rec.end_scope(sc);
+
+        let sc = rec.begin_scope("raster.depth_sort");
+        self.sort.record(rec, &frame.depth_keys, &frame.depth_ids, &Count::Host(g.n), 32, &frame.depth_scratch).context("depth sort")?;
+        rec.end_scope(sc);
+
+        let sc = rec.begin_scope("raster.gather");
+        rec.dispatch(&self.gather, &[frame.depth_ids.binding(), frame.tiles.binding(), frame.offsets.binding()], bytemuck::bytes_of(&g.n), self.groups(g.n + 1))?;
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("raster.scan");
+        self.scan.record(rec, &frame.offsets, &frame.offsets, &Count::Host(g.n + 1), &frame.scan_scratch)?;
+        rec.end_scope(sc);
+
+        let sc = rec.begin_scope("raster.plan");
+        let plan_push = [g.n, frame.capacity, WG, self.max_x()];
+        rec.dispatch(&self.plan, &[frame.offsets.binding(), frame.params.binding(), frame.args.binding(), frame.stats.binding()], bytemuck::cast_slice(&plan_push), [1, 1, 1])?;
+        rec.end_scope(sc);
+
+        let sc = rec.begin_scope("raster.emit");
+        rec.dispatch(
+            &self.emit,
+            &[frame.depth_ids.binding(), frame.offsets.binding(), frame.rects.binding(), frame.isect_keys.binding(), frame.isect_vals.binding(), frame.isect_gid.binding()],
+            pb,
+            self.groups(g.n),
+        )?;
+        rec.end_scope(sc);
+
+        let tiles = frame.tiles();
+        let tile_bits = 32 - (tiles.max(1) - 1).leading_zeros();
+        let count = Count::Gpu { buffer: frame.params.binding(), index: 0 };
+        let sc = rec.begin_scope("raster.tile_sort");
+        self.sort.record(rec, &frame.isect_keys, &frame.isect_vals, &count, tile_bits, &frame.tile_scratch).context("tile sort")?;
+        rec.end_scope(sc);
+
+        let sc = rec.begin_scope("raster.ranges");
+        rec.fill(&frame.ranges.binding(), 0)?;
+        rec.dispatch_indirect(&self.ranges, &[frame.params.binding(), frame.isect_keys.binding(), frame.ranges.binding()], &[], &frame.args.binding())?;
+        rec.end_scope(sc);
+        Ok(())
+    }
+}
