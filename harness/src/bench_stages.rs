@@ -105,7 +105,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
     cfg.stages = "I,II,III".into();
     cfg.reflection.iterations = per_stage;
     cfg.light_field.iterations = spec.train_light_field + timed;
-    cfg.light_field.preset = spec.mlp.clone();
+    cfg.light_field.preset = crate::train::settings::LightPreset::parse(&spec.mlp).map_err(anyhow::Error::msg)?;
     let data = crate::train::run::load_dataset(dir, &cfg)?;
     let cam = data.train.first().context("the scene has no training views")?.camera;
     let mut tr = Trainer::new(ctx, cfg, &data)?;

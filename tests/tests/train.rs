@@ -251,7 +251,7 @@ fn paper_preset_notes_small_datasets() {
 
 #[test]
 fn named_settings_read_and_write_as_their_names() {
-    use tgs::train::settings::{EnvStart, LightFresnel, ReflectionFresnel, ReflectionInit, ScatteringParams};
+    use tgs::train::settings::{EnvStart, LightFresnel, LightPreset, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams};
     assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::View);
     for (n, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient)] {
         assert_eq!(SeedNormal::parse(n), Ok(want));
@@ -262,13 +262,15 @@ fn named_settings_read_and_write_as_their_names() {
     // Every name of every named setting, set as --set does: the config
     // takes it and writes it back as the same text (config.toml, checkpoint
     // headers and sweep keys read as they did when these were strings).
-    let keys: [(&str, &[&str]); 6] = [
+    let keys: [(&str, &[&str]); 8] = [
         (SeedNormal::KEY, SeedNormal::NAMES),
         (EnvStart::KEY, EnvStart::NAMES),
         (ReflectionInit::KEY, ReflectionInit::NAMES),
         (ReflectionFresnel::KEY, ReflectionFresnel::NAMES),
         (LightFresnel::KEY, LightFresnel::NAMES),
         (ScatteringParams::KEY, ScatteringParams::NAMES),
+        (RotationGrad::KEY, RotationGrad::NAMES),
+        (LightPreset::KEY, LightPreset::NAMES),
     ];
     for (key, names) in keys {
         assert!(names.len() >= 2, "{key}");

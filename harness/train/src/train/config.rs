@@ -6,6 +6,7 @@ use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 pub use super::stages::light_field::config::LightFieldConfig;
+use super::settings::LightPreset;
 pub use super::stages::reflection::config::ReflectionConfig;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -163,7 +164,7 @@ impl TrainConfig {
             test_interval: 1000,
             checkpoint_interval: 500,
             reflection: ReflectionConfig { iterations: 1000, env_res: 16, prune_interval: 100, ..ReflectionConfig::default() },
-            light_field: LightFieldConfig { iterations: 1000, preset: "small".into(), ..LightFieldConfig::default() },
+            light_field: LightFieldConfig { iterations: 1000, preset: LightPreset::Small, ..LightFieldConfig::default() },
             ..Self::paper()
         }
     }

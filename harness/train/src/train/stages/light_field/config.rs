@@ -1,7 +1,7 @@
 //! Stage III's settings (`[light_field]` in TOML, `--set light_field.KEY=V`).
 
 use crate::train::settings::check_hf;
-use crate::train::settings::{LightFresnel, ScatteringParams};
+use crate::train::settings::{LightFresnel, LightPreset, ScatteringParams};
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 
@@ -12,7 +12,7 @@ pub struct LightFieldConfig {
     pub iterations: u32,
     /// Network: "paper" (8 x 256, skip at layer 5, L = 12) or "small"
     /// (4 x 64, skip at layer 3, L = 8 / 4; about 1/25 of the work).
-    pub preset: String,
+    pub preset: LightPreset,
     /// Fourier octaves of gamma(x) and gamma(w); 0 keeps the preset's
     /// (paper 12 / 12, small 8 / 4).
     pub levels_x: u32,
@@ -53,7 +53,7 @@ impl Default for LightFieldConfig {
     fn default() -> Self {
         LightFieldConfig {
             iterations: 20_000,
-            preset: "paper".into(),
+            preset: LightPreset::Paper,
             levels_x: 0,
             levels_w: 0,
             lr: 5e-4,
@@ -73,7 +73,7 @@ impl Default for LightFieldConfig {
 
 impl LightFieldConfig {
     pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
-        let mut shape = tgs_pipelines::MlpShape::preset(&self.preset).context("light_field.preset")?;
+        let mut shape = self.preset.shape();
         if self.levels_x > 0 {
             shape.levels_x = self.levels_x;
         }
