@@ -7,6 +7,16 @@ use anyhow::{bail, Result};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context};
 
+/// The names of a Gaussian set's five arrays, in the one order every list
+/// of them follows (bindings, Adam groups, checkpoints, densification).
+pub const GAUSSIAN_ARRAYS: [&str; 5] = ["means", "log_scales", "quats", "opacity", "features"];
+
+/// Floats per Gaussian of each array, in [`GAUSSIAN_ARRAYS`] order, for a
+/// set with `features` floats of features per Gaussian.
+pub fn array_widths(features: usize) -> [usize; 5] {
+    [3, 2, 4, 1, features]
+}
+
 /// A Gaussian set on the host (flat arrays in the GPU layout).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct HostGaussians {
@@ -36,6 +46,10 @@ impl HostGaussians {
         self.quats.extend_from_slice(&quat);
         self.opacity.push(opacity);
         self.features.extend_from_slice(features);
+    }
+    /// The set from its five arrays in [`GAUSSIAN_ARRAYS`] order.
+    pub fn from_arrays(channels: u32, coeffs: u32, [means, log_scales, quats, opacity, features]: [Vec<f32>; 5]) -> Self {
+        HostGaussians { channels, coeffs, means, log_scales, quats, opacity, features }
     }
     pub fn validate(&self) -> Result<()> {
         let n = self.len();
@@ -96,25 +110,26 @@ impl Gaussians {
         }
         // The uploads below write every element.
         let g = Self::uninit(ctx, h.len() as u32, h.channels, h.coeffs)?;
-        g.means.upload(&h.means)?;
-        g.log_scales.upload(&h.log_scales)?;
-        g.quats.upload(&h.quats)?;
-        g.opacity.upload(&h.opacity)?;
-        g.features.upload(&h.features)?;
+        for (buf, data) in g.buffers().into_iter().zip([&h.means, &h.log_scales, &h.quats, &h.opacity, &h.features]) {
+            buf.upload(data)?;
+        }
         Ok(g)
     }
 
     pub fn download(&self) -> Result<HostGaussians> {
         let n = self.n as usize;
         let f = (self.coeffs * self.channels) as usize;
-        Ok(HostGaussians {
-            channels: self.channels,
-            coeffs: self.coeffs,
-            means: self.means.download_range(0, 3 * n)?,
-            log_scales: self.log_scales.download_range(0, 2 * n)?,
-            quats: self.quats.download_range(0, 4 * n)?,
-            opacity: self.opacity.download_range(0, n)?,
-            features: self.features.download_range(0, f * n)?,
-        })
+        let [a, b, c, d, e] = self.buffers();
+        let w = array_widths(f);
+        Ok(HostGaussians::from_arrays(
+            self.channels,
+            self.coeffs,
+            [a.download_range(0, w[0] * n)?, b.download_range(0, w[1] * n)?, c.download_range(0, w[2] * n)?, d.download_range(0, w[3] * n)?, e.download_range(0, w[4] * n)?],
+        ))
+    }
+
+    /// The five arrays in [`GAUSSIAN_ARRAYS`] order.
+    pub fn buffers(&self) -> [&Buffer<f32>; 5] {
+        [&self.means, &self.log_scales, &self.quats, &self.opacity, &self.features]
     }
 }

@@ -17,7 +17,7 @@ mod reduce_adam;
 
 pub use camera::Camera;
 pub use frame::{Frame, Plane};
-pub use gaussians::{Gaussians, HostGaussians};
+pub use gaussians::{array_widths, Gaussians, HostGaussians, GAUSSIAN_ARRAYS};
 pub use reduce_adam::ReduceAdam;
 
 use crate::scan::{PrefixSum, ScanScratch};

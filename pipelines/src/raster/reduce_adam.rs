@@ -87,9 +87,9 @@ impl Rasterizer {
         let sc = rec.begin_scope("raster.reduce");
         let mut bindings = Self::param_bindings(frame, g, &g.features);
         bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records]);
-        bindings.extend([m.means.binding(), m.log_scales.binding(), m.quats.binding(), m.opacity.binding(), m.features.binding()]);
+        bindings.extend(m.buffers().map(|b| b.binding()));
         bindings.push(frame.densify.binding());
-        bindings.extend([v.means.binding(), v.log_scales.binding(), v.quats.binding(), v.opacity.binding(), v.features.binding()]);
+        bindings.extend(v.buffers().map(|b| b.binding()));
         let push = PushAdam { base: self.push(g, frame, sh_degree), adam: *adam };
         match gate {
             Some(args) => rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(&push), args)?,

@@ -192,14 +192,9 @@ impl Adam {
     fn arrays(set: &TrainableSet) -> [ParamArrays<'_>; 5] {
         let n = set.len() as usize;
         let f = (set.params.channels * set.params.coeffs) as usize;
-        let (p, g, m, v) = (&set.params, &set.grads, &set.m, &set.v);
-        [
-            (&p.means, &g.means, &m.means, &v.means, 3 * n),
-            (&p.log_scales, &g.log_scales, &m.log_scales, &v.log_scales, 2 * n),
-            (&p.quats, &g.quats, &m.quats, &v.quats, 4 * n),
-            (&p.opacity, &g.opacity, &m.opacity, &v.opacity, n),
-            (&p.features, &g.features, &m.features, &v.features, f * n),
-        ]
+        let (p, g, m, v) = (set.params.buffers(), set.grads.buffers(), set.m.buffers(), set.v.buffers());
+        let w = crate::raster::array_widths(f);
+        std::array::from_fn(|i| (p[i], g[i], m[i], v[i], w[i] * n))
     }
 
     fn record_set_on(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64, args: Option<&[BufferBinding]>) -> Result<()> {

@@ -149,14 +149,10 @@ impl Densifier {
         // Modes of densify_apply.comp: 0 moments, 1 copy, 2 means, 3 log-scales.
         for (src, dst, is_param) in [(&set.params, &params, true), (&set.m, &m, false), (&set.v, &v, false)] {
             let mode = is_param as u32;
-            let arrays = [
-                (&src.means, &dst.means, 3usize, if is_param { 2 } else { 0 }),
-                (&src.log_scales, &dst.log_scales, 2, if is_param { 3 } else { 0 }),
-                (&src.quats, &dst.quats, 4, mode),
-                (&src.opacity, &dst.opacity, 1, mode),
-                (&src.features, &dst.features, f, mode),
-            ];
-            for (s, d, width, mode) in arrays {
+            // Parameters: means and log-scales have modes of their own.
+            let modes = if is_param { [2, 3, mode, mode, mode] } else { [mode; 5] };
+            let arrays = src.buffers().into_iter().zip(dst.buffers()).zip(crate::raster::array_widths(f)).zip(modes);
+            for (((s, d), width), mode) in arrays {
                 let push = [n, width as u32, mode, p.seed];
                 rec.dispatch(
                     &self.apply,

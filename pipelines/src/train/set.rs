@@ -1,7 +1,7 @@
 //! A trainable Gaussian set: parameters, their gradients, Adam moments and
 //! the densification statistics, all on the GPU with the same SoA layout.
 
-use crate::raster::{Gaussians, HostGaussians};
+use crate::raster::{array_widths, Gaussians, HostGaussians, GAUSSIAN_ARRAYS};
 use anyhow::Result;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context};
@@ -55,7 +55,7 @@ impl TrainableSet {
     pub fn layout(features: usize) -> Vec<(String, usize)> {
         let mut out = Vec::new();
         for prefix in ["param", "adam_m", "adam_v"] {
-            for (name, w) in [("means", 3), ("log_scales", 2), ("quats", 4), ("opacity", 1), ("features", features)] {
+            for (name, w) in GAUSSIAN_ARRAYS.into_iter().zip(array_widths(features)) {
                 out.push((format!("{prefix}.{name}"), w));
             }
         }
@@ -70,7 +70,7 @@ impl TrainableSet {
         let f = (self.params.channels * self.params.coeffs) as usize;
         let mut bufs = Vec::new();
         for g in [&self.params, &self.m, &self.v] {
-            bufs.extend([&g.means, &g.log_scales, &g.quats, &g.opacity, &g.features]);
+            bufs.extend(g.buffers());
         }
         bufs.extend([&self.accum, &self.denom, &self.max_radii]);
         Self::layout(f).into_iter().zip(bufs).map(|((name, w), b)| (name, b, w)).collect()

@@ -20,15 +20,7 @@ pub(crate) fn check_arrays(want: &[(String, usize)], have: &[(String, usize)], a
 
 /// A host set from the first five arrays of a set's layout (parameters).
 pub(crate) fn host_set(channels: u32, coeffs: u32, arrays: &[Vec<f32>]) -> HostGaussians {
-    HostGaussians {
-        channels,
-        coeffs,
-        means: arrays[0].clone(),
-        log_scales: arrays[1].clone(),
-        quats: arrays[2].clone(),
-        opacity: arrays[3].clone(),
-        features: arrays[4].clone(),
-    }
+    HostGaussians::from_arrays(channels, coeffs, std::array::from_fn(|i| arrays[i].clone()))
 }
 
 /// Upload `arrays` (a set's arrays in `TrainableSet::layout` order, maybe
