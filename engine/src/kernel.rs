@@ -115,6 +115,14 @@ impl Kernel {
         let name = desc.name;
         let words = spirv::words(desc.spirv).with_context(|| format!("kernel '{name}'"))?;
         let bindings = spirv::binding_count(&words);
+        // The Rust struct a kernel's wrapper passes must be the shader's
+        // block, byte for byte in size: a field added on one side only
+        // would shift every later one.
+        if let Some(want) = spirv::push_constant_bytes(&words) {
+            if want != desc.push_bytes {
+                bail!("kernel '{name}': the shader's push-constant block is {want} bytes, its wrapper declares {} (the Rust struct and the GLSL block must match)", desc.push_bytes);
+            }
+        }
         if desc.push_bytes > ctx.caps.max_push_constants {
             bail!("kernel '{name}' needs {} push-constant bytes; device allows {}", desc.push_bytes, ctx.caps.max_push_constants);
         }

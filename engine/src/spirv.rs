@@ -1,4 +1,5 @@
-//! Minimal SPIR-V reading: enough to check a kernel's declared bindings.
+//! Minimal SPIR-V reading: enough to check a kernel's declared bindings
+//! and the size of its push-constant block.
 
 use anyhow::{bail, Result};
 
@@ -32,4 +33,105 @@ pub(crate) fn binding_count(words: &[u32]) -> usize {
         i += n;
     }
     count
+}
+
+/// Size in bytes of the shader's push-constant block, as its members'
+/// offsets and types lay it out (the end of its last byte; 0 when the
+/// shader declares none). Arrays sized by a specialization constant count
+/// at the constant's default. `None` when the block uses a type this
+/// reader does not size (matrices, pointers), so that the caller can skip
+/// its check rather than fail.
+pub(crate) fn push_constant_bytes(words: &[u32]) -> Option<u32> {
+    use std::collections::HashMap;
+    const OP_TYPE_INT: u32 = 21;
+    const OP_TYPE_FLOAT: u32 = 22;
+    const OP_TYPE_VECTOR: u32 = 23;
+    const OP_TYPE_ARRAY: u32 = 28;
+    const OP_TYPE_STRUCT: u32 = 30;
+    const OP_TYPE_POINTER: u32 = 32;
+    const OP_CONSTANT: u32 = 43;
+    const OP_SPEC_CONSTANT: u32 = 50;
+    const OP_VARIABLE: u32 = 59;
+    const OP_DECORATE: u32 = 71;
+    const OP_MEMBER_DECORATE: u32 = 72;
+    const DEC_ARRAY_STRIDE: u32 = 6;
+    const DEC_OFFSET: u32 = 35;
+    const SC_PUSH_CONSTANT: u32 = 9;
+    enum Ty {
+        Scalar(u32),
+        Vector(u32, u32),
+        Array(u32, u32),
+        Struct(Vec<u32>),
+    }
+    let mut types: HashMap<u32, Ty> = HashMap::new();
+    let mut pointers: HashMap<u32, u32> = HashMap::new();
+    let mut constants: HashMap<u32, u32> = HashMap::new();
+    let mut strides: HashMap<u32, u32> = HashMap::new();
+    let mut offsets: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut block = None;
+    let mut i = 5;
+    while i < words.len() {
+        let n = (words[i] >> 16) as usize;
+        let op = words[i] & 0xffff;
+        if n == 0 || i + n > words.len() {
+            break;
+        }
+        let w = &words[i..i + n];
+        match op {
+            OP_TYPE_INT | OP_TYPE_FLOAT if n >= 3 => {
+                types.insert(w[1], Ty::Scalar(w[2] / 8));
+            }
+            OP_TYPE_VECTOR if n >= 4 => {
+                types.insert(w[1], Ty::Vector(w[2], w[3]));
+            }
+            OP_TYPE_ARRAY if n >= 4 => {
+                types.insert(w[1], Ty::Array(w[2], w[3]));
+            }
+            OP_TYPE_STRUCT => {
+                types.insert(w[1], Ty::Struct(w[2..].to_vec()));
+            }
+            OP_TYPE_POINTER if n >= 4 && w[2] == SC_PUSH_CONSTANT => {
+                pointers.insert(w[1], w[3]);
+            }
+            OP_CONSTANT | OP_SPEC_CONSTANT if n >= 4 => {
+                constants.insert(w[2], w[3]);
+            }
+            OP_VARIABLE if n >= 4 && w[3] == SC_PUSH_CONSTANT => {
+                block = pointers.get(&w[1]).copied();
+            }
+            OP_DECORATE if n >= 4 && w[2] == DEC_ARRAY_STRIDE => {
+                strides.insert(w[1], w[3]);
+            }
+            OP_MEMBER_DECORATE if n >= 5 && w[3] == DEC_OFFSET => {
+                offsets.insert((w[1], w[2]), w[4]);
+            }
+            _ => {}
+        }
+        i += n;
+    }
+    fn size(t: u32, types: &HashMap<u32, Ty>, constants: &HashMap<u32, u32>, strides: &HashMap<u32, u32>, offsets: &HashMap<(u32, u32), u32>) -> Option<u32> {
+        match types.get(&t)? {
+            Ty::Scalar(b) => Some(*b),
+            Ty::Vector(c, k) => Some(size(*c, types, constants, strides, offsets)? * k),
+            Ty::Array(e, len) => {
+                let stride = match strides.get(&t) {
+                    Some(s) => *s,
+                    None => size(*e, types, constants, strides, offsets)?,
+                };
+                Some(stride * constants.get(len)?)
+            }
+            Ty::Struct(members) => {
+                let mut end = 0;
+                for (m, &mt) in members.iter().enumerate() {
+                    let off = *offsets.get(&(t, m as u32))?;
+                    end = end.max(off + size(mt, types, constants, strides, offsets)?);
+                }
+                Some(end)
+            }
+        }
+    }
+    match block {
+        None => Some(0),
+        Some(t) => size(t, &types, &constants, &strides, &offsets),
+    }
 }

@@ -126,16 +126,16 @@ impl RadixSort {
     pub fn with_config(ctx: &Arc<Context>, cfg: SortConfig) -> Result<RadixSort> {
         cfg.check(ctx.caps())?;
         let spec = [(0, cfg.wg), (1, ctx.caps().min_subgroup_size.max(1)), (2, cfg.kpt), (3, cfg.radix_bits)];
-        let k = |name, spirv| {
-            Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes: 8, subgroup_size: None, full_subgroups: true })
+        let k = |name, spirv, push_bytes| {
+            Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: true })
         };
         Ok(RadixSort {
             ctx: ctx.clone(),
             cfg,
             scan: PrefixSum::new(ctx)?,
-            upsweep: k("sort.upsweep", shaders::SORT_UPSWEEP)?,
-            downsweep: k("sort.downsweep", shaders::SORT_DOWNSWEEP)?,
-            copy: k("sort.copy", shaders::SORT_COPY)?,
+            upsweep: k("sort.upsweep", shaders::SORT_UPSWEEP, 8)?,
+            downsweep: k("sort.downsweep", shaders::SORT_DOWNSWEEP, 8)?,
+            copy: k("sort.copy", shaders::SORT_COPY, 0)?,
         })
     }
 
@@ -220,7 +220,7 @@ impl RadixSort {
             rec.dispatch_indirect(
                 &self.copy,
                 &[params.clone(), scratch.keys.binding(), scratch.vals.binding(), keys.binding(), vals.binding()],
-                bytemuck::bytes_of(&[0u32, 0u32]),
+                &[],
                 &parts_args,
             )?;
             rec.end_scope(sc);

@@ -335,8 +335,9 @@ fn run_iota(ctx: &Arc<Context>, k: &Kernel, n: u32, start: u32) -> Vec<u32> {
 
 /// A context builds each distinct pipeline once: the same SPIR-V,
 /// specialization constants and push-constant size under another name
-/// reuse it, it outlives the kernels that asked for it, and a change in
-/// any of them builds another.
+/// reuse it, it outlives the kernels that asked for it, and other
+/// specialization constants build another; a push-constant size that is
+/// not the shader's block is refused.
 #[test]
 fn pipelines_are_built_once_per_context() {
     let ctx = tgs_tests::ctx();
@@ -368,8 +369,11 @@ fn pipelines_are_built_once_per_context() {
     rec.dispatch(&d, &[buf.binding()], bytemuck::cast_slice(&[1000u32, 3]), [8, 1, 1]).unwrap();
     rec.submit_and_wait().unwrap();
     assert_eq!(buf.download().unwrap(), want(1000, 3));
-    Kernel::new(&ctx, &iota_desc("test.e", &spec, 16)).unwrap();
-    assert_eq!(ctx.pipelines_built(), 3, "another push-constant size");
+    // A push-constant size other than the shader's block (8 bytes: count,
+    // start) is refused, naming the kernel, before anything is built.
+    let e = format!("{:#}", Kernel::new(&ctx, &iota_desc("test.e", &spec, 16)).err().expect("a 16-byte push for an 8-byte block"));
+    assert!(e.contains("'test.e'") && e.contains("push-constant block is 8 bytes") && e.contains("declares 16"), "{e}");
+    assert_eq!(ctx.pipelines_built(), 2, "nothing built for a refused kernel");
     // Four Iotas: their direct kernel is "test.a"'s pipeline, and the
     // device-address one (where enabled) is built once.
     let before = ctx.pipelines_built();
