@@ -169,7 +169,7 @@ impl SceneRenderer {
                 raster.record_forward_with(rec, set, feat, cam, &[0.0; tgs_pipelines::lightfield::CHANNELS as usize], 0, frame)?;
                 shading.record_samples(rec, cam, shade, &frame.out, samples, &scratch.samples)?;
                 mlp.record_forward_counted(rec, params, &samples.count, scratch)?;
-                shading.record_composite(rec, cam, shade, &v.scat.out, &frame.out, samples, &scratch.out, comp)?;
+                shading.record_composite(rec, cam, shade, &tgs_pipelines::lightfield::CompositeInputs { scat: &v.scat.out, refl: &frame.out, samples, phi: &scratch.out }, comp)?;
                 comp
             }
             _ => bail!("view buffers missing for the reflection layer"),

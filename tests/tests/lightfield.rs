@@ -8,6 +8,7 @@
 //! sigmoid with its gradient.
 
 use tgs_engine::{Buffer, Recorder};
+use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs};
 use tgs_pipelines::lightfield::{LightFieldShading, ShadeParams, CHANNELS};
 use tgs_pipelines::{Camera, Plane};
 use tgs_tests::lightfield_ref::{self as lr, Cam, ReflPixel};
@@ -192,8 +193,10 @@ fn composite_matches_reference_and_finite_differences() {
             let sg = Buffer::uninit(ctx, "scat_grad", 3 * n).unwrap();
             let mut rec = Recorder::new(ctx).unwrap();
             lf.record_samples(&mut rec, &cam, &p, &rb, &s, &samples).unwrap();
-            lf.record_composite(&mut rec, &cam, &p, &sb, &rb, &s, &pb, &loss_in).unwrap();
-            lf.record_composite_backward(&mut rec, &cam, &p, &sb, &rb, &s, &pb, &gb, &dphi, &rg, Some(&sg), r_prior).unwrap();
+            let inputs = CompositeInputs { scat: &sb, refl: &rb, samples: &s, phi: &pb };
+            lf.record_composite(&mut rec, &cam, &p, &inputs, &loss_in).unwrap();
+            let grads = CompositeGrads { loss_grad: &gb, d_phi: &dphi, refl_grad: &rg, scat_grad: Some(&sg) };
+            lf.record_composite_backward(&mut rec, &cam, &p, &inputs, &grads, r_prior).unwrap();
             rec.submit_and_wait().unwrap();
             let (li, dp, rgv, sgv, so) = (loss_in.download().unwrap(), dphi.download().unwrap(), rg.download().unwrap(), sg.download().unwrap(), s.sample_of.download().unwrap());
             for (i, px_i) in px.iter().enumerate() {

@@ -172,44 +172,54 @@ impl LightFieldShading {
     }
 
     /// Record the composite into `loss_in` (3-channel render layout) from
-    /// the scattering colour (3 planes), the reflection render and Phi at
-    /// the samples (3 floats each).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, scat: &Buffer<f32>, refl: &Buffer<f32>, s: &SampleScratch, phi: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
-        let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_in, Plane::count(3))])?;
+    /// the inputs `x` (glsl/lightfield/composite.comp).
+    pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, x: &CompositeInputs, loss_in: &Buffer<f32>) -> Result<()> {
+        let n = Self::check(cam, x.samples, &[(x.refl, Plane::count(CHANNELS)), (x.scat, 3), (loss_in, Plane::count(3))])?;
         let pc = push(cam, p, 0, 0.0);
-        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_in.binding()];
+        let b = [x.refl.binding(), x.scat.binding(), x.samples.sample_of.binding(), x.phi.binding(), loss_in.binding()];
         rec.dispatch(&self.composite, &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
 
-    /// Record the composite's backward: `loss_grad` (colour planes) to
-    /// `d_phi` (per sample), `refl_grad` (every plane of the reflection
-    /// render, overwritten) and, when given, `scat_grad` (3 planes).
-    /// `r_prior` is added to dL/dR at every pixel, evaluated or not (the
-    /// gradient of `lambda * mean(R)` is `lambda / pixels`).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_composite_backward(
-        &self,
-        rec: &mut Recorder,
-        cam: &Camera,
-        p: &ShadeParams,
-        scat: &Buffer<f32>,
-        refl: &Buffer<f32>,
-        s: &SampleScratch,
-        phi: &Buffer<f32>,
-        loss_grad: &Buffer<f32>,
-        d_phi: &Buffer<f32>,
-        refl_grad: &Buffer<f32>,
-        scat_grad: Option<&Buffer<f32>>,
-        r_prior: f32,
-    ) -> Result<()> {
-        let n = Self::check(cam, s, &[(refl, Plane::count(CHANNELS)), (scat, 3), (loss_grad, 3), (refl_grad, Plane::count(CHANNELS))])?;
-        if let Some(g) = scat_grad {
-            check_planes(cam, &[(g, 3)])?;
+    /// Record the composite's backward (glsl/lightfield/composite_backward.comp):
+    /// `g.loss_grad` (colour planes) to `g.d_phi` (per sample), `g.refl_grad`
+    /// (every plane of the reflection render, overwritten) and, when given,
+    /// `g.scat_grad` (3 planes). `r_prior` is added to dL/dR at every pixel,
+    /// evaluated or not (the gradient of `lambda * mean(R)` is `lambda / pixels`).
+    pub fn record_composite_backward(&self, rec: &mut Recorder, cam: &Camera, p: &ShadeParams, x: &CompositeInputs, g: &CompositeGrads, r_prior: f32) -> Result<()> {
+        let n = Self::check(cam, x.samples, &[(x.refl, Plane::count(CHANNELS)), (x.scat, 3), (g.loss_grad, 3), (g.refl_grad, Plane::count(CHANNELS))])?;
+        if let Some(sg) = g.scat_grad {
+            check_planes(cam, &[(sg, 3)])?;
         }
         let pc = push(cam, p, 0, r_prior);
-        let sg = scat_grad.unwrap_or(refl_grad);
-        let b = [refl.binding(), scat.binding(), s.sample_of.binding(), phi.binding(), loss_grad.binding(), d_phi.binding(), refl_grad.binding(), sg.binding()];
-        rec.dispatch(&self.composite_backward[scat_grad.is_some() as usize], &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
+        let sg = g.scat_grad.unwrap_or(g.refl_grad);
+        let b = [x.refl.binding(), x.scat.binding(), x.samples.sample_of.binding(), x.phi.binding(), g.loss_grad.binding(), g.d_phi.binding(), g.refl_grad.binding(), sg.binding()];
+        rec.dispatch(&self.composite_backward[g.scat_grad.is_some() as usize], &b, bytemuck::bytes_of(&pc), grid(&self.ctx, n))
     }
+}
+
+/// What Stage III's composite reads (its forward and backward bind them in
+/// this order of meaning: reflection render, scattering colour, sample
+/// list, Phi).
+pub struct CompositeInputs<'a> {
+    /// The scattering colour (3 planes).
+    pub scat: &'a Buffer<f32>,
+    /// The reflection render (CHANNELS features, `Plane` order).
+    pub refl: &'a Buffer<f32>,
+    /// This view's sample list (which pixels Phi ran on).
+    pub samples: &'a SampleScratch,
+    /// Phi at the samples (3 floats each).
+    pub phi: &'a Buffer<f32>,
+}
+
+/// The gradients of Stage III's composite backward: in `loss_grad`, out the
+/// rest (each overwritten).
+pub struct CompositeGrads<'a> {
+    /// dL/d(composite colour), 3 planes.
+    pub loss_grad: &'a Buffer<f32>,
+    /// dL/dPhi per sample.
+    pub d_phi: &'a Buffer<f32>,
+    /// dL/d(reflection render), every plane.
+    pub refl_grad: &'a Buffer<f32>,
+    /// dL/d(scattering colour), 3 planes, when the scattering set trains.
+    pub scat_grad: Option<&'a Buffer<f32>>,
 }

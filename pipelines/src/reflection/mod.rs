@@ -311,36 +311,24 @@ impl ReflectionShading {
         rec.dispatch(&self.composite, &[scat.binding(), refl.binding(), loss_in.binding()], bytemuck::bytes_of(&p), grid(&self.ctx, cam.width * cam.height))
     }
 
-    /// Record the composite's backward: `loss_grad` (gradient of every plane
-    /// of `loss_in`) to `refl_grad` (every plane of the reflection render,
-    /// overwritten) and, when given, `scat_grad` (the scattering colour's 3
-    /// planes, overwritten). `prior`'s values are added to dL/dR and to
-    /// dL/dalpha at every pixel ([`CompositePriors::of_means`]).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_composite_backward(
-        &self,
-        rec: &mut Recorder,
-        cam: &Camera,
-        fresnel: Fresnel,
-        scat: &Buffer<f32>,
-        refl: &Buffer<f32>,
-        loss_grad: &Buffer<f32>,
-        refl_grad: &Buffer<f32>,
-        scat_grad: Option<&Buffer<f32>>,
-        prior: CompositePriors,
-    ) -> Result<()> {
+    /// Record the composite's backward: `g.loss_grad` (gradient of every
+    /// plane of `loss_in`) to `g.refl_grad` (every plane of the reflection
+    /// render, overwritten) and, when given, `g.scat_grad` (the scattering
+    /// colour's 3 planes, overwritten). `prior`'s values are added to dL/dR
+    /// and to dL/dalpha at every pixel ([`CompositePriors::of_means`]).
+    pub fn record_composite_backward(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, g: &CompositeGrads, prior: CompositePriors) -> Result<()> {
         let ch = fresnel.channels();
-        check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_grad, Plane::count(3)), (refl_grad, Plane::count(ch))])?;
-        if let Some(s) = scat_grad {
+        check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (g.loss_grad, Plane::count(3)), (g.refl_grad, Plane::count(ch))])?;
+        if let Some(s) = g.scat_grad {
             check_planes(cam, &[(s, 3)])?;
         }
-        let p = Self::composite_push(cam, fresnel, scat_grad.is_some(), prior);
+        let p = Self::composite_push(cam, fresnel, g.scat_grad.is_some(), prior);
         // Without a scattering gradient the binding is never written; bind
         // the reflection gradient in its place.
-        let sg = scat_grad.unwrap_or(refl_grad);
+        let sg = g.scat_grad.unwrap_or(g.refl_grad);
         rec.dispatch(
             &self.composite_backward,
-            &[scat.binding(), refl.binding(), loss_grad.binding(), refl_grad.binding(), sg.binding()],
+            &[scat.binding(), refl.binding(), g.loss_grad.binding(), g.refl_grad.binding(), sg.binding()],
             bytemuck::bytes_of(&p),
             grid(&self.ctx, cam.width * cam.height),
         )
@@ -357,4 +345,15 @@ impl ReflectionShading {
         }
         rec.dispatch(&self.residual, &[target.binding(), scat.binding(), residual.binding()], bytemuck::bytes_of(&pixels), grid(&self.ctx, pixels))
     }
+}
+
+/// The gradients of Stage II's composite backward: in `loss_grad`, out the
+/// rest (each overwritten).
+pub struct CompositeGrads<'a> {
+    /// dL/d(composite render), every plane of the loss's input.
+    pub loss_grad: &'a Buffer<f32>,
+    /// dL/d(reflection render), every plane.
+    pub refl_grad: &'a Buffer<f32>,
+    /// dL/d(scattering colour), 3 planes, when the scattering set trains.
+    pub scat_grad: Option<&'a Buffer<f32>>,
 }

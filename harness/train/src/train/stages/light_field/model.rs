@@ -16,7 +16,7 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
-use tgs_pipelines::lightfield::{LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
+use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
 use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
@@ -252,7 +252,7 @@ impl LightFieldModel {
                 }
             }
             let sc = rec.begin_scope("lf.composite");
-            self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
+            self.shading.record_composite(&mut rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out }, &b.loss_in)?;
             rec.end_scope(sc);
             let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
             self.objective.record(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, hf, &mut b.loss)?;
@@ -263,7 +263,9 @@ impl LightFieldModel {
                 CompositeLoss::clear_scattering_geometry(&mut rec, g, n)?;
             }
             let r_prior = CompositePriors::of_means(lf.lambda_r, 0.0, pixels).r;
-            self.shading.record_composite_backward(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_grad, d_phi, &b.frame.grad_out, scat_grad, r_prior)?;
+            let inputs = CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out };
+            let grads = CompositeGrads { loss_grad: &b.loss_grad, d_phi, refl_grad: &b.frame.grad_out, scat_grad };
+            self.shading.record_composite_backward(&mut rec, cam, &self.shade, &inputs, &grads, r_prior)?;
             rec.end_scope(sc);
             if lf.lambda_r > 0.0 {
                 rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
@@ -322,7 +324,7 @@ impl LightFieldModel {
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         let mut rec = Recorder::new(&self.ctx)?;
         self.mlp.record_forward(&mut rec, &self.net.params, count, scratch)?;
-        self.shading.record_composite(&mut rec, cam, &self.shade, scat, &b.frame.out, &b.samples, &scratch.out, &b.loss_in)?;
+        self.shading.record_composite(&mut rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out }, &b.loss_in)?;
         rec.submit_and_wait()?;
         let n = (cam.width * cam.height) as usize;
         let composite = b.loss_in.download()?;

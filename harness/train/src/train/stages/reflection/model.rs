@@ -19,7 +19,7 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
-use tgs_pipelines::reflection::{TexelScratch, MATERIAL};
+use tgs_pipelines::reflection::{CompositeGrads, TexelScratch, MATERIAL};
 use tgs_pipelines::{
     Adam, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
@@ -225,7 +225,8 @@ impl ReflectionModel {
                 CompositeLoss::clear_scattering_geometry(&mut rec, g, n)?;
             }
             let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, pixels);
-            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_grad, &b.frame.grad_out, scat_grad, prior)?;
+            let g = CompositeGrads { loss_grad: &b.loss_grad, refl_grad: &b.frame.grad_out, scat_grad };
+            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &g, prior)?;
             rec.end_scope(sc);
             if rc.lambda_r > 0.0 {
                 rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
