@@ -7,6 +7,7 @@ pub mod checkpoint;
 pub mod clock;
 pub mod config;
 pub mod from;
+pub mod report;
 pub mod run;
 pub mod rundir;
 pub mod schedule;

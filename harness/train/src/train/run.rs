@@ -21,12 +21,12 @@ use super::stages::reflection::outputs::write_residual;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
-use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 use super::clock::{Before, Clocks};
+use super::report::{lpips_text, Reporter};
 use tgs_engine::Context;
 
 /// What a finished (or interrupted) run reports.
@@ -147,16 +147,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     INTERRUPTED.store(false, Ordering::SeqCst);
 
     let total = tr.schedule.total();
-    let mut log = std::fs::OpenOptions::new().create(true).append(a.resume).write(true).truncate(!a.resume).open(a.out.join("log.jsonl")).context("opening log.jsonl")?;
-    let tty = std::io::stderr().is_terminal() && !a.quiet;
-    let bar = if tty {
-        let b = indicatif::ProgressBar::new(total as u64);
-        b.set_style(indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} [{elapsed_precise} < {eta}, {per_sec}]").unwrap());
-        b.set_position(tr.iteration as u64);
-        Some(b)
-    } else {
-        None
-    };
+    let mut report = Reporter::open(&a.out, a.resume, a.quiet, total, tr.iteration)?;
     let note = if a.resume { None } else { a.preset.as_deref().and_then(|p| paper_schedule_note(p, &data.train.iter().map(|v| (v.camera.width, v.camera.height)).collect::<Vec<_>>())) };
     if let (Some(n), false) = (&note, a.quiet) {
         eprintln!("tgs: {n}");
@@ -213,13 +204,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             None
         };
         if let Some((msg, event)) = begun {
-            if let Some(b) = &bar {
-                b.set_length(tr.schedule.total() as u64);
-                b.println(&msg);
-            } else if !a.quiet {
-                eprintln!("{msg}");
-            }
-            writeln!(log, "{event}")?;
+            report.stage_event(&msg, &event, tr.schedule.total())?;
             clocks.next_stage();
             last_closed = tr.done();
             atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
@@ -239,39 +224,14 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         let elapsed = loop_start.elapsed().as_secs_f64();
         let its = (r.iteration - start_it) as f64 / elapsed.max(1e-9);
-        let mut line = json!({
-            "iteration": r.iteration, "stage": label, "view": r.view, "loss": r.loss, "l1": r.values.l1, "ssim": r.values.ssim,
-            "psnr": r.values.psnr(), "gaussians": r.gaussians, "it_per_s": its, "elapsed_s": clocks.total_s(),
-        });
-        if r.values.normal.is_finite() {
-            line["normal"] = json!(r.values.normal);
-        }
-        if r.opacity_reset {
-            line["opacity_reset"] = json!(true);
-        }
-        if let Some(f) = tr.later.as_mut().and_then(|m| m.take_coverage()) {
-            line["phi_fraction"] = json!(f);
-        }
-        if let Some((b, a2)) = r.densified {
-            line["densified"] = json!({"before": b, "after": a2});
-        }
+        let phi = tr.later.as_mut().and_then(|m| m.take_coverage());
+        let mut line = Reporter::iteration_line(&r, &label, its, clocks.total_s(), phi);
         let cfg = &tr.cfg;
         if cfg.test_interval > 0 && r.iteration % cfg.test_interval == 0 && r.iteration < total && !data.test.is_empty() {
             let m = evaluate(&mut tr, &data.test, None)?;
-            line["test"] = json!({"psnr": m.psnr, "ssim": m.ssim, "lpips": m.lpips, "normal_mae_deg": m.normals.normal_mae_deg, "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg});
-            if !tty && !a.quiet {
-                eprintln!("[{}] test PSNR {:.2} SSIM {:.4}{}", r.iteration, m.psnr, m.ssim, lpips_text(m.lpips));
-            }
+            report.test_metrics(&mut line, r.iteration, &m);
         }
-        writeln!(log, "{line}")?;
-        let msg = format!("loss {:.4} PSNR {:.2} N {}", r.loss, r.values.psnr(), r.gaussians);
-        if let Some(b) = &bar {
-            b.set_position(r.iteration as u64);
-            b.set_message(msg);
-        } else if !a.quiet && (r.iteration % 100 == 0 || r.iteration == total) {
-            let eta = (total - r.iteration) as f64 / its.max(1e-9);
-            eprintln!("[{}/{total}] {msg} {its:.2} it/s ETA {eta:.0}s", r.iteration);
-        }
+        report.iteration(&r, &line, total, its)?;
         let ck = tr.cfg.checkpoint_interval;
         if ck > 0 && r.iteration % ck == 0 && r.iteration < total {
             save_run(&tr, &clocks)?;
@@ -281,9 +241,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             break;
         }
     }
-    if let Some(b) = &bar {
-        b.finish();
-    }
+    report.finish();
     save_run(&tr, &clocks)?;
     if interrupted {
         if !a.quiet {
@@ -334,10 +292,6 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: clocks.total_s() })
 }
 
-/// ", LPIPS 0.123" (nothing without one).
-fn lpips_text(l: Option<f64>) -> String {
-    l.map(|v| format!(", LPIPS {v:.4}")).unwrap_or_default()
-}
 
 /// metrics.json's record of a finished stage.
 fn stage_record(stage: &str, tr: &Trainer, wall_s: f64, m: Option<&Metrics>) -> serde_json::Value {
