@@ -1,7 +1,7 @@
 //! Adam and adaptive density control on the GPU against CPU expectations.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Adam, AdamGroup, DensifyParams, Densifier, HostGaussians, TrainableSet};
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, DensifyParams, Densifier, HostGaussians, TrainableSet};
 use tgs_tests::Rng;
 use tgs_tests::{check_validation, ctx_shared, seed};
 
@@ -21,7 +21,7 @@ fn adam_matches_f64_reference_and_ignores_non_finite_gradients() {
         g[11] = f32::INFINITY;
         grad.upload(&g).unwrap();
         let mut rec = Recorder::new(ctx).unwrap();
-        adam.record(&mut rec, &param, &grad, &m, &v, n, &group, t).unwrap();
+        adam.record(&mut rec, AdamArrays { param: &param, grad: &grad, m: &m, v: &v, n }, &group, t).unwrap();
         rec.submit_and_wait().unwrap();
         let (b1, b2) = (0.9f64, 0.999f64);
         for i in 0..n {
@@ -210,7 +210,7 @@ fn adam_steps_only_the_active_elements_of_each_block() {
             let g: Vec<f32> = (0..n).map(|i| if zero_inactive && !live(i) { 0.0 } else { rng.uniform(-1.0, 1.0) as f32 }).collect();
             grad.upload(&g).unwrap();
             let mut rec = Recorder::new(ctx).unwrap();
-            adam.record(&mut rec, &bufs[0], &grad, &bufs[1], &bufs[2], n, &group, t).unwrap();
+            adam.record(&mut rec, AdamArrays { param: &bufs[0], grad: &grad, m: &bufs[1], v: &bufs[2], n }, &group, t).unwrap();
             rec.submit_and_wait().unwrap();
         }
         bufs.map(|b| b.download().unwrap().iter().map(|v| v.to_bits()).collect())
@@ -231,7 +231,9 @@ fn adam_steps_only_the_active_elements_of_each_block() {
     // Zero gradients where inactive: the same as stepping every element.
     assert!(run(some, true) == run(all, true), "skipping zero-gradient elements changed the result");
     // Blocks must be whole.
-    assert!(adam.record(&mut Recorder::new(ctx).unwrap(), &Buffer::<f32>::new(ctx, "p", 50).unwrap(), &Buffer::<f32>::new(ctx, "g", 50).unwrap(), &Buffer::<f32>::new(ctx, "m", 50).unwrap(), &Buffer::<f32>::new(ctx, "v", 50).unwrap(), 50, &some, 1).is_err());
+    let b = |name| Buffer::<f32>::new(ctx, name, 50).unwrap();
+    let (p50, g50, m50, v50) = (b("p"), b("g"), b("m"), b("v"));
+    assert!(adam.record(&mut Recorder::new(ctx).unwrap(), AdamArrays { param: &p50, grad: &g50, m: &m50, v: &v50, n: 50 }, &some, 1).is_err());
     check_validation(ctx);
 }
 

@@ -41,7 +41,17 @@ impl AdamGroup {
 
 /// One parameter array of a set: parameter, gradient, first and second
 /// moments, and its length in floats.
-type ParamArrays<'a> = (&'a Buffer<f32>, &'a Buffer<f32>, &'a Buffer<f32>, &'a Buffer<f32>, usize);
+/// The four arrays one Adam step reads and writes (glsl/adam.comp's
+/// bindings 0..=3), over their first `n` elements.
+#[derive(Clone, Copy)]
+pub struct AdamArrays<'a> {
+    pub param: &'a Buffer<f32>,
+    pub grad: &'a Buffer<f32>,
+    /// First and second moments.
+    pub m: &'a Buffer<f32>,
+    pub v: &'a Buffer<f32>,
+    pub n: usize,
+}
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -73,18 +83,16 @@ impl Adam {
         Ok(Adam { ctx: ctx.clone(), kernel: kernel(ctx, "adam", shaders::ADAM, std::mem::size_of::<Push>() as u32)?, beta1: 0.9, beta2: 0.999, eps })
     }
 
-    /// Record step `t` (1-based) over the first `n` elements.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64) -> Result<()> {
-        self.record_on(rec, param, grad, m, v, n, group, t, None)
+    /// Record step `t` (1-based) over the first `a.n` elements of `a`.
+    pub fn record(&self, rec: &mut Recorder, a: AdamArrays, group: &AdamGroup, t: u64) -> Result<()> {
+        self.record_on(rec, a, group, t, None)
     }
 
     /// As [`Adam::record`], the workgroup counts read from `args` (written
     /// on the GPU from [`Adam::grid`], e.g. by `Rasterizer::record_fit_gate`;
     /// zero groups skip the step).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_gated(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64, args: &BufferBinding) -> Result<()> {
-        self.record_on(rec, param, grad, m, v, n, group, t, Some(args))
+    pub fn record_gated(&self, rec: &mut Recorder, a: AdamArrays, group: &AdamGroup, t: u64, args: &BufferBinding) -> Result<()> {
+        self.record_on(rec, a, group, t, Some(args))
     }
 
     /// The grid [`Adam::record`] dispatches for `n` elements.
@@ -93,8 +101,8 @@ impl Adam {
     }
 
     /// The body of [`Adam::record`] (`args` None) and [`Adam::record_gated`].
-    #[allow(clippy::too_many_arguments)]
-    fn record_on(&self, rec: &mut Recorder, param: &Buffer<f32>, grad: &Buffer<f32>, m: &Buffer<f32>, v: &Buffer<f32>, n: usize, group: &AdamGroup, t: u64, args: Option<&BufferBinding>) -> Result<()> {
+    fn record_on(&self, rec: &mut Recorder, a: AdamArrays, group: &AdamGroup, t: u64, args: Option<&BufferBinding>) -> Result<()> {
+        let AdamArrays { param, grad, m, v, n } = a;
         if n == 0 {
             return Ok(());
         }
@@ -135,8 +143,7 @@ impl Adam {
     /// Record step `t` over `set`'s features (SH colour) alone, with `group`;
     /// the other arrays and their moments are left as they are.
     pub fn record_set_features(&self, rec: &mut Recorder, set: &TrainableSet, group: &AdamGroup, t: u64) -> Result<()> {
-        let (p, g, m, v, len) = Self::arrays(set)[4];
-        self.record_on(rec, p, g, m, v, len, group, t, None)
+        self.record_on(rec, Self::arrays(set)[4], group, t, None)
     }
 
     /// The grids of [`Adam::record_set`]'s five dispatches (means, scales,
@@ -144,7 +151,7 @@ impl Adam {
     /// (`Rasterizer::record_fit_gate`).
     pub fn set_grids(&self, set: &TrainableSet, groups: &[AdamGroup; 5]) -> [[u32; 3]; 5] {
         let arrays = Self::arrays(set);
-        std::array::from_fn(|k| self.grid(groups[k].items(arrays[k].4)))
+        std::array::from_fn(|k| self.grid(groups[k].items(arrays[k].n)))
     }
 
     /// As [`Adam::record_set`], dispatch k taking its workgroup counts from
@@ -189,17 +196,17 @@ impl Adam {
         })
     }
 
-    fn arrays(set: &TrainableSet) -> [ParamArrays<'_>; 5] {
+    fn arrays(set: &TrainableSet) -> [AdamArrays<'_>; 5] {
         let n = set.len() as usize;
         let f = (set.params.channels * set.params.coeffs) as usize;
         let (p, g, m, v) = (set.params.buffers(), set.grads.buffers(), set.m.buffers(), set.v.buffers());
         let w = crate::raster::array_widths(f);
-        std::array::from_fn(|i| (p[i], g[i], m[i], v[i], w[i] * n))
+        std::array::from_fn(|i| AdamArrays { param: p[i], grad: g[i], m: m[i], v: v[i], n: w[i] * n })
     }
 
     fn record_set_on(&self, rec: &mut Recorder, set: &TrainableSet, groups: &[AdamGroup; 5], t: u64, args: Option<&[BufferBinding]>) -> Result<()> {
-        for (k, ((p, g, m, v, len), group)) in Self::arrays(set).into_iter().zip(groups).enumerate() {
-            self.record_on(rec, p, g, m, v, len, group, t, args.map(|a| &a[k]))?;
+        for (k, (a, group)) in Self::arrays(set).into_iter().zip(groups).enumerate() {
+            self.record_on(rec, a, group, t, args.map(|a| &a[k]))?;
         }
         Ok(())
     }

@@ -10,7 +10,7 @@ mod hf;
 mod loss;
 mod set;
 
-pub use adam::{Adam, AdamGroup};
+pub use adam::{Adam, AdamArrays, AdamGroup};
 pub use densify::{DensifyParams, DensifyReport, Densifier};
 pub use hf::{HfLoss, HfStats};
 pub use loss::{ImageLoss, LossScratch, LossValues, LossWeights};

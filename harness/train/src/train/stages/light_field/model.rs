@@ -19,7 +19,7 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
-use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -283,16 +283,18 @@ impl LightFieldModel {
             }
             let (n, s) = (&self.net, &self.set);
             let np = n.shape.params() as usize;
+            let net_arrays = AdamArrays { param: &n.params, grad: &n.grads, m: &n.m, v: &n.v, n: np };
+            let material_arrays = AdamArrays { param: &s.params.features, grad: &s.grads.features, m: &s.m.features, v: &s.v.features, n: material_len };
             if host_count.is_some() {
                 let sc = rec.begin_scope("adam");
-                self.adam.record(&mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it)?;
-                self.adam.record(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, material_len, &material_group, it)?;
+                self.adam.record(&mut rec, net_arrays, &net_group, it)?;
+                self.adam.record(&mut rec, material_arrays, &material_group, it)?;
                 rec.end_scope(sc);
             } else {
                 let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.adam.grid(np), self.adam.grid(material_len)])?;
                 let sc = rec.begin_scope("adam");
-                self.adam.record_gated(&mut rec, &n.params, &n.grads, &n.m, &n.v, np, &net_group, it, &args[0])?;
-                self.adam.record_gated(&mut rec, &s.params.features, &s.grads.features, &s.m.features, &s.v.features, material_len, &material_group, it, &args[1])?;
+                self.adam.record_gated(&mut rec, net_arrays, &net_group, it, &args[0])?;
+                self.adam.record_gated(&mut rec, material_arrays, &material_group, it, &args[1])?;
                 rec.end_scope(sc);
                 rec.read_back(&b.samples.count, 0, &self.count_host)?;
             }

@@ -21,7 +21,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::reflection::{CompositeGrads, TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
+    Adam, AdamArrays, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -251,7 +251,7 @@ impl ReflectionModel {
             let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
             let sc = rec.begin_scope("adam");
             self.adam.record_set_gated(&mut rec, &self.set, &groups, it, &args[..5])?;
-            self.adam.record_gated(&mut rec, &e.params, &e.grads, &e.m, &e.v, e.len(), &AdamGroup::single(rc.lr_env), it, &args[5])?;
+            self.adam.record_gated(&mut rec, AdamArrays { param: &e.params, grad: &e.grads, m: &e.m, v: &e.v, n: e.len() }, &AdamGroup::single(rc.lr_env), it, &args[5])?;
             rec.end_scope(sc);
             let t = rec.submit_and_wait()?;
             if self.raster.fit(&mut b.frame)? {
