@@ -1,4 +1,4 @@
-//! Residual-guided seeding of the reflection set (harness/train/src/train/stages/reflection/seed.rs),
+//! Residual-guided seeding of the reflection set (harness/train/src/train/stages/reflection/seed/),
 //! on the CPU: the geometry helpers against closed forms, and the residual
 //! hull on a synthetic glass sphere whose residual is exactly its
 //! silhouette (plus scattered noise), seen from a ring of cameras around

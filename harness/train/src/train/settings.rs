@@ -102,7 +102,7 @@ name_enum!(
     ReflectionInit, "reflection.init", {
         /// The whole converged Stage I set (the paper's words).
         Copy = "copy",
-        /// Seeds on the residual hull (stages/reflection/seed.rs) only.
+        /// Seeds on the residual hull (stages/reflection/seed/) only.
         Hull = "hull",
         /// Both.
         CopyHull = "copy+hull",

@@ -79,7 +79,7 @@ pub struct ReflectionConfig {
     pub min_view_dependence: f32,
     /// How the reflection set starts (method-notes §3.4): "copy" = the whole
     /// converged Stage I set (the paper's words); "hull" = seeds on the
-    /// residual hull (stages/reflection/seed.rs) only; "copy+hull" = both. Measured on
+    /// residual hull (stages/reflection/seed/) only; "copy+hull" = both. Measured on
     /// the glass scene: the copy sits behind the glass (normal MAE 70.7
     /// degrees after Stage II vs Stage I's 63.1); the seeds start at 43.
     pub init: ReflectionInit,
@@ -89,7 +89,7 @@ pub struct ReflectionConfig {
     pub seed_agree: f32,
     /// Residual hull: a point also needs more agreeing views than masks
     /// placed at random would give it this often (binomial tail at the
-    /// masks' mean coverage; 1: no test; stages/reflection/seed.rs `min_hits`). Where
+    /// masks' mean coverage; 1: no test; stages/reflection/seed/ `min_hits`). Where
     /// path-tracing noise and textures put residual on 60% of the pixels,
     /// a point near the cameras that ten views see agrees by chance and
     /// seeds in front of the glass. Measured after Stage II (perf/RESULTS.md,
@@ -109,7 +109,7 @@ pub struct ReflectionConfig {
     /// places seeds with depth noise that turns their plane nearly random.
     /// "gradient": against the gradient of the views' blurred residual
     /// masks summed at the seed's projections (the silhouette cones'
-    /// normal; stages/reflection/seed.rs). Measured after Stage II, view -> gradient:
+    /// normal; stages/reflection/seed/). Measured after Stage II, view -> gradient:
     /// built-in glass 40.2 -> 31.8 degrees (0.50x Stage I's 64.1), but
     /// `lantern` 47.8 -> 51.1, where the residual is noisy rather than an
     /// outline of the glass: an option for glass objects seen whole from
