@@ -617,7 +617,7 @@ fn jpeg_captures_load_in_both_layouts() {
     std::fs::write(b.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a.jpg", "transform_matrix": {C2W}}}]}}"#)).unwrap();
     let ds = Dataset::load(&b, &LoadOptions::default()).unwrap();
     assert_eq!(ds.train[0].image.data, want);
-    // The PNG variants the README names: 16-bit RGBA and grey + alpha,
+    // The PNG variants docs/usage.md names: 16-bit RGBA and grey + alpha,
     // composited on the (white) background.
     let rgba16: Vec<u8> = (0..48).flat_map(|_| [0xffffu16, 0x8000, 0, 0x8000]).flat_map(|v| v.to_ne_bytes()).collect();
     image::save_buffer(b.join("train/a.png"), &rgba16, 8, 6, image::ExtendedColorType::Rgba16).unwrap();

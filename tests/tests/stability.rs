@@ -1,4 +1,4 @@
-//! Numerical stability across all three stages (the README's "Numerical
+//! Numerical stability across all three stages (docs/stability.md, "Numerical
 //! stability" lists every hard case and the test that holds it). Here: a
 //! long run of every stage on the tiny glass scene with no NaN/Inf anywhere
 //! and every parameter bounded, and a light field that has no pixel to run

@@ -37,7 +37,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tgs_engine::Context;
 
-/// The grid used when no file is given: the knobs the README's accuracy /
+/// The grid used when no file is given: the knobs docs/usage.md's accuracy /
 /// time section discusses, one at a time around the quick preset.
 pub const DEFAULT_GRID: &str = r#"
 preset = "quick"
