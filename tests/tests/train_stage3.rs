@@ -89,7 +89,10 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     });
     let o = train(ctx, &a).unwrap();
     stopper.join().unwrap();
-    assert!(o.interrupted && o.iteration > 440 && o.iteration < 520, "stopped at {}", o.iteration);
+    // The stop is asked for once the 40th Stage III line (iteration 440)
+    // is in the log, and the loop checks for it after writing that line:
+    // on a loaded machine the request can land before that check.
+    assert!(o.interrupted && o.iteration >= 440 && o.iteration < 520, "stopped at {}", o.iteration);
     let o = train(ctx, &TrainArgs { resume: true, ..a }).unwrap();
     assert_eq!((o.iteration, o.interrupted), (520, false));
     let (ha, aa) = checkpoint::read(&full.join("checkpoint.bin")).unwrap();
