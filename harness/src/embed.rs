@@ -160,7 +160,7 @@ impl SceneRenderer {
             (Some(Layer::Env { set, env, fresnel, shading, raster, feat }), Some(frame), Some(comp)) => {
                 shading.record_color(rec, set, env, cam, *fresnel, feat)?;
                 raster.record_forward_with(rec, set, feat, cam, &vec![0.0; fresnel.channels() as usize], 0, frame)?;
-                shading.record_composite(rec, cam, *fresnel, &v.scat.out, &frame.out, comp)?;
+                shading.record_composite(rec, cam, *fresnel, &tgs_pipelines::reflection::CompositeInputs { scat: &v.scat.out, refl: &frame.out }, comp)?;
                 comp
             }
             (Some(Layer::Light { set, params, shade, shading, mlp, raster, feat, .. }), Some(frame), Some(comp)) => {

@@ -23,7 +23,7 @@ pub use util::Iota;
 pub mod raster;
 pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, Plane, RasterKernels, Rasterizer, RecordAccess, GATE_SLOTS};
 pub mod train;
-pub use train::{Adam, AdamArrays, AdamGroup, DensifyParams, DensifyReport, Densifier, HfLoss, HfStats, ImageLoss, LossScratch, LossValues, LossWeights, TrainableSet};
+pub use train::{Adam, AdamArrays, AdamGroup, DensifyParams, DensifyReport, Densifier, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights, TrainableSet};
 pub mod reflection;
 pub use reflection::{CompositePriors, EnvMap, EnvProxy, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
 pub mod mlp;

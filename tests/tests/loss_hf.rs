@@ -36,7 +36,7 @@ fn gpu(x: &[f32], y: &[f32], n: usize, pct: f32, weight: f32, base: &[f32]) -> O
     let yb = Buffer::from_slice(ctx, "target", y).unwrap();
     let gb = Buffer::from_slice(ctx, "grad", base).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    hf.record(&mut rec, &xb, &yb, n as u32, pct, weight, &gb, &s).unwrap();
+    hf.record(&mut rec, tgs_pipelines::LossIo { render: &xb, target: &yb, grad: &gb }, n as u32, pct, weight, &s).unwrap();
     rec.submit_and_wait().unwrap();
     let (tau, count, mean) = s.values().unwrap();
     let out = Out { tau, count, mean, grad: gb.download().unwrap() };

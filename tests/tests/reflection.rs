@@ -715,8 +715,9 @@ fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_i
     let gr = Buffer::<f32>::new(ctx, "test.refl_grad", refl.len()).unwrap();
     let gs = Buffer::<f32>::new(ctx, "test.scat_grad", 3 * n).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    shading.record_composite(&mut rec, cam, fresnel, &s, &r, &li).unwrap();
-    shading.record_composite_backward(&mut rec, cam, fresnel, &s, &r, &tgs_pipelines::reflection::CompositeGrads { loss_grad: &gi, refl_grad: &gr, scat_grad: Some(&gs) }, prior).unwrap();
+    let inputs = tgs_pipelines::reflection::CompositeInputs { scat: &s, refl: &r };
+    shading.record_composite(&mut rec, cam, fresnel, &inputs, &li).unwrap();
+    shading.record_composite_backward(&mut rec, cam, fresnel, &inputs, &tgs_pipelines::reflection::CompositeGrads { loss_grad: &gi, refl_grad: &gr, scat_grad: Some(&gs) }, prior).unwrap();
     rec.submit_and_wait().unwrap();
     (li.download().unwrap(), gr.download().unwrap(), gs.download().unwrap())
 }

@@ -139,7 +139,7 @@ fn targets(ctx: &Arc<Context>, truth: &HostGaussians, geometry: &HostGaussians, 
             let mut rec = Recorder::new(ctx).unwrap();
             shading.record_color(&mut rec, &truth, &env, cam, fresnel, &feat).unwrap();
             raster.record_forward_with(&mut rec, &geometry, &feat, cam, &background, 0, &frame).unwrap();
-            shading.record_composite(&mut rec, cam, fresnel, scat, &frame.out, &img).unwrap();
+            shading.record_composite(&mut rec, cam, fresnel, &tgs_pipelines::reflection::CompositeInputs { scat, refl: &frame.out }, &img).unwrap();
             rec.submit_and_wait().unwrap();
             if raster.fit(&mut frame).unwrap() {
                 break;

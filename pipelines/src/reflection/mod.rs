@@ -299,12 +299,13 @@ impl ReflectionShading {
         }
     }
 
-    /// Record the composite of a scattering render `scat` (colour in its
-    /// first 3 planes) and a reflection render `refl` (`fresnel.channels()`
+    /// Record the composite of a scattering render `x.scat` (colour in its
+    /// first 3 planes) and a reflection render `x.refl` (`fresnel.channels()`
     /// feature channels, `Plane` order) into `loss_in`: the composite colour
     /// followed by the reflection render's alpha..distortion planes, i.e. a
     /// 3-channel render's layout, for `ImageLoss::record_planes`.
-    pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, loss_in: &Buffer<f32>) -> Result<()> {
+    pub fn record_composite(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, x: &CompositeInputs, loss_in: &Buffer<f32>) -> Result<()> {
+        let CompositeInputs { scat, refl } = *x;
         let ch = fresnel.channels();
         check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (loss_in, Plane::count(3))])?;
         let p = Self::composite_push(cam, fresnel, false, CompositePriors::default());
@@ -316,7 +317,8 @@ impl ReflectionShading {
     /// render, overwritten) and, when given, `g.scat_grad` (the scattering
     /// colour's 3 planes, overwritten). `prior`'s values are added to dL/dR
     /// and to dL/dalpha at every pixel ([`CompositePriors::of_means`]).
-    pub fn record_composite_backward(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, scat: &Buffer<f32>, refl: &Buffer<f32>, g: &CompositeGrads, prior: CompositePriors) -> Result<()> {
+    pub fn record_composite_backward(&self, rec: &mut Recorder, cam: &Camera, fresnel: Fresnel, x: &CompositeInputs, g: &CompositeGrads, prior: CompositePriors) -> Result<()> {
+        let CompositeInputs { scat, refl } = *x;
         let ch = fresnel.channels();
         check_planes(cam, &[(scat, 3), (refl, Plane::count(ch)), (g.loss_grad, Plane::count(3)), (g.refl_grad, Plane::count(ch))])?;
         if let Some(s) = g.scat_grad {
@@ -345,6 +347,15 @@ impl ReflectionShading {
         }
         rec.dispatch(&self.residual, &[target.binding(), scat.binding(), residual.binding()], bytemuck::bytes_of(&pixels), grid(&self.ctx, pixels))
     }
+}
+
+/// What Stage II's composite reads: the scattering render (colour in its
+/// first 3 planes) and the reflection render (`fresnel.channels()`
+/// features, `Plane` order).
+#[derive(Clone, Copy)]
+pub struct CompositeInputs<'a> {
+    pub scat: &'a Buffer<f32>,
+    pub refl: &'a Buffer<f32>,
 }
 
 /// The gradients of Stage II's composite backward: in `loss_grad`, out the

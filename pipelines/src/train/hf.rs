@@ -2,6 +2,7 @@
 //! per-pixel error of the pixels at or above the p-th percentile of the
 //! error, the percentile found on the GPU by an exact radix select.
 
+use super::loss::LossIo;
 use super::{grid, kernel};
 use crate::shaders;
 use anyhow::{bail, Result};
@@ -45,11 +46,11 @@ impl HfLoss {
         Ok(HfStats { stats: Buffer::new(&self.ctx, "loss.hf_stats", 4)?, stats_host: Readback::new(&self.ctx, "loss.hf_stats_host", 4)? })
     }
 
-    /// Record the loss of the colour planes of `render` (`pixels` per
-    /// plane) against `target` at percentile `pct` (in [0, 1]) into `s`, and
-    /// add `weight` x its gradient to the colour planes of `grad`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record(&self, rec: &mut Recorder, render: &Buffer<f32>, target: &Buffer<f32>, pixels: u32, pct: f32, weight: f32, grad: &Buffer<f32>, s: &HfStats) -> Result<()> {
+    /// Record the loss of the colour planes of `io.render` (`pixels` per
+    /// plane) against `io.target` at percentile `pct` (in [0, 1]) into `s`,
+    /// and add `weight` x its gradient to the colour planes of `io.grad`.
+    pub fn record(&self, rec: &mut Recorder, io: LossIo, pixels: u32, pct: f32, weight: f32, s: &HfStats) -> Result<()> {
+        let LossIo { render, target, grad } = io;
         if pixels == 0 {
             bail!("high-frequency loss of an empty image");
         }

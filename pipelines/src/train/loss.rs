@@ -13,6 +13,16 @@ use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Kernel, Readback, Recorder};
 
+/// What a loss reads and writes: a render's planes (`Plane` order), the
+/// target image (its colour planes), and the gradient of the render's
+/// planes (written, or added to).
+#[derive(Clone, Copy)]
+pub struct LossIo<'a> {
+    pub render: &'a Buffer<f32>,
+    pub target: &'a Buffer<f32>,
+    pub grad: &'a Buffer<f32>,
+}
+
 /// Loss weights. The photometric term is (1 - ssim) L1 + ssim D-SSIM.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LossWeights {
@@ -146,15 +156,15 @@ impl ImageLoss {
         if frame.width != s.width || frame.height != s.height {
             bail!("loss scratch is {}x{} but the render is {}x{}", s.width, s.height, frame.width, frame.height);
         }
-        self.record_planes(rec, &frame.out, &frame.grad_out, target, cam, w, s)
+        self.record_planes(rec, LossIo { render: &frame.out, target, grad: &frame.grad_out }, cam, w, s)
     }
 
     /// As [`ImageLoss::record`] on planes laid out as a render with
-    /// `s.channels` channels (`Plane` order) held in `out`, writing the
-    /// gradient of every plane to `grad_out` (e.g. a deferred composite
+    /// `s.channels` channels (`Plane` order) held in `io.render`, writing
+    /// the gradient of every plane to `io.grad` (e.g. a deferred composite
     /// followed by another render's geometry planes).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_planes(&self, rec: &mut Recorder, out: &Buffer<f32>, grad_out: &Buffer<f32>, target: &Buffer<f32>, cam: &Camera, w: &LossWeights, s: &mut LossScratch) -> Result<()> {
+    pub fn record_planes(&self, rec: &mut Recorder, io: LossIo, cam: &Camera, w: &LossWeights, s: &mut LossScratch) -> Result<()> {
+        let LossIo { render: out, target, grad: grad_out } = io;
         let (width, height, c) = (s.width, s.height, s.channels);
         let n = width * height;
         let need = (Plane::count(c) * n) as usize;

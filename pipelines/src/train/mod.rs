@@ -13,7 +13,7 @@ mod set;
 pub use adam::{Adam, AdamArrays, AdamGroup};
 pub use densify::{DensifyParams, DensifyReport, Densifier};
 pub use hf::{HfLoss, HfStats};
-pub use loss::{ImageLoss, LossScratch, LossValues, LossWeights};
+pub use loss::{ImageLoss, LossIo, LossScratch, LossValues, LossWeights};
 pub use set::TrainableSet;
 
 use tgs_engine::{groups_2d, BufferBinding, Context, Kernel, Recorder};

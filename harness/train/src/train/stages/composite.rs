@@ -9,7 +9,7 @@
 use anyhow::Result;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder};
-use tgs_pipelines::{Camera, HfLoss, HfStats, ImageLoss, LossScratch, LossValues, LossWeights};
+use tgs_pipelines::{Camera, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights};
 
 /// A stage's high-frequency loss setting (`lambda_hf`, `hf_percentile` in
 /// its section).
@@ -38,14 +38,14 @@ impl CompositeLoss {
         self.image.scratch(w, h, 3)
     }
 
-    /// Record the loss of the composite `out` (its planes, colour first)
-    /// against `target`: its gradient into `grad`, the values into `s`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record(&self, rec: &mut Recorder, out: &Buffer<f32>, grad: &Buffer<f32>, target: &Buffer<f32>, cam: &Camera, w: &LossWeights, hf: HfSetting, s: &mut LossScratch) -> Result<()> {
-        self.image.record_planes(rec, out, grad, target, cam, w, s)?;
+    /// Record the loss of the composite `io.render` (its planes, colour
+    /// first) against `io.target`: its gradient into `io.grad`, the values
+    /// into `s`.
+    pub fn record(&self, rec: &mut Recorder, io: LossIo, cam: &Camera, w: &LossWeights, hf: HfSetting, s: &mut LossScratch) -> Result<()> {
+        self.image.record_planes(rec, io, cam, w, s)?;
         if hf.lambda > 0.0 {
             let sc = rec.begin_scope("loss.hf");
-            self.hf.record(rec, out, target, cam.width * cam.height, hf.percentile / 100.0, hf.lambda, grad, &self.hf_stats)?;
+            self.hf.record(rec, io, cam.width * cam.height, hf.percentile / 100.0, hf.lambda, &self.hf_stats)?;
             rec.end_scope(sc);
         }
         Ok(())

@@ -19,7 +19,7 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
-use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, LossIo, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -255,7 +255,7 @@ impl LightFieldModel {
             self.shading.record_composite(&mut rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out }, &b.loss_in)?;
             rec.end_scope(sc);
             let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
-            self.objective.record(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, hf, &mut b.loss)?;
+            self.objective.record(&mut rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
             let sc = rec.begin_scope("lf.composite_backward");
             if let Some(g) = scat_grad {
                 // The composite writes the colour planes; the scattering

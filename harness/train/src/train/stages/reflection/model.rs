@@ -19,9 +19,9 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
-use tgs_pipelines::reflection::{CompositeGrads, TexelScratch, MATERIAL};
+use tgs_pipelines::reflection::{CompositeGrads, CompositeInputs, TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamArrays, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
+    Adam, AdamArrays, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossIo, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -214,10 +214,10 @@ impl ReflectionModel {
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
             let sc = rec.begin_scope("refl.composite");
-            self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
+            self.shading.record_composite(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
             rec.end_scope(sc);
             let hf = HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile };
-            self.objective.record(&mut rec, &b.loss_in, &b.loss_grad, x.target, cam, &weights, hf, &mut b.loss)?;
+            self.objective.record(&mut rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
             let sc = rec.begin_scope("refl.composite_backward");
             if let Some(g) = scat_grad {
                 // The composite writes the colour planes; the scattering
@@ -226,7 +226,7 @@ impl ReflectionModel {
             }
             let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, pixels);
             let g = CompositeGrads { loss_grad: &b.loss_grad, refl_grad: &b.frame.grad_out, scat_grad };
-            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, scat, &b.frame.out, &g, prior)?;
+            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &g, prior)?;
             rec.end_scope(sc);
             if rc.lambda_r > 0.0 {
                 rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
@@ -293,7 +293,7 @@ impl ReflectionModel {
         self.forward(cam, false)?;
         let b = &self.sizes[&(cam.width, cam.height)];
         let mut rec = Recorder::new(&self.ctx)?;
-        self.shading.record_composite(&mut rec, cam, self.fresnel, scat, &b.frame.out, &b.loss_in)?;
+        self.shading.record_composite(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
         rec.submit_and_wait()?;
         Ok(ReflRendered { width: cam.width, height: cam.height, composite: b.loss_in.download()?, refl: b.frame.out.download()?, channels: self.fresnel.channels(), phi: None })
     }
