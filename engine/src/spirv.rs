@@ -15,24 +15,27 @@ pub(crate) fn words(bytes: &[u8]) -> Result<Vec<u32>> {
     Ok(w)
 }
 
+const OP_DECORATE: u32 = 71;
+
+/// The module's instructions after its 5-word header, each as its words
+/// (opcode and word count first); stops at a malformed word count.
+fn instructions(words: &[u32]) -> impl Iterator<Item = &[u32]> {
+    let mut i = 5;
+    std::iter::from_fn(move || {
+        let n = (*words.get(i)? >> 16) as usize;
+        if n == 0 || i + n > words.len() {
+            return None;
+        }
+        let w = &words[i..i + n];
+        i += n;
+        Some(w)
+    })
+}
+
 /// Number of descriptor bindings in set 0 (max binding + 1).
 pub(crate) fn binding_count(words: &[u32]) -> usize {
-    const OP_DECORATE: u32 = 71;
     const DEC_BINDING: u32 = 33;
-    let mut i = 5;
-    let mut count = 0usize;
-    while i < words.len() {
-        let n = (words[i] >> 16) as usize;
-        let op = words[i] & 0xffff;
-        if n == 0 {
-            break;
-        }
-        if op == OP_DECORATE && n >= 4 && words[i + 2] == DEC_BINDING {
-            count = count.max(words[i + 3] as usize + 1);
-        }
-        i += n;
-    }
-    count
+    instructions(words).filter(|w| w[0] & 0xffff == OP_DECORATE && w.len() >= 4 && w[2] == DEC_BINDING).map(|w| w[3] as usize + 1).max().unwrap_or(0)
 }
 
 /// Size in bytes of the shader's push-constant block, as its members'
@@ -52,7 +55,6 @@ pub(crate) fn push_constant_bytes(words: &[u32]) -> Option<u32> {
     const OP_CONSTANT: u32 = 43;
     const OP_SPEC_CONSTANT: u32 = 50;
     const OP_VARIABLE: u32 = 59;
-    const OP_DECORATE: u32 = 71;
     const OP_MEMBER_DECORATE: u32 = 72;
     const DEC_ARRAY_STRIDE: u32 = 6;
     const DEC_OFFSET: u32 = 35;
@@ -69,14 +71,8 @@ pub(crate) fn push_constant_bytes(words: &[u32]) -> Option<u32> {
     let mut strides: HashMap<u32, u32> = HashMap::new();
     let mut offsets: HashMap<(u32, u32), u32> = HashMap::new();
     let mut block = None;
-    let mut i = 5;
-    while i < words.len() {
-        let n = (words[i] >> 16) as usize;
-        let op = words[i] & 0xffff;
-        if n == 0 || i + n > words.len() {
-            break;
-        }
-        let w = &words[i..i + n];
+    for w in instructions(words) {
+        let (op, n) = (w[0] & 0xffff, w.len());
         match op {
             OP_TYPE_INT | OP_TYPE_FLOAT if n >= 3 => {
                 types.insert(w[1], Ty::Scalar(w[2] / 8));
@@ -87,7 +83,7 @@ pub(crate) fn push_constant_bytes(words: &[u32]) -> Option<u32> {
             OP_TYPE_ARRAY if n >= 4 => {
                 types.insert(w[1], Ty::Array(w[2], w[3]));
             }
-            OP_TYPE_STRUCT => {
+            OP_TYPE_STRUCT if n >= 2 => {
                 types.insert(w[1], Ty::Struct(w[2..].to_vec()));
             }
             OP_TYPE_POINTER if n >= 4 && w[2] == SC_PUSH_CONSTANT => {
@@ -107,7 +103,6 @@ pub(crate) fn push_constant_bytes(words: &[u32]) -> Option<u32> {
             }
             _ => {}
         }
-        i += n;
     }
     fn size(t: u32, types: &HashMap<u32, Ty>, constants: &HashMap<u32, u32>, strides: &HashMap<u32, u32>, offsets: &HashMap<(u32, u32), u32>) -> Option<u32> {
         match types.get(&t)? {

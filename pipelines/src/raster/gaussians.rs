@@ -51,11 +51,15 @@ impl HostGaussians {
     pub fn from_arrays(channels: u32, coeffs: u32, [means, log_scales, quats, opacity, features]: [Vec<f32>; 5]) -> Self {
         HostGaussians { channels, coeffs, means, log_scales, quats, opacity, features }
     }
+    /// The five arrays in [`GAUSSIAN_ARRAYS`] order.
+    pub fn arrays(&self) -> [&Vec<f32>; 5] {
+        [&self.means, &self.log_scales, &self.quats, &self.opacity, &self.features]
+    }
     pub fn validate(&self) -> Result<()> {
         let n = self.len();
         let fpg = (self.coeffs * self.channels) as usize;
-        let checks = [("means", self.means.len(), 3 * n), ("log_scales", self.log_scales.len(), 2 * n), ("quats", self.quats.len(), 4 * n), ("features", self.features.len(), fpg * n)];
-        for (name, got, want) in checks {
+        for ((name, a), w) in GAUSSIAN_ARRAYS.into_iter().zip(self.arrays()).zip(array_widths(fpg)) {
+            let (got, want) = (a.len(), w * n);
             if got != want {
                 bail!("Gaussian set: {name} has {got} values, expected {want} for {n} Gaussians");
             }
@@ -110,7 +114,7 @@ impl Gaussians {
         }
         // The uploads below write every element.
         let g = Self::uninit(ctx, h.len() as u32, h.channels, h.coeffs)?;
-        for (buf, data) in g.buffers().into_iter().zip([&h.means, &h.log_scales, &h.quats, &h.opacity, &h.features]) {
+        for (buf, data) in g.buffers().into_iter().zip(h.arrays()) {
             buf.upload(data)?;
         }
         Ok(g)
@@ -119,13 +123,11 @@ impl Gaussians {
     pub fn download(&self) -> Result<HostGaussians> {
         let n = self.n as usize;
         let f = (self.coeffs * self.channels) as usize;
-        let [a, b, c, d, e] = self.buffers();
-        let w = array_widths(f);
-        Ok(HostGaussians::from_arrays(
-            self.channels,
-            self.coeffs,
-            [a.download_range(0, w[0] * n)?, b.download_range(0, w[1] * n)?, c.download_range(0, w[2] * n)?, d.download_range(0, w[3] * n)?, e.download_range(0, w[4] * n)?],
-        ))
+        let mut arrays: [Vec<f32>; 5] = Default::default();
+        for ((a, buf), w) in arrays.iter_mut().zip(self.buffers()).zip(array_widths(f)) {
+            *a = buf.download_range(0, w * n)?;
+        }
+        Ok(HostGaussians::from_arrays(self.channels, self.coeffs, arrays))
     }
 
     /// The five arrays in [`GAUSSIAN_ARRAYS`] order.
