@@ -99,6 +99,7 @@ pub trait LaterStage: Any {
     fn take_coverage(&mut self) -> Option<f64> {
         None
     }
+    /// For the trainer's typed views of the running stage
+    /// (`Trainer::reflection`, `Trainer::light_field`).
     fn as_any(&self) -> &dyn Any;
-    fn as_any_mut(&mut self) -> &mut dyn Any;
 }

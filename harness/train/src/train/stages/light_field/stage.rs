@@ -79,8 +79,4 @@ impl LaterStage for LightFieldModel {
     fn as_any(&self) -> &dyn Any {
         self
     }
-
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
-    }
 }

@@ -238,10 +238,6 @@ impl LaterStage for ReflectionModel {
     fn as_any(&self) -> &dyn Any {
         self
     }
-
-    fn as_any_mut(&mut self) -> &mut dyn Any {
-        self
-    }
 }
 
 /// Whether the reflection set decides the geometry of pixel `i` of a Stage
