@@ -203,6 +203,25 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     assert!(pct(&eg, 0.5) < 20.0 && pct(&eg, 0.9) < 30.0, "gradient normals: median {:.1}, 90% {:.1} deg", pct(&eg, 0.5), pct(&eg, 0.9));
     assert!(pct(&eg, 0.5) + 20.0 < pct(&ev, 0.5), "gradient median {:.1} against view {:.1} deg", pct(&eg, 0.5), pct(&ev, 0.5));
     assert_eq!(grad, residual_hull_seeds(&sv, &pg));
+
+    // "halfway": the unit bisector of the two, seed by seed (the camera
+    // direction where the field is flat: there the gradient's normal is
+    // the camera's too); on the sphere between them.
+    let ph = SeedParams { normal: SeedNormal::Halfway, ..p };
+    let half = residual_hull_seeds(&sv, &ph);
+    assert_eq!(half.len(), seeds.len());
+    for ((h, g), v) in half.iter().zip(&grad).zip(&view) {
+        assert_eq!((h.position, h.scale), (g.position, g.scale));
+        let (nh, ng, nv) = (h.normal.map(f64::from), g.normal.map(f64::from), v.normal.map(f64::from));
+        let b = [ng[0] + nv[0], ng[1] + nv[1], ng[2] + nv[2]];
+        let bl = dot(b, b).sqrt();
+        assert!(bl > 1.0, "gradient {ng:?} and view {nv:?} normals not in one hemisphere");
+        let cos = dot(nh, b) / bl;
+        assert!(cos > 1.0 - 1e-5 && (dot(nh, nh) - 1.0).abs() < 1e-4, "halfway {nh:?} against the bisector of {ng:?} and {nv:?}");
+    }
+    let eh = radial_error(&half);
+    assert!(pct(&eh, 0.5) < pct(&ev, 0.5) - 10.0 && pct(&eh, 0.5) > pct(&eg, 0.5), "halfway median {:.1} against gradient {:.1} and view {:.1} deg", pct(&eh, 0.5), pct(&eg, 0.5), pct(&ev, 0.5));
+    assert_eq!(half, residual_hull_seeds(&sv, &ph));
 }
 
 #[test]
@@ -327,7 +346,7 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
 fn seeds_are_the_same_at_any_thread_count() {
     let (cams, res, depth) = ring(24, 0.1, true);
     let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-    for normal in [SeedNormal::View, SeedNormal::Plane, SeedNormal::Gradient] {
+    for normal in [SeedNormal::View, SeedNormal::Plane, SeedNormal::Gradient, SeedNormal::Halfway] {
         let at = |threads: usize| hull_seeding(&sv, &SeedParams { max_rays: 1500, normal, threads, ..SeedParams::default() });
         let one = at(1);
         assert!(one.seeds.len() > 200, "{normal:?}: {} seeds", one.seeds.len());

@@ -23,7 +23,8 @@
 //! normals face the camera that found them (or, with [`SeedNormal::Plane`],
 //! are the local plane of neighbouring seeds, PCA, and with
 //! [`SeedNormal::Gradient`] the silhouette cones' normal from the
-//! gradient of the views' blurred masks; both turned to that camera);
+//! gradient of the views' blurred masks, and with [`SeedNormal::Halfway`]
+//! the bisector of that and the camera direction; all turned to that camera);
 //! their size is the seed spacing. Stage II then refines them by the
 //! reflection it has to explain.
 //!
@@ -101,8 +102,23 @@ crate::train::settings::name_enum!(
         /// its mask adds nothing. Where the field changes by less than
         /// [`GRADIENT_MIN`] over the step, the camera direction (as `View`).
         Gradient = "gradient",
+        /// The unit bisector of `View` and `Gradient`'s normals (the camera
+        /// direction where the field is flat). The hull's outward normal is
+        /// right where the residual's hull is the glass's (closed objects)
+        /// and wrong where it is not (a flat pane or an open tube inside a
+        /// blob of residual); halfway keeps most of its gain on the first
+        /// and most of the camera direction on the second (perf/RESULTS.md,
+        /// thirty-third session).
+        Halfway = "halfway",
     }
 );
+
+impl SeedNormal {
+    /// Whether the normal reads the views' blurred masks' gradient.
+    fn uses_field(self) -> bool {
+        matches!(self, SeedNormal::Gradient | SeedNormal::Halfway)
+    }
+}
 
 impl Default for SeedParams {
     fn default() -> Self {
@@ -135,7 +151,7 @@ fn normalize(a: V3) -> V3 {
 struct Prepared {
     cam: Camera,
     mask: Vec<bool>,
-    /// With [`SeedNormal::Gradient`]: `mask` as 0/1 box-blurred by
+    /// With [`SeedNormal::Gradient`] or [`SeedNormal::Halfway`]: `mask` as 0/1 box-blurred by
     /// [`gradient_pixels`], the field whose 3D gradient gives the normal.
     soft: Vec<f32>,
     /// Stage I depth with "no surface" as infinity.
@@ -153,7 +169,7 @@ impl Prepared {
         let r = p.blur as usize / 2;
         let mask: Vec<bool> = if r == 0 { grown.iter().map(|&g| g > 0.5).collect() } else { box_blur(&grown, w, h, r).iter().map(|&m| m > 1.0 - 1e-4).collect() };
         let depth = v.depth.iter().map(|&d| if d.is_finite() && d > 0.0 { d } else { f32::INFINITY }).collect();
-        let soft = if p.normal == SeedNormal::Gradient { box_blur(&mask.iter().map(|&m| m as u8 as f32).collect::<Vec<f32>>(), w, h, gradient_pixels(w)) } else { Vec::new() };
+        let soft = if p.normal.uses_field() { box_blur(&mask.iter().map(|&m| m as u8 as f32).collect::<Vec<f32>>(), w, h, gradient_pixels(w)) } else { Vec::new() };
         Prepared { cam: v.camera, mask, soft, depth }
     }
 

@@ -1,6 +1,7 @@
 //! The seeds' surfels: each found hull point's normal (facing the camera
 //! that found it, or the local plane of its neighbours, or the gradient of
-//! the views' blurred residual masks; see the parent module for which and
+//! the views' blurred residual masks, or halfway between the first and the
+//! last; see the parent module for which and
 //! why) and its size (the spacing of its nearest seeds), and the
 //! quaternion that turns a surfel's normal axis onto a normal.
 
@@ -29,6 +30,10 @@ fn surfel(found: &[(V3, usize)], i: usize, views: &[Prepared], normal: SeedNorma
     let mut n = match normal {
         SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
         SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
+        SeedNormal::Halfway => field_normal(x, views, &views[vi]).map_or(to_cam, |g| {
+            let g = if dot(g, to_cam) < 0.0 { g.map(|c| -c) } else { g };
+            normalize([g[0] + to_cam[0], g[1] + to_cam[1], g[2] + to_cam[2]])
+        }),
         _ => to_cam,
     };
     if dot(n, to_cam) < 0.0 {
