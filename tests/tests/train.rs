@@ -252,7 +252,7 @@ fn paper_preset_notes_small_datasets() {
 #[test]
 fn named_settings_read_and_write_as_their_names() {
     use tgs::train::settings::{EnvStart, LightFresnel, LightPreset, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams};
-    assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::View);
+    assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::Halfway);
     for (n, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient), ("halfway", SeedNormal::Halfway)] {
         assert_eq!(SeedNormal::parse(n), Ok(want));
     }

@@ -4,10 +4,12 @@
 //! reflection set lowers the glass-mask normal MAE well below Stage I's
 //! and keeps the test PSNR; Stage III keeps the normals and raises the
 //! PSNR over this short Stage II; the meshes lie near the true surfaces.
-//! Measured on lavapipe (perf/RESULTS.md, thirtieth entry): Stage I 58.96
-//! degrees, PSNR 28.307; Stage II 46.33 degrees (0.79x), PSNR 28.213,
-//! coverage 0.881; Stage III PSNR 28.417 (+0.204); scene mesh distance
-//! mean 0.292, median 0.209; glass mesh 0.422, 0.453. 393 s alone (the
+//! Measured on lavapipe (perf/RESULTS.md, thirty-third entry, the seeds
+//! halfway to the hull's normal): Stage I 58.96 degrees, PSNR 28.307;
+//! Stage II 43.63 degrees (0.74x; 46.33, 0.79x, with the camera-facing
+//! seeds of the thirtieth entry), PSNR 28.221, coverage 0.856; Stage III
+//! PSNR 28.417 (+0.196); scene mesh distance mean 0.292, median 0.209;
+//! glass mesh 0.392, 0.432 (0.422, 0.453 before). 393 s alone (the
 //! full 3,000-iteration Stage I: 831 s). The same test with each of
 //! three broken Stage II/III settings fails (the entry lists them): the
 //! paper's copy start in place of the seeds, a light field that does not

@@ -101,23 +101,25 @@ pub struct ReflectionConfig {
     /// -> 42.8, `pane` 49.5 -> 48.4; built-in glass 40.1 -> 40.3), with
     /// less coverage on `lantern` and `pane`.
     pub seed_significance: f32,
-    /// A seed's normal: "view" (towards the camera whose ray found it) or
-    /// "plane" (the plane of its neighbouring seeds). Measured after Stage
-    /// II (perf/RESULTS.md, quick preset), glass normal MAE plane -> view:
-    /// built-in glass 45.1 -> 40.2 degrees, `lantern` 60.7 -> 47.7, `pane`
-    /// 65.8 -> 46.4, test PSNR within 0.03 dB: a real residual's hull
+    /// A seed's normal: "halfway" (the default), the unit bisector of
+    /// "view" (towards the camera whose ray found it) and "gradient"
+    /// (against the gradient of the views' blurred residual masks summed
+    /// at the seed's projections: the normal of the residual hull's
+    /// silhouette cones; stages/reflection/seed/), or "plane" (the plane
+    /// of its neighbouring seeds). Measured on nine path-traced scenes
+    /// (the eight of `mitsuba_scenes.py --scene suite` and `lantern`, 50²,
+    /// seeds 0 and 1; perf/RESULTS.md, thirty-third entry), glass normal
+    /// MAE after Stage II, mean, view / gradient / halfway: 41.8 / 37.8 /
+    /// 36.8 degrees; worst Stage II / Stage I 0.98 / 1.06 / 1.00 (all
+    /// `lantern`). The hull's normal is right where the residual's hull is
+    /// the glass (the closed `globe`, `globe_far`, `dome`, `cabinet`: 9 to
+    /// 15 degrees better than "view" with either) and wrong where the glass
+    /// is a flat pane or an open tube inside a blob of residual or under
+    /// the hull's lid (`pane` 7 to 10 worse with "gradient", 4 to 7 with
+    /// halfway; `lantern` 1 to 4 and 1); halfway keeps nearly all of the
+    /// first and about halves the second. "plane": built-in glass 45.1
+    /// against view's 40.2 (fifteenth session): a real residual's hull
     /// places seeds with depth noise that turns their plane nearly random.
-    /// "gradient": against the gradient of the views' blurred residual
-    /// masks summed at the seed's projections (the silhouette cones'
-    /// normal; stages/reflection/seed/). Measured after Stage II, view -> gradient:
-    /// built-in glass 40.2 -> 31.8 degrees (0.50x Stage I's 64.1), but
-    /// `lantern` 47.8 -> 51.1, where the residual is noisy rather than an
-    /// outline of the glass: an option for glass objects seen whole from
-    /// around them, not the default. With `seed_significance` 1e-6 (twenty-
-    /// first session), view -> gradient: built-in glass 40.3 -> 30.7
-    /// (0.48x), path-traced `globe` 35.1 -> 20.5 (0.34x), but `lantern`
-    /// 49.1 -> 64.0 and the flat `pane` 55.6 -> 63.4 (its silhouette
-    /// cones' normal lies in the pane's plane).
     pub seed_normal: SeedNormal,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
@@ -201,7 +203,7 @@ impl Default for ReflectionConfig {
             seed_rays: 8192,
             seed_agree: 0.9,
             seed_significance: 1e-6,
-            seed_normal: SeedNormal::View,
+            seed_normal: SeedNormal::Halfway,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,

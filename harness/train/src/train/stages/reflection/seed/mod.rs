@@ -20,26 +20,31 @@
 //! pass it, Stage II's [`hull_seeding`] takes the hull without it, found
 //! in the same march. Seeds
 //! are the first hull points of rays that crossed carved space; their
-//! normals face the camera that found them (or, with [`SeedNormal::Plane`],
-//! are the local plane of neighbouring seeds, PCA, and with
-//! [`SeedNormal::Gradient`] the silhouette cones' normal from the
-//! gradient of the views' blurred masks, and with [`SeedNormal::Halfway`]
-//! the bisector of that and the camera direction; all turned to that camera);
-//! their size is the seed spacing. Stage II then refines them by the
-//! reflection it has to explain.
+//! normals are by default ([`SeedNormal::Halfway`]) the bisector of the
+//! direction to the camera that found them ([`SeedNormal::View`]) and the
+//! silhouette cones' normal from the gradient of the views' blurred masks
+//! ([`SeedNormal::Gradient`]); or, with [`SeedNormal::Plane`], the local
+//! plane of neighbouring seeds (PCA); all turned to that camera. Their
+//! size is the seed spacing. Stage II then refines them by the reflection
+//! it has to explain.
 //!
-//! Why the camera and not the plane: on an ideal hull the seeds lie on the
-//! surface and their plane is its tangent plane (the synthetic sphere in
+//! Why not the plane: on an ideal hull the seeds lie on the surface and
+//! their plane is its tangent plane (the synthetic sphere in
 //! `tests/tests/seed.rs`: median error under 10 degrees), but the hull of a
 //! real Stage I residual places seeds with a depth noise comparable to
 //! their spacing, and the plane through 16 of them is then close to a
-//! random direction. Measured after Stage II (perf/RESULTS.md, fifteenth
-//! session): glass normal MAE with plane normals 45.1 / 60.7 / 65.8 degrees
-//! on the built-in glass / `lantern` / `pane`, with camera-facing normals
-//! 40.2 / 47.7 / 46.4. The mask gradient is smooth where the plane is not
-//! (it is a property of the field, not of where the march stopped):
-//! 31.8 on the built-in glass, but 51.1 on `lantern`, whose residual is
-//! noise more than an outline (perf/RESULTS.md, sixteenth session).
+//! random direction (perf/RESULTS.md, fifteenth session: glass normal MAE
+//! after Stage II 45.1 / 60.7 / 65.8 degrees on the built-in glass /
+//! `lantern` / `pane` with plane normals, 40.2 / 47.7 / 46.4 facing the
+//! camera). The mask gradient is smooth where the plane is not (it is a
+//! property of the field, not of where the march stopped), and right where
+//! the residual's hull is the glass's: on closed glass objects seen from
+//! around them. Where the glass is a flat pane inside a blob of residual,
+//! or an open tube whose hull has a lid, it is the normal of the wrong
+//! surface; halfway keeps most of its gain on the first and about halves
+//! its loss on the second (perf/RESULTS.md, thirty-third session: nine
+//! path-traced scenes, two seeds, glass normal MAE after Stage II 41.8 /
+//! 37.8 / 36.8 degrees with view / gradient / halfway).
 
 mod normals;
 
@@ -122,7 +127,7 @@ impl SeedNormal {
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::View, significance: 1e-6, threads: 0 }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, threads: 0 }
     }
 }
 
