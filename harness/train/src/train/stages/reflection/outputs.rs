@@ -42,7 +42,7 @@ impl ReflDecision {
                 if d.hull_empty {
                     ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's"
                 } else if d.significance_dropped {
-                    ": no hull point beat chance at reflection.seed_significance, so the seeds come from the hull without that test"
+                    ": no hull point beat chance at reflection.seed_significance, so the seeds come from the hull without that test (on each ray the point the most views agree on)"
                 } else {
                     ""
                 },

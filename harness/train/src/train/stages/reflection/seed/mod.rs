@@ -18,7 +18,8 @@
 //! needs a binomial tail at the masks' coverage below
 //! [`SeedParams::significance`] ([`min_hits`]); where no point can
 //! pass it, Stage II's [`hull_seeding`] takes the hull without it, found
-//! in the same march. Seeds
+//! in the same march, each ray's seed the point of it that the most views
+//! agree on. Seeds
 //! are the first hull points of rays that crossed carved space; their
 //! normals are by default ([`SeedNormal::Halfway`]) the bisector of the
 //! direction to the camera that found them ([`SeedNormal::View`]) and the
@@ -122,6 +123,21 @@ impl SeedNormal {
     /// Whether the normal reads the views' blurred masks' gradient.
     fn uses_field(self) -> bool {
         matches!(self, SeedNormal::Gradient | SeedNormal::Halfway)
+    }
+
+    /// The normal where no hull point beat chance ([`hull_seeding`]'s
+    /// fallback): the masks then cover most of every image, so their sum
+    /// has no outline to take a normal from, and the normals that read it
+    /// ([`SeedNormal::Gradient`], [`SeedNormal::Halfway`]) face the camera
+    /// instead. Measured on the path-traced room fronts and `lantern`
+    /// (perf/RESULTS.md, thirty-third entry), glass normal MAE after Stage
+    /// II with the fallback's most-agreeing seeds, halfway against the
+    /// camera direction: `facade` 16.9 / 17.7 against 18.6 / 16.6 degrees
+    /// (seeds 0 / 1), `windshield` 18.6 / 19.0 against 20.9 / 18.9,
+    /// `lantern` 50.8 against 47.5 (seed 0; its Stage I 47.7), and beside
+    /// the glass 5 to 7 degrees worse on the rooms.
+    pub fn without_outline(self) -> SeedNormal {
+        if self.uses_field() { SeedNormal::View } else { self }
     }
 }
 
@@ -272,9 +288,9 @@ enum Verdict {
     Unseen,
     /// Fewer than `agree` of them see residual there: carved.
     Carved,
-    /// Enough agree; `significant`: also more than chance explains
-    /// (`min_hits`, indexed by the views that see it).
-    Agrees { significant: bool },
+    /// Enough agree (`hits` of the views that see it); `significant`: also
+    /// more than chance explains (`min_hits`, indexed by the views that see it).
+    Agrees { significant: bool, hits: u32 },
 }
 
 fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict {
@@ -290,7 +306,7 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict
     } else if (hit as f64) < agree as f64 * seen as f64 {
         Verdict::Carved
     } else {
-        Verdict::Agrees { significant: hit >= min_hits[seen as usize] }
+        Verdict::Agrees { significant: hit >= min_hits[seen as usize], hits: hit }
     }
 }
 
@@ -356,18 +372,28 @@ pub struct HullSeeding {
 
 /// [`residual_hull_seeds`], except where no point can beat chance (with
 /// 16 views whose masks cover 80% of the pixels not even all of them
-/// agreeing can): there the seeds of the hull without the test (what
-/// seeding gave before the test existed), not none. One march finds both.
+/// agreeing can): there the seeds of the hull without the test, not none,
+/// each the point of its ray that the most views agree on, facing the
+/// camera that found it ([`SeedNormal::without_outline`]). The first
+/// agreeing point, which seeding took before, lies where the fewest views
+/// see it, among the cameras: with residual on nearly every pixel a point
+/// that three views see agrees as readily as the glass does (measured on
+/// the path-traced room fronts, masks on 89% of the pixels: the first
+/// agreeing points 2 to 2.5 units in front of the glass, seen by a median
+/// of 5 of 60 views; perf/RESULTS.md, thirty-third entry). One march finds
+/// both.
 pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
     let found = march(&prepared, p);
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
-    let chosen = if dropped { &found.agreeing } else { &found.significant };
-    HullSeeding { seeds: surfels(chosen, &prepared, p.normal, p.threads), significance_dropped: dropped }
+    let (chosen, normal) = if dropped { (&found.agreeing, p.normal.without_outline()) } else { (&found.significant, p.normal) };
+    HullSeeding { seeds: surfels(chosen, &prepared, normal, p.threads), significance_dropped: dropped }
 }
 
-/// Per ray, the first hull point after carved space: with the significance
-/// test, and without it. Each with the view whose ray found it.
+/// Per ray: the first hull point after carved space with the significance
+/// test, and without it the hull point after carved space with the most
+/// agreeing views (the first of them on a tie). Each with the view whose
+/// ray found it.
 struct Found {
     significant: Vec<(V3, usize)>,
     agreeing: Vec<(V3, usize)>,
@@ -404,17 +430,24 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         // the surface begins (the residual covers what every view sees
         // there): it seeds only after some of it was carved. A point
         // that agrees by chance alone is neither hull nor carved: the
-        // test's march goes on through it, the plain one stops there.
-        let (mut carved, mut agreed) = (false, false);
+        // test's march goes on through it, and the plain one keeps, of
+        // the agreeing points, the one the most views agree on.
+        // Without the test, a ray whose first agreeing point came after
+        // carved space seeds at its agreeing point with the most hits.
+        let (mut carved, mut agreed, mut track) = (false, false, false);
+        let mut best: Option<(u32, V3)> = None;
         for s in 0..p.steps {
             let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
             let x = v.unproject(i, z);
             match hull_test(prepared, x, p.agree, min_hits) {
-                Verdict::Agrees { significant } => {
-                    if !agreed && carved {
-                        found.agreeing.push((x, vi));
+                Verdict::Agrees { significant, hits } => {
+                    if !agreed {
+                        track = carved;
                     }
                     agreed = true;
+                    if track && best.is_none_or(|(h, _)| hits > h) {
+                        best = Some((hits, x));
+                    }
                     if significant {
                         if carved {
                             found.significant.push((x, vi));
@@ -425,6 +458,9 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
                 Verdict::Carved => carved = true,
                 Verdict::Unseen => {}
             }
+        }
+        if let Some((_, x)) = best {
+            found.agreeing.push((x, vi));
         }
     }
     found
