@@ -228,7 +228,7 @@ impl Prepared {
 
 /// The pixel (row-major index) world point `x` projects to in `cam`, and
 /// its view depth, if it is in front of the camera and inside the image.
-pub(crate) fn pixel_of(cam: &Camera, x: V3) -> Option<(usize, f64)> {
+pub fn pixel_of(cam: &Camera, x: V3) -> Option<(usize, f64)> {
     let (u, v, z) = image_point(cam, x)?;
     let (u, v) = (u.round(), v.round());
     if !(u >= 0.0 && v >= 0.0 && u < cam.width as f64 && v < cam.height as f64) {
@@ -431,21 +431,17 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         // there): it seeds only after some of it was carved. A point
         // that agrees by chance alone is neither hull nor carved: the
         // test's march goes on through it, and the plain one keeps, of
-        // the agreeing points, the one the most views agree on.
-        // Without the test, a ray whose first agreeing point came after
-        // carved space seeds at its agreeing point with the most hits.
-        let (mut carved, mut agreed, mut track) = (false, false, false);
+        // the agreeing points, the one the most views agree on (if the
+        // first of them came after carved space: `after_carved`, set there).
+        let mut carved = false;
+        let mut after_carved: Option<bool> = None;
         let mut best: Option<(u32, V3)> = None;
         for s in 0..p.steps {
             let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
             let x = v.unproject(i, z);
             match hull_test(prepared, x, p.agree, min_hits) {
                 Verdict::Agrees { significant, hits } => {
-                    if !agreed {
-                        track = carved;
-                    }
-                    agreed = true;
-                    if track && best.is_none_or(|(h, _)| hits > h) {
+                    if *after_carved.get_or_insert(carved) && best.is_none_or(|(h, _)| hits > h) {
                         best = Some((hits, x));
                     }
                     if significant {
