@@ -15,6 +15,7 @@
 //! are reported beside the times.
 
 use crate::bench::{average, nested_scope, KernelTime};
+use crate::train::stages::light_field;
 use crate::train::{Stage, TrainConfig, Trainer};
 use anyhow::{ensure, Context as _, Result};
 use serde::Serialize;
@@ -123,31 +124,23 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         stages: Vec::new(),
         skipped: Vec::new(),
     };
-    for stage in [Stage::Scattering, Stage::Reflection, Stage::LightField] {
+    let all = Stage::all();
+    for (i, &stage) in all.iter().enumerate() {
         ctx.reset_peak_memory();
         let t = Instant::now();
-        let switch_ms = match stage {
-            Stage::Scattering => None,
-            Stage::Reflection => {
-                if !tr.at_reflection_start() {
-                    break;
-                }
-                let d = tr.begin_reflection(|_, _, _| Ok(()))?;
-                if !d.run {
-                    out.skipped.extend(["II".to_string(), "III".to_string()]);
-                    break;
-                }
-                Some(t.elapsed().as_secs_f64() * 1e3)
+        let switch_ms = if stage == Stage::SCATTERING {
+            None
+        } else {
+            if tr.next_begins().map(|k| k.stage()) != Some(stage) {
+                break;
             }
-            Stage::LightField => {
-                if !tr.at_light_field_start() {
-                    break;
-                }
-                tr.begin_light_field()?;
-                Some(t.elapsed().as_secs_f64() * 1e3)
+            if !tr.begin_next(None, true)?.runs {
+                out.skipped.extend(all[i..].iter().map(|s| s.name().to_string()));
+                break;
             }
+            Some(t.elapsed().as_secs_f64() * 1e3)
         };
-        let untimed = if stage == Stage::LightField { spec.train_light_field } else { spec.train };
+        let untimed = if stage == light_field::stage::STAGE { spec.train_light_field } else { spec.train };
         for _ in 0..untimed + spec.warmup {
             tr.step(false)?;
         }
@@ -169,10 +162,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         }
         let kernels = average(all);
         let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
-        let reflection_gaussians = match stage {
-            Stage::Scattering => None,
-            _ => tr.later.as_ref().map(|m| m.set().len()),
-        };
+        let reflection_gaussians = if stage == Stage::SCATTERING { None } else { tr.later.as_ref().map(|m| m.set().len()) };
         let mem = ctx.memory_use();
         out.stages.push(StageTimes {
             stage: stage.name().into(),

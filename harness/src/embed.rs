@@ -26,7 +26,7 @@ use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::{Buffer, BufferBinding, Context, Recorder};
 use tgs_pipelines::{
-    Camera, EnvMap, Features, Frame, Fresnel, Gaussians, LightFieldShading, Mlp, MlpScratch, MlpShape, Plane, Rasterizer, ReflectionShading, SampleScratch, ShadeParams,
+    Camera, EnvMap, Features, Frame, Fresnel, Gaussians, LightFieldShading, Mlp, MlpScratch, MlpShape, Plane, Rasterizer, ReflectionShading, SampleScratch, ShadeParams, Splats,
 };
 
 /// The reflection layer of a run past Stage I.
@@ -158,15 +158,15 @@ impl SceneRenderer {
         let colour = match (&self.layer, v.refl.as_ref(), v.composite.as_ref()) {
             (None, _, _) => &v.scat.out,
             (Some(Layer::Env { set, env, fresnel, shading, raster, feat }), Some(frame), Some(comp)) => {
-                shading.record_color(rec, set, env, cam, *fresnel, feat)?;
-                raster.record_forward_with(rec, set, feat, cam, &vec![0.0; fresnel.channels() as usize], 0, frame)?;
+                shading.record_color(rec, &tgs_pipelines::ColorInputs { g: set, env, cam, fresnel: *fresnel }, feat)?;
+                raster.record_forward_with(rec, Splats::coloured(set, feat), cam, &vec![0.0; fresnel.channels() as usize], frame)?;
                 shading.record_composite(rec, cam, *fresnel, &tgs_pipelines::reflection::CompositeInputs { scat: &v.scat.out, refl: &frame.out }, comp)?;
                 comp
             }
             (Some(Layer::Light { set, params, shade, shading, mlp, raster, feat, .. }), Some(frame), Some(comp)) => {
                 let (samples, scratch) = v.samples.as_ref().context("light-field sample buffers")?;
                 shading.record_material(rec, &set.features, set.n, feat)?;
-                raster.record_forward_with(rec, set, feat, cam, &[0.0; tgs_pipelines::lightfield::CHANNELS as usize], 0, frame)?;
+                raster.record_forward_with(rec, Splats::coloured(set, feat), cam, &[0.0; tgs_pipelines::lightfield::CHANNELS as usize], frame)?;
                 shading.record_samples(rec, cam, shade, &frame.out, samples, &scratch.samples)?;
                 mlp.record_forward_counted(rec, params, &samples.count, scratch)?;
                 shading.record_composite(rec, cam, shade, &tgs_pipelines::lightfield::CompositeInputs { scat: &v.scat.out, refl: &frame.out, samples, phi: &scratch.out }, comp)?;

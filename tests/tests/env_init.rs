@@ -4,7 +4,7 @@
 //! inside the box that the map must leave out, and the distance to each
 //! wall the map's depth records.
 
-use tgs::train::stages::reflection::env_init::{outside_box, scene_env_map};
+use tgs::train::stages::reflection::env_init::{outside_box, scene_env_map, SceneLight};
 use tgs::train::stages::scattering::init::SH_C0;
 use tgs::train::stages::reflection::seed::quat_for_normal;
 use tgs_pipelines::{HostEnvMap, HostGaussians};
@@ -86,7 +86,7 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
     }
     assert_eq!(outside_box(&scat, centre, [0.55; 3]).len(), walls, "the box keeps the walls and drops the Gaussian inside");
     let res = 8;
-    let (env, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15, false).unwrap();
+    let (env, info) = scene_env_map(ctx, SceneLight { set: &scat, sh_degree: 0, background: &[0.0; 3] }, &refl, res, 1e-15, false).unwrap();
     assert_eq!(info.rendered, walls, "Gaussians rendered");
     for a in 0..3 {
         assert!((info.centre[a] - centre[a]).abs() < 1e-5, "box centre {:?}", info.centre);
@@ -114,12 +114,12 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
         }
     }
     assert_eq!(checked, 6 * 24, "texels checked");
-    let (again, _) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15, false).unwrap();
+    let (again, _) = scene_env_map(ctx, SceneLight { set: &scat, sh_degree: 0, background: &[0.0; 3] }, &refl, res, 1e-15, false).unwrap();
     assert!(env.raw.iter().zip(&again.raw).all(|(a, b)| a.to_bits() == b.to_bits()), "a second map differs");
     // With depth: each texel's distance from the centre to its wall
     // (4 / the axis component of the unit direction), the same colours,
     // and the lookup's proxy at the centre.
-    let (deep, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &refl, res, 1e-15, true).unwrap();
+    let (deep, info) = scene_env_map(ctx, SceneLight { set: &scat, sh_degree: 0, background: &[0.0; 3] }, &refl, res, 1e-15, true).unwrap();
     assert!(deep.raw.iter().zip(&env.raw).all(|(a, b)| a.to_bits() == b.to_bits()), "depth changed the colours");
     let proxy = deep.proxy.expect("a depth map's proxy");
     assert!((0..3).all(|a| (proxy.centre[a] - centre[a]).abs() < 1e-5), "proxy {proxy:?}");
@@ -149,7 +149,7 @@ fn the_map_sees_the_walls_around_the_box_and_not_what_is_in_it() {
     // A reflection set around the whole room leaves nothing to render: the
     // grey map, not an error.
     let big: Vec<f32> = [-10.0f32, 10.0].iter().flat_map(|o| centre.map(|c| c + o)).collect();
-    let (grey, info) = scene_env_map(ctx, &scat, 0, &[0.0; 3], &big, res, 1e-15, false).unwrap();
+    let (grey, info) = scene_env_map(ctx, SceneLight { set: &scat, sh_degree: 0, background: &[0.0; 3] }, &big, res, 1e-15, false).unwrap();
     assert_eq!(info.rendered, 0);
     assert!(grey.raw.iter().all(|&v| v == 0.0), "the grey map");
     check_validation(ctx);

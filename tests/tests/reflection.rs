@@ -11,7 +11,7 @@
 //! and these cases share the reference's helpers.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{CompositePriors, EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
+use tgs_pipelines::{ColorInputs, CompositePriors, EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
 use tgs_tests::reflection_ref::{self as rr, CompositePixel, ReflGaussian, V3};
 use tgs_tests::{check_validation, ctx_shared, seed, Rng};
 
@@ -150,7 +150,7 @@ fn gpu_color_light(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresne
     let e = upload_env_light(ctx, res, env, proxy, depth);
     let feat = Buffer::<f32>::new(ctx, "test.feat", fresnel.channels() as usize * gs.len()).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    shading.record_color(&mut rec, &g, &e, &camera(), fresnel, &feat).unwrap();
+    shading.record_color(&mut rec, &ColorInputs { g: &g, env: &e, cam: &camera(), fresnel }, &feat).unwrap();
     rec.submit_and_wait().unwrap();
     feat.download().unwrap()
 }
@@ -256,7 +256,7 @@ fn gpu_backward_light(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fre
     let d = Buffer::from_slice(ctx, "test.dfeat", &df).unwrap();
     let s = shading.texel_scratch(&e, gs.len() as u32).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
-    shading.record_color_backward(&mut rec, &g, &e, &camera(), fresnel, &d, &grads, &s).unwrap();
+    shading.record_color_backward(&mut rec, &ColorInputs { g: &g, env: &e, cam: &camera(), fresnel }, &d, &grads, &s).unwrap();
     rec.submit_and_wait().unwrap();
     let h = grads.download().unwrap();
     Backward { material: h.features, means: h.means, quats: h.quats, env: e.grads.download().unwrap() }

@@ -131,8 +131,8 @@ fn array_offsets(bytes: &[u8]) -> Vec<(String, usize, usize)> {
     let h: checkpoint::Header = serde_json::from_slice(&bytes[12..12 + hlen]).unwrap();
     let mut at = 12 + hlen + 4;
     let mut out = Vec::new();
-    let refl = h.reflection.iter().flat_map(|r| r.arrays.iter()).chain(h.light_field.iter().flat_map(|l| l.arrays.iter()));
-    for (name, len) in h.arrays.iter().chain(refl) {
+    let later = h.later_arrays().unwrap();
+    for (name, len) in h.arrays.iter().chain(&later) {
         out.push((name.clone(), at, 4 * len));
         at += 4 * len + 4;
     }

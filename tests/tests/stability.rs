@@ -53,7 +53,7 @@ fn long_run_of_every_stage_stays_finite_and_bounded() {
     }
     // Every array of the final state (parameters and Adam moments) finite and bounded.
     let (h, arrays) = checkpoint::read(&out.join("checkpoint.bin")).unwrap();
-    let names: Vec<String> = h.arrays.iter().chain(h.light_field.as_ref().unwrap().arrays.iter()).map(|a| a.0.clone()).collect();
+    let names: Vec<String> = h.arrays.iter().chain(h.later_arrays().unwrap().iter()).map(|a| a.0.clone()).collect();
     assert_eq!(names.len(), arrays.len());
     for (name, v) in names.iter().zip(&arrays) {
         assert!(v.iter().all(|x| x.is_finite()), "{name}: NaN/Inf");
@@ -100,7 +100,7 @@ fn light_field_with_no_reflecting_pixel() {
         assert!(l["loss"].as_f64().unwrap().is_finite());
     }
     let (h, arrays) = checkpoint::read(&out.join("checkpoint.bin")).unwrap();
-    let lf = h.light_field.as_ref().unwrap();
+    let lf: checkpoint::LightFieldHeader = h.state_of(tgs::train::Stage("III")).unwrap().expect("a Stage III state");
     let k = h.arrays.len() + lf.arrays.iter().position(|a| a.0 == "mlp.param").unwrap();
     let [depth, width, skip, levels_x, levels_w] = lf.shape;
     let shape = tgs_pipelines::MlpShape { depth, width, skip, levels_x, levels_w };

@@ -137,8 +137,8 @@ fn targets(ctx: &Arc<Context>, truth: &HostGaussians, geometry: &HostGaussians, 
         let img = Buffer::<f32>::new(ctx, "test.target", (Plane::count(3) * cam.width * cam.height) as usize).unwrap();
         loop {
             let mut rec = Recorder::new(ctx).unwrap();
-            shading.record_color(&mut rec, &truth, &env, cam, fresnel, &feat).unwrap();
-            raster.record_forward_with(&mut rec, &geometry, &feat, cam, &background, 0, &frame).unwrap();
+            shading.record_color(&mut rec, &tgs_pipelines::ColorInputs { g: &truth, env: &env, cam, fresnel }, &feat).unwrap();
+            raster.record_forward_with(&mut rec, tgs_pipelines::Splats::coloured(&geometry, &feat), cam, &background, &frame).unwrap();
             shading.record_composite(&mut rec, cam, fresnel, &tgs_pipelines::reflection::CompositeInputs { scat, refl: &frame.out }, &img).unwrap();
             rec.submit_and_wait().unwrap();
             if raster.fit(&mut frame).unwrap() {

@@ -221,7 +221,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert!(rendered > 0 && rendered < me["gaussians"].as_u64().unwrap(), "env_from {env_from}");
     assert_eq!(me["reflection"]["seeds"], d["seeds"], "the same seeding");
     let (he, env_arrays) = checkpoint::read(&scene_env.join("checkpoint.bin")).unwrap();
-    let k = he.arrays.len() + he.reflection.as_ref().unwrap().arrays.iter().position(|(n, _)| n == "env.param").unwrap();
+    let k = he.arrays.len() + he.later_arrays().unwrap().iter().position(|(n, _)| n == "env.param").unwrap();
     let (lo, hi) = env_arrays[k].iter().fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     assert!(hi - lo > 1.0 && lo.is_finite() && hi.is_finite(), "raw texels span [{lo}, {hi}]: not the scene");
     assert!(d.get("env_from").is_none(), "the grey default records no box: {d}");
@@ -239,8 +239,8 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
         let set = vec![format!("reflection.iterations={its}"), "test_interval=0".into(), "reflection.lr_env=0".into(), "reflection.lr_quats=0.01".into(), format!("reflection.rotation_grad={rotation}")];
         assert_eq!(train(ctx, &TrainArgs { out: dir.to_path_buf(), set, ..af.clone() }).unwrap().iteration, 300 + its);
         let (h, a) = checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
-        let k = h.arrays.len() + h.reflection.as_ref().unwrap().arrays.iter().position(|(n, _)| n == "refl.param.quats").unwrap();
-        let means = h.arrays.len() + h.reflection.as_ref().unwrap().arrays.iter().position(|(n, _)| n == "refl.param.means").unwrap();
+        let k = h.arrays.len() + h.later_arrays().unwrap().iter().position(|(n, _)| n == "refl.param.quats").unwrap();
+        let means = h.arrays.len() + h.later_arrays().unwrap().iter().position(|(n, _)| n == "refl.param.means").unwrap();
         let _ = std::fs::remove_dir_all(&dir);
         (bits(&a[k]), bits(&a[means]))
     };
@@ -285,7 +285,8 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert!(share > 0.1 && share <= 1.0 && di["nearest"].as_f64().unwrap() > 0.0 && di["farthest"].as_f64() >= di["nearest"].as_f64(), "depth {di}");
     assert!(md["reflection"]["env_proxy"].as_array().is_some_and(|p| p.len() == 4), "the depth map's proxy: {}", md["reflection"]);
     let (hd, _) = checkpoint::read(&deep.join("checkpoint.bin")).unwrap();
-    let names: Vec<&str> = hd.reflection.as_ref().unwrap().arrays.iter().map(|(n, _)| n.as_str()).collect();
+    let later = hd.later_arrays().unwrap();
+    let names: Vec<&str> = later.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(names.last(), Some(&"env.depth"), "{names:?}");
     // The light's depth as images beside envmap.png; a map without depth writes none.
     assert!(["envmap_depth.exr", "envmap_depth.png"].iter().all(|f| deep.join(f).is_file()), "no envmap_depth images");

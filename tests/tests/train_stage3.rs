@@ -98,7 +98,10 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     let (ha, aa) = checkpoint::read(&full.join("checkpoint.bin")).unwrap();
     let (hb, ab) = checkpoint::read(&part.join("checkpoint.bin")).unwrap();
     assert_eq!((ha.iteration, ha.rng, &ha.stack), (hb.iteration, hb.rng, &hb.stack));
-    let names: Vec<&String> = ha.arrays.iter().chain(ha.light_field.as_ref().unwrap().arrays.iter()).map(|a| &a.0).collect();
+    let (kind, state) = ha.later_state().unwrap().expect("a Stage III state");
+    assert_eq!((kind.key(), kind.stage().name()), ("light_field", "III"));
+    let later = kind.arrays(state).unwrap();
+    let names: Vec<&String> = ha.arrays.iter().chain(later.iter()).map(|a| &a.0).collect();
     assert!(names.iter().any(|n| *n == "mlp.adam_v"));
     assert_eq!(aa.len(), ab.len());
     for (name, (x, y)) in names.iter().zip(aa.iter().zip(&ab)) {
@@ -151,7 +154,9 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     assert_eq!(train(ctx, &a_again2).unwrap().iteration, 400);
     let (_, a_re2) = checkpoint::read(&again2.join("checkpoint.bin")).unwrap();
     assert_eq!(a_re2.len(), a_two.len());
-    for (k, (name, _)) in h_two.arrays.iter().chain(h_two.reflection.as_ref().unwrap().arrays.iter()).enumerate() {
+    let (kind, state) = h_two.later_state().unwrap().expect("a Stage II state");
+    assert_eq!((kind.key(), kind.stage().name()), ("reflection", "II"));
+    for (k, (name, _)) in h_two.arrays.iter().chain(kind.arrays(state).unwrap().iter()).enumerate() {
         assert!(bits(&a_re2[k]) == bits(&a_two[k]), "{name}: Stage II from a finished three-stage run differs from the Stage I + II run");
     }
     let again3 = base.join("again3");

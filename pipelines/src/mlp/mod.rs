@@ -108,6 +108,14 @@ pub struct Mlp {
     reduce: Kernel,
 }
 
+/// The samples a backward covers: the first `n`, or (counted) the first
+/// `count[0]` of at most `n`, the count read on the device.
+#[derive(Clone, Copy)]
+struct Rows<'a> {
+    n: u32,
+    count: Option<&'a Buffer<u32>>,
+}
+
 impl Mlp {
     /// The MLP on the kernel this device runs best ([`Gemm::for_device`]).
     pub fn new(ctx: &Arc<Context>) -> Result<Mlp> {
@@ -277,7 +285,7 @@ impl Mlp {
     /// (every parameter, overwritten). The inputs get no gradient (the
     /// reflection geometry is frozen in Stage III).
     pub fn record_backward(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
-        self.record_backward_rows(rec, params, n, None, d_out, grads, s)
+        self.record_backward_rows(rec, params, Rows { n, count: None }, d_out, grads, s)
     }
 
     /// The backward of the last [`Mlp::record_forward_counted`], on the
@@ -286,11 +294,11 @@ impl Mlp {
     /// order as [`Mlp::record_backward`] with that count, so the gradients
     /// are bit-identical to it.
     pub fn record_backward_counted(&self, rec: &mut Recorder, params: &Buffer<f32>, count: &Buffer<u32>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
-        self.record_backward_rows(rec, params, s.capacity, Some(count), d_out, grads, s)
+        self.record_backward_rows(rec, params, Rows { n: s.capacity, count: Some(count) }, d_out, grads, s)
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn record_backward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+    fn record_backward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, r: Rows, d_out: &Buffer<f32>, grads: &Buffer<f32>, s: &MlpScratch) -> Result<()> {
+        let Rows { n, count: rows } = r;
         Self::check(s, params, n)?;
         let sh = s.shape;
         if grads.len() < sh.params() as usize {

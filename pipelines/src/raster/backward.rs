@@ -2,7 +2,7 @@
 //! gradient record per intersection; then a fixed-order per-Gaussian
 //! reduction of those records fused with the projection backward.
 
-use super::{Frame, Gaussians, Push, Rasterizer};
+use super::{Frame, Gaussians, Push, Rasterizer, Splats};
 use anyhow::{bail, Result};
 use tgs_engine::{groups_2d, Buffer, BufferBinding, Recorder};
 
@@ -14,15 +14,15 @@ impl Rasterizer {
         if grads.channels != g.channels || grads.coeffs != g.coeffs {
             bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
         }
-        self.record_backward_with(rec, g, &g.features, grads, &grads.features, sh_degree, frame)
+        self.record_backward_with(rec, Splats::own(g, sh_degree), grads, &grads.features, frame)
     }
 
     /// As [`Rasterizer::record_backward`] for a forward recorded with
     /// [`Rasterizer::record_forward_with`]: the feature gradients go to
     /// `d_features` (same layout as `features`), the geometry gradients to
     /// `grads` (whose own feature buffer is left alone).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_backward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, grads: &Gaussians, d_features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<()> {
+    pub fn record_backward_with(&self, rec: &mut Recorder, s: Splats, grads: &Gaussians, d_features: &Buffer<f32>, frame: &Frame) -> Result<()> {
+        let Splats { g, features, sh_degree } = s;
         if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {
             bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
         }

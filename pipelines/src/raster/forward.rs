@@ -3,7 +3,7 @@
 //! a whole training iteration, and the capacity check that grows a frame
 //! when a view did not fit.
 
-use super::{Camera, Frame, Gaussians, IntersectionBuffers, Push, RecordAccess, Rasterizer, GATE_PUSH_WORDS, GATE_SLOTS};
+use super::{Camera, Frame, Gaussians, IntersectionBuffers, Push, RecordAccess, Rasterizer, Splats, GATE_PUSH_WORDS, GATE_SLOTS};
 use anyhow::{bail, Result};
 use tgs_engine::{groups_2d, Buffer, BufferBinding, Recorder};
 
@@ -11,15 +11,15 @@ impl Rasterizer {
     /// Record the forward pass of one view: outputs land in `frame.out`.
     /// `sh_degree` is the active SH degree (ignored for plain features).
     pub fn record_forward(&self, rec: &mut Recorder, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
-        self.record_forward_with(rec, g, &g.features, cam, background, sh_degree, frame)
+        self.record_forward_with(rec, Splats::own(g, sh_degree), cam, background, frame)
     }
 
     /// As [`Rasterizer::record_forward`], with the per-Gaussian features
-    /// taken from `features` (this rasterizer's channels x coefficients per
-    /// Gaussian) instead of the set's own (features computed by another
-    /// kernel, e.g. the reflection colour).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_forward_with(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
+    /// taken from `s.features` (this rasterizer's channels x coefficients
+    /// per Gaussian), which may be another kernel's instead of the set's
+    /// own (e.g. the reflection colour).
+    pub fn record_forward_with(&self, rec: &mut Recorder, s: Splats, cam: &Camera, background: &[f32], frame: &Frame) -> Result<()> {
+        let Splats { g, features, sh_degree } = s;
         self.check_inputs(g, features, frame)?;
         cam.validate()?;
         if cam.width != frame.width || cam.height != frame.height {

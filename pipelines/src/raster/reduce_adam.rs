@@ -12,6 +12,14 @@ use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use tgs_engine::{BufferBinding, Kernel, KernelDesc, Recorder};
 
+/// Adam's first and second moments of a Gaussian set, each in the set's
+/// layout, for [`Rasterizer::record_backward_adam`].
+#[derive(Clone, Copy)]
+pub struct Moments<'a> {
+    pub m: &'a Gaussians,
+    pub v: &'a Gaussians,
+}
+
 /// Adam's rates and constants for [`Rasterizer::record_backward_adam`]
 /// (the push-constant tail of the `ADAM` variant, in its order).
 #[repr(C)]
@@ -62,14 +70,14 @@ impl Rasterizer {
     }
 
     /// Record the backward of the last forward on `frame` and an Adam step
-    /// of `g` with moments `m` and `v` (same layout as `g`), fused into the
+    /// of `g` with its `moments` (same layout as `g`), fused into the
     /// per-Gaussian reduce; `frame.densify` is written as by
     /// [`Rasterizer::record_backward`], no gradient buffer is. With `gate`
     /// (a slot from [`Rasterizer::record_fit_gate`] holding
     /// [`Rasterizer::reduce_grid`]) the reduce, and so the step, runs only
     /// when the view fitted its frame.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, m: &Gaussians, v: &Gaussians, adam: &ReduceAdam, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
+    pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, moments: Moments, adam: &ReduceAdam, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
+        let Moments { m, v } = moments;
         for (name, s) in [("first", m), ("second", v)] {
             if s.n != g.n || s.channels != g.channels || s.coeffs != g.coeffs {
                 bail!("Adam's {name} moments ({} Gaussians, {} x {} features) do not match the Gaussian set ({}, {} x {})", s.n, s.channels, s.coeffs, g.n, g.channels, g.coeffs);

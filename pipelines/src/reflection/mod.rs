@@ -148,6 +148,17 @@ pub struct ReflectionShading {
     residual: Kernel,
 }
 
+/// What the reflection colour of a view reads (the colour kernels' inputs
+/// and push constants): the reflection set, its light, the camera and the
+/// Fresnel term.
+#[derive(Clone, Copy)]
+pub struct ColorInputs<'a> {
+    pub g: &'a Gaussians,
+    pub env: &'a EnvMap,
+    pub cam: &'a Camera,
+    pub fresnel: Fresnel,
+}
+
 impl ReflectionShading {
     pub fn new(ctx: &Arc<Context>) -> Result<ReflectionShading> {
         let cp = std::mem::size_of::<ColorPush>() as u32;
@@ -211,9 +222,10 @@ impl ReflectionShading {
         Ok(())
     }
 
-    /// Record the reflection colour of every Gaussian of `g` seen from `cam`
-    /// into `features` (`fresnel.channels()` per Gaussian).
-    pub fn record_color(&self, rec: &mut Recorder, g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel, features: &Buffer<f32>) -> Result<()> {
+    /// Record the reflection colour of every Gaussian of `x.g` seen from
+    /// `x.cam` into `features` (`x.fresnel.channels()` per Gaussian).
+    pub fn record_color(&self, rec: &mut Recorder, x: &ColorInputs, features: &Buffer<f32>) -> Result<()> {
+        let ColorInputs { g, env, cam, fresnel } = *x;
         Self::check_set(g, features, fresnel)?;
         if g.n == 0 {
             return Ok(());
@@ -227,8 +239,8 @@ impl ReflectionShading {
     /// feature gradients) to `grads.features` (material, overwritten),
     /// `grads.means` and `grads.quats` (added to what the rasterizer's
     /// backward wrote) and `env.grads` (overwritten).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_color_backward(&self, rec: &mut Recorder, g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel, d_features: &Buffer<f32>, grads: &Gaussians, s: &TexelScratch) -> Result<()> {
+    pub fn record_color_backward(&self, rec: &mut Recorder, x: &ColorInputs, d_features: &Buffer<f32>, grads: &Gaussians, s: &TexelScratch) -> Result<()> {
+        let ColorInputs { g, env, cam, fresnel } = *x;
         Self::check_set(g, d_features, fresnel)?;
         if grads.n != g.n || grads.channels != MATERIAL {
             bail!("reflection gradients ({} Gaussians) do not match the set ({})", grads.n, g.n);

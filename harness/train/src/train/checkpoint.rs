@@ -22,8 +22,11 @@ use tgs_engine::Context;
 use tgs_pipelines::{HostGaussians, TrainableSet};
 
 use super::arrays::{check_arrays, host_set, upload_set};
+use super::schedule::Stage;
+use super::stages::kind::{by_key, by_stage, LaterKind};
 pub use super::stages::light_field::checkpoint::LightFieldHeader;
 pub use super::stages::reflection::checkpoint::ReflHeader;
+use std::collections::BTreeMap;
 
 const MAGIC: &[u8; 8] = b"TGSCKPT2";
 const MAGIC_V1: &[u8; 8] = b"TGSCKPT1";
@@ -66,23 +69,71 @@ pub struct Header {
     /// before they were recorded).
     #[serde(default)]
     pub identity: Option<Identity>,
-    /// Stage II's state, when the run is in Stage II: its arrays follow the
-    /// scattering set's (reflection set in `TrainableSet::layout` order with
-    /// the prefix `refl.`, then the cube map's).
-    #[serde(default)]
-    pub reflection: Option<ReflHeader>,
-    /// Stage III's state, when the run is in Stage III: its arrays follow
-    /// the scattering set's (reflection set with the prefix `refl.`, then
-    /// the MLP's parameters and Adam moments).
-    #[serde(default)]
-    pub light_field: Option<LightFieldHeader>,
+    /// The running later stage's state, under its key (`"reflection"`
+    /// for Stage II, `"light_field"` for Stage III; `stages::LATER`): its
+    /// arrays follow the scattering set's (the reflection set in
+    /// `TrainableSet::layout` order with the prefix `refl.`, then the
+    /// stage's own: the cube map's, the network's). Files from before
+    /// this map wrote `null` under the keys of the stages not running.
+    #[serde(flatten)]
+    pub later: BTreeMap<String, serde_json::Value>,
+}
+
+impl Header {
+    /// The later stage whose state the header holds (None in Stage I),
+    /// with its JSON part.
+    pub fn later_state(&self) -> Result<Option<(&'static dyn LaterKind, &serde_json::Value)>> {
+        let mut found = None;
+        for (key, v) in self.later.iter().filter(|(_, v)| !v.is_null()) {
+            let kind = by_key(key).with_context(|| format!("the header names '{key}', which is no stage of this version of tgs"))?;
+            if found.is_some() {
+                bail!("the header holds the states of two stages");
+            }
+            found = Some((kind, v));
+        }
+        Ok(found)
+    }
+
+    /// The later stage's arrays (names and lengths, in file order), none in
+    /// Stage I.
+    pub fn later_arrays(&self) -> Result<Vec<(String, usize)>> {
+        match self.later_state()? {
+            Some((kind, v)) => kind.arrays(v),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    /// The state of `stage` as its own header type (e.g. [`ReflHeader`]
+    /// for Stage II), None when the header holds another stage's or none.
+    pub fn state_of<T: serde::de::DeserializeOwned>(&self, stage: Stage) -> Result<Option<T>> {
+        match self.later_state()? {
+            Some((kind, v)) if kind.stage() == stage => Ok(Some(T::deserialize(v).with_context(|| format!("the checkpoint's {} header", kind.key()))?)),
+            _ => Ok(None),
+        }
+    }
+
+    /// Whether the header holds the state of `stage`.
+    pub fn holds(&self, stage: Stage) -> bool {
+        self.later_state().ok().flatten().is_some_and(|(k, _)| k.stage() == stage)
+    }
+
+    /// Drop the later stage's state and its arrays (the last in
+    /// `arrays`), leaving the scattering set's.
+    pub fn drop_later(&mut self, arrays: &mut Vec<Vec<f32>>) -> Result<()> {
+        if let Some((kind, v)) = self.later_state()? {
+            let n = kind.arrays(v)?.len();
+            arrays.truncate(arrays.len().saturating_sub(n));
+        }
+        self.later.clear();
+        Ok(())
+    }
 }
 
 pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Result<()> {
     let set = &tr.scattering.set;
     let n = set.len() as usize;
     let arrays = set.arrays();
-    let header = Header {
+    let mut header = Header {
         iteration: tr.iteration,
         config: tr.cfg.clone(),
         dataset: dataset.to_string(),
@@ -94,17 +145,13 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         extent: tr.views.extent,
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
         identity: Some(identity.clone()),
-        reflection: None,
-        light_field: None,
+        later: BTreeMap::new(),
     };
-    let mut header = header;
-    // (buffer, values) of the Stage II or III arrays.
-    let mut refl_arrays = Vec::new();
-    if let (Some(m), Some(d)) = (tr.reflection(), &tr.decision) {
-        header.reflection = Some(ReflHeader::save(m, d, &mut refl_arrays));
-    }
-    if let (Some(m), Some(d)) = (tr.light_field(), &tr.decision) {
-        header.light_field = Some(LightFieldHeader::save(m, d, &mut refl_arrays));
+    // (buffer, values) of the later stage's arrays.
+    let mut later_arrays = Vec::new();
+    if let (Some(m), Some(d)) = (&tr.later, &tr.decision) {
+        let kind = by_stage(m.stage()).context("the running stage is not in stages::LATER")?;
+        header.later.insert(kind.key().to_string(), m.save_state(d, &mut later_arrays)?);
     }
     let json = serde_json::to_vec(&header)?;
     crate::export::atomic_write_with(path, |f| {
@@ -112,7 +159,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         f.write_all(&(json.len() as u32).to_le_bytes())?;
         f.write_all(&json)?;
         f.write_all(&crc32fast::hash(&json).to_le_bytes())?;
-        let bufs = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).chain(refl_arrays.iter().map(|(b, l)| (*b, *l)));
+        let bufs = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).chain(later_arrays.iter().map(|(b, l)| (*b, *l)));
         for (buf, len) in bufs {
             let data = buf.download_range(0, len)?;
             let bytes: &[u8] = bytemuck::cast_slice(&data);
@@ -145,8 +192,11 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
     }
     let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut arrays = Vec::new();
-    let refl = header.reflection.iter().flat_map(|r| r.arrays.iter()).chain(header.light_field.iter().flat_map(|l| l.arrays.iter()));
-    for (name, len) in header.arrays.iter().chain(refl) {
+    let later = match header.later_state().map_err(|e| bad(&format!("{e:#}")))? {
+        Some((kind, v)) => kind.arrays(v).map_err(|e| bad(&format!("{e:#}")))?,
+        None => Vec::new(),
+    };
+    for (name, len) in header.arrays.iter().chain(&later) {
         let b = len.checked_mul(4).and_then(|n| at.checked_add(n)).and_then(|end| bytes.get(at..end)).ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
         at += 4 * len;
         if sums {
@@ -217,18 +267,15 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     let g = gaussians(&h, &arrays).map_err(|e| bad(format!("{e:#}")))?;
     let mut tr = Trainer::with_gaussians(ctx, h.config.clone(), data, &g, Rng(h.rng))?;
     upload_set(&tr.scattering.set, &arrays)?;
-    match (&h.reflection, &h.light_field) {
-        (Some(r), None) => {
-            tr.later = Some(Box::new(r.restore(ctx, &tr.cfg, refl_arrays).map_err(|e| bad(format!("Stage II state: {e:#}")))?));
-            tr.decision = Some(r.decision.clone());
+    match h.later_state().map_err(|e| bad(format!("{e:#}")))? {
+        Some((kind, v)) => {
+            let name = kind.stage().name();
+            let (m, d) = kind.restore(v, ctx, &tr.cfg, refl_arrays).map_err(|e| bad(format!("Stage {name} state: {e:#}")))?;
+            tr.later = Some(m);
+            tr.decision = Some(d);
         }
-        (None, Some(l)) => {
-            tr.later = Some(Box::new(l.restore(ctx, &tr.cfg, refl_arrays).map_err(|e| bad(format!("Stage III state: {e:#}")))?));
-            tr.decision = Some(l.decision.clone());
-        }
-        (Some(_), Some(_)) => return Err(bad("both a Stage II and a Stage III state".into())),
-        (None, None) if !refl_arrays.is_empty() => return Err(bad(format!("{} arrays after the scattering set without a Stage II or III header", refl_arrays.len()))),
-        (None, None) => {}
+        None if !refl_arrays.is_empty() => return Err(bad(format!("{} arrays after the scattering set without a later stage's header", refl_arrays.len()))),
+        None => {}
     }
     tr.iteration = h.iteration;
     tr.stack = h.stack;
@@ -265,24 +312,13 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
     let want: Vec<(String, usize)> = layout.iter().map(|(name, w)| (name.clone(), w * h.n as usize)).collect();
     check_arrays(&want, &have, &arrays)?;
     let scattering = gaussians(h, &arrays)?;
-    let (stage, layer) = match (&h.reflection, &h.light_field) {
-        (None, None) if refl.is_empty() => ("I", RenderLayer::Scattering),
-        (Some(r), None) => {
-            let k = r.check(&refl).context("Stage II state")?;
-            let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
-            set.validate()?;
-            let env = r.env(&refl, k);
-            ("II", RenderLayer::Env { set, env, fresnel: h.config.reflection.fresnel.pipeline() })
+    let (stage, layer) = match h.later_state()? {
+        None if refl.is_empty() => (Stage::SCATTERING.name(), RenderLayer::Scattering),
+        None => bail!("{} arrays after the scattering set without a later stage's header", refl.len()),
+        Some((kind, v)) => {
+            let name = kind.stage().name();
+            (name, kind.render_layer(v, &h.config, refl).with_context(|| format!("Stage {name} state"))?)
         }
-        (None, Some(l)) => {
-            let shape = l.shape().context("Stage III state")?;
-            l.check(&shape, &refl).context("Stage III state")?;
-            let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &refl);
-            set.validate()?;
-            let params = refl[refl.len() - 3].clone();
-            ("III", RenderLayer::LightField { set, shape, params, shade: l.shade() })
-        }
-        _ => bail!("the arrays after the scattering set match neither a Stage II nor a Stage III state"),
     };
     Ok(RenderState { stage, scattering, layer })
 }

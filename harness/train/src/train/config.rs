@@ -6,6 +6,7 @@ use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 pub use super::stages::light_field::config::LightFieldConfig;
+use super::schedule::Stage;
 use super::settings::LightPreset;
 pub use super::stages::reflection::config::ReflectionConfig;
 
@@ -218,31 +219,39 @@ impl TrainConfig {
         self.validate()
     }
 
-    /// The stages to run, parsed from `stages`.
+    /// The stages to run, parsed from `stages`: Stage I and the later
+    /// stages after it in order, each starting from the one before.
     pub fn stage_list(&self) -> Result<Vec<&'static str>> {
+        let all: Vec<&'static str> = Stage::all().iter().map(|s| s.name()).collect();
         let mut out = Vec::new();
         for s in self.stages.split(',').map(str::trim) {
-            match s {
-                "I" => out.push("I"),
-                "II" => out.push("II"),
-                "III" => out.push("III"),
-                _ => bail!("stages: unknown stage '{s}' (I, II, III; e.g. \"I,II,III\")"),
+            match all.iter().find(|&&a| a == s) {
+                Some(&a) => out.push(a),
+                None => bail!("stages: unknown stage '{s}' ({}; e.g. \"{}\")", all.join(", "), all.join(",")),
             }
         }
-        if out != ["I"] && out != ["I", "II"] && out != ["I", "II", "III"] {
-            bail!("stages must be \"I\", \"I,II\" or \"I,II,III\", not \"{}\" (each stage starts from the one before; use --from RUN to reuse a run's)", self.stages);
+        if out.is_empty() || out[..] != all[..out.len().min(all.len())] {
+            let prefixes: Vec<String> = (1..=all.len()).map(|k| format!("\"{}\"", all[..k].join(","))).collect();
+            let (last, rest) = prefixes.split_last().expect("Stage I is always a stage");
+            let list = if rest.is_empty() { last.clone() } else { format!("{} or {last}", rest.join(", ")) };
+            bail!("stages must be {list}, not \"{}\" (each stage starts from the one before; use --from RUN to reuse a run's)", self.stages);
         }
         Ok(out)
     }
 
+    /// Whether the stage named `name` ("II", ...) is scheduled.
+    pub fn wants(&self, name: &str) -> bool {
+        self.stage_list().map(|s| s.contains(&name)).unwrap_or(false)
+    }
+
     /// Whether Stage II is scheduled.
     pub fn wants_reflection(&self) -> bool {
-        self.stage_list().map(|s| s.contains(&"II")).unwrap_or(false)
+        self.wants("II")
     }
 
     /// Whether Stage III is scheduled.
     pub fn wants_light_field(&self) -> bool {
-        self.stage_list().map(|s| s.contains(&"III")).unwrap_or(false)
+        self.wants("III")
     }
 
     /// Whether the opacity reset follows iteration `it` (2DGS: every

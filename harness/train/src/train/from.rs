@@ -7,6 +7,7 @@ use super::checkpoint;
 use super::config::TrainConfig;
 use super::args::{load_dataset, TrainArgs};
 use super::rundir::{CHECKPOINT, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
+use super::stages::{light_field, reflection};
 use super::trainer::Trainer;
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
@@ -72,7 +73,7 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
     let (mut h, mut arrays) = checkpoint::read(&ckpt)?;
     // Past Stage I, a stage that trained the scattering set changed it.
     let stage_two_trained = h.iteration > h.config.iterations && h.config.reflection.train_scattering;
-    let stage_three_trained = h.light_field.is_some() && h.config.light_field.train_scattering;
+    let stage_three_trained = h.holds(light_field::stage::STAGE) && h.config.light_field.train_scattering;
     if !keep_two && (stage_two_trained || stage_three_trained) {
         bail!(
             "--from {}: its Stage {} trained the scattering set, and the run has no {STAGE_ONE_CHECKPOINT} (Stage I's own state; runs from before it was written lack it): train Stage I again",
@@ -94,12 +95,12 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
     let cfg = apply_args(base, a).with_context(|| format!("--from {}", run.display()))?;
     if keep_two {
         let end = h.config.iterations + h.config.reflection.iterations;
-        if h.reflection.is_none() || h.iteration != end {
+        if !h.holds(reflection::stage::STAGE) || h.iteration != end {
             bail!(
                 "--from {} --stages III starts from that run's finished Stage II; it is at iteration {} (Stage II ends at {end}{}) and has no {STAGE_TWO_CHECKPOINT}",
                 run.display(),
                 h.iteration,
-                if h.reflection.is_none() { ", and it holds no Stage II state" } else { "" }
+                if !h.holds(reflection::stage::STAGE) { ", and it holds no Stage II state" } else { "" }
             );
         }
         let conflicts = changed_settings(&h.config, &cfg, stage_three_setting)?;
@@ -126,12 +127,7 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
     }
     let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("--from {}: loading its dataset {}", run.display(), h.dataset))?;
     if !keep_two {
-        if let Some(r) = h.reflection.take() {
-            arrays.truncate(arrays.len().saturating_sub(r.arrays.len()));
-        }
-        if let Some(l) = h.light_field.take() {
-            arrays.truncate(arrays.len().saturating_sub(l.arrays.len()));
-        }
+        h.drop_later(&mut arrays).with_context(|| format!("--from {}", ckpt.display()))?;
     }
     let dataset = h.dataset.clone();
     let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;

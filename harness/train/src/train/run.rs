@@ -6,7 +6,7 @@
 
 use super::args::resume_config;
 pub use super::args::{config_from_args, dataset_dir, load_dataset, TrainArgs, RESUMABLE_SETTINGS};
-pub use super::rundir::{CHECKPOINT, DEFAULT_SCENE, RUN_FILES, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
+pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::checkpoint;
 use super::from::start_from;
 pub use super::from::inherited_settings;
@@ -17,7 +17,8 @@ use crate::eval::{evaluate, Metrics};
 use crate::outdir::OutDir;
 use crate::export::atomic_write;
 use crate::export::ply::write_splats;
-use super::stages::reflection::outputs::write_residual;
+use super::schedule::Stage;
+use super::stages::RunFiles;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -85,8 +86,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     }
     if !a.resume {
         let mut dir = OutDir::open(&a.out, a.dataset.as_deref())?;
-        for f in RUN_FILES {
-            dir.file(f)?;
+        for f in run_files() {
+            dir.file(&f)?;
         }
     }
     let (mut tr, data, dataset_str, identity) = if a.resume {
@@ -178,28 +179,35 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         checkpoint::save(tr, &ckpt, &dataset_str, &identity)?;
         clocks.save(&a.out, tr.iteration)
     };
+    let view_names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
     // Set when a skipped Stage II closed the last stage for good.
     let mut last_closed = false;
     while !tr.done() {
         // Between stages: close the last one, start the next, say so.
         let (entry, label) = tr.next_entry();
         let first_round = tr.schedule.round(entry) == 1;
-        let begun = if tr.at_reflection_start() {
-            // Not on a resume inside Stage II (the cache is rebuilt then),
-            // nor as Stage II begins again (reflection.reseed).
-            if tr.reflection().is_none() && first_round {
-                checkpoint::save(&tr, &a.out.join(STAGE_ONE_CHECKPOINT), &dataset_str, &identity)?;
-            }
+        let begun = if let Some(kind) = tr.next_begins() {
+            // A resume inside the stage begins it again (to rebuild what
+            // is not checkpointed) without closing the stage before.
+            let resumed = tr.later.as_ref().map(|m| m.stage()) == Some(kind.stage());
             let prev = tr.schedule.label(entry.saturating_sub(1));
-            let msg = begin_reflection(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
-            Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin", "reflection": tr.decision})))
-        } else if tr.at_light_field_start() {
-            if first_round {
-                checkpoint::save(&tr, &a.out.join(STAGE_TWO_CHECKPOINT), &dataset_str, &identity)?;
+            if !resumed {
+                // The state at the end of the stage before
+                // (checkpoint-stage1.bin, ...), for --from; not as a
+                // stage begins again (reflection.reseed).
+                if first_round {
+                    checkpoint::save(&tr, &a.out.join(stage_checkpoint(entry)), &dataset_str, &identity)?;
+                }
+                close_stage(&mut tr, &data, &a.out, &mut stages, &clocks, &prev)?;
+                if !a.quiet {
+                    eprintln!("Stage {prev} done");
+                }
             }
-            let prev = tr.schedule.label(entry.saturating_sub(1));
-            let msg = begin_light_field(&mut tr, &data, &a.out, &mut stages, &clocks, a.quiet, &prev)?;
-            Some((msg, json!({"iteration": tr.iteration, "stage": label, "event": "begin"})))
+            let files = RunFiles { dir: &a.out, dataset: &data.root, view_names: &view_names };
+            let b = tr.begin_next(Some(files), a.quiet)?;
+            let mut event = json!({"iteration": tr.iteration, "stage": label, "event": "begin"});
+            event.as_object_mut().expect("an object").extend(b.event);
+            Some((b.message, event))
         } else {
             None
         };
@@ -317,20 +325,16 @@ fn read_stage_records(out: &Path, resume: bool) -> Vec<serde_json::Value> {
 /// stage3, and stage2.2 / stage3.2 for a second round.
 fn renders_dir(label: &str) -> String {
     let (name, round) = label.split_once('.').map(|(n, r)| (n, format!(".{r}"))).unwrap_or((label, String::new()));
-    let n = match name {
-        "I" => "1",
-        "II" => "2",
-        _ => "3",
-    };
+    let n = Stage::all().iter().position(|s| s.name() == name).map(|i| i + 1).unwrap_or(0);
     format!("stage{n}{round}")
 }
 
-/// Close `stage`: its test metrics (renders in OUT/renders/RENDERS) into
+/// Close `stage`: its test metrics (renders in OUT/renders/stageN) into
 /// its record in `stages`. A stage taken
 /// from another run (--from) keeps that run's record (its wall time, where
 /// it came from); the test metrics are re-measured.
-fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str, renders: &str) -> Result<()> {
-    let dir = out.join("renders").join(renders);
+fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str) -> Result<()> {
+    let dir = out.join("renders").join(renders_dir(stage));
     let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&mut OutDir::open(&dir, Some(&data.root))?))?) };
     let from = stages.iter().find(|s| s["stage"] == stage && s.get("from").is_some()).cloned();
     stages.retain(|s| s["stage"] != stage);
@@ -341,44 +345,6 @@ fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<se
     }
     stages.push(rec);
     Ok(())
-}
-
-/// Close Stage I (its test metrics), measure the residual (maps written to
-/// OUT/residual/), and start Stage II or skip it. Returns the message.
-fn begin_reflection(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
-    let resumed = tr.reflection().is_some();
-    let reseed = prev != "I";
-    if !resumed {
-        close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
-        if !quiet {
-            eprintln!("Stage {prev} done: measuring the residual of {} training views", data.train.len());
-        }
-    }
-    // The second round's residual (reflection.reseed) beside the first's.
-    let dir = out.join(if reseed { "residual/round2" } else { "residual" });
-    let mut maps = OutDir::open(&dir, Some(&data.root))?;
-    let names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
-    let d = tr.begin_reflection(|i, cam, r| {
-        if resumed {
-            return Ok(());
-        }
-        write_residual(&mut maps, &names[i], cam, r)
-    })?;
-    Ok(d.message(reseed, tr.cfg.reflection.iterations))
-}
-
-/// Between Stage II and III: Stage II's record (test metrics, renders in
-/// renders/stage2), then the light-field model.
-fn begin_light_field(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, quiet: bool, prev: &str) -> Result<String> {
-    if tr.reflection().is_some() {
-        close_stage(tr, data, out, stages, clock, prev, &renders_dir(prev))?;
-        if !quiet {
-            eprintln!("Stage {prev} done");
-        }
-    }
-    tr.begin_light_field()?;
-    let m = tr.light_field().context("Stage III model")?;
-    Ok(m.start_message(&tr.next_entry().1, &tr.cfg.light_field))
 }
 
 /// Drop the log lines of iterations after `iteration` (those a killed run

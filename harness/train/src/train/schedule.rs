@@ -3,26 +3,38 @@
 //! (`reflection.reseed`).
 
 use super::config::TrainConfig;
+use super::stages::LATER;
 
-/// Training stages (paper §3–4).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Stage {
-    /// Stage I: the scattering set alone (2DGS).
-    #[default]
-    Scattering,
-    /// Stage II: reflection set + environment map over the frozen Stage I set.
-    Reflection,
-    /// Stage III: the reflection light field MLP (reflection geometry frozen).
-    LightField,
+/// A training stage (paper §3–4), by the name logs, metrics and
+/// `--stages` give it: Stage I ([`Stage::SCATTERING`]) and the later
+/// stages, each of which names itself in its folder's `stage.rs`
+/// (`stages::LATER` lists them in run order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Stage(pub &'static str);
+
+impl Default for Stage {
+    fn default() -> Stage {
+        Stage::SCATTERING
+    }
 }
 
 impl Stage {
+    /// Stage I: the scattering set alone (2DGS).
+    pub const SCATTERING: Stage = Stage("I");
+
     pub fn name(self) -> &'static str {
-        match self {
-            Stage::Scattering => "I",
-            Stage::Reflection => "II",
-            Stage::LightField => "III",
-        }
+        self.0
+    }
+
+    /// Every stage in run order: Stage I, then `stages::LATER`.
+    pub fn all() -> Vec<Stage> {
+        std::iter::once(Stage::SCATTERING).chain(LATER.iter().map(|k| k.stage())).collect()
+    }
+
+    /// 1 for Stage I, 2 for the first later stage, ...: the number in
+    /// the run directory's `checkpoint-stageN.bin` and `renders/stageN`.
+    pub fn number(self) -> usize {
+        Stage::all().iter().position(|&s| s == self).map(|i| i + 1).unwrap_or(0)
     }
 }
 
@@ -33,17 +45,16 @@ pub struct Schedule {
 }
 
 impl Schedule {
+    /// Stage I, then each later stage the settings name (`stages`), in
+    /// order; with `reflection.reseed` and every later stage named, the
+    /// later stages run once more (Stage II seeded again after Stage III).
     pub fn from_config(cfg: &TrainConfig) -> Schedule {
-        let mut stages = vec![(Stage::Scattering, cfg.iterations)];
-        if cfg.wants_reflection() {
-            stages.push((Stage::Reflection, cfg.reflection.iterations));
-        }
-        if cfg.wants_light_field() {
-            stages.push((Stage::LightField, cfg.light_field.iterations));
-            if cfg.reflection.reseed {
-                stages.push((Stage::Reflection, cfg.reflection.iterations));
-                stages.push((Stage::LightField, cfg.light_field.iterations));
-            }
+        let mut stages = vec![(Stage::SCATTERING, cfg.iterations)];
+        let named = cfg.stage_list().unwrap_or_default();
+        let later: Vec<(Stage, u32)> = LATER.iter().filter(|k| named.contains(&k.stage().name())).map(|k| (k.stage(), k.iterations(cfg))).collect();
+        stages.extend(&later);
+        if cfg.reflection.reseed && later.len() == LATER.len() && later.len() > 1 {
+            stages.extend(&later);
         }
         Schedule { stages }
     }
@@ -79,11 +90,9 @@ impl Schedule {
     pub fn start_of(&self, stage: Stage) -> u32 {
         self.stages.iter().take_while(|s| s.0 != stage).map(|s| s.1).sum()
     }
-    /// Drop the stages after `stage` (a skipped Stage II).
-    pub fn end_after(&mut self, stage: Stage) {
-        if let Some(i) = self.stages.iter().position(|s| s.0 == stage) {
-            self.stages.truncate(i + 1);
-        }
+    /// Drop entry `i` and those after it (a stage that decided not to run).
+    pub fn end_before(&mut self, i: usize) {
+        self.stages.truncate(i);
     }
     pub fn total(&self) -> u32 {
         self.stages.iter().map(|s| s.1).sum()

@@ -11,10 +11,11 @@
 use super::config::TrainConfig;
 use super::schedule::{Schedule, Stage};
 use super::stages::light_field::LightFieldModel;
+use super::stages::kind::by_stage;
 use super::stages::reflection::{reflection_decides, ReflDecision, ReflectionModel};
 use super::stages::scattering::init::{far_points, gaussians_from_points, random_points};
 use super::stages::scattering::ScatteringModel;
-use super::stages::{light_field, reflection, scattering, Iteration, LaterStage, ScatCache, Shared, Views};
+use super::stages::{scattering, Begun, Iteration, LaterKind, LaterStage, RunFiles, ScatCache, Shared, Transition, Views};
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
 use std::sync::Arc;
@@ -152,71 +153,46 @@ impl Trainer {
         self.schedule.at(self.iteration + 1).map(|(s, _)| s)
     }
 
-    fn shared(&mut self) -> Shared<'_> {
-        Shared { cfg: &self.cfg, views: &self.views, scattering: &mut self.scattering, cache: &mut self.cache }
+    /// The later stage the next iteration belongs to, when it has to be
+    /// begun first ([`Trainer::begin_next`]): the stage has not started,
+    /// or (Stage II) it resumes without its cached scattering colours.
+    pub fn next_begins(&self) -> Option<&'static dyn LaterKind> {
+        let kind = by_stage(self.next_stage()?)?;
+        kind.needs_begin(self.later.as_deref(), self.cache.is_empty()).then_some(kind)
     }
 
-    /// Whether the next iteration starts Stage II (call
-    /// [`Trainer::begin_reflection`] first).
-    pub fn at_reflection_start(&self) -> bool {
-        // A Stage II run again after Stage III starts while the light
-        // field is still there.
-        (self.cache.is_empty() || self.light_field().is_some()) && self.next_stage() == Some(Stage::Reflection)
-    }
-
-    /// Between Stage I and II ([`reflection::stage::begin`]): the residual,
-    /// the decision, the reflection set; a skipped Stage II ends the
-    /// schedule after Stage I. `on_view(i, camera, residual planes)` sees
-    /// every view's residual for saving.
-    pub fn begin_reflection(&mut self, on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<ReflDecision> {
-        // Stage II again (reflection.reseed): the light field and its
-        // reflection set give way to a set seeded afresh.
-        let reseed = self.light_field().is_some();
-        if reseed {
-            self.later = None;
-        }
-        let round = self.schedule.round(self.next_entry().0);
-        let existing = self.reflection().map(|m| m.set.len());
-        let kept = self.decision.clone();
-        let (d, model) = reflection::stage::begin(self.shared(), existing, kept.as_ref(), reseed, round, on_view)?;
-        if let Some(m) = model {
-            self.later = Some(Box::new(m));
-        }
-        if !d.run {
-            self.schedule.end_after(Stage::Scattering);
-        }
-        self.decision = Some(d.clone());
-        Ok(d)
-    }
-
-    /// Whether the next iteration starts Stage III (call
-    /// [`Trainer::begin_light_field`] first).
-    pub fn at_light_field_start(&self) -> bool {
-        self.light_field().is_none() && self.next_stage() == Some(Stage::LightField)
-    }
-
-    /// Between Stage II and III ([`light_field::stage::begin`]): Stage II's
-    /// reflection set moves to the light-field model.
-    pub fn begin_light_field(&mut self) -> Result<()> {
-        let prev = match self.later.take() {
-            Some(m) if m.stage() == Stage::Reflection => m,
-            _ => bail!("Stage III starts from Stage II's reflection set, and there is none"),
+    /// The transition into the stage [`Trainer::next_begins`] names (its
+    /// `stage.rs`; Stage II: the residual, the decision, the seeds;
+    /// Stage III: the light-field model from Stage II's set). A stage
+    /// that decides not to run (a skipped Stage II) ends the schedule
+    /// before it. `files`: where the transition may write what it
+    /// measured (Stage II's residual maps).
+    pub fn begin_next(&mut self, files: Option<RunFiles<'_>>, quiet: bool) -> Result<Begun> {
+        let kind = self.next_begins().context("the next iteration begins no stage")?;
+        let (entry, label) = self.next_entry();
+        let round = self.schedule.round(entry);
+        let t = Transition {
+            shared: Shared { cfg: &self.cfg, views: &self.views, scattering: &mut self.scattering, cache: &mut self.cache },
+            previous: self.later.take(),
+            decision: &mut self.decision,
+            round,
+            label,
+            files,
+            quiet,
         };
-        let m = light_field::stage::begin(&self.cfg, &self.views.ctx, prev.into_set())?;
-        self.later = Some(Box::new(m));
-        // Stage III renders the scattering colour itself, or caches it
-        // again when Stage II changed it.
-        if self.cfg.light_field.train_scattering || self.cfg.reflection.train_scattering {
-            self.cache.clear();
+        let mut b = kind.begin(t)?;
+        self.later = b.model.take();
+        if !b.runs {
+            self.schedule.end_before(entry);
         }
-        Ok(())
+        Ok(b)
     }
 
     /// One training iteration.
     pub fn step(&mut self, profile: bool) -> Result<StepReport> {
         let it = self.iteration + 1;
         let (stage, stage_it) = self.schedule.at(it).context("training is already complete")?;
-        if stage == Stage::Scattering {
+        if stage == Stage::SCATTERING {
             let view = self.next_view();
             let (out, reset) = scattering::stage::iterate(&mut self.scattering, &self.cfg, &self.views, it, view, profile)?;
             self.iteration = it;
@@ -233,7 +209,7 @@ impl Trainer {
             });
         }
         if self.later.as_ref().map(|m| m.stage()) != Some(stage) {
-            bail!("Stage {} has not begun (Trainer::{})", stage.name(), if stage == Stage::Reflection { "begin_reflection" } else { "begin_light_field" });
+            bail!("Stage {} has not begun (Trainer::begin_next)", stage.name());
         }
         let view = self.next_view();
         let x = Iteration { global: it, stage: stage_it, view, profile };

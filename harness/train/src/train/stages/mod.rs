@@ -6,10 +6,13 @@
 //! part of the checkpoint (`checkpoint.rs`), what it writes
 //! (`outputs.rs`) and `stage.rs`: the transition from the previous stage
 //! and one iteration as the trainer calls it. The later stages implement
-//! [`LaterStage`] (`shared.rs`), which the trainer drives them through;
-//! `composite.rs` is the deferred composite's loss they share; `views.rs`
+//! [`LaterStage`] (`shared.rs`), which the trainer drives them through,
+//! and are begun, scheduled and checkpointed through their [`LaterKind`]
+//! (`kind.rs`), listed in run order in [`LATER`]: a new stage is a folder
+//! and an entry in that list. `composite.rs` is the deferred composite's loss they share; `views.rs`
 //! and `rendered.rs` what every stage reads and returns.
 pub mod composite;
+pub mod kind;
 pub mod light_field;
 pub mod reflection;
 pub mod rendered;
@@ -17,5 +20,9 @@ pub mod scattering;
 pub mod shared;
 pub mod views;
 
+pub use kind::{Begun, LaterKind, RunFiles, Transition};
 pub use shared::{Iteration, LaterStage, ScatCache, Shared};
 pub use views::Views;
+
+/// The stages after Stage I, in run order.
+pub static LATER: [&dyn LaterKind; 2] = [&reflection::stage::Kind, &light_field::stage::Kind];

@@ -8,6 +8,7 @@
 //! (its `stage.rs`) and then stepped, rendered, written and handed on
 //! through this trait without the trainer knowing which it is.
 
+use super::reflection::ReflDecision;
 use super::rendered::ReflRendered;
 use super::scattering::{ScatteringModel, StepOutput};
 use super::views::Views;
@@ -94,6 +95,10 @@ pub trait LaterStage: Any {
     fn write_outputs(&self, out: &Path) -> Result<()>;
     /// The reflection set (with its Adam moments), for the next stage.
     fn into_set(self: Box<Self>) -> TrainableSet;
+    /// The stage's part of a checkpoint: its header (JSON, with the
+    /// decision `d` and an `arrays` list) and its arrays' buffers and
+    /// lengths appended to `bufs` in that list's order.
+    fn save_state<'a>(&'a self, d: &ReflDecision, bufs: &mut Vec<(&'a Buffer<f32>, usize)>) -> Result<serde_json::Value>;
     /// The fraction of pixels the stage's light was evaluated at since the
     /// last call, where the stage measures it.
     fn take_coverage(&mut self) -> Option<f64> {

@@ -19,7 +19,8 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
-use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, LossIo, LossScratch, LossWeights, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
+use crate::train::stages::scattering::ExternalStep;
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -170,7 +171,7 @@ impl LightFieldModel {
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
+            record_forward(&mut rec, (&self.shading, &self.raster), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
             timings.extend(rec.submit_and_wait()?);
             if self.raster.fit(&mut b.frame)? {
                 break;
@@ -247,7 +248,7 @@ impl LightFieldModel {
             match host_count {
                 Some(n) => self.mlp.record_forward(&mut rec, &self.net.params, n, scratch)?,
                 None => {
-                    record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.feat, cam, &self.shade, b, scratch)?;
+                    record_forward(&mut rec, (&self.shading, &self.raster), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
                     self.mlp.record_forward_counted(&mut rec, &self.net.params, &b.samples.count, scratch)?;
                 }
             }
@@ -274,12 +275,12 @@ impl LightFieldModel {
                 Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
                 None => self.mlp.record_backward_counted(&mut rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
             }
-            self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
+            self.raster.record_backward_with(&mut rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
             let sc = rec.begin_scope("lf.material_backward");
             self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
             rec.end_scope(sc);
             if train_scat {
-                scattering.record_backward_external(&mut rec, cfg, cam, x.sh_degree, x.lr_means, x.global_iteration, colour_only)?;
+                scattering.record_backward_external(&mut rec, cfg, cam, &ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only })?;
             }
             let (n, s) = (&self.net, &self.set);
             let np = n.shape.params() as usize;
@@ -372,14 +373,14 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
     -(nn[0] * ray[0] + nn[1] * ray[1] + nn[2] * ray[2]) / (nl * l)
 }
 
-/// Record the reflection set's material features, its rasterization into
-/// `b.frame` and the view's sample list (Phi's inputs, `b.samples.count`).
-#[allow(clippy::too_many_arguments)]
-fn record_forward(rec: &mut Recorder, shading: &LightFieldShading, raster: &Rasterizer, set: &TrainableSet, feat: &Buffer<f32>, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
+/// Record the reflection set's material features (into `s.features`), its
+/// rasterization into `b.frame` and the view's sample list (Phi's inputs,
+/// `b.samples.count`), with the model's shading and raster kernels.
+fn record_forward(rec: &mut Recorder, (shading, raster): (&LightFieldShading, &Rasterizer), s: Splats, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
     let sc = rec.begin_scope("lf.material");
-    shading.record_material(rec, &set.params.features, set.len(), feat)?;
+    shading.record_material(rec, &s.g.features, s.g.n, s.features)?;
     rec.end_scope(sc);
-    raster.record_forward_with(rec, &set.params, feat, cam, &[0.0; CHANNELS as usize], 0, &b.frame)?;
+    raster.record_forward_with(rec, s, cam, &[0.0; CHANNELS as usize], &b.frame)?;
     let sc = rec.begin_scope("lf.samples");
     shading.record_samples(rec, cam, shade, &b.frame.out, &b.samples, &scratch.samples)?;
     rec.end_scope(sc);

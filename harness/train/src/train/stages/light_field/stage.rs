@@ -2,19 +2,81 @@
 //! reflection set moves to a light-field model with a fresh network) and
 //! one iteration of the light field.
 
+use super::checkpoint::LightFieldHeader;
 use super::model::{LightFieldModel, LightFieldStepInput};
+use crate::train::arrays::host_set;
+use crate::train::checkpoint::RenderLayer;
 use crate::train::config::TrainConfig;
 use crate::train::schedule::Stage;
+use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
+use crate::train::stages::reflection::ReflDecision;
 use crate::train::stages::reflection::bounds::normalization_box;
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};
-use anyhow::{Context as _, Result};
+use anyhow::{bail, Context as _, Result};
 use std::any::Any;
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context};
 use tgs_pipelines::{Camera, TrainableSet};
+
+/// Stage III.
+pub const STAGE: Stage = Stage("III");
+
+/// Stage III as the schedule and the checkpoint know it.
+pub struct Kind;
+
+impl LaterKind for Kind {
+    fn stage(&self) -> Stage {
+        STAGE
+    }
+
+    fn key(&self) -> &'static str {
+        "light_field"
+    }
+
+    fn iterations(&self, cfg: &TrainConfig) -> u32 {
+        cfg.light_field.iterations
+    }
+
+    /// From Stage II's model ([`begin`]); the frozen scattering colours
+    /// are cached again when Stage II or III trains the scattering set.
+    fn begin(&self, t: Transition<'_>) -> Result<Begun> {
+        let Transition { shared, previous, label, .. } = t;
+        let prev = match previous {
+            Some(m) if m.stage() == crate::train::stages::reflection::stage::STAGE => m,
+            _ => bail!("Stage III starts from Stage II's reflection set, and there is none"),
+        };
+        let m = begin(shared.cfg, &shared.views.ctx, prev.into_set())?;
+        // Stage III renders the scattering colour itself, or caches it
+        // again when Stage II changed it.
+        if shared.cfg.light_field.train_scattering || shared.cfg.reflection.train_scattering {
+            shared.cache.clear();
+        }
+        let message = m.start_message(&label, &shared.cfg.light_field);
+        Ok(Begun { model: Some(Box::new(m)), runs: true, message, event: serde_json::Map::new() })
+    }
+
+    fn restore(&self, header: &serde_json::Value, ctx: &Arc<Context>, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<(Box<dyn LaterStage>, ReflDecision)> {
+        let h: LightFieldHeader = parse(self, header)?;
+        Ok((Box::new(h.restore(ctx, cfg, arrays)?), h.decision))
+    }
+
+    fn render_layer(&self, header: &serde_json::Value, _cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<RenderLayer> {
+        let h: LightFieldHeader = parse(self, header)?;
+        let shape = h.shape()?;
+        h.check(&shape, &arrays)?;
+        let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &arrays);
+        set.validate()?;
+        let params = arrays[arrays.len() - 3].clone();
+        Ok(RenderLayer::LightField { set, shape, params, shade: h.shade() })
+    }
+
+    fn files(&self) -> &'static [&'static str] {
+        &["reflection.ply", "light_field.safetensors"]
+    }
+}
 
 /// Between Stage II and III: the reflection set `set` (with its Adam
 /// moments) moves to a light-field model with a fresh network; Stage II's
@@ -30,7 +92,7 @@ pub fn begin(cfg: &TrainConfig, ctx: &Arc<Context>, set: TrainableSet) -> Result
 
 impl LaterStage for LightFieldModel {
     fn stage(&self) -> Stage {
-        Stage::LightField
+        STAGE
     }
 
     fn iterate(&mut self, s: Shared<'_>, x: &Iteration) -> Result<StepOutput> {
@@ -70,6 +132,10 @@ impl LaterStage for LightFieldModel {
 
     fn into_set(self: Box<Self>) -> TrainableSet {
         self.set
+    }
+
+    fn save_state<'a>(&'a self, d: &ReflDecision, bufs: &mut Vec<(&'a Buffer<f32>, usize)>) -> Result<serde_json::Value> {
+        Ok(serde_json::to_value(LightFieldHeader::save(self, d, bufs))?)
     }
 
     fn take_coverage(&mut self) -> Option<f64> {

@@ -117,13 +117,21 @@ fn sample_depth(plane: &[f32], w: u32, h: u32, u: f32, v: f32) -> Option<f32> {
     (wsum > 0.0).then(|| sum / wsum)
 }
 
+/// The scene a cube map shows: the scattering set `set` at active SH
+/// degree `sh_degree` over `background`.
+#[derive(Clone, Copy)]
+pub struct SceneLight<'a> {
+    pub set: &'a HostGaussians,
+    pub sh_degree: u32,
+    pub background: &'a [f32; 3],
+}
+
 /// The cube map of face size `res` seen from the reflection set's box
-/// (`refl_means`) with the scattering Gaussians `scat` outside it, at SH
-/// degree `sh` over `background`; with `depth`, also the distance from the
-/// box's centre to the surface each texel shows (`HostEnvMap::depth`,
-/// with the parallax proxy at that centre).
-#[allow(clippy::too_many_arguments)]
-pub fn scene_env_map(ctx: &Arc<Context>, scat: &HostGaussians, sh: u32, background: &[f32; 3], refl_means: &[f32], res: u32, adam_eps: f32, depth: bool) -> Result<(HostEnvMap, EnvInit)> {
+/// (`refl_means`) with the Gaussians of `scene` outside it; with `depth`,
+/// also the distance from the box's centre to the surface each texel
+/// shows (`HostEnvMap::depth`, with the parallax proxy at that centre).
+pub fn scene_env_map(ctx: &Arc<Context>, scene: SceneLight, refl_means: &[f32], res: u32, adam_eps: f32, depth: bool) -> Result<(HostEnvMap, EnvInit)> {
+    let SceneLight { set: scat, sh_degree: sh, background } = scene;
     let (centre, half) = normalization_box(refl_means);
     let outside = outside_box(scat, centre, half);
     let mut info = EnvInit { centre, half_extent: half, rendered: outside.len(), depth: None };

@@ -19,7 +19,9 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
-use tgs_pipelines::reflection::{CompositeGrads, CompositeInputs, TexelScratch, MATERIAL};
+use tgs_pipelines::reflection::{ColorInputs, CompositeGrads, CompositeInputs, TexelScratch, MATERIAL};
+use tgs_pipelines::Splats;
+use crate::train::stages::scattering::ExternalStep;
 use tgs_pipelines::{
     Adam, AdamArrays, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossIo, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
@@ -156,7 +158,7 @@ impl ReflectionModel {
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
+            record_forward(&mut rec, (&self.shading, &self.raster), &ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel }, &self.feat, &b.frame)?;
             let t = rec.submit_and_wait()?;
             if self.raster.fit(&mut b.frame)? {
                 return Ok(t);
@@ -212,7 +214,7 @@ impl ReflectionModel {
             let pixels = cam.width * cam.height;
             let n = pixels as usize;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
-            record_forward(&mut rec, &self.shading, &self.raster, &self.set, &self.env, cam, self.fresnel, &self.feat, &b.frame)?;
+            record_forward(&mut rec, (&self.shading, &self.raster), &ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel }, &self.feat, &b.frame)?;
             let sc = rec.begin_scope("refl.composite");
             self.shading.record_composite(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
             rec.end_scope(sc);
@@ -235,15 +237,16 @@ impl ReflectionModel {
                 rec.read_back(&b.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, &b.alpha_host)?;
             }
             if let Some((m, sh, it)) = scat_model {
-                m.record_backward_external(&mut rec, cfg, cam, sh, x.lr_means, it, true)?;
+                m.record_backward_external(&mut rec, cfg, cam, &ExternalStep { sh_degree: sh, lr_means: x.lr_means, iteration: it, colour_only: true })?;
             }
-            self.raster.record_backward_with(&mut rec, &self.set.params, &self.feat, &self.set.grads, &self.dfeat, 0, &b.frame)?;
+            self.raster.record_backward_with(&mut rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
             if rc.rotation_grad == RotationGrad::Reflection {
                 // The colour's backward adds the mirror direction's part to zeros.
                 rec.fill(&self.set.grads.quats.binding(), 0)?;
             }
             let sc = rec.begin_scope("refl.color_backward");
-            self.shading.record_color_backward(&mut rec, &self.set.params, &self.env, cam, self.fresnel, &self.dfeat, &self.set.grads, &self.texels)?;
+            let x = ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel };
+            self.shading.record_color_backward(&mut rec, &x, &self.dfeat, &self.set.grads, &self.texels)?;
             rec.end_scope(sc);
             let e = &self.env;
             let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
@@ -306,15 +309,15 @@ impl ReflectionModel {
     }
 }
 
-/// Record the reflection colour of every Gaussian of `set` seen from `cam`
-/// and the rasterization of [colour, r (, f0)] into `frame`.
-#[allow(clippy::too_many_arguments)]
-fn record_forward(rec: &mut Recorder, shading: &ReflectionShading, raster: &Rasterizer, set: &TrainableSet, env: &EnvMap, cam: &Camera, fresnel: Fresnel, feat: &Buffer<f32>, frame: &Frame) -> Result<()> {
+/// Record the reflection colour of every Gaussian of `x.g` seen from
+/// `x.cam` into `feat` and the rasterization of [colour, r (, f0)] into
+/// `frame`, with the model's colour and raster kernels.
+fn record_forward(rec: &mut Recorder, (shading, raster): (&ReflectionShading, &Rasterizer), x: &ColorInputs, feat: &Buffer<f32>, frame: &Frame) -> Result<()> {
     let sc = rec.begin_scope("refl.color");
-    shading.record_color(rec, &set.params, env, cam, fresnel, feat)?;
+    shading.record_color(rec, x, feat)?;
     rec.end_scope(sc);
-    let bg = vec![0.0; fresnel.channels() as usize];
-    raster.record_forward_with(rec, &set.params, feat, cam, &bg, 0, frame)
+    let bg = vec![0.0; x.fresnel.channels() as usize];
+    raster.record_forward_with(rec, Splats::coloured(x.g, feat), x.cam, &bg, frame)
 }
 
 /// The Stage I residual of one view: 4 planes (r (3), mean_c |r_c|).

@@ -3,21 +3,108 @@
 //! seeds and the light), and one iteration of the reflection set.
 
 use super::bounds::normalization_box;
-use super::env_init::scene_env_map;
+use super::env_init::{scene_env_map, SceneLight};
 use super::model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::seed::{hull_seeding, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
+use super::checkpoint::ReflHeader;
+use super::outputs::write_residual;
+use crate::outdir::OutDir;
+use crate::train::arrays::host_set;
+use crate::train::checkpoint::RenderLayer;
+use crate::train::config::TrainConfig;
 use crate::train::schedule::Stage;
+use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};
 use anyhow::{Context as _, Result};
 use std::any::Any;
 use std::path::Path;
-use tgs_engine::Buffer;
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context};
 use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, Plane, ReflectionShading, TrainableSet};
 
 pub use super::env_init::EnvInit;
+
+/// Stage II.
+pub const STAGE: Stage = Stage("II");
+
+/// Stage II as the schedule and the checkpoint know it.
+pub struct Kind;
+
+impl LaterKind for Kind {
+    fn stage(&self) -> Stage {
+        STAGE
+    }
+
+    fn key(&self) -> &'static str {
+        "reflection"
+    }
+
+    fn iterations(&self, cfg: &TrainConfig) -> u32 {
+        cfg.reflection.iterations
+    }
+
+    /// Also on a resume inside Stage II (its set exists, the frozen
+    /// scattering colours are not cached yet), and as Stage II begins
+    /// again after Stage III (`reflection.reseed`).
+    fn needs_begin(&self, running: Option<&dyn LaterStage>, cache_empty: bool) -> bool {
+        running.map(|m| m.stage()) != Some(STAGE) || cache_empty
+    }
+
+    /// The residual (maps into RUN/residual, or residual/round2), the
+    /// decision, the seeds and the light; on a resume inside the stage
+    /// only the cache, keeping the set and the decision it began with.
+    fn begin(&self, t: Transition<'_>) -> Result<Begun> {
+        let Transition { shared, previous, decision, round, files, quiet, .. } = t;
+        // Stage II again (reflection.reseed): the light field and its
+        // reflection set give way to a set seeded afresh.
+        let reseed = previous.as_ref().is_some_and(|m| m.stage() != STAGE);
+        let previous = previous.filter(|m| m.stage() == STAGE);
+        let existing = previous.as_ref().map(|m| m.set().len());
+        if existing.is_none() && !quiet {
+            eprintln!("Stage II: measuring the residual of {} training views", shared.views.cameras.len());
+        }
+        let mut maps = match &files {
+            Some(f) => Some(OutDir::open(&f.dir.join(if reseed { "residual/round2" } else { "residual" }), Some(f.dataset))?),
+            None => None,
+        };
+        let names = files.as_ref().map(|f| f.view_names).unwrap_or_default();
+        let iterations = shared.cfg.reflection.iterations;
+        let kept = decision.clone();
+        let (d, model) = begin(shared, existing, kept.as_ref(), reseed, round, |i, cam, r| match (&mut maps, names.get(i)) {
+            (Some(maps), Some(name)) if existing.is_none() => write_residual(maps, name, cam, r),
+            _ => Ok(()),
+        })?;
+        *decision = Some(d.clone());
+        let model: Option<Box<dyn LaterStage>> = match model {
+            Some(m) => Some(Box::new(m)),
+            None => previous,
+        };
+        let mut event = serde_json::Map::new();
+        event.insert("reflection".into(), serde_json::to_value(&d)?);
+        Ok(Begun { model, runs: d.run, message: d.message(reseed, iterations), event })
+    }
+
+    fn restore(&self, header: &serde_json::Value, ctx: &Arc<Context>, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<(Box<dyn LaterStage>, ReflDecision)> {
+        let h: ReflHeader = parse(self, header)?;
+        Ok((Box::new(h.restore(ctx, cfg, arrays)?), h.decision))
+    }
+
+    fn render_layer(&self, header: &serde_json::Value, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<RenderLayer> {
+        let h: ReflHeader = parse(self, header)?;
+        let k = h.check(&arrays)?;
+        let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &arrays);
+        set.validate()?;
+        let env = h.env(&arrays, k);
+        Ok(RenderLayer::Env { set, env, fresnel: cfg.reflection.fresnel.pipeline() })
+    }
+
+    fn files(&self) -> &'static [&'static str] {
+        &["reflection.ply", "envmap.exr", "envmap.png", "envmap_depth.exr", "envmap_depth.png"]
+    }
+}
 
 
 /// The view-dependence measure reduces each view to at most this many
@@ -172,7 +259,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
             let mut env = if matches!(rc.env_init, EnvStart::Scene | EnvStart::SceneDepth) {
                 let scat = s.scattering.set.params.download()?;
                 let depth = rc.env_init == EnvStart::SceneDepth;
-                let (env, info) = scene_env_map(&v.ctx, &scat, sh, &v.background, &means, rc.env_res, cfg.adam_eps, depth)?;
+                let (env, info) = scene_env_map(&v.ctx, SceneLight { set: &scat, sh_degree: sh, background: &v.background }, &means, rc.env_res, cfg.adam_eps, depth)?;
                 d.env_from = Some(info);
                 // The depth map's proxy: at the centre it was rendered from.
                 d.env_proxy = env.proxy.map(|p| EnvProxy::packed(Some(p)));
@@ -196,7 +283,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
 
 impl LaterStage for ReflectionModel {
     fn stage(&self) -> Stage {
-        Stage::Reflection
+        STAGE
     }
 
     fn iterate(&mut self, s: Shared<'_>, x: &Iteration) -> Result<StepOutput> {
@@ -233,6 +320,10 @@ impl LaterStage for ReflectionModel {
 
     fn into_set(self: Box<Self>) -> TrainableSet {
         ReflectionModel::into_set(*self)
+    }
+
+    fn save_state<'a>(&'a self, d: &ReflDecision, bufs: &mut Vec<(&'a Buffer<f32>, usize)>) -> Result<serde_json::Value> {
+        Ok(serde_json::to_value(ReflHeader::save(self, d, bufs))?)
     }
 
     fn as_any(&self) -> &dyn Any {

@@ -5,4 +5,4 @@ pub mod model;
 pub mod stage;
 
 pub use crate::train::stages::rendered::Rendered;
-pub use model::{ScatteringModel, StepInput, StepOutput};
+pub use model::{ExternalStep, ScatteringModel, StepInput, StepOutput};

@@ -13,7 +13,7 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
-use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one step of this model.
 pub struct StepInput<'a> {
@@ -30,6 +30,17 @@ pub struct StepInput<'a> {
     /// Scene extent (densification thresholds are relative to it).
     pub extent: f32,
     pub profile: bool,
+}
+
+/// The Adam step of [`ScatteringModel::record_backward_external`]: the
+/// active SH degree, the position rate, the step's count for Adam's bias
+/// correction, and whether only the SH colour is stepped.
+#[derive(Clone, Copy, Debug)]
+pub struct ExternalStep {
+    pub sh_degree: u32,
+    pub lr_means: f32,
+    pub iteration: u32,
+    pub colour_only: bool,
 }
 
 /// What one step did.
@@ -95,12 +106,12 @@ impl ScatteringModel {
 
     /// Record the backward of the last forward of `cam` from gradients a
     /// later stage wrote into [`Self::frame_buffers`]' gradient planes, and
-    /// an Adam step (Stage I's rates, positions at `lr_means`; no
-    /// densification statistics). With `colour_only` the step covers the
-    /// SH colour alone: the geometry and opacity, and their Adam moments,
-    /// stay as they are.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, sh: u32, lr_means: f32, it: u32, colour_only: bool) -> Result<()> {
+    /// an Adam step (Stage I's rates, positions at `step.lr_means`; no
+    /// densification statistics). With `step.colour_only` the step covers
+    /// the SH colour alone: the geometry and opacity, and their Adam
+    /// moments, stay as they are.
+    pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, step: &ExternalStep) -> Result<()> {
+        let ExternalStep { sh_degree: sh, lr_means, iteration: it, colour_only } = *step;
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
         self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
         let sc = rec.begin_scope("adam");
@@ -163,7 +174,7 @@ impl ScatteringModel {
                 let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.raster.reduce_grid(self.set.len()), stats_grid])?;
                 let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
                 let s = &self.set;
-                self.raster.record_backward_adam(&mut rec, &s.params, &s.m, &s.v, &c, sh, &b.frame, Some(&args[0]))?;
+                self.raster.record_backward_adam(&mut rec, &s.params, Moments { m: &s.m, v: &s.v }, &c, sh, &b.frame, Some(&args[0]))?;
                 args
             } else {
                 self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
