@@ -102,6 +102,21 @@ fn spec(ctx: &Context) -> [(u32, u32); 3] {
     [(0, WG), (1, ctx.caps().min_subgroup_size.max(1)), (2, KPT)]
 }
 
+/// What the plan kernel plans (its push constants besides the count):
+/// `mode` 0 scans `n` elements; 1 scans the radix sort's per-partition
+/// digit counts (`n` keys in partitions of `part_size`, `radix` digits).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Plan {
+    pub mode: u32,
+    pub part_size: u32,
+    pub radix: u32,
+}
+
+impl Plan {
+    /// A plain scan of n elements.
+    pub const ELEMENTS: Plan = Plan { mode: 0, part_size: 1, radix: 1 };
+}
+
 impl PrefixSum {
     pub fn new(ctx: &Arc<Context>) -> Result<PrefixSum> {
         let s = spec(ctx);
@@ -120,8 +135,10 @@ impl PrefixSum {
         self.ctx.caps().max_workgroup_count[0].min(65535)
     }
 
-    /// Record the plan kernel: n from `count`, lengths and dispatch grids into scratch.
-    pub(crate) fn record_plan(&self, rec: &mut Recorder, s: &ScanScratch, count: &Count, mode: u32, part_size: u32, radix: u32, capacity: u32) -> Result<()> {
+    /// Record the plan kernel: n from `count`, lengths and dispatch grids
+    /// into scratch, for the scan `plan` describes.
+    pub(crate) fn record_plan(&self, rec: &mut Recorder, s: &ScanScratch, count: &Count, plan: Plan, capacity: u32) -> Result<()> {
+        let Plan { mode, part_size, radix } = plan;
         let (cbuf, index) = match count {
             Count::Host(n) => {
                 if *n > capacity {
@@ -173,7 +190,7 @@ impl PrefixSum {
             bail!("scan buffers ({} / {}) smaller than the scratch capacity {cap}", src.len(), dst.len());
         }
         let sc = rec.begin_scope("scan.plan");
-        self.record_plan(rec, scratch, count, 0, 1, 1, cap)?;
+        self.record_plan(rec, scratch, count, Plan::ELEMENTS, cap)?;
         rec.end_scope(sc);
         self.record_levels(rec, scratch, 0, src.binding(), dst.binding(), true)
     }

@@ -181,7 +181,7 @@ impl RadixSort {
         }
         let radix = 1u32 << self.cfg.radix_bits;
         let sc = rec.begin_scope("sort.plan");
-        self.scan.record_plan(rec, &scratch.spine, count, 1, self.cfg.partition(), radix, cap)?;
+        self.scan.record_plan(rec, &scratch.spine, count, crate::scan::Plan { mode: 1, part_size: self.cfg.partition(), radix }, cap)?;
         // (A GPU count over `cap` is clamped; `SortScratch::overflow` reports it.)
         rec.end_scope(sc);
         let params = scratch.spine.params.binding();

@@ -280,7 +280,7 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
                 let mut rec = Recorder::new(ctx).unwrap();
                 if fused {
                     let c = adam.reduce_constants(&set, &groups, t).unwrap();
-                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v }, &c, 1, &frame, None).unwrap();
+                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c }, 1, &frame, None).unwrap();
                 } else {
                     rast.record_backward(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
                     adam.record_set(&mut rec, &set, &groups, t).unwrap();

@@ -12,12 +12,14 @@ use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use tgs_engine::{BufferBinding, Kernel, KernelDesc, Recorder};
 
-/// Adam's first and second moments of a Gaussian set, each in the set's
-/// layout, for [`Rasterizer::record_backward_adam`].
+/// The Adam step [`Rasterizer::record_backward_adam`] fuses into the
+/// reduce: the set's first and second moments (each in the set's layout)
+/// and the step's rates and constants.
 #[derive(Clone, Copy)]
 pub struct Moments<'a> {
     pub m: &'a Gaussians,
     pub v: &'a Gaussians,
+    pub adam: &'a ReduceAdam,
 }
 
 /// Adam's rates and constants for [`Rasterizer::record_backward_adam`]
@@ -70,14 +72,14 @@ impl Rasterizer {
     }
 
     /// Record the backward of the last forward on `frame` and an Adam step
-    /// of `g` with its `moments` (same layout as `g`), fused into the
+    /// of `g` with `step`'s moments and rates, fused into the
     /// per-Gaussian reduce; `frame.densify` is written as by
     /// [`Rasterizer::record_backward`], no gradient buffer is. With `gate`
     /// (a slot from [`Rasterizer::record_fit_gate`] holding
     /// [`Rasterizer::reduce_grid`]) the reduce, and so the step, runs only
     /// when the view fitted its frame.
-    pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, moments: Moments, adam: &ReduceAdam, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
-        let Moments { m, v } = moments;
+    pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, step: Moments, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
+        let Moments { m, v, adam } = step;
         for (name, s) in [("first", m), ("second", v)] {
             if s.n != g.n || s.channels != g.channels || s.coeffs != g.coeffs {
                 bail!("Adam's {name} moments ({} Gaussians, {} x {} features) do not match the Gaussian set ({}, {} x {})", s.n, s.channels, s.coeffs, g.n, g.channels, g.coeffs);

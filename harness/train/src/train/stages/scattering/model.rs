@@ -174,7 +174,7 @@ impl ScatteringModel {
                 let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.raster.reduce_grid(self.set.len()), stats_grid])?;
                 let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
                 let s = &self.set;
-                self.raster.record_backward_adam(&mut rec, &s.params, Moments { m: &s.m, v: &s.v }, &c, sh, &b.frame, Some(&args[0]))?;
+                self.raster.record_backward_adam(&mut rec, &s.params, Moments { m: &s.m, v: &s.v, adam: &c }, sh, &b.frame, Some(&args[0]))?;
                 args
             } else {
                 self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
