@@ -30,6 +30,8 @@ fn the_stages_are_i_ii_iii_in_order() {
     assert_eq!(all, ["I", "II", "III"]);
     assert_eq!(Stage::default(), Stage::SCATTERING);
     assert_eq!(LATER.iter().map(|k| k.key()).collect::<Vec<_>>(), ["reflection", "light_field"]);
+    // The later stages' kinds follow the names' order.
+    assert_eq!(LATER.iter().map(|k| k.stage()).collect::<Vec<_>>(), Stage::ALL[1..]);
     for (i, s) in Stage::all().into_iter().enumerate() {
         assert_eq!(s.number(), i + 1);
     }

@@ -135,3 +135,26 @@ impl Gaussians {
         [&self.means, &self.log_scales, &self.quats, &self.opacity, &self.features]
     }
 }
+
+/// What a rasterization draws: the Gaussians' geometry and opacity (`g`),
+/// the per-Gaussian features that colour them (`g.features`, or a buffer
+/// another kernel computed in the same layout: the reflection colour, the
+/// light field's material) and the active SH degree (ignored for plain
+/// features). The forward and backward of one view take the same.
+#[derive(Clone, Copy)]
+pub struct Splats<'a> {
+    pub g: &'a Gaussians,
+    pub features: &'a Buffer<f32>,
+    pub sh_degree: u32,
+}
+
+impl<'a> Splats<'a> {
+    /// `g` with its own features.
+    pub fn own(g: &'a Gaussians, sh_degree: u32) -> Splats<'a> {
+        Splats { g, features: &g.features, sh_degree }
+    }
+    /// `g` coloured by `features`, with no SH (degree 0).
+    pub fn coloured(g: &'a Gaussians, features: &'a Buffer<f32>) -> Splats<'a> {
+        Splats { g, features, sh_degree: 0 }
+    }
+}

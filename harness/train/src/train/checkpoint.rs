@@ -22,7 +22,7 @@ use tgs_engine::Context;
 use tgs_pipelines::{HostGaussians, TrainableSet};
 
 use super::arrays::{check_arrays, host_set, upload_set};
-use super::schedule::Stage;
+use super::stage::Stage;
 use super::stages::kind::{by_key, by_stage, LaterKind};
 pub use super::stages::light_field::checkpoint::LightFieldHeader;
 pub use super::stages::reflection::checkpoint::ReflHeader;
@@ -283,15 +283,7 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     Ok(tr)
 }
 
-/// The reflection layer a renderer needs from a checkpoint.
-pub enum RenderLayer {
-    /// A Stage I run: the scattering set alone.
-    Scattering,
-    /// Stage II: the reflection set and the environment map.
-    Env { set: HostGaussians, env: tgs_pipelines::HostEnvMap, fresnel: tgs_pipelines::Fresnel },
-    /// Stage III: the reflection set, the network and its shading.
-    LightField { set: HostGaussians, shape: tgs_pipelines::MlpShape, params: Vec<f32>, shade: tgs_pipelines::ShadeParams },
-}
+pub use super::stages::kind::RenderLayer;
 
 /// What rendering a checkpoint needs: the parameters only (no Adam moments,
 /// no dataset), checked as [`restore`] checks them.

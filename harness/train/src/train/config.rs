@@ -6,7 +6,7 @@ use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 pub use super::stages::light_field::config::LightFieldConfig;
-use super::schedule::Stage;
+use super::stage::Stage;
 use super::settings::LightPreset;
 pub use super::stages::reflection::config::ReflectionConfig;
 

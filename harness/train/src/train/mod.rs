@@ -12,6 +12,7 @@ pub mod run;
 pub mod rundir;
 pub mod schedule;
 pub mod settings;
+pub mod stage;
 pub mod stages;
 pub mod trainer;
 

@@ -18,7 +18,7 @@ use crate::outdir::OutDir;
 use crate::export::atomic_write;
 use crate::export::ply::write_splats;
 use super::schedule::Stage;
-use super::stages::RunFiles;
+use super::stages::RunPaths;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -203,7 +203,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
                     eprintln!("Stage {prev} done");
                 }
             }
-            let files = RunFiles { dir: &a.out, dataset: &data.root, view_names: &view_names };
+            let files = RunPaths { dir: &a.out, dataset: &data.root, view_names: &view_names };
             let b = tr.begin_next(Some(files), a.quiet)?;
             let mut event = json!({"iteration": tr.iteration, "stage": label, "event": "begin"});
             event.as_object_mut().expect("an object").extend(b.event);

@@ -4,39 +4,7 @@
 
 use super::config::TrainConfig;
 use super::stages::LATER;
-
-/// A training stage (paper §3–4), by the name logs, metrics and
-/// `--stages` give it: Stage I ([`Stage::SCATTERING`]) and the later
-/// stages, each of which names itself in its folder's `stage.rs`
-/// (`stages::LATER` lists them in run order).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Stage(pub &'static str);
-
-impl Default for Stage {
-    fn default() -> Stage {
-        Stage::SCATTERING
-    }
-}
-
-impl Stage {
-    /// Stage I: the scattering set alone (2DGS).
-    pub const SCATTERING: Stage = Stage("I");
-
-    pub fn name(self) -> &'static str {
-        self.0
-    }
-
-    /// Every stage in run order: Stage I, then `stages::LATER`.
-    pub fn all() -> Vec<Stage> {
-        std::iter::once(Stage::SCATTERING).chain(LATER.iter().map(|k| k.stage())).collect()
-    }
-
-    /// 1 for Stage I, 2 for the first later stage, ...: the number in
-    /// the run directory's `checkpoint-stageN.bin` and `renders/stageN`.
-    pub fn number(self) -> usize {
-        Stage::all().iter().position(|&s| s == self).map(|i| i + 1).unwrap_or(0)
-    }
-}
+pub use super::stage::Stage;
 
 /// The stage schedule: each stage with its iteration count, run in order.
 #[derive(Clone, Debug, PartialEq)]

@@ -15,7 +15,7 @@ use super::stages::kind::by_stage;
 use super::stages::reflection::{reflection_decides, ReflDecision, ReflectionModel};
 use super::stages::scattering::init::{far_points, gaussians_from_points, random_points};
 use super::stages::scattering::ScatteringModel;
-use super::stages::{scattering, Begun, Iteration, LaterKind, LaterStage, RunFiles, ScatCache, Shared, Transition, Views};
+use super::stages::{scattering, Begun, Iteration, LaterKind, LaterStage, RunPaths, ScatCache, Shared, Transition, Views};
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
 use std::sync::Arc;
@@ -167,7 +167,7 @@ impl Trainer {
     /// that decides not to run (a skipped Stage II) ends the schedule
     /// before it. `files`: where the transition may write what it
     /// measured (Stage II's residual maps).
-    pub fn begin_next(&mut self, files: Option<RunFiles<'_>>, quiet: bool) -> Result<Begun> {
+    pub fn begin_next(&mut self, files: Option<RunPaths<'_>>, quiet: bool) -> Result<Begun> {
         let kind = self.next_begins().context("the next iteration begins no stage")?;
         let (entry, label) = self.next_entry();
         let round = self.schedule.round(entry);

@@ -3,21 +3,33 @@
 //! part of a checkpoint. Each later stage has one [`LaterKind`] (a unit
 //! struct in its `stage.rs`), listed in run order in [`super::LATER`]; the
 //! schedule, the trainer, the checkpoint and the `tgs train` driver go
-//! through that list, so a new stage is its folder and one entry there.
+//! through that list, so a new stage is its folder, its kind there and
+//! its name in `Stage::ALL` (the settings check `stages` against the names
+//! without depending on the stages; a test holds the two lists together).
 
 use super::shared::{LaterStage, Shared};
-use crate::train::checkpoint::RenderLayer;
 use crate::train::config::TrainConfig;
-use crate::train::schedule::Stage;
-use crate::train::stages::reflection::ReflDecision;
+use crate::train::stage::Stage;
+use crate::train::stages::reflection::decision::ReflDecision;
 use anyhow::{Context as _, Result};
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
+use tgs_pipelines::HostGaussians;
+
+/// The reflection layer a renderer needs from a checkpoint.
+pub enum RenderLayer {
+    /// A Stage I run: the scattering set alone.
+    Scattering,
+    /// Stage II: the reflection set and the environment map.
+    Env { set: HostGaussians, env: tgs_pipelines::HostEnvMap, fresnel: tgs_pipelines::Fresnel },
+    /// Stage III: the reflection set, the network and its shading.
+    LightField { set: HostGaussians, shape: tgs_pipelines::MlpShape, params: Vec<f32>, shade: tgs_pipelines::ShadeParams },
+}
 
 /// Where a transition may write what it measured (the run directory); none
 /// in benchmarks and tests that only train.
-pub struct RunFiles<'a> {
+pub struct RunPaths<'a> {
     pub dir: &'a Path,
     /// The dataset's directory, which nothing is written into.
     pub dataset: &'a Path,
@@ -39,7 +51,7 @@ pub struct Transition<'a> {
     pub round: u32,
     /// The schedule's name of the starting entry ("II", "III.2", ...).
     pub label: String,
-    pub files: Option<RunFiles<'a>>,
+    pub files: Option<RunPaths<'a>>,
     /// Progress lines go to stderr unless quiet.
     pub quiet: bool,
 }

@@ -8,8 +8,8 @@
 //! and one iteration as the trainer calls it. The later stages implement
 //! [`LaterStage`] (`shared.rs`), which the trainer drives them through,
 //! and are begun, scheduled and checkpointed through their [`LaterKind`]
-//! (`kind.rs`), listed in run order in [`LATER`]: a new stage is a folder
-//! and an entry in that list. `composite.rs` is the deferred composite's loss they share; `views.rs`
+//! (`kind.rs`), listed in run order in [`LATER`]: a new stage is a folder,
+//! an entry in that list and its name in `Stage::ALL`. `composite.rs` is the deferred composite's loss they share; `views.rs`
 //! and `rendered.rs` what every stage reads and returns.
 pub mod composite;
 pub mod kind;
@@ -20,7 +20,7 @@ pub mod scattering;
 pub mod shared;
 pub mod views;
 
-pub use kind::{Begun, LaterKind, RunFiles, Transition};
+pub use kind::{Begun, LaterKind, RunPaths, Transition};
 pub use shared::{Iteration, LaterStage, ScatCache, Shared};
 pub use views::Views;
 

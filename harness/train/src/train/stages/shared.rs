@@ -8,12 +8,12 @@
 //! (its `stage.rs`) and then stepped, rendered, written and handed on
 //! through this trait without the trainer knowing which it is.
 
-use super::reflection::ReflDecision;
+use super::reflection::decision::ReflDecision;
 use super::rendered::ReflRendered;
 use super::scattering::{ScatteringModel, StepOutput};
 use super::views::Views;
 use crate::train::config::TrainConfig;
-use crate::train::schedule::Stage;
+use crate::train::stage::Stage;
 use anyhow::Result;
 use std::any::Any;
 use std::path::Path;

@@ -5,9 +5,9 @@
 use super::checkpoint::LightFieldHeader;
 use super::model::{LightFieldModel, LightFieldStepInput};
 use crate::train::arrays::host_set;
-use crate::train::checkpoint::RenderLayer;
+use crate::train::stages::kind::RenderLayer;
 use crate::train::config::TrainConfig;
-use crate::train::schedule::Stage;
+use crate::train::stage::Stage;
 use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
 use crate::train::stages::reflection::ReflDecision;
 use crate::train::stages::reflection::bounds::normalization_box;

@@ -3,6 +3,7 @@
 pub mod bounds;
 pub mod checkpoint;
 pub mod config;
+pub mod decision;
 pub mod env_init;
 pub mod model;
 pub mod outputs;

@@ -11,9 +11,9 @@ use super::checkpoint::ReflHeader;
 use super::outputs::write_residual;
 use crate::outdir::OutDir;
 use crate::train::arrays::host_set;
-use crate::train::checkpoint::RenderLayer;
+use crate::train::stages::kind::RenderLayer;
 use crate::train::config::TrainConfig;
-use crate::train::schedule::Stage;
+use crate::train::stage::Stage;
 use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
@@ -25,6 +25,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context};
 use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, Plane, ReflectionShading, TrainableSet};
 
+pub use super::decision::ReflDecision;
 pub use super::env_init::EnvInit;
 
 /// Stage II.
@@ -113,55 +114,6 @@ impl LaterKind for Kind {
 /// image size) and samples at most this many pixels in all.
 const VD_MAX_SIDE: u32 = 64;
 const VD_SAMPLES: usize = 1 << 16;
-
-/// The measured Stage I residual and what it decided (metrics.json's `reflection`).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ReflDecision {
-    /// Mean over the training views of the per-pixel mean_c |I_gt - I_scat|.
-    pub residual_mean: f64,
-    /// Fraction of training pixels whose residual magnitude exceeds 0.05.
-    pub residual_fraction_over_0_05: f64,
-    /// The threshold on `residual_mean` (reflection.min_residual).
-    pub threshold: f64,
-    /// How much the residual changes with the view at a fixed Stage I
-    /// surface point (stages/reflection/view_dependence.rs), over how many samples,
-    /// and its threshold (reflection.min_view_dependence).
-    #[serde(default)]
-    pub view_dependence: f64,
-    #[serde(default)]
-    pub view_dependence_samples: u64,
-    #[serde(default)]
-    pub view_dependence_threshold: f64,
-    /// Whether Stage II ran.
-    pub run: bool,
-    /// 1, or 2 for the Stage II run again after Stage III (reflection.reseed).
-    #[serde(default)]
-    pub round: u32,
-    pub reflection_gaussians: u32,
-    /// Of those: residual-hull seeds, and Stage I Gaussians copied.
-    #[serde(default)]
-    pub seeds: u32,
-    #[serde(default)]
-    pub copied: u32,
-    /// The residual hull gave no seed, so the set started as a copy of
-    /// Stage I's (reflection.init = "hull").
-    #[serde(default)]
-    pub hull_empty: bool,
-    /// No hull point beat chance at reflection.seed_significance (too few
-    /// views, or residual over most of every image), so the seeds come
-    /// from the hull without that test.
-    #[serde(default)]
-    pub significance_dropped: bool,
-    /// The cube map started from the scene (reflection.env_init = "scene"):
-    /// the box it was rendered from and the Gaussians outside it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub env_from: Option<EnvInit>,
-    /// The cube map's parallax proxy (reflection.env_radius > 0, or the
-    /// centre of a map with depth, env_init = "scene-depth"): centre and
-    /// radius in world units, fixed when Stage II starts.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub env_proxy: Option<[f32; 4]>,
-}
 
 /// Between Stage I and II: render every training view with the frozen
 /// scattering set (cached in `s.cache` for Stage II), measure the residual
@@ -338,12 +290,6 @@ pub fn reflection_decides(refl: &ReflRendered, i: usize, min_r: f32) -> bool {
     refl.refl_plane(Plane::Alpha)[i] >= 0.5 && refl.r()[i] >= min_r
 }
 
-impl ReflDecision {
-    /// The recorded parallax proxy of the cube map.
-    pub fn proxy(&self) -> Option<EnvProxy> {
-        self.env_proxy.map(|p| EnvProxy { centre: [p[0], p[1], p[2]], radius: p[3] })
-    }
-}
 
 /// The cube map's parallax proxy for `reflection.env_radius` = `radius`:
 /// centred on the box of the reflection set's starting positions `means`
