@@ -124,7 +124,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         stages: Vec::new(),
         skipped: Vec::new(),
     };
-    let all = Stage::all();
+    let all = Stage::ALL;
     for (i, &stage) in all.iter().enumerate() {
         ctx.reset_peak_memory();
         let t = Instant::now();

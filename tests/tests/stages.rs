@@ -26,15 +26,17 @@ fn config(stages: &str, reseed: bool) -> TrainConfig {
 
 #[test]
 fn the_stages_are_i_ii_iii_in_order() {
-    let all: Vec<&str> = Stage::all().iter().map(|s| s.name()).collect();
+    let all: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
     assert_eq!(all, ["I", "II", "III"]);
     assert_eq!(Stage::default(), Stage::SCATTERING);
     assert_eq!(LATER.iter().map(|k| k.key()).collect::<Vec<_>>(), ["reflection", "light_field"]);
     // The later stages' kinds follow the names' order.
     assert_eq!(LATER.iter().map(|k| k.stage()).collect::<Vec<_>>(), Stage::ALL[1..]);
-    for (i, s) in Stage::all().into_iter().enumerate() {
+    for (i, s) in Stage::ALL.into_iter().enumerate() {
         assert_eq!(s.number(), i + 1);
+        assert_eq!(Stage::named(s.name()), Some(s));
     }
+    assert_eq!(Stage::named("IV"), None);
     for k in LATER {
         assert_eq!(by_key(k.key()).map(|b| b.stage()), Some(k.stage()));
         assert_eq!(by_stage(k.stage()).map(|b| b.key()), Some(k.key()));

@@ -23,7 +23,7 @@ use tgs_pipelines::{HostGaussians, TrainableSet};
 
 use super::arrays::{check_arrays, host_set, upload_set};
 use super::stage::Stage;
-use super::stages::kind::{by_key, by_stage, LaterKind};
+use super::stages::kind::{by_key, by_stage, parse, LaterKind};
 pub use super::stages::light_field::checkpoint::LightFieldHeader;
 pub use super::stages::reflection::checkpoint::ReflHeader;
 use std::collections::BTreeMap;
@@ -107,7 +107,7 @@ impl Header {
     /// for Stage II), None when the header holds another stage's or none.
     pub fn state_of<T: serde::de::DeserializeOwned>(&self, stage: Stage) -> Result<Option<T>> {
         match self.later_state()? {
-            Some((kind, v)) if kind.stage() == stage => Ok(Some(T::deserialize(v).with_context(|| format!("the checkpoint's {} header", kind.key()))?)),
+            Some((kind, v)) if kind.stage() == stage => Ok(Some(parse(kind, v)?)),
             _ => Ok(None),
         }
     }
@@ -120,10 +120,8 @@ impl Header {
     /// Drop the later stage's state and its arrays (the last in
     /// `arrays`), leaving the scattering set's.
     pub fn drop_later(&mut self, arrays: &mut Vec<Vec<f32>>) -> Result<()> {
-        if let Some((kind, v)) = self.later_state()? {
-            let n = kind.arrays(v)?.len();
-            arrays.truncate(arrays.len().saturating_sub(n));
-        }
+        let n = self.later_arrays()?.len();
+        arrays.truncate(arrays.len().saturating_sub(n));
         self.later.clear();
         Ok(())
     }
@@ -192,10 +190,7 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
     }
     let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
     let mut arrays = Vec::new();
-    let later = match header.later_state().map_err(|e| bad(&format!("{e:#}")))? {
-        Some((kind, v)) => kind.arrays(v).map_err(|e| bad(&format!("{e:#}")))?,
-        None => Vec::new(),
-    };
+    let later = header.later_arrays().map_err(|e| bad(&format!("{e:#}")))?;
     for (name, len) in header.arrays.iter().chain(&later) {
         let b = len.checked_mul(4).and_then(|n| at.checked_add(n)).and_then(|end| bytes.get(at..end)).ok_or_else(|| bad(&format!("array {name} of {len} values is truncated")))?;
         at += 4 * len;

@@ -325,7 +325,7 @@ fn read_stage_records(out: &Path, resume: bool) -> Vec<serde_json::Value> {
 /// stage3, and stage2.2 / stage3.2 for a second round.
 fn renders_dir(label: &str) -> String {
     let (name, round) = label.split_once('.').map(|(n, r)| (n, format!(".{r}"))).unwrap_or((label, String::new()));
-    let n = Stage::all().iter().position(|s| s.name() == name).map(|i| i + 1).unwrap_or(0);
+    let n = Stage::named(name).map(Stage::number).unwrap_or(0);
     format!("stage{n}{round}")
 }
 

@@ -27,9 +27,9 @@ impl Stage {
         self.0
     }
 
-    /// Every stage in run order, as a list.
-    pub fn all() -> Vec<Stage> {
-        Stage::ALL.to_vec()
+    /// The stage of [`Stage::ALL`] named `name` ("II", ...).
+    pub fn named(name: &str) -> Option<Stage> {
+        Stage::ALL.into_iter().find(|s| s.name() == name)
     }
 
     /// 1 for Stage I, 2 for the first later stage, ...: the number in

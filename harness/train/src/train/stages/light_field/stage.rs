@@ -4,7 +4,7 @@
 
 use super::checkpoint::LightFieldHeader;
 use super::model::{LightFieldModel, LightFieldStepInput};
-use crate::train::arrays::host_set;
+use crate::train::stages::reflection::checkpoint::host_reflection_set;
 use crate::train::stages::kind::RenderLayer;
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
@@ -67,8 +67,7 @@ impl LaterKind for Kind {
         let h: LightFieldHeader = parse(self, header)?;
         let shape = h.shape()?;
         h.check(&shape, &arrays)?;
-        let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &arrays);
-        set.validate()?;
+        let set = host_reflection_set(&arrays)?;
         let params = arrays[arrays.len() - 3].clone();
         Ok(RenderLayer::LightField { set, shape, params, shade: h.shade() })
     }

@@ -98,6 +98,14 @@ pub(crate) fn push_set<'a>(set: &'a TrainableSet, names: &mut Vec<(String, usize
     }
 }
 
+/// The reflection set of a Stage II or III state (its first arrays) on
+/// the host, checked, for a renderer.
+pub(crate) fn host_reflection_set(arrays: &[Vec<f32>]) -> Result<tgs_pipelines::HostGaussians> {
+    let set = host_set(MATERIAL, 1, arrays);
+    set.validate()?;
+    Ok(set)
+}
+
 /// The reflection set of a Stage II or III state (its first arrays).
 pub(crate) fn reflection_set(ctx: &Arc<Context>, arrays: &[Vec<f32>]) -> Result<TrainableSet> {
     let set = TrainableSet::new(ctx, &host_set(MATERIAL, 1, arrays))?;

@@ -7,10 +7,9 @@ use super::env_init::{scene_env_map, SceneLight};
 use super::model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::seed::{hull_seeding, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
-use super::checkpoint::ReflHeader;
+use super::checkpoint::{host_reflection_set, ReflHeader};
 use super::outputs::write_residual;
 use crate::outdir::OutDir;
-use crate::train::arrays::host_set;
 use crate::train::stages::kind::RenderLayer;
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
@@ -96,8 +95,7 @@ impl LaterKind for Kind {
     fn render_layer(&self, header: &serde_json::Value, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<RenderLayer> {
         let h: ReflHeader = parse(self, header)?;
         let k = h.check(&arrays)?;
-        let set = host_set(tgs_pipelines::reflection::MATERIAL, 1, &arrays);
-        set.validate()?;
+        let set = host_reflection_set(&arrays)?;
         let env = h.env(&arrays, k);
         Ok(RenderLayer::Env { set, env, fresnel: cfg.reflection.fresnel.pipeline() })
     }
