@@ -121,16 +121,17 @@ void main() {
             bool valid = j < bend - bstart;
             uint q = valid ? bend - 1u - j : bstart;
             uint g = gid[vals[q]];
-            uint o = 16u * g;
+            uint o = PROJ_STRIDE * g;
             vec3 tu = vec3(proj[o], proj[o + 1u], proj[o + 2u]);
             vec3 tv = vec3(proj[o + 3u], proj[o + 4u], proj[o + 5u]);
             vec3 tw = vec3(proj[o + 6u], proj[o + 7u], proj[o + 8u]);
             vec2 mu = vec2(proj[o + 9u], proj[o + 10u]);
             vec3 nrm = vec3(proj[o + 11u], proj[o + 12u], proj[o + 13u]);
             float op = proj[o + 14u];
+            vec4 box = vec4(proj[o + 16u], proj[o + 17u], proj[o + 18u], proj[o + 19u]);
 
             Hit h;
-            bool contrib = valid && inside && q < last && intersect(tu, tv, tw, mu, pf, h);
+            bool contrib = valid && inside && q < last && in_box(box, pf) && intersect(tu, tv, tw, mu, pf, h);
             float alpha = contrib ? min(ALPHA_MAX, op * h.g) : 0.0;
             contrib = contrib && alpha >= ALPHA_MIN;
 

@@ -106,13 +106,14 @@ void main() {
     for (uint q1 = end; q1 > start; q1--) {
         uint q = q1 - 1u;
         uint g = gid[vals[q]];
-        uint o = 16u * g;
+        uint o = PROJ_STRIDE * g;
         vec3 tu = vec3(proj[o], proj[o + 1u], proj[o + 2u]);
         vec3 tv = vec3(proj[o + 3u], proj[o + 4u], proj[o + 5u]);
         vec3 tw = vec3(proj[o + 6u], proj[o + 7u], proj[o + 8u]);
         vec2 mu = vec2(proj[o + 9u], proj[o + 10u]);
         vec3 nrm = vec3(proj[o + 11u], proj[o + 12u], proj[o + 13u]);
         float op = proj[o + 14u];
+        vec4 box = vec4(proj[o + 16u], proj[o + 17u], proj[o + 18u], proj[o + 19u]);
         for (uint c = 0u; c < CH; c++) {
             feat[c] = pfeat[g * CH + c];
             dF[c] = 0.0;
@@ -120,9 +121,14 @@ void main() {
         vec3 dTu = vec3(0.0), dTv = vec3(0.0), dTw = vec3(0.0), dn = vec3(0.0);
         vec2 dmu = vec2(0.0);
         float dO = 0.0;
-        for (uint k = 0u; k < PPT; k++) {
+        // Only the pixels of the splat's box (the forward's).
+        uvec2 ks = box_slots(box, ty, PPT);
+        for (uint k = ks.x; k < ks.y; k++) {
             Hit h;
             vec2 pf = pfs[k];
+            if (!in_box(box, pf)) {
+                continue;
+            }
             bool contrib = ins[k] && q < lasts[k] && intersect(tu, tv, tw, mu, pf, h);
             float alpha = contrib ? min(ALPHA_MAX, op * h.g) : 0.0;
             if (!(contrib && alpha >= ALPHA_MIN)) {
@@ -154,8 +160,8 @@ void main() {
         for (uint c = 0u; c < CH; c++) {
             dF[c] = subgroupAdd(dF[c]);
         }
+        uint b = vals[q] * KREC;
         if (subgroupElect()) {
-            uint b = vals[q] * KREC;
             RECORDS[b + 0u] = dTu.x; RECORDS[b + 1u] = dTu.y; RECORDS[b + 2u] = dTu.z;
             RECORDS[b + 3u] = dTv.x; RECORDS[b + 4u] = dTv.y; RECORDS[b + 5u] = dTv.z;
             RECORDS[b + 6u] = dTw.x; RECORDS[b + 7u] = dTw.y; RECORDS[b + 8u] = dTw.z;

@@ -60,7 +60,13 @@ layout(push_constant) uniform Push {
 #endif
 } pc;
 
-// Projected splat: what the rasterizer needs, 16 floats per Gaussian.
+// Floats per projected splat in the projection buffer: the Splat below
+// (tu, tv, tw, mu, n, o: 0..15), the view depth (15), and the pixel box
+// (16..20: lo.x, lo.y, hi.x, hi.y) outside which the splat's alpha stays
+// below ALPHA_MIN (raster_project.glsl `pixel_box`).
+#define PROJ_STRIDE 20u
+
+// Projected splat: what the rasterizer needs.
 struct Splat {
     vec3 tu, tv, tw;  // rows of the splat-to-pixel homography T
     vec2 mu;          // centre of the 3-sigma bounding box (pixels)
@@ -132,6 +138,28 @@ struct Hit {
     vec2 uv;
     float rho3, rho2, g, z;
 };
+
+// Whether pixel `pix` lies in a splat's pixel box (PROJ_STRIDE): the tile
+// kernels evaluate a splat only there, skipping the ray-splat intersection
+// of pixels it cannot reach.
+bool in_box(vec4 box, vec2 pix) {
+    return all(greaterThanEqual(pix, box.xy)) && all(lessThanEqual(pix, box.zw));
+}
+
+// The one-subgroup tile kernels (WG invocations, PPT pixels each: slot k of
+// invocation l is pixel l + k WG of the tile, row (l + k WG) / TILE): the
+// slots [x, y) whose rows can meet `box` in tile row `ty`. The same range
+// for every invocation, so a CPU driver runs only those iterations.
+uvec2 box_slots(vec4 box, uint ty, uint ppt) {
+    float top = float(ty * TILE);
+    float r0 = clamp(ceil(box.y) - top, 0.0, float(TILE));
+    float r1 = clamp(floor(box.w) - top, -1.0, float(TILE - 1u));
+    if (!(r1 >= r0)) {
+        return uvec2(0u);
+    }
+    uint y0 = uint(r0), y1 = uint(r1);
+    return uvec2(min(TILE * y0 / WG, ppt), min((TILE * y1 + TILE - 1u) / WG + 1u, ppt));
+}
 
 bool intersect(vec3 tu, vec3 tv, vec3 tw, vec2 mu, vec2 pix, out Hit h) {
     h.hx = pix.x * tw - tu;

@@ -32,6 +32,7 @@ shared vec3 s_tv[256];
 shared vec3 s_tw[256];
 shared vec3 s_muo[256];
 shared uint s_g[256];
+shared vec4 s_box[256];
 
 void main() {
     uint tile = wg_linear();
@@ -69,7 +70,8 @@ void main() {
         uint q = b + lid;
         if (q < end) {
             uint g = gid[vals[q]];
-            uint o = 16u * g;
+            uint o = PROJ_STRIDE * g;
+            s_box[lid] = vec4(proj[o + 16u], proj[o + 17u], proj[o + 18u], proj[o + 19u]);
             s_tu[lid] = vec3(proj[o], proj[o + 1u], proj[o + 2u]);
             s_tv[lid] = vec3(proj[o + 3u], proj[o + 4u], proj[o + 5u]);
             s_tw[lid] = vec3(proj[o + 6u], proj[o + 7u], proj[o + 8u]);
@@ -81,7 +83,7 @@ void main() {
         for (uint j = 0u; j < cnt && !p.done; j++) {
             Hit h;
             vec3 muo = s_muo[j];
-            if (!intersect(s_tu[j], s_tv[j], s_tw[j], muo.xy, pf, h)) {
+            if (!in_box(s_box[j], pf) || !intersect(s_tu[j], s_tv[j], s_tw[j], muo.xy, pf, h)) {
                 continue;
             }
             float alpha = min(ALPHA_MAX, muo.z * h.g);
@@ -94,7 +96,7 @@ void main() {
                 break;
             }
             uint g = s_g[j];
-            vec3 nrm = vec3(proj[16u * g + 11u], proj[16u * g + 12u], proj[16u * g + 13u]);
+            vec3 nrm = vec3(proj[PROJ_STRIDE * g + 11u], proj[PROJ_STRIDE * g + 12u], proj[PROJ_STRIDE * g + 13u]);
             float w = blend(p, h, alpha, Tn, nrm, b + j);
             for (uint c = 0u; c < CH; c++) {
                 acc[c] += w * pfeat[g * CH + c];

@@ -48,7 +48,7 @@ void main() {
     bool ins[PPT];
     PixelState ps[PPT];
     float accs[PPT * CH];
-    bool all_done = true;
+    uint n_done = 0u;
     bool resume = pc.span_index > 0u;
     for (uint k = 0u; k < PPT; k++) {
         uint i = lid + k * WG;
@@ -62,40 +62,42 @@ void main() {
         for (uint c = 0u; c < CH; c++) {
             accs[k * CH + c] = inside && resume ? outp[c * plane + px] : 0.0;
         }
-        all_done = all_done && ps[k].done;
+        n_done += ps[k].done ? 1u : 0u;
     }
 
     float feat[CH];
-    for (uint q = start; q < end && !subgroupAll(all_done); q++) {
+    for (uint q = start; q < end && !subgroupAll(n_done == PPT); q++) {
         uint g = gid[vals[q]];
-        uint o = 16u * g;
+        uint o = PROJ_STRIDE * g;
         vec3 tu = vec3(proj[o], proj[o + 1u], proj[o + 2u]);
         vec3 tv = vec3(proj[o + 3u], proj[o + 4u], proj[o + 5u]);
         vec3 tw = vec3(proj[o + 6u], proj[o + 7u], proj[o + 8u]);
         vec2 mu = vec2(proj[o + 9u], proj[o + 10u]);
         vec3 nrm = vec3(proj[o + 11u], proj[o + 12u], proj[o + 13u]);
         float op = proj[o + 14u];
+        vec4 box = vec4(proj[o + 16u], proj[o + 17u], proj[o + 18u], proj[o + 19u]);
         for (uint c = 0u; c < CH; c++) {
             feat[c] = pfeat[g * CH + c];
         }
-        all_done = true;
+        // Only the pixels of the splat's box. (Every slot is visited: a
+        // loop of constant length keeps the pixel state in registers, which
+        // on llvmpipe is worth more than skipping the rows the box misses.)
         for (uint k = 0u; k < PPT; k++) {
-            if (ps[k].done) {
+            if (ps[k].done || !in_box(box, pfs[k])) {
                 continue;
             }
             Hit h;
             bool hit = intersect(tu, tv, tw, mu, pfs[k], h);
             float alpha = hit ? min(ALPHA_MAX, op * h.g) : 0.0;
             if (alpha < ALPHA_MIN) {
-                all_done = false;
                 continue;
             }
             float Tn = ps[k].T * (1.0 - alpha);
             if (Tn < T_MIN) {
                 ps[k].done = true;
+                n_done++;
                 continue;
             }
-            all_done = false;
             float w = blend(ps[k], h, alpha, Tn, nrm, q);
             for (uint c = 0u; c < CH; c++) {
                 accs[k * CH + c] += w * feat[c];

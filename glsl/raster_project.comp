@@ -32,8 +32,12 @@ void main() {
     Proj pr;
     bool ok = project(p, ls, quats[g], opacity[g], pr);
     uvec4 rect = uvec4(0u);
+    vec4 box = vec4(0.0);
     if (ok) {
-        rect = tile_rect(pixel_bounds(pr));
+        bool bounded;
+        vec4 b = pixel_bounds_of(pr, bounded);
+        rect = tile_rect(b);
+        box = pixel_box(b, bounded);
     }
     uint count = (rect.z - rect.x) * (rect.w - rect.y);
     rects[g] = rect;
@@ -43,13 +47,14 @@ void main() {
     if (count == 0u) {
         return;
     }
-    uint b = 16u * g;
+    uint b = PROJ_STRIDE * g;
     proj[b + 0u] = pr.s.tu.x; proj[b + 1u] = pr.s.tu.y; proj[b + 2u] = pr.s.tu.z;
     proj[b + 3u] = pr.s.tv.x; proj[b + 4u] = pr.s.tv.y; proj[b + 5u] = pr.s.tv.z;
     proj[b + 6u] = pr.s.tw.x; proj[b + 7u] = pr.s.tw.y; proj[b + 8u] = pr.s.tw.z;
     proj[b + 9u] = pr.s.mu.x; proj[b + 10u] = pr.s.mu.y;
     proj[b + 11u] = pr.s.n.x; proj[b + 12u] = pr.s.n.y; proj[b + 13u] = pr.s.n.z;
     proj[b + 14u] = pr.s.o; proj[b + 15u] = pr.pv.z;
+    proj[b + 16u] = box.x; proj[b + 17u] = box.y; proj[b + 18u] = box.z; proj[b + 19u] = box.w;
 
     // Features: SH evaluated for the view direction (+0.5, clamped at 0), or plain.
     uint fb = g * pc.coeffs * CH;

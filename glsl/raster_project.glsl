@@ -91,7 +91,9 @@ bool project(vec3 p, vec2 log_s, vec4 q_raw, float o_raw, out Proj pr) {
 // shrinks with it; o < ALPHA_MIN gives an empty box. An ellipse that reaches
 // the camera plane (d >= 0: unbounded on screen) keeps the 3-sigma square
 // box of pr.radius.
-vec4 pixel_bounds(Proj pr) {
+// `bounded` is false when the ellipse reaches the camera plane.
+vec4 pixel_bounds_of(Proj pr, out bool bounded) {
+    bounded = true;
     float a = pr.s.o / ALPHA_MIN;
     if (!(a >= 1.0)) {
         return vec4(1.0, 1.0, 0.0, 0.0);
@@ -109,7 +111,18 @@ vec4 pixel_bounds(Proj pr) {
             return b;
         }
     }
+    bounded = false;
     return vec4(pr.s.mu - pr.radius, pr.s.mu + pr.radius);
+}
+
+// The pixels a tile kernel evaluates the splat at (see `in_box` in
+// raster_common.glsl): the bounds above widened by one pixel on each side,
+// so that f32 rounding of the bounds never drops a pixel whose alpha
+// reaches ALPHA_MIN; every pixel of its tiles when the ellipse is unbounded
+// on screen (the tile rectangle then comes from the 3-sigma box, not from
+// where alpha reaches ALPHA_MIN).
+vec4 pixel_box(vec4 b, bool bounded) {
+    return bounded ? b + vec4(-1.0, -1.0, 1.0, 1.0) : vec4(-3.0e38, -3.0e38, 3.0e38, 3.0e38);
 }
 
 // Tile rectangle [x0, x1) x [y0, y1) of the pixels (centres at integers)

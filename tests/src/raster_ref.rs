@@ -518,6 +518,47 @@ pub fn render_with_rects(s: &RefScene, cam: &Camera, background: &[f64], degree:
     RefRender { planes, ambiguous, tolerance, splats }
 }
 
+/// Where a splat reaches on screen (see [`splat_reach`]).
+pub struct SplatReach {
+    /// Bounding box [x_lo, y_lo, x_hi, y_hi] of the image's pixel centres
+    /// where the splat reaches alpha 1/255 with a hit past the near plane
+    /// (those within 1e-6 of the cut left out); None when there are none.
+    pub pixels: Option<[f64; 4]>,
+    /// Whether its cutoff ellipse misses the camera plane (bounded on screen).
+    pub bounded: bool,
+    /// The GPU's pixel box in f64 (raster_project.glsl `pixel_box`: the
+    /// pixel bounds widened by one pixel) where the splat is bounded and
+    /// its bounding conic is well conditioned.
+    pub pixel_box: Option<[f64; 4]>,
+}
+
+/// Where splat `g` reaches on screen; None when it is culled (not
+/// projected, or too faint ever to reach alpha 1/255).
+pub fn splat_reach(s: &RefScene, cam: &Camera, degree: u32, g: usize) -> Option<SplatReach> {
+    let c = Cam64::new(cam);
+    let sp = project(s, g, &c, degree)?;
+    let k2 = cutoff2(sp.o)?;
+    let tw = sp.tw;
+    let bounded = k2 * (tw[0] * tw[0] + tw[1] * tw[1]) - tw[2] * tw[2] < 0.0;
+    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for py in 0..c.h {
+        for px in 0..c.w {
+            let (x, y) = (px as f64, py as f64);
+            let Some((gv, z)) = hit(sp.tu, sp.tv, sp.tw, sp.mu, x, y) else { continue };
+            let alpha = (sp.o * gv).min(0.99);
+            if alpha * 255.0 < 1.0 + 1e-6 || !(z >= NEAR) || z.is_infinite() {
+                continue;
+            }
+            b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+        }
+    }
+    let pixel_box = (bounded && !bbox_ill_conditioned(&sp, c.tiles())).then(|| {
+        let p = pixel_bounds(sp.tu, sp.tv, sp.tw, sp.mu, sp.radius.ceil(), k2);
+        [p[0] - 1.0, p[1] - 1.0, p[2] + 1.0, p[3] + 1.0]
+    });
+    Some(SplatReach { pixels: b[0].is_finite().then_some(b), bounded, pixel_box })
+}
+
 /// Tiles the splats of `s` that can reach alpha 1/255 would cover with a
 /// square box of their screen radius about mu (the 3-sigma binning 2DGS
 /// uses), summed: what the opacity-aware per-axis boxes are measured against.

@@ -2,8 +2,8 @@
 //! with the CPU f64 reference (see tests/src/raster_ref.rs for the
 //! tolerances).
 
-use tgs_pipelines::{Camera, Features, HostGaussians, Plane, RasterKernels, Rasterizer, RecordAccess};
-use tgs_tests::raster_ref::{render, RefScene};
+use tgs_pipelines::{Camera, Features, Gaussians, HostGaussians, Plane, RasterKernels, Rasterizer, RecordAccess};
+use tgs_tests::raster_ref::{render, splat_reach, RefScene};
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
 
@@ -335,5 +335,72 @@ fn gradient_records_past_the_binding_limit() {
         assert_eq!(bits(&x[..k * n]), bits(y), "{name}: gradients behind the fillers differ from the scene alone");
         assert!(x[k * n..].iter().all(|v| *v == 0.0), "{name}: a filler got a gradient");
     }
+    check_validation(ctx);
+}
+
+/// The pixel box of every splat, outside which the tile kernels skip it
+/// (raster_project.glsl `pixel_box`), holds every pixel the f64 reference
+/// sees it reach alpha 1/255 (tiny, huge, faint, thin, edge-on and
+/// near-plane splats; the box is computed once per splat, whatever the
+/// subgroup size), equals the reference's box where the splat is bounded on
+/// screen and well conditioned, and culls most of the pixels of the
+/// splats' tiles.
+#[test]
+fn pixel_boxes_hold_every_reached_pixel() {
+    let ctx = ctx_shared();
+    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
+    let mut rng = Rng(seed("pixel_boxes_hold_every_reached_pixel"));
+    let cam = axis_camera(48, 40, 36.0);
+    let mut s = HostGaussians::new(3, 16);
+    for i in 0..400 {
+        let m = [rng.uniform(-1.2, 1.2), rng.uniform(-1.0, 1.0), rng.uniform(1.0, 6.0)].map(|v| v as f32);
+        let ls = match i % 8 {
+            0 => [(1e-6f32).ln(), (1e-6f32).ln()],
+            1 => [(1e-6f32).ln(), -1.5],
+            2 => [0.5, -3.0],
+            _ => [rng.uniform(-4.0, -1.0) as f32, rng.uniform(-4.0, -1.0) as f32],
+        };
+        // Opacities from below the cut (culled) to saturated.
+        let o = rng.uniform(-7.0, 6.0) as f32;
+        s.push(m, ls, random_quat(&mut rng), o, &feats(&mut rng, 48));
+    }
+    // Huge, and straddling the near plane (unbounded on screen).
+    s.push([0.0, 0.0, 8.0], [(1e3f32).ln(), (1e3f32).ln()], [1.0, 0.0, 0.0, 0.0], 0.0, &feats(&mut rng, 48));
+    s.push([0.0, 0.0, 0.25], [0.0, 0.0], [0.8, 0.5, 0.0, 0.0], 1.0, &feats(&mut rng, 48));
+    let g = Gaussians::upload(ctx, &s).unwrap();
+    let mut frame = rast.frame(cam.width, cam.height, s.len() as u32, 1024).unwrap();
+    rast.forward(&g, &cam, &[0.2; 3], 3, &mut frame, false).unwrap();
+    let boxes = frame.download_pixel_boxes(s.len()).unwrap();
+    let rects = frame.download_rects(s.len()).unwrap();
+    let scene = RefScene::from_host(&s, false);
+    let (w, h) = ((cam.width - 1) as f64, (cam.height - 1) as f64);
+    let (mut reached, mut compared, mut unbounded) = (0, 0, 0);
+    // Pixel centres of the splats' tiles, and of them those in their boxes.
+    let (mut in_boxes, mut in_tiles) = (0usize, 0usize);
+    for (i, (b, r)) in boxes.iter().zip(&rects).enumerate() {
+        let Some(reach) = splat_reach(&scene, &cam, 3, i) else { continue };
+        let b = b.map(|v| v as f64);
+        if let Some(want) = reach.pixel_box {
+            compared += 1;
+            for k in 0..4 {
+                assert!((b[k] - want[k]).abs() <= 1e-3 * (1.0 + want[k].abs()), "Gaussian {i}: box {b:?}, the reference's {want:?}");
+            }
+        }
+        unbounded += !reach.bounded as usize;
+        let Some(px) = reach.pixels else { continue };
+        reached += 1;
+        assert!(r[2] > r[0] && r[3] > r[1], "Gaussian {i} reaches pixels {px:?} but has no tiles");
+        assert!(b[0] <= px[0] && b[1] <= px[1] && b[2] >= px[2] && b[3] >= px[3], "Gaussian {i}: box {b:?} misses pixels it reaches, {px:?}");
+        let t = r.map(|v| v as f64 * 16.0);
+        let count = |lo: f64, hi: f64, tlo: f64, thi: f64, max: f64| {
+            let (a, z) = (lo.ceil().max(tlo), hi.floor().min(thi - 1.0).min(max));
+            if z >= a { (z - a + 1.0) as usize } else { 0 }
+        };
+        in_boxes += count(b[0], b[2], t[0], t[2], w) * count(b[1], b[3], t[1], t[3], h);
+        in_tiles += count(t[0], t[2], t[0], t[2], w) * count(t[1], t[3], t[1], t[3], h);
+    }
+    eprintln!("{reached} splats reach a pixel, {unbounded} unbounded on screen; {compared} boxes compared; the boxes hold {in_boxes} of the {in_tiles} pixels of the tiles");
+    assert!(reached >= 150 && unbounded >= 1 && compared >= 150, "the scene should hold both kinds of splat");
+    assert!(in_boxes * 2 < in_tiles, "the boxes hold {in_boxes} of their tiles' {in_tiles} pixels: they should cull most");
     check_validation(ctx);
 }

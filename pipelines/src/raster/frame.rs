@@ -111,6 +111,16 @@ impl Frame {
     pub fn download_rects(&self, n: usize) -> anyhow::Result<Vec<[u32; 4]>> {
         Ok(self.rects.download_range(0, 4 * n)?.chunks(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
     }
+    /// Pixel boxes [x_lo, y_lo, x_hi, y_hi] of the first `n` Gaussians from
+    /// the last forward: the tile kernels evaluate a splat only at pixel
+    /// centres inside its box (glsl/raster_project.glsl `pixel_box`;
+    /// +-3e38 where the splat is unbounded on screen, undefined for culled
+    /// ones). One read-back, for inspection.
+    pub fn download_pixel_boxes(&self, n: usize) -> anyhow::Result<Vec<[f32; 4]>> {
+        let stride = super::PROJ_STRIDE;
+        let proj = self.proj.download_range(0, stride * n)?;
+        Ok(proj.chunks(stride).map(|c| [c[16], c[17], c[18], c[19]]).collect())
+    }
     pub fn pixels(&self) -> usize {
         self.width as usize * self.height as usize
     }

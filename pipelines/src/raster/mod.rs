@@ -71,6 +71,9 @@ pub const GATE_SLOTS: usize = 8;
 /// slot (`glsl/raster_gate.comp`, whose array holds 3 x GATE_SLOTS).
 const GATE_PUSH_WORDS: usize = 4 + 3 * GATE_SLOTS;
 const TILE: u32 = 16;
+/// Floats per Gaussian in a frame's projection buffer (`PROJ_STRIDE` in
+/// glsl/raster_common.glsl: the splat, its depth and its pixel box).
+const PROJ_STRIDE: usize = 20;
 /// Loop iterations per invocation we allow on devices with a loop limiter
 /// (lavapipe stops loops after 65,535).
 const LOOP_BUDGET: f64 = 50_000.0;
@@ -372,7 +375,7 @@ impl Rasterizer {
             spans: 1,
             last_intersections: 0,
             cam: fbuf("raster.cam", 20 + MAX_CHANNELS as usize)?,
-            proj: fbuf("raster.proj", 16 * n)?,
+            proj: fbuf("raster.proj", PROJ_STRIDE * n)?,
             pfeat: fbuf("raster.pfeat", self.channels as usize * n)?,
             rects: buf("raster.rects", 4 * n)?,
             tiles: buf("raster.tiles", n)?,
