@@ -1,5 +1,7 @@
 #version 460
 // variant: RECORDS_BDA
+// variant: COLOUR_ONLY
+// variant: COLOUR_ONLY RECORDS_BDA
 #ifdef RECORDS_BDA
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
@@ -18,6 +20,7 @@
 // dL/dalpha_i = T_i V_i - S_i / (1 - alpha_i), where V_i combines every
 // output's value for splat i with its upstream gradient and
 // S_i = sum_{j>i} w_j V_j + T_final (g_C . background).
+// COLOUR_ONLY: the feature gradients alone (see raster_backward_sg.comp).
 #include "common.glsl"
 #include "raster_common.glsl"
 #include "raster_pixel_grad.glsl"
@@ -138,6 +141,13 @@ void main() {
             vec3 dTu = vec3(0.0), dTv = vec3(0.0), dTw = vec3(0.0), dn = vec3(0.0);
             vec2 dmu = vec2(0.0);
             float dO = 0.0, w = 0.0;
+#ifdef COLOUR_ONLY
+            if (contrib) {
+                float Ti = T / (1.0 - alpha);
+                w = alpha * Ti;
+                T = Ti;
+            }
+#else
             if (contrib) {
                 float m = ndc_depth(h.z);
                 float V = gA + gD * h.z + dot(gN, nrm) + gDist * (m * m * A + M2 - 2.0 * m * M1);
@@ -153,15 +163,18 @@ void main() {
                 dn = r.dn;
                 w = r.w;
             }
+#endif
             // Sum over the subgroup; one partial per subgroup and splat.
             uint base = (gl_SubgroupID * BATCH + j) * KREC;
             if (subgroupAny(contrib)) {
+#ifndef COLOUR_ONLY
                 dTu = subgroupAdd(dTu);
                 dTv = subgroupAdd(dTv);
                 dTw = subgroupAdd(dTw);
                 dmu = subgroupAdd(dmu);
                 dO = subgroupAdd(dO);
                 dn = subgroupAdd(dn);
+#endif
                 for (uint c = 0u; c < CH; c++) {
                     float v = subgroupAdd(w * gC[c]);
                     if (subgroupElect()) {

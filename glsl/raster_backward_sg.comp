@@ -1,5 +1,7 @@
 #version 460
 // variant: RECORDS_BDA
+// variant: COLOUR_ONLY
+// variant: COLOUR_ONLY RECORDS_BDA
 #ifdef RECORDS_BDA
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
@@ -15,6 +17,10 @@
 // atomics, one writer per slot in a fixed order (bit-identical run to run).
 // The math per pixel is raster_backward.comp's (method-notes §1.7); spans
 // are processed last to first with (T, S) carried in `bstate`.
+// COLOUR_ONLY: the feature gradients alone (a set whose geometry does not
+// train): per pixel the weight w = alpha T_i and the feature sums, the
+// same operations as the full kernel's, so those records are bit-identical
+// to its; the geometric entries are zero and S is not carried.
 #include "common.glsl"
 #include "raster_common.glsl"
 #include "raster_pixel_grad.glsl"
@@ -134,6 +140,14 @@ void main() {
             if (!(contrib && alpha >= ALPHA_MIN)) {
                 continue;
             }
+#ifdef COLOUR_ONLY
+            float Ti = Ts[k] / (1.0 - alpha);
+            float w = alpha * Ti;
+            Ts[k] = Ti;
+            for (uint c = 0u; c < CH; c++) {
+                dF[c] += w * gCs[k * CH + c];
+            }
+#else
             float m = ndc_depth(h.z);
             float V = gAs[k] + gDs[k] * h.z + dot(gNs[k], nrm) + gDists[k] * (m * m * As[k] + M2s[k] - 2.0 * m * M1s[k]);
             for (uint c = 0u; c < CH; c++) {
@@ -149,14 +163,17 @@ void main() {
             dmu += r.dmu;
             dO += r.dO;
             dn += r.dn;
+#endif
         }
         // One subgroup is the whole tile: its sum is the splat's gradient.
+#ifndef COLOUR_ONLY
         dTu = subgroupAdd(dTu);
         dTv = subgroupAdd(dTv);
         dTw = subgroupAdd(dTw);
         dmu = subgroupAdd(dmu);
         dO = subgroupAdd(dO);
         dn = subgroupAdd(dn);
+#endif
         for (uint c = 0u; c < CH; c++) {
             dF[c] = subgroupAdd(dF[c]);
         }

@@ -289,3 +289,48 @@ fn workgroup_and_subgroup_kernels_agree() {
     }
     check_validation(ctx);
 }
+
+/// The feature-only backward (a set whose geometry does not train: Stage
+/// III's scattering colour) gives feature gradients bit-identical to the
+/// full backward's, with both tile kernels and both record accesses, on a
+/// scene whose tiles take several spans; and its geometry records are
+/// zero, so the positions get only the colour's view-direction term.
+#[test]
+fn colour_only_backward_matches_the_full_feature_gradients() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("colour_only_backward_matches_the_full_feature_gradients"));
+    let mut spec = SceneSpec::new(1500, 3, SH3);
+    spec.log_scale = (-2.5, -1.2);
+    spec.opacity = (-5.0, 2.0);
+    let scene = random_scene(&mut rng, &spec);
+    let cam = default_camera(40, 24);
+    let go = random_grads(&mut rng, 3, 40 * 24);
+    let g = tgs_pipelines::Gaussians::upload(ctx, &scene).unwrap();
+    let accesses: &[RecordAccess] = if ctx.caps().buffer_device_address { &[RecordAccess::Binding, RecordAccess::Address] } else { &[RecordAccess::Binding] };
+    for kernels in [RasterKernels::Subgroup, RasterKernels::Workgroup] {
+        for &records in accesses {
+            let one = Rasterizer::with_records(ctx, 3, SH3, None, kernels, records).unwrap();
+            let short = (one.span().min(512) / 2).max(32) / 32 * 32;
+            let rast = Rasterizer::with_records(ctx, 3, SH3, Some(short), kernels, records).unwrap();
+            let mut frame = rast.frame(cam.width, cam.height, scene.len() as u32, 1024).unwrap();
+            rast.forward(&g, &cam, &[0.3; 3], 3, &mut frame, false).unwrap();
+            frame.grad_out.upload(&go).unwrap();
+            let full = tgs_pipelines::Gaussians::zeros(ctx, g.n, g.channels, g.coeffs).unwrap();
+            rast.backward(&g, &full, 3, &frame, false).unwrap();
+            let colour = tgs_pipelines::Gaussians::zeros(ctx, g.n, g.channels, g.coeffs).unwrap();
+            let mut rec = tgs_engine::Recorder::new(ctx).unwrap();
+            rast.record_backward_colour(&mut rec, &g, &colour, 3, &frame).unwrap();
+            rec.submit_and_wait().unwrap();
+            let (full, colour) = (full.download().unwrap(), colour.download().unwrap());
+            assert!(frame.spans >= 2, "{kernels:?}: the scene should take several spans, not {}", frame.spans);
+            assert!(full.features.iter().filter(|v| **v != 0.0).count() > full.features.len() / 4, "{kernels:?}: too few feature gradients");
+            assert_eq!(bits(&full.features), bits(&colour.features), "{kernels:?} {records:?}: feature gradients differ");
+            for (name, v) in [("log_scales", &colour.log_scales), ("quats", &colour.quats), ("opacity", &colour.opacity)] {
+                assert!(v.iter().all(|x| *x == 0.0), "{kernels:?}: {name} gradients should be zero without geometric records");
+            }
+            let moved = |v: &[f32], w: &[f32]| v.iter().zip(w).filter(|(a, b)| a != b).count();
+            assert!(moved(&full.means, &colour.means) > full.means.len() / 4, "{kernels:?}: the positions' gradients should lack the geometric terms");
+        }
+    }
+    check_validation(ctx);
+}

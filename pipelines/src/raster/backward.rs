@@ -2,9 +2,10 @@
 //! gradient record per intersection; then a fixed-order per-Gaussian
 //! reduction of those records fused with the projection backward.
 
-use super::{Frame, Gaussians, Push, Rasterizer, Splats};
+use super::{Frame, Gaussians, Push, RasterKernels, Rasterizer, RecordAccess, Splats};
+use crate::shaders;
 use anyhow::{bail, Result};
-use tgs_engine::{groups_2d, Buffer, BufferBinding, Recorder};
+use tgs_engine::{groups_2d, Buffer, BufferBinding, Kernel, KernelDesc, Recorder};
 
 impl Rasterizer {
     /// Record the backward of the last forward on `frame` (same Gaussians),
@@ -22,11 +23,27 @@ impl Rasterizer {
     /// `d_features` (same layout as `features`), the geometry gradients to
     /// `grads` (whose own feature buffer is left alone).
     pub fn record_backward_with(&self, rec: &mut Recorder, s: Splats, grads: &Gaussians, d_features: &Buffer<f32>, frame: &Frame) -> Result<()> {
+        self.record_backward_parts(rec, s, grads, d_features, frame, false)
+    }
+
+    /// As [`Rasterizer::record_backward`] for a set whose geometry does not
+    /// train: the feature gradients, bit-identical to that backward's, at
+    /// a fraction of its per-pixel work (the tile kernels form no geometric
+    /// records). The other gradients in `grads` are partial (the colour's
+    /// dependence on the view direction alone) and are not for stepping.
+    pub fn record_backward_colour(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
+        if grads.channels != g.channels || grads.coeffs != g.coeffs {
+            bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
+        }
+        self.record_backward_parts(rec, Splats::own(g, sh_degree), grads, &grads.features, frame, true)
+    }
+
+    fn record_backward_parts(&self, rec: &mut Recorder, s: Splats, grads: &Gaussians, d_features: &Buffer<f32>, frame: &Frame, colour_only: bool) -> Result<()> {
         let Splats { g, features, sh_degree } = s;
         if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {
             bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
         }
-        let records = self.record_tile_backward(rec, g, features, sh_degree, frame)?;
+        let records = self.record_tile_backward(rec, g, features, sh_degree, frame, colour_only)?;
         let sc = rec.begin_scope("raster.reduce");
         let mut bindings = Self::param_bindings(frame, g, features);
         bindings.extend([
@@ -47,10 +64,12 @@ impl Rasterizer {
     }
 
     /// The per-tile part of the backward (every span, back to front): the
-    /// intersection gradient records. Returns the records' binding for the
+    /// intersection gradient records (their feature entries only, the rest
+    /// zero, with `colour_only`). Returns the records' binding for the
     /// per-Gaussian reduce.
-    pub(super) fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame) -> Result<BufferBinding> {
+    pub(super) fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame, colour_only: bool) -> Result<BufferBinding> {
         self.check_inputs(g, features, frame)?;
+        let kernel = if colour_only { self.backward_colour_kernel()? } else { &self.backward };
         let push = self.push(g, frame, sh_degree);
         let tile_groups = groups_2d(frame.tiles(), self.max_x());
         let mut bindings = Self::tile_bindings(frame);
@@ -66,10 +85,25 @@ impl Rasterizer {
         for k in (0..frame.spans).rev() {
             let p = Push { span_index: k, ..push };
             let sc = rec.begin_scope("raster.backward");
-            rec.dispatch(&self.backward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
+            rec.dispatch(kernel, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
         Ok(records)
+    }
+
+    fn backward_colour_kernel(&self) -> Result<&Kernel> {
+        if let Some(k) = self.backward_colour.get() {
+            return Ok(k);
+        }
+        let spirv = match (self.kernels, self.records) {
+            (RasterKernels::Workgroup, RecordAccess::Binding) => shaders::RASTER_BACKWARD_COLOUR_ONLY,
+            (RasterKernels::Workgroup, RecordAccess::Address) => shaders::RASTER_BACKWARD_COLOUR_ONLY_RECORDS_BDA,
+            (RasterKernels::Subgroup, RecordAccess::Binding) => shaders::RASTER_BACKWARD_SG_COLOUR_ONLY,
+            (RasterKernels::Subgroup, RecordAccess::Address) => shaders::RASTER_BACKWARD_SG_COLOUR_ONLY_RECORDS_BDA,
+        };
+        let push_bytes = std::mem::size_of::<Push>() as u32;
+        let k = Kernel::new(&self.ctx, &KernelDesc { name: "raster.backward", spirv, spec: &self.backward_spec, push_bytes, subgroup_size: None, full_subgroups: true })?;
+        Ok(self.backward_colour.get_or_init(|| k))
     }
 
     /// Run the backward of the last [`Rasterizer::forward`] on `frame`.

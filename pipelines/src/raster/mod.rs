@@ -169,6 +169,10 @@ pub struct Rasterizer {
     reduce: Kernel,
     /// The reduce with Adam fused (`reduce_adam.rs`), built on first use.
     reduce_adam: std::sync::OnceLock<Kernel>,
+    /// The tile backward of the feature gradients alone (`backward.rs`,
+    /// variant COLOUR_ONLY), built on first use with `backward_spec`.
+    backward_colour: std::sync::OnceLock<Kernel>,
+    backward_spec: Vec<(u32, u32)>,
 }
 
 impl Rasterizer {
@@ -248,14 +252,17 @@ impl Rasterizer {
         };
         let push = std::mem::size_of::<Push>() as u32;
         let by_address = records == RecordAccess::Address;
+        let backward_spec = match kernels {
+            RasterKernels::Workgroup => spec.to_vec(),
+            RasterKernels::Subgroup => vec![(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)],
+        };
         let (forward, backward) = match kernels {
             RasterKernels::Workgroup => {
                 let bwd = if by_address { shaders::RASTER_BACKWARD_RECORDS_BDA } else { shaders::RASTER_BACKWARD };
                 (k("raster.forward", shaders::RASTER_FORWARD, push, false)?, k("raster.backward", bwd, push, true)?)
             }
             RasterKernels::Subgroup => {
-                let spec = [(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)];
-                let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes: push, subgroup_size: None, full_subgroups: true });
+                let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &backward_spec, push_bytes: push, subgroup_size: None, full_subgroups: true });
                 let bwd = if by_address { shaders::RASTER_BACKWARD_SG_RECORDS_BDA } else { shaders::RASTER_BACKWARD_SG };
                 (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", bwd)?)
             }
@@ -281,6 +288,8 @@ impl Rasterizer {
             backward,
             reduce: k("raster.reduce", reduce, push, false)?,
             reduce_adam: std::sync::OnceLock::new(),
+            backward_colour: std::sync::OnceLock::new(),
+            backward_spec,
         })
     }
 

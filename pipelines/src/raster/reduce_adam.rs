@@ -93,7 +93,7 @@ impl Rasterizer {
             bail!("{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)", self.ctx.caps().device_name, std::mem::size_of::<PushAdam>());
         }
         let kernel = self.reduce_adam_kernel()?;
-        let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame)?;
+        let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, false)?;
         let sc = rec.begin_scope("raster.reduce");
         let mut bindings = Self::param_bindings(frame, g, &g.features);
         bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records]);

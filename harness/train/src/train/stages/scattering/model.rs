@@ -113,7 +113,11 @@ impl ScatteringModel {
     pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, step: &ExternalStep) -> Result<()> {
         let ExternalStep { sh_degree: sh, lr_means, iteration: it, colour_only } = *step;
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
-        self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+        if colour_only {
+            self.raster.record_backward_colour(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+        } else {
+            self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
+        }
         let sc = rec.begin_scope("adam");
         let groups = self.groups(cfg, lr_means, sh);
         if colour_only {
