@@ -9,9 +9,11 @@
 // Per-pixel 2DGS backward in ONE SUBGROUP per tile (for CPU drivers, where
 // a workgroup's subgroups run as coroutines on one thread and barriers and
 // shared-memory traffic dominate). The workgroup is one subgroup of WG
-// invocations; invocation l owns the PPT = 256 / WG pixels l, l + WG, ... of
-// the 16x16 tile and keeps their state in registers. Back to front, for each
-// splat every invocation sums its pixels' gradient records in pixel order,
+// invocations; invocation l owns the PPT = TILE^2 / WG pixels l, l + WG, ...
+// of the tile (8x8 where the frame allows, else 16x16) and keeps their
+// state in registers. Back to front, for each splat every invocation sums
+// the gradient records of its pixels inside the splat's pixel box (only
+// the rows the box reaches: `box_slots`) in pixel order,
 // one subgroupAdd per record entry sums the invocations, and one invocation
 // writes the intersection's own slot: no shared memory, no barriers, no
 // atomics, one writer per slot in a fixed order (bit-identical run to run).
@@ -25,7 +27,7 @@
 #include "raster_common.glsl"
 #include "raster_pixel_grad.glsl"
 
-layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = 256
+layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = TILE * TILE
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };

@@ -3,6 +3,7 @@
 // Specialization constants (besides common.glsl's 0..2):
 //   4: CH     feature channels per Gaussian (colour = 3; any 1..32)
 //   5: BATCH  splats per shared-memory reduction round in the backward
+//   7: TILE   tile side in pixels (below)
 //
 // Camera buffer (floats): [0..12) world->view rows (R | t), row-major;
 // [12..16) fx fy cx cy (pixel centres at integer coordinates);
@@ -14,7 +15,9 @@
 layout(constant_id = 4) const uint CH = 3;
 layout(constant_id = 5) const uint BATCH = 8;
 
-#define TILE 16u
+// Tile side in pixels (spec constant 7: 16, or 8 for the one-subgroup
+// kernels where the frame allows; pipelines/src/raster/tiles.rs).
+layout(constant_id = 7) const uint TILE = 16;
 #define NEAR 0.2
 #define FAR 100.0
 #define FILTER_INV_SQUARE 2.0

@@ -1,6 +1,7 @@
 #version 460
-// Per-pixel 2DGS forward (method-notes §1.5): one 16x16 workgroup per tile,
-// splats staged in shared memory in batches of 256, front to back.
+// Per-pixel 2DGS forward (method-notes §1.5): one 16x16 workgroup per tile
+// (TILE is 16 for these kernels), splats staged in shared memory in batches
+// of 256, front to back, each evaluated at the pixels of its box only.
 //
 // Long tile lists are cut into spans of `pc.span` splats; pass k handles span
 // k of every tile, carrying per-pixel state in the output/state planes, so no

@@ -1,8 +1,9 @@
 #version 460
 // Per-pixel 2DGS forward in ONE SUBGROUP per tile (for CPU drivers; see
-// raster_backward_sg.comp): invocation l owns the PPT = 256 / WG pixels
-// l, l + WG, ... of the 16x16 tile with their blending state in registers
-// and walks the tile's splats front to back, reading each splat straight
+// raster_backward_sg.comp): invocation l owns the PPT = TILE^2 / WG pixels
+// l, l + WG, ... of the tile (8x8 where the frame allows, else 16x16) with
+// their blending state in registers and walks the tile's splats front to
+// back (each at the pixels of its box only), reading each splat straight
 // from the projection buffer (the same address in every invocation): no
 // shared-memory staging, no barriers. The math, the outputs and the span
 // handling are raster_forward.comp's (method-notes §1.5); the walk stops
@@ -10,7 +11,7 @@
 #include "common.glsl"
 #include "raster_common.glsl"
 
-layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = 256
+layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = TILE * TILE
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };

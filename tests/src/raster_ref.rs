@@ -20,7 +20,8 @@ use tgs_pipelines::{Camera, HostGaussians};
 
 const NEAR: f64 = 0.2;
 const FAR: f64 = 100.0;
-const TILE: f64 = 16.0;
+/// The tile side the reference bins with unless told the GPU frame's.
+const TILE: usize = 16;
 
 /// A Gaussian set in f64 (same layout as [`HostGaussians`]).
 #[derive(Clone, Debug)]
@@ -143,6 +144,8 @@ struct Cam64 {
     centre: V3,
     w: usize,
     h: usize,
+    /// Tile side in pixels.
+    tile: usize,
 }
 
 impl Cam64 {
@@ -151,11 +154,15 @@ impl Cam64 {
         let r = [[m[0][0], m[0][1], m[0][2]], [m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]];
         let t = [m[0][3], m[1][3], m[2][3]];
         let centre = [0, 1, 2].map(|j| -(0..3).map(|i| r[i][j] * t[i]).sum::<f64>());
-        Cam64 { r, t, fx: c.fx as f64, fy: c.fy as f64, cx: c.cx as f64, cy: c.cy as f64, centre, w: c.width as usize, h: c.height as usize }
+        Cam64 { r, t, fx: c.fx as f64, fy: c.fy as f64, cx: c.cx as f64, cy: c.cy as f64, centre, w: c.width as usize, h: c.height as usize, tile: TILE }
+    }
+    /// As [`Cam64::new`], binning with `tile` x `tile` tiles (the GPU frame's).
+    fn tiled(c: &Camera, tile: u32) -> Cam64 {
+        Cam64 { tile: tile as usize, ..Cam64::new(c) }
     }
     /// The tile grid, as the bounds rectangles are clamped to.
-    fn tiles(&self) -> [f64; 2] {
-        [self.w.div_ceil(16) as f64, self.h.div_ceil(16) as f64]
+    fn tiles(&self) -> [f64; 3] {
+        [self.w.div_ceil(self.tile) as f64, self.h.div_ceil(self.tile) as f64, self.tile as f64]
     }
     fn rot(&self, v: V3) -> V3 {
         [dot(self.r[0], v), dot(self.r[1], v), dot(self.r[2], v)]
@@ -266,14 +273,14 @@ fn pixel_bounds(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius: f64, k2: f64) -> [
 
 /// Tile rectangle [x0, x1) x [y0, y1) of the pixels (centres at integers)
 /// inside bounds `b`, clamped to the grid; [0; 4] when no pixel is inside.
-fn rect_of(b: [f64; 4], tiles: [f64; 2]) -> [usize; 4] {
+fn rect_of(b: [f64; 4], tiles: [f64; 3]) -> [usize; 4] {
     let first = [b[0].ceil(), b[1].ceil()];
     let last = [b[2].floor(), b[3].floor()];
     if first[0] > last[0] || first[1] > last[1] || b.iter().any(|v| v.is_nan()) {
         return [0; 4];
     }
-    let lo = |v: f64, g: f64| (v / TILE).floor().clamp(0.0, g) as usize;
-    let hi = |v: f64, g: f64| ((v / TILE).floor() + 1.0).clamp(0.0, g) as usize;
+    let lo = |v: f64, g: f64| (v / tiles[2]).floor().clamp(0.0, g) as usize;
+    let hi = |v: f64, g: f64| ((v / tiles[2]).floor() + 1.0).clamp(0.0, g) as usize;
     [lo(first[0], tiles[0]), lo(first[1], tiles[1]), hi(last[0], tiles[0]), hi(last[1], tiles[1])]
 }
 
@@ -287,7 +294,7 @@ fn rect_contains(a: [usize; 4], b: [usize; 4]) -> bool {
 }
 
 /// The splat's tile rectangle (raster_project.glsl `tile_rect`).
-fn rect_at(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 2]) -> [usize; 4] {
+fn rect_at(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 3]) -> [usize; 4] {
     match cutoff2(o) {
         Some(k2) => rect_of(pixel_bounds(tu, tv, tw, mu, radius_raw.ceil(), k2), tiles),
         None => [0; 4],
@@ -297,7 +304,7 @@ fn rect_at(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles:
 /// The splat's tile rectangle, and the smallest and largest rectangles that
 /// f32 rounding of its inputs (opacity, the bounds, the radius's ceiling)
 /// could give: (rect, inner, outer).
-fn rects(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 2]) -> ([usize; 4], [usize; 4], [usize; 4]) {
+fn rects(tu: V3, tv: V3, tw: V3, mu: [f64; 2], radius_raw: f64, o: f64, tiles: [f64; 3]) -> ([usize; 4], [usize; 4], [usize; 4]) {
     let rect = rect_at(tu, tv, tw, mu, radius_raw, o, tiles);
     let dl = 1e-5 * (1.0 + mu[0].abs().max(mu[1].abs()));
     let (mut lo, mut hi) = ([f64::INFINITY; 4], [f64::NEG_INFINITY; 4]);
@@ -418,8 +425,12 @@ pub fn render(s: &RefScene, cam: &Camera, background: &[f64], degree: u32) -> Re
 /// As [`render`], with the tile rectangles taken from the GPU (the binning
 /// decision), so rounding at rectangle edges cannot make the two differ.
 /// Check the GPU's rectangles with [`rects_agree`].
-pub fn render_with_rects(s: &RefScene, cam: &Camera, background: &[f64], degree: u32, rects: Option<&[[u32; 4]]>) -> RefRender {
-    let c = Cam64::new(cam);
+pub fn render_with_rects(s: &RefScene, cam: &Camera, background: &[f64], degree: u32, rects: Option<(&[[u32; 4]], u32)>) -> RefRender {
+    let c = match rects {
+        Some((_, tile)) => Cam64::tiled(cam, tile),
+        None => Cam64::new(cam),
+    };
+    let rects = rects.map(|(r, _)| r);
     let (w, h) = (c.w, c.h);
     let ch = s.channels;
     let mut splats: Vec<RefSplat> = (0..s.len()).filter_map(|g| project(s, g, &c, degree)).collect();
@@ -442,7 +453,7 @@ pub fn render_with_rects(s: &RefScene, cam: &Camera, background: &[f64], degree:
     for py in 0..h {
         for px in 0..w {
             let i = py * w + px;
-            let (tx, ty) = (px / 16, py / 16);
+            let (tx, ty) = (px / c.tile, py / c.tile);
             let (xf, yf) = (px as f64, py as f64);
             let mut acc = vec![0.0; ch];
             let (mut t, mut dsum, mut m1, mut m2, mut dist, mut med) = (1.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
@@ -562,8 +573,8 @@ pub fn splat_reach(s: &RefScene, cam: &Camera, degree: u32, g: usize) -> Option<
 /// Tiles the splats of `s` that can reach alpha 1/255 would cover with a
 /// square box of their screen radius about mu (the 3-sigma binning 2DGS
 /// uses), summed: what the opacity-aware per-axis boxes are measured against.
-pub fn square_box_tiles(s: &RefScene, cam: &Camera, degree: u32) -> usize {
-    let c = Cam64::new(cam);
+pub fn square_box_tiles(s: &RefScene, cam: &Camera, degree: u32, tile: u32) -> usize {
+    let c = Cam64::tiled(cam, tile);
     (0..s.len())
         .filter_map(|g| project(s, g, &c, degree))
         .map(|sp| {
@@ -576,8 +587,8 @@ pub fn square_box_tiles(s: &RefScene, cam: &Camera, degree: u32) -> usize {
 /// Gaussians whose GPU tile rectangle is not between the reference's inner
 /// and outer rectangles (or that one side culls and the other does not, with
 /// a rectangle that cannot be empty). Returns their indices.
-pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) -> Vec<usize> {
-    let c = Cam64::new(cam);
+pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]], tile: u32) -> Vec<usize> {
+    let c = Cam64::tiled(cam, tile);
     let mut bad = Vec::new();
     for (g, r) in gpu.iter().enumerate() {
         let r = r.map(|v| v as usize);
@@ -602,7 +613,7 @@ pub fn rects_agree(s: &RefScene, cam: &Camera, degree: u32, gpu: &[[u32; 4]]) ->
 /// The 3-sigma box of a nearly edge-on splat is ill-conditioned (its conic
 /// is close to degenerate): does its tile rectangle change when the entries
 /// of T move by one f32 ulp?
-fn bbox_ill_conditioned(sp: &RefSplat, tiles: [f64; 2]) -> bool {
+fn bbox_ill_conditioned(sp: &RefSplat, tiles: [f64; 3]) -> bool {
     if sp.cos_view < 1e-3 {
         return true; // seen edge-on: the bounding conic is degenerate
     }

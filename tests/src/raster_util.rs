@@ -82,8 +82,9 @@ pub struct GpuRun {
     pub densify: Vec<f32>,
     pub intersections: u32,
     pub spans: u32,
-    /// Tile rectangle of every Gaussian.
+    /// Tile rectangle of every Gaussian, and the tile side they count in.
     pub rects: Vec<[u32; 4]>,
+    pub tile: u32,
 }
 
 /// Forward (and backward when `grad_out` is given) on the GPU.
@@ -94,7 +95,7 @@ pub fn gpu_run(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32]
     rast.forward(&g, cam, bg, degree, &mut frame, false).unwrap();
     let out = frame.out.download().unwrap();
     let rects = frame.download_rects(host.len()).unwrap();
-    let mut run = GpuRun { out, grads: None, densify: vec![], intersections: frame.last_intersections, spans: frame.spans, rects };
+    let mut run = GpuRun { out, grads: None, densify: vec![], intersections: frame.last_intersections, spans: frame.spans, rects, tile: frame.tile };
     if let Some(go) = grad_out {
         frame.grad_out.upload(go).unwrap();
         let grads = Gaussians::zeros(ctx, g.n, g.channels, g.coeffs).unwrap();
@@ -148,9 +149,9 @@ pub fn check_forward_with(rast: &Rasterizer, host: &HostGaussians, cam: &Camera,
     let run = gpu_run(rast, host, cam, bg, degree, None);
     let scene = RefScene::from_host(host, rast.features() == Features::Plain);
     let bg64: Vec<f64> = bg.iter().map(|&v| v as f64).collect();
-    let bad = raster_ref::rects_agree(&scene, cam, degree, &run.rects);
+    let bad = raster_ref::rects_agree(&scene, cam, degree, &run.rects, run.tile);
     assert!(bad.is_empty(), "{what}: tile rectangles of Gaussians {bad:?} differ from the reference beyond rounding");
-    let cpu = raster_ref::render_with_rects(&scene, cam, &bg64, degree, Some(&run.rects));
+    let cpu = raster_ref::render_with_rects(&scene, cam, &bg64, degree, Some((&run.rects, run.tile)));
     let pixels = (cam.width * cam.height) as usize;
     let (err, at, skipped, widened) = compare_forward(&run.out, &cpu, rast.channels(), pixels);
     eprintln!("{what}: worst error/tolerance {err:.3} ({at}); {skipped} ambiguous and {widened} ill-conditioned pixels of {pixels}; {} intersections", run.intersections);

@@ -40,14 +40,14 @@ fn binning_drops_no_pixel_a_splat_reaches() {
         let cam = default_camera(w, h);
         let run = gpu_run(&rast, &scene, &cam, &[0.1, 0.5, 0.9], 3, None);
         let ref_scene = RefScene::from_host(&scene, false);
-        let tiles = [w.div_ceil(16), h.div_ceil(16)];
+        let tiles = [w.div_ceil(run.tile), h.div_ceil(run.tile)];
         let whole = vec![[0, 0, tiles[0], tiles[1]]; scene.len()];
-        let cpu = raster_ref::render_with_rects(&ref_scene, &cam, &[0.1, 0.5, 0.9], 3, Some(&whole));
+        let cpu = raster_ref::render_with_rects(&ref_scene, &cam, &[0.1, 0.5, 0.9], 3, Some((&whole, run.tile)));
         let pixels = (w * h) as usize;
         let (err, at, skipped, _) = compare_forward(&run.out, &cpu, 3, pixels);
         assert!(err <= 1.0, "{w}x{h}: the binned render differs from the unbinned reference: {at}");
         assert!(skipped * 100 <= pixels, "{w}x{h}: {skipped} of {pixels} pixels ambiguous");
-        let squares = raster_ref::square_box_tiles(&ref_scene, &cam, 3);
+        let squares = raster_ref::square_box_tiles(&ref_scene, &cam, 3, run.tile);
         let faint = |g: usize| 1.0 / (1.0 + (-scene.opacity[g] as f64).exp()) < 1.0 / 255.0;
         let tiles_of = |r: &[u32; 4]| if r[2] > r[0] && r[3] > r[1] { ((r[2] - r[0]) * (r[3] - r[1])) as usize } else { 0 };
         let culled = (0..scene.len()).filter(|&g| faint(g)).count();

@@ -2,10 +2,9 @@
 //! gradient record per intersection; then a fixed-order per-Gaussian
 //! reduction of those records fused with the projection backward.
 
-use super::{Frame, Gaussians, Push, RasterKernels, Rasterizer, RecordAccess, Splats};
-use crate::shaders;
+use super::{Frame, Gaussians, Push, Rasterizer, Splats};
 use anyhow::{bail, Result};
-use tgs_engine::{groups_2d, Buffer, BufferBinding, Kernel, KernelDesc, Recorder};
+use tgs_engine::{groups_2d, Buffer, BufferBinding, Recorder};
 
 impl Rasterizer {
     /// Record the backward of the last forward on `frame` (same Gaussians),
@@ -69,7 +68,8 @@ impl Rasterizer {
     /// per-Gaussian reduce.
     pub(super) fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame, colour_only: bool) -> Result<BufferBinding> {
         self.check_inputs(g, features, frame)?;
-        let kernel = if colour_only { self.backward_colour_kernel()? } else { &self.backward };
+        let tk = self.tile_kernels(frame.tile)?;
+        let kernel = if colour_only { tk.backward_colour()? } else { &tk.backward };
         let push = self.push(g, frame, sh_degree);
         let tile_groups = groups_2d(frame.tiles(), self.max_x());
         let mut bindings = Self::tile_bindings(frame);
@@ -89,21 +89,6 @@ impl Rasterizer {
             rec.end_scope(sc);
         }
         Ok(records)
-    }
-
-    fn backward_colour_kernel(&self) -> Result<&Kernel> {
-        if let Some(k) = self.backward_colour.get() {
-            return Ok(k);
-        }
-        let spirv = match (self.kernels, self.records) {
-            (RasterKernels::Workgroup, RecordAccess::Binding) => shaders::RASTER_BACKWARD_COLOUR_ONLY,
-            (RasterKernels::Workgroup, RecordAccess::Address) => shaders::RASTER_BACKWARD_COLOUR_ONLY_RECORDS_BDA,
-            (RasterKernels::Subgroup, RecordAccess::Binding) => shaders::RASTER_BACKWARD_SG_COLOUR_ONLY,
-            (RasterKernels::Subgroup, RecordAccess::Address) => shaders::RASTER_BACKWARD_SG_COLOUR_ONLY_RECORDS_BDA,
-        };
-        let push_bytes = std::mem::size_of::<Push>() as u32;
-        let k = Kernel::new(&self.ctx, &KernelDesc { name: "raster.backward", spirv, spec: &self.backward_spec, push_bytes, subgroup_size: None, full_subgroups: true })?;
-        Ok(self.backward_colour.get_or_init(|| k))
     }
 
     /// Run the backward of the last [`Rasterizer::forward`] on `frame`.

@@ -25,7 +25,7 @@ impl Rasterizer {
             frame.depth_ids.binding(),
             frame.radii.binding(),
         ]);
-        rec.dispatch(&self.project, &bindings, pb, self.groups(g.n))?;
+        rec.dispatch(&self.tile_kernels(frame.tile)?.project, &bindings, pb, self.groups(g.n))?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.depth_sort");

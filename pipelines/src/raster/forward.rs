@@ -34,6 +34,7 @@ impl Rasterizer {
 
         self.record_binning(rec, g, features, pb, frame)?;
 
+        let forward = &self.tile_kernels(frame.tile)?.forward;
         let tiles = frame.tiles();
         let tile_groups = groups_2d(tiles, self.max_x());
         let mut bindings = Self::tile_bindings(frame);
@@ -41,7 +42,7 @@ impl Rasterizer {
         for k in 0..frame.spans {
             let p = Push { span_index: k, ..push };
             let sc = rec.begin_scope("raster.forward");
-            rec.dispatch(&self.forward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
+            rec.dispatch(forward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);
         }
         // The total and the overflow flag ride this submission back to the host (`fit`).
@@ -92,7 +93,7 @@ impl Rasterizer {
         if span_overflow {
             let r = frame.ranges.download()?;
             let longest = r.chunks(2).map(|c| c[1].saturating_sub(c[0])).max().unwrap_or(0);
-            frame.spans = longest.div_ceil(self.span).max(frame.spans + 1);
+            frame.spans = longest.div_ceil(self.span_of(frame.tile)).max(frame.spans + 1);
             fits = false;
         }
         Ok(fits)

@@ -49,6 +49,8 @@ impl Plane {
 pub struct Frame {
     pub width: u32,
     pub height: u32,
+    /// Tile side in pixels (8 or 16: the rasterizer's choice for the size).
+    pub tile: u32,
     pub tiles_x: u32,
     pub tiles_y: u32,
     /// Gaussians this frame can take.

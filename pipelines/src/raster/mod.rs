@@ -14,11 +14,13 @@ mod forward;
 mod frame;
 mod gaussians;
 mod reduce_adam;
+mod tiles;
 
 pub use camera::Camera;
 pub use frame::{Frame, Plane};
 pub use gaussians::{array_widths, Gaussians, HostGaussians, Splats, GAUSSIAN_ARRAYS};
 pub use reduce_adam::{Moments, ReduceAdam};
+use tiles::{TileKernels, TileSpec, SMALL_TILE};
 
 use crate::scan::{PrefixSum, ScanScratch};
 use crate::shaders;
@@ -70,7 +72,6 @@ pub const GATE_SLOTS: usize = 8;
 /// The gate's push constants: capacity, count, two pads, then x, y, z per
 /// slot (`glsl/raster_gate.comp`, whose array holds 3 x GATE_SLOTS).
 const GATE_PUSH_WORDS: usize = 4 + 3 * GATE_SLOTS;
-const TILE: u32 = 16;
 /// Floats per Gaussian in a frame's projection buffer (`PROJ_STRIDE` in
 /// glsl/raster_common.glsl: the splat, its depth and its pixel box).
 const PROJ_STRIDE: usize = 20;
@@ -153,26 +154,23 @@ pub struct Rasterizer {
     channels: u32,
     features: Features,
     batch: u32,
-    span: u32,
     kernels: RasterKernels,
     records: RecordAccess,
     sort: RadixSort,
     scan: PrefixSum,
-    project: Kernel,
     gather: Kernel,
     emit: Kernel,
     plan: Kernel,
     gate: Kernel,
     ranges: Kernel,
-    forward: Kernel,
-    backward: Kernel,
     reduce: Kernel,
     /// The reduce with Adam fused (`reduce_adam.rs`), built on first use.
     reduce_adam: std::sync::OnceLock<Kernel>,
-    /// The tile backward of the feature gradients alone (`backward.rs`,
-    /// variant COLOUR_ONLY), built on first use with `backward_spec`.
-    backward_colour: std::sync::OnceLock<Kernel>,
-    backward_spec: Vec<(u32, u32)>,
+    /// What the tile-size dependent kernels are built for, and those
+    /// kernels for 16 x 16 and 8 x 8 tiles, each built on first use
+    /// (`tiles.rs`).
+    tile_spec: TileSpec,
+    tile_sets: [std::sync::OnceLock<TileKernels>; 2],
 }
 
 impl Rasterizer {
@@ -225,71 +223,36 @@ impl Rasterizer {
         if kernels == RasterKernels::Subgroup && (caps.min_subgroup_size != caps.max_subgroup_size || sg == 0 || WG % sg != 0) {
             bail!("the one-subgroup backward needs a fixed subgroup size dividing {WG}; {} has {}..={}", caps.device_name, caps.min_subgroup_size, caps.max_subgroup_size);
         }
-        let ppt = WG / sg.max(1);
-        let span = match span {
-            Some(s) if s == 0 || s % SPAN_STEP != 0 => bail!("span must be a positive multiple of {SPAN_STEP}, not {s}"),
-            Some(s) => s,
-            None if caps.is_cpu() => {
-                // Loop iterations per splat in the forward and the backward
-                // (every loop counted, unrolled or not).
-                let ch = channels as f64;
-                let fwd = match kernels {
-                    RasterKernels::Workgroup => 2.0 + ch,
-                    RasterKernels::Subgroup => ppt as f64 * (1.0 + ch) + ch + 2.0,
-                };
-                let bwd = match kernels {
-                    RasterKernels::Workgroup => 3.0 + 2.0 * ch + ((batch * krec).div_ceil(WG) as f64 * (1.0 + max_sg_count as f64) + 1.0) / batch as f64,
-                    RasterKernels::Subgroup => ppt as f64 * (1.0 + ch) + 3.0 * ch + 2.0,
-                };
-                let s = (LOOP_BUDGET / fwd.max(bwd)) as u32 / SPAN_STEP * SPAN_STEP;
-                s.max(SPAN_STEP)
+        if let Some(s) = span {
+            if s == 0 || s % SPAN_STEP != 0 {
+                bail!("span must be a positive multiple of {SPAN_STEP}, not {s}");
             }
-            None => u32::MAX / 2 / WG * WG,
-        };
+        }
         let spec = [(0, WG), (1, min_sg), (4, channels), (5, batch)];
         let k = |name, spirv, push_bytes, full| {
             Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full })
         };
         let push = std::mem::size_of::<Push>() as u32;
         let by_address = records == RecordAccess::Address;
-        let backward_spec = match kernels {
-            RasterKernels::Workgroup => spec.to_vec(),
-            RasterKernels::Subgroup => vec![(0, sg), (1, sg), (4, channels), (5, batch), (6, ppt)],
-        };
-        let (forward, backward) = match kernels {
-            RasterKernels::Workgroup => {
-                let bwd = if by_address { shaders::RASTER_BACKWARD_RECORDS_BDA } else { shaders::RASTER_BACKWARD };
-                (k("raster.forward", shaders::RASTER_FORWARD, push, false)?, k("raster.backward", bwd, push, true)?)
-            }
-            RasterKernels::Subgroup => {
-                let k = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &backward_spec, push_bytes: push, subgroup_size: None, full_subgroups: true });
-                let bwd = if by_address { shaders::RASTER_BACKWARD_SG_RECORDS_BDA } else { shaders::RASTER_BACKWARD_SG };
-                (k("raster.forward", shaders::RASTER_FORWARD_SG)?, k("raster.backward", bwd)?)
-            }
-        };
         let reduce = if by_address { shaders::RASTER_REDUCE_RECORDS_BDA } else { shaders::RASTER_REDUCE };
         Ok(Rasterizer {
             ctx: ctx.clone(),
             channels,
             features,
             batch,
-            span,
             kernels,
             records,
             sort: RadixSort::new(ctx)?,
             scan: PrefixSum::new(ctx)?,
-            project: k("raster.project", shaders::RASTER_PROJECT, push, false)?,
             gather: k("raster.gather", shaders::RASTER_GATHER, 4, false)?,
             emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
             plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
             gate: Kernel::new(ctx, &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 4 * GATE_PUSH_WORDS as u32, subgroup_size: None, full_subgroups: false })?,
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
-            forward,
-            backward,
             reduce: k("raster.reduce", reduce, push, false)?,
             reduce_adam: std::sync::OnceLock::new(),
-            backward_colour: std::sync::OnceLock::new(),
-            backward_spec,
+            tile_spec: TileSpec { kernels, records, channels, batch, span },
+            tile_sets: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
         })
     }
 
@@ -308,9 +271,28 @@ impl Rasterizer {
         self.records
     }
 
-    /// Splats per span (tiles longer than this take several passes).
+    /// Splats per span (tiles longer than this take several passes) with
+    /// the tiles this rasterizer prefers ([`Rasterizer::tile`]).
     pub fn span(&self) -> u32 {
-        self.span
+        self.span_of(self.tile())
+    }
+    /// Splats per span with `tile` x `tile` tiles.
+    pub(crate) fn span_of(&self, tile: u32) -> u32 {
+        self.tile_spec.span(self.ctx.caps(), tile)
+    }
+    /// The tile side of the frames this rasterizer makes where the loop
+    /// budget allows (8 with the Subgroup kernels, else 16; `tiles.rs`).
+    pub fn tile(&self) -> u32 {
+        self.tile_spec.tile_for(1, 1, |_| true)
+    }
+    /// The tile-size dependent kernels for `tile` x `tile` tiles.
+    fn tile_kernels(&self, tile: u32) -> Result<&TileKernels> {
+        let slot = &self.tile_sets[(tile == SMALL_TILE) as usize];
+        if let Some(k) = slot.get() {
+            return Ok(k);
+        }
+        let k = self.tile_spec.build(&self.ctx, tile)?;
+        Ok(slot.get_or_init(|| k))
     }
     /// Splats per shared-memory reduction round in the backward.
     pub fn batch(&self) -> u32 {
@@ -354,10 +336,13 @@ impl Rasterizer {
         if width == 0 || height == 0 {
             bail!("image size {width}x{height} is empty");
         }
-        let tiles_x = width.div_ceil(TILE);
-        let tiles_y = height.div_ceil(TILE);
+        let cpu = ctx.caps().is_cpu();
+        let fits = |tiles: u64| !cpu || tiles * (3 + self.channels as u64) <= LOOP_BUDGET as u64;
+        let tile = self.tile_spec.tile_for(width, height, fits);
+        let tiles_x = width.div_ceil(tile);
+        let tiles_y = height.div_ceil(tile);
         let tiles = tiles_x as u64 * tiles_y as u64;
-        if ctx.caps().is_cpu() && tiles * (3 + self.channels as u64) > LOOP_BUDGET as u64 {
+        if !fits(tiles) {
             bail!(
                 "image {width}x{height} has {tiles} tiles; on a CPU driver (loop limit 65,535 per invocation) at most {} tiles fit with {} channels",
                 LOOP_BUDGET as u64 / (3 + self.channels as u64),
@@ -377,6 +362,7 @@ impl Rasterizer {
         Ok(Frame {
             width,
             height,
+            tile,
             tiles_x,
             tiles_y,
             max_gaussians,
@@ -426,7 +412,7 @@ impl Rasterizer {
             degree,
             mode: matches!(self.features, Features::Plain) as u32,
             capacity: frame.capacity,
-            span: self.span,
+            span: self.span_of(frame.tile),
             span_index: 0,
             spans: frame.spans,
         }
