@@ -37,6 +37,13 @@ impl Rasterizer {
         self.record_backward_parts(rec, Splats::own(g, sh_degree), grads, &grads.features, frame, true)
     }
 
+    /// [`Rasterizer::record_backward_colour`] for a forward recorded with
+    /// [`Rasterizer::record_forward_with`]: the feature gradients, those of
+    /// [`Rasterizer::record_backward_with`] bit for bit, to `d_features`.
+    pub fn record_backward_colour_with(&self, rec: &mut Recorder, s: Splats, grads: &Gaussians, d_features: &Buffer<f32>, frame: &Frame) -> Result<()> {
+        self.record_backward_parts(rec, s, grads, d_features, frame, true)
+    }
+
     fn record_backward_parts(&self, rec: &mut Recorder, s: Splats, grads: &Gaussians, d_features: &Buffer<f32>, frame: &Frame, colour_only: bool) -> Result<()> {
         let Splats { g, features, sh_degree } = s;
         if grads.n != g.n || d_features.len() < features.len().min((self.channels * self.features.coeffs() * g.n) as usize) {

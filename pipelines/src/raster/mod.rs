@@ -20,7 +20,7 @@ pub use camera::Camera;
 pub use frame::{Frame, Plane};
 pub use gaussians::{array_widths, Gaussians, HostGaussians, Splats, GAUSSIAN_ARRAYS};
 pub use reduce_adam::{Moments, ReduceAdam};
-use tiles::{TileKernels, TileSpec, SMALL_TILE};
+use tiles::{TileKernels, TileSpec, SMALL_TILE, WIDE_TILE};
 
 use crate::scan::{PrefixSum, ScanScratch};
 use crate::shaders;
@@ -287,6 +287,9 @@ impl Rasterizer {
     }
     /// The tile-size dependent kernels for `tile` x `tile` tiles.
     fn tile_kernels(&self, tile: u32) -> Result<&TileKernels> {
+        if !(tile == WIDE_TILE || tile == SMALL_TILE && self.kernels == RasterKernels::Subgroup) {
+            bail!("a frame of {tile} x {tile} tiles does not suit this rasterizer's {:?} kernels (make the frame with this rasterizer)", self.kernels);
+        }
         let slot = &self.tile_sets[(tile == SMALL_TILE) as usize];
         if let Some(k) = slot.get() {
             return Ok(k);

@@ -275,7 +275,9 @@ impl LightFieldModel {
                 Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
                 None => self.mlp.record_backward_counted(&mut rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
             }
-            self.raster.record_backward_with(&mut rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
+            // The reflection set's geometry is frozen: its material alone
+            // needs gradients (the feature-only backward, bit-identical).
+            self.raster.record_backward_colour_with(&mut rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
             let sc = rec.begin_scope("lf.material_backward");
             self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
             rec.end_scope(sc);
