@@ -2,6 +2,8 @@
 // variant: RECORDS_BDA
 // variant: ADAM
 // variant: ADAM RECORDS_BDA
+// variant: ADAM COLOUR_ONLY
+// variant: ADAM COLOUR_ONLY RECORDS_BDA
 #ifdef RECORDS_BDA
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
@@ -15,6 +17,10 @@
 // its gradients (bindings 9-13 then hold the first moments, 15-19 the
 // second ones; adam.comp's arithmetic, so the result is the same as this
 // kernel followed by adam.comp): one pass over the parameters fewer.
+// ADAM COLOUR_ONLY (after the COLOUR_ONLY tile backward, for a set whose
+// geometry does not train): sums the feature records alone and steps the
+// features alone; means, scales, rotations, opacity and their moments are
+// left as they are, densification gradients are written as zero.
 #include "common.glsl"
 
 #ifdef ADAM
@@ -60,6 +66,12 @@ layout(std430, binding = 19) buffer M2Feats { float m2_feats[]; };
     float d_ = sqrt(v_) / sqrt(pc.bc2) + pc.eps; \
     P -= ((LR) / pc.bc1) * m_ / d_; }
 
+#ifdef COLOUR_ONLY
+void put_mean(uint i, float g) {}
+void put_scale(uint i, float g) {}
+void put_quat(uint i, vec4 g) {}
+void put_opacity(uint i, float g) {}
+#else
 void put_mean(uint i, float g) { ADAM_STEP(means[i], m1_means[i], m2_means[i], g, pc.lr_means) }
 void put_scale(uint i, float g) { ADAM_STEP(log_scales[i], m1_scales[i], m2_scales[i], g, pc.lr_scales) }
 void put_quat(uint i, vec4 g) {
@@ -68,6 +80,7 @@ void put_quat(uint i, vec4 g) {
     }
 }
 void put_opacity(uint i, float g) { ADAM_STEP(opacity[i], m1_opacity[i], m2_opacity[i], g, pc.lr_opacity) }
+#endif
 // Feature i of the Gaussian whose features start at fb.
 void put_feat(uint fb, uint i, float g) {
     if (i < pc.feat_active) {
@@ -118,12 +131,14 @@ void main() {
     }
     for (uint p = p0; p < p1; p++) {
         uint b = p * KREC;
+#ifndef COLOUR_ONLY
         dTu += vec3(RECORDS[b], RECORDS[b + 1u], RECORDS[b + 2u]);
         dTv += vec3(RECORDS[b + 3u], RECORDS[b + 4u], RECORDS[b + 5u]);
         dTw += vec3(RECORDS[b + 6u], RECORDS[b + 7u], RECORDS[b + 8u]);
         dmu += vec2(RECORDS[b + 9u], RECORDS[b + 10u]);
         dO += RECORDS[b + 11u];
         dn += vec3(RECORDS[b + 12u], RECORDS[b + 13u], RECORDS[b + 14u]);
+#endif
         for (uint c = 0u; c < CH; c++) {
             df[c] += RECORDS[b + 15u + c];
         }

@@ -280,7 +280,7 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
                 let mut rec = Recorder::new(ctx).unwrap();
                 if fused {
                     let c = adam.reduce_constants(&set, &groups, t).unwrap();
-                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c }, 1, &frame, None).unwrap();
+                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c, features_only: false }, 1, &frame, None).unwrap();
                 } else {
                     rast.record_backward(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
                     adam.record_set(&mut rec, &set, &groups, t).unwrap();
@@ -303,6 +303,90 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
             assert_ne!(params(&fused, k), params(&initial, k), "{records:?}: {k} did not move");
         }
     }
+    check_validation(ctx);
+}
+
+/// The feature-only reduce with Adam fused (`Moments::features_only`: Stage
+/// III's scattering colour on CPU devices) leaves bit for bit the
+/// parameters and moments of the feature-only backward followed by Adam's
+/// pass over the features (two steps at SH degree 1 of 3, records bound
+/// and by address); the geometry and its moments stay as they were, and the
+/// features move.
+#[test]
+fn the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam() {
+    use tgs_pipelines::{Features, RasterKernels, Rasterizer, RecordAccess};
+    use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam"));
+    let sh3 = Features::Sh { degree: 3 };
+    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, sh3));
+    let cam = default_camera(70, 45);
+    let grad_out = random_grads(&mut rng, 3, 70 * 45);
+    let adam = Adam::new(ctx, 1e-15).unwrap();
+    let groups = [
+        AdamGroup::single(1e-3),
+        AdamGroup::single(5e-3),
+        AdamGroup::single(1e-3),
+        AdamGroup::single(0.05),
+        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
+    ];
+    let mut access = vec![RecordAccess::Binding];
+    if ctx.caps().buffer_device_address {
+        access.push(RecordAccess::Address);
+    }
+    let bits_of = |set: &TrainableSet| -> Vec<(String, Vec<u32>)> { set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect() };
+    let initial = bits_of(&TrainableSet::new(ctx, &host).unwrap());
+    for records in access {
+        let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
+        if !rast.can_fuse_adam() {
+            eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
+            return;
+        }
+        let run = |fused: bool| -> Vec<(String, Vec<u32>)> {
+            let set = TrainableSet::new(ctx, &host).unwrap();
+            let mut frame = rast.frame(cam.width, cam.height, set.len(), 1024).unwrap();
+            for t in 1..=2u64 {
+                rast.forward(&set.params, &cam, &[0.1, 0.5, 0.9], 1, &mut frame, false).unwrap();
+                frame.grad_out.upload(&grad_out).unwrap();
+                let mut rec = Recorder::new(ctx).unwrap();
+                if fused {
+                    let c = adam.reduce_constants(&set, &groups, t).unwrap();
+                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c, features_only: true }, 1, &frame, None).unwrap();
+                } else {
+                    rast.record_backward_colour(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
+                    adam.record_set_features(&mut rec, &set, &groups[4], t).unwrap();
+                }
+                rec.submit_and_wait().unwrap();
+            }
+            bits_of(&set)
+        };
+        let (fused, separate) = (run(true), run(false));
+        for (((name, a), (_, b)), (_, init)) in fused.iter().zip(&separate).zip(&initial) {
+            if name.starts_with("grad.") {
+                continue;
+            }
+            assert!(a == b, "{records:?}: {name} differs between the fused and the separate step");
+            let feature = name.ends_with(".features");
+            assert_eq!(a != init, feature, "{records:?}: {name} should {} move", if feature { "" } else { "not" });
+        }
+    }
+    check_validation(ctx);
+}
+
+#[test]
+fn the_fused_reduce_refuses_groups_it_cannot_express() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("the_fused_reduce_refuses_groups_it_cannot_express"));
+    let sh3 = tgs_pipelines::Features::Sh { degree: 3 };
+    let host = tgs_tests::raster_util::random_scene(&mut rng, &tgs_tests::raster_util::SceneSpec::new(20, 3, sh3));
+    let adam = Adam::new(ctx, 1e-15).unwrap();
+    let groups = [
+        AdamGroup::single(1e-3),
+        AdamGroup::single(5e-3),
+        AdamGroup::single(1e-3),
+        AdamGroup::single(0.05),
+        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
+    ];
     // Groups the fused step cannot express are refused, not approximated.
     let set = TrainableSet::new(ctx, &host).unwrap();
     let mut two_rates = groups;

@@ -20,6 +20,12 @@ pub struct Moments<'a> {
     pub m: &'a Gaussians,
     pub v: &'a Gaussians,
     pub adam: &'a ReduceAdam,
+    /// Step the features alone (a set whose geometry does not train): the
+    /// feature-only tile backward and reduce; the geometry and its moments
+    /// are left as they are, `frame.densify` is zero. The result is that of
+    /// [`Rasterizer::record_backward_colour`] followed by Adam's pass over
+    /// the features, bit for bit.
+    pub features_only: bool,
 }
 
 /// Adam's rates and constants for [`Rasterizer::record_backward_adam`]
@@ -79,7 +85,7 @@ impl Rasterizer {
     /// [`Rasterizer::reduce_grid`]) the reduce, and so the step, runs only
     /// when the view fitted its frame.
     pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, step: Moments, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
-        let Moments { m, v, adam } = step;
+        let Moments { m, v, adam, features_only } = step;
         for (name, s) in [("first", m), ("second", v)] {
             if s.n != g.n || s.channels != g.channels || s.coeffs != g.coeffs {
                 bail!("Adam's {name} moments ({} Gaussians, {} x {} features) do not match the Gaussian set ({}, {} x {})", s.n, s.channels, s.coeffs, g.n, g.channels, g.coeffs);
@@ -92,8 +98,8 @@ impl Rasterizer {
         if !self.can_fuse_adam() {
             bail!("{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)", self.ctx.caps().device_name, std::mem::size_of::<PushAdam>());
         }
-        let kernel = self.reduce_adam_kernel()?;
-        let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, false)?;
+        let kernel = self.reduce_adam_kernel(features_only)?;
+        let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, features_only)?;
         let sc = rec.begin_scope("raster.reduce");
         let mut bindings = Self::param_bindings(frame, g, &g.features);
         bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records]);
@@ -109,18 +115,21 @@ impl Rasterizer {
         Ok(())
     }
 
-    fn reduce_adam_kernel(&self) -> Result<&Kernel> {
-        if let Some(k) = self.reduce_adam.get() {
+    fn reduce_adam_kernel(&self, features_only: bool) -> Result<&Kernel> {
+        let slot = &self.reduce_adam[features_only as usize];
+        if let Some(k) = slot.get() {
             return Ok(k);
         }
-        let spirv = match self.records {
-            super::RecordAccess::Address => shaders::RASTER_REDUCE_ADAM_RECORDS_BDA,
-            super::RecordAccess::Binding => shaders::RASTER_REDUCE_ADAM,
+        let spirv = match (self.records, features_only) {
+            (super::RecordAccess::Address, false) => shaders::RASTER_REDUCE_ADAM_RECORDS_BDA,
+            (super::RecordAccess::Binding, false) => shaders::RASTER_REDUCE_ADAM,
+            (super::RecordAccess::Address, true) => shaders::RASTER_REDUCE_ADAM_COLOUR_ONLY_RECORDS_BDA,
+            (super::RecordAccess::Binding, true) => shaders::RASTER_REDUCE_ADAM_COLOUR_ONLY,
         };
         let min_sg = self.ctx.caps().min_subgroup_size.max(1);
         let spec = [(0, super::WG), (1, min_sg), (4, self.channels), (5, self.batch)];
         let push_bytes = std::mem::size_of::<PushAdam>() as u32;
         let k = Kernel::new(&self.ctx, &KernelDesc { name: "raster.reduce_adam", spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false })?;
-        Ok(self.reduce_adam.get_or_init(|| k))
+        Ok(slot.get_or_init(|| k))
     }
 }

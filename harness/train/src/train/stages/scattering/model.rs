@@ -113,13 +113,20 @@ impl ScatteringModel {
     pub fn record_backward_external(&self, rec: &mut Recorder, cfg: &TrainConfig, cam: &Camera, step: &ExternalStep) -> Result<()> {
         let ExternalStep { sh_degree: sh, lr_means, iteration: it, colour_only } = *step;
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
+        let groups = self.groups(cfg, lr_means, sh);
+        if colour_only && self.fuse_adam && self.raster.can_fuse_adam() {
+            // The colour's Adam step in the reduce (the same result as the
+            // two passes below, bit for bit: tests/tests/train_kernels.rs).
+            let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
+            let s = &self.set;
+            return self.raster.record_backward_adam(rec, &s.params, Moments { m: &s.m, v: &s.v, adam: &c, features_only: true }, sh, &b.frame, None);
+        }
         if colour_only {
             self.raster.record_backward_colour(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
         } else {
             self.raster.record_backward(rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
         }
         let sc = rec.begin_scope("adam");
-        let groups = self.groups(cfg, lr_means, sh);
         if colour_only {
             self.adam.record_set_features(rec, &self.set, &groups[4], it as u64)?;
         } else {
@@ -178,7 +185,7 @@ impl ScatteringModel {
                 let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.raster.reduce_grid(self.set.len()), stats_grid])?;
                 let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
                 let s = &self.set;
-                self.raster.record_backward_adam(&mut rec, &s.params, Moments { m: &s.m, v: &s.v, adam: &c }, sh, &b.frame, Some(&args[0]))?;
+                self.raster.record_backward_adam(&mut rec, &s.params, Moments { m: &s.m, v: &s.v, adam: &c, features_only: false }, sh, &b.frame, Some(&args[0]))?;
                 args
             } else {
                 self.raster.record_backward(&mut rec, &self.set.params, &self.set.grads, sh, &b.frame)?;
