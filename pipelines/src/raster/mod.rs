@@ -282,7 +282,8 @@ impl Rasterizer {
         self.tile_spec.span(self.ctx.caps(), tile)
     }
     /// The tile side of the frames this rasterizer makes where the loop
-    /// budget allows (8 with the Subgroup kernels, else 16; `tiles.rs`).
+    /// budget allows (16; 8 with the Subgroup kernels and
+    /// `TGS_RASTER_TILE=8`; `tiles.rs`).
     pub fn tile(&self) -> u32 {
         self.tile_spec.tile_for(1, 1, |_| true)
     }

@@ -2,13 +2,15 @@
 //! rectangles) and the per-tile forward and backward (pixels per
 //! invocation), with the span that keeps their loops within a CPU driver's
 //! limit. A rasterizer builds a set per tile size on first use: 16 x 16
-//! tiles for the Workgroup kernels (one pixel per invocation of 256); for
-//! the Subgroup kernels 8 x 8 wherever a frame's tile count fits the loop
-//! budget, else 16 x 16. A splat is walked by every pixel of every tile it
-//! is binned to; with tiles a quarter the size a small splat costs about a
-//! quarter as much per tile for about 1.3x the intersections (measured on
-//! llvmpipe, perf/RESULTS.md thirty-fifth entry: the forward 2.2x and the
-//! backward 1.3x faster on the README's main job's scale).
+//! tiles by default (the Workgroup kernels need them: one pixel per
+//! invocation of 256); with `TGS_RASTER_TILE=8` the Subgroup kernels use
+//! 8 x 8 wherever a frame's tile count fits the loop budget. A splat is
+//! walked by every pixel of every tile it is binned to; with tiles a
+//! quarter the size a small splat costs about a quarter as much per tile
+//! for about 1.3x the intersections (measured on llvmpipe, perf/RESULTS.md
+//! thirty-fifth entry: the forward 2.2x and the backward 1.3x faster on
+//! the README's main job's scale), but training results moved (see
+//! `TileSpec::tile_for`).
 
 use super::{Push, RasterKernels, RecordAccess, LOOP_BUDGET, SPAN_STEP, WG};
 use crate::shaders;
@@ -73,12 +75,17 @@ impl TileSpec {
         s.max(SPAN_STEP)
     }
 
-    /// The tile side a `width` x `height` frame uses: SMALL_TILE with the
-    /// Subgroup kernels where its tiles fit the loop budget of a CPU
-    /// driver (`fits`), else WIDE_TILE.
+    /// The tile side a `width` x `height` frame uses: WIDE_TILE, or with
+    /// `TGS_RASTER_TILE=8` SMALL_TILE for the Subgroup kernels where its
+    /// tiles fit the loop budget of a CPU driver (`fits`). Not the default:
+    /// faster on lavapipe, but `lantern`'s Stage I lost 0.25 dB of test
+    /// PSNR on three seeds with it (perf/RESULTS.md, thirty-fifth entry;
+    /// the suspect is the 3-sigma binning of splats unbounded on screen,
+    /// which depends on how far the tile grid extends past the image).
     pub(super) fn tile_for(&self, width: u32, height: u32, fits: impl Fn(u64) -> bool) -> u32 {
+        let small = std::env::var("TGS_RASTER_TILE").is_ok_and(|v| v == "8");
         let tiles = width.div_ceil(SMALL_TILE) as u64 * height.div_ceil(SMALL_TILE) as u64;
-        if self.kernels == RasterKernels::Subgroup && fits(tiles) {
+        if small && self.kernels == RasterKernels::Subgroup && fits(tiles) {
             SMALL_TILE
         } else {
             WIDE_TILE
