@@ -316,6 +316,13 @@ fn check_backward_with(
                 bad.push(format!("Gaussian {i} material[{c}]: GPU {} vs FD {want}", got.material[4 * i + c]));
             }
         }
+        // A mirror direction within rounding of a texel boundary (a tap
+        // weight below 1e-4) puts the f32 lookup and the f64 difference on
+        // either side of the bilinear kink: its geometry is not compared
+        // (seen once in CI: tap weights 4.2e-6 and 1.2e-6).
+        if rr::taps(rr::mirror_dir(&gs[i], CENTRE), res).iter().any(|&(_, wt)| wt > 0.0 && wt < 1e-4) {
+            continue;
+        }
         let scale = (0..3).map(|c| fd(&|e| with(&|g, e| g.p[c] += e, e)).abs()).fold(1.0, f64::max);
         for c in 0..3 {
             let want = fd(&|e| with(&|g, e| g.p[c] += e, e));
