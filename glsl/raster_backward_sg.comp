@@ -179,8 +179,8 @@ void main() {
         for (uint c = 0u; c < CH; c++) {
             dF[c] = subgroupAdd(dF[c]);
         }
-        uint b = vals[q] * KREC;
         if (subgroupElect()) {
+            uint b = vals[q] * KREC;
             RECORDS[b + 0u] = dTu.x; RECORDS[b + 1u] = dTu.y; RECORDS[b + 2u] = dTu.z;
             RECORDS[b + 3u] = dTv.x; RECORDS[b + 4u] = dTv.y; RECORDS[b + 5u] = dTv.z;
             RECORDS[b + 6u] = dTw.x; RECORDS[b + 7u] = dTw.y; RECORDS[b + 8u] = dTw.z;

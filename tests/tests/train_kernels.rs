@@ -237,6 +237,28 @@ fn adam_steps_only_the_active_elements_of_each_block() {
     check_validation(ctx);
 }
 
+/// The fused-reduce tests' Adam groups: one rate per geometry array; the
+/// SH colour's DC and rest at their own rates, the coefficients of degree
+/// 1 of 3 active.
+fn fused_groups() -> [AdamGroup; 5] {
+    [
+        AdamGroup::single(1e-3),
+        AdamGroup::single(5e-3),
+        AdamGroup::single(1e-3),
+        AdamGroup::single(0.05),
+        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
+    ]
+}
+
+/// The ways of reaching the gradient records this device has.
+fn record_accesses(ctx: &tgs_engine::Context) -> Vec<tgs_pipelines::RecordAccess> {
+    let mut access = vec![tgs_pipelines::RecordAccess::Binding];
+    if ctx.caps().buffer_device_address {
+        access.push(tgs_pipelines::RecordAccess::Address);
+    }
+    access
+}
+
 /// The per-Gaussian reduce with Adam fused (`Rasterizer::record_backward_adam`)
 /// leaves bit for bit the parameters, moments and densification gradients
 /// of the backward followed by Adam's own pass: two steps at SH degree 1 of
@@ -244,7 +266,7 @@ fn adam_steps_only_the_active_elements_of_each_block() {
 /// rates), with the gradient records bound and reached by address.
 #[test]
 fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
-    use tgs_pipelines::{Features, RasterKernels, Rasterizer, RecordAccess};
+    use tgs_pipelines::{Features, RasterKernels, Rasterizer};
     use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
     let ctx = ctx_shared();
     let mut rng = Rng(seed("the_reduce_with_adam_fused_matches_the_backward_then_adam"));
@@ -253,18 +275,8 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
     let cam = default_camera(70, 45);
     let grad_out = random_grads(&mut rng, 3, 70 * 45);
     let adam = Adam::new(ctx, 1e-15).unwrap();
-    let groups = [
-        AdamGroup::single(1e-3),
-        AdamGroup::single(5e-3),
-        AdamGroup::single(1e-3),
-        AdamGroup::single(0.05),
-        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
-    ];
-    let mut access = vec![RecordAccess::Binding];
-    if ctx.caps().buffer_device_address {
-        access.push(RecordAccess::Address);
-    }
-    for records in access {
+    let groups = fused_groups();
+    for records in record_accesses(ctx) {
         let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
         if !rast.can_fuse_adam() {
             eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
@@ -314,7 +326,7 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
 /// features move.
 #[test]
 fn the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam() {
-    use tgs_pipelines::{Features, RasterKernels, Rasterizer, RecordAccess};
+    use tgs_pipelines::{Features, RasterKernels, Rasterizer};
     use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
     let ctx = ctx_shared();
     let mut rng = Rng(seed("the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam"));
@@ -323,20 +335,10 @@ fn the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam() {
     let cam = default_camera(70, 45);
     let grad_out = random_grads(&mut rng, 3, 70 * 45);
     let adam = Adam::new(ctx, 1e-15).unwrap();
-    let groups = [
-        AdamGroup::single(1e-3),
-        AdamGroup::single(5e-3),
-        AdamGroup::single(1e-3),
-        AdamGroup::single(0.05),
-        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
-    ];
-    let mut access = vec![RecordAccess::Binding];
-    if ctx.caps().buffer_device_address {
-        access.push(RecordAccess::Address);
-    }
+    let groups = fused_groups();
     let bits_of = |set: &TrainableSet| -> Vec<(String, Vec<u32>)> { set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect() };
     let initial = bits_of(&TrainableSet::new(ctx, &host).unwrap());
-    for records in access {
+    for records in record_accesses(ctx) {
         let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
         if !rast.can_fuse_adam() {
             eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
@@ -380,13 +382,7 @@ fn the_fused_reduce_refuses_groups_it_cannot_express() {
     let sh3 = tgs_pipelines::Features::Sh { degree: 3 };
     let host = tgs_tests::raster_util::random_scene(&mut rng, &tgs_tests::raster_util::SceneSpec::new(20, 3, sh3));
     let adam = Adam::new(ctx, 1e-15).unwrap();
-    let groups = [
-        AdamGroup::single(1e-3),
-        AdamGroup::single(5e-3),
-        AdamGroup::single(1e-3),
-        AdamGroup::single(0.05),
-        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
-    ];
+    let groups = fused_groups();
     // Groups the fused step cannot express are refused, not approximated.
     let set = TrainableSet::new(ctx, &host).unwrap();
     let mut two_rates = groups;

@@ -11,10 +11,7 @@ impl Rasterizer {
     /// with the loss gradient of every output plane in `frame.grad_out`.
     /// Overwrites every gradient in `grads` (and `frame.densify`).
     pub fn record_backward(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
-        if grads.channels != g.channels || grads.coeffs != g.coeffs {
-            bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
-        }
-        self.record_backward_with(rec, Splats::own(g, sh_degree), grads, &grads.features, frame)
+        self.record_own_backward(rec, g, grads, sh_degree, frame, false)
     }
 
     /// As [`Rasterizer::record_backward`] for a forward recorded with
@@ -31,10 +28,16 @@ impl Rasterizer {
     /// records). The other gradients in `grads` are partial (the colour's
     /// dependence on the view direction alone) and are not for stepping.
     pub fn record_backward_colour(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame) -> Result<()> {
+        self.record_own_backward(rec, g, grads, sh_degree, frame, true)
+    }
+
+    /// The backward of a set coloured by its own features (SH degree
+    /// `sh`), its gradients in `grads`' own layout.
+    fn record_own_backward(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh: u32, frame: &Frame, colour_only: bool) -> Result<()> {
         if grads.channels != g.channels || grads.coeffs != g.coeffs {
             bail!("gradient buffers ({} x {} features) do not match the Gaussian set ({} x {})", grads.channels, grads.coeffs, g.channels, g.coeffs);
         }
-        self.record_backward_parts(rec, Splats::own(g, sh_degree), grads, &grads.features, frame, true)
+        self.record_backward_parts(rec, Splats::own(g, sh), grads, &grads.features, frame, colour_only)
     }
 
     /// [`Rasterizer::record_backward_colour`] for a forward recorded with

@@ -32,6 +32,9 @@ pub(super) struct TileSpec {
     pub(super) batch: u32,
     /// The span when forced (tests), else from the loop budget.
     pub(super) span: Option<u32>,
+    /// Whether frames may use SMALL_TILE (`TGS_RASTER_TILE=8`, read once
+    /// when the rasterizer is made: [`TileSpec::small_tiles_requested`]).
+    pub(super) small: bool,
 }
 
 pub(super) struct TileKernels {
@@ -83,13 +86,17 @@ impl TileSpec {
     /// the suspect is the 3-sigma binning of splats unbounded on screen,
     /// which depends on how far the tile grid extends past the image).
     pub(super) fn tile_for(&self, width: u32, height: u32, fits: impl Fn(u64) -> bool) -> u32 {
-        let small = std::env::var("TGS_RASTER_TILE").is_ok_and(|v| v == "8");
         let tiles = width.div_ceil(SMALL_TILE) as u64 * height.div_ceil(SMALL_TILE) as u64;
-        if small && self.kernels == RasterKernels::Subgroup && fits(tiles) {
+        if self.small && self.kernels == RasterKernels::Subgroup && fits(tiles) {
             SMALL_TILE
         } else {
             WIDE_TILE
         }
+    }
+
+    /// `TGS_RASTER_TILE=8`: the opt-in to SMALL_TILE.
+    pub(super) fn small_tiles_requested() -> bool {
+        std::env::var("TGS_RASTER_TILE").is_ok_and(|v| v == "8")
     }
 
     pub(super) fn build(&self, ctx: &Arc<Context>, tile: u32) -> Result<TileKernels> {
