@@ -522,16 +522,26 @@ fn depth_mapped_backward_matches_finite_differences() {
     for fresnel in [Fresnel::Off, Fresnel::Schlick] {
         let schlick = fresnel == Fresnel::Schlick;
         let env = random_env(&mut rng, res);
-        let mut gs = Vec::new();
-        while gs.len() < 24 {
+        // Both kinds of lookup by construction (16 through the depth, 8
+        // keeping w): a random draw alone can miss the rarer kind.
+        let (mut moved, mut kept) = (Vec::new(), Vec::new());
+        for _ in 0..100_000 {
+            if moved.len() >= 16 && kept.len() >= 8 {
+                break;
+            }
             let w = random_dir(&mut rng);
             let g = round32(&random_gaussian(&mut rng, w));
-            if rr::depth_dir(g.p, rr::mirror_dir(&g, centre), c32, &depth, res, DEPTH_ITERS).2 > 1e-3 {
-                gs.push(g);
+            let (_, last, margin) = rr::depth_dir(g.p, rr::mirror_dir(&g, centre), c32, &depth, res, DEPTH_ITERS);
+            match last {
+                _ if margin <= 1e-3 => {}
+                Some(_) if moved.len() < 16 => moved.push(g),
+                None if kept.len() < 8 => kept.push(g),
+                _ => {}
             }
         }
+        assert!(moved.len() == 16 && kept.len() == 8, "both kinds of lookup: {} through the depth, {} keeping w", moved.len(), kept.len());
+        let gs: Vec<ReflGaussian> = moved.into_iter().zip(kept.into_iter().map(Some).chain(std::iter::repeat(None))).flat_map(|(a, b)| std::iter::once(a).chain(b)).collect();
         let radii: Vec<Option<f64>> = gs.iter().map(|g| rr::depth_dir(g.p, rr::mirror_dir(g, centre), c32, &depth, res, DEPTH_ITERS).1).collect();
-        assert!(radii.iter().filter(|r| r.is_some()).count() > 8 && radii.iter().any(|r| r.is_none()), "both kinds of lookup: {radii:?}");
         let gpu = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| gpu_backward_light(gs, env, res, fresnel, dfeat, Some(PROXY), Some(&depth));
         let loss = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| {
             let ch = fresnel.channels() as usize;
