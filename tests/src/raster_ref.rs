@@ -19,6 +19,10 @@
 use tgs_pipelines::{Camera, HostGaussians};
 
 const NEAR: f64 = 0.2;
+/// The low-pass filter's size as raster_common.glsl writes it (not 1/sqrt 2
+/// to the last digit: the reference takes the GPU's constant).
+#[allow(clippy::approx_constant)]
+const FILTER_SIZE: f64 = 0.707106;
 const FAR: f64 = 100.0;
 /// The tile side the reference bins with unless told the GPU frame's.
 const TILE: usize = 16;
@@ -239,7 +243,7 @@ fn bbox(tu: V3, tv: V3, tw: V3) -> Option<([f64; 2], f64)> {
     let mu = [fdot(tu, tw), fdot(tv, tw)];
     let ex = (mu[0] * mu[0] - fdot(tu, tu)).max(1e-4).sqrt();
     let ey = (mu[1] * mu[1] - fdot(tv, tv)).max(1e-4).sqrt();
-    Some((mu, ex.max(ey).max(3.0 * 0.707106)))
+    Some((mu, ex.max(ey).max(3.0 * FILTER_SIZE)))
 }
 
 /// Squared cutoff k^2 = 2 ln(255 o) of the box where alpha = o G can reach
