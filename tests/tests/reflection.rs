@@ -531,17 +531,17 @@ fn depth_mapped_backward_matches_finite_differences() {
             }
             let w = random_dir(&mut rng);
             let g = round32(&random_gaussian(&mut rng, w));
+            // The radius of the last step, kept for the reference below.
             let (_, last, margin) = rr::depth_dir(g.p, rr::mirror_dir(&g, centre), c32, &depth, res, DEPTH_ITERS);
             match last {
                 _ if margin <= 1e-3 => {}
-                Some(_) if moved.len() < 16 => moved.push(g),
-                None if kept.len() < 8 => kept.push(g),
+                Some(_) if moved.len() < 16 => moved.push((g, last)),
+                None if kept.len() < 8 => kept.push((g, last)),
                 _ => {}
             }
         }
         assert!(moved.len() == 16 && kept.len() == 8, "both kinds of lookup: {} through the depth, {} keeping w", moved.len(), kept.len());
-        let gs: Vec<ReflGaussian> = moved.into_iter().zip(kept.into_iter().map(Some).chain(std::iter::repeat(None))).flat_map(|(a, b)| std::iter::once(a).chain(b)).collect();
-        let radii: Vec<Option<f64>> = gs.iter().map(|g| rr::depth_dir(g.p, rr::mirror_dir(g, centre), c32, &depth, res, DEPTH_ITERS).1).collect();
+        let (gs, radii): (Vec<ReflGaussian>, Vec<Option<f64>>) = moved.into_iter().chain(kept).unzip();
         let gpu = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| gpu_backward_light(gs, env, res, fresnel, dfeat, Some(PROXY), Some(&depth));
         let loss = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| {
             let ch = fresnel.channels() as usize;
