@@ -89,10 +89,11 @@ bool project(vec3 p, vec2 log_s, vec4 q_raw, float o_raw, out Proj pr) {
 // -1), about its own centre) or inside the low-pass disc of radius
 // k / sqrt(FILTER_INV_SQUARE) about mu. So k is 3.33 at full opacity and
 // shrinks with it; o < ALPHA_MIN gives an empty box. An ellipse that reaches
-// the camera plane (d >= 0: unbounded on screen) keeps the 3-sigma square
-// box of pr.radius (`bounded` false; so do bounds that are not finite),
-// which can miss pixels such a splat reaches (tests/tests/raster_hard.rs
-// `pixel_boxes_hold_every_reached_pixel`).
+// the camera plane (d >= 0: unbounded on screen) can reach any pixel, so its
+// bounds are the whole plane (`bounded` false; so are bounds that are not
+// finite): such a splat is binned to every tile. (Its 3-sigma square, used
+// before, missed pixels it reaches and made the image depend on the tile
+// size: tests/tests/raster_hard.rs `pixel_boxes_hold_every_reached_pixel`.)
 vec4 pixel_bounds_of(Proj pr, out bool bounded) {
     bounded = true;
     float a = pr.s.o / ALPHA_MIN;
@@ -113,15 +114,13 @@ vec4 pixel_bounds_of(Proj pr, out bool bounded) {
         }
     }
     bounded = false;
-    return vec4(pr.s.mu - pr.radius, pr.s.mu + pr.radius);
+    return vec4(-3.0e38, -3.0e38, 3.0e38, 3.0e38);
 }
 
 // The pixels a tile kernel evaluates the splat at (see `in_box` in
 // raster_common.glsl): the bounds above widened by one pixel on each side,
 // so that f32 rounding of the bounds never drops a pixel whose alpha
-// reaches ALPHA_MIN; every pixel of its tiles when the splat is unbounded
-// on screen (its tiles then come from the 3-sigma box, not from where alpha
-// reaches ALPHA_MIN).
+// reaches ALPHA_MIN; every pixel when the splat is unbounded on screen.
 vec4 pixel_box(vec4 b, bool bounded) {
     return bounded ? b + vec4(-1.0, -1.0, 1.0, 1.0) : vec4(-3.0e38, -3.0e38, 3.0e38, 3.0e38);
 }

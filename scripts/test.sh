@@ -25,9 +25,9 @@ bash scripts/setup.sh
 # same code; a second pass of them at width 4 found nothing the kernel
 # suites do not (perf/RESULTS.md, CI profile) and cost over half of CI.
 # On other devices LP_NATIVE_VECTOR_WIDTH does nothing and this is a rerun.
-# The second pass also gives the CPU rasterizer its opt-in 8 x 8 tiles
-# (TGS_RASTER_TILE=8; the default is 16 x 16), so both tile sizes of its
-# kernels are compared against the f64 reference.
+# The second pass also keeps the CPU rasterizer at 16 x 16 tiles
+# (TGS_RASTER_TILE=16; the default there is 8 x 8), so both tile sizes of
+# its kernels are compared against the f64 reference.
 KERNEL_SUITES=(engine sort scan raster raster_hard loss loss_hf mlp lightfield reflection env_init train_kernels train_step)
 # Stream A's test binaries besides the subgroup-4 pass: the first before
 # it, the rest after. Stream B skips exactly their tests (listed from the
@@ -47,9 +47,9 @@ stream_a() {
   local s rc=0 args=() b
   a_binary "${A_BINARIES[0]}" || rc=$?
   for t in "${KERNEL_SUITES[@]}"; do args+=(--test "$t"); done
-  echo "== kernel suites again with LP_NATIVE_VECTOR_WIDTH=128 (lavapipe subgroup size 4), 8 x 8 tiles"
+  echo "== kernel suites again with LP_NATIVE_VECTOR_WIDTH=128 (lavapipe subgroup size 4), 16 x 16 tiles"
   s=$(date +%s)
-  LP_NATIVE_VECTOR_WIDTH=128 TGS_RASTER_TILE=8 cargo test -p tgs-tests "${args[@]}" || rc=$?
+  LP_NATIVE_VECTOR_WIDTH=128 TGS_RASTER_TILE=16 cargo test -p tgs-tests "${args[@]}" || rc=$?
   echo "== the subgroup-4 pass took $(( $(date +%s) - s )) s"
   for b in "${A_BINARIES[@]:1}"; do a_binary "$b" || rc=$?; done
   return $rc

@@ -91,8 +91,11 @@ fn tiny_and_huge_scales() {
         };
         s.push(m, ls, random_quat(&mut rng), rng.uniform(-1.0, 3.0) as f32, &feats(&mut rng, 48));
     }
-    // Huge splats behind the others: one facing the camera, one tilted.
-    s.push([0.0, 0.0, 8.0], [(1e3f32).ln(), (1e3f32).ln()], [1.0, 0.0, 0.0, 0.0], 0.0, &feats(&mut rng, 48));
+    // Huge splats behind the others: one facing the camera, one tilted
+    // (unbounded on screen: it covers every pixel). The first's opacity is
+    // not 1/2, which would leave the second a transmittance of exactly 1/2
+    // (the median depth's cut, a tie) at nearly every pixel.
+    s.push([0.0, 0.0, 8.0], [(1e3f32).ln(), (1e3f32).ln()], [1.0, 0.0, 0.0, 0.0], 0.3, &feats(&mut rng, 48));
     s.push([0.3, 0.1, 9.0], [(1e3f32).ln(), 2.0], [0.9, 0.3, 0.2, 0.1], 0.5, &feats(&mut rng, 48));
     check_finite_backward(&rast, &s, &cam, &[0.2; 3], 3, &mut rng, "tiny and huge");
     check_validation(ctx);
@@ -343,16 +346,12 @@ fn gradient_records_past_the_binding_limit() {
 /// sees it reach alpha 1/255 (tiny, huge, faint, thin, edge-on and
 /// near-plane splats; the box is computed once per splat, whatever the
 /// subgroup size), equals the reference's box where the splat is bounded on
-/// screen and well conditioned, and culls pixels of the splats' tiles. (A
-/// splat whose cutoff ellipse reaches the camera plane is binned by its
-/// 3-sigma square, which can miss pixels it reaches: its box is the whole
-/// screen, and it is not asked to be binned wherever it reaches.)
-#[test]
-fn pixel_boxes_hold_every_reached_pixel() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("pixel_boxes_hold_every_reached_pixel"));
-    let cam = axis_camera(48, 40, 36.0);
+/// screen and well conditioned, and culls pixels of the splats' tiles. A
+/// splat whose cutoff ellipse reaches the camera plane is binned to every
+/// tile (its 3-sigma square, used before, missed pixels it reaches).
+/// Tiny, huge, faint, thin, edge-on and near-plane splats, some of them
+/// unbounded on screen, seen by `axis_camera(48, 40, 36.0)`.
+fn reach_scene(rng: &mut Rng) -> HostGaussians {
     let mut s = HostGaussians::new(3, 16);
     for i in 0..400 {
         let m = [rng.uniform(-1.2, 1.2), rng.uniform(-1.0, 1.0), rng.uniform(1.0, 6.0)].map(|v| v as f32);
@@ -364,11 +363,21 @@ fn pixel_boxes_hold_every_reached_pixel() {
         };
         // Opacities from below the cut (culled) to saturated.
         let o = rng.uniform(-7.0, 6.0) as f32;
-        s.push(m, ls, random_quat(&mut rng), o, &feats(&mut rng, 48));
+        s.push(m, ls, random_quat(rng), o, &feats(rng, 48));
     }
     // Huge, and straddling the near plane (unbounded on screen).
-    s.push([0.0, 0.0, 8.0], [(1e3f32).ln(), (1e3f32).ln()], [1.0, 0.0, 0.0, 0.0], 0.0, &feats(&mut rng, 48));
-    s.push([0.0, 0.0, 0.25], [0.0, 0.0], [0.8, 0.5, 0.0, 0.0], 1.0, &feats(&mut rng, 48));
+    s.push([0.0, 0.0, 8.0], [(1e3f32).ln(), (1e3f32).ln()], [1.0, 0.0, 0.0, 0.0], 0.0, &feats(rng, 48));
+    s.push([0.0, 0.0, 0.25], [0.0, 0.0], [0.8, 0.5, 0.0, 0.0], 1.0, &feats(rng, 48));
+    s
+}
+
+#[test]
+fn pixel_boxes_hold_every_reached_pixel() {
+    let ctx = ctx_shared();
+    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
+    let mut rng = Rng(seed("pixel_boxes_hold_every_reached_pixel"));
+    let cam = axis_camera(48, 40, 36.0);
+    let s = reach_scene(&mut rng);
     let g = Gaussians::upload(ctx, &s).unwrap();
     let mut frame = rast.frame(cam.width, cam.height, s.len() as u32, 1024).unwrap();
     rast.forward(&g, &cam, &[0.2; 3], 3, &mut frame, false).unwrap();
@@ -393,14 +402,11 @@ fn pixel_boxes_hold_every_reached_pixel() {
         unbounded += !reach.bounded as usize;
         let Some(px) = reach.pixels else { continue };
         reached += 1;
-        if !reach.bounded && !binned {
-            // Binned by its 3-sigma square (raster_project.glsl
-            // `pixel_bounds_of`), which can miss pixels it reaches.
-            continue;
-        }
         assert!(binned, "Gaussian {i} reaches pixels {px:?} but has no tiles");
         assert!(b[0] <= px[0] && b[1] <= px[1] && b[2] >= px[2] && b[3] >= px[3], "Gaussian {i}: box {b:?} misses pixels it reaches, {px:?}");
         if !reach.bounded {
+            // It can reach any pixel: binned to every tile.
+            assert_eq!(*r, [0, 0, frame.tiles_x, frame.tiles_y], "Gaussian {i} is unbounded on screen");
             continue;
         }
         let t = r.map(|v| (v * frame.tile) as f64);
@@ -415,5 +421,47 @@ fn pixel_boxes_hold_every_reached_pixel() {
     assert!(reached >= 150 && unbounded >= 1 && compared >= 150, "the scene should hold both kinds of splat");
     // (Measured: about 35% with 16 x 16 tiles, 65% with 8 x 8.)
     assert!(in_boxes * 5 < in_tiles * 4, "the boxes hold {in_boxes} of their tiles' {in_tiles} pixels: they should cull");
+    check_validation(ctx);
+}
+
+/// The image does not depend on the tile size: the Subgroup kernels' 8 x 8
+/// and 16 x 16 tiles give the same image bit for bit (a splat is evaluated
+/// at the pixels of its box, one unbounded on screen at every pixel: with
+/// its 3-sigma square instead, the images differed), and on a scene of
+/// ordinary splats the same gradients up to the order of their sums. (On
+/// the hard scene a splat straddling the near plane has grazing hits whose
+/// terms cancel: its scale gradient moved by up to 1e-3 of the group's
+/// norm between the two orders.)
+#[test]
+fn the_image_does_not_depend_on_the_tile_size() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("the_image_does_not_depend_on_the_tile_size"));
+    let cam = axis_camera(48, 40, 36.0);
+    let go = random_grads(&mut rng, 3, 48 * 40);
+    let run = |s: &HostGaussians, small: bool| {
+        let rast = Rasterizer::with_options(ctx, 3, SH3, None, RasterKernels::Subgroup).unwrap().small_tiles(small);
+        gpu_run(&rast, s, &cam, &[0.2; 3], 3, Some(&go))
+    };
+    let hard = reach_scene(&mut rng);
+    let mut spec = SceneSpec::new(600, 3, SH3);
+    spec.log_scale = (-3.5, -1.5);
+    let plain = random_scene(&mut rng, &spec);
+    for (what, s) in [("hard", &hard), ("ordinary", &plain)] {
+        let (small, wide) = (run(s, true), run(s, false));
+        assert_eq!((small.tile, wide.tile), (8, 16));
+        assert!(small.intersections > wide.intersections);
+        assert_eq!(bits(&small.out), bits(&wide.out), "{what}: the image depends on the tile size");
+        if what == "hard" {
+            continue;
+        }
+        let (a, b) = (small.grads.as_ref().unwrap(), wide.grads.as_ref().unwrap());
+        for ((name, x), (_, y)) in named_arrays(a).into_iter().zip(named_arrays(b)) {
+            // The group norm, as the finite-difference checks measure.
+            let norm = |v: &mut dyn Iterator<Item = f64>| v.map(|d| d * d).sum::<f64>().sqrt();
+            let diff = norm(&mut x.iter().zip(y).map(|(p, q)| (p - q) as f64));
+            let size = norm(&mut y.iter().map(|&q| q as f64));
+            assert!(size > 0.0 && diff <= 1e-5 * size, "{name} gradients: 8 x 8 and 16 x 16 tiles differ by {diff} (norm {size})");
+        }
+    }
     check_validation(ctx);
 }

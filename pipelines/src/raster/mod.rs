@@ -252,7 +252,7 @@ impl Rasterizer {
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             reduce: k("raster.reduce", reduce, push, false)?,
             reduce_adam: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
-            tile_spec: TileSpec { kernels, records, channels, batch, span, small: TileSpec::small_tiles_requested()? },
+            tile_spec: TileSpec { kernels, records, channels, batch, span, small: TileSpec::small_tiles_allowed() },
             tile_sets: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
         })
     }
@@ -282,10 +282,17 @@ impl Rasterizer {
         self.tile_spec.span(self.ctx.caps(), tile)
     }
     /// The tile side of the frames this rasterizer makes where the loop
-    /// budget allows (16; 8 with the Subgroup kernels and
-    /// `TGS_RASTER_TILE=8`; `tiles.rs`).
+    /// budget allows (16; 8 with the Subgroup kernels unless
+    /// `TGS_RASTER_TILE=16`; `tiles.rs`).
     pub fn tile(&self) -> u32 {
         self.tile_spec.tile_for(1, 1, |_| true)
+    }
+    /// This rasterizer with the Subgroup kernels' 8 x 8 tiles allowed or
+    /// not (the default allows them unless `TGS_RASTER_TILE=16`); tests
+    /// compare both sizes in one process.
+    pub fn small_tiles(mut self, allowed: bool) -> Rasterizer {
+        self.tile_spec.small = allowed;
+        self
     }
     /// The tile-size dependent kernels for `tile` x `tile` tiles.
     fn tile_kernels(&self, tile: u32) -> Result<&TileKernels> {

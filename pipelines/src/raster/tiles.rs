@@ -1,17 +1,18 @@
 //! The kernels that depend on the tile size: the projection (its tile
 //! rectangles) and the per-tile forward and backward (pixels per
 //! invocation), with the span that keeps their loops within a CPU driver's
-//! limit. A rasterizer builds a set per tile size on first use: 16 x 16
-//! tiles by default (the Workgroup kernels need them: one pixel per
-//! invocation of 256); with `TGS_RASTER_TILE=8` the Subgroup kernels use
-//! 8 x 8 wherever a frame's tile count fits the loop budget (CI's
-//! subgroup-4 pass of the kernel suites runs with it). A splat is walked
-//! by every pixel of every tile it is binned to; with tiles a quarter the
-//! size a small splat costs about a quarter as much per tile for about
-//! 1.3x the intersections (measured on llvmpipe, perf/RESULTS.md
-//! thirty-fifth and thirty-sixth entries: Stage I iterations about 25%
-//! faster at the README's main job's scale), but training results move
-//! (see `TileSpec::tile_for`).
+//! limit. A rasterizer builds a set per tile size on first use: the
+//! Workgroup kernels (GPUs) use 16 x 16 tiles (one pixel per invocation of
+//! 256); the Subgroup kernels (CPU drivers) 8 x 8 wherever a frame's tile
+//! count fits the loop budget, else 16 x 16 (`TGS_RASTER_TILE=16` keeps
+//! them at 16 x 16). A splat is walked by every pixel of every tile it is
+//! binned to; with tiles a quarter the size a small splat costs about a
+//! quarter as much per tile for about 1.3x the intersections (measured on
+//! llvmpipe, perf/RESULTS.md thirty-fifth entry: the forward 2.2x and the
+//! backward 1.3x faster at the README's main job's scale). The image does
+//! not depend on the tile size: a splat is evaluated only inside its pixel
+//! box, and one unbounded on screen is binned to every tile; only the
+//! backward's summation order does (thirty-sixth entry).
 
 use super::{Push, RasterKernels, RecordAccess, LOOP_BUDGET, SPAN_STEP, WG};
 use crate::shaders;
@@ -33,8 +34,8 @@ pub(super) struct TileSpec {
     pub(super) batch: u32,
     /// The span when forced (tests), else from the loop budget.
     pub(super) span: Option<u32>,
-    /// Whether frames may use SMALL_TILE (`TGS_RASTER_TILE=8`, read once
-    /// when the rasterizer is made: [`TileSpec::small_tiles_requested`]).
+    /// Whether frames may use SMALL_TILE (unless `TGS_RASTER_TILE=16`,
+    /// read once when the rasterizer is made: [`TileSpec::small_tiles_allowed`]).
     pub(super) small: bool,
 }
 
@@ -79,17 +80,10 @@ impl TileSpec {
         s.max(SPAN_STEP)
     }
 
-    /// The tile side a `width` x `height` frame uses: WIDE_TILE, or with
-    /// `TGS_RASTER_TILE=8` SMALL_TILE for the Subgroup kernels where its
-    /// tiles fit the loop budget of a CPU driver (`fits`). Not the default:
-    /// a splat unbounded on screen is binned by its 3-sigma square rounded
-    /// out to whole tiles, so the tile size changes which pixels see it and
-    /// so the training trajectory (perf/RESULTS.md, thirty-sixth entry:
-    /// binning such splats to every tile makes the images identical at
-    /// both sizes, and Stage I's test PSNR on the suite moved by -0.02 dB
-    /// on average, within what a summation order moves, but the built-in
-    /// scene's Stage II glass normals ended 4 and 9 degrees worse on two
-    /// seeds: not resolved).
+    /// The tile side a `width` x `height` frame uses: SMALL_TILE for the
+    /// Subgroup kernels where its tiles fit the loop budget of a CPU driver
+    /// (`fits`) and `TGS_RASTER_TILE=16` does not ask otherwise, else
+    /// WIDE_TILE.
     pub(super) fn tile_for(&self, width: u32, height: u32, fits: impl Fn(u64) -> bool) -> u32 {
         let tiles = width.div_ceil(SMALL_TILE) as u64 * height.div_ceil(SMALL_TILE) as u64;
         if self.small && self.kernels == RasterKernels::Subgroup && fits(tiles) {
@@ -99,17 +93,10 @@ impl TileSpec {
         }
     }
 
-    /// `TGS_RASTER_TILE=8`: the opt-in to SMALL_TILE (16, or unset, keeps
-    /// WIDE_TILE); any other value is refused.
-    pub(super) fn small_tiles_requested() -> Result<bool> {
-        match std::env::var("TGS_RASTER_TILE") {
-            Err(_) => Ok(false),
-            Ok(v) => match v.trim() {
-                "8" => Ok(true),
-                "16" => Ok(false),
-                other => anyhow::bail!("TGS_RASTER_TILE must be 8 or 16 (the CPU rasterizer's tile side), not {other:?}"),
-            },
-        }
+    /// SMALL_TILE unless `TGS_RASTER_TILE=16` (scripts/test.sh runs the
+    /// kernel suites' second pass with it, so both sizes are tested).
+    pub(super) fn small_tiles_allowed() -> bool {
+        std::env::var("TGS_RASTER_TILE").map_or(true, |v| v.trim() != "16")
     }
 
     pub(super) fn build(&self, ctx: &Arc<Context>, tile: u32) -> Result<TileKernels> {
