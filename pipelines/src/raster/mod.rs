@@ -252,7 +252,7 @@ impl Rasterizer {
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             reduce: k("raster.reduce", reduce, push, false)?,
             reduce_adam: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
-            tile_spec: TileSpec { kernels, records, channels, batch, span, small: TileSpec::small_tiles_allowed() },
+            tile_spec: TileSpec { kernels, records, channels, batch, span, small: TileSpec::small_tiles_allowed()? },
             tile_sets: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
         })
     }

@@ -94,9 +94,10 @@ impl TileSpec {
     }
 
     /// SMALL_TILE unless `TGS_RASTER_TILE=16` (scripts/test.sh runs the
-    /// kernel suites' second pass with it, so both sizes are tested).
-    pub(super) fn small_tiles_allowed() -> bool {
-        std::env::var("TGS_RASTER_TILE").map_or(true, |v| v.trim() != "16")
+    /// kernel suites' second pass with it, so both sizes are tested);
+    /// `8` or unset allows it, any other value is refused.
+    pub(super) fn small_tiles_allowed() -> Result<bool> {
+        small_tiles_from(std::env::var("TGS_RASTER_TILE").ok().as_deref())
     }
 
     pub(super) fn build(&self, ctx: &Arc<Context>, tile: u32) -> Result<TileKernels> {
@@ -141,5 +142,28 @@ impl TileKernels {
         let push_bytes = std::mem::size_of::<Push>() as u32;
         let k = Kernel::new(&self.ctx, &KernelDesc { name: "raster.backward", spirv: self.colour_spirv, spec: &self.spec, push_bytes, subgroup_size: None, full_subgroups: true })?;
         Ok(self.backward_colour.get_or_init(|| k))
+    }
+}
+
+/// [`TileSpec::small_tiles_allowed`] for the variable's value.
+fn small_tiles_from(value: Option<&str>) -> Result<bool> {
+    match value.map(str::trim) {
+        None | Some("8") => Ok(true),
+        Some("16") => Ok(false),
+        Some(other) => anyhow::bail!("TGS_RASTER_TILE must be 8 or 16 (the CPU rasterizer's tile side), not {other:?}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_tile_variable_is_8_16_or_unset() {
+        assert!(super::small_tiles_from(None).unwrap());
+        assert!(super::small_tiles_from(Some("8")).unwrap());
+        assert!(!super::small_tiles_from(Some(" 16 ")).unwrap());
+        for bad in ["", "32", "auto"] {
+            let e = super::small_tiles_from(Some(bad)).unwrap_err().to_string();
+            assert!(e.contains("TGS_RASTER_TILE") && e.contains(&format!("{bad:?}")), "{e}");
+        }
     }
 }
