@@ -10,9 +10,13 @@
 
 use crate::bench::{average, KernelTime};
 use crate::scene::spheres::{self, SpheresSpec};
+use crate::train::args::load_dataset;
+use crate::train::checkpoint;
+use crate::train::rundir::{CHECKPOINT, STAGE_ONE_CHECKPOINT};
 use crate::train::{TrainConfig, Trainer};
-use anyhow::{ensure, Result};
+use anyhow::{ensure, Context as _, Result};
 use serde::Serialize;
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 use tgs_engine::Context;
@@ -140,7 +144,54 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
         ..TrainConfig::quick()
     };
     ctx.reset_peak_memory();
-    let mut tr = Trainer::new(ctx, cfg, &data)?;
+    let tr = Trainer::new(ctx, cfg, &data)?;
+    let brush_lavapipe_s = BRUSH_LAVAPIPE_S.iter().find(|(k, _)| w.width == w.height && *k == (w.width, w.points) && w.views == 20).map(|(_, s)| *s);
+    time(ctx, tr, Series { warmup, iterations, profiled, fuse_adam }, (w.width, w.height, spec.train), brush_lavapipe_s)
+}
+
+/// Time Stage I iterations on a trained model: the scattering set of the
+/// run directory `run` (its Stage I checkpoint where the run went past
+/// Stage I, else its checkpoint, later stages' state dropped) on the run's
+/// own dataset and settings, densification off so the count stays. The
+/// random spheres of [`train`] are small and evenly spread; a trained
+/// model's splats are not, and the two can rank a change differently
+/// (perf/RESULTS.md, thirty-seventh entry: 8x8 tiles).
+pub fn train_from(ctx: &Arc<Context>, run: &Path, warmup: u32, iterations: u32, fuse_adam: Option<bool>) -> Result<TrainBench> {
+    ensure!(iterations > 0, "--iterations must be at least 1");
+    let stage_one = run.join(STAGE_ONE_CHECKPOINT);
+    let path = if stage_one.is_file() { stage_one } else { run.join(CHECKPOINT) };
+    ensure!(path.is_file(), "--from {}: no {CHECKPOINT} there (a `tgs train` run directory is expected)", run.display());
+    let (mut h, mut arrays) = checkpoint::read(&path)?;
+    h.drop_later(&mut arrays).with_context(|| format!("{}", path.display()))?;
+    let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("--from {}: loading its dataset {}", run.display(), h.dataset))?;
+    ensure!(!data.train.is_empty(), "--from {}: its dataset {} has no training views", run.display(), h.dataset);
+    let profiled = iterations.clamp(1, 5);
+    // Stage I goes on past the checkpoint with the count fixed.
+    let cfg = &mut h.config;
+    cfg.iterations = h.iteration + warmup + iterations + profiled + 1;
+    cfg.densify_until = 0;
+    cfg.max_gaussians = h.n;
+    cfg.test_interval = 0;
+    cfg.checkpoint_interval = 0;
+    cfg.stages = "I".into();
+    ctx.reset_peak_memory();
+    let tr = checkpoint::restore(ctx, &path, (h, arrays), &data)?;
+    let (width, height) = (data.train[0].camera.width, data.train[0].camera.height);
+    time(ctx, tr, Series { warmup, iterations, profiled, fuse_adam }, (width, height, data.train.len() as u32), None)
+}
+
+/// The iterations [`time`] runs: untimed, timed, then profiled.
+struct Series {
+    warmup: u32,
+    iterations: u32,
+    profiled: u32,
+    fuse_adam: Option<bool>,
+}
+
+/// Run `s` on `tr` (frames of `size` = width, height, views) and report.
+fn time(ctx: &Arc<Context>, mut tr: Trainer, s: Series, size: (u32, u32, u32), brush_lavapipe_s: Option<f64>) -> Result<TrainBench> {
+    let Series { warmup, iterations, profiled, fuse_adam } = s;
+    let (width, height, views) = size;
     if let Some(f) = fuse_adam {
         tr.scattering.fuse_adam = f;
     }
@@ -169,11 +220,11 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
     let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
     Ok(TrainBench {
         device: ctx.caps().describe(),
-        width: w.width,
-        height: w.height,
-        views: spec.train,
+        width,
+        height,
+        views,
         gaussians: tr.scattering.set.len(),
-        sh_degree: SH_DEGREE,
+        sh_degree: tr.cfg.sh_degree,
         warmup,
         iterations,
         wall_ms,
@@ -190,7 +241,7 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
         intersections,
         bytes_per_intersection: tr.scattering.rasterizer().bytes_per_intersection(),
         peak_memory_mib: ctx.memory_use().peak_bytes as f64 / 1048576.0,
-        brush_lavapipe_s: BRUSH_LAVAPIPE_S.iter().find(|(k, _)| w.width == w.height && *k == (w.width, w.points) && w.views == 20).map(|(_, s)| *s),
+        brush_lavapipe_s,
     })
 }
 

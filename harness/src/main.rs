@@ -217,6 +217,11 @@ enum Bench {
         /// frame (1237x822), a million Gaussians (unless --points), 8 views.
         #[arg(long, conflicts_with_all = ["res", "views"])]
         real_scale: bool,
+        /// A trained model instead of the spheres: Stage I iterations on
+        /// the scattering set of this `tgs train` run directory (its Stage I
+        /// checkpoint), its dataset and settings, the Gaussian count fixed.
+        #[arg(long, value_name = "RUN", conflicts_with_all = ["res", "points", "views", "real_scale"])]
+        from: Option<std::path::PathBuf>,
         /// Timed iterations (after the warm-up).
         #[arg(long, default_value_t = 20)]
         iterations: u32,
@@ -437,11 +442,14 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_raster::print_raster(&b);
                     }
                 }
-                Bench::Train { res, points, views, real_scale, iterations, warmup, separate_adam, fused_adam, json } => {
+                Bench::Train { res, points, views, real_scale, from, iterations, warmup, separate_adam, fused_adam, json } => {
                     use tgs::bench_train::Workload;
                     let w = if *real_scale { Workload { points: points.unwrap_or(Workload::REAL_SCALE.points), ..Workload::REAL_SCALE } } else { Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) } };
                     let fuse = if *separate_adam { Some(false) } else if *fused_adam { Some(true) } else { None };
-                    let b = tgs::bench_train::train(&ctx, w, *warmup, *iterations, fuse)?;
+                    let b = match from {
+                        Some(run) => tgs::bench_train::train_from(&ctx, run, *warmup, *iterations, fuse)?,
+                        None => tgs::bench_train::train(&ctx, w, *warmup, *iterations, fuse)?,
+                    };
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);
                     } else {
