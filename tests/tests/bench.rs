@@ -53,6 +53,39 @@ fn train_bench_reports_every_stage() {
     check_validation(ctx);
 }
 
+/// `tgs bench train --from RUN` on a 12-iteration Stage I run of the tiny
+/// glass scene: the run's own Gaussians and frame, the count fixed, the run
+/// directory untouched; a directory without a checkpoint is refused by name.
+#[test]
+fn train_bench_from_a_trained_run() {
+    let ctx = ctx_shared();
+    let base = tgs_tests::TempDir::created("bench-train-from");
+    let ds = tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("bench-from-scene"));
+    let run = base.join("run");
+    let set = ["stages=\"I\"", "background=\"black\"", "test_interval=0", "checkpoint_interval=0", "densify_from=1000"];
+    let args = tgs::train::run::TrainArgs { dataset: Some(ds), out: run.clone(), iterations: Some(12), set: set.iter().map(|s| s.to_string()).collect(), quiet: true, ..Default::default() };
+    tgs::train::run::train(ctx, &args).unwrap();
+    let ckpt = run.join("checkpoint.bin");
+    let before = std::fs::read(&ckpt).unwrap();
+    let (h, _) = tgs::train::checkpoint::read(&ckpt).unwrap();
+    let files = std::fs::read_dir(&run).unwrap().count();
+    let b = tgs::bench_train::train_from(ctx, &run, 1, 2, None).unwrap();
+    assert_eq!((b.gaussians, b.iterations, b.warmup), (h.n, 2, 1));
+    assert_eq!((b.width, b.height, b.views), (48, 48, 16));
+    assert!(b.intersections > 0 && b.wall_ms.is_finite() && b.wall_ms_best <= b.wall_ms);
+    if ctx.caps().timestamp_valid_bits > 0 {
+        assert!(b.forward_ms > 0.0 && b.backward_ms > 0.0);
+    }
+    assert_eq!(std::fs::read(&ckpt).unwrap(), before, "the bench wrote over the run's checkpoint");
+    assert_eq!(std::fs::read_dir(&run).unwrap().count(), files, "the bench wrote into the run directory");
+    let empty = base.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let e = format!("{:#}", tgs::bench_train::train_from(ctx, &empty, 0, 1, None).unwrap_err());
+    assert!(e.contains("checkpoint.bin") && e.contains(&*empty.to_string_lossy()), "{e}");
+    assert!(tgs::bench_train::train_from(ctx, &run, 0, 0, None).is_err());
+    check_validation(ctx);
+}
+
 /// `tgs bench stages` on the tiny glass scene: every stage runs, each
 /// reports its own kernels, the Gaussian counts stay fixed while timing,
 /// the memory counters move, and Stage III reports the fraction Φ ran on.
