@@ -87,6 +87,14 @@ void put_feat(uint fb, uint i, float g) {
         ADAM_STEP(feats[fb + i], m1_feats[fb + i], m2_feats[fb + i], g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
     }
 }
+// The same with the feature's value p already loaded (the same arithmetic).
+void put_feat_from(uint fb, uint i, float p, float g) {
+    if (i < pc.feat_active) {
+        float p_ = p;
+        ADAM_STEP(p_, m1_feats[fb + i], m2_feats[fb + i], g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
+        feats[fb + i] = p_;
+    }
+}
 #else
 layout(std430, binding = 9) writeonly buffer GMeans { float g_means[]; };
 layout(std430, binding = 10) writeonly buffer GScales { float g_scales[]; };
@@ -99,6 +107,7 @@ void put_scale(uint i, float g) { g_scales[i] = g; }
 void put_quat(uint i, vec4 g) { g_quats[i] = g; }
 void put_opacity(uint i, float g) { g_opacity[i] = g; }
 void put_feat(uint fb, uint i, float g) { g_feats[fb + i] = g; }
+void put_feat_from(uint fb, uint i, float p, float g) { g_feats[fb + i] = g; }
 #endif
 
 vec4 quat_rot_vjp(vec4 q, mat3 dR) {
@@ -201,6 +210,13 @@ void main() {
         sh_basis(dir, Y);
         sh_basis_grad(dir, dY);
         uint nk = active_coeffs();
+        // The coefficients, loaded once (a storage-buffer load costs a
+        // scalar load per lane on CPU drivers; they were read three times).
+        uint nc = min(pc.coeffs, 16u);
+        float F[16u * CH];
+        for (uint i = 0u; i < nc * CH; i++) {
+            F[i] = feats[fb + i];
+        }
         // precise: no fused multiply-adds into the direction gradient, so
         // the ADAM variant (whose loop also steps the coefficients) rounds
         // it as the plain reduce does.
@@ -208,15 +224,15 @@ void main() {
         for (uint c = 0u; c < CH; c++) {
             float v = 0.5;
             for (uint kk = 0u; kk < nk; kk++) {
-                v += Y[kk] * feats[fb + kk * CH + c];
+                v += Y[kk] * F[kk * CH + c];
             }
             float gc = v > 0.0 ? df[c] : 0.0;
-            for (uint kk = 0u; kk < pc.coeffs; kk++) {
-                float coef = feats[fb + kk * CH + c];
+            for (uint kk = 0u; kk < nc; kk++) {
+                float coef = F[kk * CH + c];
                 if (kk < nk) {
                     ddir += gc * coef * dY[kk];
                 }
-                put_feat(fb, kk * CH + c, kk < nk ? Y[kk] * gc : 0.0);
+                put_feat_from(fb, kk * CH + c, coef, kk < nk ? Y[kk] * gc : 0.0);
             }
         }
         if (len > 0.0) {
