@@ -6,6 +6,8 @@
 //! `TGS_BENCH_REAL_SCALE=1` (one timed iteration: minutes on lavapipe).
 //! Prints the device, wall and per-kernel GPU ms per iteration, and Brush's
 //! time on the reference lavapipe machine; JSON to target/tgs-bench/train.json.
+//! `TGS_BENCH_TRAIN_FROM=RUN` adds Stage I iterations on that `tgs train`
+//! run's own model and views (`tgs bench train --from RUN`).
 
 fn main() -> anyhow::Result<()> {
     if !tgs_perf::wanted("train") {
@@ -27,6 +29,12 @@ fn main() -> anyhow::Result<()> {
     }
     for (w, iterations) in workloads {
         let b = tgs::bench_train::train(&ctx, w, 3, iterations, None)?;
+        tgs::bench_train::print_train(&b);
+        runs.push(b);
+    }
+    if let Some(run) = std::env::var_os("TGS_BENCH_TRAIN_FROM") {
+        let b = tgs::bench_train::train_from(&ctx, std::path::Path::new(&run), 3, if cpu { 20 } else { 100 }, None)?;
+        println!("trained model of {}:", std::path::Path::new(&run).display());
         tgs::bench_train::print_train(&b);
         runs.push(b);
     }
