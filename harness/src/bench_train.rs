@@ -131,7 +131,7 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
     // SH degree 3 is active from iteration 3 on (sh_interval 1).
     let warmup = warmup.max(3);
     let cfg = TrainConfig {
-        iterations: warmup + iterations + profiled,
+        iterations: warmup.saturating_add(iterations).saturating_add(profiled),
         background: "black".into(),
         sh_degree: SH_DEGREE,
         sh_interval: 1,
@@ -168,7 +168,7 @@ pub fn train_from(ctx: &Arc<Context>, run: &Path, warmup: u32, iterations: u32, 
     let profiled = iterations.clamp(1, 5);
     // Stage I goes on past the checkpoint with the count fixed.
     let cfg = &mut h.config;
-    cfg.iterations = h.iteration + warmup + iterations + profiled + 1;
+    cfg.iterations = h.iteration.saturating_add(warmup).saturating_add(iterations).saturating_add(profiled + 1);
     cfg.densify_until = 0;
     cfg.max_gaussians = h.n;
     cfg.test_interval = 0;
