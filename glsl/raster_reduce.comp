@@ -81,18 +81,19 @@ void put_quat(uint i, vec4 g) {
 }
 void put_opacity(uint i, float g) { ADAM_STEP(opacity[i], m1_opacity[i], m2_opacity[i], g, pc.lr_opacity) }
 #endif
-// Feature i of the Gaussian whose features start at fb.
-void put_feat(uint fb, uint i, float g) {
-    if (i < pc.feat_active) {
-        ADAM_STEP(feats[fb + i], m1_feats[fb + i], m2_feats[fb + i], g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
-    }
-}
-// The same with the feature's value p already loaded (the same arithmetic).
+// Feature i of the Gaussian whose features start at fb, its value p
+// already loaded.
 void put_feat_from(uint fb, uint i, float p, float g) {
     if (i < pc.feat_active) {
         float p_ = p;
         ADAM_STEP(p_, m1_feats[fb + i], m2_feats[fb + i], g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
         feats[fb + i] = p_;
+    }
+}
+// The same, loading the value (only for a feature that steps).
+void put_feat(uint fb, uint i, float g) {
+    if (i < pc.feat_active) {
+        put_feat_from(fb, i, feats[fb + i], g);
     }
 }
 #else
@@ -107,7 +108,7 @@ void put_scale(uint i, float g) { g_scales[i] = g; }
 void put_quat(uint i, vec4 g) { g_quats[i] = g; }
 void put_opacity(uint i, float g) { g_opacity[i] = g; }
 void put_feat(uint fb, uint i, float g) { g_feats[fb + i] = g; }
-void put_feat_from(uint fb, uint i, float p, float g) { g_feats[fb + i] = g; }
+void put_feat_from(uint fb, uint i, float p, float g) { put_feat(fb, i, g); }
 #endif
 
 vec4 quat_rot_vjp(vec4 q, mat3 dR) {
@@ -212,6 +213,8 @@ void main() {
         uint nk = active_coeffs();
         // The coefficients, loaded once (a storage-buffer load costs a
         // scalar load per lane on CPU drivers; they were read three times).
+        // At most 16 (SH degree 3: Rasterizer::new refuses more, and Y
+        // above holds 16).
         uint nc = min(pc.coeffs, 16u);
         float F[16u * CH];
         for (uint i = 0u; i < nc * CH; i++) {

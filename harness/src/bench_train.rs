@@ -127,7 +127,7 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
     ensure!(w.views > 0, "--views must be at least 1");
     let spec = SpheresSpec { width: w.width, height: w.height, points: w.points, train: w.views, ..SpheresSpec::NAMED[0].1 };
     let data = spheres::dataset(&spec)?;
-    let profiled = iterations.clamp(1, 5);
+    let profiled = profiled(iterations);
     // SH degree 3 is active from iteration 3 on (sh_interval 1).
     let warmup = warmup.max(3);
     let cfg = TrainConfig {
@@ -146,7 +146,7 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
     ctx.reset_peak_memory();
     let tr = Trainer::new(ctx, cfg, &data)?;
     let brush_lavapipe_s = BRUSH_LAVAPIPE_S.iter().find(|(k, _)| w.width == w.height && *k == (w.width, w.points) && w.views == 20).map(|(_, s)| *s);
-    time(ctx, tr, Series { warmup, iterations, profiled, fuse_adam }, (w.width, w.height, spec.train), brush_lavapipe_s)
+    time(ctx, tr, Series { warmup, iterations, fuse_adam }, (w.width, w.height, spec.train), brush_lavapipe_s)
 }
 
 /// Time Stage I iterations on a trained model: the scattering set of the
@@ -165,7 +165,7 @@ pub fn train_from(ctx: &Arc<Context>, run: &Path, warmup: u32, iterations: u32, 
     h.drop_later(&mut arrays).with_context(|| format!("{}", path.display()))?;
     let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("--from {}: loading its dataset {}", run.display(), h.dataset))?;
     ensure!(!data.train.is_empty(), "--from {}: its dataset {} has no training views", run.display(), h.dataset);
-    let profiled = iterations.clamp(1, 5);
+    let profiled = profiled(iterations);
     // Stage I goes on past the checkpoint with the count fixed.
     let cfg = &mut h.config;
     cfg.iterations = h.iteration.saturating_add(warmup).saturating_add(iterations).saturating_add(profiled + 1);
@@ -177,20 +177,25 @@ pub fn train_from(ctx: &Arc<Context>, run: &Path, warmup: u32, iterations: u32, 
     ctx.reset_peak_memory();
     let tr = checkpoint::restore(ctx, &path, (h, arrays), &data)?;
     let (width, height) = (data.train[0].camera.width, data.train[0].camera.height);
-    time(ctx, tr, Series { warmup, iterations, profiled, fuse_adam }, (width, height, data.train.len() as u32), None)
+    time(ctx, tr, Series { warmup, iterations, fuse_adam }, (width, height, data.train.len() as u32), None)
 }
 
-/// The iterations [`time`] runs: untimed, timed, then profiled.
+/// The iterations [`time`] runs: untimed, timed, then [`profiled`].
 struct Series {
     warmup: u32,
     iterations: u32,
-    profiled: u32,
     fuse_adam: Option<bool>,
+}
+
+/// The profiled iterations after `iterations` timed ones.
+fn profiled(iterations: u32) -> u32 {
+    iterations.clamp(1, 5)
 }
 
 /// Run `s` on `tr` (frames of `size` = width, height, views) and report.
 fn time(ctx: &Arc<Context>, mut tr: Trainer, s: Series, size: (u32, u32, u32), brush_lavapipe_s: Option<f64>) -> Result<TrainBench> {
-    let Series { warmup, iterations, profiled, fuse_adam } = s;
+    let Series { warmup, iterations, fuse_adam } = s;
+    let profiled = profiled(iterations);
     let (width, height, views) = size;
     if let Some(f) = fuse_adam {
         tr.scattering.fuse_adam = f;

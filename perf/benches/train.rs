@@ -32,9 +32,9 @@ fn main() -> anyhow::Result<()> {
         tgs::bench_train::print_train(&b);
         runs.push(b);
     }
-    if let Some(run) = std::env::var_os("TGS_BENCH_TRAIN_FROM") {
-        let b = tgs::bench_train::train_from(&ctx, std::path::Path::new(&run), 3, if cpu { 20 } else { 100 }, None)?;
-        println!("trained model of {}:", std::path::Path::new(&run).display());
+    if let Some(run) = std::env::var_os("TGS_BENCH_TRAIN_FROM").map(std::path::PathBuf::from) {
+        let b = tgs::bench_train::train_from(&ctx, &run, 3, if cpu { 20 } else { 100 }, None)?;
+        println!("trained model of {}:", run.display());
         tgs::bench_train::print_train(&b);
         runs.push(b);
     }

@@ -10,9 +10,10 @@
 //! quarter as much per tile for about 1.3x the intersections (measured on
 //! llvmpipe, perf/RESULTS.md thirty-fifth entry: the forward 2.2x and the
 //! backward 1.3x faster at the README's main job's scale on random
-//! spheres; Stage II and early Stage I are faster, while on a trained
-//! model of 33k Gaussians a Stage I iteration costs the same at both
-//! sizes, thirty-seventh entry). The image does
+//! spheres; on a trained model of 33k Gaussians, 1.7x the intersections,
+//! the forward 19% faster, the backward 3-5% slower, a Stage I iteration
+//! 4-6% faster; Stage II and early Stage I gain more, thirty-seventh
+//! entry). The image does
 //! not depend on the tile size: a splat is evaluated only inside its pixel
 //! box, and one unbounded on screen is binned to every tile; only the
 //! backward's summation order does (thirty-sixth entry).
