@@ -50,6 +50,13 @@ layout(push_constant) uniform Push {
     uint span;       // splats per span (tiles longer than this take several passes)
     uint span_index; // which span this pass handles
     uint spans;      // span passes recorded
+    // The Gaussians [feat_base, feat_end) whose features (and, in the
+    // reduce, their moments or gradients) the feature bindings hold, from
+    // feature feat_base coeffs CH on: a set whose features exceed one
+    // storage binding is projected and reduced in slices
+    // (pipelines/src/raster feature_slices); 0 and ~0 otherwise.
+    uint feat_base;
+    uint feat_end;
 #ifdef ADAM
     // The reduce with the Adam step fused (raster_reduce.comp, variant ADAM):
     // rates of means, log-scales, rotations, opacity, features (the first

@@ -22,8 +22,9 @@ layout(std430, binding = 12) writeonly buffer Radii { float radii[]; };
 #include "raster_project.glsl"
 
 void main() {
-    uint g = wg_linear() * WG + gl_LocalInvocationID.x;
-    if (g >= pc.n) {
+    // The Gaussians of this slice (pc.feat_base on; all of them unsliced).
+    uint g = pc.feat_base + wg_linear() * WG + gl_LocalInvocationID.x;
+    if (g >= min(pc.n, pc.feat_end)) {
         return;
     }
     depth_ids[g] = g;
@@ -57,7 +58,7 @@ void main() {
     proj[b + 16u] = box.x; proj[b + 17u] = box.y; proj[b + 18u] = box.z; proj[b + 19u] = box.w;
 
     // Features: SH evaluated for the view direction (+0.5, clamped at 0), or plain.
-    uint fb = g * pc.coeffs * CH;
+    uint fb = (g - pc.feat_base) * pc.coeffs * CH;
     if (pc.mode == 1u) {
         for (uint c = 0u; c < CH; c++) {
             pfeat[g * CH + c] = feats[fb + c];

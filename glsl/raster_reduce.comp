@@ -130,6 +130,11 @@ void main() {
         return;
     }
     uint g = ids[r];
+    // Another slice's Gaussian (feature slices: every slice's dispatch
+    // walks every rank and takes its own).
+    if (g < pc.feat_base || g >= pc.feat_end) {
+        return;
+    }
     uint p0 = min(offsets[r], pc.capacity), p1 = min(offsets[r + 1u], pc.capacity);
 
     vec3 dTu = vec3(0.0), dTv = vec3(0.0), dTw = vec3(0.0), dn = vec3(0.0);
@@ -159,7 +164,7 @@ void main() {
     vec4 qr = quats[g];
     Proj pr;
     bool ok = p1 > p0 && project(p, ls, qr, opacity[g], pr);
-    uint fb = g * pc.coeffs * CH;
+    uint fb = (g - pc.feat_base) * pc.coeffs * CH;
     if (!ok) {
         put_mean(3u * g, 0.0); put_mean(3u * g + 1u, 0.0); put_mean(3u * g + 2u, 0.0);
         put_scale(2u * g, 0.0); put_scale(2u * g + 1u, 0.0);

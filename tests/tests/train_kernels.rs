@@ -393,3 +393,68 @@ fn the_fused_reduce_refuses_groups_it_cannot_express() {
     assert!(adam.reduce_constants(&set, &wrong_block, 1).is_err());
     check_validation(ctx);
 }
+
+/// A set whose features exceed one storage binding (a million Gaussians of
+/// SH degree 3 on lavapipe) is projected and reduced in slices of
+/// Gaussians, each binding its part of the features and of their moments
+/// or gradients (`Rasterizer::feature_slices`). Forced here on 400 Gaussians
+/// in slices of 64 (the last one partial): the image, the densification
+/// gradients, the parameters, moments and gradients come out bit for bit
+/// as with the whole buffers bound, for the plain backward, the fused
+/// reduce and Adam, and its feature-only variant.
+#[test]
+fn features_bound_in_slices_give_the_whole_bindings_results() {
+    use tgs_pipelines::{Features, Rasterizer};
+    use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("features_bound_in_slices_give_the_whole_bindings_results"));
+    let sh3 = Features::Sh { degree: 3 };
+    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, sh3));
+    let cam = default_camera(70, 45);
+    let grad_out = random_grads(&mut rng, 3, 70 * 45);
+    let adam = Adam::new(ctx, 1e-15).unwrap();
+    let groups = fused_groups();
+    let bits = |b: &Buffer<f32>| -> Vec<u32> { b.download().unwrap().iter().map(|v| v.to_bits()).collect() };
+    // 0: backward then Adam's pass; 1: the fused reduce; 2: its feature-only variant.
+    for mode in 0..3 {
+        let run = |slice: Option<u32>| -> Vec<(String, Vec<u32>)> {
+            let rast = Rasterizer::new(ctx, 3, sh3).unwrap();
+            let rast = match slice {
+                Some(s) => rast.feature_slice(s),
+                None => rast,
+            };
+            if mode > 0 && !rast.can_fuse_adam() {
+                return Vec::new();
+            }
+            let set = TrainableSet::new(ctx, &host).unwrap();
+            let mut frame = rast.frame(cam.width, cam.height, set.len(), 1024).unwrap();
+            let mut out = Vec::new();
+            for t in 1..=2u64 {
+                rast.forward(&set.params, &cam, &[0.1, 0.5, 0.9], 3, &mut frame, false).unwrap();
+                out.push((format!("step {t}: image"), bits(&frame.out)));
+                frame.grad_out.upload(&grad_out).unwrap();
+                let mut rec = Recorder::new(ctx).unwrap();
+                if mode == 0 {
+                    rast.record_backward(&mut rec, &set.params, &set.grads, 3, &frame).unwrap();
+                    adam.record_set(&mut rec, &set, &groups, t).unwrap();
+                } else {
+                    let c = adam.reduce_constants(&set, &groups, t).unwrap();
+                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c, features_only: mode == 2 }, 3, &frame, None).unwrap();
+                }
+                rec.submit_and_wait().unwrap();
+                out.push((format!("step {t}: densify"), bits(&frame.densify)));
+            }
+            out.extend(set.arrays().into_iter().map(|(name, b, _)| (name, bits(b))));
+            out
+        };
+        let (whole, sliced) = (run(None), run(Some(64)));
+        assert_eq!(whole.len(), sliced.len());
+        for ((name, a), (_, b)) in whole.iter().zip(&sliced) {
+            assert!(a == b, "mode {mode}: {name} differs between whole and sliced feature bindings");
+        }
+        if let Some((_, f)) = whole.iter().find(|(n, _)| n == "param.features") {
+            assert_ne!(*f, bits(&TrainableSet::new(ctx, &host).unwrap().params.features), "mode {mode}: the features did not move");
+        }
+    }
+    check_validation(ctx);
+}

@@ -54,20 +54,23 @@ impl Rasterizer {
         }
         let records = self.record_tile_backward(rec, g, features, sh_degree, frame, colour_only)?;
         let sc = rec.begin_scope("raster.reduce");
-        let mut bindings = Self::param_bindings(frame, g, features);
-        bindings.extend([
-            frame.depth_ids.binding(),
-            frame.offsets.binding(),
-            records,
-            grads.means.binding(),
-            grads.log_scales.binding(),
-            grads.quats.binding(),
-            grads.opacity.binding(),
-            d_features.binding(),
-            frame.densify.binding(),
-        ]);
-        let push = self.push(g, frame, sh_degree);
-        rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
+        for slice in self.feature_slices(g.n) {
+            let mut bindings = Self::param_bindings(frame, g, features);
+            bindings[5] = self.feature_binding(features, slice);
+            bindings.extend([
+                frame.depth_ids.binding(),
+                frame.offsets.binding(),
+                records.clone(),
+                grads.means.binding(),
+                grads.log_scales.binding(),
+                grads.quats.binding(),
+                grads.opacity.binding(),
+                self.feature_binding(d_features, slice),
+                frame.densify.binding(),
+            ]);
+            let push = Push { feat_base: slice.0, feat_end: slice.1, ..self.push(g, frame, sh_degree) };
+            rec.dispatch(&self.reduce, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?;
+        }
         rec.end_scope(sc);
         Ok(())
     }

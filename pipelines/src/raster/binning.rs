@@ -4,7 +4,7 @@
 //! of one (tile, depth) key per intersection, the stable tile sort, and
 //! each tile's range of intersections. Counts stay on the GPU.
 
-use super::{Frame, Gaussians, Rasterizer};
+use super::{Frame, Gaussians, Push, Rasterizer};
 use crate::scan::Count;
 use crate::WG;
 use anyhow::{Context as _, Result};
@@ -15,17 +15,24 @@ impl Rasterizer {
     /// `frame`, with the forward's push constants `pb`.
     pub(super) fn record_binning(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, pb: &[u8], frame: &Frame) -> Result<()> {
         let sc = rec.begin_scope("raster.project");
-        let mut bindings = Self::param_bindings(frame, g, features);
-        bindings.extend([
-            frame.proj.binding(),
-            frame.pfeat.binding(),
-            frame.rects.binding(),
-            frame.tiles.binding(),
-            frame.depth_keys.binding(),
-            frame.depth_ids.binding(),
-            frame.radii.binding(),
-        ]);
-        rec.dispatch(&self.tile_kernels(frame.tile)?.project, &bindings, pb, self.groups(g.n))?;
+        let project = &self.tile_kernels(frame.tile)?.project;
+        let base: Push = *bytemuck::try_from_bytes(pb).map_err(|e| anyhow::anyhow!("the forward's push constants: {e}"))?;
+        for slice in self.feature_slices(g.n) {
+            let mut bindings = Self::param_bindings(frame, g, features);
+            bindings[5] = self.feature_binding(features, slice);
+            bindings.extend([
+                frame.proj.binding(),
+                frame.pfeat.binding(),
+                frame.rects.binding(),
+                frame.tiles.binding(),
+                frame.depth_keys.binding(),
+                frame.depth_ids.binding(),
+                frame.radii.binding(),
+            ]);
+            let push = Push { feat_base: slice.0, feat_end: slice.1, ..base };
+            let count = slice.1.min(g.n) - slice.0;
+            rec.dispatch(project, &bindings, bytemuck::bytes_of(&push), self.groups(count))?;
+        }
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.depth_sort");

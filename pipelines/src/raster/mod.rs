@@ -64,6 +64,10 @@ struct Push {
     span: u32,
     span_index: u32,
     spans: u32,
+    /// The Gaussians whose features the feature bindings hold
+    /// ([`Rasterizer::feature_slices`]).
+    feat_base: u32,
+    feat_end: u32,
 }
 
 use crate::WG;
@@ -172,6 +176,8 @@ pub struct Rasterizer {
     /// (`tiles.rs`).
     tile_spec: TileSpec,
     tile_sets: [std::sync::OnceLock<TileKernels>; 2],
+    /// Gaussians per feature slice, forced ([`Rasterizer::feature_slice`]).
+    feature_slice: Option<u32>,
 }
 
 impl Rasterizer {
@@ -254,6 +260,7 @@ impl Rasterizer {
             reduce_adam: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
             tile_spec: TileSpec { kernels, records, channels, batch, span, small: TileSpec::small_tiles_allowed()? },
             tile_sets: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
+            feature_slice: None,
         })
     }
 
@@ -427,7 +434,48 @@ impl Rasterizer {
             span: self.span_of(frame.tile),
             span_index: 0,
             spans: frame.spans,
+            feat_base: 0,
+            feat_end: u32::MAX,
         }
+    }
+
+    /// The slices [base, end) of Gaussians the per-Gaussian kernels that
+    /// bind the features (the projection and the reduce) take in turn: one,
+    /// every Gaussian with the whole buffers bound, unless `n` Gaussians'
+    /// features exceed one storage binding (a million Gaussians of SH
+    /// degree 3 are 183 MiB; lavapipe binds 128). Each slice then binds its
+    /// own part of the features, and of their moments or gradients, and
+    /// starts at a multiple of 64 Gaussians (so at an offset every device
+    /// allows).
+    pub(super) fn feature_slices(&self, n: u32) -> Vec<(u32, u32)> {
+        let per = 4 * self.channels as u64 * self.features.coeffs() as u64;
+        let fit = (self.ctx.caps().max_storage_buffer_range / per.max(1)).min(u32::MAX as u64) as u32;
+        let slice = self.feature_slice.unwrap_or(fit).min(fit) / 64 * 64;
+        let fits_one = n as u64 * per <= self.ctx.caps().max_storage_buffer_range;
+        if (fits_one && self.feature_slice.is_none()) || slice == 0 {
+            return vec![(0, u32::MAX)];
+        }
+        (0..n.div_ceil(slice)).map(|k| (k * slice, ((k + 1) * slice).min(n))).collect()
+    }
+
+    /// This rasterizer with the Gaussians' features bound in slices of
+    /// `gaussians` (rounded down to a multiple of 64; at most what one
+    /// binding holds) even when they would fit one binding: tests compare
+    /// the sliced projection and reduce with the whole ones on small sets.
+    pub fn feature_slice(mut self, gaussians: u32) -> Rasterizer {
+        self.feature_slice = Some(gaussians);
+        self
+    }
+
+    /// `features`' binding for the slice (base, end) of
+    /// [`Rasterizer::feature_slices`]: the whole buffer for the one slice
+    /// of every Gaussian.
+    pub(super) fn feature_binding(&self, features: &Buffer<f32>, slice: (u32, u32)) -> BufferBinding {
+        if slice == (0, u32::MAX) {
+            return features.binding();
+        }
+        let per = (self.channels * self.features.coeffs()) as usize;
+        features.slice(slice.0 as usize * per, (slice.1 - slice.0) as usize * per)
     }
 
     fn check_inputs(&self, g: &Gaussians, features: &Buffer<f32>, frame: &Frame) -> Result<()> {

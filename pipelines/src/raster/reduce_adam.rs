@@ -65,7 +65,7 @@ const BINDINGS: u32 = 20;
 
 impl Rasterizer {
     /// Whether this device can run [`Rasterizer::record_backward_adam`]
-    /// (20 storage buffers in one shader and a 100-byte push constant).
+    /// (20 storage buffers in one shader and a 108-byte push constant).
     pub fn can_fuse_adam(&self) -> bool {
         let caps = self.ctx.caps();
         caps.max_storage_buffers_per_stage >= BINDINGS && caps.max_push_constants as usize >= std::mem::size_of::<PushAdam>()
@@ -101,15 +101,20 @@ impl Rasterizer {
         let kernel = self.reduce_adam_kernel(features_only)?;
         let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, features_only)?;
         let sc = rec.begin_scope("raster.reduce");
-        let mut bindings = Self::param_bindings(frame, g, &g.features);
-        bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records]);
-        bindings.extend(m.buffers().map(|b| b.binding()));
-        bindings.push(frame.densify.binding());
-        bindings.extend(v.buffers().map(|b| b.binding()));
-        let push = PushAdam { base: self.push(g, frame, sh_degree), adam: *adam };
-        match gate {
-            Some(args) => rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(&push), args)?,
-            None => rec.dispatch(kernel, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?,
+        for slice in self.feature_slices(g.n) {
+            let mut bindings = Self::param_bindings(frame, g, &g.features);
+            bindings[5] = self.feature_binding(&g.features, slice);
+            bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records.clone()]);
+            bindings.extend(m.buffers().map(|b| b.binding()));
+            bindings[13] = self.feature_binding(&m.features, slice);
+            bindings.push(frame.densify.binding());
+            bindings.extend(v.buffers().map(|b| b.binding()));
+            bindings[19] = self.feature_binding(&v.features, slice);
+            let push = PushAdam { base: Push { feat_base: slice.0, feat_end: slice.1, ..self.push(g, frame, sh_degree) }, adam: *adam };
+            match gate {
+                Some(args) => rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(&push), args)?,
+                None => rec.dispatch(kernel, &bindings, bytemuck::bytes_of(&push), self.groups(g.n))?,
+            }
         }
         rec.end_scope(sc);
         Ok(())
