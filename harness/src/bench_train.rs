@@ -20,7 +20,6 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 use tgs_engine::Context;
-use tgs_pipelines::Features;
 
 /// The SH degree every workload trains at (active from iteration 3).
 const SH_DEGREE: u32 = 3;
@@ -95,13 +94,6 @@ impl Workload {
         Workload { width: res, height: res, points, views: 20 }
     }
 
-    /// The most Gaussians, in whole ten thousands, whose features (one
-    /// storage binding of RGB SH coefficients) `ctx` can bind: 699,050 ->
-    /// 690,000 on lavapipe's 128 MiB.
-    pub fn max_points(ctx: &Context) -> u32 {
-        let bytes = 4 * 3 * Features::Sh { degree: SH_DEGREE }.coeffs() as u64;
-        (ctx.caps().max_storage_buffer_range / bytes).min(u32::MAX as u64) as u32 / 10_000 * 10_000
-    }
 }
 
 /// Top-level scopes of a training step, by stage. Scopes named `sort.*`
