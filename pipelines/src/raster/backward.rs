@@ -55,8 +55,7 @@ impl Rasterizer {
         let records = self.record_tile_backward(rec, g, features, sh_degree, frame, colour_only)?;
         let sc = rec.begin_scope("raster.reduce");
         for slice in self.feature_slices(g.n) {
-            let mut bindings = Self::param_bindings(frame, g, features);
-            bindings[5] = self.feature_binding(features, slice);
+            let mut bindings = self.param_bindings(frame, g, features, slice);
             bindings.extend([
                 frame.depth_ids.binding(),
                 frame.offsets.binding(),

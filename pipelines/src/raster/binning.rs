@@ -18,8 +18,7 @@ impl Rasterizer {
         let project = &self.tile_kernels(frame.tile)?.project;
         let base: Push = *bytemuck::try_from_bytes(pb).map_err(|e| anyhow::anyhow!("the forward's push constants: {e}"))?;
         for slice in self.feature_slices(g.n) {
-            let mut bindings = Self::param_bindings(frame, g, features);
-            bindings[5] = self.feature_binding(features, slice);
+            let mut bindings = self.param_bindings(frame, g, features, slice);
             bindings.extend([
                 frame.proj.binding(),
                 frame.pfeat.binding(),

@@ -14,6 +14,7 @@ mod forward;
 mod frame;
 mod gaussians;
 mod reduce_adam;
+mod slices;
 mod tiles;
 
 pub use camera::Camera;
@@ -439,45 +440,6 @@ impl Rasterizer {
         }
     }
 
-    /// The slices [base, end) of Gaussians the per-Gaussian kernels that
-    /// bind the features (the projection and the reduce) take in turn: one,
-    /// every Gaussian with the whole buffers bound, unless `n` Gaussians'
-    /// features exceed one storage binding (a million Gaussians of SH
-    /// degree 3 are 183 MiB; lavapipe binds 128). Each slice then binds its
-    /// own part of the features, and of their moments or gradients, and
-    /// starts at a multiple of 64 Gaussians (so at an offset every device
-    /// allows).
-    pub(super) fn feature_slices(&self, n: u32) -> Vec<(u32, u32)> {
-        let per = 4 * self.channels as u64 * self.features.coeffs() as u64;
-        let fit = (self.ctx.caps().max_storage_buffer_range / per.max(1)).min(u32::MAX as u64) as u32;
-        let slice = self.feature_slice.unwrap_or(fit).min(fit) / 64 * 64;
-        let fits_one = n as u64 * per <= self.ctx.caps().max_storage_buffer_range;
-        if (fits_one && self.feature_slice.is_none()) || slice == 0 {
-            return vec![(0, u32::MAX)];
-        }
-        (0..n.div_ceil(slice)).map(|k| (k * slice, ((k + 1) * slice).min(n))).collect()
-    }
-
-    /// This rasterizer with the Gaussians' features bound in slices of
-    /// `gaussians` (rounded down to a multiple of 64; at most what one
-    /// binding holds) even when they would fit one binding: tests compare
-    /// the sliced projection and reduce with the whole ones on small sets.
-    pub fn feature_slice(mut self, gaussians: u32) -> Rasterizer {
-        self.feature_slice = Some(gaussians);
-        self
-    }
-
-    /// `features`' binding for the slice (base, end) of
-    /// [`Rasterizer::feature_slices`]: the whole buffer for the one slice
-    /// of every Gaussian.
-    pub(super) fn feature_binding(&self, features: &Buffer<f32>, slice: (u32, u32)) -> BufferBinding {
-        if slice == (0, u32::MAX) {
-            return features.binding();
-        }
-        let per = (self.channels * self.features.coeffs()) as usize;
-        features.slice(slice.0 as usize * per, (slice.1 - slice.0) as usize * per)
-    }
-
     fn check_inputs(&self, g: &Gaussians, features: &Buffer<f32>, frame: &Frame) -> Result<()> {
         let own = std::ptr::eq(features, &g.features);
         let (channels, coeffs) = if own { (g.channels, g.coeffs) } else { (self.channels, self.features.coeffs()) };
@@ -509,12 +471,6 @@ impl Rasterizer {
         groups_2d(items.div_ceil(WG), self.max_x())
     }
 
-    /// Bindings 0..=5 of the project and reduce kernels: camera, then the
-    /// Gaussian parameters.
-    fn param_bindings(frame: &Frame, g: &Gaussians, features: &Buffer<f32>) -> Vec<BufferBinding> {
-        vec![frame.cam.binding(), g.means.binding(), g.log_scales.binding(), g.quats.binding(), g.opacity.binding(), features.binding()]
-    }
-
     /// Bindings 0..=8 of the per-tile forward and backward kernels.
     fn tile_bindings(frame: &Frame) -> Vec<BufferBinding> {
         vec![
@@ -529,7 +485,6 @@ impl Rasterizer {
             frame.ustate.binding(),
         ]
     }
-
 }
 
 #[cfg(test)]

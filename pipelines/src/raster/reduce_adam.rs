@@ -102,8 +102,7 @@ impl Rasterizer {
         let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, features_only)?;
         let sc = rec.begin_scope("raster.reduce");
         for slice in self.feature_slices(g.n) {
-            let mut bindings = Self::param_bindings(frame, g, &g.features);
-            bindings[5] = self.feature_binding(&g.features, slice);
+            let mut bindings = self.param_bindings(frame, g, &g.features, slice);
             bindings.extend([frame.depth_ids.binding(), frame.offsets.binding(), records.clone()]);
             bindings.extend(m.buffers().map(|b| b.binding()));
             bindings[13] = self.feature_binding(&m.features, slice);
