@@ -6,9 +6,10 @@
 // even integer (exact too), so sin(pi t) keeps f32 accuracy at L = 12 and
 // |a| >= 1 where sin(2^11 pi a) would lose ~3 digits.
 //
-// Samples: 6 floats each (x normalized, unit w). Writes gamma(x) to the
+// Samples: 6 floats each (x normalized, unit w), from sample `base` on (a
+// block of the samples: pipelines/src/mlp `Block`). Writes gamma(x) to the
 // first layer's input (row stride 3 + 6 L_x) and gamma(x), gamma(w) to the
-// skip layer's input after its first `width` columns.
+// skip layer's input after its first `width` columns, rows from 0.
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Samples { float samples[]; };
@@ -23,6 +24,7 @@ layout(push_constant) uniform Push {
     uint levels_w;
     uint width;
     uint n_count;
+    uint base;
 } pc;
 
 const float PI = 3.14159265358979;
@@ -47,7 +49,7 @@ void main() {
         uint levels = part == 0u ? pc.levels_x : pc.levels_w;
         uint oc_p = oc + (part == 0u ? 0u : dx);
         for (uint d = 0u; d < 3u; d++) {
-            float v = samples[6u * s + 3u * part + d];
+            float v = samples[6u * (pc.base + s) + 3u * part + d];
             if (part == 0u) {
                 in0[o0 + d] = v;
             }

@@ -41,6 +41,10 @@ pub fn weight_chunks(n: u32) -> (u32, u32) {
 pub struct MlpScratch {
     shape: MlpShape,
     capacity: u32,
+    /// Rows of the activation buffers: the samples are taken in blocks of
+    /// this many when the capacity's activations exceed one binding
+    /// ([`Mlp::scratch_in_blocks`]); the capacity otherwise.
+    block: u32,
     /// Inputs, [`SAMPLE`] floats per sample (normalized x, unit w); the caller writes them.
     pub samples: Buffer<f32>,
     /// Outputs, RGB per sample, after [`Mlp::record_forward`].
@@ -56,6 +60,16 @@ pub struct MlpScratch {
 impl MlpScratch {
     pub fn capacity(&self) -> u32 {
         self.capacity
+    }
+    /// The first `n` samples cut into blocks (one, [0, n), unless `n`
+    /// exceeds the block; none for `n` = 0).
+    fn blocks(&self, n: u32) -> Vec<Block> {
+        (0..n.div_ceil(self.block)).map(|k| Block { base: k * self.block, m: (n - k * self.block).min(self.block) }).collect()
+    }
+    /// Samples one pass of the kernels takes ([`MlpScratch::block`]); the
+    /// GPU-count paths need the capacity within one block.
+    pub fn block(&self) -> u32 {
+        self.block
     }
     pub fn shape(&self) -> MlpShape {
         self.shape
@@ -108,6 +122,23 @@ pub struct Mlp {
     reduce: Kernel,
 }
 
+/// Samples [base, base + m) of a forward or backward taken as one block.
+#[derive(Clone, Copy)]
+struct Block {
+    base: u32,
+    m: u32,
+}
+
+/// Where a block's backward reads the output gradient and writes the
+/// weight gradients; `rows`: the GPU-held count of a counted backward.
+#[derive(Clone, Copy)]
+struct Grads<'a> {
+    d_out: &'a Buffer<f32>,
+    grads: &'a Buffer<f32>,
+    rows: Option<&'a Buffer<u32>>,
+    accumulate: bool,
+}
+
 /// The samples a backward covers: the first `n`, or (counted) the first
 /// `count[0]` of at most `n`, the count read on the device.
 #[derive(Clone, Copy)]
@@ -138,9 +169,9 @@ impl Mlp {
             ctx: ctx.clone(),
             gemm_kind,
             gemm,
-            encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 20)?,
+            encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 24)?,
             relu_grad: kernel(ctx, "mlp.relu_grad", shaders::MLP_RELU_GRAD, 16)?,
-            reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 16)?,
+            reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 20)?,
         })
     }
 
@@ -157,35 +188,52 @@ impl Mlp {
         (max / widest).min(u32::MAX as u64) as u32
     }
 
-    /// Memory for up to `capacity` samples of `shape`.
+    /// Memory for up to `capacity` samples of `shape`, in one block when
+    /// their activations fit one storage binding (then as
+    /// [`Mlp::scratch`] always was), else in blocks of the most that do
+    /// ([`Mlp::scratch_in_blocks`]).
     pub fn scratch(&self, shape: MlpShape, capacity: u32) -> Result<MlpScratch> {
+        self.scratch_in_blocks(shape, capacity, self.max_capacity(&shape))
+    }
+
+    /// As [`Mlp::scratch`], with the activations held for `block` samples
+    /// at a time (tests force small blocks). The host-count forward and
+    /// backward of more samples than a block run block after block: the
+    /// forward rows are the same, bit for bit; the backward recomputes each
+    /// block's activations before its gradients, and sums the weight
+    /// gradients block by block in order (each block's own chunks, then
+    /// added to the blocks before it), so they are deterministic but not
+    /// summed in the one-block order. The GPU-count paths take one block.
+    pub fn scratch_in_blocks(&self, shape: MlpShape, capacity: u32, block: u32) -> Result<MlpScratch> {
         shape.validate()?;
         let ctx = &self.ctx;
         let cap = capacity.max(1);
+        let block = block.clamp(1, cap);
         let max = ctx.caps().max_storage_buffer_range / 4;
         let widest = shape.cat_width().max(shape.dx()) as u64;
-        if cap as u64 * widest > max || MAX_CHUNKS as u64 * shape.params() as u64 > max {
+        if block as u64 * widest > max || MAX_CHUNKS as u64 * shape.params() as u64 > max || cap as u64 * SAMPLE as u64 > max {
             bail!(
-                "a light field of {} x {} on {capacity} samples needs {} floats in one buffer; this device binds at most {max}",
+                "a light field of {} x {} on {capacity} samples in blocks of {block} needs {} floats in one buffer; this device binds at most {max}",
                 shape.depth,
                 shape.width,
-                (cap as u64 * widest).max(MAX_CHUNKS as u64 * shape.params() as u64)
+                (block as u64 * widest).max(MAX_CHUNKS as u64 * shape.params() as u64).max(cap as u64 * SAMPLE as u64)
             );
         }
-        let c = cap as usize;
+        let (c, blk) = (cap as usize, block as usize);
         let w = shape.width as usize;
         let hidden = (0..shape.depth)
-            .map(|l| if l + 1 == shape.skip { Ok(None) } else { Buffer::uninit(ctx, &format!("mlp.h{l}"), c * w).map(Some) })
+            .map(|l| if l + 1 == shape.skip { Ok(None) } else { Buffer::uninit(ctx, &format!("mlp.h{l}"), blk * w).map(Some) })
             .collect::<Result<Vec<_>>>()?;
         Ok(MlpScratch {
             shape,
             capacity: cap,
+            block,
             samples: Buffer::uninit(ctx, "mlp.samples", c * SAMPLE as usize)?,
             out: Buffer::uninit(ctx, "mlp.out", c * OUT as usize)?,
-            in0: Buffer::uninit(ctx, "mlp.in0", c * shape.dx() as usize)?,
-            cat: Buffer::uninit(ctx, "mlp.cat", c * shape.cat_width() as usize)?,
+            in0: Buffer::uninit(ctx, "mlp.in0", blk * shape.dx() as usize)?,
+            cat: Buffer::uninit(ctx, "mlp.cat", blk * shape.cat_width() as usize)?,
             hidden,
-            d: [Buffer::uninit(ctx, "mlp.d0", c * w)?, Buffer::uninit(ctx, "mlp.d1", c * w)?],
+            d: [Buffer::uninit(ctx, "mlp.d0", blk * w)?, Buffer::uninit(ctx, "mlp.d1", blk * w)?],
             part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
         })
     }
@@ -242,13 +290,23 @@ impl Mlp {
 
     fn record_forward_rows(&self, rec: &mut Recorder, params: &Buffer<f32>, n: u32, rows: Option<&Buffer<u32>>, s: &MlpScratch) -> Result<()> {
         Self::check(s, params, n)?;
-        if n == 0 {
-            return Ok(());
+        if rows.is_some() && s.block < s.capacity {
+            bail!("the light field on a GPU-held count takes its capacity ({}) in one block; this scratch holds {} samples' activations", s.capacity, s.block);
         }
+        for b in s.blocks(n) {
+            self.record_forward_block(rec, params, b, rows, s)?;
+        }
+        Ok(())
+    }
+
+    /// The forward of samples [b.base, b.base + b.m): their activations in
+    /// the scratch's block buffers, their outputs at their place in `s.out`.
+    fn record_forward_block(&self, rec: &mut Recorder, params: &Buffer<f32>, b: Block, rows: Option<&Buffer<u32>>, s: &MlpScratch) -> Result<()> {
+        let Block { base, m: n } = b;
         let sh = s.shape;
         let m_count = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.encode");
-        let push = [n, sh.levels_x, sh.levels_w, sh.width, m_count];
+        let push = [n, sh.levels_x, sh.levels_w, sh.width, m_count, base];
         let r = rows.map(|r| r.binding()).unwrap_or_else(|| s.samples.binding());
         rec.dispatch(&self.encode, &[s.samples.binding(), s.in0.binding(), s.cat.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n))?;
         rec.end_scope(sc);
@@ -269,6 +327,7 @@ impl Mlp {
                 b_rs: 1,
                 b_cs: k + 1,
                 b_ones_j: NONE,
+                c_off: if l == sh.depth { base * OUT } else { 0 },
                 c_rs: ld,
                 c_act: if l == sh.depth { SIGMOID } else { RELU },
                 m_count,
@@ -311,6 +370,31 @@ impl Mlp {
             rec.fill(&grads.slice(0, sh.params() as usize), 0)?;
             return Ok(());
         }
+        if rows.is_some() && s.block < s.capacity {
+            bail!("the light field on a GPU-held count takes its capacity ({}) in one block; this scratch holds {} samples' activations", s.capacity, s.block);
+        }
+        // Block after block: the activations of every block but the last
+        // were overwritten, so each is computed again before its gradients
+        // (one block, the usual case: nothing again); its weight gradients
+        // are added to those of the blocks before it.
+        let blocks = s.blocks(n);
+        let again = blocks.len() > 1;
+        for (i, b) in blocks.into_iter().enumerate() {
+            if again {
+                self.record_forward_block(rec, params, b, None, s)?;
+            }
+            self.record_backward_block(rec, params, Grads { d_out, grads, rows, accumulate: i > 0 }, b, s)?;
+        }
+        Ok(())
+    }
+
+    /// The backward of samples [b.base, b.base + b.m) after their forward:
+    /// their weight gradients into `g.grads` (added to it with
+    /// `g.accumulate`).
+    fn record_backward_block(&self, rec: &mut Recorder, params: &Buffer<f32>, g: Grads, b: Block, s: &MlpScratch) -> Result<()> {
+        let Grads { d_out, grads, rows, accumulate } = g;
+        let Block { base, m: n } = b;
+        let sh = s.shape;
         // Counted: every chunk the capacity could need is dispatched; those
         // past the count's skip their work.
         let (chunk, chunks) = if rows.is_some() { (0, MAX_CHUNKS) } else { weight_chunks(n) };
@@ -322,6 +406,9 @@ impl Mlp {
             // This layer's output gradient: d_out for the head, else the
             // ping-pong buffer the layer above wrote (row stride width).
             let (dy, d_ld) = if l == sh.depth { (d_out, OUT) } else { (&s.d[(l % 2) as usize], sh.width) };
+            // The head's output and its gradient are the caller's, at the
+            // block's place; the hidden layers' are the block's own.
+            let at = if l == sh.depth { base * OUT } else { 0 };
             // A hidden layer's dY becomes dZ in place, once (both products
             // below then read it without Y); the head's sigmoid derivative
             // is taken in the products (d_out is the caller's, 3 wide).
@@ -346,6 +433,8 @@ impl Mlp {
                 b_rs: k,
                 b_cs: 1,
                 b_ones_j: k,
+                a_off: at,
+                y_off: at,
                 y_rs: 1,
                 y_cs: y_ld,
                 a_deriv: deriv,
@@ -364,6 +453,7 @@ impl Mlp {
                     n: sh.width,
                     kdim: j,
                     k_chunk: j,
+                    a_off: at,
                     a_rs: d_ld,
                     a_cs: 1,
                     a_ones_k: NONE,
@@ -371,6 +461,7 @@ impl Mlp {
                     b_rs: k + 1,
                     b_cs: 1,
                     b_ones_j: NONE,
+                    y_off: at,
                     y_rs: y_ld,
                     y_cs: 1,
                     a_deriv: deriv,
@@ -383,7 +474,7 @@ impl Mlp {
         }
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.reduce");
-        let push = [sh.params(), chunks, sh.params(), if rows.is_some() { n } else { 0 }];
+        let push = [sh.params(), chunks, sh.params(), if rows.is_some() { n } else { 0 }, accumulate as u32];
         let count = rows.map(|r| r.binding()).unwrap_or_else(|| grads.binding());
         rec.dispatch(&self.reduce, &[s.part.binding(), grads.binding(), count], bytemuck::cast_slice(&push), grid(&self.ctx, sh.params()))?;
         rec.end_scope(sc);

@@ -139,8 +139,10 @@ impl LightFieldModel {
 
     fn view_buffers(&mut self, w: u32, h: u32) -> Result<()> {
         let pixels = w * h;
-        // One sample per pixel at most, and no more than one binding holds.
-        let cap = pixels.min(self.mlp.max_capacity(&self.net.shape));
+        // One sample per pixel at most; the MLP takes them in blocks when
+        // their activations exceed one binding (then the step reads the
+        // sample count on the host: `step`).
+        let cap = pixels;
         if self.scratch.as_ref().is_none_or(|s| s.capacity() < cap) {
             self.scratch = Some(self.mlp.scratch(self.net.shape, cap)?);
             self.d_phi = Some(Buffer::uninit(&self.ctx, "lf.d_phi", (OUT * cap) as usize)?);
@@ -179,16 +181,7 @@ impl LightFieldModel {
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
-            let sh = &self.net.shape;
-            bail!(
-                "a {}x{} view has {count} pixels with R > {} (light_field.threshold); a {} x {} light field holds at most {} samples on this device: raise the threshold, use --downscale, or a smaller light_field.preset",
-                cam.width,
-                cam.height,
-                self.shade.threshold,
-                sh.depth,
-                sh.width,
-                scratch.capacity()
-            );
+            bail!("a {}x{} view has {count} light-field samples; its sample list holds {}", cam.width, cam.height, scratch.capacity());
         }
         Ok(count)
     }
@@ -223,7 +216,8 @@ impl LightFieldModel {
         self.view_buffers(cam.width, cam.height)?;
         let pixels = cam.width * cam.height;
         let n = pixels as usize;
-        let room = self.scratch.as_ref().is_some_and(|s| s.capacity() >= pixels);
+        // The GPU-count step needs every pixel's sample within one block.
+        let room = self.scratch.as_ref().is_some_and(|s| s.block() >= pixels);
         let host_count = if train_scat || !room || !self.one_submission { Some(self.forward(cam, x.profile, &mut timings)?) } else { None };
         let (scat, scat_grad) = match x.scat {
             Some(s) => (s, None),
