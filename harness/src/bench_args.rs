@@ -75,6 +75,11 @@ pub(crate) enum Bench {
         /// Fuse Adam into the per-Gaussian reduce where the device can.
         #[arg(long, conflicts_with = "separate_adam")]
         fused_adam: bool,
+        /// Stage III iterations instead of Stage I's on this workload: the
+        /// scattering colour and a reflection set of every tenth Gaussian
+        /// lit by the light field of this preset (small or paper).
+        #[arg(long, value_name = "NETWORK", conflicts_with_all = ["from", "separate_adam", "fused_adam"])]
+        light_field: Option<String>,
         #[arg(long)]
         json: bool,
     },

@@ -7,6 +7,7 @@
 pub use tgs_train::{data, eval, export, lpips, outdir, scene, train};
 
 pub mod bench;
+pub mod bench_light_field;
 pub mod bench_mlp;
 pub mod bench_raster;
 pub mod bench_stages;

@@ -301,9 +301,19 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_raster::print_raster(&b);
                     }
                 }
-                Bench::Train { res, points, views, real_scale, from, iterations, warmup, separate_adam, fused_adam, json } => {
+                Bench::Train { res, points, views, real_scale, from, iterations, warmup, separate_adam, fused_adam, light_field, json } => {
                     use tgs::bench_train::Workload;
                     let w = if *real_scale { Workload { points: points.unwrap_or(Workload::REAL_SCALE.points), ..Workload::REAL_SCALE } } else { Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) } };
+                    if let Some(net) = light_field {
+                        let net = tgs::train::settings::LightPreset::parse(net).map_err(|e| anyhow::anyhow!("--light-field: {e}"))?;
+                        let b = tgs::bench_light_field::light_field(&ctx, w, *warmup, *iterations, net)?;
+                        if *json {
+                            println!("{}", serde_json::to_string_pretty(&b)?);
+                        } else {
+                            tgs::bench_light_field::print_light_field(&b);
+                        }
+                        return Ok(());
+                    }
                     let fuse = if *separate_adam { Some(false) } else if *fused_adam { Some(true) } else { None };
                     let b = match from {
                         Some(run) => tgs::bench_train::train_from(&ctx, run, *warmup, *iterations, fuse)?,

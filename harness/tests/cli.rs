@@ -64,5 +64,7 @@ fn benches_refuse_sizes_that_cannot_run() {
     refused(&["bench", "scan", "--reps", "0"], &["--reps"]);
     refused(&["bench", "mlp", "--n", "0"], &["--n 0"]);
     refused(&["bench", "mlp", "--reps", "0", "--preset", "small"], &["--reps"]);
+    refused(&["bench", "train", "--light-field", "large"], &["--light-field", "large"]);
+    refused(&["bench", "train", "--light-field", "small", "--from", "run"], &["--light-field"]);
     refused(&["bench", "raster", "--width", "0"], &["--width"]);
 }

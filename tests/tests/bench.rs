@@ -116,3 +116,28 @@ fn stages_bench_reports_each_stage() {
     assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { scene: "nope".into(), ..spec }).is_err());
     check_validation(ctx);
 }
+
+/// `tgs bench train --light-field`: Stage III iterations on the spheres
+/// (the scattering colour and a reflection set of every tenth Gaussian
+/// under the small light field) report the sizes they ran, Φ's share of the
+/// pixels, the MLP's and the rasterizer's scopes, and the peak memory.
+#[test]
+fn light_field_bench_times_stage_three() {
+    let ctx = ctx_shared();
+    let w = tgs::bench_train::Workload { width: 40, height: 24, points: 300, views: 2 };
+    let b = tgs::bench_light_field::light_field(ctx, w, 0, 2, tgs::train::settings::LightPreset::Small).unwrap();
+    assert_eq!((b.width, b.height, b.scattering_gaussians, b.reflection_gaussians, b.iterations), (40, 24, 300, 30, 2));
+    assert_eq!(b.network, "small");
+    assert!(b.wall_ms.is_finite() && b.wall_ms > 0.0 && b.wall_ms_best <= b.wall_ms);
+    assert!(b.phi_fraction.is_some_and(|f| (0.0..=1.0).contains(&f)), "{:?}", b.phi_fraction);
+    assert_eq!(b.mlp_block, 40 * 24, "one block holds a small frame's samples");
+    assert!(b.peak_memory_mib > 0.0 && b.peak_memory_mib.is_finite());
+    if ctx.caps().timestamp_valid_bits > 0 {
+        for k in ["raster.forward", "raster.backward", "mlp.forward", "mlp.backward", "lf.composite"] {
+            assert!(b.kernels.iter().any(|t| t.name == k), "no timing for {k}");
+        }
+        assert!(b.gpu_ms > 0.0);
+    }
+    assert!(tgs::bench_light_field::light_field(ctx, w, 0, 0, tgs::train::settings::LightPreset::Small).is_err(), "no timed iterations must be refused");
+    check_validation(ctx);
+}

@@ -186,6 +186,11 @@ impl LightFieldModel {
         Ok(count)
     }
 
+    /// Samples the light field takes in one pass (0 before the first view).
+    pub fn mlp_block(&self) -> u32 {
+        self.scratch.as_ref().map_or(0, |s| s.block())
+    }
+
     /// Fraction of pixels Phi was evaluated at since the last call.
     pub fn take_coverage(&mut self) -> Option<f64> {
         let (s, p) = std::mem::take(&mut self.evaluated);
