@@ -3,7 +3,8 @@
 //! spheres scene: 10k Gaussians at 128² and 50k at 256², 20 views, SH 3.
 //! Then the real-scale workload (a Mip-NeRF 360 frame, 1237x822, and a
 //! million Gaussians) on GPUs, and on CPU devices when
-//! `TGS_BENCH_REAL_SCALE=1` (one timed iteration: minutes on lavapipe).
+//! `TGS_BENCH_REAL_SCALE=1` (one timed iteration: minutes on lavapipe),
+//! and a Stage III iteration at that frame (the small light field).
 //! Prints the device, wall and per-kernel GPU ms per iteration, and Brush's
 //! time on the reference lavapipe machine; JSON to target/tgs-bench/train.json.
 //! `TGS_BENCH_TRAIN_FROM=RUN` adds Stage I iterations on that `tgs train`
@@ -24,10 +25,19 @@ fn main() -> anyhow::Result<()> {
         // in slices there.
         workloads.push((Workload::REAL_SCALE, if cpu { 1 } else { 20 }));
     }
+    let real = workloads.iter().any(|(w, _)| *w == Workload::REAL_SCALE);
     for (w, iterations) in workloads {
         let b = tgs::bench_train::train(&ctx, w, 3, iterations, None)?;
         tgs::bench_train::print_train(&b);
         runs.push(b);
+    }
+    // Stage III at the real-scale frame (`tgs bench train --real-scale
+    // --light-field small`).
+    let mut light = Vec::new();
+    if real {
+        let b = tgs::bench_light_field::light_field(&ctx, Workload::REAL_SCALE, 1, if cpu { 1 } else { 20 }, tgs::train::settings::LightPreset::Small)?;
+        tgs::bench_light_field::print_light_field(&b);
+        light.push(b);
     }
     if let Some(run) = std::env::var_os("TGS_BENCH_TRAIN_FROM").map(std::path::PathBuf::from) {
         let b = tgs::bench_train::train_from(&ctx, &run, 3, if cpu { 20 } else { 100 }, None)?;
@@ -35,6 +45,6 @@ fn main() -> anyhow::Result<()> {
         tgs::bench_train::print_train(&b);
         runs.push(b);
     }
-    tgs_perf::write_runs("train", &ctx, serde_json::to_value(runs)?)?;
+    tgs_perf::write_runs("train", &ctx, serde_json::json!({ "stage1": runs, "stage3": light }))?;
     Ok(())
 }
