@@ -259,6 +259,27 @@ fn record_accesses(ctx: &tgs_engine::Context) -> Vec<tgs_pipelines::RecordAccess
     access
 }
 
+/// The fused-reduce tests' case: 400 random Gaussians of SH degree 3 (the
+/// rng seeded by the test's name), a 70 x 45 view and a random image
+/// gradient, Adam and its groups.
+struct FusedCase {
+    host: HostGaussians,
+    cam: tgs_pipelines::Camera,
+    grad_out: Vec<f32>,
+    adam: Adam,
+    groups: [AdamGroup; 5],
+}
+
+fn fused_case(name: &str) -> FusedCase {
+    use tgs_pipelines::Features;
+    use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
+    let mut rng = Rng(seed(name));
+    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, Features::Sh { degree: 3 }));
+    let cam = default_camera(70, 45);
+    let grad_out = random_grads(&mut rng, 3, 70 * 45);
+    FusedCase { host, cam, grad_out, adam: Adam::new(ctx_shared(), 1e-15).unwrap(), groups: fused_groups() }
+}
+
 /// The per-Gaussian reduce with Adam fused (`Rasterizer::record_backward_adam`)
 /// leaves bit for bit the parameters, moments and densification gradients
 /// of the backward followed by Adam's own pass: two steps at SH degree 1 of
@@ -267,15 +288,9 @@ fn record_accesses(ctx: &tgs_engine::Context) -> Vec<tgs_pipelines::RecordAccess
 #[test]
 fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
     use tgs_pipelines::{Features, RasterKernels, Rasterizer};
-    use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
     let ctx = ctx_shared();
-    let mut rng = Rng(seed("the_reduce_with_adam_fused_matches_the_backward_then_adam"));
     let sh3 = Features::Sh { degree: 3 };
-    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, sh3));
-    let cam = default_camera(70, 45);
-    let grad_out = random_grads(&mut rng, 3, 70 * 45);
-    let adam = Adam::new(ctx, 1e-15).unwrap();
-    let groups = fused_groups();
+    let FusedCase { host, cam, grad_out, adam, groups } = fused_case("the_reduce_with_adam_fused_matches_the_backward_then_adam");
     for records in record_accesses(ctx) {
         let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
         if !rast.can_fuse_adam() {
@@ -327,15 +342,9 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
 #[test]
 fn the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam() {
     use tgs_pipelines::{Features, RasterKernels, Rasterizer};
-    use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
     let ctx = ctx_shared();
-    let mut rng = Rng(seed("the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam"));
     let sh3 = Features::Sh { degree: 3 };
-    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, sh3));
-    let cam = default_camera(70, 45);
-    let grad_out = random_grads(&mut rng, 3, 70 * 45);
-    let adam = Adam::new(ctx, 1e-15).unwrap();
-    let groups = fused_groups();
+    let FusedCase { host, cam, grad_out, adam, groups } = fused_case("the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam");
     let bits_of = |set: &TrainableSet| -> Vec<(String, Vec<u32>)> { set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect() };
     let initial = bits_of(&TrainableSet::new(ctx, &host).unwrap());
     for records in record_accesses(ctx) {
@@ -405,15 +414,9 @@ fn the_fused_reduce_refuses_groups_it_cannot_express() {
 #[test]
 fn features_bound_in_slices_give_the_whole_bindings_results() {
     use tgs_pipelines::{Features, Rasterizer};
-    use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
     let ctx = ctx_shared();
-    let mut rng = Rng(seed("features_bound_in_slices_give_the_whole_bindings_results"));
     let sh3 = Features::Sh { degree: 3 };
-    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, sh3));
-    let cam = default_camera(70, 45);
-    let grad_out = random_grads(&mut rng, 3, 70 * 45);
-    let adam = Adam::new(ctx, 1e-15).unwrap();
-    let groups = fused_groups();
+    let FusedCase { host, cam, grad_out, adam, groups } = fused_case("features_bound_in_slices_give_the_whole_bindings_results");
     let bits = |b: &Buffer<f32>| -> Vec<u32> { b.download().unwrap().iter().map(|v| v.to_bits()).collect() };
     // 0: backward then Adam's pass; 1: the fused reduce; 2: its feature-only variant.
     for mode in 0..3 {
