@@ -66,8 +66,9 @@ impl MlpScratch {
     fn blocks(&self, n: u32) -> Vec<Block> {
         (0..n.div_ceil(self.block)).map(|k| Block { base: k * self.block, m: (n - k * self.block).min(self.block) }).collect()
     }
-    /// Samples one pass of the kernels takes ([`MlpScratch::block`]); the
-    /// GPU-count paths need the capacity within one block.
+    /// Samples one pass of the kernels takes: the capacity, or the block
+    /// it is cut into ([`Mlp::scratch_in_blocks`]). The GPU-count paths
+    /// need the capacity within one block.
     pub fn block(&self) -> u32 {
         self.block
     }
@@ -180,8 +181,9 @@ impl Mlp {
         self.gemm_kind
     }
 
-    /// The most samples one scratch of `shape` holds on this device (its
-    /// widest activation buffer within one storage-buffer binding).
+    /// The most samples whose activations one block of a scratch of
+    /// `shape` holds on this device (its widest activation buffer within
+    /// one storage-buffer binding); more are taken in blocks.
     pub fn max_capacity(&self, shape: &MlpShape) -> u32 {
         let max = self.ctx.caps().max_storage_buffer_range / 4;
         let widest = shape.cat_width().max(shape.dx()).max(1) as u64;
