@@ -75,12 +75,38 @@ pub struct Adam {
     pub beta1: f32,
     pub beta2: f32,
     pub eps: f32,
+    /// Elements per dispatch, forced ([`Adam::slice`]).
+    slice: Option<usize>,
 }
 
 impl Adam {
     /// Adam with betas (0.9, 0.999) and the given epsilon.
     pub fn new(ctx: &Arc<Context>, eps: f32) -> Result<Adam> {
-        Ok(Adam { ctx: ctx.clone(), kernel: kernel(ctx, "adam", shaders::ADAM, std::mem::size_of::<Push>() as u32)?, beta1: 0.9, beta2: 0.999, eps })
+        Ok(Adam { ctx: ctx.clone(), kernel: kernel(ctx, "adam", shaders::ADAM, std::mem::size_of::<Push>() as u32)?, beta1: 0.9, beta2: 0.999, eps, slice: None })
+    }
+
+    /// This Adam with every array stepped in slices of about `elements`
+    /// (whole blocks of its group's stride, 64 blocks at a time) even when
+    /// it fits one binding: tests compare the sliced step with the whole.
+    pub fn slice(mut self, elements: usize) -> Adam {
+        self.slice = Some(elements);
+        self
+    }
+
+    /// Elements per dispatch for an array of `n` in blocks of `stride`:
+    /// all of them, unless they exceed one storage binding (the SH 3
+    /// features of a million Gaussians and their moments: 183 MiB; lavapipe
+    /// binds 128) or a slice is forced; then whole multiples of 64 blocks,
+    /// so each slice starts at an offset every device allows.
+    fn slice_len(&self, n: usize, stride: usize) -> usize {
+        let fit = (self.ctx.caps().max_storage_buffer_range / 4) as usize;
+        let want = self.slice.unwrap_or(fit).min(fit);
+        let per = want / stride.max(1) / 64 * 64 * stride.max(1);
+        if (n <= fit && self.slice.is_none()) || per == 0 {
+            n
+        } else {
+            per
+        }
     }
 
     /// Record step `t` (1-based) over the first `a.n` elements of `a`.
@@ -116,9 +142,8 @@ impl Adam {
         if active < group.stride && n % group.stride as usize != 0 {
             bail!("Adam on '{}': {n} elements are not whole blocks of {}", param.name(), group.stride);
         }
-        let items = group.items(n);
         let p = Push {
-            n: items as u32,
+            n: group.items(n) as u32,
             stride: group.stride,
             split: group.split,
             active,
@@ -130,7 +155,21 @@ impl Adam {
             bc1: 1.0 - self.beta1.powf(t as f32),
             bc2: 1.0 - self.beta2.powf(t as f32),
         };
-        dispatch_items(rec, &self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), items as u32, args)
+        let per = self.slice_len(n, group.stride as usize);
+        if per >= n {
+            return dispatch_items(rec, &self.kernel, &[param.binding(), grad.binding(), m.binding(), v.binding()], bytemuck::bytes_of(&p), p.n, args);
+        }
+        // Slices of whole blocks: element i of a slice is element
+        // start + i of the array, in the same place of its block. A gated
+        // step's grid covers the whole array; each slice's invocations past
+        // its own elements return.
+        for start in (0..n).step_by(per) {
+            let len = per.min(n - start);
+            let ps = Push { n: group.items(len) as u32, ..p };
+            let bindings = [param.slice(start, len), grad.slice(start, len), m.slice(start, len), v.slice(start, len)];
+            dispatch_items(rec, &self.kernel, &bindings, bytemuck::bytes_of(&ps), ps.n, args)?;
+        }
+        Ok(())
     }
 
     /// Record step `t` over every parameter array of `set`, in its layout
