@@ -4,8 +4,9 @@
 //! the per-Gaussian reduce binds its slice's part of the features (and of
 //! their moments or gradients) and takes the push constants
 //! `feat_base` / `feat_end` (glsl/raster_common.glsl). The results are the
-//! whole binding's, bit for bit (tests/tests/train_kernels.rs). The
-//! densification and the separate Adam pass still bind whole arrays.
+//! whole binding's, bit for bit (tests/tests/train_kernels.rs). Adam's
+//! own pass slices its arrays likewise (`Adam::slice`); the densification
+//! still binds whole arrays.
 
 use super::{Frame, Gaussians, Rasterizer};
 use tgs_engine::{Buffer, BufferBinding};
