@@ -15,7 +15,11 @@ layout(std430, binding = 2) readonly buffer Offsets { uint offsets[]; };
 layout(std430, binding = 3) readonly buffer Action { uint action[]; };
 layout(std430, binding = 4) readonly buffer Scales { vec2 log_scales[]; };
 layout(std430, binding = 5) readonly buffer Quats { vec4 quats[]; };
-layout(push_constant) uniform Push { uint n; uint width; uint mode; uint seed; } pc;
+// Sources [src_base, n): an array too large for one binding is copied in
+// slices (pipelines/src/train/densify.rs copy_slice), the source bound
+// from Gaussian src_base and the destination from float dst_origin; both
+// 0 for a whole copy.
+layout(push_constant) uniform Push { uint n; uint width; uint mode; uint seed; uint src_base; uint dst_origin; } pc;
 
 uint pcg(uint v) {
     uint state = v * 747796405u + 2891336453u;
@@ -45,10 +49,11 @@ mat3 rotation(vec4 q) {
 }
 
 void main() {
-    uint i = wg_linear() * WG + gl_LocalInvocationID.x;
+    uint i = pc.src_base + wg_linear() * WG + gl_LocalInvocationID.x;
     if (i >= pc.n) {
         return;
     }
+    uint si = i - pc.src_base;
     uint o = offsets[i];
     uint cnt = offsets[i + 1u] - o;
     uint act = action[i];
@@ -59,18 +64,18 @@ void main() {
             vec2 xi = gauss2(i, k);
             vec3 d = rotation(quats[i]) * vec3(s * xi, 0.0);
             for (uint j = 0u; j < 3u; j++) {
-                dst[(o + k) * 3u + j] = src[i * 3u + j] + d[j];
+                dst[(o + k) * 3u + j - pc.dst_origin] = src[si * 3u + j] + d[j];
             }
             continue;
         }
         for (uint j = 0u; j < pc.width; j++) {
-            float v = src[i * pc.width + j];
+            float v = src[si * pc.width + j];
             if (pc.mode == 0u && fresh) {
                 v = 0.0;
             } else if (pc.mode == 3u && act == 3u) {
                 v -= 0.47000362924573558;  // log(1.6)
             }
-            dst[(o + k) * pc.width + j] = v;
+            dst[(o + k) * pc.width + j - pc.dst_origin] = v;
         }
     }
 }

@@ -5,8 +5,8 @@
 //! their moments or gradients) and takes the push constants
 //! `feat_base` / `feat_end` (glsl/raster_common.glsl). The results are the
 //! whole binding's, bit for bit (tests/tests/train_kernels.rs). Adam's
-//! own pass slices its arrays likewise (`Adam::slice`); the densification
-//! still binds whole arrays.
+//! own pass (`Adam::slice`) and the densification's copy
+//! (`Densifier::slice`) slice their arrays likewise.
 
 use super::{Frame, Gaussians, Rasterizer};
 use tgs_engine::{Buffer, BufferBinding};

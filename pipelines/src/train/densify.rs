@@ -60,6 +60,8 @@ pub struct Densifier {
     mark: Kernel,
     apply: Kernel,
     reset: Kernel,
+    /// Source Gaussians per copy dispatch, forced ([`Densifier::slice`]).
+    slice: Option<u32>,
 }
 
 impl Densifier {
@@ -69,9 +71,37 @@ impl Densifier {
             scan: PrefixSum::new(ctx)?,
             stats: kernel(ctx, "densify.stats", shaders::DENSIFY_STATS, 4)?,
             mark: kernel(ctx, "densify.mark", shaders::DENSIFY_MARK, std::mem::size_of::<MarkPush>() as u32)?,
-            apply: kernel(ctx, "densify.apply", shaders::DENSIFY_APPLY, 16)?,
+            apply: kernel(ctx, "densify.apply", shaders::DENSIFY_APPLY, 24)?,
             reset: kernel(ctx, "densify.opacity_reset", shaders::OPACITY_RESET, 8)?,
+            slice: None,
         })
+    }
+
+    /// This densifier with every array copied in slices of `gaussians`
+    /// source Gaussians (rounded down to a multiple of 64) even when it
+    /// fits one binding: tests compare the sliced copy with the whole.
+    pub fn slice(mut self, gaussians: u32) -> Densifier {
+        self.slice = Some(gaussians);
+        self
+    }
+
+    /// Source Gaussians per copy dispatch of an array of `width` floats a
+    /// Gaussian: all `n` while the source and the `total` outputs each fit
+    /// one storage binding and no slice is forced; else a multiple of 64
+    /// whose outputs (at most two a source: a clone or a split) fit one
+    /// binding past an aligned start.
+    fn copy_slice(&self, n: u32, total: u32, width: u32) -> u32 {
+        let caps = self.ctx.caps();
+        let (max_f, align_f) = (caps.max_storage_buffer_range / 4, (caps.min_storage_buffer_offset_alignment / 4).max(1));
+        let w = width.max(1) as u64;
+        let fits = (n.max(total) as u64) * w <= max_f;
+        let fit = (max_f.saturating_sub(align_f) / (2 * w)).min(u32::MAX as u64) as u32;
+        let per = self.slice.unwrap_or(fit).min(fit) / 64 * 64;
+        if (fits && self.slice.is_none()) || per == 0 {
+            n
+        } else {
+            per
+        }
     }
 
     /// Record the statistics update from the last forward/backward on `frame`.
@@ -146,6 +176,9 @@ impl Densifier {
         let (params, m, v) = (Gaussians::uninit(ctx, total, c, k)?, Gaussians::uninit(ctx, total, c, k)?, Gaussians::uninit(ctx, total, c, k)?);
         let mut rec = Recorder::new(ctx)?;
         let f = (c * k) as usize;
+        // The output offsets, read back only when an array is copied in
+        // slices (the SH 3 features of a million Gaussians: 183 MiB).
+        let mut offsets: Option<Vec<u32>> = None;
         // Modes of densify_apply.comp: 0 moments, 1 copy, 2 means, 3 log-scales.
         for (src, dst, is_param) in [(&set.params, &params, true), (&set.m, &m, false), (&set.v, &v, false)] {
             let mode = is_param as u32;
@@ -153,13 +186,40 @@ impl Densifier {
             let modes = if is_param { [2, 3, mode, mode, mode] } else { [mode; 5] };
             let arrays = src.buffers().into_iter().zip(dst.buffers()).zip(crate::raster::array_widths(f)).zip(modes);
             for (((s, d), width), mode) in arrays {
-                let push = [n, width as u32, mode, p.seed];
-                rec.dispatch(
-                    &self.apply,
-                    &[s.binding(), d.binding(), counts.binding(), action.binding(), g.log_scales.binding(), g.quats.binding()],
-                    bytemuck::cast_slice(&push),
-                    grid(ctx, n),
-                )?;
+                let width = width as u32;
+                let per = self.copy_slice(n, total, width);
+                let tail = [counts.binding(), action.binding(), g.log_scales.binding(), g.quats.binding()];
+                if per >= n {
+                    let push = [n, width, mode, p.seed, 0, 0];
+                    let bindings = [s.binding(), d.binding(), tail[0].clone(), tail[1].clone(), tail[2].clone(), tail[3].clone()];
+                    rec.dispatch(&self.apply, &bindings, bytemuck::cast_slice(&push), grid(ctx, n))?;
+                    continue;
+                }
+                if offsets.is_none() {
+                    offsets = Some(counts.download()?);
+                }
+                let o = offsets.as_ref().expect("offsets read back");
+                let align_f = (ctx.caps().min_storage_buffer_offset_alignment / 4).max(1) as u32;
+                for a in (0..n).step_by(per as usize) {
+                    let b = (a + per).min(n);
+                    if o[b as usize] == o[a as usize] {
+                        continue; // every source of the slice pruned
+                    }
+                    // The slice's outputs start at o[a]; bound from the
+                    // aligned float at or before it.
+                    let start = o[a as usize] * width / align_f * align_f;
+                    let end = o[b as usize] * width;
+                    let push = [b, width, mode, p.seed, a, start];
+                    let bindings = [
+                        s.slice((a * width) as usize, ((b - a) * width) as usize),
+                        d.slice(start as usize, (end - start) as usize),
+                        tail[0].clone(),
+                        tail[1].clone(),
+                        tail[2].clone(),
+                        tail[3].clone(),
+                    ];
+                    rec.dispatch(&self.apply, &bindings, bytemuck::cast_slice(&push), grid(ctx, b - a))?;
+                }
             }
         }
         rec.submit_and_wait()?;
