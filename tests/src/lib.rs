@@ -9,6 +9,7 @@ pub mod mlp_ref;
 pub mod lightfield_ref;
 pub mod lpips_ref;
 pub mod tsdf_ref;
+pub mod train_cases;
 
 use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};

@@ -3,6 +3,7 @@
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::{Adam, AdamArrays, AdamGroup, DensifyParams, Densifier, HostGaussians, TrainableSet};
 use tgs_tests::Rng;
+use tgs_tests::train_cases::{densify_cases as cases, fused_case, fused_groups, FusedCase};
 use tgs_tests::{check_validation, ctx_shared, seed};
 
 #[test]
@@ -39,32 +40,6 @@ fn adam_matches_f64_reference_and_ignores_non_finite_gradients() {
     }
     assert!(got.iter().all(|v| v.is_finite()));
     check_validation(ctx);
-}
-
-/// Eight Gaussians, one per densification case.
-fn cases() -> (HostGaussians, Vec<f32>, Vec<f32>, Vec<f32>) {
-    let mut g = HostGaussians::new(3, 4);
-    let logit = |o: f32| (o / (1.0 - o)).ln();
-    // (opacity, log-scale, mean grad, views, max radius)
-    let spec: [(f32, f32, f32, f32, f32); 8] = [
-        (0.5, -4.0, 1e-5, 3.0, 4.0), // 0 keep
-        (0.5, -4.0, 5e-4, 2.0, 4.0), // 1 clone
-        (0.5, -1.0, 5e-4, 2.0, 4.0), // 2 split
-        (0.01, -4.0, 1e-5, 2.0, 4.0), // 3 prune: opacity
-        (0.5, 0.5, 1e-5, 2.0, 4.0),  // 4 prune: world size
-        (0.5, -4.0, 1e-5, 2.0, 40.0), // 5 prune: screen size
-        (0.5, -4.0, 1.0, 0.0, 0.0),  // 6 never seen: keep
-        (0.5, -2.5, 3e-4, 1.0, 4.0), // 7 split (scale 0.082 > 0.01 * extent)
-    ];
-    let (mut acc, mut den, mut rad) = (vec![], vec![], vec![]);
-    for (i, &(o, ls, gr, views, r)) in spec.iter().enumerate() {
-        let feats: Vec<f32> = (0..12).map(|k| (i * 12 + k) as f32 * 0.01).collect();
-        g.push([i as f32, 0.5 * i as f32, -0.25 * i as f32], [ls, ls - 0.3], [0.9, 0.1 * i as f32, 0.2, -0.3], logit(o), &feats);
-        acc.push(if views > 0.0 { gr * views } else { 1.0 });
-        den.push(views);
-        rad.push(r);
-    }
-    (g, acc, den, rad)
 }
 
 fn densify(seed_value: u32) -> (HostGaussians, HostGaussians, HostGaussians, [Vec<f32>; 3]) {
@@ -237,19 +212,6 @@ fn adam_steps_only_the_active_elements_of_each_block() {
     check_validation(ctx);
 }
 
-/// The fused-reduce tests' Adam groups: one rate per geometry array; the
-/// SH colour's DC and rest at their own rates, the coefficients of degree
-/// 1 of 3 active.
-fn fused_groups() -> [AdamGroup; 5] {
-    [
-        AdamGroup::single(1e-3),
-        AdamGroup::single(5e-3),
-        AdamGroup::single(1e-3),
-        AdamGroup::single(0.05),
-        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
-    ]
-}
-
 /// The ways of reaching the gradient records this device has.
 fn record_accesses(ctx: &tgs_engine::Context) -> Vec<tgs_pipelines::RecordAccess> {
     let mut access = vec![tgs_pipelines::RecordAccess::Binding];
@@ -257,27 +219,6 @@ fn record_accesses(ctx: &tgs_engine::Context) -> Vec<tgs_pipelines::RecordAccess
         access.push(tgs_pipelines::RecordAccess::Address);
     }
     access
-}
-
-/// The fused-reduce tests' case: 400 random Gaussians of SH degree 3 (the
-/// rng seeded by the test's name), a 70 x 45 view and a random image
-/// gradient, Adam and its groups.
-struct FusedCase {
-    host: HostGaussians,
-    cam: tgs_pipelines::Camera,
-    grad_out: Vec<f32>,
-    adam: Adam,
-    groups: [AdamGroup; 5],
-}
-
-fn fused_case(name: &str) -> FusedCase {
-    use tgs_pipelines::Features;
-    use tgs_tests::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
-    let mut rng = Rng(seed(name));
-    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, Features::Sh { degree: 3 }));
-    let cam = default_camera(70, 45);
-    let grad_out = random_grads(&mut rng, 3, 70 * 45);
-    FusedCase { host, cam, grad_out, adam: Adam::new(ctx_shared(), 1e-15).unwrap(), groups: fused_groups() }
 }
 
 /// The per-Gaussian reduce with Adam fused (`Rasterizer::record_backward_adam`)
@@ -403,151 +344,3 @@ fn the_fused_reduce_refuses_groups_it_cannot_express() {
     check_validation(ctx);
 }
 
-/// A set whose features exceed one storage binding (a million Gaussians of
-/// SH degree 3 on lavapipe) is projected and reduced in slices of
-/// Gaussians, each binding its part of the features and of their moments
-/// or gradients (`Rasterizer::feature_slices`). Forced here on 400 Gaussians
-/// in slices of 64 (the last one partial): the image, the densification
-/// gradients, the parameters, moments and gradients come out bit for bit
-/// as with the whole buffers bound, for the plain backward, the fused
-/// reduce and Adam, and its feature-only variant.
-#[test]
-fn features_bound_in_slices_give_the_whole_bindings_results() {
-    use tgs_pipelines::{Features, Rasterizer};
-    let ctx = ctx_shared();
-    let sh3 = Features::Sh { degree: 3 };
-    let FusedCase { host, cam, grad_out, adam, groups } = fused_case("features_bound_in_slices_give_the_whole_bindings_results");
-    let bits = |b: &Buffer<f32>| -> Vec<u32> { b.download().unwrap().iter().map(|v| v.to_bits()).collect() };
-    // 0: backward then Adam's pass; 1: the fused reduce; 2: its feature-only variant.
-    for mode in 0..3 {
-        let run = |slice: Option<u32>| -> Vec<(String, Vec<u32>)> {
-            let rast = Rasterizer::new(ctx, 3, sh3).unwrap();
-            let rast = match slice {
-                Some(s) => rast.feature_slice(s),
-                None => rast,
-            };
-            if mode > 0 && !rast.can_fuse_adam() {
-                return Vec::new();
-            }
-            let set = TrainableSet::new(ctx, &host).unwrap();
-            let mut frame = rast.frame(cam.width, cam.height, set.len(), 1024).unwrap();
-            let mut out = Vec::new();
-            for t in 1..=2u64 {
-                rast.forward(&set.params, &cam, &[0.1, 0.5, 0.9], 3, &mut frame, false).unwrap();
-                out.push((format!("step {t}: image"), bits(&frame.out)));
-                frame.grad_out.upload(&grad_out).unwrap();
-                let mut rec = Recorder::new(ctx).unwrap();
-                if mode == 0 {
-                    rast.record_backward(&mut rec, &set.params, &set.grads, 3, &frame).unwrap();
-                    adam.record_set(&mut rec, &set, &groups, t).unwrap();
-                } else {
-                    let c = adam.reduce_constants(&set, &groups, t).unwrap();
-                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c, features_only: mode == 2 }, 3, &frame, None).unwrap();
-                }
-                rec.submit_and_wait().unwrap();
-                out.push((format!("step {t}: densify"), bits(&frame.densify)));
-            }
-            out.extend(set.arrays().into_iter().map(|(name, b, _)| (name, bits(b))));
-            out
-        };
-        let (whole, sliced) = (run(None), run(Some(64)));
-        assert_eq!(whole.len(), sliced.len());
-        for ((name, a), (_, b)) in whole.iter().zip(&sliced) {
-            assert!(a == b, "mode {mode}: {name} differs between whole and sliced feature bindings");
-        }
-        if let Some((_, f)) = whole.iter().find(|(n, _)| n == "param.features") {
-            assert_ne!(*f, bits(&TrainableSet::new(ctx, &host).unwrap().params.features), "mode {mode}: the features did not move");
-        }
-    }
-    check_validation(ctx);
-}
-
-/// Adam's own pass (the GPU default) steps an array that exceeds one
-/// storage binding in slices of whole blocks (the SH 3 features of a
-/// million Gaussians on lavapipe). Forced here in slices of 64 Gaussians'
-/// features on 400: two steps at SH degree 1 of 3 (the active
-/// coefficients only, DC and rest at their own rates), direct and gated
-/// (the whole array's grid read on the device), leave the parameters and
-/// moments bit for bit as the whole step does.
-#[test]
-fn adam_in_slices_matches_the_whole_step() {
-    let ctx = ctx_shared();
-    let FusedCase { host, adam, groups, .. } = fused_case("adam_in_slices_matches_the_whole_step");
-    let mut rng = Rng(seed("adam_in_slices_matches_the_whole_step grads"));
-    let lens: Vec<usize> = TrainableSet::new(ctx, &host).unwrap().grads.buffers().iter().map(|b| b.len()).collect();
-    let grads: Vec<Vec<f32>> = lens.iter().map(|&n| (0..n).map(|_| ((rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32) - 0.5).collect()).collect();
-    let bits = |b: &Buffer<f32>| -> Vec<u32> { b.download().unwrap().iter().map(|v| v.to_bits()).collect() };
-    // 64 Gaussians' 48 features a slice: the features in 7 slices.
-    let sliced = Adam::new(ctx, adam.eps).unwrap().slice(64 * 48);
-    for gated in [false, true] {
-        let run = |a: &Adam| -> Vec<(String, Vec<u32>)> {
-            let set = TrainableSet::new(ctx, &host).unwrap();
-            for (b, g) in set.grads.buffers().into_iter().zip(&grads) {
-                b.upload(g).unwrap();
-            }
-            let grids = a.set_grids(&set, &groups);
-            let args = Buffer::from_slice(ctx, "args", &grids.iter().flatten().copied().collect::<Vec<u32>>()).unwrap();
-            let slots: Vec<_> = (0..5).map(|k| args.slice(3 * k, 3)).collect();
-            for t in 1..=2u64 {
-                let mut rec = Recorder::new(ctx).unwrap();
-                if gated {
-                    a.record_set_gated(&mut rec, &set, &groups, t, &slots).unwrap();
-                } else {
-                    a.record_set(&mut rec, &set, &groups, t).unwrap();
-                }
-                rec.submit_and_wait().unwrap();
-            }
-            set.arrays().into_iter().map(|(name, b, _)| (name, bits(b))).collect()
-        };
-        let (whole, parts) = (run(&adam), run(&sliced));
-        for ((name, a), (_, b)) in whole.iter().zip(&parts) {
-            assert!(a == b, "gated {gated}: {name} differs between the whole and the sliced step");
-        }
-        let f = whole.iter().find(|(n, _)| n == "param.features").unwrap();
-        assert_ne!(f.1, bits(&TrainableSet::new(ctx, &host).unwrap().params.features), "gated {gated}: the features did not move");
-    }
-    check_validation(ctx);
-}
-
-/// Densification copies an array that exceeds one storage binding (the SH
-/// 3 features of a million Gaussians on lavapipe) in slices of source
-/// Gaussians, each slice's outputs bound from an aligned float before
-/// their start. Forced here in slices of 64 on 320 Gaussians (the eight
-/// cases forty times: clones, splits and prunes in every slice): the
-/// parameters, moments and counts come out bit for bit as the whole copy's.
-#[test]
-fn densify_in_slices_matches_the_whole_copy() {
-    let ctx = ctx_shared();
-    let (g8, acc8, den8, rad8) = cases();
-    let mut g = HostGaussians::new(3, 4);
-    let (mut acc, mut den, mut rad) = (vec![], vec![], vec![]);
-    for r in 0..40 {
-        for i in 0..8 {
-            let s = |v: &[f32], w: usize| -> Vec<f32> { v[w * i..w * (i + 1)].to_vec() };
-            let mean = s(&g8.means, 3);
-            g.push([mean[0] + r as f32, mean[1], mean[2]], s(&g8.log_scales, 2).try_into().unwrap(), s(&g8.quats, 4).try_into().unwrap(), g8.opacity[i], &s(&g8.features, 12));
-            acc.push(acc8[i]);
-            den.push(den8[i]);
-            rad.push(rad8[i]);
-        }
-    }
-    let run = |d: &Densifier| {
-        let mut set = TrainableSet::new(ctx, &g).unwrap();
-        set.accum.upload(&acc).unwrap();
-        set.denom.upload(&den).unwrap();
-        set.max_radii.upload(&rad).unwrap();
-        for (k, (m, v)) in set.m.buffers().into_iter().zip(set.v.buffers()).enumerate() {
-            let vals: Vec<f32> = (0..m.len()).map(|j| j as f32 + 0.25 * k as f32).collect();
-            m.upload(&vals).unwrap();
-            v.upload(&vals.iter().map(|x| -x).collect::<Vec<_>>()).unwrap();
-        }
-        let p = DensifyParams { grad_threshold: 2e-4, dense_scale: 0.01 * 5.0, opacity_min: 0.05, prune_big: true, big_screen: 20.0, big_world: 0.1 * 5.0, grow: true, seed: 11 };
-        let r = d.densify(&mut set, &p).unwrap();
-        (r, set.params.download().unwrap(), set.m.download().unwrap(), set.v.download().unwrap())
-    };
-    let whole = run(&Densifier::new(ctx).unwrap());
-    let sliced = run(&Densifier::new(ctx).unwrap().slice(64));
-    assert_eq!(whole.0, tgs_pipelines::DensifyReport { before: 320, after: 320 });
-    assert!(whole == sliced, "the sliced densification differs from the whole one");
-    check_validation(ctx);
-}

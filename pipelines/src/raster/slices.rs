@@ -4,7 +4,7 @@
 //! the per-Gaussian reduce binds its slice's part of the features (and of
 //! their moments or gradients) and takes the push constants
 //! `feat_base` / `feat_end` (glsl/raster_common.glsl). The results are the
-//! whole binding's, bit for bit (tests/tests/train_kernels.rs). Adam's
+//! whole binding's, bit for bit (tests/tests/slices.rs). Adam's
 //! own pass (`Adam::slice`) and the densification's copy
 //! (`Densifier::slice`) slice their arrays likewise.
 
