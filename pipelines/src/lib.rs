@@ -11,6 +11,23 @@ pub mod shaders {
 /// `gl_WorkGroupSize.x`): one value for every kernel family.
 pub(crate) const WG: u32 = 256;
 
+/// How arrays too large for one storage binding are cut (the SH 3 features
+/// of a million Gaussians and their moments are 183 MiB; lavapipe binds
+/// 128): units per dispatch, or `None` for one dispatch with the whole
+/// buffers bound, which is what happens when `whole_fits` and no slice is
+/// `forced` (tests force slices on small sets). Otherwise the units that
+/// fit one binding (`fit`, or `forced` when smaller), rounded down to a
+/// multiple of 64 so that every slice starts at an offset any device
+/// allows; `None` too when that leaves none. The rasterizer's feature
+/// slices, Adam's own pass and the densification's copy all cut by it.
+pub(crate) fn slice_units(whole_fits: bool, fit: u64, forced: Option<u64>) -> Option<u64> {
+    if whole_fits && forced.is_none() {
+        return None;
+    }
+    let per = forced.unwrap_or(fit).min(fit) / 64 * 64;
+    (per > 0).then_some(per)
+}
+
 pub mod scan;
 pub mod sort;
 pub mod rng;

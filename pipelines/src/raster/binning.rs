@@ -12,11 +12,10 @@ use tgs_engine::{Buffer, Recorder};
 
 impl Rasterizer {
     /// Record the binning of the Gaussians `g` (features `features`) into
-    /// `frame`, with the forward's push constants `pb`.
-    pub(super) fn record_binning(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, pb: &[u8], frame: &Frame) -> Result<()> {
+    /// `frame`, with the forward's push constants `push`.
+    pub(super) fn record_binning(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
         let sc = rec.begin_scope("raster.project");
         let project = &self.tile_kernels(frame.tile)?.project;
-        let base: Push = *bytemuck::try_from_bytes(pb).map_err(|e| anyhow::anyhow!("the forward's push constants: {e}"))?;
         for slice in self.feature_slices(g.n) {
             let mut bindings = self.param_bindings(frame, g, features, slice);
             bindings.extend([
@@ -28,9 +27,9 @@ impl Rasterizer {
                 frame.depth_ids.binding(),
                 frame.radii.binding(),
             ]);
-            let push = Push { feat_base: slice.0, feat_end: slice.1, ..base };
+            let p = Push { feat_base: slice.0, feat_end: slice.1, ..*push };
             let count = slice.1.min(g.n) - slice.0;
-            rec.dispatch(project, &bindings, bytemuck::bytes_of(&push), self.groups(count))?;
+            rec.dispatch(project, &bindings, bytemuck::bytes_of(&p), self.groups(count))?;
         }
         rec.end_scope(sc);
 
@@ -54,7 +53,7 @@ impl Rasterizer {
         rec.dispatch(
             &self.emit,
             &[frame.depth_ids.binding(), frame.offsets.binding(), frame.rects.binding(), frame.isect_keys.binding(), frame.isect_vals.binding(), frame.isect_gid.binding()],
-            pb,
+            bytemuck::bytes_of(push),
             self.groups(g.n),
         )?;
         rec.end_scope(sc);

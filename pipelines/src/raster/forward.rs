@@ -29,10 +29,9 @@ impl Rasterizer {
             bail!("background has {} values; the rasterizer has {} channels", background.len(), self.channels);
         }
         let push = self.push(g, frame, sh_degree);
-        let pb = bytemuck::bytes_of(&push);
         rec.update(&frame.cam.binding(), bytemuck::cast_slice(&cam.pack(background)))?;
 
-        self.record_binning(rec, g, features, pb, frame)?;
+        self.record_binning(rec, g, features, &push, frame)?;
 
         let forward = &self.tile_kernels(frame.tile)?.forward;
         let tiles = frame.tiles();

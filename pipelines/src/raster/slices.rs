@@ -27,14 +27,15 @@ impl Rasterizer {
     /// starts at a multiple of 64 Gaussians (so at an offset every device
     /// allows).
     pub(super) fn feature_slices(&self, n: u32) -> Vec<(u32, u32)> {
-        let per = 4 * self.channels as u64 * self.features.coeffs() as u64;
-        let fit = (self.ctx.caps().max_storage_buffer_range / per.max(1)).min(u32::MAX as u64) as u32;
-        let slice = self.feature_slice.unwrap_or(fit).min(fit) / 64 * 64;
-        let fits_one = n as u64 * per <= self.ctx.caps().max_storage_buffer_range;
-        if (fits_one && self.feature_slice.is_none()) || slice == 0 {
-            return vec![(0, u32::MAX)];
+        let per = (4 * self.channels as u64 * self.features.coeffs() as u64).max(1);
+        let max = self.ctx.caps().max_storage_buffer_range;
+        match crate::slice_units(n as u64 * per <= max, max / per, self.feature_slice.map(u64::from)) {
+            None => vec![(0, u32::MAX)],
+            Some(slice) => {
+                let slice = slice.min(u32::MAX as u64) as u32;
+                (0..n.div_ceil(slice)).map(|k| (k * slice, ((k + 1) * slice).min(n))).collect()
+            }
         }
-        (0..n.div_ceil(slice)).map(|k| (k * slice, ((k + 1) * slice).min(n))).collect()
     }
 
     /// This rasterizer with the Gaussians' features bound in slices of

@@ -99,13 +99,10 @@ impl Adam {
     /// binds 128) or a slice is forced; then whole multiples of 64 blocks,
     /// so each slice starts at an offset every device allows.
     fn slice_len(&self, n: usize, stride: usize) -> usize {
-        let fit = (self.ctx.caps().max_storage_buffer_range / 4) as usize;
-        let want = self.slice.unwrap_or(fit).min(fit);
-        let per = want / stride.max(1) / 64 * 64 * stride.max(1);
-        if (n <= fit && self.slice.is_none()) || per == 0 {
-            n
-        } else {
-            per
+        let (fit, stride) = ((self.ctx.caps().max_storage_buffer_range / 4) as usize, stride.max(1));
+        match crate::slice_units(n <= fit, (fit / stride) as u64, self.slice.map(|e| (e / stride) as u64)) {
+            None => n,
+            Some(blocks) => blocks as usize * stride,
         }
     }
 

@@ -94,13 +94,10 @@ impl Densifier {
         let caps = self.ctx.caps();
         let (max_f, align_f) = (caps.max_storage_buffer_range / 4, (caps.min_storage_buffer_offset_alignment / 4).max(1));
         let w = width.max(1) as u64;
-        let fits = (n.max(total) as u64) * w <= max_f;
-        let fit = (max_f.saturating_sub(align_f) / (2 * w)).min(u32::MAX as u64) as u32;
-        let per = self.slice.unwrap_or(fit).min(fit) / 64 * 64;
-        if (fits && self.slice.is_none()) || per == 0 {
-            n
-        } else {
-            per
+        let fit = max_f.saturating_sub(align_f) / (2 * w);
+        match crate::slice_units((n.max(total) as u64) * w <= max_f, fit, self.slice.map(u64::from)) {
+            None => n,
+            Some(per) => per.min(u32::MAX as u64) as u32,
         }
     }
 
@@ -188,11 +185,10 @@ impl Densifier {
             for (((s, d), width), mode) in arrays {
                 let width = width as u32;
                 let per = self.copy_slice(n, total, width);
-                let tail = [counts.binding(), action.binding(), g.log_scales.binding(), g.quats.binding()];
+                let bind = |src: BufferBinding, dst: BufferBinding| [src, dst, counts.binding(), action.binding(), g.log_scales.binding(), g.quats.binding()];
                 if per >= n {
                     let push = [n, width, mode, p.seed, 0, 0];
-                    let bindings = [s.binding(), d.binding(), tail[0].clone(), tail[1].clone(), tail[2].clone(), tail[3].clone()];
-                    rec.dispatch(&self.apply, &bindings, bytemuck::cast_slice(&push), grid(ctx, n))?;
+                    rec.dispatch(&self.apply, &bind(s.binding(), d.binding()), bytemuck::cast_slice(&push), grid(ctx, n))?;
                     continue;
                 }
                 if offsets.is_none() {
@@ -210,14 +206,7 @@ impl Densifier {
                     let start = o[a as usize] * width / align_f * align_f;
                     let end = o[b as usize] * width;
                     let push = [b, width, mode, p.seed, a, start];
-                    let bindings = [
-                        s.slice((a * width) as usize, ((b - a) * width) as usize),
-                        d.slice(start as usize, (end - start) as usize),
-                        tail[0].clone(),
-                        tail[1].clone(),
-                        tail[2].clone(),
-                        tail[3].clone(),
-                    ];
+                    let bindings = bind(s.slice((a * width) as usize, ((b - a) * width) as usize), d.slice(start as usize, (end - start) as usize));
                     rec.dispatch(&self.apply, &bindings, bytemuck::cast_slice(&push), grid(ctx, b - a))?;
                 }
             }
