@@ -14,6 +14,14 @@ impl Rasterizer {
     /// Record the binning of the Gaussians `g` (features `features`) into
     /// `frame`, with the forward's push constants `push`.
     pub(super) fn record_binning(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
+        self.record_project(rec, g, features, push, frame)?;
+        self.record_bins(rec, g.n, push, frame)
+    }
+
+    /// The projection alone: every Gaussian's splat, colour, tile rectangle
+    /// and depth key (the rest of the binning reads them; a kept binning
+    /// needs only the splats and colours, `kept.rs`).
+    pub(super) fn record_project(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
         let sc = rec.begin_scope("raster.project");
         let project = &self.tile_kernels(frame.tile)?.project;
         for slice in self.feature_slices(g.n) {
@@ -32,20 +40,24 @@ impl Rasterizer {
             rec.dispatch(project, &bindings, bytemuck::bytes_of(&p), self.groups(count))?;
         }
         rec.end_scope(sc);
+        Ok(())
+    }
 
+    /// The binning after the projection of `n` Gaussians.
+    fn record_bins(&self, rec: &mut Recorder, n: u32, push: &Push, frame: &Frame) -> Result<()> {
         let sc = rec.begin_scope("raster.depth_sort");
-        self.sort.record(rec, &frame.depth_keys, &frame.depth_ids, &Count::Host(g.n), 32, &frame.depth_scratch).context("depth sort")?;
+        self.sort.record(rec, &frame.depth_keys, &frame.depth_ids, &Count::Host(n), 32, &frame.depth_scratch).context("depth sort")?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.gather");
-        rec.dispatch(&self.gather, &[frame.depth_ids.binding(), frame.tiles.binding(), frame.offsets.binding()], bytemuck::bytes_of(&g.n), self.groups(g.n + 1))?;
+        rec.dispatch(&self.gather, &[frame.depth_ids.binding(), frame.tiles.binding(), frame.offsets.binding()], bytemuck::bytes_of(&n), self.groups(n + 1))?;
         rec.end_scope(sc);
         let sc = rec.begin_scope("raster.scan");
-        self.scan.record(rec, &frame.offsets, &frame.offsets, &Count::Host(g.n + 1), &frame.scan_scratch)?;
+        self.scan.record(rec, &frame.offsets, &frame.offsets, &Count::Host(n + 1), &frame.scan_scratch)?;
         rec.end_scope(sc);
 
         let sc = rec.begin_scope("raster.plan");
-        let plan_push = [g.n, frame.capacity, WG, self.max_x()];
+        let plan_push = [n, frame.capacity, WG, self.max_x()];
         rec.dispatch(&self.plan, &[frame.offsets.binding(), frame.params.binding(), frame.args.binding(), frame.stats.binding()], bytemuck::cast_slice(&plan_push), [1, 1, 1])?;
         rec.end_scope(sc);
 
@@ -54,7 +66,7 @@ impl Rasterizer {
             &self.emit,
             &[frame.depth_ids.binding(), frame.offsets.binding(), frame.rects.binding(), frame.isect_keys.binding(), frame.isect_vals.binding(), frame.isect_gid.binding()],
             bytemuck::bytes_of(push),
-            self.groups(g.n),
+            self.groups(n),
         )?;
         rec.end_scope(sc);
 

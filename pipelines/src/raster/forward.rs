@@ -19,7 +19,15 @@ impl Rasterizer {
     /// per Gaussian), which may be another kernel's instead of the set's
     /// own (e.g. the reflection colour).
     pub fn record_forward_with(&self, rec: &mut Recorder, s: Splats, cam: &Camera, background: &[f32], frame: &Frame) -> Result<()> {
-        let Splats { g, features, sh_degree } = s;
+        let push = self.begin_forward(rec, &s, cam, background, frame)?;
+        self.record_binning(rec, s.g, s.features, &push, frame)?;
+        self.record_tiles_forward(rec, &push, frame)
+    }
+
+    /// A view's forward up to its binning: the inputs checked, the camera
+    /// written; returns the forward's push constants.
+    pub(super) fn begin_forward(&self, rec: &mut Recorder, s: &Splats, cam: &Camera, background: &[f32], frame: &Frame) -> Result<Push> {
+        let Splats { g, features, sh_degree } = *s;
         self.check_inputs(g, features, frame)?;
         cam.validate()?;
         if cam.width != frame.width || cam.height != frame.height {
@@ -30,16 +38,18 @@ impl Rasterizer {
         }
         let push = self.push(g, frame, sh_degree);
         rec.update(&frame.cam.binding(), bytemuck::cast_slice(&cam.pack(background)))?;
+        Ok(push)
+    }
 
-        self.record_binning(rec, g, features, &push, frame)?;
-
+    /// A view's forward after its binning: each tile's splats, span by span.
+    pub(super) fn record_tiles_forward(&self, rec: &mut Recorder, push: &Push, frame: &Frame) -> Result<()> {
         let forward = &self.tile_kernels(frame.tile)?.forward;
         let tiles = frame.tiles();
         let tile_groups = groups_2d(tiles, self.max_x());
         let mut bindings = Self::tile_bindings(frame);
         bindings.push(frame.stats.binding());
         for k in 0..frame.spans {
-            let p = Push { span_index: k, ..push };
+            let p = Push { span_index: k, ..*push };
             let sc = rec.begin_scope("raster.forward");
             rec.dispatch(forward, &bindings, bytemuck::bytes_of(&p), tile_groups)?;
             rec.end_scope(sc);

@@ -13,6 +13,7 @@ mod camera;
 mod forward;
 mod frame;
 mod gaussians;
+mod kept;
 mod reduce_adam;
 mod slices;
 mod tiles;
@@ -20,6 +21,7 @@ mod tiles;
 pub use camera::Camera;
 pub use frame::{Frame, Plane};
 pub use gaussians::{array_widths, Gaussians, HostGaussians, Splats, GAUSSIAN_ARRAYS};
+pub use kept::KeptBinning;
 pub use reduce_adam::{Moments, ReduceAdam};
 use tiles::{TileKernels, TileSpec, SMALL_TILE, WIDE_TILE};
 
@@ -65,8 +67,7 @@ struct Push {
     span: u32,
     span_index: u32,
     spans: u32,
-    /// The Gaussians whose features the feature bindings hold
-    /// ([`Rasterizer::feature_slices`]).
+    /// The Gaussians whose features the bindings hold ([`Rasterizer::feature_slices`]).
     feat_base: u32,
     feat_end: u32,
 }
@@ -280,8 +281,7 @@ impl Rasterizer {
         self.records
     }
 
-    /// Splats per span (tiles longer than this take several passes) with
-    /// the tiles this rasterizer prefers ([`Rasterizer::tile`]).
+    /// Splats per span (longer tiles take several passes), tiles as [`Rasterizer::tile`].
     pub fn span(&self) -> u32 {
         self.span_of(self.tile())
     }
