@@ -79,6 +79,7 @@ pub fn light_field(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32
             iteration: it,
             global_iteration: cfg.iterations + it,
             camera: &tr.views.cameras[view],
+            keep: light_field::KeepAs { view: view as u32, budget_mib: cfg.light_field.kept_binning_mib },
             target: &tr.views.targets[view],
             scat: None,
             sh_degree: sh,

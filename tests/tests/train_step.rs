@@ -8,7 +8,7 @@
 //! again.
 
 use tgs::train::stages::scattering::init::{gaussians_from_points, random_points};
-use tgs::train::stages::light_field::{LightFieldModel, LightFieldStepInput};
+use tgs::train::stages::light_field::{KeepAs, LightFieldModel, LightFieldStepInput};
 use tgs::train::stages::reflection::{ReflStepInput, ReflectionModel};
 use tgs_pipelines::Rng;
 use tgs::train::stages::scattering::{ScatteringModel, StepInput};
@@ -254,7 +254,7 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
     let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
-    let input = LightFieldStepInput { iteration: 1, global_iteration: 1, camera: &cam, target: &target, scat: Some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: false };
+    let input = LightFieldStepInput { iteration: 1, global_iteration: 1, camera: &cam, keep: KeepAs { view: 0, budget_mib: 0 }, target: &target, scat: Some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: false };
     let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
     let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true };
     let model = || {
@@ -298,5 +298,56 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let out_c = c.step(&cfg, &mut scattering, &input).unwrap();
     assert_eq!(ctx.submissions() - submitted, 3);
     assert_one_step(&before, (&light_field_bits(&c), out_c.loss), (&light_field_bits(&b), out_b.loss), &[]);
+    check_validation(ctx);
+}
+
+/// Stage III keeps each training view's binning (the reflection set's, and
+/// the scattering set's while only its colour trains) and bins it again
+/// never: four steps over two views, with the scattering colour training
+/// (the default) and with it frozen (one submission per step), leave every
+/// parameter and moment of the network, the reflection set and the
+/// scattering set bit for bit as steps that bin every view every time. The
+/// second visit of each view sorts nothing.
+#[test]
+fn light_field_steps_from_kept_binnings_match_steps_that_bin_every_time() {
+    let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());
+    let ctx = ctx_shared();
+    let g = big_splats(600);
+    let cfg = TrainConfig::default();
+    let cams = [camera(), Camera::look_at([1.5, 0.3, 3.6], [0.0; 3], [0.0, 1.0, 0.0], 0.9, SIZE, SIZE)];
+    let (target, scat) = target_and_scat(ctx);
+    let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
+    let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true };
+    let run = |budget_mib: u32, frozen: bool| -> (Bits, Vec<Vec<String>>) {
+        let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
+        let set = ReflectionModel::from_scattering(ctx, Some(&g), &[], HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(), &cfg.reflection, 1e-15).unwrap().into_set();
+        let mut m = LightFieldModel::new(ctx, set, LightFieldModel::init_net(ctx, shape, 5).unwrap(), shade, 1e-15).unwrap();
+        let mut scopes = Vec::new();
+        for (it, view) in [0u32, 1, 0, 1].into_iter().enumerate() {
+            let cam = &cams[view as usize];
+            let it = it as u32 + 1;
+            let input = LightFieldStepInput { iteration: it, global_iteration: it, camera: cam, keep: KeepAs { view, budget_mib }, target: &target, scat: frozen.then_some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: true };
+            let out = m.step(&cfg, &mut scattering, &input).unwrap();
+            assert!(out.loss.is_finite());
+            scopes.push(out.timings.iter().map(|t| t.name.clone()).collect());
+        }
+        let mut all = light_field_bits(&m);
+        all.extend(bits(&scattering.set).into_iter().map(|(n, b)| (format!("scattering {n}"), b)));
+        (all, scopes)
+    };
+    for frozen in [false, true] {
+        let ((every, binned), (kept, copied)) = (run(0, frozen), run(512, frozen));
+        for ((name, a), (_, b)) in every.iter().zip(&kept) {
+            assert!(a == b, "{name}: steps from kept binnings differ from steps that bin every time (scattering frozen: {frozen})");
+        }
+        let has = |s: &Vec<String>, k: &str| s.iter().any(|n| n == k);
+        let sorts = if frozen { 1 } else { 2 };
+        for (i, (b, c)) in binned.iter().zip(&copied).enumerate() {
+            // (A first view may overflow its frame and bin again.)
+            assert!(b.iter().filter(|n| *n == "raster.depth_sort").count() >= sorts, "step {i}: every set bins");
+            assert_eq!(has(c, "raster.depth_sort"), i < 2, "step {i} with kept binnings (scattering frozen: {frozen}): {c:?}");
+            assert_eq!(has(c, "raster.kept_binning"), i >= 2);
+        }
+    }
     check_validation(ctx);
 }

@@ -10,8 +10,10 @@
 //! and are begun, scheduled and checkpointed through their [`LaterKind`]
 //! (`kind.rs`), listed in run order in [`LATER`]: a new stage is a folder,
 //! an entry in that list and its name in `Stage::ALL`. `composite.rs` is the deferred composite's loss they share; `views.rs`
-//! and `rendered.rs` what every stage reads and returns.
+//! and `rendered.rs` what every stage reads and returns; `kept_views.rs`
+//! the training views' binnings kept for a set whose geometry is frozen.
 pub mod composite;
+pub mod kept_views;
 pub mod kind;
 pub mod light_field;
 pub mod reflection;

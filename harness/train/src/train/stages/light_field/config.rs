@@ -47,6 +47,12 @@ pub struct LightFieldConfig {
     pub hf_percentile: f32,
     /// Penalty on the mean of R (as in `[reflection]`).
     pub lambda_r: f32,
+    /// Device memory (MiB, per set) for the training views' binnings kept
+    /// while the geometry is frozen: the scattering set's when only its
+    /// colour trains, and the reflection set's. Each view is then binned
+    /// once instead of every iteration, with the same results bit for bit
+    /// (`stages/kept_views.rs`); 0 bins every time.
+    pub kept_binning_mib: u32,
 }
 
 impl Default for LightFieldConfig {
@@ -67,6 +73,7 @@ impl Default for LightFieldConfig {
             lambda_hf: 0.1,
             hf_percentile: 90.0,
             lambda_r: 0.0,
+            kept_binning_mib: 512,
         }
     }
 }

@@ -7,4 +7,5 @@ pub mod outputs;
 pub mod stage;
 
 pub use crate::train::stages::reflection::bounds::normalization_box;
+pub use crate::train::stages::kept_views::KeepAs;
 pub use model::{LightFieldModel, LightFieldStepInput, MlpParams};

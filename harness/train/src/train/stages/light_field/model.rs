@@ -10,6 +10,7 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::composite::{CompositeLoss, HfSetting};
+use crate::train::stages::kept_views::{KeepAs, KeptViews};
 use crate::train::stages::rendered::{PhiLayers, ReflRendered, R_PLANE};
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
@@ -19,7 +20,7 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
-use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, KeptBinning, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
 use crate::train::stages::scattering::ExternalStep;
 
 /// What the trainer passes for one Stage III step.
@@ -29,6 +30,8 @@ pub struct LightFieldStepInput<'a> {
     /// Global iteration: the scattering set's Adam step.
     pub global_iteration: u32,
     pub camera: &'a Camera,
+    /// The training view, and the budget of each set's kept binnings.
+    pub keep: KeepAs,
     pub target: &'a Buffer<f32>,
     /// The frozen scattering colour of this view when the scattering set
     /// does not train.
@@ -102,6 +105,9 @@ pub struct LightFieldModel {
     /// the host reads every view's sample count first (the same results,
     /// bit for bit: tests/tests/train_step.rs compares them).
     pub one_submission: bool,
+    /// Training views' binnings of the reflection set (its geometry is
+    /// frozen in Stage III).
+    kept: KeptViews,
 }
 
 impl LightFieldModel {
@@ -127,6 +133,7 @@ impl LightFieldModel {
             evaluated: (0, 0),
             count_host: Readback::new(ctx, "lf.count_host", 1)?,
             one_submission: true,
+            kept: KeptViews::default(),
             ctx: ctx.clone(),
         })
     }
@@ -167,17 +174,25 @@ impl LightFieldModel {
 
     /// Reflection render + sample list of `cam`, re-run until the frame
     /// fits; returns the number of samples.
-    fn forward(&mut self, cam: &Camera, profile: bool, timings: &mut Vec<Timing>) -> Result<u32> {
+    /// A training view (`keep`) uses and keeps its binning.
+    fn forward(&mut self, cam: &Camera, keep: Option<KeepAs>, profile: bool, timings: &mut Vec<Timing>) -> Result<u32> {
         self.view_buffers(cam.width, cam.height)?;
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
+        let kept = keep.and_then(|k| self.kept.get(k.view));
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(&mut rec, (&self.shading, &self.raster), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
+            record_forward(&mut rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
             timings.extend(rec.submit_and_wait()?);
             if self.raster.fit(&mut b.frame)? {
                 break;
             }
+            if kept.is_some() {
+                bail!("a training view's kept binning did not fit its frame");
+            }
+        }
+        if let Some(at) = keep {
+            self.kept.keep(&self.raster, &b.frame, self.set.len(), at)?;
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -215,7 +230,10 @@ impl LightFieldModel {
         let cam = x.camera;
         let mut timings = Vec::new();
         let train_scat = x.scat.is_none();
-        if train_scat {
+        let colour_only = cfg.light_field.scattering_colour_only();
+        if train_scat && colour_only {
+            timings.extend(scattering.forward_view_kept(x.keep, cam, x.sh_degree, &x.background, x.profile)?);
+        } else if train_scat {
             timings.extend(scattering.forward_view(cam, x.sh_degree, &x.background, x.profile)?);
         }
         self.view_buffers(cam.width, cam.height)?;
@@ -223,7 +241,7 @@ impl LightFieldModel {
         let n = pixels as usize;
         // The GPU-count step needs every pixel's sample within one block.
         let room = self.scratch.as_ref().is_some_and(|s| s.block() >= pixels);
-        let host_count = if train_scat || !room || !self.one_submission { Some(self.forward(cam, x.profile, &mut timings)?) } else { None };
+        let host_count = if train_scat || !room || !self.one_submission { Some(self.forward(cam, Some(x.keep), x.profile, &mut timings)?) } else { None };
         let (scat, scat_grad) = match x.scat {
             Some(s) => (s, None),
             None => {
@@ -233,12 +251,12 @@ impl LightFieldModel {
         };
         let weights = LossWeights { ssim: cfg.lambda_ssim, normal: 0.0, dist: 0.0 };
         let lf = &cfg.light_field;
-        let colour_only = lf.scattering_colour_only();
         let it = x.iteration as u64;
         let net_group = AdamGroup::single(Self::lr(cfg, x.iteration));
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
         let material_len = (MATERIAL * self.set.len()) as usize;
         let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
+        let kept = self.kept.get(x.keep.view);
         loop {
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
             let scratch = self.scratch.as_ref().context("light-field scratch")?;
@@ -247,7 +265,7 @@ impl LightFieldModel {
             match host_count {
                 Some(n) => self.mlp.record_forward(&mut rec, &self.net.params, n, scratch)?,
                 None => {
-                    record_forward(&mut rec, (&self.shading, &self.raster), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
+                    record_forward(&mut rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
                     self.mlp.record_forward_counted(&mut rec, &self.net.params, &b.samples.count, scratch)?;
                 }
             }
@@ -304,6 +322,13 @@ impl LightFieldModel {
             if host_count.is_some() || self.raster.fit(&mut b.frame)? {
                 break;
             }
+            if kept.is_some() {
+                bail!("a training view's kept binning did not fit its frame");
+            }
+        }
+        if host_count.is_none() {
+            let b = &self.sizes[&(cam.width, cam.height)];
+            self.kept.keep(&self.raster, &b.frame, self.set.len(), x.keep)?;
         }
         let count = match host_count {
             Some(n) => n,
@@ -323,7 +348,7 @@ impl LightFieldModel {
     /// Render `cam` composited over the scattering colour `scat` (3 planes).
     pub fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
         let mut timings = Vec::new();
-        let count = self.forward(cam, false, &mut timings)?;
+        let count = self.forward(cam, None, false, &mut timings)?;
         let b = &self.sizes[&(cam.width, cam.height)];
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         let mut rec = Recorder::new(&self.ctx)?;
@@ -377,11 +402,16 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
 /// Record the reflection set's material features (into `s.features`), its
 /// rasterization into `b.frame` and the view's sample list (Phi's inputs,
 /// `b.samples.count`), with the model's shading and raster kernels.
-fn record_forward(rec: &mut Recorder, (shading, raster): (&LightFieldShading, &Rasterizer), s: Splats, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
+/// A training view's kept binning, where given, stands for the binning.
+fn record_forward(rec: &mut Recorder, (shading, raster, kept): (&LightFieldShading, &Rasterizer, Option<&KeptBinning>), s: Splats, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
     let sc = rec.begin_scope("lf.material");
     shading.record_material(rec, &s.g.features, s.g.n, s.features)?;
     rec.end_scope(sc);
-    raster.record_forward_with(rec, s, cam, &[0.0; CHANNELS as usize], &b.frame)?;
+    let bg = [0.0; CHANNELS as usize];
+    match kept {
+        Some(k) => raster.record_forward_kept(rec, s, cam, &bg, &b.frame, k)?,
+        None => raster.record_forward_with(rec, s, cam, &bg, &b.frame)?,
+    }
     let sc = rec.begin_scope("lf.samples");
     shading.record_samples(rec, cam, shade, &b.frame.out, &b.samples, &scratch.samples)?;
     rec.end_scope(sc);

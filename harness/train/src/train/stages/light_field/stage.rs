@@ -5,6 +5,7 @@
 use super::checkpoint::LightFieldHeader;
 use super::model::{LightFieldModel, LightFieldStepInput};
 use crate::train::stages::reflection::checkpoint::host_reflection_set;
+use crate::train::stages::kept_views::KeepAs;
 use crate::train::stages::kind::RenderLayer;
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
@@ -106,6 +107,7 @@ impl LaterStage for LightFieldModel {
             iteration: x.stage,
             global_iteration: x.global,
             camera: &cam,
+            keep: KeepAs { view: x.view, budget_mib: cfg.light_field.kept_binning_mib },
             target: &v.targets[x.view as usize],
             scat: if frozen { Some(s.cache.get(x.view as usize).context("the scattering colour cache is missing")?) } else { None },
             sh_degree: sh,

@@ -8,6 +8,7 @@
 //! trainer.
 
 use crate::train::config::TrainConfig;
+use crate::train::stages::kept_views::{KeepAs, KeptViews};
 use crate::train::stages::rendered::Rendered;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
@@ -74,6 +75,9 @@ pub struct ScatteringModel {
     /// the fused reduce took 11.6 ms against 2.9 + 0.5 ms for the reduce
     /// and Adam apart (thirtieth entry).
     pub fuse_adam: bool,
+    /// Training views' binnings kept while only the colour trains (Stage
+    /// III; cleared by any step of Stage I's).
+    kept: KeptViews,
 }
 
 impl ScatteringModel {
@@ -87,6 +91,7 @@ impl ScatteringModel {
             set: TrainableSet::new(ctx, g)?,
             sizes: HashMap::new(),
             fuse_adam: ctx.caps().is_cpu(),
+            kept: KeptViews::default(),
         })
     }
 
@@ -95,6 +100,26 @@ impl ScatteringModel {
     /// [`Self::record_backward_external`]).
     pub fn forward_view(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
         self.forward(cam, sh, background, profile)
+    }
+
+    /// The forward of training view `at.view` while the geometry is frozen
+    /// (Stage III with the colour alone training): from its kept binning,
+    /// or in full until it fits, its binning then kept within the budget.
+    pub fn forward_view_kept(&mut self, at: KeepAs, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
+        let Some(k) = self.kept.get(at.view) else {
+            let t = self.forward(cam, sh, background, profile)?;
+            let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
+            self.kept.keep(&self.raster, &b.frame, self.set.len(), at)?;
+            return Ok(t);
+        };
+        let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
+        let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
+        self.raster.record_forward_kept(&mut rec, tgs_pipelines::Splats::own(&self.set.params, sh), cam, background, &b.frame, k)?;
+        let t = rec.submit_and_wait()?;
+        if !self.raster.fit(&mut b.frame)? {
+            bail!("view {}: the forward from its kept binning did not fit its frame", at.view);
+        }
+        Ok(t)
     }
 
     /// The last forward's output planes (colour first) and their gradient
@@ -170,6 +195,7 @@ impl ScatteringModel {
         };
         let stats = it < cfg.densify_until;
         let groups = self.groups(cfg, x.lr_means, sh);
+        self.kept.clear();
         let fused = self.fuse_adam && self.raster.can_fuse_adam();
         let (timings, values) = loop {
             let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
@@ -238,6 +264,7 @@ impl ScatteringModel {
 
     /// Cap every opacity at 0.01 (and clear its Adam moments).
     pub fn reset_opacity(&mut self) -> Result<()> {
+        self.kept.clear();
         let mut rec = Recorder::new(&self.ctx)?;
         self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
         rec.submit_and_wait()?;

@@ -1,0 +1,53 @@
+//! Training views' binnings kept for a set whose geometry no longer
+//! trains (Stage III: the scattering set when only its colour trains, and
+//! the reflection set), within a memory budget
+//! (`light_field.kept_binning_mib`, per set): each view is binned once, and
+//! its later forwards copy the binning back instead of sorting again
+//! (`pipelines/src/raster/kept.rs`; the same outputs, bit for bit). Views
+//! beyond the budget are binned every time, as without it.
+
+use anyhow::Result;
+use std::collections::HashMap;
+use tgs_pipelines::{Frame, KeptBinning, Rasterizer};
+
+#[derive(Default)]
+pub struct KeptViews {
+    views: HashMap<u32, KeptBinning>,
+    bytes: u64,
+}
+
+/// Which training view a forward renders, and the budget its set's kept
+/// binnings may take (MiB; 0 keeps none).
+#[derive(Clone, Copy, Debug)]
+pub struct KeepAs {
+    pub view: u32,
+    pub budget_mib: u32,
+}
+
+impl KeptViews {
+    pub fn get(&self, view: u32) -> Option<&KeptBinning> {
+        self.views.get(&view)
+    }
+    /// Bytes of device memory held.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+    /// Drop every kept binning (the geometry is about to change).
+    pub fn clear(&mut self) {
+        self.views.clear();
+        self.bytes = 0;
+    }
+    /// After a forward of training view `view` (`n` Gaussians) that fitted
+    /// `frame`, with nothing recorded on the frame since: keep its binning
+    /// if it is not kept yet and the budget has room.
+    pub fn keep(&mut self, raster: &Rasterizer, frame: &Frame, n: u32, at: KeepAs) -> Result<()> {
+        let KeepAs { view, budget_mib } = at;
+        if self.views.contains_key(&view) || self.bytes + Rasterizer::kept_binning_bytes(frame, n) > budget_mib as u64 * (1 << 20) {
+            return Ok(());
+        }
+        let k = raster.keep_binning(frame, n)?;
+        self.bytes += k.bytes();
+        self.views.insert(view, k);
+        Ok(())
+    }
+}
