@@ -6,7 +6,6 @@
 //! (`pipelines/src/raster/kept.rs`; the same outputs, bit for bit). Views
 //! beyond the budget are binned every time, as without it.
 
-use anyhow::Result;
 use std::collections::HashMap;
 use tgs_pipelines::{Frame, KeptBinning, Rasterizer};
 
@@ -14,6 +13,10 @@ use tgs_pipelines::{Frame, KeptBinning, Rasterizer};
 pub struct KeptViews {
     views: HashMap<u32, KeptBinning>,
     bytes: u64,
+    /// Keeping stopped (the device could not hold another binning): the
+    /// views not kept by then are binned every time, as without a budget,
+    /// rather than the run failing for memory it did not need.
+    stopped: bool,
 }
 
 /// Which training view a forward renders, and the budget its set's kept
@@ -28,26 +31,30 @@ impl KeptViews {
     pub fn get(&self, view: u32) -> Option<&KeptBinning> {
         self.views.get(&view)
     }
-    /// Bytes of device memory held.
-    pub fn bytes(&self) -> u64 {
-        self.bytes
-    }
     /// Drop every kept binning (the geometry is about to change).
     pub fn clear(&mut self) {
         self.views.clear();
         self.bytes = 0;
+        self.stopped = false;
     }
     /// After a forward of training view `view` (`n` Gaussians) that fitted
     /// `frame`, with nothing recorded on the frame since: keep its binning
-    /// if it is not kept yet and the budget has room.
-    pub fn keep(&mut self, raster: &Rasterizer, frame: &Frame, n: u32, at: KeepAs) -> Result<()> {
+    /// if it is not kept yet and the budget has room. A device that cannot
+    /// hold it stops the keeping (said once on stderr), not the run.
+    pub fn keep(&mut self, raster: &Rasterizer, frame: &Frame, n: u32, at: KeepAs) {
         let KeepAs { view, budget_mib } = at;
-        if self.views.contains_key(&view) || self.bytes + Rasterizer::kept_binning_bytes(frame, n) > budget_mib as u64 * (1 << 20) {
-            return Ok(());
+        if self.stopped || self.views.contains_key(&view) || self.bytes + Rasterizer::kept_binning_bytes(frame, n) > budget_mib as u64 * (1 << 20) {
+            return;
         }
-        let k = raster.keep_binning(frame, n)?;
-        self.bytes += k.bytes();
-        self.views.insert(view, k);
-        Ok(())
+        match raster.keep_binning(frame, n) {
+            Ok(k) => {
+                self.bytes += k.bytes();
+                self.views.insert(view, k);
+            }
+            Err(e) => {
+                eprintln!("note: keeping training views' binnings stopped after {} views ({e:#}); the others are binned every time", self.views.len());
+                self.stopped = true;
+            }
+        }
     }
 }

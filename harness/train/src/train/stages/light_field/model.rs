@@ -192,7 +192,7 @@ impl LightFieldModel {
             }
         }
         if let Some(at) = keep {
-            self.kept.keep(&self.raster, &b.frame, self.set.len(), at)?;
+            self.kept.keep(&self.raster, &b.frame, self.set.len(), at);
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -328,7 +328,7 @@ impl LightFieldModel {
         }
         if host_count.is_none() {
             let b = &self.sizes[&(cam.width, cam.height)];
-            self.kept.keep(&self.raster, &b.frame, self.set.len(), x.keep)?;
+            self.kept.keep(&self.raster, &b.frame, self.set.len(), x.keep);
         }
         let count = match host_count {
             Some(n) => n,

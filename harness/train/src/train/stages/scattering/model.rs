@@ -109,7 +109,7 @@ impl ScatteringModel {
         let Some(k) = self.kept.get(at.view) else {
             let t = self.forward(cam, sh, background, profile)?;
             let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
-            self.kept.keep(&self.raster, &b.frame, self.set.len(), at)?;
+            self.kept.keep(&self.raster, &b.frame, self.set.len(), at);
             return Ok(t);
         };
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
