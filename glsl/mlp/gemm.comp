@@ -16,9 +16,10 @@
 // Elements: A(i, k) = a[a_off + i a_rs + k a_cs], B(k, j) likewise, with
 // optional implicit ones: A(i, a_ones_k) = 1 (the bias column of an
 // augmented input [X, 1]) and B(k, b_ones_j) = 1 (the column that turns a
-// weight gradient's last column into the bias gradient). pre: with a_deriv != 0, A is an output gradient dY and the
-// product uses dZ = dY * act'(Y), Y read at y_off + i y_rs + k y_cs
-// (1: ReLU, Y > 0; 2: sigmoid, Y (1 - Y)). post: c_act 1 ReLU, 2 sigmoid.
+// weight gradient's last column into the bias gradient). post: c_act 1
+// ReLU, 2 sigmoid, 3 the ReLU's derivative at C's own place, C(i, j) =
+// Y(i, j) > 0 ? C : 0 with Y at y_off + i y_rs + j y_cs (an input gradient
+// written as the ReLU layer below's dZ).
 //
 // Rows on the GPU: with m_count != 0, C has min(m, rows[0]) rows (a sample
 // count a kernel wrote, e.g. the light field's compacted list); the grid
@@ -50,7 +51,7 @@ layout(push_constant) uniform Push {
     uint m, n, kdim, k_chunk;
     uint a_off, a_rs, a_cs, a_ones_k;
     uint b_off, b_rs, b_cs, b_ones_j;
-    uint y_off, y_rs, y_cs, a_deriv;
+    uint y_off, y_rs, y_cs;
     uint c_off, c_rs, c_zstride, c_act;
     uint m_count;
     uint k_count;
@@ -66,14 +67,7 @@ float load_a(uint i, uint k) {
     if (k == pc.a_ones_k) {
         return 1.0;
     }
-    float v = a[pc.a_off + i * pc.a_rs + k * pc.a_cs];
-    if (pc.a_deriv == 1u) {
-        v = y[pc.y_off + i * pc.y_rs + k * pc.y_cs] > 0.0 ? v : 0.0;
-    } else if (pc.a_deriv == 2u) {
-        float s = y[pc.y_off + i * pc.y_rs + k * pc.y_cs];
-        v *= s * (1.0 - s);
-    }
-    return v;
+    return a[pc.a_off + i * pc.a_rs + k * pc.a_cs];
 }
 
 float load_b(uint k, uint j) {
@@ -161,6 +155,8 @@ void main() {
                     v = max(v, 0.0);
                 } else if (pc.c_act == 2u) {
                     v = 1.0 / (1.0 + exp(-v));
+                } else if (pc.c_act == 3u) {
+                    v = y[pc.y_off + i * pc.y_rs + j * pc.y_cs] > 0.0 ? v : 0.0;
                 }
                 c[base + i * pc.c_rs + j] = v;
             }

@@ -50,21 +50,17 @@ layout(push_constant) uniform Push {
     uint m, n, kdim, k_chunk;
     uint a_off, a_rs, a_cs, a_ones_k;
     uint b_off, b_rs, b_cs, b_ones_j;
-    uint y_off, y_rs, y_cs, a_deriv;
+    uint y_off, y_rs, y_cs;
     uint c_off, c_rs, c_zstride, c_act;
     uint m_count;
     uint k_count;
 } pc;
 
-// A(i, k) with its activation derivative; the implicit ones column reads a
-// valid address and is replaced (a select, not a branch around the load).
+// A(i, k); the implicit ones column reads a valid address and is replaced
+// (a select, not a branch around the load).
 float load_a(uint i, uint k) {
     uint kk = k == pc.a_ones_k ? 0u : k;
     float v = a[pc.a_off + i * pc.a_rs + kk * pc.a_cs];
-    if (pc.a_deriv != 0u) {
-        float s = y[pc.y_off + i * pc.y_rs + kk * pc.y_cs];
-        v *= pc.a_deriv == 1u ? (s > 0.0 ? 1.0 : 0.0) : s * (1.0 - s);
-    }
     return k == pc.a_ones_k ? 1.0 : v;
 }
 
@@ -139,6 +135,8 @@ void main() {
                         v = max(v, 0.0);
                     } else if (pc.c_act == 2u) {
                         v = 1.0 / (1.0 + exp(-v));
+                    } else if (pc.c_act == 3u) {
+                        v = y[pc.y_off + ir * pc.y_rs + (j0 + q) * pc.y_cs] > 0.0 ? v : 0.0;
                     }
                     c[base + q] = v;
                 }

@@ -26,21 +26,23 @@ pub(super) struct RowConfig {
 /// workgroup of 64 invocations with 8 rows each (4 with 64 columns, whose
 /// accumulators would otherwise not fit the registers) for products with
 /// many rows (the forward and the input gradient: a row per sample), one of
-/// 16 with 4 rows for products of at most 64 rows (the weight gradient: a
-/// row per output unit), and one of 8 with 1 row for at most 8 (the head's
-/// weight gradient). Rows per invocation share every broadcast of B:
-/// measured on llvmpipe, the small network's forward on 4,096 samples takes
-/// 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8 rows (perf/RESULTS.md,
+/// 8 with 8 rows for products of at most 64 rows (the weight gradient: a
+/// row per output unit; 16 invocations of 4 rows before, measured slower:
+/// backward / forward 2.34-2.55 against 2.06-2.22 alternated,
+/// perf/RESULTS.md fortieth session), and one of 8 with 1 row for at most 8
+/// (the head's weight gradient). Rows per invocation share every broadcast
+/// of B: measured on llvmpipe, the small network's forward on 4,096 samples
+/// takes 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8 rows (perf/RESULTS.md,
 /// twenty-eighth session).
 pub(super) const ROW_CONFIGS: [RowConfig; 12] = [
     RowConfig { nb: 8, rr: 8, wg: 64 },
     RowConfig { nb: 16, rr: 8, wg: 64 },
     RowConfig { nb: 32, rr: 8, wg: 64 },
     RowConfig { nb: 64, rr: 4, wg: 64 },
-    RowConfig { nb: 8, rr: 4, wg: 16 },
-    RowConfig { nb: 16, rr: 4, wg: 16 },
-    RowConfig { nb: 32, rr: 4, wg: 16 },
-    RowConfig { nb: 64, rr: 4, wg: 16 },
+    RowConfig { nb: 8, rr: 8, wg: 8 },
+    RowConfig { nb: 16, rr: 8, wg: 8 },
+    RowConfig { nb: 32, rr: 8, wg: 8 },
+    RowConfig { nb: 64, rr: 8, wg: 8 },
     RowConfig { nb: 8, rr: 1, wg: 8 },
     RowConfig { nb: 16, rr: 1, wg: 8 },
     RowConfig { nb: 32, rr: 1, wg: 8 },
@@ -69,11 +71,11 @@ const _: () = assert!(MAX_CHUNKS.is_power_of_two());
 pub(super) const MIN_CHUNK: u32 = 256;
 pub(super) const NONE: u32 = u32::MAX;
 
-/// Push constants of glsl/mlp/gemm.comp: C = pre(A) B with element (i, k)
+/// Push constants of glsl/mlp/gemm.comp: C = post(A B) with element (i, k)
 /// of A at a_off + i a_rs + k a_cs (column a_ones_k implicitly 1), B(k, j)
 /// likewise (column b_ones_j implicitly 1), C(i, j) at
-/// c_off + z c_zstride + i c_rs + j; the activation derivative (Y at
-/// y_off + i y_rs + k y_cs) multiplies A.
+/// c_off + z c_zstride + i c_rs + j; post by `c_act` (with
+/// [`RELU_DERIV`], Y(i, j) at y_off + i y_rs + j y_cs).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, Default)]
 pub(super) struct Product {
@@ -92,7 +94,6 @@ pub(super) struct Product {
     pub(super) y_off: u32,
     pub(super) y_rs: u32,
     pub(super) y_cs: u32,
-    pub(super) a_deriv: u32,
     pub(super) c_off: u32,
     pub(super) c_rs: u32,
     pub(super) c_zstride: u32,
@@ -106,6 +107,9 @@ pub(super) struct Product {
 
 pub(super) const RELU: u32 = 1;
 pub(super) const SIGMOID: u32 = 2;
+/// `c_act`: C(i, j) kept where Y(i, j) > 0, else 0 (an input gradient
+/// written as the ReLU layer below's dZ; Y from the `y_*` fields).
+pub(super) const RELU_DERIV: u32 = 3;
 
 /// The kernel the MLP's products run on. Both sum every element of C in
 /// increasing k with one invocation, so their results are bit-identical

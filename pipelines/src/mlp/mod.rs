@@ -6,7 +6,9 @@
 //!   weight gradient dW = dZ^T [X, 1] as per-chunk partials in their own
 //!   slots), in two kernels with bit-identical results ([`Gemm`]): tiled
 //!   through shared memory on GPUs, rows per invocation on CPU devices;
-//! - `relu_grad`: a hidden layer's output gradient turned into dZ in place;
+//! - `head_grad`: the head's output gradient turned into dZ (the hidden
+//!   layers' dZ is written by the input-gradient product itself, the ReLU's
+//!   derivative in its epilogue);
 //! - `reduce`: the partials summed per parameter in a fixed order.
 //!
 //! No atomics: every output has one writer and a fixed summation order that
@@ -19,7 +21,7 @@ mod gemm;
 mod shape;
 
 pub use gemm::{Gemm, GEMM_ENV};
-use gemm::{row_config, Product, BLOCKS, MAX_CHUNKS, MIN_CHUNK, NONE, RELU, ROW_CONFIGS, SIGMOID};
+use gemm::{row_config, Product, BLOCKS, MAX_CHUNKS, MIN_CHUNK, NONE, RELU, RELU_DERIV, ROW_CONFIGS, SIGMOID};
 
 pub use shape::{MlpShape, OUT, SAMPLE};
 
@@ -119,7 +121,7 @@ pub struct Mlp {
     /// configuration of [`ROW_CONFIGS`] (rows).
     gemm: Vec<Kernel>,
     encode: Kernel,
-    relu_grad: Kernel,
+    head_grad: Kernel,
     reduce: Kernel,
 }
 
@@ -171,7 +173,7 @@ impl Mlp {
             gemm_kind,
             gemm,
             encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 24)?,
-            relu_grad: kernel(ctx, "mlp.relu_grad", shaders::MLP_RELU_GRAD, 16)?,
+            head_grad: kernel(ctx, "mlp.head_grad", shaders::MLP_HEAD_GRAD, 12)?,
             reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 20)?,
         })
     }
@@ -235,7 +237,8 @@ impl Mlp {
             in0: Buffer::uninit(ctx, "mlp.in0", blk * shape.dx() as usize)?,
             cat: Buffer::uninit(ctx, "mlp.cat", blk * shape.cat_width() as usize)?,
             hidden,
-            d: [Buffer::uninit(ctx, "mlp.d0", blk * w)?, Buffer::uninit(ctx, "mlp.d1", blk * w)?],
+            // dZ of a hidden layer (width wide) or of the head (OUT wide).
+            d: [Buffer::uninit(ctx, "mlp.d0", blk * w.max(OUT as usize))?, Buffer::uninit(ctx, "mlp.d1", blk * w.max(OUT as usize))?],
             part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
         })
     }
@@ -402,26 +405,21 @@ impl Mlp {
         let (chunk, chunks) = if rows.is_some() { (0, MAX_CHUNKS) } else { weight_chunks(n) };
         let counted = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.backward");
+        // The head's dZ = dY * sigmoid'(Z), from the caller's output
+        // gradient at the block's place into the ping-pong buffer the head
+        // reads (3 wide); the hidden layers' dZ is written by the
+        // input-gradient product of the layer above, the ReLU's derivative
+        // taken in its epilogue. Both products of a layer read dZ as it is.
+        {
+            let push = [n, base * OUT, counted];
+            let r = rows.map(|r| r.binding()).unwrap_or_else(|| d_out.binding());
+            let z = &s.d[(sh.depth % 2) as usize];
+            rec.dispatch(&self.head_grad, &[d_out.binding(), s.out.binding(), z.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n * OUT))?;
+        }
         for l in (0..sh.layers()).rev() {
             let (x, k) = s.input(l);
-            let (y, y_ld) = s.output(l);
-            // This layer's output gradient: d_out for the head, else the
-            // ping-pong buffer the layer above wrote (row stride width).
-            let (dy, d_ld) = if l == sh.depth { (d_out, OUT) } else { (&s.d[(l % 2) as usize], sh.width) };
-            // The head's output and its gradient are the caller's, at the
-            // block's place; the hidden layers' are the block's own.
-            let at = if l == sh.depth { base * OUT } else { 0 };
-            // A hidden layer's dY becomes dZ in place, once (both products
-            // below then read it without Y); the head's sigmoid derivative
-            // is taken in the products (d_out is the caller's, 3 wide).
-            let deriv = if l == sh.depth {
-                SIGMOID
-            } else {
-                let push = [n, sh.width, y_ld, counted];
-                let r = rows.map(|r| r.binding()).unwrap_or_else(|| dy.binding());
-                rec.dispatch(&self.relu_grad, &[dy.binding(), y.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n * sh.width))?;
-                0
-            };
+            // This layer's dZ (row stride OUT for the head, width else).
+            let (dz, d_ld) = (&s.d[(l % 2) as usize], sh.fan_out(l));
             let j = sh.fan_out(l);
             // [dW | db] (J x (K + 1)) = dZ^T [X, 1], per chunk of samples.
             let pw = Product {
@@ -435,27 +433,22 @@ impl Mlp {
                 b_rs: k,
                 b_cs: 1,
                 b_ones_j: k,
-                a_off: at,
-                y_off: at,
-                y_rs: 1,
-                y_cs: y_ld,
-                a_deriv: deriv,
                 c_off: sh.offset(l),
                 c_rs: k + 1,
                 c_zstride: sh.params(),
                 k_count: counted,
                 ..Default::default()
             };
-            self.dispatch(rec, &pw, [dy, x, y, &s.part], chunks, rows)?;
+            self.dispatch(rec, &pw, [dz, x, dz, &s.part], chunks, rows)?;
             if l > 0 {
-                // dH_{l-1} (n x width) = dZ W[:, :width] (the skip layer's
-                // encoded columns need no gradient).
+                // dZ_{l-1} (n x width) = (dZ W[:, :width]) * ReLU'(Y_{l-1})
+                // (the skip layer's encoded columns need no gradient).
+                let (y, y_ld) = s.output(l - 1);
                 let pd = Product {
                     m: n,
                     n: sh.width,
                     kdim: j,
                     k_chunk: j,
-                    a_off: at,
                     a_rs: d_ld,
                     a_cs: 1,
                     a_ones_k: NONE,
@@ -463,15 +456,14 @@ impl Mlp {
                     b_rs: k + 1,
                     b_cs: 1,
                     b_ones_j: NONE,
-                    y_off: at,
                     y_rs: y_ld,
                     y_cs: 1,
-                    a_deriv: deriv,
                     c_rs: sh.width,
+                    c_act: RELU_DERIV,
                     m_count: counted,
                     ..Default::default()
                 };
-                self.dispatch(rec, &pd, [dy, params, y, &s.d[((l - 1) % 2) as usize]], 1, rows)?;
+                self.dispatch(rec, &pd, [dz, params, y, &s.d[((l - 1) % 2) as usize]], 1, rows)?;
             }
         }
         rec.end_scope(sc);
