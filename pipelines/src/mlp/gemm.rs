@@ -23,22 +23,22 @@ pub(super) struct RowConfig {
 }
 
 /// The row kernel's pipelines: for each column block (8, 16, 32, 64), a
-/// workgroup of 64 invocations with 8 rows each (4 with 64 columns, whose
-/// accumulators would otherwise not fit the registers) for products with
-/// many rows (the forward and the input gradient: a row per sample), one of
-/// 8 with 8 rows for products of at most 64 rows (the weight gradient: a
-/// row per output unit; 16 invocations of 4 rows before, measured slower:
-/// backward / forward 2.34-2.55 against 2.06-2.22 alternated,
-/// perf/RESULTS.md fortieth session), and one of 8 with 1 row for at most 8
-/// (the head's weight gradient). Rows per invocation share every broadcast
-/// of B: measured on llvmpipe, the small network's forward on 4,096 samples
-/// takes 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8 rows (perf/RESULTS.md,
-/// twenty-eighth session).
+/// workgroup of 32 invocations with 8 rows each for products with many
+/// rows (the forward and the input gradient: a row per sample; the paper
+/// network's weight gradients, a row per output unit, 256), one of 8 with 8
+/// rows for products of at most 64 rows (the small network's weight
+/// gradients), and one of 8 with 1 row for at most 8 (the head's weight
+/// gradient). Rows per invocation share every broadcast of B and columns
+/// share every load of A: measured on llvmpipe, the small network's
+/// forward on 4,096 samples takes 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8
+/// rows (twenty-eighth session), and 8 rows with 64 columns (512
+/// accumulators per invocation, which spill either way) beat 32 columns
+/// and 4 rows with 64 (fortieth session, perf/RESULTS.md).
 pub(super) const ROW_CONFIGS: [RowConfig; 12] = [
-    RowConfig { nb: 8, rr: 8, wg: 64 },
-    RowConfig { nb: 16, rr: 8, wg: 64 },
-    RowConfig { nb: 32, rr: 8, wg: 64 },
-    RowConfig { nb: 64, rr: 4, wg: 64 },
+    RowConfig { nb: 8, rr: 8, wg: 32 },
+    RowConfig { nb: 16, rr: 8, wg: 32 },
+    RowConfig { nb: 32, rr: 8, wg: 32 },
+    RowConfig { nb: 64, rr: 8, wg: 32 },
     RowConfig { nb: 8, rr: 8, wg: 8 },
     RowConfig { nb: 16, rr: 8, wg: 8 },
     RowConfig { nb: 32, rr: 8, wg: 8 },
@@ -49,11 +49,46 @@ pub(super) const ROW_CONFIGS: [RowConfig; 12] = [
     RowConfig { nb: 64, rr: 1, wg: 8 },
 ];
 
+/// Column blocks the row kernel has pipelines for.
+const COLUMN_BLOCKS: [u32; 4] = [8, 16, 32, 64];
+
+/// The column blocks a row-kernel product of `m` x `n` is dispatched in:
+/// (first column, columns, configuration). As many whole blocks of
+/// [`row_config`]'s width as fit, then the columns left over (the weight
+/// gradients' bias column makes 65, 143 and 257 of 64, 128 and 256) in
+/// narrower blocks instead of a wide block of zeros: the smallest block
+/// that holds them if it wastes fewer than 8 columns, else the widest that
+/// they fill. Each element of C is still summed by one invocation in
+/// increasing k, so the results do not change.
+pub(super) fn row_column_blocks(m: u32, n: u32) -> Vec<(u32, u32, usize)> {
+    let first = row_config(m, n);
+    let rows = first / COLUMN_BLOCKS.len() * COLUMN_BLOCKS.len();
+    let nb = ROW_CONFIGS[first].nb;
+    if n <= nb || n % nb == 0 {
+        return vec![(0, n, first)];
+    }
+    let main = n / nb * nb;
+    let mut out = vec![(0, main, first)];
+    let mut j0 = main;
+    let narrow = &COLUMN_BLOCKS[..3];
+    while j0 < n {
+        let left = n - j0;
+        let col = match narrow.iter().position(|&b| b >= left) {
+            Some(c) if narrow[c] - left < 8 => c,
+            _ => narrow.iter().rposition(|&b| b <= left).unwrap_or(0),
+        };
+        let take = if left >= narrow[col] { left / narrow[col] * narrow[col] } else { left };
+        out.push((j0, take, rows + col));
+        j0 += take;
+    }
+    out
+}
+
 /// The row configuration for a product of `m` x `n`: 64 columns for
-/// products at least 128 wide, else the smallest block that holds them (8,
+/// products at least 64 wide, else the smallest block that holds them (8,
 /// 16, 32); the smallest workgroup shape that covers the rows.
 pub(super) fn row_config(m: u32, n: u32) -> usize {
-    let col = if n >= 128 { 3 } else { [8, 16, 32].iter().position(|&nb| nb >= n).unwrap_or(2) };
+    let col = if n >= 64 { 3 } else { COLUMN_BLOCKS.iter().position(|&nb| nb >= n).unwrap_or(2) };
     let rows = if m <= 8 {
         8
     } else if m <= 64 {

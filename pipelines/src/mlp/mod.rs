@@ -21,7 +21,7 @@ mod gemm;
 mod shape;
 
 pub use gemm::{Gemm, GEMM_ENV};
-use gemm::{row_config, Product, BLOCKS, MAX_CHUNKS, MIN_CHUNK, NONE, RELU, RELU_DERIV, ROW_CONFIGS, SIGMOID};
+use gemm::{row_column_blocks, Product, BLOCKS, MAX_CHUNKS, MIN_CHUNK, NONE, RELU, RELU_DERIV, ROW_CONFIGS, SIGMOID};
 
 pub use shape::{MlpShape, OUT, SAMPLE};
 
@@ -268,9 +268,21 @@ impl Mlp {
             }
         };
         if self.gemm_kind == Gemm::Rows {
-            let k = row_config(p.m, p.n);
-            let cfg = ROW_CONFIGS[k];
-            return rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(cfg.nb), row_groups(cfg.wg * cfg.rr), chunks]);
+            for (j0, cols, k) in row_column_blocks(p.m, p.n) {
+                let cfg = ROW_CONFIGS[k];
+                // Columns [j0, j0 + cols) as a product of their own: B and C
+                // start j0 columns on (the implicit ones column moves with them).
+                let q = Product {
+                    n: cols,
+                    b_off: p.b_off + j0 * p.b_cs,
+                    b_ones_j: if p.b_ones_j == NONE { NONE } else { p.b_ones_j.wrapping_sub(j0) },
+                    c_off: p.c_off + j0,
+                    y_off: p.y_off + j0 * p.y_cs,
+                    ..*p
+                };
+                rec.dispatch(&self.gemm[k], &[a.clone(), b.clone(), y.clone(), c.clone(), r.clone()], bytemuck::bytes_of(&q), [cols.div_ceil(cfg.nb), row_groups(cfg.wg * cfg.rr), chunks])?;
+            }
+            return Ok(());
         }
         let side = p.m.min(p.n).max(32);
         let k = BLOCKS.iter().rposition(|&rb| 8 * rb <= side).unwrap_or(0);
