@@ -22,35 +22,47 @@ pub(super) struct RowConfig {
     pub(super) wg: u32,
 }
 
-/// The row kernel's pipelines: for each column block (8, 16, 32, 64), a
-/// workgroup of 32 invocations with 8 rows each for products with many
-/// rows (the forward and the input gradient: a row per sample; the paper
-/// network's weight gradients, a row per output unit, 256), one of 8 with 8
-/// rows for products of at most 64 rows (the small network's weight
-/// gradients), and one of 8 with 1 row for at most 8 (the head's weight
-/// gradient). Rows per invocation share every broadcast of B and columns
-/// share every load of A: measured on llvmpipe, the small network's
+/// Column blocks the row kernel has pipelines for.
+const COLUMN_BLOCKS: [u32; 4] = [8, 16, 32, 64];
+
+/// The row kernel's workgroup shapes, (rows per invocation, invocations),
+/// each with a pipeline per column block: 32 invocations with 8 rows each
+/// for products with many rows (the forward and the input gradient: a row
+/// per sample; the paper network's weight gradients, a row per output unit,
+/// 256), 8 with 8 rows for products of at most 64 rows (the small
+/// network's weight gradients), and 8 with 1 row for at most 8 (the head's
+/// weight gradient). Rows per invocation share every broadcast of B and
+/// columns share every load of A: measured on llvmpipe, the small network's
 /// forward on 4,096 samples takes 131 / 80 / 55 / 44 ms with 1 / 2 / 4 / 8
 /// rows (twenty-eighth session), and 8 rows with 64 columns (512
 /// accumulators per invocation, which spill either way) beat 32 columns
 /// and 4 rows with 64 (fortieth session, perf/RESULTS.md).
-pub(super) const ROW_CONFIGS: [RowConfig; 12] = [
-    RowConfig { nb: 8, rr: 8, wg: 32 },
-    RowConfig { nb: 16, rr: 8, wg: 32 },
-    RowConfig { nb: 32, rr: 8, wg: 32 },
-    RowConfig { nb: 64, rr: 8, wg: 32 },
-    RowConfig { nb: 8, rr: 8, wg: 8 },
-    RowConfig { nb: 16, rr: 8, wg: 8 },
-    RowConfig { nb: 32, rr: 8, wg: 8 },
-    RowConfig { nb: 64, rr: 8, wg: 8 },
-    RowConfig { nb: 8, rr: 1, wg: 8 },
-    RowConfig { nb: 16, rr: 1, wg: 8 },
-    RowConfig { nb: 32, rr: 1, wg: 8 },
-    RowConfig { nb: 64, rr: 1, wg: 8 },
-];
+const ROW_GROUPS: [(u32, u32); 3] = [(8, 32), (8, 8), (1, 8)];
 
-/// Column blocks the row kernel has pipelines for.
-const COLUMN_BLOCKS: [u32; 4] = [8, 16, 32, 64];
+/// The row kernel's pipelines: configuration `g * 4 + c` is row group `g`
+/// ([`ROW_GROUPS`]) with column block `c` ([`COLUMN_BLOCKS`]).
+pub(super) const ROW_CONFIGS: [RowConfig; 12] = {
+    let mut out = [RowConfig { nb: 0, rr: 0, wg: 0 }; 12];
+    let mut i = 0;
+    while i < out.len() {
+        let (rr, wg) = ROW_GROUPS[i / COLUMN_BLOCKS.len()];
+        out[i] = RowConfig { nb: COLUMN_BLOCKS[i % COLUMN_BLOCKS.len()], rr, wg };
+        i += 1;
+    }
+    out
+};
+
+/// The first configuration of the smallest row group that covers `m` rows.
+fn row_group(m: u32) -> usize {
+    let g = if m <= 8 {
+        2
+    } else if m <= 64 {
+        1
+    } else {
+        0
+    };
+    g * COLUMN_BLOCKS.len()
+}
 
 /// The column blocks a row-kernel product of `m` x `n` is dispatched in:
 /// (first column, columns, configuration). As many whole blocks of
@@ -62,7 +74,6 @@ const COLUMN_BLOCKS: [u32; 4] = [8, 16, 32, 64];
 /// increasing k, so the results do not change.
 pub(super) fn row_column_blocks(m: u32, n: u32) -> Vec<(u32, u32, usize)> {
     let first = row_config(m, n);
-    let rows = first / COLUMN_BLOCKS.len() * COLUMN_BLOCKS.len();
     let nb = ROW_CONFIGS[first].nb;
     if n <= nb || n % nb == 0 {
         return vec![(0, n, first)];
@@ -78,7 +89,7 @@ pub(super) fn row_column_blocks(m: u32, n: u32) -> Vec<(u32, u32, usize)> {
             _ => narrow.iter().rposition(|&b| b <= left).unwrap_or(0),
         };
         let take = if left >= narrow[col] { left / narrow[col] * narrow[col] } else { left };
-        out.push((j0, take, rows + col));
+        out.push((j0, take, row_group(m) + col));
         j0 += take;
     }
     out
@@ -89,14 +100,7 @@ pub(super) fn row_column_blocks(m: u32, n: u32) -> Vec<(u32, u32, usize)> {
 /// 16, 32); the smallest workgroup shape that covers the rows.
 pub(super) fn row_config(m: u32, n: u32) -> usize {
     let col = if n >= 64 { 3 } else { COLUMN_BLOCKS.iter().position(|&nb| nb >= n).unwrap_or(2) };
-    let rows = if m <= 8 {
-        8
-    } else if m <= 64 {
-        4
-    } else {
-        0
-    };
-    rows + col
+    row_group(m) + col
 }
 /// At most this many sample chunks hold weight-gradient partials (a power
 /// of two: the counted backward walks them in bit-reversed order).

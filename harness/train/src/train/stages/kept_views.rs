@@ -12,7 +12,6 @@ use tgs_pipelines::{Frame, KeptBinning, Rasterizer};
 #[derive(Default)]
 pub struct KeptViews {
     views: HashMap<u32, KeptBinning>,
-    bytes: u64,
     /// Keeping stopped (the device could not hold another binning): the
     /// views not kept by then are binned every time, as without a budget,
     /// rather than the run failing for memory it did not need.
@@ -34,7 +33,6 @@ impl KeptViews {
     /// Drop every kept binning (the geometry is about to change).
     pub fn clear(&mut self) {
         self.views.clear();
-        self.bytes = 0;
         self.stopped = false;
     }
     /// After a forward of training view `view` (`n` Gaussians) that fitted
@@ -43,12 +41,15 @@ impl KeptViews {
     /// hold it stops the keeping (said once on stderr), not the run.
     pub fn keep(&mut self, raster: &Rasterizer, frame: &Frame, n: u32, at: KeepAs) {
         let KeepAs { view, budget_mib } = at;
-        if self.stopped || self.views.contains_key(&view) || self.bytes + Rasterizer::kept_binning_bytes(frame, n) > budget_mib as u64 * (1 << 20) {
+        if self.stopped || self.views.contains_key(&view) {
+            return;
+        }
+        let held: u64 = self.views.values().map(KeptBinning::bytes).sum();
+        if held + Rasterizer::kept_binning_bytes(frame, n) > budget_mib as u64 * (1 << 20) {
             return;
         }
         match raster.keep_binning(frame, n) {
             Ok(k) => {
-                self.bytes += k.bytes();
                 self.views.insert(view, k);
             }
             Err(e) => {
