@@ -25,7 +25,10 @@ impl RawBuffer {
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;
         if location == MemoryLocation::GpuOnly {
-            usage |= vk::BufferUsageFlags::INDIRECT_BUFFER;
+            // Texel-buffer reads: kernels that read an input through a
+            // uniform texel buffer (cheaper than a storage-buffer load on
+            // CPU drivers; `Kernel`'s binding kinds).
+            usage |= vk::BufferUsageFlags::INDIRECT_BUFFER | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
             if ctx.features.buffer_device_address {
                 usage |= vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
             }

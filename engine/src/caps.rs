@@ -34,6 +34,10 @@ pub struct Capabilities {
     pub max_storage_buffers_per_stage: u32,
     pub max_memory_allocation: u64,
     pub min_storage_buffer_offset_alignment: u64,
+    /// Texels one texel-buffer view may hold (`maxTexelBufferElements`).
+    pub max_texel_buffer_elements: u64,
+    /// Alignment of a texel-buffer view's offset (`minTexelBufferOffsetAlignment`).
+    pub min_texel_buffer_offset_alignment: u64,
     /// `bufferDeviceAddress` supported.
     pub buffer_device_address: bool,
     /// 32-bit float atomic add on storage buffers (`VK_EXT_shader_atomic_float`).
@@ -130,6 +134,8 @@ impl Capabilities {
             max_storage_buffers_per_stage: props.limits.max_per_stage_descriptor_storage_buffers,
             max_memory_allocation: maint3.max_memory_allocation_size,
             min_storage_buffer_offset_alignment: props.limits.min_storage_buffer_offset_alignment,
+            max_texel_buffer_elements: props.limits.max_texel_buffer_elements as u64,
+            min_texel_buffer_offset_alignment: props.limits.min_texel_buffer_offset_alignment,
             buffer_device_address: f12.buffer_device_address == vk::TRUE,
             float_atomics: atomic_float_ext && fatomic.shader_buffer_float32_atomic_add == vk::TRUE,
             timestamp_period: props.limits.timestamp_period,

@@ -9,7 +9,7 @@
 //! as the context: a run builds a few dozen distinct ones.
 
 use crate::context::Context;
-use crate::spirv;
+use crate::spirv::{self, BindingKind};
 use anyhow::{bail, Context as _, Result};
 use ash::vk;
 use std::collections::HashMap;
@@ -45,12 +45,12 @@ pub(crate) struct PipelineKey {
 
 /// A pipeline the context built, with its layouts; destroyed with the
 /// context ([`destroy_pipelines`]).
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub(crate) struct Pipeline {
     pipeline: vk::Pipeline,
     layout: vk::PipelineLayout,
     set_layout: vk::DescriptorSetLayout,
-    bindings: usize,
+    kinds: Arc<[BindingKind]>,
 }
 
 /// The pipelines a context built, by what they were built from.
@@ -74,7 +74,8 @@ pub(crate) struct KernelInner {
     pub(crate) pipeline: vk::Pipeline,
     pub(crate) layout: vk::PipelineLayout,
     pub(crate) set_layout: vk::DescriptorSetLayout,
-    pub(crate) bindings: usize,
+    /// What each binding is (storage buffer or texel buffer), from the SPIR-V.
+    pub(crate) kinds: Arc<[BindingKind]>,
     pub(crate) push_bytes: u32,
 }
 
@@ -91,10 +92,10 @@ impl Kernel {
         let key = PipelineKey { spirv: desc.spirv.to_vec(), spec: desc.spec.to_vec(), push_bytes: desc.push_bytes, subgroup_size: desc.subgroup_size, full_subgroups: desc.full_subgroups };
         let mut built = ctx.pipelines.lock().map_err(|_| anyhow::anyhow!("kernel '{}': the context's pipeline table is poisoned", desc.name))?;
         let p = match built.get(&key) {
-            Some(p) => *p,
+            Some(p) => p.clone(),
             None => {
                 let p = Self::build(ctx, desc)?;
-                built.insert(key, p);
+                built.insert(key, p.clone());
                 p
             }
         };
@@ -105,7 +106,7 @@ impl Kernel {
                 pipeline: p.pipeline,
                 layout: p.layout,
                 set_layout: p.set_layout,
-                bindings: p.bindings,
+                kinds: p.kinds,
                 push_bytes: desc.push_bytes,
             }),
         })
@@ -114,7 +115,7 @@ impl Kernel {
     fn build(ctx: &Arc<Context>, desc: &KernelDesc) -> Result<Pipeline> {
         let name = desc.name;
         let words = spirv::words(desc.spirv).with_context(|| format!("kernel '{name}'"))?;
-        let bindings = spirv::binding_count(&words);
+        let kinds: Arc<[BindingKind]> = spirv::binding_kinds(&words, spirv::binding_count(&words)).into();
         // The Rust struct a kernel's wrapper passes must be the shader's
         // block, byte for byte in size: a field added on one side only
         // would shift every later one.
@@ -131,11 +132,13 @@ impl Kernel {
             let module = d
                 .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
                 .with_context(|| format!("creating shader module '{name}'"))?;
-            let lb: Vec<_> = (0..bindings as u32)
-                .map(|b| {
+            let lb: Vec<_> = kinds
+                .iter()
+                .enumerate()
+                .map(|(b, k)| {
                     vk::DescriptorSetLayoutBinding::default()
-                        .binding(b)
-                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                        .binding(b as u32)
+                        .descriptor_type(descriptor_type(*k))
                         .descriptor_count(1)
                         .stage_flags(vk::ShaderStageFlags::COMPUTE)
                 })
@@ -199,7 +202,7 @@ impl Kernel {
                     bail!("creating compute pipeline '{name}': {e}");
                 }
             };
-            Ok(Pipeline { pipeline, layout, set_layout, bindings })
+            Ok(Pipeline { pipeline, layout, set_layout, kinds })
         }
     }
 
@@ -211,8 +214,16 @@ impl Kernel {
     pub fn pipeline(&self) -> vk::Pipeline {
         self.inner.pipeline
     }
-    /// Number of storage-buffer bindings the shader declares.
+    /// Number of buffer bindings the shader declares (storage and texel).
     pub fn bindings(&self) -> usize {
-        self.inner.bindings
+        self.inner.kinds.len()
+    }
+}
+
+/// The descriptor type of a binding of `kind`.
+pub(crate) fn descriptor_type(kind: BindingKind) -> vk::DescriptorType {
+    match kind {
+        BindingKind::Storage => vk::DescriptorType::STORAGE_BUFFER,
+        BindingKind::TexelF32 | BindingKind::TexelU32 => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
     }
 }

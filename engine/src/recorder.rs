@@ -178,13 +178,13 @@ impl Recorder {
     fn bind(&mut self, kernel: &Kernel, bindings: &[BufferBinding], push: &[u8]) -> Result<()> {
         self.check_open()?;
         let k = &kernel.inner;
-        if bindings.len() != k.bindings {
-            bail!("kernel '{}' declares {} buffers, {} given", k.name, k.bindings, bindings.len());
+        if bindings.len() != k.kinds.len() {
+            bail!("kernel '{}' declares {} buffers, {} given", k.name, k.kinds.len(), bindings.len());
         }
         if push.len() as u32 != k.push_bytes {
             bail!("kernel '{}' takes {} push-constant bytes, {} given", k.name, k.push_bytes, push.len());
         }
-        let set = self.arena.bind(&k.name, k.set_layout, bindings)?;
+        let set = self.arena.bind(&k.name, k.set_layout, &k.kinds, bindings)?;
         self.before();
         let d = &self.ctx.device;
         unsafe {

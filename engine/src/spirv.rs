@@ -32,10 +32,83 @@ fn instructions(words: &[u32]) -> impl Iterator<Item = &[u32]> {
     })
 }
 
+const DEC_BINDING: u32 = 33;
+
 /// Number of descriptor bindings in set 0 (max binding + 1).
 pub(crate) fn binding_count(words: &[u32]) -> usize {
-    const DEC_BINDING: u32 = 33;
     instructions(words).filter(|w| w[0] & 0xffff == OP_DECORATE && w.len() >= 4 && w[2] == DEC_BINDING).map(|w| w[3] as usize + 1).max().unwrap_or(0)
+}
+
+/// What a binding of the shader is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BindingKind {
+    /// A storage buffer (every binding but a texel buffer).
+    Storage,
+    /// A uniform texel buffer of 32-bit floats (`samplerBuffer`), read
+    /// with `texelFetch`.
+    TexelF32,
+    /// A uniform texel buffer of 32-bit unsigned integers (`usamplerBuffer`).
+    TexelU32,
+}
+
+/// The kind of each of the first `count` bindings: a texel buffer where the
+/// binding's variable is a buffer-dimension sampled image (float or
+/// unsigned 32-bit texels), a storage buffer otherwise.
+pub(crate) fn binding_kinds(words: &[u32], count: usize) -> Vec<BindingKind> {
+    use std::collections::HashMap;
+    const OP_TYPE_INT: u32 = 21;
+    const OP_TYPE_FLOAT: u32 = 22;
+    const OP_TYPE_IMAGE: u32 = 25;
+    const OP_TYPE_SAMPLED_IMAGE: u32 = 27;
+    const OP_TYPE_POINTER: u32 = 32;
+    const OP_VARIABLE: u32 = 59;
+    const DIM_BUFFER: u32 = 5;
+    let mut scalars: HashMap<u32, BindingKind> = HashMap::new();
+    let mut images: HashMap<u32, BindingKind> = HashMap::new();
+    let mut sampled: HashMap<u32, BindingKind> = HashMap::new();
+    let mut pointers: HashMap<u32, BindingKind> = HashMap::new();
+    let mut variables: HashMap<u32, BindingKind> = HashMap::new();
+    let mut bound: Vec<(u32, usize)> = Vec::new();
+    for w in instructions(words) {
+        let (op, n) = (w[0] & 0xffff, w.len());
+        match op {
+            OP_TYPE_FLOAT if n >= 3 && w[2] == 32 => {
+                scalars.insert(w[1], BindingKind::TexelF32);
+            }
+            OP_TYPE_INT if n >= 4 && w[2] == 32 && w[3] == 0 => {
+                scalars.insert(w[1], BindingKind::TexelU32);
+            }
+            OP_TYPE_IMAGE if n >= 4 && w[3] == DIM_BUFFER => {
+                if let Some(&k) = scalars.get(&w[2]) {
+                    images.insert(w[1], k);
+                }
+            }
+            OP_TYPE_SAMPLED_IMAGE if n >= 3 => {
+                if let Some(&k) = images.get(&w[2]) {
+                    sampled.insert(w[1], k);
+                }
+            }
+            OP_TYPE_POINTER if n >= 4 => {
+                if let Some(&k) = sampled.get(&w[3]) {
+                    pointers.insert(w[1], k);
+                }
+            }
+            OP_VARIABLE if n >= 4 => {
+                if let Some(&k) = pointers.get(&w[1]) {
+                    variables.insert(w[2], k);
+                }
+            }
+            OP_DECORATE if n >= 4 && w[2] == DEC_BINDING => bound.push((w[1], w[3] as usize)),
+            _ => {}
+        }
+    }
+    let mut kinds = vec![BindingKind::Storage; count];
+    for (var, b) in bound {
+        if let (Some(&k), Some(slot)) = (variables.get(&var), kinds.get_mut(b)) {
+            *slot = k;
+        }
+    }
+    kinds
 }
 
 /// Size in bytes of the shader's push-constant block, as its members'

@@ -25,6 +25,7 @@
 //
 // Rows on the GPU (m_count), chunks of k over z (k_count), the bit-reversed
 // walk of counted grids: as in mlp/gemm.comp.
+// variant: TEXEL
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -40,9 +41,24 @@ layout(constant_id = 4) const uint SB = 4;
 // Rows of C per invocation: rows i + WGX r, r < RR (the workgroup's WGX RR).
 layout(constant_id = 5) const uint RR = 1;
 
+#ifdef TEXEL
+// The operands as uniform texel buffers: llvmpipe fetches a texel as a
+// gather of the lanes' values, where a storage-buffer load is a loop over
+// the lanes with a branch, a bounds check and a spill each.
+layout(binding = 0) uniform samplerBuffer a_t;
+layout(binding = 1) uniform samplerBuffer b_t;
+layout(binding = 2) uniform samplerBuffer y_t;
+#define A_AT(at) texelFetch(a_t, int(at)).r
+#define B_AT(at) texelFetch(b_t, int(at)).r
+#define Y_AT(at) texelFetch(y_t, int(at)).r
+#else
 layout(std430, binding = 0) readonly buffer A { float a[]; };
 layout(std430, binding = 1) readonly buffer B { float b[]; };
 layout(std430, binding = 2) readonly buffer Y { float y[]; };
+#define A_AT(at) a[at]
+#define B_AT(at) b[at]
+#define Y_AT(at) y[at]
+#endif
 layout(std430, binding = 3) buffer C { float c[]; };
 layout(std430, binding = 4) readonly buffer Rows { uint rows[]; };
 
@@ -60,7 +76,7 @@ layout(push_constant) uniform Push {
 // (a select, not a branch around the load).
 float load_a(uint i, uint k) {
     uint kk = k == pc.a_ones_k ? 0u : k;
-    float v = a[pc.a_off + i * pc.a_rs + kk * pc.a_cs];
+    float v = A_AT(pc.a_off + i * pc.a_rs + kk * pc.a_cs);
     return k == pc.a_ones_k ? 1.0 : v;
 }
 
@@ -114,7 +130,7 @@ void main() {
         [[unroll]] for (uint g = 0u; g < NB / SB; g++) {
             uint j = j0 + SB * g + lane;
             uint jj = j == pc.b_ones_j ? 0u : min(j, jl);
-            float bl = b[boff + jj * pc.b_cs];
+            float bl = B_AT(boff + jj * pc.b_cs);
             bl = j == pc.b_ones_j ? 1.0 : (SB * g + lane < nb ? bl : 0.0);
             [[unroll]] for (uint t = 0u; t < SB; t++) {
                 float bv = subgroupBroadcast(bl, t);
@@ -136,7 +152,7 @@ void main() {
                     } else if (pc.c_act == 2u) {
                         v = 1.0 / (1.0 + exp(-v));
                     } else if (pc.c_act == 3u) {
-                        v = y[pc.y_off + ir * pc.y_rs + (j0 + q) * pc.y_cs] > 0.0 ? v : 0.0;
+                        v = Y_AT(pc.y_off + ir * pc.y_rs + (j0 + q) * pc.y_cs) > 0.0 ? v : 0.0;
                     }
                     c[base + q] = v;
                 }

@@ -166,7 +166,10 @@ impl Mlp {
         let pipeline = |name, spirv, spec: &[(u32, u32)]| Kernel::new(ctx, &KernelDesc { name, spirv, spec, push_bytes: push, subgroup_size: None, full_subgroups: false });
         let gemm = match gemm_kind {
             Gemm::Tiled => BLOCKS.iter().map(|&b| pipeline("mlp.gemm", shaders::MLP_GEMM, &[(3, b)])).collect::<Result<Vec<_>>>()?,
-            Gemm::Rows => ROW_CONFIGS.iter().map(|c| pipeline("mlp.gemm_rows", shaders::MLP_GEMM_ROWS, &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)])).collect::<Result<Vec<_>>>()?,
+            Gemm::Rows => {
+                let spirv = if std::env::var("TGS_TEXEL").is_ok() { shaders::MLP_GEMM_ROWS_TEXEL } else { shaders::MLP_GEMM_ROWS };
+                ROW_CONFIGS.iter().map(|c| pipeline("mlp.gemm_rows", spirv, &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)])).collect::<Result<Vec<_>>>()?
+            }
         };
         Ok(Mlp {
             ctx: ctx.clone(),
