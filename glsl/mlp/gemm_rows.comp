@@ -25,7 +25,6 @@
 //
 // Rows on the GPU (m_count), chunks of k over z (k_count), the bit-reversed
 // walk of counted grids: as in mlp/gemm.comp.
-// variant: TEXEL
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -41,24 +40,18 @@ layout(constant_id = 4) const uint SB = 4;
 // Rows of C per invocation: rows i + WGX r, r < RR (the workgroup's WGX RR).
 layout(constant_id = 5) const uint RR = 1;
 
-#ifdef TEXEL
-// The operands as uniform texel buffers: llvmpipe fetches a texel as a
-// gather of the lanes' values, where a storage-buffer load is a loop over
-// the lanes with a branch, a bounds check and a spill each.
+// The operands A, B and Y are read as uniform texel buffers of floats:
+// llvmpipe 22.3 fetches a texel for the lanes as one gather, where a
+// storage-buffer load is a loop over the lanes with a branch, a bounds
+// check and a store to the stack for each (its SSBO path; read from the
+// JIT's machine code, forty-first session): the small network's products
+// ran 1.6-1.8x faster so (perf/RESULTS.md). Bindings as in mlp/gemm.comp.
 layout(binding = 0) uniform samplerBuffer a_t;
 layout(binding = 1) uniform samplerBuffer b_t;
 layout(binding = 2) uniform samplerBuffer y_t;
 #define A_AT(at) texelFetch(a_t, int(at)).r
 #define B_AT(at) texelFetch(b_t, int(at)).r
 #define Y_AT(at) texelFetch(y_t, int(at)).r
-#else
-layout(std430, binding = 0) readonly buffer A { float a[]; };
-layout(std430, binding = 1) readonly buffer B { float b[]; };
-layout(std430, binding = 2) readonly buffer Y { float y[]; };
-#define A_AT(at) a[at]
-#define B_AT(at) b[at]
-#define Y_AT(at) y[at]
-#endif
 layout(std430, binding = 3) buffer C { float c[]; };
 layout(std430, binding = 4) readonly buffer Rows { uint rows[]; };
 

@@ -163,7 +163,10 @@ pub enum Gemm {
     /// (lavapipe), where every load a lane makes costs a scalar load and the
     /// tiled kernel's shared-memory reads were the bottleneck. Measured on
     /// llvmpipe, 4,096 samples, forward + backward: the small network 5,131
-    /// -> 25,915 samples/s, the paper network 434 -> 1,260.
+    /// -> 25,915 samples/s, the paper network 434 -> 1,260. Its operands
+    /// are bound as uniform texel buffers (llvmpipe gathers a texel fetch;
+    /// it loops over the lanes for a storage-buffer load), so each binding
+    /// is also held to the device's `maxTexelBufferElements`.
     Rows,
 }
 

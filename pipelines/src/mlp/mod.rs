@@ -166,10 +166,7 @@ impl Mlp {
         let pipeline = |name, spirv, spec: &[(u32, u32)]| Kernel::new(ctx, &KernelDesc { name, spirv, spec, push_bytes: push, subgroup_size: None, full_subgroups: false });
         let gemm = match gemm_kind {
             Gemm::Tiled => BLOCKS.iter().map(|&b| pipeline("mlp.gemm", shaders::MLP_GEMM, &[(3, b)])).collect::<Result<Vec<_>>>()?,
-            Gemm::Rows => {
-                let spirv = if std::env::var("TGS_TEXEL").is_ok() { shaders::MLP_GEMM_ROWS_TEXEL } else { shaders::MLP_GEMM_ROWS };
-                ROW_CONFIGS.iter().map(|c| pipeline("mlp.gemm_rows", spirv, &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)])).collect::<Result<Vec<_>>>()?
-            }
+            Gemm::Rows => ROW_CONFIGS.iter().map(|c| pipeline("mlp.gemm_rows", shaders::MLP_GEMM_ROWS, &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)])).collect::<Result<Vec<_>>>()?,
         };
         Ok(Mlp {
             ctx: ctx.clone(),
@@ -186,11 +183,23 @@ impl Mlp {
         self.gemm_kind
     }
 
+    /// Floats one binding of the GEMM may hold on this device: a storage
+    /// buffer's range, and for the row kernel (which reads its operands as
+    /// texel buffers) the texels of one texel-buffer view too.
+    fn max_binding_floats(&self) -> u64 {
+        let caps = self.ctx.caps();
+        let storage = caps.max_storage_buffer_range / 4;
+        match self.gemm_kind {
+            Gemm::Rows => storage.min(caps.max_texel_buffer_elements),
+            Gemm::Tiled => storage,
+        }
+    }
+
     /// The most samples whose activations one block of a scratch of
     /// `shape` holds on this device (its widest activation buffer within
-    /// one storage-buffer binding); more are taken in blocks.
+    /// one binding); more are taken in blocks.
     pub fn max_capacity(&self, shape: &MlpShape) -> u32 {
-        let max = self.ctx.caps().max_storage_buffer_range / 4;
+        let max = self.max_binding_floats();
         let widest = shape.cat_width().max(shape.dx()).max(1) as u64;
         (max / widest).min(u32::MAX as u64) as u32
     }
@@ -216,7 +225,7 @@ impl Mlp {
         let ctx = &self.ctx;
         let cap = capacity.max(1);
         let block = block.clamp(1, cap);
-        let max = ctx.caps().max_storage_buffer_range / 4;
+        let max = self.max_binding_floats();
         let widest = shape.cat_width().max(shape.dx()) as u64;
         if block as u64 * widest > max || MAX_CHUNKS as u64 * shape.params() as u64 > max || cap as u64 * SAMPLE as u64 > max {
             bail!(
