@@ -382,3 +382,38 @@ fn pipelines_are_built_once_per_context() {
     drop(iotas);
     check_validation(&ctx);
 }
+
+/// Bindings a shader declares as uniform texel buffers (`samplerBuffer`,
+/// `usamplerBuffer`) are bound as such, whole or as a slice, and read back
+/// every texel exactly, beside a storage buffer; a slice whose offset breaks
+/// the device's texel alignment is refused with the binding named.
+#[test]
+fn texel_buffer_bindings_read_exactly() {
+    let ctx = tgs_tests::ctx();
+    let k = Kernel::new(&ctx, &KernelDesc { name: "util.texel_read", spirv: shaders::UTIL_TEXEL_READ, spec: &[(0, 256)], push_bytes: 4, subgroup_size: None, full_subgroups: false }).unwrap();
+    assert_eq!(k.bindings(), 3);
+    let n = 1000usize;
+    let f: Vec<f32> = (0..n + 8).map(|i| (i as f32 * 0.37).sin() * 1e3 + if i % 7 == 0 { f32::MIN_POSITIVE } else { 0.0 }).collect();
+    let u: Vec<u32> = (0..n + 8).map(|i| (i as u32).wrapping_mul(2_654_435_761)).collect();
+    let fb = Buffer::from_slice(&ctx, "test.texel_f", &f).unwrap();
+    let ub = Buffer::from_slice(&ctx, "test.texel_u", &u).unwrap();
+    let out = Buffer::<u32>::new(&ctx, "test.texel_out", n).unwrap();
+    let align = ctx.caps().min_texel_buffer_offset_alignment as usize / 4;
+    for (start, whole) in [(0, true), (align.max(1), false)] {
+        let mut rec = Recorder::new(&ctx).unwrap();
+        let (fbind, ubind) = if whole { (fb.binding(), ub.binding()) } else { (fb.slice(start, n), ub.slice(start, n)) };
+        rec.dispatch(&k, &[fbind, ubind, out.binding()], bytemuck::bytes_of(&(n as u32)), [(n as u32).div_ceil(256), 1, 1]).unwrap();
+        rec.submit_and_wait().unwrap();
+        let got = out.download().unwrap();
+        for i in 0..n {
+            assert_eq!(got[i], f[start + i].to_bits() ^ u[start + i], "texel {i} from offset {start}");
+        }
+    }
+    if ctx.caps().min_texel_buffer_offset_alignment > 4 {
+        let mut rec = Recorder::new(&ctx).unwrap();
+        let e = rec.dispatch(&k, &[fb.slice(1, n), ub.binding(), out.binding()], bytemuck::bytes_of(&(n as u32)), [1, 1, 1]).unwrap_err();
+        let msg = format!("{e:#}");
+        assert!(msg.contains("binding 0") && msg.contains("minTexelBufferOffsetAlignment"), "{msg}");
+    }
+    check_validation(&ctx);
+}

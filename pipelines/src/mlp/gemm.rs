@@ -5,7 +5,7 @@
 
 use anyhow::{bail, Context as _, Result};
 use bytemuck::{Pod, Zeroable};
-use tgs_engine::Context;
+use tgs_engine::{Capabilities, Context};
 
 /// Rows and columns of C per invocation of the tiled GEMM (its tile is 8x
 /// that; glsl/mlp/gemm.comp): the largest whose tile fits the product's
@@ -188,6 +188,16 @@ impl Gemm {
             "tiled" => Ok(Gemm::Tiled),
             "rows" => Ok(Gemm::Rows),
             _ => bail!("unknown MLP kernel '{name}' (tiled, rows)"),
+        }
+    }
+    /// Floats one binding of this kernel may hold on a device: a storage
+    /// buffer's range, and for the row kernel (which reads its operands as
+    /// texel buffers) the texels of one texel-buffer view too.
+    pub(super) fn max_binding_floats(&self, caps: &Capabilities) -> u64 {
+        let storage = caps.max_storage_buffer_range / 4;
+        match self {
+            Gemm::Rows => storage.min(caps.max_texel_buffer_elements),
+            Gemm::Tiled => storage,
         }
     }
     pub fn name(&self) -> &'static str {

@@ -183,23 +183,11 @@ impl Mlp {
         self.gemm_kind
     }
 
-    /// Floats one binding of the GEMM may hold on this device: a storage
-    /// buffer's range, and for the row kernel (which reads its operands as
-    /// texel buffers) the texels of one texel-buffer view too.
-    fn max_binding_floats(&self) -> u64 {
-        let caps = self.ctx.caps();
-        let storage = caps.max_storage_buffer_range / 4;
-        match self.gemm_kind {
-            Gemm::Rows => storage.min(caps.max_texel_buffer_elements),
-            Gemm::Tiled => storage,
-        }
-    }
-
     /// The most samples whose activations one block of a scratch of
     /// `shape` holds on this device (its widest activation buffer within
     /// one binding); more are taken in blocks.
     pub fn max_capacity(&self, shape: &MlpShape) -> u32 {
-        let max = self.max_binding_floats();
+        let max = self.gemm_kind.max_binding_floats(self.ctx.caps());
         let widest = shape.cat_width().max(shape.dx()).max(1) as u64;
         (max / widest).min(u32::MAX as u64) as u32
     }
@@ -225,7 +213,7 @@ impl Mlp {
         let ctx = &self.ctx;
         let cap = capacity.max(1);
         let block = block.clamp(1, cap);
-        let max = self.max_binding_floats();
+        let max = self.gemm_kind.max_binding_floats(self.ctx.caps());
         let widest = shape.cat_width().max(shape.dx()) as u64;
         if block as u64 * widest > max || MAX_CHUNKS as u64 * shape.params() as u64 > max || cap as u64 * SAMPLE as u64 > max {
             bail!(
