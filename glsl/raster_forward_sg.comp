@@ -15,10 +15,18 @@ layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
-layout(std430, binding = 2) readonly buffer Vals { uint vals[]; };
-layout(std430, binding = 3) readonly buffer Gid { uint gid[]; };
-layout(std430, binding = 4) readonly buffer ProjIn { float proj[]; };
-layout(std430, binding = 5) readonly buffer FeatIn { float pfeat[]; };
+// The tile's splats as uniform texel buffers: llvmpipe fetches a texel as
+// one gather, where it loads from a storage buffer lane by lane with a
+// branch and a spill each (the light field's GEMM, perf/RESULTS.md,
+// forty-first entry). Every invocation reads the same splat.
+layout(binding = 2) uniform usamplerBuffer vals_t;
+layout(binding = 3) uniform usamplerBuffer gid_t;
+layout(binding = 4) uniform samplerBuffer proj_t;
+layout(binding = 5) uniform samplerBuffer pfeat_t;
+#define VALS(at) texelFetch(vals_t, int(at)).r
+#define GID(at) texelFetch(gid_t, int(at)).r
+#define PROJ(at) texelFetch(proj_t, int(at)).r
+#define PFEAT(at) texelFetch(pfeat_t, int(at)).r
 layout(std430, binding = 6) buffer Out { float outp[]; };
 layout(std430, binding = 7) buffer FState { float fstate[]; };
 layout(std430, binding = 8) buffer UState { uint ustate[]; };
@@ -68,17 +76,17 @@ void main() {
 
     float feat[CH];
     for (uint q = start; q < end && !subgroupAll(n_done == PPT); q++) {
-        uint g = gid[vals[q]];
+        uint g = GID(VALS(q));
         uint o = PROJ_STRIDE * g;
-        vec3 tu = vec3(proj[o], proj[o + 1u], proj[o + 2u]);
-        vec3 tv = vec3(proj[o + 3u], proj[o + 4u], proj[o + 5u]);
-        vec3 tw = vec3(proj[o + 6u], proj[o + 7u], proj[o + 8u]);
-        vec2 mu = vec2(proj[o + 9u], proj[o + 10u]);
-        vec3 nrm = vec3(proj[o + 11u], proj[o + 12u], proj[o + 13u]);
-        float op = proj[o + 14u];
-        vec4 box = vec4(proj[o + 16u], proj[o + 17u], proj[o + 18u], proj[o + 19u]);
+        vec3 tu = vec3(PROJ(o), PROJ(o + 1u), PROJ(o + 2u));
+        vec3 tv = vec3(PROJ(o + 3u), PROJ(o + 4u), PROJ(o + 5u));
+        vec3 tw = vec3(PROJ(o + 6u), PROJ(o + 7u), PROJ(o + 8u));
+        vec2 mu = vec2(PROJ(o + 9u), PROJ(o + 10u));
+        vec3 nrm = vec3(PROJ(o + 11u), PROJ(o + 12u), PROJ(o + 13u));
+        float op = PROJ(o + 14u);
+        vec4 box = vec4(PROJ(o + 16u), PROJ(o + 17u), PROJ(o + 18u), PROJ(o + 19u));
         for (uint c = 0u; c < CH; c++) {
-            feat[c] = pfeat[g * CH + c];
+            feat[c] = PFEAT(g * CH + c);
         }
         // Only the pixels of the splat's box. (Every slot is visited: a
         // loop of constant length keeps the pixel state in registers, which
