@@ -2,14 +2,38 @@
 // One invocation per Gaussian: the 2DGS splat-to-pixel transform, bounding
 // box and tile rectangle, view-dependent features, and the depth sort key.
 // Culled Gaussians get zero tiles and the largest key.
+// Variant TEXEL (CPU devices): the camera and the Gaussians are read as
+// uniform texel buffers, which llvmpipe fetches as one gather where it
+// loads a storage buffer lane by lane (perf/RESULTS.md, forty-first entry).
+// variant: TEXEL
 #include "common.glsl"
 
+#ifdef TEXEL
+layout(binding = 0) uniform samplerBuffer cam_t;
+layout(binding = 1) uniform samplerBuffer means_t;
+layout(binding = 2) uniform samplerBuffer scales_t;
+layout(binding = 3) uniform samplerBuffer quats_t;
+layout(binding = 4) uniform samplerBuffer opacity_t;
+layout(binding = 5) uniform samplerBuffer feats_t;
+#define CAM(at) texelFetch(cam_t, int(at)).r
+#define MEANS(at) texelFetch(means_t, int(at)).r
+#define LOG_SCALES(at) texelFetch(scales_t, int(at)).r
+#define QUAT(at) vec4(texelFetch(quats_t, int(4u * (at))).r, texelFetch(quats_t, int(4u * (at) + 1u)).r, texelFetch(quats_t, int(4u * (at) + 2u)).r, texelFetch(quats_t, int(4u * (at) + 3u)).r)
+#define OPACITY(at) texelFetch(opacity_t, int(at)).r
+#define FEATS(at) texelFetch(feats_t, int(at)).r
+#else
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Means { float means[]; };
 layout(std430, binding = 2) readonly buffer Scales { float log_scales[]; };
 layout(std430, binding = 3) readonly buffer Quats { vec4 quats[]; };
 layout(std430, binding = 4) readonly buffer Opac { float opacity[]; };
 layout(std430, binding = 5) readonly buffer Feats { float feats[]; };
+#define MEANS(at) means[at]
+#define LOG_SCALES(at) log_scales[at]
+#define QUAT(at) quats[at]
+#define OPACITY(at) opacity[at]
+#define FEATS(at) feats[at]
+#endif
 layout(std430, binding = 6) writeonly buffer ProjOut { float proj[]; };
 layout(std430, binding = 7) writeonly buffer FeatOut { float pfeat[]; };
 layout(std430, binding = 8) writeonly buffer Rects { uvec4 rects[]; };
@@ -28,10 +52,10 @@ void main() {
         return;
     }
     depth_ids[g] = g;
-    vec3 p = vec3(means[3u * g], means[3u * g + 1u], means[3u * g + 2u]);
-    vec2 ls = vec2(log_scales[2u * g], log_scales[2u * g + 1u]);
+    vec3 p = vec3(MEANS(3u * g), MEANS(3u * g + 1u), MEANS(3u * g + 2u));
+    vec2 ls = vec2(LOG_SCALES(2u * g), LOG_SCALES(2u * g + 1u));
     Proj pr;
-    bool ok = project(p, ls, quats[g], opacity[g], pr);
+    bool ok = project(p, ls, QUAT(g), OPACITY(g), pr);
     uvec4 rect = uvec4(0u);
     vec4 box = vec4(0.0);
     if (ok) {
@@ -61,7 +85,7 @@ void main() {
     uint fb = (g - pc.feat_base) * pc.coeffs * CH;
     if (pc.mode == 1u) {
         for (uint c = 0u; c < CH; c++) {
-            pfeat[g * CH + c] = feats[fb + c];
+            pfeat[g * CH + c] = FEATS(fb + c);
         }
         return;
     }
@@ -73,7 +97,7 @@ void main() {
     for (uint c = 0u; c < CH; c++) {
         float v = 0.5;
         for (uint k = 0u; k < nk; k++) {
-            v += Y[k] * feats[fb + k * CH + c];
+            v += Y[k] * FEATS(fb + k * CH + c);
         }
         pfeat[g * CH + c] = max(v, 0.0);
     }

@@ -1,12 +1,16 @@
 // The per-Gaussian 2DGS projection (method-notes §1.3), shared by the
 // forward projection and the per-Gaussian backward. Expects a float buffer
-// `cam` (layout in raster_common.glsl) to be declared before inclusion.
+// `cam` (layout in raster_common.glsl) to be declared before inclusion, or
+// a macro CAM(i) that reads its float i.
 #ifndef TGS_RASTER_PROJECT_GLSL
 #define TGS_RASTER_PROJECT_GLSL
+#ifndef CAM
+#define CAM(at) cam[at]
+#endif
 #include "raster_common.glsl"
 
 vec3 cam_row(uint i) {
-    return vec3(cam[4u * i], cam[4u * i + 1u], cam[4u * i + 2u]);
+    return vec3(CAM(4u * i), CAM(4u * i + 1u), CAM(4u * i + 2u));
 }
 // World -> view rotation applied to v, and its transpose.
 vec3 view_rot(vec3 v) {
@@ -16,13 +20,13 @@ vec3 view_rot_t(vec3 v) {
     return cam_row(0u) * v.x + cam_row(1u) * v.y + cam_row(2u) * v.z;
 }
 vec3 view_t() {
-    return vec3(cam[3], cam[7], cam[11]);
+    return vec3(CAM(3), CAM(7), CAM(11));
 }
 vec4 intrinsics() {
-    return vec4(cam[12], cam[13], cam[14], cam[15]);
+    return vec4(CAM(12), CAM(13), CAM(14), CAM(15));
 }
 vec3 cam_centre() {
-    return vec3(cam[16], cam[17], cam[18]);
+    return vec3(CAM(16), CAM(17), CAM(18));
 }
 
 struct Proj {

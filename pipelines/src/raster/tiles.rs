@@ -127,7 +127,9 @@ impl TileSpec {
         };
         let full_forward = self.kernels == RasterKernels::Subgroup;
         Ok(TileKernels {
-            project: k("raster.project", shaders::RASTER_PROJECT, &common, false)?,
+            // CPU devices read the Gaussians as texel buffers (one gather a
+            // load on llvmpipe, where a storage load loops over the lanes).
+            project: k("raster.project", if full_forward { shaders::RASTER_PROJECT_TEXEL } else { shaders::RASTER_PROJECT }, &common, false)?,
             forward: k("raster.forward", fwd, &spec, full_forward)?,
             backward: k("raster.backward", bwd, &spec, true)?,
             backward_colour: OnceLock::new(),
