@@ -4,6 +4,8 @@
 // variant: ADAM RECORDS_BDA
 // variant: ADAM COLOUR_ONLY
 // variant: ADAM COLOUR_ONLY RECORDS_BDA
+// variant: ADAM TEXEL
+// variant: ADAM COLOUR_ONLY TEXEL
 #ifdef RECORDS_BDA
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
@@ -21,6 +23,12 @@
 // geometry does not train): sums the feature records alone and steps the
 // features alone; means, scales, rotations, opacity and their moments are
 // left as they are, densification gradients are written as zero.
+// ADAM TEXEL (CPU devices): every input read as a uniform texel buffer,
+// which llvmpipe fetches as one gather where it loads a storage buffer lane
+// by lane (perf/RESULTS.md, forty-first entry): the camera (0), the ids (6),
+// offsets (7) and records (8, the records buffer itself), and the
+// parameters and moments through views 20-34 of the storage buffers 1-5,
+// 9-13 and 15-19 that the step writes. The same arithmetic.
 #include "common.glsl"
 
 #ifdef ADAM
@@ -28,17 +36,80 @@
 #else
 #define PARAM_ACCESS readonly
 #endif
+#ifdef TEXEL
+layout(binding = 0) uniform samplerBuffer cam_t;
+#define CAM(at) texelFetch(cam_t, int(at)).r
+#else
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
+#endif
 layout(std430, binding = 1) PARAM_ACCESS buffer Means { float means[]; };
 layout(std430, binding = 2) PARAM_ACCESS buffer Scales { float log_scales[]; };
 layout(std430, binding = 3) PARAM_ACCESS buffer Quats { vec4 quats[]; };
 layout(std430, binding = 4) PARAM_ACCESS buffer Opac { float opacity[]; };
 layout(std430, binding = 5) PARAM_ACCESS buffer Feats { float feats[]; };
+#ifdef TEXEL
+layout(binding = 6) uniform usamplerBuffer ids_t;
+layout(binding = 7) uniform usamplerBuffer offsets_t;
+layout(binding = 8) uniform samplerBuffer records_t;
+layout(binding = 20) uniform samplerBuffer means_t;
+layout(binding = 21) uniform samplerBuffer scales_t;
+layout(binding = 22) uniform samplerBuffer quats_t;
+layout(binding = 23) uniform samplerBuffer opacity_t;
+layout(binding = 24) uniform samplerBuffer feats_t;
+layout(binding = 25) uniform samplerBuffer m1_means_t;
+layout(binding = 26) uniform samplerBuffer m1_scales_t;
+layout(binding = 27) uniform samplerBuffer m1_quats_t;
+layout(binding = 28) uniform samplerBuffer m1_opacity_t;
+layout(binding = 29) uniform samplerBuffer m1_feats_t;
+layout(binding = 30) uniform samplerBuffer m2_means_t;
+layout(binding = 31) uniform samplerBuffer m2_scales_t;
+layout(binding = 32) uniform samplerBuffer m2_quats_t;
+layout(binding = 33) uniform samplerBuffer m2_opacity_t;
+layout(binding = 34) uniform samplerBuffer m2_feats_t;
+#define TX(t, at) texelFetch(t, int(at)).r
+#define IDS(at) texelFetch(ids_t, int(at)).r
+#define OFFSETS(at) texelFetch(offsets_t, int(at)).r
+#define REC(at) TX(records_t, at)
+#define R_MEANS(at) TX(means_t, at)
+#define R_LOG_SCALES(at) TX(scales_t, at)
+#define R_QUAT(at) vec4(TX(quats_t, 4u * (at)), TX(quats_t, 4u * (at) + 1u), TX(quats_t, 4u * (at) + 2u), TX(quats_t, 4u * (at) + 3u))
+#define R_OPACITY(at) TX(opacity_t, at)
+#define R_FEATS(at) TX(feats_t, at)
+#define R_M1_MEANS(at) TX(m1_means_t, at)
+#define R_M1_SCALES(at) TX(m1_scales_t, at)
+#define R_M1_QUATS(at) TX(m1_quats_t, at)
+#define R_M1_OPACITY(at) TX(m1_opacity_t, at)
+#define R_M1_FEATS(at) TX(m1_feats_t, at)
+#define R_M2_MEANS(at) TX(m2_means_t, at)
+#define R_M2_SCALES(at) TX(m2_scales_t, at)
+#define R_M2_QUATS(at) TX(m2_quats_t, at)
+#define R_M2_OPACITY(at) TX(m2_opacity_t, at)
+#define R_M2_FEATS(at) TX(m2_feats_t, at)
+#else
 layout(std430, binding = 6) readonly buffer Ids { uint ids[]; };
 layout(std430, binding = 7) readonly buffer Offsets { uint offsets[]; };
 #define RECORDS_BINDING 8
 #define RECORDS_ACCESS readonly
 #include "raster_records.glsl"
+#define IDS(at) ids[at]
+#define OFFSETS(at) offsets[at]
+#define REC(at) RECORDS[at]
+#define R_MEANS(at) means[at]
+#define R_LOG_SCALES(at) log_scales[at]
+#define R_QUAT(at) quats[at]
+#define R_OPACITY(at) opacity[at]
+#define R_FEATS(at) feats[at]
+#define R_M1_MEANS(at) m1_means[at]
+#define R_M1_SCALES(at) m1_scales[at]
+#define R_M1_QUATS(at) m1_quats[at]
+#define R_M1_OPACITY(at) m1_opacity[at]
+#define R_M1_FEATS(at) m1_feats[at]
+#define R_M2_MEANS(at) m2_means[at]
+#define R_M2_SCALES(at) m2_scales[at]
+#define R_M2_QUATS(at) m2_quats[at]
+#define R_M2_OPACITY(at) m2_opacity[at]
+#define R_M2_FEATS(at) m2_feats[at]
+#endif
 layout(std430, binding = 14) writeonly buffer Densify { vec2 densify[]; };
 
 #include "raster_project.glsl"
@@ -55,16 +126,17 @@ layout(std430, binding = 17) buffer M2Quats { float m2_quats[]; };
 layout(std430, binding = 18) buffer M2Opac { float m2_opacity[]; };
 layout(std430, binding = 19) buffer M2Feats { float m2_feats[]; };
 
-// adam.comp's step of parameter P with moments M, V, gradient G, rate LR.
-#define ADAM_STEP(P, M, V, G, LR) { \
+// adam.comp's step of parameter P with moments M, V (written; read as
+// PR, MR, VR), gradient G, rate LR.
+#define ADAM_STEP(P, M, V, PR, MR, VR, G, LR) { \
     float g_ = (G); \
     if (isnan(g_) || isinf(g_)) { g_ = 0.0; } \
-    float m_ = pc.beta1 * M + (1.0 - pc.beta1) * g_; \
-    float v_ = pc.beta2 * V + (1.0 - pc.beta2) * g_ * g_; \
+    float m_ = pc.beta1 * (MR) + (1.0 - pc.beta1) * g_; \
+    float v_ = pc.beta2 * (VR) + (1.0 - pc.beta2) * g_ * g_; \
     M = m_; \
     V = v_; \
     float d_ = sqrt(v_) / sqrt(pc.bc2) + pc.eps; \
-    P -= ((LR) / pc.bc1) * m_ / d_; }
+    P = (PR) - ((LR) / pc.bc1) * m_ / d_; }
 
 #ifdef COLOUR_ONLY
 void put_mean(uint i, float g) {}
@@ -72,28 +144,27 @@ void put_scale(uint i, float g) {}
 void put_quat(uint i, vec4 g) {}
 void put_opacity(uint i, float g) {}
 #else
-void put_mean(uint i, float g) { ADAM_STEP(means[i], m1_means[i], m2_means[i], g, pc.lr_means) }
-void put_scale(uint i, float g) { ADAM_STEP(log_scales[i], m1_scales[i], m2_scales[i], g, pc.lr_scales) }
+void put_mean(uint i, float g) { ADAM_STEP(means[i], m1_means[i], m2_means[i], R_MEANS(i), R_M1_MEANS(i), R_M2_MEANS(i), g, pc.lr_means) }
+void put_scale(uint i, float g) { ADAM_STEP(log_scales[i], m1_scales[i], m2_scales[i], R_LOG_SCALES(i), R_M1_SCALES(i), R_M2_SCALES(i), g, pc.lr_scales) }
 void put_quat(uint i, vec4 g) {
+    vec4 q = R_QUAT(i);
     for (uint k = 0u; k < 4u; k++) {
-        ADAM_STEP(quats[i][k], m1_quats[4u * i + k], m2_quats[4u * i + k], g[k], pc.lr_quats)
+        ADAM_STEP(quats[i][k], m1_quats[4u * i + k], m2_quats[4u * i + k], q[k], R_M1_QUATS(4u * i + k), R_M2_QUATS(4u * i + k), g[k], pc.lr_quats)
     }
 }
-void put_opacity(uint i, float g) { ADAM_STEP(opacity[i], m1_opacity[i], m2_opacity[i], g, pc.lr_opacity) }
+void put_opacity(uint i, float g) { ADAM_STEP(opacity[i], m1_opacity[i], m2_opacity[i], R_OPACITY(i), R_M1_OPACITY(i), R_M2_OPACITY(i), g, pc.lr_opacity) }
 #endif
 // Feature i of the Gaussian whose features start at fb, its value p
 // already loaded.
 void put_feat_from(uint fb, uint i, float p, float g) {
     if (i < pc.feat_active) {
-        float p_ = p;
-        ADAM_STEP(p_, m1_feats[fb + i], m2_feats[fb + i], g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
-        feats[fb + i] = p_;
+        ADAM_STEP(feats[fb + i], m1_feats[fb + i], m2_feats[fb + i], p, R_M1_FEATS(fb + i), R_M2_FEATS(fb + i), g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
     }
 }
 // The same, loading the value (only for a feature that steps).
 void put_feat(uint fb, uint i, float g) {
     if (i < pc.feat_active) {
-        put_feat_from(fb, i, feats[fb + i], g);
+        put_feat_from(fb, i, R_FEATS(fb + i), g);
     }
 }
 #else
@@ -129,13 +200,13 @@ void main() {
     if (r >= pc.n) {
         return;
     }
-    uint g = ids[r];
+    uint g = IDS(r);
     // Another slice's Gaussian (feature slices: every slice's dispatch
     // walks every rank and takes its own).
     if (g < pc.feat_base || g >= pc.feat_end) {
         return;
     }
-    uint p0 = min(offsets[r], pc.capacity), p1 = min(offsets[r + 1u], pc.capacity);
+    uint p0 = min(OFFSETS(r), pc.capacity), p1 = min(OFFSETS(r + 1u), pc.capacity);
 
     vec3 dTu = vec3(0.0), dTv = vec3(0.0), dTw = vec3(0.0), dn = vec3(0.0);
     vec2 dmu = vec2(0.0);
@@ -147,23 +218,23 @@ void main() {
     for (uint p = p0; p < p1; p++) {
         uint b = p * KREC;
 #ifndef COLOUR_ONLY
-        dTu += vec3(RECORDS[b], RECORDS[b + 1u], RECORDS[b + 2u]);
-        dTv += vec3(RECORDS[b + 3u], RECORDS[b + 4u], RECORDS[b + 5u]);
-        dTw += vec3(RECORDS[b + 6u], RECORDS[b + 7u], RECORDS[b + 8u]);
-        dmu += vec2(RECORDS[b + 9u], RECORDS[b + 10u]);
-        dO += RECORDS[b + 11u];
-        dn += vec3(RECORDS[b + 12u], RECORDS[b + 13u], RECORDS[b + 14u]);
+        dTu += vec3(REC(b), REC(b + 1u), REC(b + 2u));
+        dTv += vec3(REC(b + 3u), REC(b + 4u), REC(b + 5u));
+        dTw += vec3(REC(b + 6u), REC(b + 7u), REC(b + 8u));
+        dmu += vec2(REC(b + 9u), REC(b + 10u));
+        dO += REC(b + 11u);
+        dn += vec3(REC(b + 12u), REC(b + 13u), REC(b + 14u));
 #endif
         for (uint c = 0u; c < CH; c++) {
-            df[c] += RECORDS[b + 15u + c];
+            df[c] += REC(b + 15u + c);
         }
     }
 
-    vec3 p = vec3(means[3u * g], means[3u * g + 1u], means[3u * g + 2u]);
-    vec2 ls = vec2(log_scales[2u * g], log_scales[2u * g + 1u]);
-    vec4 qr = quats[g];
+    vec3 p = vec3(R_MEANS(3u * g), R_MEANS(3u * g + 1u), R_MEANS(3u * g + 2u));
+    vec2 ls = vec2(R_LOG_SCALES(2u * g), R_LOG_SCALES(2u * g + 1u));
+    vec4 qr = R_QUAT(g);
     Proj pr;
-    bool ok = p1 > p0 && project(p, ls, qr, opacity[g], pr);
+    bool ok = p1 > p0 && project(p, ls, qr, R_OPACITY(g), pr);
     uint fb = (g - pc.feat_base) * pc.coeffs * CH;
     if (!ok) {
         put_mean(3u * g, 0.0); put_mean(3u * g + 1u, 0.0); put_mean(3u * g + 2u, 0.0);
@@ -201,7 +272,7 @@ void main() {
     put_quat(g, (dqn - qn * dot(qn, dqn)) / qlen);
     // sigmoid'(x) = sigmoid(x) sigmoid(-x): 1 - o would cancel in f32 for
     // saturated opacities (1% error at x = 12).
-    put_opacity(g, dO * s.o / (1.0 + exp(opacity[g])));
+    put_opacity(g, dO * s.o / (1.0 + exp(R_OPACITY(g))));
 
     if (pc.mode == 1u) {
         for (uint i = 0u; i < pc.coeffs * CH; i++) {
@@ -223,7 +294,7 @@ void main() {
         uint nc = min(pc.coeffs, 16u);
         float F[16u * CH];
         for (uint i = 0u; i < nc * CH; i++) {
-            F[i] = feats[fb + i];
+            F[i] = R_FEATS(fb + i);
         }
         // precise: no fused multiply-adds into the direction gradient, so
         // the ADAM variant (whose loop also steps the coefficients) rounds

@@ -172,7 +172,7 @@ pub struct Rasterizer {
     reduce: Kernel,
     /// The reduce with Adam fused (`reduce_adam.rs`), and its feature-only
     /// variant, each built on first use.
-    reduce_adam: [std::sync::OnceLock<Kernel>; 2],
+    reduce_adam: [std::sync::OnceLock<Kernel>; 4],
     /// What the tile-size dependent kernels are built for, and those
     /// kernels for 16 x 16 and 8 x 8 tiles, each built on first use
     /// (`tiles.rs`).
@@ -259,7 +259,7 @@ impl Rasterizer {
             gate: Kernel::new(ctx, &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 4 * GATE_PUSH_WORDS as u32, subgroup_size: None, full_subgroups: false })?,
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             reduce: k("raster.reduce", reduce, push, false)?,
-            reduce_adam: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
+            reduce_adam: std::array::from_fn(|_| std::sync::OnceLock::new()),
             tile_spec: TileSpec { kernels, records, channels, batch, span, small: TileSpec::small_tiles_allowed()? },
             tile_sets: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
             feature_slice: None,

@@ -62,6 +62,10 @@ struct PushAdam {
 
 /// Storage buffers the fused reduce binds.
 const BINDINGS: u32 = 20;
+/// The bindings of the storage buffers that the `TEXEL` variant also reads
+/// through texel views (bindings 20-34, in this order): the parameters and
+/// both moments.
+const TEXEL_VIEWS: [usize; 15] = [1, 2, 3, 4, 5, 9, 10, 11, 12, 13, 15, 16, 17, 18, 19];
 
 impl Rasterizer {
     /// Whether this device can run [`Rasterizer::record_backward_adam`]
@@ -98,7 +102,10 @@ impl Rasterizer {
         if !self.can_fuse_adam() {
             bail!("{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)", self.ctx.caps().device_name, std::mem::size_of::<PushAdam>());
         }
-        let kernel = self.reduce_adam_kernel(features_only)?;
+        // CPU devices read the reduce's inputs as texel buffers where the
+        // records fit one texel view (variant TEXEL): the same arithmetic.
+        let texel = self.kernels == super::RasterKernels::Subgroup && frame.isect_grads.len() as u64 <= self.ctx.caps().max_texel_buffer_elements;
+        let kernel = self.reduce_adam_kernel(features_only, texel)?;
         let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, features_only)?;
         let sc = rec.begin_scope("raster.reduce");
         for slice in self.feature_slices(g.n) {
@@ -109,6 +116,12 @@ impl Rasterizer {
             bindings.push(frame.densify.binding());
             bindings.extend(v.buffers().map(|b| b.binding()));
             bindings[19] = self.feature_binding(&v.features, slice);
+            if texel {
+                // The records themselves (not their address), and the views.
+                bindings[8] = frame.isect_grads.binding();
+                let views: Vec<_> = TEXEL_VIEWS.iter().map(|&i| bindings[i].clone()).collect();
+                bindings.extend(views);
+            }
             let push = PushAdam { base: Push { feat_base: slice.0, feat_end: slice.1, ..self.push(g, frame, sh_degree) }, adam: *adam };
             match gate {
                 Some(args) => rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(&push), args)?,
@@ -119,16 +132,18 @@ impl Rasterizer {
         Ok(())
     }
 
-    fn reduce_adam_kernel(&self, features_only: bool) -> Result<&Kernel> {
-        let slot = &self.reduce_adam[features_only as usize];
+    fn reduce_adam_kernel(&self, features_only: bool, texel: bool) -> Result<&Kernel> {
+        let slot = &self.reduce_adam[features_only as usize + 2 * texel as usize];
         if let Some(k) = slot.get() {
             return Ok(k);
         }
-        let spirv = match (self.records, features_only) {
-            (super::RecordAccess::Address, false) => shaders::RASTER_REDUCE_ADAM_RECORDS_BDA,
-            (super::RecordAccess::Binding, false) => shaders::RASTER_REDUCE_ADAM,
-            (super::RecordAccess::Address, true) => shaders::RASTER_REDUCE_ADAM_COLOUR_ONLY_RECORDS_BDA,
-            (super::RecordAccess::Binding, true) => shaders::RASTER_REDUCE_ADAM_COLOUR_ONLY,
+        let spirv = match (self.records, features_only, texel) {
+            (_, false, true) => shaders::RASTER_REDUCE_ADAM_TEXEL,
+            (_, true, true) => shaders::RASTER_REDUCE_ADAM_COLOUR_ONLY_TEXEL,
+            (super::RecordAccess::Address, false, false) => shaders::RASTER_REDUCE_ADAM_RECORDS_BDA,
+            (super::RecordAccess::Binding, false, false) => shaders::RASTER_REDUCE_ADAM,
+            (super::RecordAccess::Address, true, false) => shaders::RASTER_REDUCE_ADAM_COLOUR_ONLY_RECORDS_BDA,
+            (super::RecordAccess::Binding, true, false) => shaders::RASTER_REDUCE_ADAM_COLOUR_ONLY,
         };
         let min_sg = self.ctx.caps().min_subgroup_size.max(1);
         let spec = [(0, super::WG), (1, min_sg), (4, self.channels), (5, self.batch)];
