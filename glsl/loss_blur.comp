@@ -9,11 +9,27 @@
 //           symmetric, so the same pass is its own adjoint).
 // Taps outside the image are not visited, so each sum runs over its valid
 // taps from left to right.
+// variant: TEXEL
 #include "loss_common.glsl"
 
+// Variant TEXEL (CPU devices): the inputs read as uniform texel buffers,
+// one gather on llvmpipe where a storage load loops over the lanes
+// (perf/RESULTS.md, forty-first entry); the same sums.
+#ifdef TEXEL
+layout(binding = 0) uniform samplerBuffer render_t;
+layout(binding = 1) uniform samplerBuffer target_t;
+layout(binding = 2) uniform samplerBuffer src_t;
+#define RENDER(at) texelFetch(render_t, int(at)).r
+#define TARGET(at) texelFetch(target_t, int(at)).r
+#define SRC(at) texelFetch(src_t, int(at)).r
+#else
 layout(std430, binding = 0) readonly buffer Render { float render[]; };
 layout(std430, binding = 1) readonly buffer Target { float target[]; };
 layout(std430, binding = 2) readonly buffer Src { float src[]; };
+#define RENDER(at) render[at]
+#define TARGET(at) target[at]
+#define SRC(at) src[at]
+#endif
 layout(std430, binding = 3) writeonly buffer Dst { float dst[]; };
 
 void main() {
@@ -32,8 +48,8 @@ void main() {
         for (int k = t.x; k <= t.y; k++) {
             float w = SSIM_WEIGHTS[k + SSIM_RADIUS];
             uint q = row + uint(x + k);
-            float a = render[c * n + q];
-            float b = target[c * n + q];
+            float a = RENDER(c * n + q);
+            float b = TARGET(c * n + q);
             s0 += w * a;
             s1 += w * b;
             s2 += w * (a * a);
@@ -50,9 +66,9 @@ void main() {
         for (int k = t.x; k <= t.y; k++) {
             float w = SSIM_WEIGHTS[k + SSIM_RADIUS];
             uint q = row + uint(x + k);
-            s0 += w * src[(3u * c + 0u) * n + q];
-            s1 += w * src[(3u * c + 1u) * n + q];
-            s2 += w * src[(3u * c + 2u) * n + q];
+            s0 += w * SRC((3u * c + 0u) * n + q);
+            s1 += w * SRC((3u * c + 1u) * n + q);
+            s2 += w * SRC((3u * c + 2u) * n + q);
         }
         dst[(3u * c + 0u) * n + pix] = s0;
         dst[(3u * c + 1u) * n + pix] = s1;

@@ -5,11 +5,27 @@
 // and xy (scaled by -lambda_ssim / (pixels * C), blurred again by loss_blur
 // and loss_grad), and workgroup partial sums of L1, squared error and SSIM
 // (partials[4 * wg + 0..2]).
+// variant: TEXEL
 #include "loss_common.glsl"
 
+// Variant TEXEL (CPU devices): the inputs read as uniform texel buffers,
+// one gather on llvmpipe where a storage load loops over the lanes
+// (perf/RESULTS.md, forty-first entry); the same sums.
+#ifdef TEXEL
+layout(binding = 0) uniform samplerBuffer render_t;
+layout(binding = 1) uniform samplerBuffer target_t;
+layout(binding = 2) uniform samplerBuffer rows_t;
+#define RENDER(at) texelFetch(render_t, int(at)).r
+#define TARGET(at) texelFetch(target_t, int(at)).r
+#define ROWS(at) texelFetch(rows_t, int(at)).r
+#else
 layout(std430, binding = 0) readonly buffer Render { float render[]; };
 layout(std430, binding = 1) readonly buffer Target { float target[]; };
 layout(std430, binding = 2) readonly buffer Rows { float rows[]; };
+#define RENDER(at) render[at]
+#define TARGET(at) target[at]
+#define ROWS(at) rows[at]
+#endif
 layout(std430, binding = 3) writeonly buffer Coef { float coef[]; };
 layout(std430, binding = 4) writeonly buffer Partials { float partials[]; };
 
@@ -26,11 +42,11 @@ void main() {
             for (int k = t.x; k <= t.y; k++) {
                 float w = SSIM_WEIGHTS[k + SSIM_RADIUS];
                 uint q = uint(int(pix) + k * int(pc.width));
-                mx += w * rows[(5u * c + 0u) * n + q];
-                my += w * rows[(5u * c + 1u) * n + q];
-                exx += w * rows[(5u * c + 2u) * n + q];
-                eyy += w * rows[(5u * c + 3u) * n + q];
-                exy += w * rows[(5u * c + 4u) * n + q];
+                mx += w * ROWS((5u * c + 0u) * n + q);
+                my += w * ROWS((5u * c + 1u) * n + q);
+                exx += w * ROWS((5u * c + 2u) * n + q);
+                eyy += w * ROWS((5u * c + 3u) * n + q);
+                exy += w * ROWS((5u * c + 4u) * n + q);
             }
             float sxx = exx - mx * mx;
             float syy = eyy - my * my;
@@ -47,7 +63,7 @@ void main() {
             coef[(3u * c + 0u) * n + pix] = k * (d_mx - 2.0 * mx * d_sxx - my * d_sxy);
             coef[(3u * c + 1u) * n + pix] = k * d_sxx;
             coef[(3u * c + 2u) * n + pix] = k * d_sxy;
-            float d = render[c * n + pix] - target[c * n + pix];
+            float d = RENDER(c * n + pix) - TARGET(c * n + pix);
             l1 += abs(d);
             se += d * d;
             ss += s;

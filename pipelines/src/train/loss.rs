@@ -121,10 +121,12 @@ impl LossScratch {
 impl ImageLoss {
     pub fn new(ctx: &Arc<Context>) -> Result<ImageLoss> {
         let pb = std::mem::size_of::<Push>() as u32;
+        let cpu = ctx.caps().is_cpu();
         Ok(ImageLoss {
             ctx: ctx.clone(),
-            blur: kernel(ctx, "loss.blur", shaders::LOSS_BLUR, pb)?,
-            ssim: kernel(ctx, "loss.ssim", shaders::LOSS_SSIM, pb)?,
+            // CPU devices read the images through texel buffers (variant TEXEL).
+            blur: kernel(ctx, "loss.blur", if cpu { shaders::LOSS_BLUR_TEXEL } else { shaders::LOSS_BLUR }, pb)?,
+            ssim: kernel(ctx, "loss.ssim", if cpu { shaders::LOSS_SSIM_TEXEL } else { shaders::LOSS_SSIM }, pb)?,
             normal: kernel(ctx, "loss.normal", shaders::LOSS_NORMAL, pb)?,
             grad: kernel(ctx, "loss.grad", shaders::LOSS_GRAD, pb)?,
         })
