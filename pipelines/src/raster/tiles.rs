@@ -125,11 +125,16 @@ impl TileSpec {
             (RasterKernels::Subgroup, false) => (shaders::RASTER_FORWARD_SG, shaders::RASTER_BACKWARD_SG, shaders::RASTER_BACKWARD_SG_COLOUR_ONLY),
             (RasterKernels::Subgroup, true) => (shaders::RASTER_FORWARD_SG, shaders::RASTER_BACKWARD_SG_RECORDS_BDA, shaders::RASTER_BACKWARD_SG_COLOUR_ONLY_RECORDS_BDA),
         };
+        // The Subgroup kernels' projection reads the Gaussians as texel
+        // buffers (one gather a load on llvmpipe, where a storage load
+        // loops over the lanes).
+        let project = match self.kernels {
+            RasterKernels::Workgroup => shaders::RASTER_PROJECT,
+            RasterKernels::Subgroup => shaders::RASTER_PROJECT_TEXEL,
+        };
         let full_forward = self.kernels == RasterKernels::Subgroup;
         Ok(TileKernels {
-            // CPU devices read the Gaussians as texel buffers (one gather a
-            // load on llvmpipe, where a storage load loops over the lanes).
-            project: k("raster.project", if full_forward { shaders::RASTER_PROJECT_TEXEL } else { shaders::RASTER_PROJECT }, &common, false)?,
+            project: k("raster.project", project, &common, false)?,
             forward: k("raster.forward", fwd, &spec, full_forward)?,
             backward: k("raster.backward", bwd, &spec, true)?,
             backward_colour: OnceLock::new(),
