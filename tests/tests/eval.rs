@@ -1,11 +1,12 @@
 //! The evaluation's normal errors on hand-made views: the reference normal
 //! that faces each pixel's camera ray, and the MAE it scores against a wall
 //! facing the camera (computed here independently, in f64); the error off
-//! the mask, on the rest of the scene.
+//! the mask, on the rest of the scene; the error the reflection layer
+//! removes on chosen pixels.
 
 use tgs::data::image_io::ImageF;
 use tgs::data::View;
-use tgs::eval::{normal_mae, normal_mae_outside, ray_facing_normals};
+use tgs::eval::{layer_gain, normal_mae, normal_mae_outside, ray_facing_normals};
 use tgs_pipelines::Camera;
 
 fn camera(w: u32, h: u32) -> Camera {
@@ -107,4 +108,23 @@ fn error_off_the_mask_counts_only_the_pixels_outside_it() {
     // A mask over the whole image leaves nothing outside it.
     v.mask = Some(vec![true; n]);
     assert_eq!(normal_mae_outside(&out, &v), None);
+}
+
+#[test]
+fn layer_gain_is_the_error_the_composite_removes_on_the_chosen_pixels() {
+    // Four pixels, planar RGB. Pixel 0: the scattering layer is 0.2 off,
+    // the composite exact (gain 0.2); pixel 1: the composite is worse by
+    // 0.1 in red only (gain -0.1 / 3); pixel 2: both exact; pixel 3:
+    // values past [0, 1] are clamped first, so 1.5 against a 1.0 target is
+    // no error and the gain is 0.3 (scat 0.7, full 1.5).
+    let n = 4;
+    let gt = [0.5f32, 0.5, 0.4, 1.0, 0.5, 0.5, 0.4, 1.0, 0.5, 0.5, 0.4, 1.0];
+    let scat = [0.7f32, 0.5, 0.4, 0.7, 0.7, 0.5, 0.4, 0.7, 0.7, 0.5, 0.4, 0.7];
+    let full = [0.5f32, 0.6, 0.4, 1.5, 0.5, 0.5, 0.4, 1.5, 0.5, 0.5, 0.4, 1.5];
+    let per = [0.2, -0.1 / 3.0, 0.0, 0.3];
+    let all = layer_gain(&full, &scat, &gt, |_| true).unwrap();
+    assert!((all - per.iter().sum::<f64>() / n as f64).abs() < 1e-6, "{all}");
+    let odd = layer_gain(&full, &scat, &gt, |i| i % 2 == 1).unwrap();
+    assert!((odd - (per[1] + per[3]) / 2.0).abs() < 1e-6, "{odd}");
+    assert_eq!(layer_gain(&full, &scat, &gt, |_| false), None);
 }

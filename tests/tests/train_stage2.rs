@@ -114,6 +114,13 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     eprintln!("reflection set: {outside:.3} of its covered test pixels are off the glass mask");
     assert!((0.0..=1.0).contains(&outside));
     assert!(stages[0]["test"]["reflection_outside_mask"].is_null());
+    // What the reflection layer removes of the held-out error, on the glass
+    // and off it: a difference of two mean errors, so within (-1, 1).
+    for k in ["reflection_gain_mask", "reflection_gain_outside"] {
+        let g = stages[1]["test"][k].as_f64().unwrap_or_else(|| panic!("{k} missing"));
+        assert!(g.abs() < 1.0, "{k} {g}");
+        assert!(stages[0]["test"][k].is_null());
+    }
     assert_eq!(m["test"]["psnr"], stages[1]["test"]["psnr"]);
     // Outputs.
     for f in ["envmap.exr", "envmap.png", "reflection.ply", "point_cloud.ply", "residual/r_0.exr", "residual/r_0.png", "renders/stage1/r_0.png"] {

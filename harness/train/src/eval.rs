@@ -49,6 +49,17 @@ pub struct NormalMetrics {
     /// I's normals worse.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_outside_deg: Option<f64>,
+    /// In Stage II and later: how much the reflection layer lowers the
+    /// image error on the mask (and off it): the mean over those pixels of
+    /// |I_gt - I_scat| - |I_gt - I|, channel-averaged, with I_scat the
+    /// scattering layer alone and I the composite ([`layer_gain`]). > 0
+    /// where the reflection layer explains what the scattering set misses
+    /// on held-out views; it bounds the photometric evidence the reflection
+    /// set's normals can learn from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reflection_gain_mask: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reflection_gain_outside: Option<f64>,
 }
 
 impl NormalMetrics {
@@ -66,6 +77,8 @@ impl NormalMetrics {
             reflection_outside_mask: mean_of(|m| m.reflection_outside_mask),
             normal_mae_ray_facing_deg: mean_of(|m| m.normal_mae_ray_facing_deg),
             normal_mae_outside_deg: mean_of(|m| m.normal_mae_outside_deg),
+            reflection_gain_mask: mean_of(|m| m.reflection_gain_mask),
+            reflection_gain_outside: mean_of(|m| m.reflection_gain_outside),
         }
     }
 }
@@ -221,6 +234,24 @@ fn normal_mae_of(normals: &[[f32; 3]], view: &View, on_mask: bool, keep: impl Fn
 }
 
 /// Render, measure and (with `out`) write every view.
+/// The mean over the pixels `keep` selects of |gt - scat| - |gt - full|
+/// (planar RGB, values clamped to [0, 1] as [`psnr`] does, channels
+/// averaged): how much the composite `full` improves on its scattering
+/// layer `scat` against `gt`. None where `keep` selects no pixel.
+pub fn layer_gain(full: &[f32], scat: &[f32], gt: &[f32], keep: impl Fn(usize) -> bool) -> Option<f64> {
+    let n = gt.len() / 3;
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for i in (0..n).filter(|&i| keep(i)) {
+        for c in 0..3 {
+            let j = c * n + i;
+            let g = gt[j] as f64;
+            sum += ((g - scat[j].clamp(0.0, 1.0) as f64).abs() - (g - full[j].clamp(0.0, 1.0) as f64).abs()) / 3.0;
+        }
+        count += 1;
+    }
+    (count > 0).then(|| sum / count as f64)
+}
+
 pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) -> Result<Metrics> {
     let mut per_view = Vec::new();
     for v in views {
@@ -243,6 +274,10 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
             }
             _ => None,
         };
+        let gain = |on_mask: bool| match (&r.layers, &v.mask) {
+            (Some(l), Some(mask)) => layer_gain(rgb, &l.0.planes[..3 * w * h], &target, |i| mask[i] == on_mask),
+            _ => None,
+        };
         let m = ViewMetrics {
             name: v.name.clone(),
             psnr: psnr(rgb, &target),
@@ -256,6 +291,8 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
                 normal_mae_covered_deg: r.layers.as_ref().and_then(|_| normal_mae_where(&normals, v, covered)),
                 normal_mae_ray_facing_deg: v.normals.as_ref().and_then(|_| normal_mae(&ray_facing_normals(&v.camera), v)),
                 normal_mae_outside_deg: normal_mae_outside(&normals, v),
+                reflection_gain_mask: gain(true),
+                reflection_gain_outside: gain(false),
             },
         };
         if let Some(dir) = out.as_deref_mut() {
