@@ -104,6 +104,8 @@ impl SceneRenderer {
                 })
             }
         };
+        // Stage II composites with the scattering layer at its own degree.
+        let sh_degree = if matches!(layer, Some(Layer::Env { .. })) { cfg.reflection.scattering_degree(sh_degree) } else { sh_degree };
         Ok(SceneRenderer {
             ctx: ctx.clone(),
             scat: Gaussians::upload(ctx, &state.scattering)?,

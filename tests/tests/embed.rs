@@ -3,7 +3,8 @@
 //! run of each stage (Stage I; Stage II with its environment map; Stage III
 //! with its light field) and records the deferred render into the host's
 //! command buffer, writing the host's buffer. The pixels equal `tgs
-//! render`'s (the trainer's render of the checkpoint) bit for bit.
+//! render`'s (the trainer's render of the checkpoint) bit for bit, also
+//! for a Stage II that composites with the scattering set's degree-0 colour.
 
 use std::path::Path;
 use tgs::embed::SceneRenderer;
@@ -99,6 +100,28 @@ fn host_renders_each_stage_like_tgs_render() {
     check_run(&host, &one, "I");
     check_run(&host, &two, "II");
     check_run(&host, &three, "III");
+
+    // reflection.scattering_sh = 0: Stage II composites with the scattering
+    // set's view-independent colour. A Stage I that reaches SH degree 3
+    // (one degree every 100 iterations), then Stage II: the trainer's
+    // scattering layer is Stage I's set rendered at degree 0 bit for bit
+    // (not at 3, which differs), and the host's render equals the trainer's.
+    let one_sh = b.join("one-sh");
+    train(ctx_shared(), &args(&one_sh, &["iterations=300", "sh_interval=100"], "I", None)).unwrap();
+    let two_dc = b.join("two-dc");
+    train(ctx_shared(), &args(&two_dc, &["reflection.iterations=10", "reflection.scattering_sh=0"], "II", Some(&one_sh))).unwrap();
+    check_run(&host, &two_dc, "II");
+    let (mut tr, _) = tgs::train::run::open_run(ctx_shared(), &two_dc).unwrap();
+    let bg = tr.cfg.background_rgb().unwrap();
+    for (name, cam) in tgs::embed::run_cameras(&two_dc).unwrap() {
+        let n = 3 * (cam.width * cam.height) as usize;
+        let r = tr.render(&cam).unwrap();
+        let layer = r.layers.as_ref().expect("a Stage II render has layers").0.planes[..n].to_vec();
+        let dc = tr.scattering.render(&cam, 0, &bg).unwrap().planes[..n].to_vec();
+        let full = tr.scattering.render(&cam, 3, &bg).unwrap().planes[..n].to_vec();
+        assert!(layer.iter().zip(&dc).all(|(a, b)| a.to_bits() == b.to_bits()), "{name}: the scattering layer is not the degree-0 colour");
+        assert!(layer.iter().zip(&full).any(|(a, b)| a != b), "{name}: degree 3 renders the same colour, so this checks nothing");
+    }
 
     // Bad inputs name the file.
     let ctx = host.adopt();

@@ -167,6 +167,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
         }
     };
     refused(TrainArgs { set: vec!["lambda_ssim=0.3".into()], ..af.clone() }, &["lambda_ssim = 0.2 in the checkpoint, 0.3 given"]);
+    refused(TrainArgs { set: vec!["reflection.scattering_sh=4".into()], ..af.clone() }, &["reflection.scattering_sh", "not 4"]);
     refused(TrainArgs { stages: Some("I".into()), ..af.clone() }, &["nothing to run"]);
     refused(TrainArgs { from: Some(out.join("nowhere")), ..af.clone() }, &["nowhere", "checkpoint.bin"]);
     refused(TrainArgs { resume: true, ..af.clone() }, &["--resume", "--from"]);

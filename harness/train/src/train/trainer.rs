@@ -234,7 +234,11 @@ impl Trainer {
     /// the geometry planes of the reflection set where it decides a pixel
     /// ([`reflection_decides`]) and of the scattering set elsewhere, and both layers.
     pub fn render(&mut self, cam: &Camera) -> Result<Rendered> {
-        let sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
+        let mut sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
+        // Stage II composites with the scattering layer at its own degree.
+        if self.reflection().is_some() {
+            sh = self.cfg.reflection.scattering_degree(sh);
+        }
         let scat = self.scattering.render(cam, sh, &self.views.background)?;
         let n = (cam.width * cam.height) as usize;
         let Some(model) = self.later.as_mut() else {

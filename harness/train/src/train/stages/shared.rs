@@ -26,6 +26,8 @@ use tgs_pipelines::{Camera, TrainableSet};
 #[derive(Default)]
 pub struct ScatCache {
     bufs: Vec<Buffer<f32>>,
+    /// The SH degree the colours were rendered at.
+    sh: u32,
 }
 
 impl ScatCache {
@@ -35,19 +37,24 @@ impl ScatCache {
     pub fn clear(&mut self) {
         self.bufs.clear();
     }
-    pub fn push(&mut self, buf: Buffer<f32>) {
+    /// The next view's colour, rendered at SH degree `sh` (every view's
+    /// must be at the same degree).
+    pub fn push(&mut self, buf: Buffer<f32>, sh: u32) {
+        debug_assert!(self.bufs.is_empty() || self.sh == sh);
+        self.sh = sh;
         self.bufs.push(buf);
     }
     pub fn get(&self, view: usize) -> Option<&Buffer<f32>> {
         self.bufs.get(view)
     }
     /// Every view's colour, rendered with `scattering` at SH degree `sh`
-    /// unless all are there.
+    /// unless all are there at that degree.
     pub fn ensure(&mut self, views: &Views, scattering: &mut ScatteringModel, sh: u32) -> Result<()> {
-        if self.bufs.len() == views.cameras.len() {
+        if self.bufs.len() == views.cameras.len() && self.sh == sh {
             return Ok(());
         }
         self.bufs.clear();
+        self.sh = sh;
         for cam in &views.cameras {
             let buf = Buffer::<f32>::new(&views.ctx, "train.scat_cache", 3 * (cam.width * cam.height) as usize)?;
             scattering.render_color_into(cam, sh, &views.background, &buf)?;

@@ -155,6 +155,15 @@ pub struct ReflectionConfig {
     /// Stage I's (issue 42, "do no harm"); `metrics.json`'s
     /// `reflection_coverage` is the share of the glass it decides.
     pub normal_min_r: f32,
+    /// The highest SH degree of the frozen scattering layer that Stage II
+    /// composites with, trains against and evaluates (at most Stage I's
+    /// `sh_degree`; 3: Stage I's colour as it is). 0 leaves the scattering
+    /// layer its view-independent colour, so the view-dependent light that
+    /// Stage I baked into SH degrees 1-3 (at low resolution most of the
+    /// glass's reflections) is residual the reflection set must explain.
+    /// The decision whether Stage II runs and the residual-hull seeds keep
+    /// Stage I's full colour. Stage III composites with Stage I's degree.
+    pub scattering_sh: u32,
     /// Train the scattering set's SH colour in Stage II too (its geometry
     /// and opacity stay Stage I's), against the composite, at Stage I's
     /// colour rates: the reflection term then takes over the
@@ -216,6 +225,7 @@ impl Default for ReflectionConfig {
             lambda_r: 0.0,
             lambda_area: 0.0,
             normal_min_r: 0.0,
+            scattering_sh: 3,
             train_scattering: false,
             reseed: false,
         }
@@ -223,12 +233,21 @@ impl Default for ReflectionConfig {
 }
 
 impl ReflectionConfig {
+    /// The SH degree Stage II renders the frozen scattering set at, for a
+    /// Stage I trained up to `stage1` (`scattering_sh`).
+    pub fn scattering_degree(&self, stage1: u32) -> u32 {
+        stage1.min(self.scattering_sh)
+    }
+
     pub(crate) fn validate(&self) -> Result<()> {
         if !(self.env_radius >= 0.0 && self.env_radius <= 1e6) {
             bail!("reflection.env_radius must be 0 (light infinitely far) or a positive multiple of the camera distance up to 1e6, not {}", self.env_radius);
         }
         if self.env_radius > 0.0 && self.env_init == EnvStart::SceneDepth {
             bail!("reflection.env_radius = {} puts the light on one sphere, and reflection.env_init = \"scene-depth\" at the scene's depth per direction: set one of them", self.env_radius);
+        }
+        if self.scattering_sh > 3 {
+            bail!("reflection.scattering_sh must be 0..=3 (an SH degree), not {}", self.scattering_sh);
         }
         if !(self.seed_agree > 0.0 && self.seed_agree <= 1.0) {
             bail!("reflection.seed_agree must be in (0, 1], not {}", self.seed_agree);

@@ -128,6 +128,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
     let (cfg, v) = (s.cfg, s.views);
     let shading = ReflectionShading::new(&v.ctx)?;
     let sh = cfg.sh_degree_at(cfg.iterations);
+    let sh_view = cfg.reflection.scattering_degree(sh);
     let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
     s.cache.clear();
     // Per view: residual magnitude and Stage I surface depth (seeding),
@@ -145,13 +146,18 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         over += mag.iter().filter(|&&v| v > 0.05).count();
         pixels += n;
         on_view(i, cam, &r)?;
-        s.cache.push(buf);
         // The frame still holds this view's render.
         let depth = s.scattering.last_plane(cam.width, cam.height, Plane::Median)?;
+        // Stage II's scattering layer at its own degree (the residual
+        // above, for the decision and the seeds, is Stage I's colour).
+        if sh_view != sh {
+            s.scattering.render_color_into(cam, sh_view, &v.background, &buf)?;
+        }
         vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
         if hull && existing.is_none() {
             maps.push((mag.to_vec(), depth));
         }
+        s.cache.push(buf, sh_view);
     }
     // A resumed Stage II (its set exists) keeps the decision and seed
     // counts it was started with; only the cache was needed.
@@ -241,7 +247,7 @@ impl LaterStage for ReflectionModel {
         let cam = v.cameras[x.view as usize];
         let train = cfg.reflection.train_scattering;
         let scat = if train { None } else { Some(s.cache.get(x.view as usize).context("the scattering colour cache is missing")?) };
-        let sh_degree = cfg.sh_degree_at(cfg.iterations);
+        let sh_degree = cfg.reflection.scattering_degree(cfg.sh_degree_at(cfg.iterations));
         let scat_train = train.then_some(ScatTrain { model: s.scattering, sh_degree, background: v.background, global_iteration: x.global });
         let input = ReflStepInput {
             iteration: x.stage,
