@@ -233,7 +233,6 @@ fn normal_mae_of(normals: &[[f32; 3]], view: &View, on_mask: bool, keep: impl Fn
     (count > 0).then(|| sum / count as f64)
 }
 
-/// Render, measure and (with `out`) write every view.
 /// The mean over the pixels `keep` selects of |gt - scat| - |gt - full|
 /// (planar RGB, values clamped to [0, 1] as [`psnr`] does, channels
 /// averaged): how much the composite `full` improves on its scattering
@@ -252,6 +251,7 @@ pub fn layer_gain(full: &[f32], scat: &[f32], gt: &[f32], keep: impl Fn(usize) -
     (count > 0).then(|| sum / count as f64)
 }
 
+/// Render, measure and (with `out`) write every view.
 pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) -> Result<Metrics> {
     let mut per_view = Vec::new();
     for v in views {
