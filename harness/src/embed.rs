@@ -74,7 +74,7 @@ impl SceneRenderer {
         let state = checkpoint::render_state(&h, arrays).map_err(bad)?;
         let cfg = &h.config;
         // As the trainer renders a checkpoint (Trainer::render).
-        let sh_degree = cfg.sh_degree_at(h.iteration.min(cfg.iterations));
+        let sh_degree = state.sh_degree;
         let layer = match state.layer {
             checkpoint::RenderLayer::Scattering => None,
             checkpoint::RenderLayer::Env { set, env, fresnel } => {
@@ -104,8 +104,6 @@ impl SceneRenderer {
                 })
             }
         };
-        // Stage II composites with the scattering layer at its own degree.
-        let sh_degree = if matches!(layer, Some(Layer::Env { .. })) { cfg.reflection.scattering_degree(sh_degree) } else { sh_degree };
         Ok(SceneRenderer {
             ctx: ctx.clone(),
             scat: Gaussians::upload(ctx, &state.scattering)?,

@@ -284,6 +284,9 @@ pub use super::stages::kind::RenderLayer;
 /// no dataset), checked as [`restore`] checks them.
 pub struct RenderState {
     pub stage: &'static str,
+    /// The SH degree the scattering layer is rendered at, as the trainer
+    /// renders this checkpoint (`LaterKind::scattering_sh`).
+    pub sh_degree: u32,
     pub scattering: HostGaussians,
     pub layer: RenderLayer,
 }
@@ -299,13 +302,14 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
     let want: Vec<(String, usize)> = layout.iter().map(|(name, w)| (name.clone(), w * h.n as usize)).collect();
     check_arrays(&want, &have, &arrays)?;
     let scattering = gaussians(h, &arrays)?;
-    let (stage, layer) = match h.later_state()? {
-        None if refl.is_empty() => (Stage::SCATTERING.name(), RenderLayer::Scattering),
+    let stage1 = h.config.sh_degree_at(h.iteration.min(h.config.iterations));
+    let (stage, sh_degree, layer) = match h.later_state()? {
+        None if refl.is_empty() => (Stage::SCATTERING.name(), stage1, RenderLayer::Scattering),
         None => bail!("{} arrays after the scattering set without a later stage's header", refl.len()),
         Some((kind, v)) => {
             let name = kind.stage().name();
-            (name, kind.render_layer(v, &h.config, refl).with_context(|| format!("Stage {name} state"))?)
+            (name, kind.scattering_sh(&h.config, stage1), kind.render_layer(v, &h.config, refl).with_context(|| format!("Stage {name} state"))?)
         }
     };
-    Ok(RenderState { stage, scattering, layer })
+    Ok(RenderState { stage, sh_degree, scattering, layer })
 }

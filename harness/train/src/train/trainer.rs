@@ -234,11 +234,9 @@ impl Trainer {
     /// the geometry planes of the reflection set where it decides a pixel
     /// ([`reflection_decides`]) and of the scattering set elsewhere, and both layers.
     pub fn render(&mut self, cam: &Camera) -> Result<Rendered> {
-        let mut sh = self.sh_degree(self.iteration.min(self.cfg.iterations));
-        // Stage II composites with the scattering layer at its own degree.
-        if self.reflection().is_some() {
-            sh = self.cfg.reflection.scattering_degree(sh);
-        }
+        let stage1 = self.sh_degree(self.iteration.min(self.cfg.iterations));
+        // The later stage says which degree it composites with.
+        let sh = self.later.as_ref().and_then(|m| by_stage(m.stage())).map_or(stage1, |k| k.scattering_sh(&self.cfg, stage1));
         let scat = self.scattering.render(cam, sh, &self.views.background)?;
         let n = (cam.width * cam.height) as usize;
         let Some(model) = self.later.as_mut() else {

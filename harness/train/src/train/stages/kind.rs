@@ -100,6 +100,12 @@ pub trait LaterKind: Sync {
     fn files(&self) -> &'static [&'static str] {
         &[]
     }
+    /// The SH degree the frozen scattering layer is rendered at under this
+    /// stage, for a Stage I trained up to `stage1` (Stage I's own by default).
+    fn scattering_sh(&self, cfg: &TrainConfig, stage1: u32) -> u32 {
+        let _ = cfg;
+        stage1
+    }
 }
 
 /// The later stage whose checkpoint key is `key`.

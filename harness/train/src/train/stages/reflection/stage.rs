@@ -103,6 +103,11 @@ impl LaterKind for Kind {
     fn files(&self) -> &'static [&'static str] {
         &["reflection.ply", "envmap.exr", "envmap.png", "envmap_depth.exr", "envmap_depth.png"]
     }
+
+    /// `reflection.scattering_sh`.
+    fn scattering_sh(&self, cfg: &TrainConfig, stage1: u32) -> u32 {
+        cfg.reflection.scattering_degree(stage1)
+    }
 }
 
 
