@@ -259,6 +259,21 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let (a1, _) = quats_after(1, "all");
     let (a20, _) = quats_after(20, "all");
     assert!(a1 != a20, "with rotation_grad = all the rasterizer's gradient turns the surfels");
+    // reflection.lr_means_scale scales the position rate: at 0 the seeds
+    // stay where the hull put them, bit for bit, over 20 steps (at the
+    // default they move: m1 != m20 above); a negative scale is refused.
+    let means_after = |its: u32| {
+        let dir = tgs_tests::TempDir::new(&format!("stage2-still-{its}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        let set = vec![format!("reflection.iterations={its}"), "test_interval=0".into(), "reflection.lr_means_scale=0".into()];
+        assert_eq!(train(ctx, &TrainArgs { out: dir.to_path_buf(), set, ..af.clone() }).unwrap().iteration, 300 + its);
+        let (h, a) = checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
+        let means = h.arrays.len() + h.later_arrays().unwrap().iter().position(|(n, _)| n == "refl.param.means").unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        bits(&a[means])
+    };
+    assert!(means_after(1) == means_after(20), "reflection.lr_means_scale = 0 moved the seeds");
+    refused(TrainArgs { set: vec!["reflection.lr_means_scale=-1".into()], ..ae.clone() }, &["reflection.lr_means_scale", "-1"]);
     refused(TrainArgs { set: vec!["reflection.rotation_grad=colour".into()], ..ae.clone() }, &["reflection.rotation_grad", "colour", "'reflection'"]);
 
     // reflection.env_radius: the proxy (box centre, radius x the mean

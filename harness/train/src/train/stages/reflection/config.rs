@@ -54,6 +54,12 @@ pub struct ReflectionConfig {
     /// and rotations at a tenth keep them.
     pub lr_quats: f32,
     pub lr_scales: f32,
+    /// The reflection set's position rate, in multiples of Stage I's final
+    /// one (`lr_means_final` x the scene extent). 1: the seeds stay where
+    /// the residual hull put them, as the paper's converged start does
+    /// (method-notes §3.7); 100: Stage I's starting rate, so that the
+    /// photometric gradient can move them towards the glass.
+    pub lr_means_scale: f32,
     /// What turns the surfels ("all" or "reflection": the reflected colour
     /// alone, the rasterizer's rotation gradient dropped; settings.rs).
     pub rotation_grad: RotationGrad,
@@ -192,6 +198,7 @@ impl Default for ReflectionConfig {
             lr_opacity: 0.005,
             lr_quats: 0.0001,
             lr_scales: 0.0,
+            lr_means_scale: 1.0,
             rotation_grad: RotationGrad::All,
             f0_init: 0.5,
             r_init: 0.1,
@@ -273,7 +280,7 @@ impl ReflectionConfig {
         if !(0.0..=1.0).contains(&self.normal_min_r) {
             bail!("reflection.normal_min_r must be in [0, 1] (a reflection weight), not {}", self.normal_min_r);
         }
-        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r), ("lambda_area", self.lambda_area)] {
+        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lr_means_scale", self.lr_means_scale), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r), ("lambda_area", self.lambda_area)] {
             if !(v >= 0.0 && v.is_finite()) {
                 bail!("reflection.{k} must be non-negative and finite, not {v}");
             }

@@ -260,8 +260,9 @@ impl LaterStage for ReflectionModel {
             target: &v.targets[x.view as usize],
             scat,
             // The reflection geometry starts converged: positions move at
-            // Stage I's final rate (method-notes §3.7).
-            lr_means: cfg.lr_means_final * v.extent,
+            // Stage I's final rate (method-notes §3.7), times
+            // `lr_means_scale`.
+            lr_means: cfg.lr_means_final * cfg.reflection.lr_means_scale * v.extent,
             profile: x.profile,
         };
         self.step(cfg, &input, scat_train)

@@ -1,0 +1,99 @@
+#!/usr/bin/env python3
+"""How much of the glass's reflection a Stage I run leaves for Stage II to find.
+
+Stage II seeds the reflection set where the Stage I residual |I_gt - I_scat|
+is (stages/reflection/seed/). That only finds the glass if the residual is
+larger on the glass than elsewhere. This measures it on a run's test views
+(whose masks mark the glass) against a render of the same views with the
+glass's reflection switched off (`mitsuba_scenes.py --no-reflection`), so
+that the reflection itself is known:
+
+- reflection: mean |I_gt - I_norefl| on the glass, the light the glass
+  reflects (the same difference off the glass is the path tracer's noise
+  between two renders);
+- Stage I residual on the glass and off it, their ratio, and the AUC of
+  the residual as a glass detector (the chance that a glass pixel's
+  residual exceeds an off-glass pixel's; 0.5: no better than a coin);
+- absorbed: 1 - (residual on the glass) / (reflection on the glass), the
+  share of the reflection Stage I reproduced with its scattering set.
+
+    /tmp/mv/bin/python perf/scenes/glass_evidence.py --suite /work/suite \
+        --norefl /tmp/norefl --runs /work/runs-sh3 [--seed 0] globe dome pane
+
+RUNS/SCENE/sSEED/I (or RUNS itself with {scene} and {seed} filled in, when
+it names them) must hold a Stage I run with test renders
+(renders/test/NAME.png, as `tgs train` writes); NOREFL/SCENE_norefl the
+scene rendered without reflection. Reads only; needs numpy and Pillow.
+"""
+import argparse
+import json
+import os
+import sys
+
+import numpy as np
+from PIL import Image
+
+
+def rgb(path):
+    if not os.path.exists(path):
+        raise SystemExit(f"{path}: missing")
+    return np.asarray(Image.open(path).convert("RGB"), float) / 255.0
+
+
+def auc(pos, neg, cap=4000):
+    """P(a glass pixel's value > an off-glass pixel's), ties counted half."""
+    rng = np.random.default_rng(0)
+    pos = pos if len(pos) <= cap else rng.choice(pos, cap, replace=False)
+    neg = neg if len(neg) <= cap else rng.choice(neg, cap, replace=False)
+    return float((pos[:, None] > neg[None, :]).mean() + 0.5 * (pos[:, None] == neg[None, :]).mean())
+
+
+def scene_row(suite, norefl, runs, scene, seed):
+    meta = os.path.join(suite, scene, "transforms_test.json")
+    if not os.path.exists(meta):
+        raise SystemExit(f"{meta}: missing")
+    frames = json.load(open(meta))["frames"]
+    run = runs.format(scene=scene, seed=seed) if "{scene}" in runs else os.path.join(runs, scene, f"s{seed}", "I")
+    renders = os.path.join(run, "renders", "test")
+    acc = {k: [] for k in ("refl", "noise", "res_on", "res_off", "auc")}
+    for f in frames:
+        name = os.path.basename(f["file_path"])
+        gt = rgb(os.path.join(suite, scene, "test", name + ".png"))
+        nr = rgb(os.path.join(norefl, scene + "_norefl", "test", name + ".png"))
+        st1 = rgb(os.path.join(renders, name + ".png"))
+        mask = np.asarray(Image.open(os.path.join(suite, scene, "test", name + "_mask.png")).convert("L")) > 127
+        if not mask.any() or mask.all():
+            continue
+        refl = np.abs(gt - nr).mean(-1)
+        res = np.abs(gt - st1).mean(-1)
+        acc["refl"].append(refl[mask].mean())
+        acc["noise"].append(refl[~mask].mean())
+        acc["res_on"].append(res[mask].mean())
+        acc["res_off"].append(res[~mask].mean())
+        acc["auc"].append(auc(res[mask], res[~mask]))
+    if not acc["refl"]:
+        raise SystemExit(f"{scene}: no test view shows both glass and something else")
+    m = {k: float(np.mean(v)) for k, v in acc.items()}
+    m["ratio"] = m["res_on"] / max(m["res_off"], 1e-12)
+    m["absorbed"] = 1.0 - m["res_on"] / max(m["refl"], 1e-12)
+    return m
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--suite", required=True)
+    ap.add_argument("--norefl", required=True)
+    ap.add_argument("--runs", required=True)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("scenes", nargs="+")
+    a = ap.parse_args()
+    print("| scene | reflection on the glass (×1e3) | noise (×1e3) | Stage I residual on / off the glass (×1e3) | ratio | AUC | absorbed |")
+    print("|---|---|---|---|---|---|---|")
+    for s in a.scenes:
+        m = scene_row(a.suite, a.norefl, a.runs, s, a.seed)
+        print(f"| {s} | {1e3 * m['refl']:.1f} | {1e3 * m['noise']:.1f} | {1e3 * m['res_on']:.1f} / {1e3 * m['res_off']:.1f} | {m['ratio']:.2f} | {m['auc']:.2f} | {m['absorbed']:.2f} |")
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()
