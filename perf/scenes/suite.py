@@ -7,7 +7,7 @@ trains Stage I once (`RUNS/SCENE/sSEED/I`, kept and reused on a rerun), then
 every variant's Stage II from it with `--from` (`RUNS/SCENE/sSEED/VARIANT`,
 also kept), and prints one Markdown table per variant:
 
-    scene | Stage I MAE | ray-facing MAE | Stage II MAE | II / I | II / ray-facing | coverage | off mask | off-glass MAE I -> II | PSNR I -> II | gain | Stage II s
+    scene | Stage I MAE | ray-facing MAE | Stage II MAE | II / I | II / ray-facing | coverage | off mask | off-glass MAE I -> II | PSNR I -> II | gain | residual contrast | Stage II s
 
 with the mean and the worst scene (the largest II / I) under it. "off
 mask" is the share of the pixels the reflection set covers that lie off
@@ -15,7 +15,9 @@ the glass; "off-glass MAE" the normal error on the rest of the scene (when
 the dataset's normals cover the whole image), where Stage II must not
 make Stage I's normals worse; "gain" how much the reflection layer lowers
 the held-out image error (mean |gt - I_scat| - |gt - I|, x 1e3) on the glass
-and off it: the photometric evidence its normals have. Over
+and off it: the photometric evidence its normals have; "residual contrast"
+Stage I's error on the glass over its error off it, how strongly the
+residual that Stage II seeds from marks the glass (1: not at all). Over
 several seeds a cell is the mean over seeds, with the spread (max - min) in
 brackets. A variant is `NAME` (today's defaults) or `NAME:KEY=VALUE;KEY=VALUE`
 (tgs `--set` pairs, e.g. `geom:reflection.lr_quats=1e-2;reflection.lr_scales=5e-3`).
@@ -124,10 +126,10 @@ def main():
     for name, kvs in variants:
         print(f"\n### {name}" + (f": `{'; '.join(kvs)}`" if kvs else " (today's defaults)"))
         print(f"seeds {a.seeds}; cells are means over seeds, (spread) = max - min\n")
-        print("| scene | Stage I MAE | ray-facing | Stage II MAE | II / I | II / ray-facing | coverage | off mask | off-glass MAE I → II | PSNR I → II | gain ×1e3 glass / off | Stage II s |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+        print("| scene | Stage I MAE | ray-facing | Stage II MAE | II / I | II / ray-facing | coverage | off mask | off-glass MAE I → II | PSNR I → II | gain ×1e3 glass / off | residual contrast (I) | Stage II s |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         ratios = {}
-        cols = {k: [] for k in ("i", "ray", "ii", "r1", "rr", "cov", "off", "o1", "o2", "p1", "p2", "g1", "g2", "s")}
+        cols = {k: [] for k in ("i", "ray", "ii", "r1", "rr", "cov", "off", "o1", "o2", "p1", "p2", "g1", "g2", "rc", "s")}
         for scene in scenes:
             rows = [res[(scene, s, name)] for s in seeds]
             t = lambda r, st, key: (r[st] or {}).get("test", {}) .get(key) if r[st] else None
@@ -145,18 +147,19 @@ def main():
             k3 = lambda v: None if v is None else 1e3 * v
             g1 = [k3(t(r, 1, "reflection_gain_mask")) for r in rows]
             g2 = [k3(t(r, 1, "reflection_gain_outside")) for r in rows]
+            rc = [t(r, 0, "residual_contrast") for r in rows]
             sec = [(r[1] or {}).get("wall_s") for r in rows]
             ratios[scene] = mean(r1)
-            for k, v in zip(cols, (i, ray, ii, r1, rr, cov, off, o1, o2, p1, p2, g1, g2, sec)):
+            for k, v in zip(cols, (i, ray, ii, r1, rr, cov, off, o1, o2, p1, p2, g1, g2, rc, sec)):
                 cols[k].append(mean(v))
-            print(f"| {scene} | {fmt(i)}° | {fmt(ray)}° | {fmt(ii)}° | {fmt(r1, 2)} | {fmt(rr, 2)} | {fmt(cov, 2)} | {fmt(off, 2)} | {fmt(o1)}° → {fmt(o2)}° | {fmt(p1, 2)} → {fmt(p2, 2)} | {fmt(g1, 2)} / {fmt(g2, 2)} | {fmt(sec, 0)} |")
+            print(f"| {scene} | {fmt(i)}° | {fmt(ray)}° | {fmt(ii)}° | {fmt(r1, 2)} | {fmt(rr, 2)} | {fmt(cov, 2)} | {fmt(off, 2)} | {fmt(o1)}° → {fmt(o2)}° | {fmt(p1, 2)} → {fmt(p2, 2)} | {fmt(g1, 2)} / {fmt(g2, 2)} | {fmt(rc, 2)} | {fmt(sec, 0)} |")
         m = {k: mean(v) for k, v in cols.items()}
         f = lambda v, d=1: "–" if v is None else f"{v:.{d}f}"
-        print(f"| **mean** | {f(m['i'])}° | {f(m['ray'])}° | {f(m['ii'])}° | {f(m['r1'], 2)} | {f(m['rr'], 2)} | {f(m['cov'], 2)} | {f(m['off'], 2)} | {f(m['o1'])}° → {f(m['o2'])}° | {f(m['p1'], 2)} → {f(m['p2'], 2)} | {f(m['g1'], 2)} / {f(m['g2'], 2)} | {f(m['s'], 0)} |")
+        print(f"| **mean** | {f(m['i'])}° | {f(m['ray'])}° | {f(m['ii'])}° | {f(m['r1'], 2)} | {f(m['rr'], 2)} | {f(m['cov'], 2)} | {f(m['off'], 2)} | {f(m['o1'])}° → {f(m['o2'])}° | {f(m['p1'], 2)} → {f(m['p2'], 2)} | {f(m['g1'], 2)} / {f(m['g2'], 2)} | {f(m['rc'], 2)} | {f(m['s'], 0)} |")
         known = {k: v for k, v in ratios.items() if v is not None}
         if known:
             w = max(known, key=known.get)
-            print(f"| **worst** ({w}) | | | | {known[w]:.2f} | | | | | | | |")
+            print(f"| **worst** ({w}) | | | | {known[w]:.2f} | | | | | | | | |")
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@
 
 use tgs::data::image_io::ImageF;
 use tgs::data::View;
-use tgs::eval::{layer_gain, normal_mae, normal_mae_outside, ray_facing_normals};
+use tgs::eval::{layer_gain, normal_mae, normal_mae_outside, ray_facing_normals, residual_contrast};
 use tgs_pipelines::Camera;
 
 fn camera(w: u32, h: u32) -> Camera {
@@ -127,4 +127,25 @@ fn layer_gain_is_the_error_the_composite_removes_on_the_chosen_pixels() {
     let odd = layer_gain(&full, &scat, &gt, |i| i % 2 == 1).unwrap();
     assert!((odd - (per[1] + per[3]) / 2.0).abs() < 1e-6, "{odd}");
     assert_eq!(layer_gain(&full, &scat, &gt, |_| false), None);
+}
+
+#[test]
+fn residual_contrast_is_the_error_on_the_mask_over_the_error_off_it() {
+    // Four pixels, planar RGB; pixels 0 and 1 on the mask. Errors, channel
+    // means: pixel 0 0.3 (red and green 0.45, blue 0), pixel 1 0.1, pixel
+    // 2 0.05, pixel 3 0.15 once 1.4 is clamped to 1 against a 0.85 target
+    // (in every channel). On the mask (0.3 + 0.1) / 2 = 0.2, off it
+    // (0.05 + 0.15) / 2 = 0.1: a contrast of 2.
+    let gt = [0.5f32, 0.2, 0.4, 0.85, 0.5, 0.2, 0.4, 0.85, 0.5, 0.2, 0.4, 0.85];
+    let scat = [0.95f32, 0.3, 0.45, 1.4, 0.05, 0.3, 0.45, 1.4, 0.5, 0.3, 0.45, 1.4];
+    let mask = [true, true, false, false];
+    let c = residual_contrast(&scat, &gt, &mask).unwrap();
+    assert!((c - 2.0).abs() < 1e-6, "{c}");
+    // The other way round: the reciprocal.
+    let flipped = residual_contrast(&scat, &gt, &mask.map(|m| !m)).unwrap();
+    assert!((flipped - 0.5).abs() < 1e-6, "{flipped}");
+    // No contrast without both sides, or with nothing to compare against.
+    assert_eq!(residual_contrast(&scat, &gt, &[true; 4]), None);
+    assert_eq!(residual_contrast(&scat, &gt, &[false; 4]), None);
+    assert_eq!(residual_contrast(&gt, &gt, &mask), None);
 }

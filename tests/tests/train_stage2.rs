@@ -121,6 +121,13 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
         assert!(g.abs() < 1.0, "{k} {g}");
         assert!(stages[0]["test"][k].is_null());
     }
+    // How strongly Stage I's residual marks the glass, from Stage I on
+    // (the scattering layer alone after it).
+    for (i, s) in stages.iter().enumerate() {
+        let c = s["test"]["residual_contrast"].as_f64().unwrap_or_else(|| panic!("stage {i}: residual_contrast missing"));
+        eprintln!("stage {i}: residual contrast {c:.3}");
+        assert!(c > 0.0 && c.is_finite(), "stage {i}: residual contrast {c}");
+    }
     assert_eq!(m["test"]["psnr"], stages[1]["test"]["psnr"]);
     // Outputs.
     for f in ["envmap.exr", "envmap.png", "reflection.ply", "point_cloud.ply", "residual/r_0.exr", "residual/r_0.png", "renders/stage1/r_0.png"] {

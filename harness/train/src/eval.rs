@@ -60,6 +60,17 @@ pub struct NormalMetrics {
     pub reflection_gain_mask: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reflection_gain_outside: Option<f64>,
+    /// The scattering set's residual contrast: its mean image error
+    /// |I_gt - I_scat| on the mask over its mean error off the mask
+    /// ([`residual_contrast`]; I_scat is the render itself in Stage I).
+    /// Stage II seeds the reflection set where the Stage I residual is, so
+    /// this is how strongly the held-out views mark the glass for it: near
+    /// 1, Stage I reproduced the glass's reflections as well as the rest
+    /// of the scene (perf/RESULTS.md, forty-third entry: 0.5-1.4 on the
+    /// path-traced suite at 50x50) and the residual does not say where the
+    /// glass is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub residual_contrast: Option<f64>,
 }
 
 impl NormalMetrics {
@@ -79,6 +90,7 @@ impl NormalMetrics {
             normal_mae_outside_deg: mean_of(|m| m.normal_mae_outside_deg),
             reflection_gain_mask: mean_of(|m| m.reflection_gain_mask),
             reflection_gain_outside: mean_of(|m| m.reflection_gain_outside),
+            residual_contrast: mean_of(|m| m.residual_contrast),
         }
     }
 }
@@ -251,6 +263,25 @@ pub fn layer_gain(full: &[f32], scat: &[f32], gt: &[f32], keep: impl Fn(usize) -
     (count > 0).then(|| sum / count as f64)
 }
 
+/// The mean of |gt - scat| on the pixels where `mask` is true over its
+/// mean where it is false (planar RGB, values clamped to [0, 1] as
+/// [`psnr`] does, channels averaged). None where either side has no pixel
+/// or the error off the mask is 0.
+pub fn residual_contrast(scat: &[f32], gt: &[f32], mask: &[bool]) -> Option<f64> {
+    let n = gt.len() / 3;
+    let mut sum = [0.0f64; 2];
+    let mut count = [0usize; 2];
+    for (i, &m) in mask.iter().enumerate().take(n) {
+        let e: f64 = (0..3).map(|c| (gt[c * n + i] as f64 - scat[c * n + i].clamp(0.0, 1.0) as f64).abs()).sum::<f64>() / 3.0;
+        sum[m as usize] += e;
+        count[m as usize] += 1;
+    }
+    if count[0] == 0 || count[1] == 0 || sum[0] <= 0.0 {
+        return None;
+    }
+    Some((sum[1] / count[1] as f64) / (sum[0] / count[0] as f64))
+}
+
 /// Render, measure and (with `out`) write every view.
 pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) -> Result<Metrics> {
     let mut per_view = Vec::new();
@@ -293,6 +324,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
                 normal_mae_outside_deg: normal_mae_outside(&normals, v),
                 reflection_gain_mask: gain(true),
                 reflection_gain_outside: gain(false),
+                residual_contrast: v.mask.as_ref().and_then(|mask| residual_contrast(r.layers.as_ref().map_or(rgb, |l| &l.0.planes[..3 * w * h]), &target, mask)),
             },
         };
         if let Some(dir) = out.as_deref_mut() {

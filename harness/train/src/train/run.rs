@@ -309,7 +309,8 @@ fn stage_record(stage: &str, tr: &Trainer, wall_s: f64, m: Option<&Metrics>) -> 
                "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg,
                "reflection_outside_mask": m.normals.reflection_outside_mask, "normal_mae_ray_facing_deg": m.normals.normal_mae_ray_facing_deg,
                "normal_mae_outside_deg": m.normals.normal_mae_outside_deg,
-               "reflection_gain_mask": m.normals.reflection_gain_mask, "reflection_gain_outside": m.normals.reflection_gain_outside})
+               "reflection_gain_mask": m.normals.reflection_gain_mask, "reflection_gain_outside": m.normals.reflection_gain_outside,
+               "residual_contrast": m.normals.residual_contrast})
     });
     json!({"stage": stage, "iterations": its, "wall_s": wall_s, "test": test})
 }
