@@ -11,7 +11,9 @@ that the reflection itself is known:
 - reflection: mean |I_gt - I_norefl| on the glass, the light the glass
   reflects (the same difference off the glass is the path tracer's noise
   between two renders);
-- Stage I residual on the glass and off it, their ratio, and the AUC of
+- Stage I residual on the glass and off it, their ratio per view averaged
+  over the views (the contrast, as `metrics.json`'s `residual_contrast`
+  measures it on the float renders), and the AUC of
   the residual as a glass detector (the chance that a glass pixel's
   residual exceeds an off-glass pixel's; 0.5: no better than a coin);
 - absorbed: 1 - (residual on the glass) / (reflection on the glass), the
@@ -55,7 +57,7 @@ def scene_row(suite, norefl, runs, scene, seed):
     frames = json.load(open(meta))["frames"]
     run = runs.format(scene=scene, seed=seed) if "{scene}" in runs else os.path.join(runs, scene, f"s{seed}", "I")
     renders = os.path.join(run, "renders", "test")
-    acc = {k: [] for k in ("refl", "noise", "res_on", "res_off", "auc")}
+    acc = {k: [] for k in ("refl", "noise", "res_on", "res_off", "contrast", "auc")}
     for f in frames:
         name = os.path.basename(f["file_path"])
         gt = rgb(os.path.join(suite, scene, "test", name + ".png"))
@@ -70,11 +72,11 @@ def scene_row(suite, norefl, runs, scene, seed):
         acc["noise"].append(refl[~mask].mean())
         acc["res_on"].append(res[mask].mean())
         acc["res_off"].append(res[~mask].mean())
+        acc["contrast"].append(res[mask].mean() / max(res[~mask].mean(), 1e-12))
         acc["auc"].append(auc(res[mask], res[~mask]))
     if not acc["refl"]:
         raise SystemExit(f"{scene}: no test view shows both glass and something else")
     m = {k: float(np.mean(v)) for k, v in acc.items()}
-    m["ratio"] = m["res_on"] / max(m["res_off"], 1e-12)
     m["absorbed"] = 1.0 - m["res_on"] / max(m["refl"], 1e-12)
     return m
 
@@ -87,11 +89,11 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("scenes", nargs="+")
     a = ap.parse_args()
-    print("| scene | reflection on the glass (×1e3) | noise (×1e3) | Stage I residual on / off the glass (×1e3) | ratio | AUC | absorbed |")
+    print("| scene | reflection on the glass (×1e3) | noise (×1e3) | Stage I residual on / off the glass (×1e3) | contrast | AUC | absorbed |")
     print("|---|---|---|---|---|---|---|")
     for s in a.scenes:
         m = scene_row(a.suite, a.norefl, a.runs, s, a.seed)
-        print(f"| {s} | {1e3 * m['refl']:.1f} | {1e3 * m['noise']:.1f} | {1e3 * m['res_on']:.1f} / {1e3 * m['res_off']:.1f} | {m['ratio']:.2f} | {m['auc']:.2f} | {m['absorbed']:.2f} |")
+        print(f"| {s} | {1e3 * m['refl']:.1f} | {1e3 * m['noise']:.1f} | {1e3 * m['res_on']:.1f} / {1e3 * m['res_off']:.1f} | {m['contrast']:.2f} | {m['auc']:.2f} | {m['absorbed']:.2f} |")
         sys.stdout.flush()
 
 
