@@ -22,7 +22,8 @@ that the reflection itself is known:
     /tmp/mv/bin/python perf/scenes/glass_evidence.py --suite /work/suite \
         --norefl /tmp/norefl --runs /work/runs-sh3 [--seed 0] globe dome pane
 
-RUNS/SCENE/sSEED/I (or RUNS itself with {scene} and {seed} filled in, when
+Without --norefl (real data, or no such render) only the residual's
+columns are filled. RUNS/SCENE/sSEED/I (or RUNS itself with {scene} and {seed} filled in, when
 it names them) must hold a Stage I run with test renders
 (renders/test/NAME.png, as `tgs train` writes); NOREFL/SCENE_norefl the
 scene rendered without reflection. Reads only; needs numpy and Pillow.
@@ -61,30 +62,31 @@ def scene_row(suite, norefl, runs, scene, seed):
     for f in frames:
         name = os.path.basename(f["file_path"])
         gt = rgb(os.path.join(suite, scene, "test", name + ".png"))
-        nr = rgb(os.path.join(norefl, scene + "_norefl", "test", name + ".png"))
+        nr = rgb(os.path.join(norefl, scene + "_norefl", "test", name + ".png")) if norefl else None
         st1 = rgb(os.path.join(renders, name + ".png"))
         mask = np.asarray(Image.open(os.path.join(suite, scene, "test", name + "_mask.png")).convert("L")) > 127
         if not mask.any() or mask.all():
             continue
-        refl = np.abs(gt - nr).mean(-1)
         res = np.abs(gt - st1).mean(-1)
-        acc["refl"].append(refl[mask].mean())
-        acc["noise"].append(refl[~mask].mean())
+        if nr is not None:
+            refl = np.abs(gt - nr).mean(-1)
+            acc["refl"].append(refl[mask].mean())
+            acc["noise"].append(refl[~mask].mean())
         acc["res_on"].append(res[mask].mean())
         acc["res_off"].append(res[~mask].mean())
         acc["contrast"].append(res[mask].mean() / max(res[~mask].mean(), 1e-12))
         acc["auc"].append(auc(res[mask], res[~mask]))
-    if not acc["refl"]:
+    if not acc["res_on"]:
         raise SystemExit(f"{scene}: no test view shows both glass and something else")
-    m = {k: float(np.mean(v)) for k, v in acc.items()}
-    m["absorbed"] = 1.0 - m["res_on"] / max(m["refl"], 1e-12)
+    m = {k: float(np.mean(v)) if v else None for k, v in acc.items()}
+    m["absorbed"] = 1.0 - m["res_on"] / max(m["refl"], 1e-12) if norefl else None
     return m
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--suite", required=True)
-    ap.add_argument("--norefl", required=True)
+    ap.add_argument("--norefl", help="renders without the reflection (mitsuba_scenes.py --no-reflection); without it only the residual's columns")
     ap.add_argument("--runs", required=True)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("scenes", nargs="+")
@@ -93,7 +95,9 @@ def main():
     print("|---|---|---|---|---|---|---|")
     for s in a.scenes:
         m = scene_row(a.suite, a.norefl, a.runs, s, a.seed)
-        print(f"| {s} | {1e3 * m['refl']:.1f} | {1e3 * m['noise']:.1f} | {1e3 * m['res_on']:.1f} / {1e3 * m['res_off']:.1f} | {m['contrast']:.2f} | {m['auc']:.2f} | {m['absorbed']:.2f} |")
+        k3 = lambda v: "–" if v is None else f"{1e3 * v:.1f}"
+        absorbed = "–" if m["absorbed"] is None else f"{m['absorbed']:.2f}"
+        print(f"| {s} | {k3(m['refl'])} | {k3(m['noise'])} | {1e3 * m['res_on']:.1f} / {1e3 * m['res_off']:.1f} | {m['contrast']:.2f} | {m['auc']:.2f} | {absorbed} |")
         sys.stdout.flush()
 
 
