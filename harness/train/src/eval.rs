@@ -66,7 +66,7 @@ pub struct NormalMetrics {
     /// Stage II seeds the reflection set where the Stage I residual is, so
     /// this is how strongly the held-out views mark the glass for it: near
     /// 1, Stage I reproduced the glass's reflections as well as the rest
-    /// of the scene (perf/RESULTS.md, forty-third entry: 0.5-1.4 on the
+    /// of the scene (perf/RESULTS.md, forty-third entry: 0.6-1.4 on the
     /// path-traced suite at 50x50) and the residual does not say where the
     /// glass is.
     #[serde(skip_serializing_if = "Option::is_none")]
