@@ -128,6 +128,10 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
         eprintln!("stage {i}: residual contrast {c:.3}");
         assert!(c > 0.0 && c.is_finite(), "stage {i}: residual contrast {c}");
     }
+    // Stage II's scattering layer is Stage I's set, frozen, at Stage I's
+    // degree: the same contrast.
+    let contrast = |i: usize| stages[i]["test"]["residual_contrast"].as_f64().unwrap();
+    assert!((contrast(1) - contrast(0)).abs() < 1e-6 * contrast(0), "Stage II's scattering layer is not Stage I's: {} against {}", contrast(1), contrast(0));
     assert_eq!(m["test"]["psnr"], stages[1]["test"]["psnr"]);
     // Outputs.
     for f in ["envmap.exr", "envmap.png", "reflection.ply", "point_cloud.ply", "residual/r_0.exr", "residual/r_0.png", "renders/stage1/r_0.png"] {
