@@ -51,6 +51,18 @@ def auc(pos, neg, cap=4000):
     return float((pos[:, None] > neg[None, :]).mean() + 0.5 * (pos[:, None] == neg[None, :]).mean())
 
 
+def panel(suite, norefl, run, scene, name, scale=8.0):
+    """One row: the image, without the reflection, the reflection x scale,
+    Stage I, its residual x scale, the glass mask (each 3 x the pixels)."""
+    gt = rgb(os.path.join(suite, scene, "test", name + ".png"))
+    nr = rgb(os.path.join(norefl, scene + "_norefl", "test", name + ".png"))
+    st1 = rgb(os.path.join(run, "renders", "test", name + ".png"))
+    mask = np.asarray(Image.open(os.path.join(suite, scene, "test", name + "_mask.png")).convert("L"), float)[..., None].repeat(3, -1) / 255.0
+    tiles = [gt, nr, np.clip(np.abs(gt - nr) * scale, 0, 1), st1, np.clip(np.abs(gt - st1) * scale, 0, 1), mask]
+    row = np.concatenate([np.pad(t, ((1, 1), (1, 1), (0, 0)), constant_values=1.0) for t in tiles], 1)
+    return np.kron(row, np.ones((3, 3, 1)))
+
+
 def scene_row(suite, norefl, runs, scene, seed):
     meta = os.path.join(suite, scene, "transforms_test.json")
     if not os.path.exists(meta):
@@ -89,8 +101,11 @@ def main():
     ap.add_argument("--norefl", help="renders without the reflection (mitsuba_scenes.py --no-reflection); without it only the residual's columns")
     ap.add_argument("--runs", required=True)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--figure", help="also draw, for each scene's first test view: the image, without the reflection, |difference| x 8, Stage I, its residual x 8, the glass mask (needs --norefl)")
     ap.add_argument("scenes", nargs="+")
     a = ap.parse_args()
+    if a.figure and not a.norefl:
+        raise SystemExit("--figure needs --norefl")
     print("| scene | reflection on the glass (×1e3) | noise (×1e3) | Stage I residual on / off the glass (×1e3) | contrast | AUC | absorbed |")
     print("|---|---|---|---|---|---|---|")
     for s in a.scenes:
@@ -99,6 +114,16 @@ def main():
         absorbed = "–" if m["absorbed"] is None else f"{m['absorbed']:.2f}"
         print(f"| {s} | {k3(m['refl'])} | {k3(m['noise'])} | {1e3 * m['res_on']:.1f} / {1e3 * m['res_off']:.1f} | {m['contrast']:.2f} | {m['auc']:.2f} | {absorbed} |")
         sys.stdout.flush()
+    if a.figure:
+        rows = []
+        for s in a.scenes:
+            run = a.runs.format(scene=s, seed=a.seed) if "{scene}" in a.runs else os.path.join(a.runs, s, f"s{a.seed}", "I")
+            name = os.path.basename(json.load(open(os.path.join(a.suite, s, "transforms_test.json")))["frames"][0]["file_path"])
+            rows.append(panel(a.suite, a.norefl, run, s, name))
+        w = max(r.shape[1] for r in rows)
+        img = np.concatenate([np.pad(r, ((0, 0), (0, w - r.shape[1]), (0, 0)), constant_values=1.0) for r in rows], 0)
+        Image.fromarray((img * 255).round().astype(np.uint8)).save(a.figure)
+        print(f"wrote {a.figure}")
 
 
 if __name__ == "__main__":
