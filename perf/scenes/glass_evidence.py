@@ -43,6 +43,16 @@ def rgb(path):
     return np.asarray(Image.open(path).convert("RGB"), float) / 255.0
 
 
+def glass_mask(suite, scene, name):
+    """The test view's glass mask (True on the glass)."""
+    return np.asarray(Image.open(os.path.join(suite, scene, "test", name + "_mask.png")).convert("L")) > 127
+
+
+def stage1_run(runs, scene, seed):
+    """RUNS/SCENE/sSEED/I, or RUNS with {scene} and {seed} filled in when it names them."""
+    return runs.format(scene=scene, seed=seed) if "{scene}" in runs else os.path.join(runs, scene, f"s{seed}", "I")
+
+
 def auc(pos, neg, cap=4000):
     """P(a glass pixel's value > an off-glass pixel's), ties counted half."""
     rng = np.random.default_rng(0)
@@ -57,7 +67,7 @@ def panel(suite, norefl, run, scene, name, scale=8.0):
     gt = rgb(os.path.join(suite, scene, "test", name + ".png"))
     nr = rgb(os.path.join(norefl, scene + "_norefl", "test", name + ".png"))
     st1 = rgb(os.path.join(run, "renders", "test", name + ".png"))
-    mask = np.asarray(Image.open(os.path.join(suite, scene, "test", name + "_mask.png")).convert("L"), float)[..., None].repeat(3, -1) / 255.0
+    mask = glass_mask(suite, scene, name)[..., None].repeat(3, -1).astype(float)
     tiles = [gt, nr, np.clip(np.abs(gt - nr) * scale, 0, 1), st1, np.clip(np.abs(gt - st1) * scale, 0, 1), mask]
     row = np.concatenate([np.pad(t, ((1, 1), (1, 1), (0, 0)), constant_values=1.0) for t in tiles], 1)
     return np.kron(row, np.ones((3, 3, 1)))
@@ -68,15 +78,14 @@ def scene_row(suite, norefl, runs, scene, seed):
     if not os.path.exists(meta):
         raise SystemExit(f"{meta}: missing")
     frames = json.load(open(meta))["frames"]
-    run = runs.format(scene=scene, seed=seed) if "{scene}" in runs else os.path.join(runs, scene, f"s{seed}", "I")
-    renders = os.path.join(run, "renders", "test")
+    renders = os.path.join(stage1_run(runs, scene, seed), "renders", "test")
     acc = {k: [] for k in ("refl", "noise", "res_on", "res_off", "contrast", "auc")}
     for f in frames:
         name = os.path.basename(f["file_path"])
         gt = rgb(os.path.join(suite, scene, "test", name + ".png"))
         nr = rgb(os.path.join(norefl, scene + "_norefl", "test", name + ".png")) if norefl else None
         st1 = rgb(os.path.join(renders, name + ".png"))
-        mask = np.asarray(Image.open(os.path.join(suite, scene, "test", name + "_mask.png")).convert("L")) > 127
+        mask = glass_mask(suite, scene, name)
         if not mask.any() or mask.all():
             continue
         res = np.abs(gt - st1).mean(-1)
@@ -108,18 +117,17 @@ def main():
         raise SystemExit("--figure needs --norefl")
     print("| scene | reflection on the glass (×1e3) | noise (×1e3) | Stage I residual on / off the glass (×1e3) | contrast | AUC | absorbed |")
     print("|---|---|---|---|---|---|---|")
+    k3 = lambda v: "–" if v is None else f"{1e3 * v:.1f}"
     for s in a.scenes:
         m = scene_row(a.suite, a.norefl, a.runs, s, a.seed)
-        k3 = lambda v: "–" if v is None else f"{1e3 * v:.1f}"
         absorbed = "–" if m["absorbed"] is None else f"{m['absorbed']:.2f}"
         print(f"| {s} | {k3(m['refl'])} | {k3(m['noise'])} | {1e3 * m['res_on']:.1f} / {1e3 * m['res_off']:.1f} | {m['contrast']:.2f} | {m['auc']:.2f} | {absorbed} |")
         sys.stdout.flush()
     if a.figure:
         rows = []
         for s in a.scenes:
-            run = a.runs.format(scene=s, seed=a.seed) if "{scene}" in a.runs else os.path.join(a.runs, s, f"s{a.seed}", "I")
             name = os.path.basename(json.load(open(os.path.join(a.suite, s, "transforms_test.json")))["frames"][0]["file_path"])
-            rows.append(panel(a.suite, a.norefl, run, s, name))
+            rows.append(panel(a.suite, a.norefl, stage1_run(a.runs, s, a.seed), s, name))
         w = max(r.shape[1] for r in rows)
         img = np.concatenate([np.pad(r, ((0, 0), (0, w - r.shape[1]), (0, 0)), constant_values=1.0) for r in rows], 0)
         Image.fromarray((img * 255).round().astype(np.uint8)).save(a.figure)

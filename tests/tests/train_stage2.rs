@@ -247,21 +247,28 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     refused(TrainArgs { set: vec!["reflection.env_init=white".into()], ..ae.clone() }, &["reflection.env_init", "white"]);
     let _ = std::fs::remove_dir_all(&scene_env);
 
+    // The reflection set's rotations and positions (as bits) after `its`
+    // Stage II steps `--from` Stage I with the settings `extra`.
+    let geometry_after = |tag: &str, its: u32, extra: &[String]| {
+        let dir = tgs_tests::TempDir::new(&format!("stage2-{tag}-{its}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut set = vec![format!("reflection.iterations={its}"), "test_interval=0".into()];
+        set.extend(extra.iter().cloned());
+        assert_eq!(train(ctx, &TrainArgs { out: dir.to_path_buf(), set, ..af.clone() }).unwrap().iteration, 300 + its);
+        let (h, a) = checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
+        let at = |name: &str| h.arrays.len() + h.later_arrays().unwrap().iter().position(|(n, _)| n == name).unwrap();
+        let r = (bits(&a[at("refl.param.quats")]), bits(&a[at("refl.param.means")]));
+        let _ = std::fs::remove_dir_all(&dir);
+        r
+    };
+
     // reflection.rotation_grad = "reflection": with a constant map that
     // does not learn (lr_env 0) the reflected colour does not depend on the
     // normal, so nothing turns the surfels: after 20 steps at a fast
     // rotation rate they face exactly where they started (one step);
     // with "all" the rasterizer's gradient turns them.
     let quats_after = |its: u32, rotation: &str| {
-        let dir = tgs_tests::TempDir::new(&format!("stage2-rot-{rotation}-{its}"));
-        let _ = std::fs::remove_dir_all(&dir);
-        let set = vec![format!("reflection.iterations={its}"), "test_interval=0".into(), "reflection.lr_env=0".into(), "reflection.lr_quats=0.01".into(), format!("reflection.rotation_grad={rotation}")];
-        assert_eq!(train(ctx, &TrainArgs { out: dir.to_path_buf(), set, ..af.clone() }).unwrap().iteration, 300 + its);
-        let (h, a) = checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
-        let k = h.arrays.len() + h.later_arrays().unwrap().iter().position(|(n, _)| n == "refl.param.quats").unwrap();
-        let means = h.arrays.len() + h.later_arrays().unwrap().iter().position(|(n, _)| n == "refl.param.means").unwrap();
-        let _ = std::fs::remove_dir_all(&dir);
-        (bits(&a[k]), bits(&a[means]))
+        geometry_after(&format!("rot-{rotation}"), its, &["reflection.lr_env=0".into(), "reflection.lr_quats=0.01".into(), format!("reflection.rotation_grad={rotation}")])
     };
     let (q1, m1) = quats_after(1, "reflection");
     let (q20, m20) = quats_after(20, "reflection");
@@ -270,22 +277,13 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let (a1, _) = quats_after(1, "all");
     let (a20, _) = quats_after(20, "all");
     assert!(a1 != a20, "with rotation_grad = all the rasterizer's gradient turns the surfels");
+    refused(TrainArgs { set: vec!["reflection.rotation_grad=colour".into()], ..ae.clone() }, &["reflection.rotation_grad", "colour", "'reflection'"]);
     // reflection.lr_means_scale scales the position rate: at 0 the seeds
     // stay where the hull put them, bit for bit, over 20 steps (at the
     // default they move: m1 != m20 above); a negative scale is refused.
-    let means_after = |its: u32| {
-        let dir = tgs_tests::TempDir::new(&format!("stage2-still-{its}"));
-        let _ = std::fs::remove_dir_all(&dir);
-        let set = vec![format!("reflection.iterations={its}"), "test_interval=0".into(), "reflection.lr_means_scale=0".into()];
-        assert_eq!(train(ctx, &TrainArgs { out: dir.to_path_buf(), set, ..af.clone() }).unwrap().iteration, 300 + its);
-        let (h, a) = checkpoint::read(&dir.join("checkpoint.bin")).unwrap();
-        let means = h.arrays.len() + h.later_arrays().unwrap().iter().position(|(n, _)| n == "refl.param.means").unwrap();
-        let _ = std::fs::remove_dir_all(&dir);
-        bits(&a[means])
-    };
+    let means_after = |its: u32| geometry_after("still", its, &["reflection.lr_means_scale=0".into()]).1;
     assert!(means_after(1) == means_after(20), "reflection.lr_means_scale = 0 moved the seeds");
     refused(TrainArgs { set: vec!["reflection.lr_means_scale=-1".into()], ..ae.clone() }, &["reflection.lr_means_scale", "-1"]);
-    refused(TrainArgs { set: vec!["reflection.rotation_grad=colour".into()], ..ae.clone() }, &["reflection.rotation_grad", "colour", "'reflection'"]);
 
     // reflection.env_radius: the proxy (box centre, radius x the mean
     // camera distance) is recorded and restored: evaluating the run from its
