@@ -43,6 +43,14 @@ somewhat more Monte Carlo noise than in `NAME`.
 Masks and normals are ray-cast here in numpy against the same primitives
 (16 stratified rays per pixel for the mask, the pixel centre for the normal),
 so they do not depend on the renderer's sampling.
+
+`--train-masks DATASET --scene NAME --out DIR` renders nothing: it writes
+the glass mask of every training view of DATASET (a dataset this script
+made of scene NAME; its poses and image size are read from it) as
+`DIR/VIEW.png`, the layout `tgs train --set reflection.seed_masks=DIR`
+reads (Stage II's seeds from known glass masks instead of the residual;
+issue 42's measure of what exact masks are worth). DATASET is only read;
+DIR must not hold masks already.
 """
 import argparse
 import json
@@ -321,9 +329,12 @@ def main():
     ap.add_argument("--train", type=int, default=60)
     ap.add_argument("--test", type=int, default=12)
     ap.add_argument("--no-reflection", action="store_true", help="glass transmits only; writes NAME_norefl")
+    ap.add_argument("--train-masks", metavar="DATASET", help="only write DATASET's training views' glass masks into --out (one --scene)")
     a = ap.parse_args()
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
+    if a.train_masks:
+        return train_masks(mi, a)
     fov = math.pi / 4
     names = []
     for n in a.scene or SCENES:
@@ -371,6 +382,34 @@ def main():
                 print(f"{os.path.basename(root)} {stem}: {time.time() - t0:.1f} s", flush=True)
             with open(os.path.join(root, f"transforms_{split}.json"), "w") as fh:
                 json.dump({"camera_angle_x": fov, "frames": frames}, fh, indent=1)
+
+
+def train_masks(mi, a):
+    """`--train-masks`: the glass masks of an existing dataset's training views."""
+    if not a.scene or len(a.scene) != 1 or a.scene[0] == "suite":
+        raise SystemExit("--train-masks needs exactly one --scene NAME (the scene DATASET was made of)")
+    name = a.scene[0]
+    path = os.path.join(a.train_masks, "transforms_train.json")
+    try:
+        t = json.load(open(path))
+    except (OSError, ValueError) as e:
+        raise SystemExit(f"{path}: {e}")
+    prims = build(mi, name)
+    os.makedirs(a.out, exist_ok=True)
+    for f in t["frames"]:
+        stem = os.path.basename(f["file_path"])
+        stem = os.path.splitext(stem)[0] if stem.endswith(".png") else stem
+        out = os.path.join(a.out, stem + ".png")
+        if os.path.exists(out):
+            raise SystemExit(f"{out} exists; this script never writes over a file (remove it or pick another --out)")
+        img = os.path.join(a.train_masks, f["file_path"] + ("" if f["file_path"].endswith(".png") else ".png"))
+        w, h = mi.Bitmap(img).size()
+        if w != h:
+            raise SystemExit(f"{img}: {w}x{h}; this script's cameras make square images")
+        ro, rd = rays(np.array(f["transform_matrix"], float), w, t["camera_angle_x"], 4)
+        _, _, g = first_hit(prims, ro, rd)
+        write_png(mi, out, g.reshape(w, w, 16).all(2).astype(np.float32)[:, :, None], False)
+    print(f"{len(t['frames'])} masks of {name} in {a.out}")
 
 
 if __name__ == "__main__":

@@ -226,6 +226,53 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert!(off_ply.means != never_ply.means, "the fallback seeds are the first agreeing points");
     assert!(glass(&never_ply) < glass(&off_ply), "the fallback seeds lie farther from the glass than the first agreeing points");
 
+    // Glass masks given (reflection.seed_masks, here the scene's own
+    // training masks): the hull is theirs, the seeds lie on the glass, and
+    // metrics.json records the share of the pixels the masks mark.
+    let masks = tgs_tests::TempDir::new("stage2-seed-masks");
+    let _ = std::fs::remove_dir_all(&masks);
+    std::fs::create_dir_all(&masks).unwrap();
+    let (mut glass_px, mut all_px) = (0usize, 0usize);
+    for i in 0.. {
+        let src = scene().join(format!("train/r_{i}_mask.png"));
+        if !src.exists() {
+            break;
+        }
+        let (_, _, m) = tgs::data::image_io::read_mask(&src).unwrap();
+        glass_px += m.iter().filter(|&&g| g).count();
+        all_px += m.len();
+        std::fs::copy(&src, masks.join(format!("r_{i}.png"))).unwrap();
+    }
+    assert!(all_px > 0 && glass_px > 0);
+    let with_masks = |dir: &Path, extra: &[&str]| {
+        let out = tgs_tests::TempDir::new("stage2-seed-masks-run");
+        let _ = std::fs::remove_dir_all(&out);
+        let mut set = vec!["reflection.iterations=1".to_string(), "test_interval=0".into(), format!("reflection.seed_masks={}", dir.display())];
+        set.extend(extra.iter().map(|s| s.to_string()));
+        let r = train(ctx, &TrainArgs { out: out.to_path_buf(), set, ..af.clone() }).map(|o| (o.iteration, json(&out.join("metrics.json"))["reflection"].clone(), tgs::export::ply::read_splats(&out.join("reflection.ply")).unwrap()));
+        let _ = std::fs::remove_dir_all(&out);
+        r
+    };
+    let (its, dm, masked_ply) = with_masks(&masks, &[]).unwrap();
+    assert_eq!(its, 301);
+    let coverage = dm["seed_mask_coverage"].as_f64().unwrap();
+    assert!((coverage - glass_px as f64 / all_px as f64).abs() < 1e-12, "{dm}");
+    assert!(d.get("seed_mask_coverage").is_none(), "the residual's seeds record no masks: {d}");
+    let (dd, default_ply) = seeding("1e-6");
+    eprintln!("mean distance of the seeds to the glass: {:.3} from the glass masks ({} seeds), {:.3} from the residual ({} seeds)", glass(&masked_ply), dm["seeds"], glass(&default_ply), dd["seeds"]);
+    assert!(dm["seeds"].as_u64().unwrap() > 100, "{dm}");
+    assert!(glass(&masked_ply) < 0.5 * glass(&default_ply), "the glass masks' seeds are no nearer the glass than the residual's");
+    // What it refuses, naming the file or the setting.
+    refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.join("nowhere").display())], ..af.clone() }, &["reflection.seed_masks", "nowhere", "not a directory"]);
+    refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.display()), "reflection.init=copy".into()], ..af.clone() }, &["reflection.seed_masks", "reflection.init = \"copy\""]);
+    std::fs::rename(masks.join("r_1.png"), masks.join("r_1.bak")).unwrap();
+    let e = format!("{:#}", with_masks(&masks, &[]).err().expect("a missing mask is refused"));
+    assert!(e.contains("r_1.png") && e.contains("missing"), "{e}");
+    tgs::data::image_io::write_mask(&masks.join("r_1.png"), 3, 3, &[true; 9]).unwrap();
+    let e = format!("{:#}", with_masks(&masks, &[]).err().expect("a mask of the wrong size is refused"));
+    assert!(e.contains("r_1.png") && e.contains("3x3"), "{e}");
+    let _ = std::fs::remove_dir_all(&masks);
+
     // The cube map started from the scene (reflection.env_init = scene):
     // metrics.json records the box it was seen from, and after one step
     // the map still holds the scene's colours (a grey start moves by at

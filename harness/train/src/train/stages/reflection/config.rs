@@ -135,6 +135,21 @@ pub struct ReflectionConfig {
     /// against view's 40.2 (fifteenth session): a real residual's hull
     /// places seeds with depth noise that turns their plane nearly random.
     pub seed_normal: SeedNormal,
+    /// A directory of glass masks, one per training view (`DIR/VIEW.png`,
+    /// VIEW the view image's name without its extension; 8-bit, at least
+    /// 128 where the pixel's first hit is glass; at the dataset's image
+    /// size, reduced by `downscale` as the images are): the residual hull
+    /// is then these masks' hull, carved in front of Stage I's surface as
+    /// the residual's is, and Stage II runs whatever the residual measured
+    /// (the masks say where the glass is). Empty (the default): the
+    /// residual's masks. A relative path is taken from the working
+    /// directory. For masks a user has (or a segmentation gives), and for
+    /// measuring what exact masks are worth: on the path-traced suite
+    /// Stage I reproduces about half of the glass's reflection, so the
+    /// residual does not mark the glass (perf/RESULTS.md, forty-third and
+    /// forty-fourth entries; `mitsuba_scenes.py --train-masks` writes the
+    /// suite's exact masks).
+    pub seed_masks: String,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
     /// High-frequency loss (method-notes §3.6): weight of the mean error of
@@ -228,6 +243,7 @@ impl Default for ReflectionConfig {
             seed_agree: 0.9,
             seed_significance: 1e-6,
             seed_normal: SeedNormal::Halfway,
+            seed_masks: String::new(),
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,
@@ -263,6 +279,9 @@ impl ReflectionConfig {
         }
         if !(self.seed_significance > 0.0 && self.seed_significance <= 1.0) {
             bail!("reflection.seed_significance must be in (0, 1], not {}", self.seed_significance);
+        }
+        if !self.seed_masks.is_empty() && !self.init.parts().1 {
+            bail!("reflection.seed_masks places the hull's seeds; reflection.init = \"{}\" has none (use \"hull\" or \"copy+hull\")", self.init.name());
         }
         if !(self.seed_opacity > 0.0 && self.seed_opacity < 1.0) {
             bail!("reflection.seed_opacity must be in (0, 1), not {}", self.seed_opacity);

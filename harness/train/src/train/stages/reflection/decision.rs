@@ -51,6 +51,10 @@ pub struct ReflDecision {
     /// radius in world units, fixed when Stage II starts.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub env_proxy: Option<[f32; 4]>,
+    /// The hull's seeds came from given glass masks
+    /// (reflection.seed_masks): the share of the training pixels they mark.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_mask_coverage: Option<f64>,
 }
 
 impl ReflDecision {

@@ -29,15 +29,21 @@ impl ReflDecision {
         let d = self;
         if d.run {
             format!(
-                "Stage {}: residual {:.4} (>= {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} (>= {:.4}): {} reflection Gaussians ({} residual-hull seeds, {} from Stage I{}), {} iterations",
+                "Stage {}: residual {:.4} ({} {:.4}; {:.1}% of pixels above 0.05), view dependence {:.4} ({} {:.4}): {} reflection Gaussians ({} {}-hull seeds, {} from Stage I{}), {} iterations",
                 if reseed { "II.2, seeded again after Stage III" } else { "II" },
                 d.residual_mean,
+                if d.residual_mean >= d.threshold { ">=" } else { "<" },
                 d.threshold,
                 100.0 * d.residual_fraction_over_0_05,
                 d.view_dependence,
+                if d.view_dependence >= d.view_dependence_threshold { ">=" } else { "<" },
                 d.view_dependence_threshold,
                 d.reflection_gaussians,
                 d.seeds,
+                match d.seed_mask_coverage {
+                    Some(c) => format!("glass-mask ({:.1}% of the pixels; reflection.seed_masks)", 100.0 * c),
+                    None => "residual".into(),
+                },
                 d.copied,
                 if d.hull_empty {
                     ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's"

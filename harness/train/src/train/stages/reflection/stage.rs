@@ -17,7 +17,9 @@ use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};
-use anyhow::{Context as _, Result};
+use crate::data::downscale_mask;
+use crate::data::image_io::read_mask;
+use anyhow::{bail, Context as _, Result};
 use std::any::Any;
 use std::path::Path;
 use std::sync::Arc;
@@ -73,7 +75,16 @@ impl LaterKind for Kind {
         let names = files.as_ref().map(|f| f.view_names).unwrap_or_default();
         let iterations = shared.cfg.reflection.iterations;
         let kept = decision.clone();
-        let (d, model) = begin(shared, existing, kept.as_ref(), reseed, round, |i, cam, r| match (&mut maps, names.get(i)) {
+        let dir = &shared.cfg.reflection.seed_masks;
+        let masks = if dir.is_empty() || existing.is_some() {
+            None
+        } else {
+            if names.len() != shared.views.cameras.len() {
+                bail!("reflection.seed_masks needs the training views' names, which only a run with a directory has");
+            }
+            Some(seed_masks(Path::new(dir), names, &shared.views.cameras, shared.cfg.downscale)?)
+        };
+        let (d, model) = begin(shared, existing, kept.as_ref(), reseed, round, masks.as_deref(), |i, cam, r| match (&mut maps, names.get(i)) {
             (Some(maps), Some(name)) if existing.is_none() => write_residual(maps, name, cam, r),
             _ => Ok(()),
         })?;
@@ -111,6 +122,36 @@ impl LaterKind for Kind {
 }
 
 
+/// `reflection.seed_masks`: each training view's glass mask from
+/// `dir/NAME.png` (NAME the view's name without its extension), at the
+/// view's size or `downscale` times it (then reduced as the dataset's
+/// masks are: glass only where every pixel it covers is).
+pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u32) -> Result<Vec<Vec<bool>>> {
+    if !dir.is_dir() {
+        bail!("reflection.seed_masks: {} is not a directory", dir.display());
+    }
+    names
+        .iter()
+        .zip(cameras)
+        .map(|(name, cam)| {
+            let stem = Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| name.clone());
+            let path = dir.join(format!("{stem}.png"));
+            if !path.is_file() {
+                bail!("reflection.seed_masks: {} is missing (the glass mask of training view {name})", path.display());
+            }
+            let (w, h, m) = read_mask(&path).with_context(|| "reflection.seed_masks")?;
+            let f = downscale.max(1);
+            if (w, h) == (cam.width, cam.height) {
+                Ok(m)
+            } else if f > 1 && (w / f, h / f) == (cam.width, cam.height) {
+                Ok(downscale_mask(w, h, &m, f))
+            } else {
+                bail!("reflection.seed_masks: {} is {w}x{h}; training view {name} is {}x{}{}", path.display(), cam.width, cam.height, if f > 1 { format!(" ({f} times that before downscale)") } else { String::new() })
+            }
+        })
+        .collect()
+}
+
 /// The view-dependence measure reduces each view to at most this many
 /// pixels a side (box-averaged: Monte Carlo noise in the images, which
 /// also spreads the residual across views, is then about as strong at any
@@ -127,9 +168,13 @@ const VD_SAMPLES: usize = 1 << 16;
 /// was started with in `kept`; `reseed`: the second round, after Stage III
 /// (`reflection.reseed`), which runs whatever its residual; `round`: 1 or 2.
 /// `on_view(i, residual planes)` sees every view's residual (4 planes: r,
-/// mean |r|) for saving. Returns the decision and the new reflection set
-/// with its light (None when one exists or the stage does not run).
-pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, reseed: bool, round: u32, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<(ReflDecision, Option<ReflectionModel>)> {
+/// mean |r|) for saving. `masks`: each view's glass mask
+/// (`reflection.seed_masks`), which the hull's seeds then come from, and
+/// which make the stage run whatever the residual measured (if any pixel
+/// is glass). Returns the decision and the new reflection set with its
+/// light (None when one exists or the stage does not run).
+#[allow(clippy::too_many_arguments)]
+pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, reseed: bool, round: u32, masks: Option<&[Vec<bool>]>, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<(ReflDecision, Option<ReflectionModel>)> {
     let (cfg, v) = (s.cfg, s.views);
     let shading = ReflectionShading::new(&v.ctx)?;
     let sh = cfg.sh_degree_at(cfg.iterations);
@@ -160,7 +205,13 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         }
         vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
         if hull && existing.is_none() {
-            maps.push((mag.to_vec(), depth));
+            // Given masks stand in for the residual: 1 on the glass, 0
+            // elsewhere, taken as they are (no blur, threshold 0.5).
+            let hull_map = match masks.and_then(|m| m.get(i)) {
+                Some(m) => m.iter().map(|&g| g as u8 as f32).collect(),
+                None => mag.to_vec(),
+            };
+            maps.push((hull_map, depth));
         }
         s.cache.push(buf, sh_view);
     }
@@ -187,19 +238,25 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         significance_dropped: false,
         env_from: None,
         env_proxy: None,
+        seed_mask_coverage: None,
         round,
     };
+    if let Some(m) = masks {
+        let (glass, all) = m.iter().fold((0usize, 0usize), |(g, a), v| (g + v.iter().filter(|&&x| x).count(), a + v.len()));
+        d.seed_mask_coverage = Some(glass as f64 / all.max(1) as f64);
+    }
     // A reflection set that exists (a resumed Stage II without a
     // recorded decision) was decided on when it was made, and the
     // second round (reflection.reseed) runs whatever its residual: the
     // first decided.
-    d.run = reseed || existing.is_some() || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
+    d.run = reseed || existing.is_some() || d.seed_mask_coverage.is_some_and(|c| c > 0.0) || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
     let mut model = None;
     if d.run {
         if existing.is_none() {
             let rc = &cfg.reflection;
             let views: Vec<SeedView> = v.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
             let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal, significance: rc.seed_significance as f64, ..SeedParams::default() };
+            let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, ..p } } else { p };
             let seeds = if hull {
                 let h = hull_seeding(&views, &p);
                 d.significance_dropped = h.significance_dropped;
