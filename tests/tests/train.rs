@@ -252,8 +252,9 @@ fn paper_preset_notes_small_datasets() {
 #[test]
 fn named_settings_read_and_write_as_their_names() {
     use tgs::train::settings::{EnvStart, LightFresnel, LightPreset, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams};
-    assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::Halfway);
-    for (n, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient), ("halfway", SeedNormal::Halfway)] {
+    assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::Auto);
+    assert_eq!((SeedNormal::Auto.for_source(true), SeedNormal::Auto.for_source(false), SeedNormal::View.for_source(true)), (SeedNormal::Plane, SeedNormal::Halfway, SeedNormal::View));
+    for (n, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient), ("halfway", SeedNormal::Halfway), ("auto", SeedNormal::Auto)] {
         assert_eq!(SeedNormal::parse(n), Ok(want));
     }
     assert_eq!(ReflectionInit::parse("copy+hull").map(ReflectionInit::parts), Ok((true, true)));

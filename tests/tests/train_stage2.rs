@@ -262,6 +262,26 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     eprintln!("mean distance of the seeds to the glass: {:.3} from the glass masks ({} seeds), {:.3} from the residual ({} seeds)", glass(&masked_ply), dm["seeds"], glass(&default_ply), dd["seeds"]);
     assert!(dm["seeds"].as_u64().unwrap() > 100, "{dm}");
     assert!(glass(&masked_ply) < 0.5 * glass(&default_ply), "the glass masks' seeds are no nearer the glass than the residual's");
+    // Their normals: "auto" takes the plane of the neighbouring seeds,
+    // which lie on the glass (median error against the sphere's normal,
+    // degrees), and beats the residual seeds' halfway rule on the same masks.
+    let normal_error = |g: &tgs_pipelines::HostGaussians| {
+        use tgs::scene::trace::GLASS_C;
+        let mut e: Vec<f64> = (0..g.len())
+            .map(|i| {
+                let n = tgs_tests::raster_util::splat_normal(std::array::from_fn(|k| g.quats[4 * i + k]));
+                let r: [f64; 3] = std::array::from_fn(|k| g.means[3 * i + k] as f64 - GLASS_C[k]);
+                let l = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+                ((n[0] * r[0] + n[1] * r[1] + n[2] * r[2]) / l).abs().min(1.0).acos().to_degrees()
+            })
+            .collect();
+        e.sort_by(f64::total_cmp);
+        e[e.len() / 2]
+    };
+    let (_, _, halfway_ply) = with_masks(&masks, &["reflection.seed_normal=halfway"]).unwrap();
+    let (auto_err, halfway_err) = (normal_error(&masked_ply), normal_error(&halfway_ply));
+    eprintln!("median normal error of the glass masks' seeds: {auto_err:.1} degrees (auto: plane), {halfway_err:.1} (halfway)");
+    assert!(auto_err < 15.0 && auto_err < halfway_err, "auto {auto_err} halfway {halfway_err}");
     // What it refuses, naming the file or the setting.
     refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.join("nowhere").display())], ..af.clone() }, &["reflection.seed_masks", "nowhere", "not a directory"]);
     refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.display()), "reflection.init=copy".into()], ..af.clone() }, &["reflection.seed_masks", "reflection.init = \"copy\""]);

@@ -113,7 +113,14 @@ pub struct ReflectionConfig {
     /// path-traced room fronts glass normal MAE after Stage II 27.6-32.1
     /// -> 16.6-20.9 degrees (thirty-third session).
     pub seed_significance: f32,
-    /// A seed's normal: "halfway" (the default), the unit bisector of
+    /// A seed's normal: "auto" (the default): "plane" with
+    /// `seed_masks`, "halfway" without. With the suite's exact glass
+    /// masks, glass normal MAE after Stage II, plane against halfway, on
+    /// the eight scenes (seed 0): mean 18.9 against 27.6 degrees, better
+    /// on six, 4.0 against 13.6 on `globe` (seed 1: 4.0 against 13.6),
+    /// 24.7 against 55.9 on `pane` (seed 1: 25.2 against 56.6), worse on
+    /// the one-sided `facade` (37.8 against 31.2; perf/RESULTS.md,
+    /// forty-fourth entry). "halfway": the unit bisector of
     /// "view" (towards the camera whose ray found it) and "gradient"
     /// (against the gradient of the views' blurred residual masks summed
     /// at the seed's projections: the normal of the residual hull's
@@ -242,7 +249,7 @@ impl Default for ReflectionConfig {
             seed_rays: 8192,
             seed_agree: 0.9,
             seed_significance: 1e-6,
-            seed_normal: SeedNormal::Halfway,
+            seed_normal: SeedNormal::Auto,
             seed_masks: String::new(),
             seed_opacity: 0.5,
             lambda_hf: 0.1,

@@ -255,7 +255,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         if existing.is_none() {
             let rc = &cfg.reflection;
             let views: Vec<SeedView> = v.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-            let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal, significance: rc.seed_significance as f64, ..SeedParams::default() };
+            let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal.for_source(masks.is_some()), significance: rc.seed_significance as f64, ..SeedParams::default() };
             let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, ..p } } else { p };
             let seeds = if hull {
                 let h = hull_seeding(&views, &p);

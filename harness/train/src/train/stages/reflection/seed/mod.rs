@@ -116,13 +116,29 @@ crate::train::settings::name_enum!(
         /// and most of the camera direction on the second (perf/RESULTS.md,
         /// thirty-third session).
         Halfway = "halfway",
+        /// `Plane` when the hull comes from given glass masks
+        /// (`reflection.seed_masks`), `Halfway` when it comes from the
+        /// residual ([`SeedNormal::for_source`]): an exact mask's hull puts
+        /// the seeds on the glass, and their neighbours' plane is then its
+        /// tangent plane (perf/RESULTS.md, forty-fourth entry).
+        Auto = "auto",
     }
 );
 
 impl SeedNormal {
+    /// [`SeedNormal::Auto`] resolved for a hull from given glass masks
+    /// (`masks`) or from the residual; any other choice as it is.
+    pub fn for_source(self, masks: bool) -> SeedNormal {
+        match self {
+            SeedNormal::Auto if masks => SeedNormal::Plane,
+            SeedNormal::Auto => SeedNormal::Halfway,
+            n => n,
+        }
+    }
+
     /// Whether the normal reads the views' blurred masks' gradient.
     fn uses_field(self) -> bool {
-        matches!(self, SeedNormal::Gradient | SeedNormal::Halfway)
+        matches!(self.for_source(false), SeedNormal::Gradient | SeedNormal::Halfway)
     }
 
     /// The normal where no hull point beat chance ([`hull_seeding`]'s

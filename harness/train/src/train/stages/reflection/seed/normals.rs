@@ -27,7 +27,7 @@ fn surfel(found: &[(V3, usize)], i: usize, views: &[Prepared], normal: SeedNorma
     }
     let cam = views[vi].cam.centre().map(f64::from);
     let to_cam = normalize(sub(cam, x));
-    let mut n = match normal {
+    let mut n = match normal.for_source(false) {
         SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
         SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
         SeedNormal::Halfway => field_normal(x, views, &views[vi]).map_or(to_cam, |g| {
