@@ -27,6 +27,12 @@ not retrained; a half-written one (no metrics.json) is an error naming it.
     python3 perf/scenes/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
         --variant default --variant 'geom:reflection.lr_quats=1e-2' [--seeds 0,1] [--tgs target/debug/tgs]
 
+`--seed-masks ROOT` gives every Stage II the glass masks in ROOT/SCENE
+(`reflection.seed_masks`; the forty-fourth entry of perf/RESULTS.md):
+
+    python3 perf/scenes/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
+        --seed-masks /tmp/masks --variant masks --variant 'masks-halfway:reflection.seed_normal=halfway'
+
 Only the Python standard library is needed.
 """
 import argparse
@@ -90,6 +96,7 @@ def main():
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--only", action="append", help="scene names to run, in this order (repeatable; default: all, by name)")
     ap.add_argument("--stage1", default="", help="KEY=VALUE;... for Stage I (part of its run directory's identity: use a new --runs when changing it)")
+    ap.add_argument("--seed-masks", metavar="ROOT", help="every Stage II seeds from ROOT/SCENE's glass masks (reflection.seed_masks; `mitsuba_scenes.py --train-masks` writes them); use its own --runs names or variants")
     ap.add_argument("--tgs", default=os.path.join(os.path.dirname(__file__), "..", "..", "target", "debug", "tgs"))
     a = ap.parse_args()
     scenes = sorted(d for d in os.listdir(a.scenes) if os.path.exists(os.path.join(a.scenes, d, "transforms_train.json")))
@@ -119,8 +126,14 @@ def main():
             base = os.path.join(a.runs, scene, f"s{seed}")
             one = os.path.join(base, "I")
             m1 = train(a.tgs, one, [data, "--stages", "I", "--set", f"seed={seed}"] + sets(stage1_sets), f"{scene} seed {seed} Stage I")
+            masks = []
+            if a.seed_masks:
+                d = os.path.join(a.seed_masks, scene)
+                if not os.path.isdir(d):
+                    raise SystemExit(f"--seed-masks: {d} is not a directory (`mitsuba_scenes.py --train-masks {data} --scene {scene} --out {d}` writes it)")
+                masks = [f"reflection.seed_masks={os.path.abspath(d)}"]
             for name, kvs in variants:
-                m2 = train(a.tgs, os.path.join(base, name), [data, "--from", one, "--stages", "II"] + sets(kvs), f"{scene} seed {seed} {name}")
+                m2 = train(a.tgs, os.path.join(base, name), [data, "--from", one, "--stages", "II"] + sets(masks + kvs), f"{scene} seed {seed} {name}")
                 res[(scene, seed, name)] = (stage(m1, "I"), stage(m2, "II"))
 
     for name, kvs in variants:
