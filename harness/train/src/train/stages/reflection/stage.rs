@@ -173,7 +173,6 @@ const VD_SAMPLES: usize = 1 << 16;
 /// which make the stage run whatever the residual measured (if any pixel
 /// is glass). Returns the decision and the new reflection set with its
 /// light (None when one exists or the stage does not run).
-#[allow(clippy::too_many_arguments)]
 pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, reseed: bool, round: u32, masks: Option<&[Vec<bool>]>, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<(ReflDecision, Option<ReflectionModel>)> {
     let (cfg, v) = (s.cfg, s.views);
     let shading = ReflectionShading::new(&v.ctx)?;
