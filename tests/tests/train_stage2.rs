@@ -282,6 +282,10 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let (auto_err, halfway_err) = (normal_error(&masked_ply), normal_error(&halfway_ply));
     eprintln!("median normal error of the glass masks' seeds: {auto_err:.1} degrees (auto: plane), {halfway_err:.1} (halfway)");
     assert!(auto_err < 15.0 && auto_err < halfway_err, "auto {auto_err} halfway {halfway_err}");
+    // The masks say where the glass is: Stage II runs even where the
+    // residual's test would skip it.
+    let (its, forced, _) = with_masks(&masks, &["reflection.min_residual=1e9"]).unwrap();
+    assert!(its == 301 && forced["run"] == true && forced["seeds"] == dm["seeds"], "{forced}");
     // What it refuses, naming the file or the setting.
     refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.join("nowhere").display())], ..af.clone() }, &["reflection.seed_masks", "nowhere", "not a directory"]);
     refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.display()), "reflection.init=copy".into()], ..af.clone() }, &["reflection.seed_masks", "reflection.init = \"copy\""]);
