@@ -293,6 +293,26 @@ fn named_settings_read_and_write_as_their_names() {
 }
 
 #[test]
+fn seed_mask_paths_are_saved_absolute() {
+    use tgs::train::args::{config_from_args, resume_config};
+    // A relative reflection.seed_masks is read from the working directory
+    // where it is given; saved as given, a --resume or --from from another
+    // directory would look for the masks in the wrong place.
+    let cwd = std::env::current_dir().unwrap();
+    let given = |v: &str| TrainArgs { set: vec![format!("reflection.seed_masks={v}")], ..TrainArgs::default() };
+    let cfg = config_from_args(&given("masks/glass")).unwrap();
+    assert_eq!(Path::new(&cfg.reflection.seed_masks), cwd.join("masks/glass"));
+    let abs = cwd.join("elsewhere").to_string_lossy().into_owned();
+    assert_eq!(config_from_args(&given(&abs)).unwrap().reflection.seed_masks, abs);
+    assert_eq!(config_from_args(&TrainArgs::default()).unwrap().reflection.seed_masks, "");
+    // Given again, relative, on a resume: the same setting, not a conflict.
+    assert_eq!(resume_config(&given("masks/glass"), &cfg).unwrap().reflection.seed_masks, cfg.reflection.seed_masks);
+    // Another directory is a conflict, named with both values.
+    let e = format!("{:#}", resume_config(&given("other"), &cfg).unwrap_err());
+    assert!(e.contains("reflection.seed_masks") && e.contains("other"), "{e}");
+}
+
+#[test]
 fn bad_settings_and_missing_checkpoints_are_reported() {
     let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
     let ctx = ctx_shared();

@@ -80,11 +80,15 @@ pub(crate) fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainCon
             bail!("--set {kv} and {flag} both set '{key}': give one of them");
         }
     }
+    let masks_before = cfg.reflection.seed_masks.clone();
     if let Some(p) = &a.config {
         cfg.merge_toml_file(p)?;
     }
     for kv in &a.set {
         cfg.set(kv)?;
+    }
+    if cfg.reflection.seed_masks != masks_before {
+        cfg.reflection.seed_masks = absolute_setting("reflection.seed_masks", &cfg.reflection.seed_masks)?;
     }
     if let Some(st) = &a.stages {
         // With --from, Stage I comes from the other run: "II" means "I,II".
@@ -111,6 +115,18 @@ pub(crate) fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainCon
     }
     cfg.validate()?;
     Ok(cfg)
+}
+
+/// A path setting given now, made absolute against the working directory,
+/// so that the run's saved settings name the same directory when it is
+/// resumed, continued with `--from` or evaluated from anywhere else. Empty
+/// stays empty (the setting's "none").
+fn absolute_setting(key: &str, value: &str) -> Result<String> {
+    if value.is_empty() {
+        return Ok(String::new());
+    }
+    let abs = std::path::absolute(value).with_context(|| format!("{key} = \"{value}\": making the path absolute"))?;
+    Ok(abs.to_string_lossy().into_owned())
 }
 
 /// A setting's value as the user typed it (settings are f32: no f64 digits).

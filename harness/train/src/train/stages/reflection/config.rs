@@ -150,7 +150,8 @@ pub struct ReflectionConfig {
     /// the residual's is, and Stage II runs whatever the residual measured
     /// (the masks say where the glass is). Empty (the default): the
     /// residual's masks. A relative path is taken from the working
-    /// directory. For masks a user has (or a segmentation gives), and for
+    /// directory where it is given and saved absolute, so that a resumed
+    /// or continued run finds the masks from anywhere. For masks a user has (or a segmentation gives), and for
     /// measuring what exact masks are worth: on the path-traced suite
     /// Stage I reproduces about half of the glass's reflection, so the
     /// residual does not mark the glass (perf/RESULTS.md, forty-third and
