@@ -335,8 +335,8 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     // on instead of the first (which few views see, near the cameras), so
     // as many seeds, and more of them on the glass.
     let seeding = |a: f64| hull_seeding(&sv, &SeedParams { significance: a, ..base });
-    assert_eq!(seeding(1e-8), HullSeeding { seeds: tight.clone(), significance_dropped: false });
-    assert_eq!(seeding(1.0), HullSeeding { seeds: loose.clone(), significance_dropped: false });
+    assert_eq!(seeding(1e-8), HullSeeding { seeds: tight.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false });
+    assert_eq!(seeding(1.0), HullSeeding { seeds: loose.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false });
     assert!(at(1e-300).is_empty(), "1e-300 is beaten by chance with 48 views");
     let dropped = seeding(1e-300);
     assert!(dropped.significance_dropped);

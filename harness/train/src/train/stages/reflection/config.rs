@@ -158,6 +158,14 @@ pub struct ReflectionConfig {
     /// forty-fourth entries; `mitsuba_scenes.py --train-masks` writes the
     /// suite's exact masks).
     pub seed_masks: String,
+    /// With `seed_masks`: place the seeds of a view whose glass is ringed
+    /// by Stage I surface that every view sees at its masks' edges (a
+    /// window in a wall or frame) on the plane of that rim, where the hull
+    /// holds it (seed/rim.rs). A front captured from one side has a
+    /// wedge for a hull, and its first hull points lie far in front of the
+    /// glass; closed objects and free-standing panes have no such rim and
+    /// are seeded as before (perf/RESULTS.md, forty-fifth entry).
+    pub seed_rim: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
     /// High-frequency loss (method-notes §3.6): weight of the mean error of
@@ -252,6 +260,7 @@ impl Default for ReflectionConfig {
             seed_significance: 1e-6,
             seed_normal: SeedNormal::Auto,
             seed_masks: String::new(),
+            seed_rim: true,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,

@@ -41,7 +41,14 @@ impl ReflDecision {
                 d.reflection_gaussians,
                 d.seeds,
                 match d.seed_mask_coverage {
-                    Some(c) => format!("glass-mask ({:.1}% of the pixels; reflection.seed_masks)", 100.0 * c),
+                    Some(c) => format!(
+                        "glass-mask ({:.1}% of the pixels; reflection.seed_masks{})",
+                        100.0 * c,
+                        match d.seed_rim {
+                            Some([views, seeds]) if views > 0 => format!("; {seeds} on the glass rim's plane of {views} views"),
+                            _ => String::new(),
+                        }
+                    ),
                     None => "residual".into(),
                 },
                 d.copied,

@@ -238,6 +238,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         env_from: None,
         env_proxy: None,
         seed_mask_coverage: None,
+        seed_rim: None,
         round,
     };
     if let Some(m) = masks {
@@ -255,10 +256,11 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
             let rc = &cfg.reflection;
             let views: Vec<SeedView> = v.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
             let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal.for_source(masks.is_some()), significance: rc.seed_significance as f64, ..SeedParams::default() };
-            let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, ..p } } else { p };
+            let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, ..p } } else { p };
             let seeds = if hull {
                 let h = hull_seeding(&views, &p);
                 d.significance_dropped = h.significance_dropped;
+                d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
                 h.seeds
             } else {
                 Vec::new()

@@ -47,10 +47,16 @@
 //! path-traced scenes, two seeds, glass normal MAE after Stage II 41.8 /
 //! 37.8 / 36.8 degrees with view / gradient / halfway).
 
+mod geometry;
 mod normals;
+mod rim;
 
+pub use geometry::pixel_of;
+pub(crate) use geometry::unproject_pixel;
+use geometry::{box_blur, dot, image_point, in_parallel, normalize, sub, V3};
 pub use normals::{jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 use normals::{gradient_pixels, surfels};
+pub use rim::{fit_plane, RIM_AGREE, RIM_SECTORS};
 use tgs_pipelines::Camera;
 
 /// One training view as the seeding sees it.
@@ -82,6 +88,12 @@ pub struct SeedParams {
     /// from masks placed at random (one-sided binomial tail at the views'
     /// mean mask coverage; 1: no test). See [`min_hits`].
     pub significance: f64,
+    /// Depth from the glass's rim (see the `rim` module): where a view's
+    /// mask is ringed by Stage I surface that the other views see at their
+    /// masks' edges, its rays' seeds lie on the plane of that rim if the
+    /// hull holds it. For given glass masks (`reflection.seed_rim`); a
+    /// residual's blobs have no such rim.
+    pub rim: bool,
     /// Threads for the march and the normals (0: every core the process
     /// may use). The seeds are the same, bit for bit, at any count: the
     /// rays and seeds are split into contiguous runs whose results are
@@ -159,7 +171,7 @@ impl SeedNormal {
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, threads: 0 }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, rim: false, threads: 0 }
     }
 }
 
@@ -171,18 +183,6 @@ pub struct Seed {
     pub scale: f32,
 }
 
-type V3 = [f64; 3];
-
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn normalize(a: V3) -> V3 {
-    let l = dot(a, a).sqrt();
-    if l > 0.0 && l.is_finite() { [a[0] / l, a[1] / l, a[2] / l] } else { [0.0, 0.0, 1.0] }
-}
 
 /// A view prepared for hull tests: its residual mask and depths.
 struct Prepared {
@@ -242,60 +242,7 @@ impl Prepared {
     }
 }
 
-/// The pixel (row-major index) world point `x` projects to in `cam`, and
-/// its view depth, if it is in front of the camera and inside the image.
-pub fn pixel_of(cam: &Camera, x: V3) -> Option<(usize, f64)> {
-    let (u, v, z) = image_point(cam, x)?;
-    let (u, v) = (u.round(), v.round());
-    if !(u >= 0.0 && v >= 0.0 && u < cam.width as f64 && v < cam.height as f64) {
-        return None;
-    }
-    Some((v as usize * cam.width as usize + u as usize, z))
-}
 
-/// The unrounded pixel coordinates (pixel centres at integers) and view
-/// depth of world point `x` in `cam`, if it is in front of the camera; in f64.
-fn image_point(cam: &Camera, x: V3) -> Option<(f64, f64, f64)> {
-    let m = &cam.world_to_view;
-    let p: V3 = [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64);
-    if !(p[2] > 1e-6) {
-        return None;
-    }
-    Some((cam.fx as f64 * p[0] / p[2] + cam.cx as f64, cam.fy as f64 * p[1] / p[2] + cam.cy as f64, p[2]))
-}
-
-/// The world point at pixel `i` (row-major) of `cam`, view depth `z`:
-/// R^T (p_view - t), in f64.
-pub(crate) fn unproject_pixel(cam: &Camera, i: usize, z: f64) -> V3 {
-    let (u, v) = ((i % cam.width as usize) as f64, (i / cam.width as usize) as f64);
-    let pv = [(u - cam.cx as f64) / cam.fx as f64 * z, (v - cam.cy as f64) / cam.fy as f64 * z, z];
-    let m = &cam.world_to_view;
-    let d = [pv[0] - m[0][3] as f64, pv[1] - m[1][3] as f64, pv[2] - m[2][3] as f64];
-    [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
-}
-
-/// Box blur of radius `r` (mean over the window clipped to the image).
-fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    // Integral image in f64.
-    let mut s = vec![0.0f64; (w + 1) * (h + 1)];
-    for y in 0..h {
-        let mut row = 0.0;
-        for x in 0..w {
-            let v = img.get(y * w + x).copied().unwrap_or(0.0);
-            row += if v.is_finite() { v as f64 } else { 0.0 };
-            s[(y + 1) * (w + 1) + x + 1] = s[y * (w + 1) + x + 1] + row;
-        }
-    }
-    let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let (x0, x1, y0, y1) = (x.saturating_sub(r), (x + r + 1).min(w), y.saturating_sub(r), (y + r + 1).min(h));
-            let sum = s[y1 * (w + 1) + x1] - s[y0 * (w + 1) + x1] - s[y1 * (w + 1) + x0] + s[y0 * (w + 1) + x0];
-            out[y * w + x] = (sum / ((x1 - x0) * (y1 - y0)) as f64) as f32;
-        }
-    }
-    out
-}
 
 /// What the views that see a point in front of their Stage I surface say of it.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -374,13 +321,17 @@ pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
 pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
     let found = march(&prepared, p);
-    surfels(&found.significant, &prepared, p.normal, p.threads)
+    surfels(&found.significant, &found.rim_normals, &prepared, p.normal, p.threads)
 }
 
 /// The reflection set's seeds as Stage II takes them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HullSeeding {
     pub seeds: Vec<Seed>,
+    /// Views whose rim gave them a membrane ([`SeedParams::rim`]).
+    pub rim_views: usize,
+    /// Seeds placed on a membrane.
+    pub rim_seeds: usize,
     /// No hull point beat chance, so the seeds are the hull's without the
     /// significance test.
     pub significance_dropped: bool,
@@ -402,8 +353,9 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
     let found = march(&prepared, p);
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
-    let (chosen, normal) = if dropped { (&found.agreeing, p.normal.without_outline()) } else { (&found.significant, p.normal) };
-    HullSeeding { seeds: surfels(chosen, &prepared, normal, p.threads), significance_dropped: dropped }
+    let none = vec![None; found.agreeing.len()];
+    let (chosen, fixed, normal) = if dropped { (&found.agreeing, &none, p.normal.without_outline()) } else { (&found.significant, &found.rim_normals, p.normal) };
+    HullSeeding { seeds: surfels(chosen, fixed, &prepared, normal, p.threads), rim_views: found.rim_views, rim_seeds: if dropped { 0 } else { found.rim_seeds }, significance_dropped: dropped }
 }
 
 /// Per ray: the first hull point after carved space with the significance
@@ -412,11 +364,16 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
 /// ray found it.
 struct Found {
     significant: Vec<(V3, usize)>,
+    /// Per `significant` point: its membrane's normal, where it lies on one.
+    rim_normals: Vec<Option<V3>>,
     agreeing: Vec<(V3, usize)>,
+    rim_views: usize,
+    /// Of `significant`, those on a membrane.
+    rim_seeds: usize,
 }
 
 fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
-    let mut found = Found { significant: Vec::new(), agreeing: Vec::new() };
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_seeds: 0 };
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
     let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
     let total: usize = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).sum();
@@ -428,20 +385,28 @@ fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
     // Every `stride`-th residual pixel over the views, in view order.
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
     let rays: Vec<(usize, usize)> = prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
-    for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits)) {
+    let membranes = if p.rim { rim::membranes(prepared) } else { vec![None; prepared.len()] };
+    found.rim_views = membranes.iter().filter(|m| m.is_some()).count();
+    for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, &membranes)) {
         found.significant.extend(part.significant);
+        found.rim_normals.extend(part.rim_normals);
         found.agreeing.extend(part.agreeing);
+        found.rim_seeds += part.rim_seeds;
     }
     found
 }
 
 /// [`march`] along `rays` (view, pixel), in order.
-fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32]) -> Found {
-    let mut found = Found { significant: Vec::new(), agreeing: Vec::new() };
+fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32], membranes: &[Option<rim::Membrane>]) -> Found {
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_seeds: 0 };
     for &(vi, i) in rays {
         let v = &prepared[vi];
         let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
         let z_near = 0.05 * z_far;
+        // On a membrane, where the hull holds it, the rim places the glass
+        // (in place of the ray's first hull point).
+        let on_rim = membranes[vi].and_then(|m| m.depth(v, i)).filter(|&z| z > z_near && z < z_far * 0.98).map(|z| v.unproject(i, z));
+        let on_rim = on_rim.filter(|&x| matches!(hull_test(prepared, x, p.agree, min_hits), Verdict::Agrees { significant: true, .. }));
         // A ray that starts inside the hull has no evidence of where
         // the surface begins (the residual covers what every view sees
         // there): it seeds only after some of it was carved. A point
@@ -461,8 +426,9 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
                         best = Some((hits, x));
                     }
                     if significant {
-                        if carved {
+                        if carved && on_rim.is_none() {
                             found.significant.push((x, vi));
+                            found.rim_normals.push(None);
                         }
                         break;
                     }
@@ -471,6 +437,11 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
                 Verdict::Unseen => {}
             }
         }
+        if let (Some(x), Some(m)) = (on_rim, membranes[vi]) {
+            found.significant.push((x, vi));
+            found.rim_normals.push(Some(m.normal(v)));
+            found.rim_seeds += 1;
+        }
         if let Some((_, x)) = best {
             found.agreeing.push((x, vi));
         }
@@ -478,19 +449,4 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
     found
 }
 
-/// `f` over contiguous runs of `items` on up to `threads` scoped threads
-/// (0: the available parallelism), the results in the runs' order: the
-/// same as `f(items)` split at the run boundaries, whatever the count.
-fn in_parallel<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&[T]) -> R + Sync) -> Vec<R> {
-    let threads = if threads == 0 { std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) } else { threads };
-    let runs = threads.clamp(1, items.len().max(1));
-    if runs == 1 {
-        return vec![f(items)];
-    }
-    let size = items.len().div_ceil(runs);
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = items.chunks(size).map(|c| scope.spawn(|| f(c))).collect();
-        handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
-    })
-}
 

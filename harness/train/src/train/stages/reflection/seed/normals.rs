@@ -9,13 +9,15 @@ use super::{dot, in_parallel, normalize, sub, Prepared, Seed, SeedNormal, V3};
 
 /// Normals (`normal`, facing the finding camera) and scales (root mean
 /// squared distance to the 3 nearest) of the found points.
-pub(super) fn surfels(found: &[(V3, usize)], views: &[Prepared], normal: SeedNormal, threads: usize) -> Vec<Seed> {
+/// A point with a `fixed` normal (its membrane's, seed/rim.rs) takes that
+/// one, turned to face its camera.
+pub(super) fn surfels(found: &[(V3, usize)], fixed: &[Option<V3>], views: &[Prepared], normal: SeedNormal, threads: usize) -> Vec<Seed> {
     let index: Vec<usize> = (0..found.len()).collect();
-    in_parallel(&index, threads, |run| run.iter().map(|&i| surfel(found, i, views, normal)).collect::<Vec<Seed>>()).concat()
+    in_parallel(&index, threads, |run| run.iter().map(|&i| surfel(found, i, fixed.get(i).copied().flatten(), views, normal)).collect::<Vec<Seed>>()).concat()
 }
 
 /// [`surfels`] for `found[i]`.
-fn surfel(found: &[(V3, usize)], i: usize, views: &[Prepared], normal: SeedNormal) -> Seed {
+fn surfel(found: &[(V3, usize)], i: usize, fixed: Option<V3>, views: &[Prepared], normal: SeedNormal) -> Seed {
     const K: usize = 16;
     let (x, vi) = found[i];
     let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (dot(sub(x, y), sub(x, y)), j)).collect();
@@ -28,6 +30,7 @@ fn surfel(found: &[(V3, usize)], i: usize, views: &[Prepared], normal: SeedNorma
     let cam = views[vi].cam.centre().map(f64::from);
     let to_cam = normalize(sub(cam, x));
     let mut n = match normal.for_source(false) {
+        _ if fixed.is_some() => fixed.unwrap_or(to_cam),
         SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
         SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
         SeedNormal::Halfway => field_normal(x, views, &views[vi]).map_or(to_cam, |g| {

@@ -1,0 +1,89 @@
+//! The seeding's geometry and plumbing: world points and pixels of a
+//! camera in f64, a box blur, and a deterministic split of work over
+//! threads.
+
+use tgs_pipelines::Camera;
+
+pub(super) type V3 = [f64; 3];
+
+pub(super) fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+pub(super) fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+pub(super) fn normalize(a: V3) -> V3 {
+    let l = dot(a, a).sqrt();
+    if l > 0.0 && l.is_finite() { [a[0] / l, a[1] / l, a[2] / l] } else { [0.0, 0.0, 1.0] }
+}
+
+/// The pixel (row-major index) world point `x` projects to in `cam`, and
+/// its view depth, if it is in front of the camera and inside the image.
+pub fn pixel_of(cam: &Camera, x: V3) -> Option<(usize, f64)> {
+    let (u, v, z) = image_point(cam, x)?;
+    let (u, v) = (u.round(), v.round());
+    if !(u >= 0.0 && v >= 0.0 && u < cam.width as f64 && v < cam.height as f64) {
+        return None;
+    }
+    Some((v as usize * cam.width as usize + u as usize, z))
+}
+
+/// The unrounded pixel coordinates (pixel centres at integers) and view
+/// depth of world point `x` in `cam`, if it is in front of the camera; in f64.
+pub(super) fn image_point(cam: &Camera, x: V3) -> Option<(f64, f64, f64)> {
+    let m = &cam.world_to_view;
+    let p: V3 = [0, 1, 2].map(|r| m[r][0] as f64 * x[0] + m[r][1] as f64 * x[1] + m[r][2] as f64 * x[2] + m[r][3] as f64);
+    if !(p[2] > 1e-6) {
+        return None;
+    }
+    Some((cam.fx as f64 * p[0] / p[2] + cam.cx as f64, cam.fy as f64 * p[1] / p[2] + cam.cy as f64, p[2]))
+}
+
+/// The world point at pixel `i` (row-major) of `cam`, view depth `z`:
+/// R^T (p_view - t), in f64.
+pub(crate) fn unproject_pixel(cam: &Camera, i: usize, z: f64) -> V3 {
+    let (u, v) = ((i % cam.width as usize) as f64, (i / cam.width as usize) as f64);
+    let pv = [(u - cam.cx as f64) / cam.fx as f64 * z, (v - cam.cy as f64) / cam.fy as f64 * z, z];
+    let m = &cam.world_to_view;
+    let d = [pv[0] - m[0][3] as f64, pv[1] - m[1][3] as f64, pv[2] - m[2][3] as f64];
+    [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
+}
+
+/// Box blur of radius `r` (mean over the window clipped to the image).
+pub(super) fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    // Integral image in f64.
+    let mut s = vec![0.0f64; (w + 1) * (h + 1)];
+    for y in 0..h {
+        let mut row = 0.0;
+        for x in 0..w {
+            let v = img.get(y * w + x).copied().unwrap_or(0.0);
+            row += if v.is_finite() { v as f64 } else { 0.0 };
+            s[(y + 1) * (w + 1) + x + 1] = s[y * (w + 1) + x + 1] + row;
+        }
+    }
+    let mut out = vec![0.0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (x0, x1, y0, y1) = (x.saturating_sub(r), (x + r + 1).min(w), y.saturating_sub(r), (y + r + 1).min(h));
+            let sum = s[y1 * (w + 1) + x1] - s[y0 * (w + 1) + x1] - s[y1 * (w + 1) + x0] + s[y0 * (w + 1) + x0];
+            out[y * w + x] = (sum / ((x1 - x0) * (y1 - y0)) as f64) as f32;
+        }
+    }
+    out
+}
+
+/// `f` over contiguous runs of `items` on up to `threads` scoped threads
+/// (0: the available parallelism), the results in the runs' order: the
+/// same as `f(items)` split at the run boundaries, whatever the count.
+pub(super) fn in_parallel<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&[T]) -> R + Sync) -> Vec<R> {
+    let threads = if threads == 0 { std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) } else { threads };
+    let runs = threads.clamp(1, items.len().max(1));
+    if runs == 1 {
+        return vec![f(items)];
+    }
+    let size = items.len().div_ceil(runs);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = items.chunks(size).map(|c| scope.spawn(|| f(c))).collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
+    })
+}

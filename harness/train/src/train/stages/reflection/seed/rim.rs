@@ -1,0 +1,196 @@
+//! Depth from the glass's rim ([`SeedParams::rim`]): where a front of glass
+//! is captured from one side only (a shop window, a facade), the masks'
+//! hull is a wedge whose tip reaches far in front of the glass, and the
+//! first hull point along a ray lies in that wedge (perf/RESULTS.md,
+//! forty-fourth entry: `facade`'s seeds a median 0.45 in front). What
+//! places such a front is its rim: a pane set in a frame or a wall meets
+//! opaque surfaces that Stage I reconstructed, right at the masks' edges.
+//!
+//! The rim points are the Stage I surface points of the pixels just outside
+//! each view's mask that project onto (or next to) a mask edge in at least
+//! [`RIM_AGREE`] of the views whose image holds them: a frame flush with
+//! the glass does, in every view; the background seen past a closed
+//! object's silhouette, or past an open pane's free edge, does not (it lies
+//! elsewhere in the other views). A view whose mask has rim points all
+//! around it ([`RIM_SECTORS`] of 12 directions from the mask's centre)
+//! gets a membrane: the plane through them, fitted as inverse depth affine
+//! in the normalised image coordinates (exact for a plane) by iteratively
+//! reweighted least squares. Its rays' seeds are then the membrane's point
+//! where the hull holds it (it agrees, beats chance and lies in front of
+//! Stage I's surface); elsewhere the first hull point as before.
+//!
+//! Measured on the path-traced suite with exact masks (numpy on Stage I's
+//! training depths, forty-fifth entry): `facade`'s membrane points lie a
+//! median 0.10 from the glass against the hull seeds' 0.45; on `globe`,
+//! `dome`, `cabinet` and `cylinder` no rim point agrees (their rims are
+//! silhouettes), and `pane`'s (its foot on the floor) cover at most half
+//! the directions, so nothing changes there.
+
+use super::{image_point, normalize, pixel_of, Prepared, V3};
+
+/// The share of the views holding a rim point in their image that must see
+/// it at a mask edge.
+pub const RIM_AGREE: f64 = 0.9;
+/// Of 12 directions around a view's mask centre, how many must hold rim
+/// points for the view to get a membrane.
+pub const RIM_SECTORS: usize = 9;
+/// The fewest rim points a membrane is fitted to.
+const RIM_MIN_POINTS: usize = 12;
+
+/// A view's membrane: 1 / z = a x + b y + c at normalised image
+/// coordinates x = (u - cx) / fx, y = (v - cy) / fy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Membrane {
+    coef: [f64; 3],
+}
+
+impl Membrane {
+    /// The membrane's view depth at pixel `i` of `cam`'s image, if it is in
+    /// front of the camera.
+    pub(super) fn depth(&self, v: &Prepared, i: usize) -> Option<f64> {
+        let w = v.cam.width as usize;
+        let (x, y) = (((i % w) as f64 - v.cam.cx as f64) / v.cam.fx as f64, ((i / w) as f64 - v.cam.cy as f64) / v.cam.fy as f64);
+        let inv = self.coef[0] * x + self.coef[1] * y + self.coef[2];
+        (inv > 1e-9 && inv.is_finite()).then(|| 1.0 / inv)
+    }
+
+    /// The membrane's unit normal in world space: in view space the plane
+    /// is a X + b Y + c Z = 1.
+    pub(super) fn normal(&self, v: &Prepared) -> V3 {
+        let m = &v.cam.world_to_view;
+        normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * self.coef[r]).sum()))
+    }
+}
+
+/// Pixels of a `w` x `h` image within one pixel (3 x 3) of the mask's edge:
+/// mask pixels with a neighbour outside it, and outside pixels with a
+/// neighbour in it, grown by one pixel.
+fn near_edge(mask: &[bool], w: usize, h: usize) -> Vec<bool> {
+    let at = |x: i64, y: i64| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h && mask[y as usize * w + x as usize];
+    let around = |x: i64, y: i64, f: &dyn Fn(i64, i64) -> bool| (-1..=1).any(|dy| (-1..=1).any(|dx| f(x + dx, y + dy)));
+    let band: Vec<bool> = (0..w * h).map(|i| {
+        let (x, y) = ((i % w) as i64, (i / w) as i64);
+        let m = at(x, y);
+        around(x, y, &|a, b| at(a, b) != m)
+    }).collect();
+    let on = |x: i64, y: i64| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h && band[y as usize * w + x as usize];
+    (0..w * h).map(|i| around((i % w) as i64, (i / w) as i64, &on)).collect()
+}
+
+/// The rim points of all views, in view and pixel order: Stage I surface
+/// points just outside a mask that enough views see at a mask edge.
+fn rim_points(views: &[Prepared], edges: &[Vec<bool>]) -> Vec<V3> {
+    let mut out = Vec::new();
+    for v in views {
+        let (w, h) = (v.cam.width as usize, v.cam.height as usize);
+        for i in 0..w * h {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            let by_mask = (-1..=1i64).any(|dy| (-1..=1i64).any(|dx| {
+                let (a, b) = (x + dx, y + dy);
+                a >= 0 && b >= 0 && (a as usize) < w && (b as usize) < h && v.mask[b as usize * w + a as usize]
+            }));
+            if v.mask[i] || !by_mask || !v.depth[i].is_finite() {
+                continue;
+            }
+            let p = v.unproject(i, v.depth[i] as f64);
+            let (mut seen, mut hit) = (0u32, 0u32);
+            for (u, e) in views.iter().zip(edges) {
+                if let Some((j, _)) = pixel_of(&u.cam, p) {
+                    seen += 1;
+                    hit += e[j] as u32;
+                }
+            }
+            if seen >= 3 && hit as f64 >= RIM_AGREE * seen as f64 {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
+/// Each view's membrane, where its mask has rim points all around it.
+pub(super) fn membranes(views: &[Prepared]) -> Vec<Option<Membrane>> {
+    let edges: Vec<Vec<bool>> = views.iter().map(|v| near_edge(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
+    let rim = rim_points(views, &edges);
+    views.iter().zip(&edges).map(|(v, e)| membrane(v, e, &rim)).collect()
+}
+
+/// [`membranes`] for one view.
+fn membrane(v: &Prepared, edge: &[bool], rim: &[V3]) -> Option<Membrane> {
+    let w = v.cam.width as usize;
+    let (mut n, mut cu, mut cv) = (0usize, 0.0f64, 0.0f64);
+    for (i, _) in v.mask.iter().enumerate().filter(|(_, &m)| m) {
+        n += 1;
+        cu += (i % w) as f64;
+        cv += (i / w) as f64;
+    }
+    if n == 0 {
+        return None;
+    }
+    let (cu, cv) = (cu / n as f64, cv / n as f64);
+    // (x, y, 1 / z) of the rim points at this view's mask edge.
+    let mut pts: Vec<[f64; 3]> = Vec::new();
+    let mut sectors = [false; 12];
+    for &p in rim {
+        let Some((i, _)) = pixel_of(&v.cam, p) else { continue };
+        let Some((u, vv, z)) = image_point(&v.cam, p) else { continue };
+        if !edge[i] {
+            continue;
+        }
+        let a = (vv - cv).atan2(u - cu);
+        sectors[(((a + std::f64::consts::PI) / std::f64::consts::TAU * 12.0) as usize).min(11)] = true;
+        pts.push([(u - v.cam.cx as f64) / v.cam.fx as f64, (vv - v.cam.cy as f64) / v.cam.fy as f64, 1.0 / z]);
+    }
+    if pts.len() < RIM_MIN_POINTS || sectors.iter().filter(|&&s| s).count() < RIM_SECTORS {
+        return None;
+    }
+    fit_plane(&pts).map(|coef| Membrane { coef })
+}
+
+/// 1 / z = a x + b y + c through `pts` ([x, y, 1 / z]) by iteratively
+/// reweighted least squares (rows weighted 1 within twice the residuals'
+/// robust spread, s / r beyond it): a frame's stray points (the sky past a
+/// pane's top edge) do not tilt the plane. None where the points are
+/// collinear.
+pub fn fit_plane(pts: &[[f64; 3]]) -> Option<[f64; 3]> {
+    let mut wts = vec![1.0f64; pts.len()];
+    let mut coef = None;
+    for _ in 0..10 {
+        let (mut a, mut b) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
+        for (p, &wt) in pts.iter().zip(&wts) {
+            let row = [p[0], p[1], 1.0];
+            for r in 0..3 {
+                for c in 0..3 {
+                    a[r][c] += wt * wt * row[r] * row[c];
+                }
+                b[r] += wt * wt * row[r] * p[2];
+            }
+        }
+        let c = solve3(a, b)?;
+        let res: Vec<f64> = pts.iter().map(|p| (c[0] * p[0] + c[1] * p[1] + c[2] - p[2]).abs()).collect();
+        let mut sorted = res.clone();
+        sorted.sort_by(f64::total_cmp);
+        let s = 2.0 * 1.4826 * sorted[sorted.len() / 2] + 1e-12;
+        wts = res.iter().map(|&r| if r < s { 1.0 } else { s / r }).collect();
+        coef = Some(c);
+    }
+    coef
+}
+
+/// The solution of the 3 x 3 system `a` x = `b` (Cramer's rule), None
+/// where `a` is singular.
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: [[f64; 3]; 3]| m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    let d = det(a);
+    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(d.abs() > 1e-12 * scale.powi(3)) {
+        return None;
+    }
+    Some(std::array::from_fn(|k| {
+        let mut m = a;
+        for r in 0..3 {
+            m[r][k] = b[r];
+        }
+        det(m) / d
+    }))
+}
