@@ -46,6 +46,12 @@
 //! its loss on the second (perf/RESULTS.md, thirty-third session: nine
 //! path-traced scenes, two seeds, glass normal MAE after Stage II 41.8 /
 //! 37.8 / 36.8 degrees with view / gradient / halfway).
+//!
+//! Silhouettes cannot place a front of glass that every view sees from one
+//! side: its hull is a wedge in front of it. With given glass masks
+//! ([`SeedParams::rim`]), a view whose glass is ringed by a frame or wall
+//! that Stage I reconstructed seeds its rays on the plane of that rim
+//! instead (the `rim` module).
 
 mod geometry;
 mod normals;

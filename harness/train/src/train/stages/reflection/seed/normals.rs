@@ -29,15 +29,18 @@ fn surfel(found: &[(V3, usize)], i: usize, fixed: Option<V3>, views: &[Prepared]
     }
     let cam = views[vi].cam.centre().map(f64::from);
     let to_cam = normalize(sub(cam, x));
-    let mut n = match normal.for_source(false) {
-        _ if fixed.is_some() => fixed.unwrap_or(to_cam),
-        SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
-        SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
-        SeedNormal::Halfway => field_normal(x, views, &views[vi]).map_or(to_cam, |g| {
-            let g = if dot(g, to_cam) < 0.0 { g.map(|c| -c) } else { g };
-            normalize([g[0] + to_cam[0], g[1] + to_cam[1], g[2] + to_cam[2]])
-        }),
-        _ => to_cam,
+    let mut n = if let Some(f) = fixed {
+        f
+    } else {
+        match normal.for_source(false) {
+            SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
+            SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
+            SeedNormal::Halfway => field_normal(x, views, &views[vi]).map_or(to_cam, |g| {
+                let g = if dot(g, to_cam) < 0.0 { g.map(|c| -c) } else { g };
+                normalize([g[0] + to_cam[0], g[1] + to_cam[1], g[2] + to_cam[2]])
+            }),
+            _ => to_cam,
+        }
     };
     if dot(n, to_cam) < 0.0 {
         n = n.map(|c| -c);
