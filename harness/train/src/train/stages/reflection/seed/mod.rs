@@ -97,8 +97,10 @@ pub struct SeedParams {
     /// Depth from the glass's rim (see the `rim` module): where a view's
     /// mask is ringed by Stage I surface that the other views see at their
     /// masks' edges, its rays' seeds lie on the plane of that rim if the
-    /// hull holds it. For given glass masks (`reflection.seed_rim`); a
-    /// residual's blobs have no such rim.
+    /// hull holds it. Stage II sets it for given glass masks only
+    /// (`reflection.seed_rim`): the residual's masks are not the glass's
+    /// outline on the path-traced suite (perf/RESULTS.md, forty-third
+    /// entry), so their edges do not trace a rim.
     pub rim: bool,
     /// Threads for the march and the normals (0: every core the process
     /// may use). The seeds are the same, bit for bit, at any count: the
@@ -409,8 +411,16 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         let v = &prepared[vi];
         let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
         let z_near = 0.05 * z_far;
-        // On a membrane, where the hull holds it, the rim places the glass
-        // (in place of the ray's first hull point).
+        // A view with a membrane seeds on it where the hull holds it. Where
+        // the hull does not, the ray's first hull point is kept unless it
+        // lies in front of the membrane by more than [`rim::RIM_FRONT`]:
+        // there it is in the wedge, and one such seed, isolated, grows into
+        // a large surfel with a random plane that hides the glass behind it
+        // (`facade`, seed 1: glass normal MAE 26.8 degrees with them, 5.3
+        // without); behind the membrane it is where a curved front bends
+        // away from the rim's plane (`windshield`'s sides, where these
+        // seeds lie a median 0.02 from the glass). perf/RESULTS.md,
+        // forty-fifth entry.
         let on_rim = membranes[vi].and_then(|m| m.depth(v, i)).filter(|&z| z > z_near && z < z_far * 0.98).map(|z| v.unproject(i, z));
         let on_rim = on_rim.filter(|&x| matches!(hull_test(prepared, x, p.agree, min_hits), Verdict::Agrees { significant: true, .. }));
         // A ray that starts inside the hull has no evidence of where
@@ -432,7 +442,12 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
                         best = Some((hits, x));
                     }
                     if significant {
-                        if carved && on_rim.is_none() {
+                        let keep = match membranes[vi] {
+                            None => true,
+                            Some(_) if on_rim.is_some() => false,
+                            Some(m) => m.depth(v, i).is_none_or(|zm| z >= zm * (1.0 - rim::RIM_FRONT)),
+                        };
+                        if carved && keep {
                             found.significant.push((x, vi));
                             found.rim_normals.push(None);
                         }

@@ -34,6 +34,14 @@ pub const RIM_AGREE: f64 = 0.9;
 /// Of 12 directions around a view's mask centre, how many must hold rim
 /// points for the view to get a membrane.
 pub const RIM_SECTORS: usize = 9;
+/// A first hull point of a view with a membrane, on a ray whose membrane
+/// point the hull does not hold, is taken for the wedge in front of the
+/// glass, and dropped, when its depth is less than (1 - this) times the
+/// membrane's. Measured on the suite's fronts (exact masks): on `facade`
+/// such points lie a median 5% of the depth in front of the membrane
+/// (0.09 in front of the glass, a tenth of them 0.96), on `windshield` a
+/// median 3.5% behind it (0.02 from the glass).
+pub const RIM_FRONT: f64 = 0.02;
 /// The fewest rim points a membrane is fitted to.
 const RIM_MIN_POINTS: usize = 12;
 
