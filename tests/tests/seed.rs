@@ -94,6 +94,25 @@ fn views(noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>)
     ring(24, noise, glass)
 }
 
+/// A `SIZE`² view from `eye` towards `target` (vertical field of view
+/// `fov`) and its two per-pixel planes: `pixel` maps the pixel's unit world
+/// ray direction, and the length of its view ray at view depth 1 (which
+/// turns a distance along the ray into view depth), to (residual, depth).
+fn cast(eye: V3, target: [f32; 3], fov: f32, mut pixel: impl FnMut(V3, f64) -> (f32, f32)) -> (Camera, Vec<f32>, Vec<f32>) {
+    let cam = Camera::look_at(eye.map(|c| c as f32), target, [0.0, 0.0, 1.0], fov, SIZE, SIZE);
+    let m = cam.world_to_view;
+    let n = (SIZE * SIZE) as usize;
+    let (mut r, mut z) = (vec![0.0f32; n], vec![0.0f32; n]);
+    for p in 0..n {
+        let (u, v) = ((p as u32 % SIZE) as f64, (p as u32 / SIZE) as f64);
+        let dv = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
+        // World direction R^T d_view.
+        let d = norm([0, 1, 2].map(|j| (0..3).map(|k| m[k][j] as f64 * dv[k]).sum::<f64>()));
+        (r[p], z[p]) = pixel(d, dot(dv, dv).sqrt());
+    }
+    (cam, r, z)
+}
+
 /// [`views`] from `count` cameras.
 fn ring(count: usize, noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
     let mut rng = Rng(7);
@@ -102,24 +121,10 @@ fn ring(count: usize, noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, V
         let a = i as f64 * std::f64::consts::TAU / count as f64;
         let h = if i % 2 == 0 { 0.4 } else { 1.0 };
         let e = [3.0 * a.cos(), 3.0 * a.sin(), h];
-        let cam = Camera::look_at(e.map(|c| c as f32), [0.0; 3], [0.0, 0.0, 1.0], 0.7, SIZE, SIZE);
-        let m = cam.world_to_view;
-        let n = (SIZE * SIZE) as usize;
-        let (mut r, mut z) = (vec![0.0f32; n], vec![0.0f32; n]);
-        for p in 0..n {
-            let (u, v) = ((p as u32 % SIZE) as f64, (p as u32 / SIZE) as f64);
-            let dv = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
-            // World direction R^T d_view.
-            let d = norm([0, 1, 2].map(|j| (0..3).map(|k| m[k][j] as f64 * dv[k]).sum::<f64>()));
-            if glass && hit(e, d, SPHERE_R).is_some() {
-                r[p] = 0.03;
-            } else if uniform(&mut rng) < noise {
-                r[p] = 0.03;
-            }
-            if let Some(t) = hit(e, d, BALL_R) {
-                z[p] = (t / dot(dv, dv).sqrt()) as f32;
-            }
-        }
+        let (cam, r, z) = cast(e, [0.0; 3], 0.7, |d, len| {
+            let r = if (glass && hit(e, d, SPHERE_R).is_some()) || uniform(&mut rng) < noise { 0.03 } else { 0.0 };
+            (r, hit(e, d, BALL_R).map_or(0.0, |t| (t / len) as f32))
+        });
         cams.push(cam);
         res.push(r);
         depth.push(z);
@@ -391,24 +396,16 @@ fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
         let a = (-50.0 + 100.0 * i as f64 / (count - 1) as f64).to_radians();
         let h = if i % 2 == 0 { 0.5 } else { 1.6 };
         let e = [3.5 * a.cos(), 3.5 * a.sin(), h];
-        let cam = Camera::look_at(e.map(|c| c as f32), [0.0, 0.0, 0.7], [0.0, 0.0, 1.0], 0.8, SIZE, SIZE);
-        let m = cam.world_to_view;
-        let n = (SIZE * SIZE) as usize;
-        let (mut r, mut z) = (vec![0.0f32; n], vec![0.0f32; n]);
-        for p in 0..n {
-            let (u, v) = ((p as u32 % SIZE) as f64, (p as u32 / SIZE) as f64);
-            let dv = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
-            let d = norm([0, 1, 2].map(|j| (0..3).map(|k| m[k][j] as f64 * dv[k]).sum::<f64>()));
+        let (cam, r, z) = cast(e, [0.0, 0.0, 0.7], 0.8, |d, len| {
             if d[0] >= -1e-9 {
-                continue;
+                return (0.0, 0.0);
             }
             let t = -e[0] / d[0];
             let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
             let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
             let t = if glass { (-2.0 - e[0]) / d[0] } else { t };
-            r[p] = glass as u8 as f32;
-            z[p] = (t / dot(dv, dv).sqrt()) as f32;
-        }
+            (glass as u8 as f32, (t / len) as f32)
+        });
         cams.push(cam);
         masks.push(r);
         depth.push(z);
