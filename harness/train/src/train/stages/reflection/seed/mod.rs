@@ -62,7 +62,7 @@ pub(crate) use geometry::unproject_pixel;
 use geometry::{box_blur, dot, image_point, in_parallel, normalize, sub, V3};
 pub use normals::{jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 use normals::{gradient_pixels, surfels};
-pub use rim::{fit_plane, RIM_AGREE, RIM_SECTORS};
+pub use rim::fit_plane;
 use tgs_pipelines::Camera;
 
 /// One training view as the seeding sees it.
@@ -191,7 +191,6 @@ pub struct Seed {
     pub scale: f32,
 }
 
-
 /// A view prepared for hull tests: its residual mask and depths.
 struct Prepared {
     cam: Camera,
@@ -249,8 +248,6 @@ impl Prepared {
         unproject_pixel(&self.cam, i, z)
     }
 }
-
-
 
 /// What the views that see a point in front of their Stage I surface say of it.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -469,5 +466,4 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
     }
     found
 }
-
 
