@@ -427,10 +427,7 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
     let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
     let hull = hull_seeding(&sv, &base);
     let rim = hull_seeding(&sv, &SeedParams { rim: true, ..base });
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
     let off = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.position[0] as f64).abs()).collect());
     let tilt = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.normal[0] as f64).clamp(-1.0, 1.0).acos().to_degrees()).collect());
     eprintln!("window: {} hull seeds a median {:.3} off the glass, normals {:.1} degrees; with the rim {} seeds ({} on the planes of {} views) {:.4} off, {:.2} degrees", hull.seeds.len(), off(&hull), tilt(&hull), rim.seeds.len(), rim.rim_seeds, rim.rim_views, off(&rim), tilt(&rim));
@@ -497,7 +494,6 @@ fn rim_plane_fit_recovers_the_plane_through_outliers() {
     }
     let got = fit_plane(&pts).expect("a plane");
     assert!((0..3).all(|k| (got[k] - want[k]).abs() < 1e-3), "with outliers: {got:?}");
-    let line: Vec<[f64; 3]> = (0..20).map(|i| [i as f64 * 0.1, i as f64 * 0.2, 0.3]).collect();
-    assert_eq!(fit_plane(&line), None);
+    assert_eq!(fit_plane(&(0..20).map(|i| [i as f64 * 0.1, i as f64 * 0.2, 0.3]).collect::<Vec<_>>()), None);
     assert_eq!(fit_plane(&[]), None);
 }

@@ -256,8 +256,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let coverage = dm["seed_mask_coverage"].as_f64().unwrap();
     assert!((coverage - glass_px as f64 / all_px as f64).abs() < 1e-12, "{dm}");
     assert!(d.get("seed_mask_coverage").is_none(), "the residual's seeds record no masks: {d}");
-    // The rim (reflection.seed_rim, on with masks) is recorded: views with
-    // a plane, seeds on it; the built-in glass is a ball, ringed by no frame.
+    // The rim (reflection.seed_rim) is recorded; a glass ball has none.
     assert_eq!(dm["seed_rim"], serde_json::json!([0, 0]), "{dm}");
     assert!(d.get("seed_rim").is_none(), "the residual's seeds have no rim: {d}");
     let (dd, default_ply) = seeding("1e-6");
