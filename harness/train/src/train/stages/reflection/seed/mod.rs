@@ -358,9 +358,9 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
     let found = march(&prepared, p);
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
-    let none = vec![None; found.agreeing.len()];
-    let (chosen, fixed, normal) = if dropped { (&found.agreeing, &none, p.normal.without_outline()) } else { (&found.significant, &found.rim_normals, p.normal) };
-    HullSeeding { seeds: surfels(chosen, fixed, &prepared, normal, p.threads), rim_views: found.rim_views, rim_seeds: if dropped { 0 } else { found.rim_seeds }, significance_dropped: dropped }
+    let (chosen, fixed, normal) = if dropped { (&found.agreeing, &[][..], p.normal.without_outline()) } else { (&found.significant, &found.rim_normals[..], p.normal) };
+    let rim_seeds = fixed.iter().filter(|n| n.is_some()).count();
+    HullSeeding { seeds: surfels(chosen, fixed, &prepared, normal, p.threads), rim_views: found.rim_views, rim_seeds, significance_dropped: dropped }
 }
 
 /// Per ray: the first hull point after carved space with the significance
@@ -373,12 +373,10 @@ struct Found {
     rim_normals: Vec<Option<V3>>,
     agreeing: Vec<(V3, usize)>,
     rim_views: usize,
-    /// Of `significant`, those on a membrane.
-    rim_seeds: usize,
 }
 
 fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
-    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_seeds: 0 };
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
     let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
     let total: usize = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).sum();
@@ -396,14 +394,13 @@ fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
         found.significant.extend(part.significant);
         found.rim_normals.extend(part.rim_normals);
         found.agreeing.extend(part.agreeing);
-        found.rim_seeds += part.rim_seeds;
     }
     found
 }
 
 /// [`march`] along `rays` (view, pixel), in order.
 fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32], membranes: &[Option<rim::Membrane>]) -> Found {
-    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_seeds: 0 };
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     for &(vi, i) in rays {
         let v = &prepared[vi];
         let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
@@ -418,7 +415,8 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         // away from the rim's plane (`windshield`'s sides, where these
         // seeds lie a median 0.02 from the glass). perf/RESULTS.md,
         // forty-fifth entry.
-        let on_rim = membranes[vi].and_then(|m| m.depth(v, i)).filter(|&z| z > z_near && z < z_far * 0.98).map(|z| v.unproject(i, z));
+        let z_rim = membranes[vi].and_then(|m| m.depth(v, i));
+        let on_rim = z_rim.filter(|&z| z > z_near && z < z_far * 0.98).map(|z| v.unproject(i, z));
         let on_rim = on_rim.filter(|&x| matches!(hull_test(prepared, x, p.agree, min_hits), Verdict::Agrees { significant: true, .. }));
         // A ray that starts inside the hull has no evidence of where
         // the surface begins (the residual covers what every view sees
@@ -439,11 +437,7 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
                         best = Some((hits, x));
                     }
                     if significant {
-                        let keep = match membranes[vi] {
-                            None => true,
-                            Some(_) if on_rim.is_some() => false,
-                            Some(m) => m.depth(v, i).is_none_or(|zm| z >= zm * (1.0 - rim::RIM_FRONT)),
-                        };
+                        let keep = membranes[vi].is_none() || (on_rim.is_none() && z_rim.is_none_or(|zm| z >= zm * (1.0 - rim::RIM_FRONT)));
                         if carved && keep {
                             found.significant.push((x, vi));
                             found.rim_normals.push(None);
@@ -458,7 +452,6 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         if let (Some(x), Some(m)) = (on_rim, membranes[vi]) {
             found.significant.push((x, vi));
             found.rim_normals.push(Some(m.normal(v)));
-            found.rim_seeds += 1;
         }
         if let Some((_, x)) = best {
             found.agreeing.push((x, vi));

@@ -9,8 +9,8 @@ use super::{dot, in_parallel, normalize, sub, Prepared, Seed, SeedNormal, V3};
 
 /// Normals (`normal`, facing the finding camera) and scales (root mean
 /// squared distance to the 3 nearest) of the found points.
-/// A point with a `fixed` normal (its membrane's, seed/rim.rs) takes that
-/// one, turned to face its camera.
+/// A point with a `fixed` normal (its membrane's, seed/rim.rs; `fixed`
+/// is empty or one per point) takes that one, turned to face its camera.
 pub(super) fn surfels(found: &[(V3, usize)], fixed: &[Option<V3>], views: &[Prepared], normal: SeedNormal, threads: usize) -> Vec<Seed> {
     let index: Vec<usize> = (0..found.len()).collect();
     in_parallel(&index, threads, |run| run.iter().map(|&i| surfel(found, i, fixed.get(i).copied().flatten(), views, normal)).collect::<Vec<Seed>>()).concat()

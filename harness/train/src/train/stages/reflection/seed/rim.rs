@@ -74,42 +74,47 @@ impl Membrane {
     }
 }
 
-/// Pixels of a `w` x `h` image within one pixel (3 x 3) of the mask's edge:
-/// mask pixels with a neighbour outside it, and outside pixels with a
-/// neighbour in it, grown by one pixel.
-fn near_edge(mask: &[bool], w: usize, h: usize) -> Vec<bool> {
-    let at = |x: i64, y: i64| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h && mask[y as usize * w + x as usize];
-    let around = |x: i64, y: i64, f: &dyn Fn(i64, i64) -> bool| (-1..=1).any(|dy| (-1..=1).any(|dx| f(x + dx, y + dy)));
-    let band: Vec<bool> = (0..w * h).map(|i| {
+/// `img` grown by one pixel (3 x 3; nothing beyond the image).
+fn dilate(img: &[bool], w: usize, h: usize) -> Vec<bool> {
+    let at = |x: i64, y: i64| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h && img[y as usize * w + x as usize];
+    (0..w * h).map(|i| {
         let (x, y) = ((i % w) as i64, (i / w) as i64);
-        let m = at(x, y);
-        around(x, y, &|a, b| at(a, b) != m)
-    }).collect();
-    let on = |x: i64, y: i64| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h && band[y as usize * w + x as usize];
-    (0..w * h).map(|i| around((i % w) as i64, (i / w) as i64, &on)).collect()
+        (-1..=1).any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy)))
+    }).collect()
+}
+
+/// A view's mask edge as the rim reads it.
+struct Edge {
+    /// Pixels outside the mask with a mask pixel among their 3 x 3 neighbours.
+    ring: Vec<bool>,
+    /// Pixels within one pixel (3 x 3) of the edge: of the ring, or of the
+    /// mask pixels with a neighbour outside it (or beyond the image).
+    near: Vec<bool>,
+}
+
+impl Edge {
+    fn new(mask: &[bool], w: usize, h: usize) -> Edge {
+        let ring: Vec<bool> = dilate(mask, w, h).iter().zip(mask).map(|(&g, &m)| g && !m).collect();
+        let outside: Vec<bool> = mask.iter().map(|&m| !m).collect();
+        let open = dilate(&outside, w, h);
+        let border = |i: usize| i % w == 0 || i % w == w - 1 || i / w == 0 || i / w == h - 1;
+        let band: Vec<bool> = (0..w * h).map(|i| ring[i] || (mask[i] && (open[i] || border(i)))).collect();
+        Edge { near: dilate(&band, w, h), ring }
+    }
 }
 
 /// The rim points of all views, in view and pixel order: Stage I surface
-/// points just outside a mask that enough views see at a mask edge.
-fn rim_points(views: &[Prepared], edges: &[Vec<bool>]) -> Vec<V3> {
+/// points on a mask's ring that enough views see at a mask edge.
+fn rim_points(views: &[Prepared], edges: &[Edge]) -> Vec<V3> {
     let mut out = Vec::new();
-    for v in views {
-        let (w, h) = (v.cam.width as usize, v.cam.height as usize);
-        for i in 0..w * h {
-            let (x, y) = ((i % w) as i64, (i / w) as i64);
-            let by_mask = (-1..=1i64).any(|dy| (-1..=1i64).any(|dx| {
-                let (a, b) = (x + dx, y + dy);
-                a >= 0 && b >= 0 && (a as usize) < w && (b as usize) < h && v.mask[b as usize * w + a as usize]
-            }));
-            if v.mask[i] || !by_mask || !v.depth[i].is_finite() {
-                continue;
-            }
+    for (v, e) in views.iter().zip(edges) {
+        for i in (0..e.ring.len()).filter(|&i| e.ring[i] && v.depth[i].is_finite()) {
             let p = v.unproject(i, v.depth[i] as f64);
             let (mut seen, mut hit) = (0u32, 0u32);
-            for (u, e) in views.iter().zip(edges) {
+            for (u, f) in views.iter().zip(edges) {
                 if let Some((j, _)) = pixel_of(&u.cam, p) {
                     seen += 1;
-                    hit += e[j] as u32;
+                    hit += f.near[j] as u32;
                 }
             }
             if seen >= 3 && hit as f64 >= RIM_AGREE * seen as f64 {
@@ -122,9 +127,9 @@ fn rim_points(views: &[Prepared], edges: &[Vec<bool>]) -> Vec<V3> {
 
 /// Each view's membrane, where its mask has rim points all around it.
 pub(super) fn membranes(views: &[Prepared]) -> Vec<Option<Membrane>> {
-    let edges: Vec<Vec<bool>> = views.iter().map(|v| near_edge(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
+    let edges: Vec<Edge> = views.iter().map(|v| Edge::new(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
     let rim = rim_points(views, &edges);
-    views.iter().zip(&edges).map(|(v, e)| membrane(v, e, &rim)).collect()
+    views.iter().zip(&edges).map(|(v, e)| membrane(v, &e.near, &rim)).collect()
 }
 
 /// [`membranes`] for one view.
