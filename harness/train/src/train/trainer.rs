@@ -86,6 +86,7 @@ impl Trainer {
         cfg.validate()?;
         let targets = data.train.iter().map(|v| Buffer::from_slice(ctx, "train.target", &v.image.planar())).collect::<Result<Vec<_>>>()?;
         let cameras = data.train.iter().map(|v| v.camera).collect();
+        let masks = data.train.iter().map(|v| v.mask.clone()).collect();
         let (extent, centre) = data.extent();
         Ok(Trainer {
             schedule: Schedule::from_config(&cfg),
@@ -93,7 +94,7 @@ impl Trainer {
             later: None,
             decision: None,
             cache: ScatCache::default(),
-            views: Views { ctx: ctx.clone(), cameras, targets, background: data.background, extent, centre },
+            views: Views { ctx: ctx.clone(), cameras, targets, background: data.background, masks, extent, centre },
             iteration: 0,
             rng,
             stack: Vec::new(),

@@ -1,5 +1,6 @@
 //! The training views as every stage sees them: the device, the cameras,
-//! the target images on the device, the background, and the scene's frame
+//! the target images on the device, the background, the glass masks the
+//! dataset gives, and the scene's frame
 //! (the camera sphere).
 
 use std::sync::Arc;
@@ -12,6 +13,9 @@ pub struct Views {
     /// Each view's target image (planar RGB), on the device.
     pub targets: Vec<Buffer<f32>>,
     pub background: [f32; 3],
+    /// Each view's glass mask where the dataset gives one (`mask_path`;
+    /// `reflection.dataset_masks`), row-major, true on the glass.
+    pub masks: Vec<Option<Vec<bool>>>,
     /// The camera sphere: its radius (the scene extent; positions' learning
     /// rates scale with it) and its centre (the cameras' mean).
     pub extent: f32,

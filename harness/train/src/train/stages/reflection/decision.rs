@@ -55,6 +55,10 @@ pub struct ReflDecision {
     /// (reflection.seed_masks): the share of the training pixels they mark.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_mask_coverage: Option<f64>,
+    /// Where those masks came from: the reflection.seed_masks directory,
+    /// or "dataset" (the training views' mask_path, reflection.dataset_masks).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_mask_source: Option<String>,
     /// With those masks and reflection.seed_rim: the training views whose
     /// glass rim gave them a plane, and the seeds placed on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -42,8 +42,9 @@ impl ReflDecision {
                 d.seeds,
                 match d.seed_mask_coverage {
                     Some(c) => format!(
-                        "glass-mask ({:.1}% of the pixels; reflection.seed_masks{})",
+                        "glass-mask ({:.1}% of the pixels; {}{})",
                         100.0 * c,
+                        if d.seed_mask_source.as_deref() == Some("dataset") { "the dataset's training masks, reflection.dataset_masks" } else { "reflection.seed_masks" },
                         match d.seed_rim {
                             Some([views, seeds]) if views > 0 => format!("; {seeds} on the glass rim's plane of {views} views"),
                             _ => String::new(),

@@ -75,19 +75,18 @@ impl LaterKind for Kind {
         let names = files.as_ref().map(|f| f.view_names).unwrap_or_default();
         let iterations = shared.cfg.reflection.iterations;
         let kept = decision.clone();
-        let dir = &shared.cfg.reflection.seed_masks;
-        let masks = if dir.is_empty() || existing.is_some() {
-            None
-        } else {
-            if names.len() != shared.views.cameras.len() {
-                bail!("reflection.seed_masks needs the training views' names, which only a run with a directory has");
-            }
-            Some(seed_masks(Path::new(dir), names, &shared.views.cameras, shared.cfg.downscale)?)
-        };
-        let (d, model) = begin(shared, existing, kept.as_ref(), reseed, round, masks.as_deref(), |i, cam, r| match (&mut maps, names.get(i)) {
+        let (masks, source) = if existing.is_some() { (None, MaskSource::None) } else { glass_masks(&shared, names)? };
+        let (mut d, model) = begin(shared, existing, kept.as_ref(), reseed, round, masks.as_deref(), |i, cam, r| match (&mut maps, names.get(i)) {
             (Some(maps), Some(name)) if existing.is_none() => write_residual(maps, name, cam, r),
             _ => Ok(()),
         })?;
+        if d.seed_mask_coverage.is_some() {
+            d.seed_mask_source = source.recorded();
+        } else if let MaskSource::Partial { masked, views } = source {
+            if !quiet && d.run {
+                eprintln!("Stage II: {masked} of {views} training views carry a glass mask (mask_path); the seeds come from the residual (reflection.dataset_masks needs every view's)");
+            }
+        }
         *decision = Some(d.clone());
         let model: Option<Box<dyn LaterStage>> = match model {
             Some(m) => Some(Box::new(m)),
@@ -121,6 +120,61 @@ impl LaterKind for Kind {
     }
 }
 
+
+/// Where the hull's glass masks came from (metrics.json's
+/// `reflection.seed_mask_source`).
+enum MaskSource {
+    /// `reflection.seed_masks`: this directory.
+    Dir(String),
+    /// `reflection.dataset_masks`: every training view's `mask_path`.
+    Dataset,
+    /// Some training views carry a mask and others do not: none is used.
+    Partial { masked: usize, views: usize },
+    None,
+}
+
+impl MaskSource {
+    fn recorded(&self) -> Option<String> {
+        match self {
+            MaskSource::Dir(d) => Some(d.clone()),
+            MaskSource::Dataset => Some("dataset".into()),
+            _ => None,
+        }
+    }
+}
+
+/// The glass masks Stage II seeds from: `reflection.seed_masks` when it
+/// names a directory, else the dataset's own training masks when
+/// `reflection.dataset_masks` is on, the hull seeds and every training
+/// view has one; None (the residual's masks) otherwise.
+fn glass_masks(shared: &Shared<'_>, names: &[String]) -> Result<(Option<Vec<Vec<bool>>>, MaskSource)> {
+    let rc = &shared.cfg.reflection;
+    let v = shared.views;
+    if !rc.seed_masks.is_empty() {
+        if names.len() != v.cameras.len() {
+            bail!("reflection.seed_masks needs the training views' names, which only a run with a directory has");
+        }
+        let m = seed_masks(Path::new(&rc.seed_masks), names, &v.cameras, shared.cfg.downscale)?;
+        return Ok((Some(m), MaskSource::Dir(rc.seed_masks.clone())));
+    }
+    if !rc.dataset_masks || !rc.init.parts().1 {
+        return Ok((None, MaskSource::None));
+    }
+    let masked = v.masks.iter().filter(|m| m.is_some()).count();
+    if masked == 0 {
+        return Ok((None, MaskSource::None));
+    }
+    if masked < v.masks.len() {
+        return Ok((None, MaskSource::Partial { masked, views: v.masks.len() }));
+    }
+    for (i, (m, cam)) in v.masks.iter().zip(&v.cameras).enumerate() {
+        let n = (cam.width * cam.height) as usize;
+        if m.as_ref().map_or(0, |m| m.len()) != n {
+            bail!("reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image", names.get(i).cloned().unwrap_or_else(|| i.to_string()), m.as_ref().map_or(0, |m| m.len()), cam.width, cam.height);
+        }
+    }
+    Ok((Some(v.masks.iter().flatten().cloned().collect()), MaskSource::Dataset))
+}
 
 /// `reflection.seed_masks`: each training view's glass mask from
 /// `dir/NAME.png` (NAME the view's name without its extension), at the
@@ -239,6 +293,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         env_proxy: None,
         seed_mask_coverage: None,
         seed_rim: None,
+        seed_mask_source: None,
         round,
     };
     if let Some(m) = masks {

@@ -1,0 +1,89 @@
+//! The glass masks a dataset gives for its training views (`mask_path` in
+//! transforms_train.json; `reflection.dataset_masks`, on by default): Stage
+//! II seeds from them exactly as from the same masks given as a directory
+//! (`reflection.seed_masks`), bit for bit, and metrics.json records where
+//! they came from. Turned off, or where a training view has no mask, the
+//! seeds come from the residual.
+
+use std::path::{Path, PathBuf};
+use tgs::train::run::{train, TrainArgs};
+use tgs_tests::{check_validation, ctx_shared, TempDir};
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+fn sets(s: &[&str]) -> Vec<String> {
+    s.iter().map(|s| s.to_string()).collect()
+}
+
+#[test]
+fn stage_two_seeds_from_the_datasets_training_masks() {
+    let ctx = ctx_shared();
+    let base = TempDir::new("train-masks");
+    let _ = std::fs::remove_dir_all(&base);
+    let scene = tgs_tests::tiny_glass_scene(&base.join("scene"));
+    let stage1 = base.join("stage1");
+    let a1 = TrainArgs { dataset: Some(scene.clone()), out: stage1.clone(), preset: Some("quick".into()), set: sets(&["stages=\"I\"", "iterations=200", "test_interval=0", "checkpoint_interval=0"]), quiet: true, ..Default::default() };
+    assert_eq!(train(ctx, &a1).unwrap().iteration, 200);
+    // One Stage II step from that Stage I with the settings `extra`: the
+    // decision metrics.json records and reflection.ply's bytes.
+    let step = |tag: &str, extra: Vec<String>| -> (serde_json::Value, Vec<u8>) {
+        let out = base.join(tag);
+        let mut set = sets(&["reflection.iterations=1", "test_interval=0"]);
+        set.extend(extra);
+        let a = TrainArgs { out: out.clone(), set, quiet: true, from: Some(stage1.clone()), stages: Some("II".into()), ..Default::default() };
+        assert_eq!(train(ctx, &a).unwrap().iteration, 201);
+        (json(&out.join("metrics.json"))["reflection"].clone(), std::fs::read(out.join("reflection.ply")).unwrap())
+    };
+
+    // The default: the dataset's masks, and the share of the pixels they mark.
+    let (dd, dataset_ply) = step("dataset", vec![]);
+    assert_eq!(dd["seed_mask_source"], "dataset", "{dd}");
+    let masks = base.join("masks");
+    std::fs::create_dir_all(&masks).unwrap();
+    let (mut glass, mut all) = (0usize, 0usize);
+    let mut i = 0;
+    while scene.join(format!("train/r_{i}_mask.png")).is_file() {
+        let src = scene.join(format!("train/r_{i}_mask.png"));
+        let (_, _, m) = tgs::data::image_io::read_mask(&src).unwrap();
+        glass += m.iter().filter(|&&g| g).count();
+        all += m.len();
+        std::fs::copy(&src, masks.join(format!("r_{i}.png"))).unwrap();
+        i += 1;
+    }
+    assert!(i > 0 && glass > 0);
+    let coverage = dd["seed_mask_coverage"].as_f64().unwrap();
+    assert!((coverage - glass as f64 / all as f64).abs() < 1e-12, "{dd}");
+
+    // The same masks as a directory: the same seeds, bit for bit.
+    let (dm, dir_ply) = step("dir", vec![format!("reflection.seed_masks={}", masks.display())]);
+    assert_eq!(dm["seed_mask_source"].as_str().map(PathBuf::from), Some(masks.clone()), "{dm}");
+    assert_eq!(dm["seed_mask_coverage"], dd["seed_mask_coverage"]);
+    assert!(dataset_ply == dir_ply, "the dataset's masks seed differently from the same masks in a directory");
+
+    // Turned off: the residual's seeds, recorded without masks.
+    let (dr, residual_ply) = step("residual", sets(&["reflection.dataset_masks=false"]));
+    assert!(dr.get("seed_mask_coverage").is_none() && dr.get("seed_mask_source").is_none(), "{dr}");
+    assert!(dr["seeds"].as_u64().unwrap() > 0 && residual_ply != dataset_ply);
+    // The paper's copy start has no hull to seed: the masks are not used
+    // and nothing is refused.
+    let (dc, _) = step("copy", sets(&["reflection.init=\"copy\""]));
+    assert!(dc.get("seed_mask_source").is_none() && dc["copied"].as_u64().unwrap() > 0, "{dc}");
+
+    // A dataset where one training view has no mask: the residual's seeds.
+    let partial = base.join("partial");
+    tgs_tests::copy_dir(&scene, &partial);
+    let tf = partial.join("transforms_train.json");
+    let mut doc = json(&tf);
+    doc["frames"][1].as_object_mut().unwrap().remove("mask_path");
+    std::fs::write(&tf, serde_json::to_string(&doc).unwrap()).unwrap();
+    let out = base.join("partial-run");
+    let a = TrainArgs { dataset: Some(partial), out: out.clone(), preset: Some("quick".into()), set: sets(&["stages=\"I,II\"", "iterations=20", "reflection.iterations=1", "reflection.min_residual=0", "reflection.min_view_dependence=0", "test_interval=0", "checkpoint_interval=0"]), quiet: true, ..Default::default() };
+    assert_eq!(train(ctx, &a).unwrap().iteration, 21);
+    let dp = json(&out.join("metrics.json"))["reflection"].clone();
+    assert_eq!(dp["run"], true, "{dp}");
+    assert!(dp.get("seed_mask_coverage").is_none() && dp.get("seed_mask_source").is_none(), "{dp}");
+    let _ = std::fs::remove_dir_all(&base);
+    check_validation(ctx);
+}
