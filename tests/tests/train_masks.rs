@@ -3,7 +3,8 @@
 //! II seeds from them exactly as from the same masks given as a directory
 //! (`reflection.seed_masks`), bit for bit, and metrics.json records where
 //! they came from. Turned off, or where a training view has no mask, the
-//! seeds come from the residual.
+//! seeds come from the residual; masks that mark no glass anywhere skip
+//! Stage II.
 
 use std::path::{Path, PathBuf};
 use tgs::train::run::{train, TrainArgs};
@@ -84,6 +85,23 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let dp = json(&out.join("metrics.json"))["reflection"].clone();
     assert_eq!(dp["run"], true, "{dp}");
     assert!(dp.get("seed_mask_coverage").is_none() && dp.get("seed_mask_source").is_none(), "{dp}");
+
+    // Masks that mark no glass in any training view: no reflection set,
+    // though the residual alone (thresholds 0) would have run one.
+    let blank = base.join("blank");
+    tgs_tests::copy_dir(&scene, &blank);
+    for k in 0..i {
+        let m = blank.join(format!("train/r_{k}_mask.png"));
+        let (w, h, _) = tgs::data::image_io::read_mask(&m).unwrap();
+        tgs::data::image_io::write_mask(&m, w, h, &vec![false; (w * h) as usize]).unwrap();
+    }
+    let out = base.join("blank-run");
+    let a = TrainArgs { dataset: Some(blank), out: out.clone(), ..a };
+    assert_eq!(train(ctx, &a).unwrap().iteration, 20);
+    let m = json(&out.join("metrics.json"));
+    let db = &m["reflection"];
+    assert!(db["run"] == false && db["seed_mask_coverage"] == 0.0 && db["seed_mask_source"] == "dataset", "{db}");
+    assert_eq!(m["stages"].as_array().unwrap().len(), 1, "{m}");
     let _ = std::fs::remove_dir_all(&base);
     check_validation(ctx);
 }

@@ -148,7 +148,8 @@ pub struct ReflectionConfig {
     /// size, reduced by `downscale` as the images are): the residual hull
     /// is then these masks' hull, carved in front of Stage I's surface as
     /// the residual's is, and Stage II runs whatever the residual measured
-    /// (the masks say where the glass is). Empty (the default): the
+    /// (the masks say where the glass is), and not at all where they mark
+    /// no glass in any view. Empty (the default): the
     /// dataset's training masks (`dataset_masks`), else the residual's. A relative path is taken from the working
     /// directory where it is given and saved absolute, so that a resumed
     /// or continued run finds the masks from anywhere. For masks a user has (or a segmentation gives), and for

@@ -62,6 +62,11 @@ impl ReflDecision {
                 },
                 iterations
             )
+        } else if d.seed_mask_coverage.is_some() {
+            format!(
+                "Stage II skipped: the glass masks ({}) mark no pixel of any training view: no glass to reflect",
+                if d.seed_mask_source.as_deref() == Some("dataset") { "the dataset's training masks, reflection.dataset_masks" } else { "reflection.seed_masks" }
+            )
         } else if d.residual_mean < d.threshold {
             format!(
                 "Stage II skipped: the Stage I residual {:.4} is below reflection.min_residual {:.4} ({:.1}% of pixels above 0.05): the scene shows no view-dependent energy worth a reflection set",

@@ -304,7 +304,14 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
     // recorded decision) was decided on when it was made, and the
     // second round (reflection.reseed) runs whatever its residual: the
     // first decided.
-    d.run = reseed || existing.is_some() || d.seed_mask_coverage.is_some_and(|c| c > 0.0) || (d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold);
+    // Glass masks decide alone: some glass, the stage runs whatever the
+    // residual measured; none in any view, there is nothing to reflect.
+    d.run = reseed
+        || existing.is_some()
+        || match d.seed_mask_coverage {
+            Some(c) => c > 0.0,
+            None => d.residual_mean >= d.threshold && d.view_dependence >= d.view_dependence_threshold,
+        };
     let mut model = None;
     if d.run {
         if existing.is_none() {
