@@ -2,9 +2,9 @@
 //! transforms_train.json; `reflection.dataset_masks`, on by default): Stage
 //! II seeds from them exactly as from the same masks given as a directory
 //! (`reflection.seed_masks`), bit for bit, and metrics.json records where
-//! they came from. Turned off, or where a training view has no mask, the
-//! seeds come from the residual; masks that mark no glass anywhere skip
-//! Stage II.
+//! they came from, and from how many views. A view without a mask takes
+//! no part in the seeding; turned off, the seeds come from the residual;
+//! masks that mark no glass anywhere skip Stage II.
 
 use std::path::{Path, PathBuf};
 use tgs::train::run::{train, TrainArgs};
@@ -41,6 +41,8 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     // The default: the dataset's masks, and the share of the pixels they mark.
     let (dd, dataset_ply) = step("dataset", vec![]);
     assert_eq!(dd["seed_mask_source"], "dataset", "{dd}");
+    let n = dd["seed_mask_views"][1].as_u64().unwrap();
+    assert_eq!(dd["seed_mask_views"], serde_json::json!([n, n]));
     let masks = base.join("masks");
     std::fs::create_dir_all(&masks).unwrap();
     let (mut glass, mut all) = (0usize, 0usize);
@@ -62,6 +64,12 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     assert_eq!(dm["seed_mask_source"].as_str().map(PathBuf::from), Some(masks.clone()), "{dm}");
     assert_eq!(dm["seed_mask_coverage"], dd["seed_mask_coverage"]);
     assert!(dataset_ply == dir_ply, "the dataset's masks seed differently from the same masks in a directory");
+    // A directory with no view's mask is refused, naming it.
+    let empty = base.join("no-masks");
+    std::fs::create_dir_all(&empty).unwrap();
+    let a = TrainArgs { out: base.join("refused"), set: vec![format!("reflection.seed_masks={}", empty.display())], quiet: true, from: Some(stage1.clone()), stages: Some("II".into()), ..Default::default() };
+    let e = format!("{:#}", train(ctx, &a).err().expect("a directory without masks is refused"));
+    assert!(e.contains("no-masks") && e.contains("no glass mask") && e.contains("r_0.png"), "{e}");
 
     // Turned off: the residual's seeds, recorded without masks.
     let (dr, residual_ply) = step("residual", sets(&["reflection.dataset_masks=false"]));
@@ -72,7 +80,7 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let (dc, _) = step("copy", sets(&["reflection.init=\"copy\""]));
     assert!(dc.get("seed_mask_source").is_none() && dc["copied"].as_u64().unwrap() > 0, "{dc}");
 
-    // A dataset where one training view has no mask: the residual's seeds.
+    // A dataset where one training view has no mask: the others seed.
     let partial = base.join("partial");
     tgs_tests::copy_dir(&scene, &partial);
     let tf = partial.join("transforms_train.json");
@@ -83,8 +91,7 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let a = TrainArgs { dataset: Some(partial), out: out.clone(), preset: Some("quick".into()), set: sets(&["stages=\"I,II\"", "iterations=20", "reflection.iterations=1", "reflection.min_residual=0", "reflection.min_view_dependence=0", "test_interval=0", "checkpoint_interval=0"]), quiet: true, ..Default::default() };
     assert_eq!(train(ctx, &a).unwrap().iteration, 21);
     let dp = json(&out.join("metrics.json"))["reflection"].clone();
-    assert_eq!(dp["run"], true, "{dp}");
-    assert!(dp.get("seed_mask_coverage").is_none() && dp.get("seed_mask_source").is_none(), "{dp}");
+    assert!(dp["run"] == true && dp["seed_mask_source"] == "dataset" && dp["seed_mask_views"] == serde_json::json!([n - 1, n]), "{dp}");
 
     // Masks that mark no glass in any training view: no reflection set,
     // though the residual alone (thresholds 0) would have run one.

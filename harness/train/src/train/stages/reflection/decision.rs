@@ -59,6 +59,10 @@ pub struct ReflDecision {
     /// or "dataset" (the training views' mask_path, reflection.dataset_masks).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_mask_source: Option<String>,
+    /// The training views with a mask, of all: only those seed (the
+    /// masks' hull is theirs; the others train as before).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_mask_views: Option<[u32; 2]>,
     /// With those masks and reflection.seed_rim: the training views whose
     /// glass rim gave them a plane, and the seeds placed on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]

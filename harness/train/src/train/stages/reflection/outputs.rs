@@ -42,8 +42,12 @@ impl ReflDecision {
                 d.seeds,
                 match d.seed_mask_coverage {
                     Some(c) => format!(
-                        "glass-mask ({:.1}% of the pixels; {}{})",
+                        "glass-mask ({:.1}% of the pixels{}; {}{})",
                         100.0 * c,
+                        match d.seed_mask_views {
+                            Some([n, all]) if n < all => format!(" of the {n} of {all} training views that have one"),
+                            _ => String::new(),
+                        },
                         if d.seed_mask_source.as_deref() == Some("dataset") { "the dataset's training masks, reflection.dataset_masks" } else { "reflection.seed_masks" },
                         match d.seed_rim {
                             Some([views, seeds]) if views > 0 => format!("; {seeds} on the glass rim's plane of {views} views"),

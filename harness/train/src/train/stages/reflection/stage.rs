@@ -82,10 +82,6 @@ impl LaterKind for Kind {
         })?;
         if d.seed_mask_coverage.is_some() {
             d.seed_mask_source = source.recorded();
-        } else if let MaskSource::Partial { masked, views } = source {
-            if !quiet && d.run {
-                eprintln!("Stage II: {masked} of {views} training views carry a glass mask (mask_path); the seeds come from the residual (reflection.dataset_masks needs every view's)");
-            }
         }
         *decision = Some(d.clone());
         let model: Option<Box<dyn LaterStage>> = match model {
@@ -126,10 +122,8 @@ impl LaterKind for Kind {
 enum MaskSource {
     /// `reflection.seed_masks`: this directory.
     Dir(String),
-    /// `reflection.dataset_masks`: every training view's `mask_path`.
+    /// `reflection.dataset_masks`: the training views' `mask_path`.
     Dataset,
-    /// Some training views carry a mask and others do not: none is used.
-    Partial { masked: usize, views: usize },
     None,
 }
 
@@ -143,11 +137,13 @@ impl MaskSource {
     }
 }
 
-/// The glass masks Stage II seeds from: `reflection.seed_masks` when it
-/// names a directory, else the dataset's own training masks when
-/// `reflection.dataset_masks` is on, the hull seeds and every training
-/// view has one; None (the residual's masks) otherwise.
-fn glass_masks(shared: &Shared<'_>, names: &[String]) -> Result<(Option<Vec<Vec<bool>>>, MaskSource)> {
+/// The glass masks Stage II seeds from, per training view (None for a
+/// view without one, which then takes no part in the seeding):
+/// `reflection.seed_masks` when it names a directory, else the dataset's
+/// own training masks when `reflection.dataset_masks` is on, the set has
+/// hull seeds and any training view has one; None (the residual's masks)
+/// otherwise.
+fn glass_masks(shared: &Shared<'_>, names: &[String]) -> Result<(Option<Vec<Option<Vec<bool>>>>, MaskSource)> {
     let rc = &shared.cfg.reflection;
     let v = shared.views;
     if !rc.seed_masks.is_empty() {
@@ -164,23 +160,21 @@ fn glass_masks(shared: &Shared<'_>, names: &[String]) -> Result<(Option<Vec<Vec<
     if masked == 0 {
         return Ok((None, MaskSource::None));
     }
-    if masked < v.masks.len() {
-        return Ok((None, MaskSource::Partial { masked, views: v.masks.len() }));
-    }
     for (i, (m, cam)) in v.masks.iter().zip(&v.cameras).enumerate() {
         let n = (cam.width * cam.height) as usize;
-        if m.as_ref().map_or(0, |m| m.len()) != n {
-            bail!("reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image", names.get(i).cloned().unwrap_or_else(|| i.to_string()), m.as_ref().map_or(0, |m| m.len()), cam.width, cam.height);
+        if let Some(m) = m.as_ref().filter(|m| m.len() != n) {
+            bail!("reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image", names.get(i).cloned().unwrap_or_else(|| i.to_string()), m.len(), cam.width, cam.height);
         }
     }
-    Ok((Some(v.masks.iter().flatten().cloned().collect()), MaskSource::Dataset))
+    Ok((Some(v.masks.clone()), MaskSource::Dataset))
 }
 
 /// `reflection.seed_masks`: each training view's glass mask from
 /// `dir/NAME.png` (NAME the view's name without its extension), at the
 /// view's size or `downscale` times it (then reduced as the dataset's
-/// masks are: glass only where every pixel it covers is).
-pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u32) -> Result<Vec<Vec<bool>>> {
+/// masks are: glass only where every pixel it covers is); None for a view
+/// without one. Refused when no view has one.
+pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u32) -> Result<Vec<Option<Vec<bool>>>> {
     if !dir.is_dir() {
         bail!("reflection.seed_masks: {} is not a directory", dir.display());
     }
@@ -191,19 +185,25 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
             let stem = Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| name.clone());
             let path = dir.join(format!("{stem}.png"));
             if !path.is_file() {
-                bail!("reflection.seed_masks: {} is missing (the glass mask of training view {name})", path.display());
+                return Ok(None);
             }
             let (w, h, m) = read_mask(&path).with_context(|| "reflection.seed_masks")?;
             let f = downscale.max(1);
             if (w, h) == (cam.width, cam.height) {
-                Ok(m)
+                Ok(Some(m))
             } else if f > 1 && (w / f, h / f) == (cam.width, cam.height) {
-                Ok(downscale_mask(w, h, &m, f))
+                Ok(Some(downscale_mask(w, h, &m, f)))
             } else {
                 bail!("reflection.seed_masks: {} is {w}x{h}; training view {name} is {}x{}{}", path.display(), cam.width, cam.height, if f > 1 { format!(" ({f} times that before downscale)") } else { String::new() })
             }
         })
-        .collect()
+        .collect::<Result<Vec<_>>>()
+        .and_then(|m| {
+            if m.iter().all(Option::is_none) {
+                bail!("reflection.seed_masks: {} holds no glass mask of any of the {} training views (VIEW.png, e.g. {}.png)", dir.display(), names.len(), names.first().and_then(|n| Path::new(n).file_stem()).map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
+            }
+            Ok(m)
+        })
 }
 
 /// The view-dependence measure reduces each view to at most this many
@@ -227,7 +227,7 @@ const VD_SAMPLES: usize = 1 << 16;
 /// which make the stage run whatever the residual measured (if any pixel
 /// is glass). Returns the decision and the new reflection set with its
 /// light (None when one exists or the stage does not run).
-pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, reseed: bool, round: u32, masks: Option<&[Vec<bool>]>, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<(ReflDecision, Option<ReflectionModel>)> {
+pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, reseed: bool, round: u32, masks: Option<&[Option<Vec<bool>>]>, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<(ReflDecision, Option<ReflectionModel>)> {
     let (cfg, v) = (s.cfg, s.views);
     let shading = ReflectionShading::new(&v.ctx)?;
     let sh = cfg.sh_degree_at(cfg.iterations);
@@ -236,7 +236,8 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
     s.cache.clear();
     // Per view: residual magnitude and Stage I surface depth (seeding),
     // and both reduced for the view-dependence measure.
-    let mut maps: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
+    // (view, hull map, depth) of the views that seed.
+    let mut maps: Vec<(usize, Vec<f32>, Vec<f32>)> = Vec::new();
     let mut vd_maps: Vec<VdMap> = Vec::new();
     let (copy, hull) = cfg.reflection.init.parts();
     for (i, cam) in v.cameras.iter().enumerate() {
@@ -260,11 +261,12 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         if hull && existing.is_none() {
             // Given masks stand in for the residual: 1 on the glass, 0
             // elsewhere, taken as they are (no blur, threshold 0.5).
-            let hull_map = match masks.and_then(|m| m.get(i)) {
-                Some(m) => m.iter().map(|&g| g as u8 as f32).collect(),
-                None => mag.to_vec(),
-            };
-            maps.push((hull_map, depth));
+            // A view without a mask among masked ones takes no part.
+            match masks.map(|m| m.get(i).and_then(Option::as_ref)) {
+                Some(Some(m)) => maps.push((i, m.iter().map(|&g| g as u8 as f32).collect(), depth)),
+                Some(None) => {}
+                None => maps.push((i, mag.to_vec(), depth)),
+            }
         }
         s.cache.push(buf, sh_view);
     }
@@ -294,11 +296,13 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         seed_mask_coverage: None,
         seed_rim: None,
         seed_mask_source: None,
+        seed_mask_views: None,
         round,
     };
     if let Some(m) = masks {
-        let (glass, all) = m.iter().fold((0usize, 0usize), |(g, a), v| (g + v.iter().filter(|&&x| x).count(), a + v.len()));
+        let (glass, all) = m.iter().flatten().fold((0usize, 0usize), |(g, a), v| (g + v.iter().filter(|&&x| x).count(), a + v.len()));
         d.seed_mask_coverage = Some(glass as f64 / all.max(1) as f64);
+        d.seed_mask_views = Some([m.iter().flatten().count() as u32, m.len() as u32]);
     }
     // A reflection set that exists (a resumed Stage II without a
     // recorded decision) was decided on when it was made, and the
@@ -316,7 +320,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
     if d.run {
         if existing.is_none() {
             let rc = &cfg.reflection;
-            let views: Vec<SeedView> = v.cameras.iter().zip(&maps).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+            let views: Vec<SeedView> = maps.iter().map(|(i, r, z)| SeedView { camera: v.cameras[*i], residual: r, depth: z }).collect();
             let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal.for_source(masks.is_some()), significance: rc.seed_significance as f64, ..SeedParams::default() };
             let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, ..p } } else { p };
             let seeds = if hull {
