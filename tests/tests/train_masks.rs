@@ -64,6 +64,16 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     assert_eq!(dm["seed_mask_source"].as_str().map(PathBuf::from), Some(masks.clone()), "{dm}");
     assert_eq!(dm["seed_mask_coverage"], dd["seed_mask_coverage"]);
     assert!(dataset_ply == dir_ply, "the dataset's masks seed differently from the same masks in a directory");
+    // The masks of every 4th view alone: those seed, at a looser
+    // significance that so few views can beat (1e-6 needs more).
+    let sparse = base.join("sparse");
+    std::fs::create_dir_all(&sparse).unwrap();
+    for k in (0..i).step_by(4) {
+        std::fs::copy(masks.join(format!("r_{k}.png")), sparse.join(format!("r_{k}.png"))).unwrap();
+    }
+    let (ds, _) = step("sparse", vec![format!("reflection.seed_masks={}", sparse.display())]);
+    assert_eq!(ds["seed_mask_views"], serde_json::json!([n.div_ceil(4), n]));
+    assert!(ds["seed_significance"].as_f64().is_some_and(|a| a > 1e-6) && ds["significance_dropped"] == false && ds["seeds"].as_u64().unwrap() > 0, "{ds}");
     // A directory with no view's mask is refused, naming it.
     let empty = base.join("no-masks");
     std::fs::create_dir_all(&empty).unwrap();
@@ -80,18 +90,22 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let (dc, _) = step("copy", sets(&["reflection.init=\"copy\""]));
     assert!(dc.get("seed_mask_source").is_none() && dc["copied"].as_u64().unwrap() > 0, "{dc}");
 
-    // A dataset where one training view has no mask: the others seed.
+    // A dataset with a mask for every 4th training view only: those seed.
     let partial = base.join("partial");
     tgs_tests::copy_dir(&scene, &partial);
     let tf = partial.join("transforms_train.json");
     let mut doc = json(&tf);
-    doc["frames"][1].as_object_mut().unwrap().remove("mask_path");
+    for (k, f) in doc["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+        if k % 4 != 0 {
+            f.as_object_mut().unwrap().remove("mask_path");
+        }
+    }
     std::fs::write(&tf, serde_json::to_string(&doc).unwrap()).unwrap();
     let out = base.join("partial-run");
     let a = TrainArgs { dataset: Some(partial), out: out.clone(), preset: Some("quick".into()), set: sets(&["stages=\"I,II\"", "iterations=20", "reflection.iterations=1", "reflection.min_residual=0", "reflection.min_view_dependence=0", "test_interval=0", "checkpoint_interval=0"]), quiet: true, ..Default::default() };
     assert_eq!(train(ctx, &a).unwrap().iteration, 21);
     let dp = json(&out.join("metrics.json"))["reflection"].clone();
-    assert!(dp["run"] == true && dp["seed_mask_source"] == "dataset" && dp["seed_mask_views"] == serde_json::json!([n - 1, n]), "{dp}");
+    assert!(dp["run"] == true && dp["seed_mask_source"] == "dataset" && dp["seed_mask_views"] == serde_json::json!([n.div_ceil(4), n]), "{dp}");
 
     // Masks that mark no glass in any training view: no reflection set,
     // though the residual alone (thresholds 0) would have run one.

@@ -142,14 +142,16 @@ pub struct ReflectionConfig {
     /// against view's 40.2 (fifteenth session): a real residual's hull
     /// places seeds with depth noise that turns their plane nearly random.
     pub seed_normal: SeedNormal,
-    /// A directory of glass masks, one per training view (`DIR/VIEW.png`,
+    /// A directory of glass masks, one per training view that has one (`DIR/VIEW.png`,
     /// VIEW the view image's name without its extension; 8-bit, at least
     /// 128 where the pixel's first hit is glass; at the dataset's image
     /// size, reduced by `downscale` as the images are): the residual hull
     /// is then these masks' hull, carved in front of Stage I's surface as
     /// the residual's is, and Stage II runs whatever the residual measured
     /// (the masks say where the glass is), and not at all where they mark
-    /// no glass in any view. Empty (the default): the
+    /// no glass in any view. A view without a mask takes no part in the
+    /// seeding (the hull is the masked views'); a directory that holds no
+    /// view's mask is refused. Empty (the default): the
     /// dataset's training masks (`dataset_masks`), else the residual's. A relative path is taken from the working
     /// directory where it is given and saved absolute, so that a resumed
     /// or continued run finds the masks from anywhere. For masks a user has (or a segmentation gives), and for
@@ -162,10 +164,8 @@ pub struct ReflectionConfig {
     /// Without `seed_masks`: take the glass masks the dataset gives for its
     /// training views (`mask_path` in transforms_train.json, the format's
     /// evaluation key; the built-in scenes write them) as if they were
-    /// given there, when every training view has one. With the hull's
-    /// seeds only (`init` "hull" or "copy+hull"). Where some views lack a
-    /// mask the seeds come from the residual and the progress line says
-    /// so. On the path-traced suite mask seeds took the glass normal MAE
+    /// given there, from the training views that have one. With the
+    /// hull's seeds only (`init` "hull" or "copy+hull"). On the path-traced suite mask seeds took the glass normal MAE
     /// after Stage II from 34.2° (residual seeds) to 13.4° on the mean and
     /// kept the normals beside the glass at Stage I's (perf/RESULTS.md,
     /// forty-fourth to forty-sixth entries). false: the residual's seeds

@@ -63,6 +63,10 @@ pub struct ReflDecision {
     /// masks' hull is theirs; the others train as before).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_mask_views: Option<[u32; 2]>,
+    /// With those masks: the looser significance level the seeds beat,
+    /// where none beat reflection.seed_significance (few masked views).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_significance: Option<f64>,
     /// With those masks and reflection.seed_rim: the training views whose
     /// glass rim gave them a plane, and the seeds placed on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -52,7 +52,7 @@ impl ReflDecision {
                         match d.seed_rim {
                             Some([views, seeds]) if views > 0 => format!("; {seeds} on the glass rim's plane of {views} views"),
                             _ => String::new(),
-                        }
+                        } + &d.seed_significance.map(|a| format!("; hull points beat chance at {a:e} only, too few masked views for reflection.seed_significance")).unwrap_or_default()
                     ),
                     None => "residual".into(),
                 },

@@ -206,6 +206,12 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
         })
 }
 
+/// With glass masks: the significance levels tried, in order, where no
+/// hull point beats chance at `reflection.seed_significance` (15 masked
+/// views whose masks cover 45% of the pixels cannot beat 1e-6 even all
+/// together: 0.45^15 = 6e-6).
+const MASK_SIGNIFICANCE: [f64; 3] = [1e-4, 1e-2, 1e-1];
+
 /// The view-dependence measure reduces each view to at most this many
 /// pixels a side (box-averaged: Monte Carlo noise in the images, which
 /// also spreads the residual across views, is then about as strong at any
@@ -297,6 +303,7 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         seed_rim: None,
         seed_mask_source: None,
         seed_mask_views: None,
+        seed_significance: None,
         round,
     };
     if let Some(m) = masks {
@@ -324,7 +331,20 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
             let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal.for_source(masks.is_some()), significance: rc.seed_significance as f64, ..SeedParams::default() };
             let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, ..p } } else { p };
             let seeds = if hull {
-                let h = hull_seeding(&views, &p);
+                let mut h = hull_seeding(&views, &p);
+                // Given masks with few views (masks for some views only):
+                // no hull point can beat chance at the set significance,
+                // though the masks are no noise. The strictest looser
+                // level that some point beats, before the fallback.
+                if masks.is_some() && h.significance_dropped {
+                    for alpha in MASK_SIGNIFICANCE.into_iter().filter(|&a| a > p.significance) {
+                        let relaxed = hull_seeding(&views, &SeedParams { significance: alpha, ..p });
+                        if !relaxed.significance_dropped {
+                            (h, d.seed_significance) = (relaxed, Some(alpha));
+                            break;
+                        }
+                    }
+                }
                 d.significance_dropped = h.significance_dropped;
                 d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
                 h.seeds
