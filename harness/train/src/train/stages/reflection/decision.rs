@@ -74,6 +74,15 @@ pub struct ReflDecision {
 }
 
 impl ReflDecision {
+    /// The setting the glass masks came from, for the progress line.
+    pub fn mask_setting(&self) -> &'static str {
+        if self.seed_mask_source.as_deref() == Some("dataset") {
+            "the dataset's training masks, reflection.dataset_masks"
+        } else {
+            "reflection.seed_masks"
+        }
+    }
+
     /// The recorded parallax proxy of the cube map.
     pub fn proxy(&self) -> Option<EnvProxy> {
         self.env_proxy.map(|p| EnvProxy { centre: [p[0], p[1], p[2]], radius: p[3] })

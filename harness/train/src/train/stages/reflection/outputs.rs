@@ -48,7 +48,7 @@ impl ReflDecision {
                             Some([n, all]) if n < all => format!(" of the {n} of {all} training views that have one"),
                             _ => String::new(),
                         },
-                        if d.seed_mask_source.as_deref() == Some("dataset") { "the dataset's training masks, reflection.dataset_masks" } else { "reflection.seed_masks" },
+                        d.mask_setting(),
                         match d.seed_rim {
                             Some([views, seeds]) if views > 0 => format!("; {seeds} on the glass rim's plane of {views} views"),
                             _ => String::new(),
@@ -69,7 +69,7 @@ impl ReflDecision {
         } else if d.seed_mask_coverage.is_some() {
             format!(
                 "Stage II skipped: the glass masks ({}) mark no pixel of any training view: no glass to reflect",
-                if d.seed_mask_source.as_deref() == Some("dataset") { "the dataset's training masks, reflection.dataset_masks" } else { "reflection.seed_masks" }
+                d.mask_setting()
             )
         } else if d.residual_mean < d.threshold {
             format!(
