@@ -74,6 +74,18 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let (ds, _) = step("sparse", vec![format!("reflection.seed_masks={}", sparse.display())]);
     assert_eq!(ds["seed_mask_views"], serde_json::json!([n.div_ceil(4), n]));
     assert!(ds["seed_significance"].as_f64().is_some_and(|a| a > 1e-6) && ds["significance_dropped"] == false && ds["seeds"].as_u64().unwrap() > 0, "{ds}");
+    // Glass over every pixel of every view: nothing is carved, so no ray
+    // reaches a hull and the set starts as Stage I's copy, finite.
+    let full = base.join("all-glass");
+    std::fs::create_dir_all(&full).unwrap();
+    for k in 0..i {
+        let (w, h, _) = tgs::data::image_io::read_mask(&masks.join(format!("r_{k}.png"))).unwrap();
+        tgs::data::image_io::write_mask(&full.join(format!("r_{k}.png")), w, h, &vec![true; (w * h) as usize]).unwrap();
+    }
+    let (df, _) = step("all-glass", vec![format!("reflection.seed_masks={}", full.display())]);
+    assert!(df["seed_mask_coverage"] == 1.0 && df["hull_empty"] == true && df["copied"].as_u64().unwrap() > 0, "{df}");
+    let test = &json(&base.join("all-glass/metrics.json"))["test"];
+    assert!(test["psnr"].as_f64().is_some_and(f64::is_finite) && test["normal_mae_deg"].as_f64().is_some_and(f64::is_finite), "{test}");
     // A directory with no view's mask is refused, naming it.
     let empty = base.join("no-masks");
     std::fs::create_dir_all(&empty).unwrap();
