@@ -52,7 +52,8 @@ pub struct ReflDecision {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub env_proxy: Option<[f32; 4]>,
     /// The hull's seeds came from given glass masks
-    /// (reflection.seed_masks): the share of the training pixels they mark.
+    /// (reflection.seed_masks or reflection.dataset_masks): the share of
+    /// the masked views' pixels they mark.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_mask_coverage: Option<f64>,
     /// Where those masks came from: the reflection.seed_masks directory,

@@ -2,6 +2,7 @@
 //! residual, the decision whether the scene calls for a reflection set, the
 //! seeds and the light), and one iteration of the reflection set.
 
+use std::borrow::Cow;
 use super::bounds::normalization_box;
 use super::env_init::{scene_env_map, SceneLight};
 use super::model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
@@ -143,7 +144,9 @@ impl MaskSource {
 /// own training masks when `reflection.dataset_masks` is on, the set has
 /// hull seeds and any training view has one; None (the residual's masks)
 /// otherwise.
-fn glass_masks(shared: &Shared<'_>, names: &[String]) -> Result<(Option<Vec<Option<Vec<bool>>>>, MaskSource)> {
+/// The dataset's masks are lent, not copied (a view's mask is a byte per
+/// pixel).
+fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(Option<Cow<'a, [Option<Vec<bool>>]>>, MaskSource)> {
     let rc = &shared.cfg.reflection;
     let v = shared.views;
     if !rc.seed_masks.is_empty() {
@@ -151,13 +154,12 @@ fn glass_masks(shared: &Shared<'_>, names: &[String]) -> Result<(Option<Vec<Opti
             bail!("reflection.seed_masks needs the training views' names, which only a run with a directory has");
         }
         let m = seed_masks(Path::new(&rc.seed_masks), names, &v.cameras, shared.cfg.downscale)?;
-        return Ok((Some(m), MaskSource::Dir(rc.seed_masks.clone())));
+        return Ok((Some(Cow::Owned(m)), MaskSource::Dir(rc.seed_masks.clone())));
     }
     if !rc.dataset_masks || !rc.init.parts().1 {
         return Ok((None, MaskSource::None));
     }
-    let masked = v.masks.iter().filter(|m| m.is_some()).count();
-    if masked == 0 {
+    if v.masks.iter().all(Option::is_none) {
         return Ok((None, MaskSource::None));
     }
     for (i, (m, cam)) in v.masks.iter().zip(&v.cameras).enumerate() {
@@ -166,7 +168,7 @@ fn glass_masks(shared: &Shared<'_>, names: &[String]) -> Result<(Option<Vec<Opti
             bail!("reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image", names.get(i).cloned().unwrap_or_else(|| i.to_string()), m.len(), cam.width, cam.height);
         }
     }
-    Ok((Some(v.masks.clone()), MaskSource::Dataset))
+    Ok((Some(Cow::Borrowed(&v.masks[..])), MaskSource::Dataset))
 }
 
 /// `reflection.seed_masks`: each training view's glass mask from
