@@ -92,6 +92,10 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let a = TrainArgs { out: base.join("refused"), set: vec![format!("reflection.seed_masks={}", empty.display())], quiet: true, from: Some(stage1.clone()), stages: Some("II".into()), ..Default::default() };
     let e = format!("{:#}", train(ctx, &a).err().expect("a directory without masks is refused"));
     assert!(e.contains("no-masks") && e.contains("no glass mask") && e.contains("r_0.png"), "{e}");
+    // The views' image folder, its files named as their masks would be: refused, not read as masks.
+    let a = TrainArgs { set: vec![format!("reflection.seed_masks={}", scene.join("train").display())], ..a };
+    let e = format!("{:#}", train(ctx, &a).err().expect("colour images are refused as masks"));
+    assert!(e.contains("colour image") && e.contains("r_0.png"), "{e}");
 
     // Turned off: the residual's seeds, recorded without masks.
     let (dr, residual_ply) = step("residual", sets(&["reflection.dataset_masks=false"]));

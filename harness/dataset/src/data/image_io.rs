@@ -121,6 +121,20 @@ pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
     Ok((w, h, g.pixels().map(|p| p.0[0] >= 128).collect()))
 }
 
+/// [`read_mask`] for a mask a user names by hand (`reflection.seed_masks`):
+/// a colour image is refused, so that a folder of the views' images
+/// (named as their masks would be) is not taken for their masks. Grey
+/// stored as RGB (R = G = B) passes.
+pub fn read_grey_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
+    let img = image::open(path).with_context(|| format!("{}: cannot read the mask", path.display()))?;
+    if img.color().has_color() && img.to_rgb8().pixels().any(|p| p.0[0] != p.0[1] || p.0[1] != p.0[2]) {
+        bail!("{}: a colour image, not a glass mask (8-bit grey, white on the glass); is this the views' image folder?", path.display());
+    }
+    let g = img.to_luma8();
+    let (w, h) = g.dimensions();
+    Ok((w, h, g.pixels().map(|p| p.0[0] >= 128).collect()))
+}
+
 /// Per-pixel unit normals (HxWx3) from `.npy` (float32/float64), `.exr`
 /// (RGB) or a Shiny-Blender `_normal.png` (n = rgb * 2 / 255 - 1).
 pub fn read_normals(path: &Path) -> Result<ImageF> {

@@ -19,7 +19,7 @@ use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};
 use crate::data::downscale_mask;
-use crate::data::image_io::read_mask;
+use crate::data::image_io::read_grey_mask;
 use anyhow::{bail, Context as _, Result};
 use std::any::Any;
 use std::path::Path;
@@ -189,7 +189,7 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
             if !path.is_file() {
                 return Ok(None);
             }
-            let (w, h, m) = read_mask(&path).with_context(|| "reflection.seed_masks")?;
+            let (w, h, m) = read_grey_mask(&path).with_context(|| "reflection.seed_masks")?;
             let f = downscale.max(1);
             if (w, h) == (cam.width, cam.height) {
                 Ok(Some(m))
