@@ -335,13 +335,12 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     assert_eq!(tight, at(1e-8));
     // Stage II's seeding (one march for both hulls): the test's seeds where
     // any point beats chance; where none can (1e-300 needs more than 48
-    // views), the hull's without the test, and it says so: on each ray
-    // that seeds without the test, the agreeing point the most views agree
-    // on instead of the first (which few views see, near the cameras), so
-    // as many seeds, and more of them on the glass.
+    // views), the hull's without the test, and it says so: on each ray the
+    // agreeing point the most views agree on instead of the first (which
+    // few views see, near the cameras), so as many seeds, more on the glass.
     let seeding = |a: f64| hull_seeding(&sv, &SeedParams { significance: a, ..base });
-    assert_eq!(seeding(1e-8), HullSeeding { seeds: tight.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false });
-    assert_eq!(seeding(1.0), HullSeeding { seeds: loose.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false });
+    assert_eq!(seeding(1e-8), HullSeeding { seeds: tight.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false, significance_relaxed: None });
+    assert_eq!(seeding(1.0), HullSeeding { seeds: loose.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false, significance_relaxed: None });
     assert!(at(1e-300).is_empty(), "1e-300 is beaten by chance with 48 views");
     let dropped = seeding(1e-300);
     assert!(dropped.significance_dropped);
@@ -365,6 +364,8 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     }
     assert_eq!(seeding(1e-300), dropped);
     assert_eq!(hull_seeding(&sv, &SeedParams { significance: 1e-300, normal: SeedNormal::View, ..base }), dropped);
+    // Looser levels before that fallback (`relax`; Stage II's with masks): the first that some point beats, not one below the test's.
+    assert_eq!(hull_seeding(&sv, &SeedParams { significance: 1e-300, relax: &[1e-301, 1e-8, 1.0], ..base }), HullSeeding { seeds: tight.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false, significance_relaxed: Some(1e-8) });
 }
 
 /// The march and the normals run on threads, each on a contiguous run of

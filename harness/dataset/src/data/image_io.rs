@@ -115,10 +115,7 @@ pub fn border_colour(img: &ImageF) -> ([f32; 3], f32) {
 
 /// An 8-bit mask (grey or the first channel): true where the value is >= 128.
 pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
-    let img = image::open(path).with_context(|| format!("{}: cannot read the mask", path.display()))?;
-    let g = img.to_luma8();
-    let (w, h) = g.dimensions();
-    Ok((w, h, g.pixels().map(|p| p.0[0] >= 128).collect()))
+    Ok(mask_of(&open_mask(path)?))
 }
 
 /// [`read_mask`] for a mask a user names by hand (`reflection.seed_masks`):
@@ -126,13 +123,22 @@ pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
 /// (named as their masks would be) is not taken for their masks. Grey
 /// stored as RGB (R = G = B) passes.
 pub fn read_grey_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
-    let img = image::open(path).with_context(|| format!("{}: cannot read the mask", path.display()))?;
+    let img = open_mask(path)?;
     if img.color().has_color() && img.to_rgb8().pixels().any(|p| p.0[0] != p.0[1] || p.0[1] != p.0[2]) {
         bail!("{}: a colour image, not a glass mask (8-bit grey, white on the glass); is this the views' image folder?", path.display());
     }
+    Ok(mask_of(&img))
+}
+
+fn open_mask(path: &Path) -> Result<image::DynamicImage> {
+    image::open(path).with_context(|| format!("{}: cannot read the mask", path.display()))
+}
+
+/// The mask's size and its pixels at or above 128 in grey.
+fn mask_of(img: &image::DynamicImage) -> (u32, u32, Vec<bool>) {
     let g = img.to_luma8();
     let (w, h) = g.dimensions();
-    Ok((w, h, g.pixels().map(|p| p.0[0] >= 128).collect()))
+    (w, h, g.pixels().map(|p| p.0[0] >= 128).collect())
 }
 
 /// Per-pixel unit normals (HxWx3) from `.npy` (float32/float64), `.exr`

@@ -208,10 +208,11 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
         })
 }
 
-/// With glass masks: the significance levels tried, in order, where no
-/// hull point beats chance at `reflection.seed_significance` (15 masked
-/// views whose masks cover 45% of the pixels cannot beat 1e-6 even all
-/// together: 0.45^15 = 6e-6).
+/// With glass masks (`SeedParams::relax`): the significance levels tried,
+/// in order, where no hull point beats chance at
+/// `reflection.seed_significance`. The masks are no noise, but few masked
+/// views cannot beat 1e-6: 15 views whose masks cover 45% of the pixels
+/// cannot even all together (0.45^15 = 6e-6).
 const MASK_SIGNIFICANCE: [f64; 3] = [1e-4, 1e-2, 1e-1];
 
 /// The view-dependence measure reduces each view to at most this many
@@ -331,22 +332,10 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
             let rc = &cfg.reflection;
             let views: Vec<SeedView> = maps.iter().map(|(i, r, z)| SeedView { camera: v.cameras[*i], residual: r, depth: z }).collect();
             let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal.for_source(masks.is_some()), significance: rc.seed_significance as f64, ..SeedParams::default() };
-            let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, ..p } } else { p };
+            let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, relax: &MASK_SIGNIFICANCE, ..p } } else { p };
             let seeds = if hull {
-                let mut h = hull_seeding(&views, &p);
-                // Given masks with few views (masks for some views only):
-                // no hull point can beat chance at the set significance,
-                // though the masks are no noise. The strictest looser
-                // level that some point beats, before the fallback.
-                if masks.is_some() && h.significance_dropped {
-                    for alpha in MASK_SIGNIFICANCE.into_iter().filter(|&a| a > p.significance) {
-                        let relaxed = hull_seeding(&views, &SeedParams { significance: alpha, ..p });
-                        if !relaxed.significance_dropped {
-                            (h, d.seed_significance) = (relaxed, Some(alpha));
-                            break;
-                        }
-                    }
-                }
+                let h = hull_seeding(&views, &p);
+                d.seed_significance = h.significance_relaxed;
                 d.significance_dropped = h.significance_dropped;
                 d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
                 h.seeds

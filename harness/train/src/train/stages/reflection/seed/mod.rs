@@ -94,6 +94,11 @@ pub struct SeedParams {
     /// from masks placed at random (one-sided binomial tail at the views'
     /// mean mask coverage; 1: no test). See [`min_hits`].
     pub significance: f64,
+    /// Looser levels tried in order where no hull point beats
+    /// `significance`, before the fallback of [`hull_seeding`]: the first
+    /// that some point beats is used. Stage II gives them for glass masks
+    /// (few masked views cannot beat 1e-6), none for the residual.
+    pub relax: &'static [f64],
     /// Depth from the glass's rim (see the `rim` module): where a view's
     /// mask is ringed by Stage I surface that the other views see at their
     /// masks' edges, its rays' seeds lie on the plane of that rim if the
@@ -179,7 +184,7 @@ impl SeedNormal {
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, rim: false, threads: 0 }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, relax: &[], rim: false, threads: 0 }
     }
 }
 
@@ -325,7 +330,7 @@ pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
 /// the hull.
 pub fn residual_hull_seeds(views: &[SeedView], p: &SeedParams) -> Vec<Seed> {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
-    let found = march(&prepared, p);
+    let found = march(&prepared, p, &membranes(&prepared, p));
     surfels(&found.significant, &found.rim_normals, &prepared, p.normal, p.threads)
 }
 
@@ -340,6 +345,9 @@ pub struct HullSeeding {
     /// No hull point beat chance, so the seeds are the hull's without the
     /// significance test.
     pub significance_dropped: bool,
+    /// The level of [`SeedParams::relax`] the seeds beat, where none beat
+    /// [`SeedParams::significance`].
+    pub significance_relaxed: Option<f64>,
 }
 
 /// [`residual_hull_seeds`], except where no point can beat chance (with
@@ -353,14 +361,31 @@ pub struct HullSeeding {
 /// the path-traced room fronts, masks on 89% of the pixels: the first
 /// agreeing points 2 to 2.5 units in front of the glass, seen by a median
 /// of 5 of 60 views; perf/RESULTS.md, thirty-third entry). One march finds
-/// both.
+/// both. Before that fallback, the levels of [`SeedParams::relax`], each a
+/// march over the same prepared views and membranes.
 pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
-    let found = march(&prepared, p);
+    let membranes = membranes(&prepared, p);
+    let mut found = march(&prepared, p, &membranes);
+    let mut relaxed = None;
+    if found.significant.is_empty() && !found.agreeing.is_empty() {
+        for &alpha in p.relax.iter().filter(|&&a| a > p.significance) {
+            let f = march(&prepared, &SeedParams { significance: alpha, ..*p }, &membranes);
+            if !f.significant.is_empty() {
+                (found, relaxed) = (f, Some(alpha));
+                break;
+            }
+        }
+    }
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
     let (chosen, fixed, normal) = if dropped { (&found.agreeing, &[][..], p.normal.without_outline()) } else { (&found.significant, &found.rim_normals[..], p.normal) };
     let rim_seeds = fixed.iter().filter(|n| n.is_some()).count();
-    HullSeeding { seeds: surfels(chosen, fixed, &prepared, normal, p.threads), rim_views: found.rim_views, rim_seeds, significance_dropped: dropped }
+    HullSeeding { seeds: surfels(chosen, fixed, &prepared, normal, p.threads), rim_views: found.rim_views, rim_seeds, significance_dropped: dropped, significance_relaxed: relaxed }
+}
+
+/// Each view's membrane where [`SeedParams::rim`] asks for them.
+fn membranes(prepared: &[Prepared], p: &SeedParams) -> Vec<Option<rim::Membrane>> {
+    if p.rim { rim::membranes(prepared) } else { vec![None; prepared.len()] }
 }
 
 /// Per ray: the first hull point after carved space with the significance
@@ -375,7 +400,7 @@ struct Found {
     rim_views: usize,
 }
 
-fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
+fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[Option<rim::Membrane>]) -> Found {
     let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
     let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
@@ -388,9 +413,8 @@ fn march(prepared: &[Prepared], p: &SeedParams) -> Found {
     // Every `stride`-th residual pixel over the views, in view order.
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
     let rays: Vec<(usize, usize)> = prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
-    let membranes = if p.rim { rim::membranes(prepared) } else { vec![None; prepared.len()] };
     found.rim_views = membranes.iter().filter(|m| m.is_some()).count();
-    for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, &membranes)) {
+    for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, membranes)) {
         found.significant.extend(part.significant);
         found.rim_normals.extend(part.rim_normals);
         found.agreeing.extend(part.agreeing);
