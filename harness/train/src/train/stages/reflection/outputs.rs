@@ -22,6 +22,12 @@ pub(crate) fn write_residual(maps: &mut OutDir, name: &str, cam: &Camera, r: &[f
     write_png(&maps.file(&format!("{name}.png"))?, &ImageF { width: cam.width, height: cam.height, channels: 1, data: heat })
 }
 
+/// Appended to the message of a Stage II seeded from the residual (not
+/// the paper's copy start, which seeds from nothing): what
+/// glass masks would change (perf/RESULTS.md, the forty-third and
+/// forty-sixth entries).
+const RESIDUAL_NOTE: &str = ". Seeded without glass masks: the residual marks thin glass poorly; masks for a quarter of the training views (mask_path on the training frames, or reflection.seed_masks) place the seeds on it (docs/stage2.md)";
+
 impl ReflDecision {
     /// What was measured and decided, for the progress output (`reseed`:
     /// the second round, after Stage III; `iterations`: Stage II's).
@@ -65,8 +71,8 @@ impl ReflDecision {
                 } else {
                     ""
                 },
-                iterations
-            )
+                iterations,
+            ) + if d.seed_mask_coverage.is_none() && (d.seeds > 0 || d.hull_empty) { RESIDUAL_NOTE } else { "" }
         } else if d.seed_mask_coverage.is_some() {
             format!(
                 "Stage II skipped: the glass masks ({}) mark no pixel of any training view: no glass to reflect",
@@ -109,5 +115,27 @@ impl ReflectionModel {
             write_png(&out.join("envmap_depth.png"), &ImageF { width: w, height: h, channels: 1, data: crate::data::image_io::depth_grey(&d, far, 0.8) })?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_residuals_seeds_say_what_masks_would_change() {
+        let residual = ReflDecision { run: true, reflection_gaussians: 10, seeds: 10, ..Default::default() };
+        assert!(residual.message(false, 100).ends_with(RESIDUAL_NOTE), "{}", residual.message(false, 100));
+        // An empty residual hull: masks would have given seeds too.
+        let empty = ReflDecision { seeds: 0, hull_empty: true, ..residual.clone() };
+        assert!(empty.message(false, 100).ends_with(RESIDUAL_NOTE));
+        // Seeded from masks, or the paper's copy start: no note.
+        let masked = ReflDecision { seed_mask_coverage: Some(0.3), seed_mask_source: Some("dataset".into()), ..residual.clone() };
+        assert!(!masked.message(false, 100).contains("without glass masks"), "{}", masked.message(false, 100));
+        let copy = ReflDecision { seeds: 0, copied: 10, ..residual.clone() };
+        assert!(!copy.message(false, 100).contains("without glass masks"));
+        // A skipped Stage II says why, without the note.
+        let skipped = ReflDecision { run: false, residual_mean: 0.001, threshold: 0.007, ..Default::default() };
+        assert!(skipped.message(false, 100).starts_with("Stage II skipped") && !skipped.message(false, 100).contains("without glass masks"));
     }
 }
