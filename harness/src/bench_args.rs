@@ -128,6 +128,13 @@ pub(crate) enum Bench {
         /// Stage III network preset: small or paper.
         #[arg(long, default_value = "small")]
         mlp: String,
+        /// A training setting as KEY=VALUE, as `tgs train --set` takes it
+        /// (repeatable), over the quick preset: for example
+        /// reflection.dataset_masks=false to time Stage II and III seeded
+        /// from the residual. The iteration counts, the densification's end,
+        /// the stages and the network are the bench's own (refused here).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
         #[arg(long)]
         json: bool,
     },

@@ -38,7 +38,14 @@ pub struct StagesSpec {
     pub iterations: u32,
     /// Stage III network preset (paper or small).
     pub mlp: String,
+    /// Training settings as KEY=VALUE over the quick preset (`tgs train
+    /// --set`'s syntax), except those in [`BENCH_KEYS`].
+    pub set: Vec<String>,
 }
+
+/// The settings the bench sets itself from its own options: a `--set` of
+/// one of them is refused rather than silently overwritten.
+pub const BENCH_KEYS: [&str; 8] = ["iterations", "densify_until", "test_interval", "checkpoint_interval", "stages", "reflection.iterations", "light_field.iterations", "light_field.preset"];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct StageTimes {
@@ -75,6 +82,8 @@ pub struct StagesBench {
     pub train_light_field: u32,
     pub warmup: u32,
     pub iterations: u32,
+    /// The `--set` settings the run took, as given.
+    pub set: Vec<String>,
     pub stages: Vec<StageTimes>,
     /// Stages the scene did not call for (Stage II skipped by the residual test).
     pub skipped: Vec<String>,
@@ -96,6 +105,11 @@ pub fn stages(ctx: &Arc<Context>, spec: &StagesSpec) -> Result<StagesBench> {
 
 fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<StagesBench> {
     let mut cfg = TrainConfig::quick();
+    for kv in &spec.set {
+        let key = kv.split_once('=').map(|(k, _)| k.trim()).unwrap_or(kv.as_str());
+        ensure!(!BENCH_KEYS.contains(&key), "--set '{kv}': the bench sets {key} itself (see --train, --train-light-field, --iterations and --mlp)");
+        cfg.set(kv)?;
+    }
     let profiled = spec.iterations.clamp(1, 5);
     let timed = spec.warmup + spec.iterations + profiled;
     let per_stage = spec.train + timed;
@@ -121,6 +135,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         train_light_field: spec.train_light_field,
         warmup: spec.warmup,
         iterations: spec.iterations,
+        set: spec.set.clone(),
         stages: Vec::new(),
         skipped: Vec::new(),
     };
@@ -188,6 +203,9 @@ pub fn print_stages(b: &StagesBench) {
         "stages on '{}' ({}x{}, {} training views), Stage III network '{}': per stage {} untimed ({} in Stage III), {} warm-up, {} timed iterations",
         b.scene, b.width, b.height, b.train_views, b.mlp, b.train, b.train_light_field, b.warmup, b.iterations
     );
+    if !b.set.is_empty() {
+        println!("settings over the quick preset: {}", b.set.join(", "));
+    }
     for s in &b.stages {
         let refl = s.reflection_gaussians.map(|n| format!(", {n} reflection")).unwrap_or_default();
         let phi = s.phi_fraction.map(|f| format!(", Φ on {:.1}% of pixels", 100.0 * f)).unwrap_or_default();

@@ -343,8 +343,8 @@ fn run(cli: Cli) -> Result<()> {
                         tgs::bench_mlp::print_mlp(&b);
                     }
                 }
-                Bench::Stages { scene, train, train_light_field, warmup, iterations, mlp, json } => {
-                    let spec = tgs::bench_stages::StagesSpec { scene: scene.clone(), train: *train, train_light_field: *train_light_field, warmup: *warmup, iterations: *iterations, mlp: mlp.clone() };
+                Bench::Stages { scene, train, train_light_field, warmup, iterations, mlp, set, json } => {
+                    let spec = tgs::bench_stages::StagesSpec { scene: scene.clone(), train: *train, train_light_field: *train_light_field, warmup: *warmup, iterations: *iterations, mlp: mlp.clone(), set: set.clone() };
                     let b = tgs::bench_stages::stages(&ctx, &spec)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);

@@ -11,7 +11,7 @@ fn main() -> anyhow::Result<()> {
     let iterations = if ctx.caps().is_cpu() { 10 } else { 50 };
     let mut runs = Vec::new();
     for mlp in ["small", "paper"] {
-        let spec = tgs::bench_stages::StagesSpec { scene: "glass".into(), train: 300, train_light_field: 50, warmup: 3, iterations, mlp: mlp.into() };
+        let spec = tgs::bench_stages::StagesSpec { scene: "glass".into(), train: 300, train_light_field: 50, warmup: 3, iterations, mlp: mlp.into(), set: vec![] };
         let b = tgs::bench_stages::stages(&ctx, &spec)?;
         tgs::bench_stages::print_stages(&b);
         runs.push(b);

@@ -89,7 +89,7 @@ fn train_bench_from_a_trained_run() {
 #[test]
 fn stages_bench_reports_each_stage() {
     let ctx = ctx_shared();
-    let spec = tgs::bench_stages::StagesSpec { scene: "glass-tiny".into(), train: 8, train_light_field: 4, warmup: 1, iterations: 2, mlp: "small".into() };
+    let spec = tgs::bench_stages::StagesSpec { scene: "glass-tiny".into(), train: 8, train_light_field: 4, warmup: 1, iterations: 2, mlp: "small".into(), set: vec![] };
     let b = tgs::bench_stages::stages(ctx, &spec).unwrap();
     assert_eq!((b.width, b.height, b.train_views), (48, 48, 16));
     let names: Vec<&str> = b.stages.iter().map(|s| s.stage.as_str()).collect();
@@ -113,7 +113,21 @@ fn stages_bench_reports_each_stage() {
     // Stage II's set carries over to Stage III unchanged (geometry frozen, no pruning).
     assert_eq!(b.stages[1].reflection_gaussians, b.stages[2].reflection_gaussians);
     assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { iterations: 0, ..spec.clone() }).is_err());
-    assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { scene: "nope".into(), ..spec }).is_err());
+    assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { scene: "nope".into(), ..spec.clone() }).is_err());
+    // --set: the residual's seeds instead of the scene's training masks
+    // cover more of the image, so Φ runs on more of it; the settings are
+    // recorded. A key the bench sets itself, or no key, is refused by name.
+    let residual = tgs::bench_stages::StagesSpec { set: vec!["reflection.dataset_masks=false".into()], ..spec.clone() };
+    let r = tgs::bench_stages::stages(ctx, &residual).unwrap();
+    assert_eq!(r.set, residual.set);
+    assert!(b.set.is_empty());
+    let (masked, unmasked) = (f, r.stages[2].phi_fraction.unwrap());
+    assert!(unmasked > masked, "Φ on {unmasked} of the pixels from the residual's seeds, {masked} from the masks'");
+    for bad in ["iterations=5", "reflection.iterations=3", "no_such_key=1"] {
+        let e = tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { set: vec![bad.into()], ..spec.clone() }).unwrap_err();
+        let key = bad.split('=').next().unwrap();
+        assert!(format!("{e:#}").contains(key), "{bad}: {e:#}");
+    }
     check_validation(ctx);
 }
 
