@@ -116,7 +116,8 @@ fn stages_bench_reports_each_stage() {
     assert!(tgs::bench_stages::stages(ctx, &tgs::bench_stages::StagesSpec { scene: "nope".into(), ..spec.clone() }).is_err());
     // --set: the residual's seeds instead of the scene's training masks
     // cover more of the image, so Φ runs on more of it; the settings are
-    // recorded. A key the bench sets itself, or no key, is refused by name.
+    // recorded. A key the bench sets itself, or an unknown one, is refused
+    // by name.
     let residual = tgs::bench_stages::StagesSpec { set: vec!["reflection.dataset_masks=false".into()], ..spec.clone() };
     let r = tgs::bench_stages::stages(ctx, &residual).unwrap();
     assert_eq!(r.set, residual.set);
