@@ -1,8 +1,9 @@
 //! No command destroys user data, and corrupt or mismatched state is
 //! refused by name: renders and evaluations never go into a dataset or over
 //! files tgs did not write; damaged checkpoints, a changed dataset and a
-//! checkpoint from another run are refused on resume; sweep rows are keyed
-//! by their complete settings and the dataset.
+//! checkpoint from another run are refused on resume; a checkpoint from an
+//! earlier tgs names the settings it lacks; sweep rows are keyed by their
+//! complete settings and the dataset.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -239,6 +240,43 @@ fn resume_refuses_a_changed_dataset_and_another_runs_checkpoint() {
     let e = err(resume());
     assert!(e.contains("belongs to another run"), "{e}");
     assert_eq!(std::fs::read(run.join("log.jsonl")).unwrap(), log_before, "the log was touched");
+    check_validation(ctx);
+}
+
+/// A checkpoint whose header lacks a setting of this version (written by
+/// an earlier tgs) names it, with the default it now takes, and still
+/// resumes; this version's own checkpoints lack none.
+#[test]
+fn a_checkpoint_from_an_earlier_tgs_names_the_settings_it_lacks() {
+    let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
+    let ctx = ctx_shared();
+    let (_base, ds, run) = trained_run("reliability-old-settings");
+    let ck = run.join("checkpoint.bin");
+    let (h, _) = checkpoint::read(&ck).unwrap();
+    assert!(h.missing_settings.is_empty(), "{:?}", h.missing_settings);
+    assert!(checkpoint::missing_settings_note(&ck, &h, &h.config).unwrap().is_none());
+    // The header rewritten without two settings (one of a section, one
+    // top-level), its length and checksum made right again.
+    let good = std::fs::read(&ck).unwrap();
+    let hlen = u32::from_le_bytes(good[8..12].try_into().unwrap()) as usize;
+    let mut header: serde_json::Value = serde_json::from_slice(&good[12..12 + hlen]).unwrap();
+    assert!(header["config"]["reflection"].as_object_mut().unwrap().remove("dataset_masks").is_some());
+    assert!(header["config"].as_object_mut().unwrap().remove("lambda_dist").is_some());
+    let json = serde_json::to_vec(&header).unwrap();
+    let mut old = good[..8].to_vec();
+    old.extend((json.len() as u32).to_le_bytes());
+    old.extend(&json);
+    old.extend(crc32fast::hash(&json).to_le_bytes());
+    old.extend(&good[12 + hlen + 4..]);
+    std::fs::write(&ck, &old).unwrap();
+    let (h, _) = checkpoint::read(&ck).unwrap();
+    let mut missing = h.missing_settings.clone();
+    missing.sort();
+    assert_eq!(missing, ["lambda_dist", "reflection.dataset_masks"]);
+    let note = checkpoint::missing_settings_note(&ck, &h, &h.config).unwrap().unwrap();
+    assert!(note.contains("checkpoint.bin") && note.contains("reflection.dataset_masks = true") && note.contains("lambda_dist = 0"), "{note}");
+    // It resumes, on this version's defaults.
+    assert_eq!(train(ctx, &TrainArgs { resume: true, dataset: None, set: Vec::new(), ..tiny_args(&ds, &run, 14) }).unwrap().iteration, 14);
     check_validation(ctx);
 }
 

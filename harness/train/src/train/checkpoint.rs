@@ -77,6 +77,13 @@ pub struct Header {
     /// this map wrote `null` under the keys of the stages not running.
     #[serde(flatten)]
     pub later: BTreeMap<String, serde_json::Value>,
+    /// Settings of this version of tgs that the header's `config` does
+    /// not hold (a checkpoint written by an earlier tgs): `config` has
+    /// this version's defaults for them, so a continued run may differ
+    /// from how it began ([`missing_settings_note`] says which). Found by
+    /// [`read`]; not written.
+    #[serde(skip)]
+    pub missing_settings: Vec<String>,
 }
 
 impl Header {
@@ -144,6 +151,7 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
         identity: Some(identity.clone()),
         later: BTreeMap::new(),
+        missing_settings: Vec::new(),
     };
     // (buffer, values) of the later stage's arrays.
     let mut later_arrays = Vec::new();
@@ -188,7 +196,8 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
         }
         at += 4;
     }
-    let header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
+    let mut header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
+    header.missing_settings = missing_settings(hbytes).map_err(|e| bad(&format!("header: {e:#}")))?;
     let mut arrays = Vec::new();
     let later = header.later_arrays().map_err(|e| bad(&format!("{e:#}")))?;
     for (name, len) in header.arrays.iter().chain(&later) {
@@ -206,6 +215,53 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
         return Err(bad("trailing bytes"));
     }
     Ok((header, arrays))
+}
+
+/// The settings (`key` or `section.key`, as `--set` names them) of this
+/// version's configuration that the header bytes' `config` lacks.
+fn missing_settings(hbytes: &[u8]) -> Result<Vec<String>> {
+    let raw: serde_json::Value = serde_json::from_slice(hbytes)?;
+    let saved = setting_keys(raw.get("config").context("no settings")?);
+    let now = setting_keys(&serde_json::to_value(TrainConfig::default())?);
+    Ok(now.into_iter().filter(|k| !saved.contains(k)).collect())
+}
+
+/// The keys of a configuration as JSON, a section's as `section.key` (one
+/// level, as `config::flatten` lists a TOML table).
+fn setting_keys(v: &serde_json::Value) -> Vec<String> {
+    let mut out = Vec::new();
+    if let serde_json::Value::Object(m) = v {
+        for (k, v) in m {
+            match v {
+                serde_json::Value::Object(sub) => out.extend(sub.keys().map(|k2| format!("{k}.{k2}"))),
+                _ => out.push(k.clone()),
+            }
+        }
+    }
+    out
+}
+
+/// For a checkpoint at `path` written by an earlier tgs: the settings its
+/// header lacks with the values `cfg` (the settings the run continues
+/// with) gives them, as a warning; None when it lacks none.
+pub fn missing_settings_note(path: &Path, h: &Header, cfg: &TrainConfig) -> Result<Option<String>> {
+    if h.missing_settings.is_empty() {
+        return Ok(None);
+    }
+    let values = super::config::flatten(&toml::Table::try_from(cfg).context("serialising the settings")?);
+    let lines: Vec<String> = h
+        .missing_settings
+        .iter()
+        .map(|k| match values.iter().find(|(key, _)| key == k) {
+            Some((_, v)) => format!("{k} = {v}"),
+            None => k.clone(),
+        })
+        .collect();
+    Ok(Some(format!(
+        "{}: written by an earlier version of tgs, without these settings; they take this version's defaults, so the run may go on differently from how it began:\n  {}",
+        path.display(),
+        lines.join("\n  ")
+    )))
 }
 
 /// Parameters (the first five arrays) of a checkpoint as a host set.
