@@ -143,3 +143,21 @@ impl Drop for TempDir {
         let _ = std::fs::remove_file(&self.0);
     }
 }
+
+/// The bytes of a version-2 checkpoint (`TGSCKPT2`) whose JSON header
+/// `edit` changed, with its length and CRC-32 made right again (the arrays
+/// after it unchanged): a checkpoint as another version of tgs, or another
+/// run, would have written it.
+pub fn edit_checkpoint_header(bytes: &[u8], edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+    assert_eq!(&bytes[..8], b"TGSCKPT2");
+    let hlen = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
+    let mut header: serde_json::Value = serde_json::from_slice(&bytes[12..12 + hlen]).unwrap();
+    edit(&mut header);
+    let json = serde_json::to_vec(&header).unwrap();
+    let mut out = bytes[..8].to_vec();
+    out.extend((json.len() as u32).to_le_bytes());
+    out.extend(&json);
+    out.extend(crc32fast::hash(&json).to_le_bytes());
+    out.extend(&bytes[12 + hlen + 4..]);
+    out
+}

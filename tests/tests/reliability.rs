@@ -257,17 +257,10 @@ fn a_checkpoint_from_an_earlier_tgs_names_the_settings_it_lacks() {
     assert!(checkpoint::missing_settings_note(&ck, &h, &h.config).unwrap().is_none());
     // The header rewritten without two settings (one of a section, one
     // top-level), its length and checksum made right again.
-    let good = std::fs::read(&ck).unwrap();
-    let hlen = u32::from_le_bytes(good[8..12].try_into().unwrap()) as usize;
-    let mut header: serde_json::Value = serde_json::from_slice(&good[12..12 + hlen]).unwrap();
-    assert!(header["config"]["reflection"].as_object_mut().unwrap().remove("dataset_masks").is_some());
-    assert!(header["config"].as_object_mut().unwrap().remove("lambda_dist").is_some());
-    let json = serde_json::to_vec(&header).unwrap();
-    let mut old = good[..8].to_vec();
-    old.extend((json.len() as u32).to_le_bytes());
-    old.extend(&json);
-    old.extend(crc32fast::hash(&json).to_le_bytes());
-    old.extend(&good[12 + hlen + 4..]);
+    let old = tgs_tests::edit_checkpoint_header(&std::fs::read(&ck).unwrap(), |h| {
+        assert!(h["config"]["reflection"].as_object_mut().unwrap().remove("dataset_masks").is_some());
+        assert!(h["config"].as_object_mut().unwrap().remove("lambda_dist").is_some());
+    });
     std::fs::write(&ck, &old).unwrap();
     let (h, _) = checkpoint::read(&ck).unwrap();
     let mut missing = h.missing_settings.clone();

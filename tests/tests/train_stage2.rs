@@ -186,17 +186,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let unfinished = tgs_tests::TempDir::new("stage2-unfinished");
     let _ = std::fs::remove_dir_all(&unfinished);
     std::fs::create_dir_all(&unfinished).unwrap();
-    let bytes = std::fs::read(stage1.join("checkpoint.bin")).unwrap();
-    let hlen = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
-    let mut header: serde_json::Value = serde_json::from_slice(&bytes[12..12 + hlen]).unwrap();
-    header["config"]["iterations"] = 400.into();
-    let hb = serde_json::to_vec(&header).unwrap();
-    // Format 2: the header's CRC-32 follows it.
-    let mut ck = bytes[..8].to_vec();
-    ck.extend((hb.len() as u32).to_le_bytes());
-    ck.extend(&hb);
-    ck.extend(crc32fast::hash(&hb).to_le_bytes());
-    ck.extend(&bytes[12 + hlen + 4..]);
+    let ck = tgs_tests::edit_checkpoint_header(&std::fs::read(stage1.join("checkpoint.bin")).unwrap(), |h| h["config"]["iterations"] = 400.into());
     std::fs::write(unfinished.join("checkpoint.bin"), ck).unwrap();
     refused(TrainArgs { from: Some(unfinished.to_path_buf()), ..af.clone() }, &["stopped at iteration 300 of 400", "--resume"]);
     let _ = std::fs::remove_dir_all(&unfinished);
