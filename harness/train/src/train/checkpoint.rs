@@ -196,8 +196,11 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
         }
         at += 4;
     }
-    let mut header: Header = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
-    header.missing_settings = missing_settings(hbytes).map_err(|e| bad(&format!("header: {e:#}")))?;
+    // Parsed once: the settings it lacks are read off the same JSON.
+    let raw: serde_json::Value = serde_json::from_slice(hbytes).map_err(|e| bad(&format!("header: {e}")))?;
+    let missing = missing_settings(&raw).map_err(|e| bad(&format!("header: {e:#}")))?;
+    let mut header: Header = serde_json::from_value(raw).map_err(|e| bad(&format!("header: {e}")))?;
+    header.missing_settings = missing;
     let mut arrays = Vec::new();
     let later = header.later_arrays().map_err(|e| bad(&format!("{e:#}")))?;
     for (name, len) in header.arrays.iter().chain(&later) {
@@ -218,10 +221,9 @@ pub fn read(path: &Path) -> Result<(Header, Vec<Vec<f32>>)> {
 }
 
 /// The settings (`key` or `section.key`, as `--set` names them) of this
-/// version's configuration that the header bytes' `config` lacks.
-fn missing_settings(hbytes: &[u8]) -> Result<Vec<String>> {
-    let raw: serde_json::Value = serde_json::from_slice(hbytes)?;
-    let saved = setting_keys(raw.get("config").context("no settings")?);
+/// version's configuration that the header's `config` lacks.
+fn missing_settings(header: &serde_json::Value) -> Result<Vec<String>> {
+    let saved = setting_keys(header.get("config").context("no settings")?);
     let now = setting_keys(&serde_json::to_value(TrainConfig::default())?);
     Ok(now.into_iter().filter(|k| !saved.contains(k)).collect())
 }
