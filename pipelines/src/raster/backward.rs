@@ -53,6 +53,13 @@ impl Rasterizer {
             bail!("gradient buffers ({} Gaussians) do not match the Gaussian set ({})", grads.n, g.n);
         }
         let records = self.record_tile_backward(rec, g, features, sh_degree, frame, colour_only)?;
+        self.record_reduce(rec, s, grads, d_features, frame, records)
+    }
+
+    /// The per-Gaussian reduce of the gradient records `records` (ranked by
+    /// `frame.depth_ids`, ranges in `frame.offsets`) into `grads`.
+    pub(super) fn record_reduce(&self, rec: &mut Recorder, s: Splats, grads: &Gaussians, d_features: &Buffer<f32>, frame: &Frame, records: BufferBinding) -> Result<()> {
+        let Splats { g, features, sh_degree } = s;
         let sc = rec.begin_scope("raster.reduce");
         for slice in self.feature_slices(g.n) {
             let mut bindings = self.param_bindings(frame, g, features, slice);

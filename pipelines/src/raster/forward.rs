@@ -153,3 +153,15 @@ impl Rasterizer {
         }
     }
 }
+
+#[cfg(test)]
+mod gate_layout {
+    /// The gate shader's push-constant array is sized by hand: it must hold
+    /// x, y, z for every one of GATE_SLOTS slots.
+    #[test]
+    fn gate_shader_array_matches_gate_slots() {
+        let src = include_str!("../../../glsl/raster_gate.comp");
+        let want = format!("uint grids[{}];", 3 * super::GATE_SLOTS);
+        assert!(src.contains(&want), "glsl/raster_gate.comp should declare `{want}` (3 x GATE_SLOTS)");
+    }
+}

@@ -14,6 +14,7 @@ mod forward;
 mod frame;
 mod gaussians;
 mod kept;
+mod kept_weights;
 mod reduce_adam;
 mod slices;
 mod tiles;
@@ -22,6 +23,7 @@ pub use camera::Camera;
 pub use frame::{Frame, Plane};
 pub use gaussians::{array_widths, Gaussians, HostGaussians, Splats, GAUSSIAN_ARRAYS};
 pub use kept::KeptBinning;
+pub use kept_weights::KeptWeights;
 pub use reduce_adam::{Moments, ReduceAdam};
 use tiles::{TileKernels, TileSpec, SMALL_TILE, WIDE_TILE};
 
@@ -178,6 +180,8 @@ pub struct Rasterizer {
     /// (`tiles.rs`).
     tile_spec: TileSpec,
     tile_sets: [std::sync::OnceLock<TileKernels>; 2],
+    /// The kept-weights kernels per tile size (`kept_weights.rs`), likewise.
+    kept_kernels: [std::sync::OnceLock<kept_weights::KeptKernels>; 2],
     /// Gaussians per feature slice, forced ([`Rasterizer::feature_slice`]).
     feature_slice: Option<u32>,
 }
@@ -262,6 +266,7 @@ impl Rasterizer {
             reduce_adam: std::array::from_fn(|_| std::sync::OnceLock::new()),
             tile_spec: TileSpec { kernels, records, channels, batch, span, small: TileSpec::small_tiles_allowed()? },
             tile_sets: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
+            kept_kernels: [std::sync::OnceLock::new(), std::sync::OnceLock::new()],
             feature_slice: None,
         })
     }
@@ -484,17 +489,5 @@ impl Rasterizer {
             frame.fstate.binding(),
             frame.ustate.binding(),
         ]
-    }
-}
-
-#[cfg(test)]
-mod gate_layout {
-    /// The gate shader's push-constant array is sized by hand: it must hold
-    /// x, y, z for every one of GATE_SLOTS slots.
-    #[test]
-    fn gate_shader_array_matches_gate_slots() {
-        let src = include_str!("../../../glsl/raster_gate.comp");
-        let want = format!("uint grids[{}];", 3 * super::GATE_SLOTS);
-        assert!(src.contains(&want), "glsl/raster_gate.comp should declare `{want}` (3 x GATE_SLOTS)");
     }
 }

@@ -89,7 +89,14 @@ impl Rasterizer {
     /// [`Rasterizer::reduce_grid`]) the reduce, and so the step, runs only
     /// when the view fitted its frame.
     pub fn record_backward_adam(&self, rec: &mut Recorder, g: &Gaussians, step: Moments, sh_degree: u32, frame: &Frame, gate: Option<&BufferBinding>) -> Result<()> {
-        let Moments { m, v, adam, features_only } = step;
+        self.check_moments(g, &step)?;
+        let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, step.features_only)?;
+        self.record_reduce_adam(rec, g, step, sh_degree, frame, records, gate)
+    }
+
+    /// Whether `step` fits the set `g` and this device runs the fused step.
+    pub(super) fn check_moments(&self, g: &Gaussians, step: &Moments) -> Result<()> {
+        let Moments { m, v, adam, .. } = *step;
         for (name, s) in [("first", m), ("second", v)] {
             if s.n != g.n || s.channels != g.channels || s.coeffs != g.coeffs {
                 bail!("Adam's {name} moments ({} Gaussians, {} x {} features) do not match the Gaussian set ({}, {} x {})", s.n, s.channels, s.coeffs, g.n, g.channels, g.coeffs);
@@ -102,11 +109,18 @@ impl Rasterizer {
         if !self.can_fuse_adam() {
             bail!("{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)", self.ctx.caps().device_name, std::mem::size_of::<PushAdam>());
         }
+        Ok(())
+    }
+
+    /// The per-Gaussian reduce of the gradient records `records` (ranked by
+    /// `frame.depth_ids`, ranges in `frame.offsets`) with `step`'s Adam
+    /// step fused (see [`Rasterizer::record_backward_adam`]).
+    pub(super) fn record_reduce_adam(&self, rec: &mut Recorder, g: &Gaussians, step: Moments, sh_degree: u32, frame: &Frame, records: BufferBinding, gate: Option<&BufferBinding>) -> Result<()> {
+        let Moments { m, v, adam, features_only } = step;
         // CPU devices read the reduce's inputs as texel buffers where the
         // records fit one texel view (variant TEXEL): the same arithmetic.
         let texel = self.kernels == super::RasterKernels::Subgroup && frame.isect_grads.len() as u64 <= self.ctx.caps().max_texel_buffer_elements;
         let kernel = self.reduce_adam_kernel(features_only, texel)?;
-        let records = self.record_tile_backward(rec, g, &g.features, sh_degree, frame, features_only)?;
         let sc = rec.begin_scope("raster.reduce");
         for slice in self.feature_slices(g.n) {
             let mut bindings = self.param_bindings(frame, g, &g.features, slice);

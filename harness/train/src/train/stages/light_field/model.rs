@@ -10,7 +10,7 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::composite::{CompositeLoss, HfSetting};
-use crate::train::stages::kept_views::{KeepAs, KeptViews};
+use crate::train::stages::kept_views::{binning, KeepAs, KeptViews};
 use crate::train::stages::rendered::{PhiLayers, ReflRendered, R_PLANE};
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
@@ -107,7 +107,7 @@ pub struct LightFieldModel {
     pub one_submission: bool,
     /// Training views' binnings of the reflection set (its geometry is
     /// frozen in Stage III).
-    kept: KeptViews,
+    kept: KeptViews<tgs_pipelines::KeptBinning>,
 }
 
 impl LightFieldModel {
@@ -192,7 +192,7 @@ impl LightFieldModel {
             }
         }
         if let Some(at) = keep {
-            self.kept.keep(&self.raster, &b.frame, self.set.len(), at);
+            self.kept.keep(at, binning(&self.raster, &b.frame, self.set.len()));
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -328,7 +328,7 @@ impl LightFieldModel {
         }
         if host_count.is_none() {
             let b = &self.sizes[&(cam.width, cam.height)];
-            self.kept.keep(&self.raster, &b.frame, self.set.len(), x.keep);
+            self.kept.keep(x.keep, binning(&self.raster, &b.frame, self.set.len()));
         }
         let count = match host_count {
             Some(n) => n,

@@ -9,6 +9,7 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
+use tgs_pipelines::KeptWeights;
 use crate::train::stages::rendered::Rendered;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
@@ -75,9 +76,12 @@ pub struct ScatteringModel {
     /// the fused reduce took 11.6 ms against 2.9 + 0.5 ms for the reduce
     /// and Adam apart (thirtieth entry).
     pub fuse_adam: bool,
-    /// Training views' binnings kept while only the colour trains (Stage
-    /// III; cleared by any step of Stage I's).
-    kept: KeptViews,
+    /// Training views' blend weights kept while only the colour trains
+    /// (Stage III; cleared by any step of Stage I's).
+    kept: KeptViews<KeptWeights>,
+    /// The training view the last forward rendered from its kept weights
+    /// (its backward then uses them too).
+    from_weights: Option<u32>,
 }
 
 impl ScatteringModel {
@@ -92,6 +96,7 @@ impl ScatteringModel {
             sizes: HashMap::new(),
             fuse_adam: ctx.caps().is_cpu(),
             kept: KeptViews::default(),
+            from_weights: None,
         })
     }
 
@@ -103,22 +108,25 @@ impl ScatteringModel {
     }
 
     /// The forward of training view `at.view` while the geometry is frozen
-    /// (Stage III with the colour alone training): from its kept binning,
-    /// or in full until it fits, its binning then kept within the budget.
+    /// (Stage III with the colour alone training): the colour planes from
+    /// its kept blend weights, or in full until it fits, its weights then
+    /// kept within the budget. Only the colour planes of a render from kept
+    /// weights are written; [`Self::record_backward_external`] then takes
+    /// the colour's gradient from the same weights.
     pub fn forward_view_kept(&mut self, at: KeepAs, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
+        self.from_weights = None;
         let Some(k) = self.kept.get(at.view) else {
             let t = self.forward(cam, sh, background, profile)?;
             let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
-            self.kept.keep(&self.raster, &b.frame, self.set.len(), at);
+            let (raster, set) = (&self.raster, &self.set);
+            self.kept.keep(at, |left| raster.keep_weights(&set.params, &b.frame, left));
             return Ok(t);
         };
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
         let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-        self.raster.record_forward_kept(&mut rec, tgs_pipelines::Splats::own(&self.set.params, sh), cam, background, &b.frame, k)?;
+        self.raster.record_forward_weights(&mut rec, tgs_pipelines::Splats::own(&self.set.params, sh), cam, background, &b.frame, k)?;
         let t = rec.submit_and_wait()?;
-        if !self.raster.fit(&mut b.frame)? {
-            bail!("view {}: the forward from its kept binning did not fit its frame", at.view);
-        }
+        self.from_weights = Some(at.view);
         Ok(t)
     }
 
@@ -139,7 +147,20 @@ impl ScatteringModel {
         let ExternalStep { sh_degree: sh, lr_means, iteration: it, colour_only } = *step;
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
         let groups = self.groups(cfg, lr_means, sh);
-        if colour_only && self.fuse_adam && self.raster.can_fuse_adam() {
+        let fused = self.fuse_adam && self.raster.can_fuse_adam();
+        if let (true, Some(k)) = (colour_only, self.from_weights.and_then(|v| self.kept.get(v))) {
+            let s = &self.set;
+            if fused {
+                let c = self.adam.reduce_constants(s, &groups, it as u64)?;
+                return self.raster.record_colour_adam_weights(rec, &s.params, Moments { m: &s.m, v: &s.v, adam: &c, features_only: true }, sh, &b.frame, k);
+            }
+            self.raster.record_backward_colour_weights(rec, &s.params, &s.grads, sh, &b.frame, k)?;
+            let sc = rec.begin_scope("adam");
+            self.adam.record_set_features(rec, s, &groups[4], it as u64)?;
+            rec.end_scope(sc);
+            return Ok(());
+        }
+        if colour_only && fused {
             // The colour's Adam step in the reduce (the same result as the
             // two passes below, bit for bit: tests/tests/train_kernels.rs).
             let c = self.adam.reduce_constants(&self.set, &groups, it as u64)?;
@@ -177,6 +198,7 @@ impl ScatteringModel {
 
     /// Run the forward of `cam` until it fits its frame.
     fn forward(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
+        self.from_weights = None;
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
         self.raster.forward(&self.set.params, cam, background, sh, &mut b.frame, profile)
     }
@@ -196,6 +218,7 @@ impl ScatteringModel {
         let stats = it < cfg.densify_until;
         let groups = self.groups(cfg, x.lr_means, sh);
         self.kept.clear();
+        self.from_weights = None;
         let fused = self.fuse_adam && self.raster.can_fuse_adam();
         let (timings, values) = loop {
             let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
@@ -265,6 +288,7 @@ impl ScatteringModel {
     /// Cap every opacity at 0.01 (and clear its Adam moments).
     pub fn reset_opacity(&mut self) -> Result<()> {
         self.kept.clear();
+        self.from_weights = None;
         let mut rec = Recorder::new(&self.ctx)?;
         self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
         rec.submit_and_wait()?;
