@@ -38,7 +38,7 @@ pub use sort::{RadixSort, SortConfig, SortScratch};
 pub use rng::Rng;
 pub use util::Iota;
 pub mod raster;
-pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, KeptBinning, KeptWeights, Moments, Plane, RasterKernels, Rasterizer, RecordAccess, Splats, GATE_SLOTS};
+pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, KeptWeights, Moments, Plane, RasterKernels, Rasterizer, RecordAccess, Splats, GATE_SLOTS};
 pub mod train;
 pub use train::{Adam, AdamArrays, AdamGroup, DensifyParams, DensifyReport, Densifier, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights, TrainableSet};
 pub mod reflection;

@@ -149,7 +149,7 @@ fn light_field_bench_times_stage_three() {
     assert_eq!(b.mlp_block, 40 * 24, "one block holds a small frame's samples");
     assert!(b.peak_memory_mib > 0.0 && b.peak_memory_mib.is_finite());
     if ctx.caps().timestamp_valid_bits > 0 {
-        for k in ["raster.forward", "raster.backward", "mlp.forward", "mlp.backward", "lf.composite", "raster.kept_binning"] {
+        for k in ["raster.forward", "raster.backward", "mlp.forward", "mlp.backward", "lf.composite", "raster.kept_colour"] {
             assert!(b.kernels.iter().any(|t| t.name == k), "no timing for {k}");
         }
         // The warm-up binned every view once; the timed iterations sort nothing.

@@ -4,12 +4,15 @@
 //! bit; the colour gradients are the colour-only tile backward's up to
 //! the order of the sums, and match finite differences of the f64
 //! reference; the fused Adam step from them steps the colour alone; reruns
-//! are bit-identical; an empty view, a one-pixel view, several passes per
-//! kernel, a budget too small and a mismatched set or frame are handled.
+//! are bit-identical; a set of plain features (the reflection set's
+//! layout) keeps its geometry planes and renders every plane as the full
+//! forward; an empty view, a one-pixel view, several passes per kernel, a
+//! budget too small and a mismatched set or frame are handled.
 
 use tgs_engine::Recorder;
 use tgs_pipelines::{Camera, Features, Frame, Gaussians, KeptWeights, Moments, RasterKernels, Rasterizer, RecordAccess, TrainableSet};
 use tgs_tests::raster_ref::{self, RefScene};
+use tgs_tests::raster_util::{random_scene, SceneSpec};
 use tgs_tests::train_cases::{fused_case, FusedCase};
 use tgs_tests::{check_validation, ctx_shared, seed, Rng};
 
@@ -26,7 +29,7 @@ fn colour_planes(frame: &Frame) -> Vec<f32> {
 /// A full forward of `cam`, then its weights kept (no budget).
 fn keep(rast: &Rasterizer, g: &Gaussians, cam: &Camera, frame: &mut Frame) -> KeptWeights {
     rast.forward(g, cam, &BG, 3, frame, false).unwrap();
-    rast.keep_weights(g, frame, u64::MAX).unwrap().expect("the weights fit an unlimited budget")
+    rast.keep_weights(g, frame, u64::MAX, false).unwrap().expect("the weights fit an unlimited budget")
 }
 
 /// The colour planes of `cam` from kept weights.
@@ -45,7 +48,7 @@ fn colour_grads(rast: &Rasterizer, set: &TrainableSet, cam: &Camera, frame: &Fra
     match k {
         Some(k) => {
             frame.grad_out.upload(grad_out).unwrap();
-            rast.record_backward_colour_weights(&mut rec, &set.params, &set.grads, 3, frame, k).unwrap();
+            rast.record_backward_colour_weights(&mut rec, tgs_pipelines::Splats::own(&set.params, 3), &set.grads, &set.grads.features, frame, k).unwrap();
         }
         None => {
             rast.record_forward(&mut rec, &set.params, cam, &BG, 3, frame).unwrap();
@@ -276,8 +279,8 @@ fn kept_weights_of_empty_and_one_pixel_views_and_their_refusals() {
     assert!(bits(&colour_from(&rast, &set.params, &one, &small, &k1)) == bits(&full), "a one-pixel view from kept weights differs from the full forward");
 
     rast.forward(&set.params, &cam, &BG, 3, &mut frame, false).unwrap();
-    assert!(rast.keep_weights(&set.params, &frame, 1024).unwrap().is_none(), "weights kept beyond a 1 KiB budget");
-    let k = rast.keep_weights(&set.params, &frame, u64::MAX).unwrap().unwrap();
+    assert!(rast.keep_weights(&set.params, &frame, 1024, false).unwrap().is_none(), "weights kept beyond a 1 KiB budget");
+    let k = rast.keep_weights(&set.params, &frame, u64::MAX, false).unwrap().unwrap();
     assert!(k.bytes() > 1024);
 
     let fewer = Gaussians::upload(ctx, &{
@@ -291,8 +294,70 @@ fn kept_weights_of_empty_and_one_pixel_views_and_their_refusals() {
     let mut rec = Recorder::new(ctx).unwrap();
     let e = rast.record_forward_weights(&mut rec, tgs_pipelines::Splats::own(&fewer, 3), &cam, &BG, &frame, &k).unwrap_err();
     assert!(e.to_string().contains("kept weights are of 400 Gaussians; the set has 10"), "{e}");
-    let e = rast.record_backward_colour_weights(&mut rec, &set.params, &set.grads, 3, &small, &k).unwrap_err();
+    let e = rast.record_backward_colour_weights(&mut rec, tgs_pipelines::Splats::own(&set.params, 3), &set.grads, &set.grads.features, &small, &k).unwrap_err();
     assert!(e.to_string().contains(&format!("kept weights are of a {}x{} view", cam.width, cam.height)), "{e}");
     drop(rec);
+    check_validation(ctx);
+}
+
+/// A set of plain features with the reflection set's channel count (4),
+/// its weights kept with its geometry planes for two views: after the
+/// features change and the other view was rendered into the frame, each
+/// view's render from its kept weights gives every plane of the full
+/// forward bit for bit (colour from the weights, alpha to distortion
+/// restored), the view fits its frame, and the feature gradients to a
+/// separate buffer (the reflection set's `d_features`) are the colour-only
+/// backward's to 1e-5.
+#[test]
+fn kept_weights_with_planes_render_every_plane_of_a_plain_feature_set() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("kept_weights_with_planes_render_every_plane_of_a_plain_feature_set"));
+    let host = random_scene(&mut rng, &SceneSpec::new(300, 4, Features::Plain));
+    let cam = tgs_tests::raster_util::default_camera(48, 40);
+    let cam_b = Camera::look_at([-1.2, 0.4, -3.5], [0.0, 0.1, 0.0], [0.0, -1.0, 0.1], 0.8, cam.width, cam.height);
+    let rast = Rasterizer::new(ctx, 4, Features::Plain).unwrap();
+    let set = TrainableSet::new(ctx, &host).unwrap();
+    let mut frame = rast.frame(cam.width, cam.height, set.len(), 1024).unwrap();
+    let bg = [0.0f32; 4];
+    let mut kept = Vec::new();
+    for c in [&cam, &cam_b] {
+        rast.forward(&set.params, c, &bg, 0, &mut frame, false).unwrap();
+        kept.push(rast.keep_weights(&set.params, &frame, u64::MAX, true).unwrap().unwrap());
+    }
+    let without = {
+        rast.forward(&set.params, &cam, &bg, 0, &mut frame, false).unwrap();
+        rast.keep_weights(&set.params, &frame, u64::MAX, false).unwrap().unwrap()
+    };
+    let planes = tgs_pipelines::Plane::count(4) as u64 * (cam.width * cam.height) as u64;
+    assert_eq!(kept[0].bytes(), without.bytes() + 4 * (planes - 4 * (cam.width * cam.height) as u64));
+    let features: Vec<f32> = host.features.iter().map(|f| f + 0.3 * (rng.uniform(-1.0, 1.0) as f32)).collect();
+    set.params.features.upload(&features).unwrap();
+    let grad_out: Vec<f32> = (0..planes).map(|i| if i < 4 * (cam.width * cam.height) as u64 { rng.uniform(-1.0, 1.0) as f32 } else { 0.0 }).collect();
+    let d_features = tgs_engine::Buffer::<f32>::new(ctx, "test.d_features", features.len()).unwrap();
+    for (v, c) in [&cam, &cam_b].into_iter().enumerate() {
+        rast.forward(&set.params, c, &bg, 0, &mut frame, false).unwrap();
+        let full = frame.out.download().unwrap();
+        frame.grad_out.upload(&grad_out).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        rast.record_backward_colour_with(&mut rec, tgs_pipelines::Splats::own(&set.params, 0), &set.grads, &d_features, &frame).unwrap();
+        rec.submit_and_wait().unwrap();
+        let g_full = d_features.download().unwrap();
+        // The other view last: the frame holds none of this view's planes.
+        let other = [&cam_b, &cam][v];
+        rast.forward(&set.params, other, &bg, 0, &mut frame, false).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        rast.record_forward_weights(&mut rec, tgs_pipelines::Splats::own(&set.params, 0), c, &bg, &frame, &kept[v]).unwrap();
+        rec.submit_and_wait().unwrap();
+        assert!(rast.fit(&mut frame).unwrap(), "view {v}: a render from kept weights does not fit its frame");
+        let again = frame.out.download().unwrap();
+        assert!(bits(&full) == bits(&again), "view {v}: a render from kept weights with planes differs from the full forward");
+        frame.grad_out.upload(&grad_out).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        rast.record_backward_colour_weights(&mut rec, tgs_pipelines::Splats::own(&set.params, 0), &set.grads, &d_features, &frame, &kept[v]).unwrap();
+        rec.submit_and_wait().unwrap();
+        let e = rel_err(&d_features.download().unwrap(), &g_full);
+        assert!(e < 1e-5, "view {v}: feature gradients from kept weights differ from the colour-only backward's by {e:.2e}");
+        assert!(g_full.iter().any(|&x| x != 0.0));
+    }
     check_validation(ctx);
 }

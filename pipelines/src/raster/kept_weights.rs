@@ -48,12 +48,15 @@ pub struct KeptWeights {
     gau: Buffer<u32>,
     /// Each contribution's weight, grouped by Gaussian.
     gau_w: Buffer<f32>,
+    /// The output planes after the features (alpha .. distortion), where
+    /// kept: a render from the weights then restores them.
+    planes: Option<Buffer<f32>>,
 }
 
 impl KeptWeights {
     /// Bytes of device memory held.
     pub fn bytes(&self) -> u64 {
-        self.pix.bytes() + self.pix_w.bytes() + self.gau.bytes() + self.gau_w.bytes()
+        self.pix.bytes() + self.pix_w.bytes() + self.gau.bytes() + self.gau_w.bytes() + self.planes.as_ref().map_or(0, |p| p.bytes())
     }
     /// Pixel-Gaussian contributions kept.
     pub fn contributions(&self) -> u32 {
@@ -61,9 +64,10 @@ impl KeptWeights {
     }
 }
 
-/// Bytes of the kept weights of `npix` pixels, `n` Gaussians and `c` contributions.
-fn weights_bytes(npix: u64, n: u64, c: u64) -> u64 {
-    4 * ((npix + 1 + c) + (npix + c) + (n + 1 + c) + c)
+/// Bytes of the kept weights of `npix` pixels, `n` Gaussians and `c`
+/// contributions, with `planes` output planes per pixel.
+fn weights_bytes(npix: u64, n: u64, c: u64, planes: u64) -> u64 {
+    4 * ((npix + 1 + c) + (npix + c) + (n + 1 + c) + c + planes * npix)
 }
 
 impl Rasterizer {
@@ -102,12 +106,15 @@ impl Rasterizer {
 
     /// Keep the blend weights of `frame`'s last view of `g` (call it after
     /// [`Rasterizer::fit`] returned true for that forward and before
-    /// anything else used the frame). `Ok(None)` when they would take more
-    /// than `max_bytes`, a texel buffer's largest length, or a frame whose
-    /// gradient records cannot hold one per Gaussian: that view is then
-    /// rendered in full. Two submissions (counting, then writing), and the
-    /// grouping by Gaussian on the host.
-    pub fn keep_weights(&self, g: &Gaussians, frame: &Frame, max_bytes: u64) -> Result<Option<KeptWeights>> {
+    /// anything else used the frame), and with `planes` its output planes
+    /// after the features (alpha, depth, normal, median depth, distortion:
+    /// fixed with the geometry), which a render from the weights then
+    /// restores. `Ok(None)` when they would take more than `max_bytes`, a
+    /// texel buffer's largest length, or a frame whose gradient records
+    /// cannot hold one per Gaussian: that view is then rendered in full.
+    /// Two submissions (counting, then writing), and the grouping by
+    /// Gaussian on the host.
+    pub fn keep_weights(&self, g: &Gaussians, frame: &Frame, max_bytes: u64, planes: bool) -> Result<Option<KeptWeights>> {
         let (n, npix) = (g.n, (frame.width * frame.height) as usize);
         if frame.last_intersections > frame.capacity {
             bail!("the frame's last view ({} intersections) did not fit its capacity of {}: there are no weights to keep", frame.last_intersections, frame.capacity);
@@ -138,7 +145,8 @@ impl Rasterizer {
         let most_per_pixel = counts.iter().copied().max().unwrap_or(0);
         let max_texels = self.ctx.caps().max_texel_buffer_elements;
         let longest = (npix as u64 + 1 + total).max(n as u64 + 1 + total);
-        if total > u32::MAX as u64 / 2 || longest > max_texels || weights_bytes(npix as u64, n as u64, total) > max_bytes {
+        let rest = if planes { (super::Plane::count(self.channels) - self.channels) as usize } else { 0 };
+        if total > u32::MAX as u64 / 2 || longest > max_texels || weights_bytes(npix as u64, n as u64, total, rest as u64) > max_bytes {
             return Ok(None);
         }
         let c = total as usize;
@@ -148,6 +156,16 @@ impl Rasterizer {
         let pix_w = Buffer::<f32>::uninit(&self.ctx, "raster.kept_pixel_weights", npix + c).context("keeping a view's blend weights")?;
         bindings.extend([pix.binding(), pix_w.binding()]);
         capture(&k.write, &bindings)?;
+        let planes = match rest {
+            0 => None,
+            _ => {
+                let kept = Buffer::<f32>::uninit(&self.ctx, "raster.kept_planes", rest * npix).context("keeping a view's planes")?;
+                let mut rec = Recorder::new(&self.ctx)?;
+                rec.copy(&frame.out.slice(self.channels as usize * npix, rest * npix), &kept.binding(), 4 * (rest * npix) as u64)?;
+                rec.submit_and_wait()?;
+                Some(kept)
+            }
+        };
 
         // Grouped by Gaussian, each group in pixel order.
         let ids = pix.download_range(npix + 1, c)?;
@@ -186,6 +204,7 @@ impl Rasterizer {
             pix_w,
             gau: Buffer::from_slice(&self.ctx, "raster.kept_gaussians", &gau).context("keeping a view's blend weights")?,
             gau_w: Buffer::from_slice(&self.ctx, "raster.kept_gaussian_weights", &gau_w).context("keeping a view's blend weights")?,
+            planes,
         }))
     }
 
@@ -202,7 +221,9 @@ impl Rasterizer {
     /// Record the colour planes of the view whose weights `kept` holds (the
     /// same Gaussians' geometry and opacity, the same camera; the colours
     /// may differ): the projection (this step's colours), then the sums.
-    /// Only the colour planes of `frame.out` are written.
+    /// The other planes of `frame.out` are restored where `kept` holds
+    /// them, and left as they are otherwise. The view fits its frame
+    /// ([`Rasterizer::fit`] and the fit gate see no intersections).
     pub fn record_forward_weights(&self, rec: &mut Recorder, s: Splats, cam: &Camera, background: &[f32], frame: &Frame, kept: &KeptWeights) -> Result<()> {
         self.check_kept(kept, s.g, frame)?;
         let push = self.begin_forward(rec, &s, cam, background, frame)?;
@@ -214,8 +235,13 @@ impl Rasterizer {
             let push = Push { span: self.kept_span(), span_index: p, spans: kept.pixel_passes, ..push };
             rec.dispatch(&k.colour, &bindings, bytemuck::bytes_of(&push), self.groups(frame.width * frame.height))?;
         }
+        let npix = (frame.width * frame.height) as usize;
+        if let Some(p) = &kept.planes {
+            rec.copy(&p.binding(), &frame.out.slice(self.channels as usize * npix, p.len()), p.bytes())?;
+        }
         rec.end_scope(sc);
-        Ok(())
+        rec.update(&frame.stats.slice(0, 2), bytemuck::cast_slice(&[0u32, 0]))?;
+        rec.read_back(&frame.stats, 0, &frame.stats_host)
     }
 
     /// The colour gradient records of the view whose weights `kept` holds,
@@ -245,13 +271,13 @@ impl Rasterizer {
         Ok(records)
     }
 
-    /// [`Rasterizer::record_backward_colour`] for a view rendered by
-    /// [`Rasterizer::record_forward_weights`]: the feature gradients (and
-    /// the colour's dependence on the view direction in the others) from
-    /// the kept weights.
-    pub fn record_backward_colour_weights(&self, rec: &mut Recorder, g: &Gaussians, grads: &Gaussians, sh_degree: u32, frame: &Frame, kept: &KeptWeights) -> Result<()> {
-        let records = self.record_kept_grad(rec, g, frame, kept)?;
-        self.record_reduce(rec, Splats::own(g, sh_degree), grads, &grads.features, frame, records)
+    /// [`Rasterizer::record_backward_colour_with`] for a view rendered by
+    /// [`Rasterizer::record_forward_weights`]: the feature gradients to
+    /// `d_features` (and the colour's dependence on the view direction in
+    /// the others, in `grads`) from the kept weights.
+    pub fn record_backward_colour_weights(&self, rec: &mut Recorder, s: Splats, grads: &Gaussians, d_features: &Buffer<f32>, frame: &Frame, kept: &KeptWeights) -> Result<()> {
+        let records = self.record_kept_grad(rec, s.g, frame, kept)?;
+        self.record_reduce(rec, s, grads, d_features, frame, records)
     }
 
     /// [`Rasterizer::record_backward_adam`] with `step.features_only` for a

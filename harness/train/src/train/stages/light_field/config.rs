@@ -47,11 +47,14 @@ pub struct LightFieldConfig {
     pub hf_percentile: f32,
     /// Penalty on the mean of R (as in `[reflection]`).
     pub lambda_r: f32,
-    /// Device memory (MiB, per set) for the training views' binnings kept
-    /// while the geometry is frozen: the scattering set's when only its
-    /// colour trains, and the reflection set's. Each view is then binned
-    /// once instead of every iteration, with the same results bit for bit
-    /// (`stages/kept_views.rs`); 0 bins every time.
+    /// Device memory (MiB, per set) for what the training views keep while
+    /// the geometry is frozen: their blend weights, the scattering set's
+    /// when only its colour trains, and the reflection set's with its
+    /// geometry planes. Each view is then rendered in full once, and later
+    /// its colour and the colour's gradient come from the weights
+    /// (`stages/kept_views.rs`; about 3 MB per view of 33k Gaussians at
+    /// 64²); 0 renders every view in full every time. (The name is from
+    /// when the views kept their binnings.)
     pub kept_binning_mib: u32,
 }
 

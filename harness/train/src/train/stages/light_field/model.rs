@@ -10,7 +10,7 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::composite::{CompositeLoss, HfSetting};
-use crate::train::stages::kept_views::{binning, KeepAs, KeptViews};
+use crate::train::stages::kept_views::{KeepAs, KeptViews};
 use crate::train::stages::rendered::{PhiLayers, ReflRendered, R_PLANE};
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
@@ -20,7 +20,7 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
-use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, KeptBinning, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, KeptWeights, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
 use crate::train::stages::scattering::ExternalStep;
 
 /// What the trainer passes for one Stage III step.
@@ -105,9 +105,9 @@ pub struct LightFieldModel {
     /// the host reads every view's sample count first (the same results,
     /// bit for bit: tests/tests/train_step.rs compares them).
     pub one_submission: bool,
-    /// Training views' binnings of the reflection set (its geometry is
-    /// frozen in Stage III).
-    kept: KeptViews<tgs_pipelines::KeptBinning>,
+    /// Training views' blend weights and geometry planes of the reflection
+    /// set (its geometry is frozen in Stage III).
+    kept: KeptViews,
 }
 
 impl LightFieldModel {
@@ -188,11 +188,12 @@ impl LightFieldModel {
                 break;
             }
             if kept.is_some() {
-                bail!("a training view's kept binning did not fit its frame");
+                bail!("a training view's render from its kept weights did not fit its frame");
             }
         }
         if let Some(at) = keep {
-            self.kept.keep(at, binning(&self.raster, &b.frame, self.set.len()));
+            let (raster, set) = (&self.raster, &self.set);
+            self.kept.keep(at, |left| raster.keep_weights(&set.params, &b.frame, left, true));
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -293,8 +294,13 @@ impl LightFieldModel {
                 None => self.mlp.record_backward_counted(&mut rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
             }
             // The reflection set's geometry is frozen: its material alone
-            // needs gradients (the feature-only backward, bit-identical).
-            self.raster.record_backward_colour_with(&mut rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
+            // needs gradients (from the view's kept weights, or the
+            // feature-only tile backward).
+            let s = Splats::coloured(&self.set.params, &self.feat);
+            match kept {
+                Some(k) => self.raster.record_backward_colour_weights(&mut rec, s, &self.set.grads, &self.dfeat, &b.frame, k)?,
+                None => self.raster.record_backward_colour_with(&mut rec, s, &self.set.grads, &self.dfeat, &b.frame)?,
+            }
             let sc = rec.begin_scope("lf.material_backward");
             self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
             rec.end_scope(sc);
@@ -323,12 +329,13 @@ impl LightFieldModel {
                 break;
             }
             if kept.is_some() {
-                bail!("a training view's kept binning did not fit its frame");
+                bail!("a training view's render from its kept weights did not fit its frame");
             }
         }
         if host_count.is_none() {
             let b = &self.sizes[&(cam.width, cam.height)];
-            self.kept.keep(x.keep, binning(&self.raster, &b.frame, self.set.len()));
+            let (raster, set) = (&self.raster, &self.set);
+            self.kept.keep(x.keep, |left| raster.keep_weights(&set.params, &b.frame, left, true));
         }
         let count = match host_count {
             Some(n) => n,
@@ -402,14 +409,14 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
 /// Record the reflection set's material features (into `s.features`), its
 /// rasterization into `b.frame` and the view's sample list (Phi's inputs,
 /// `b.samples.count`), with the model's shading and raster kernels.
-/// A training view's kept binning, where given, stands for the binning.
-fn record_forward(rec: &mut Recorder, (shading, raster, kept): (&LightFieldShading, &Rasterizer, Option<&KeptBinning>), s: Splats, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
+/// A training view's kept weights, where given, stand for the rasterization.
+fn record_forward(rec: &mut Recorder, (shading, raster, kept): (&LightFieldShading, &Rasterizer, Option<&KeptWeights>), s: Splats, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
     let sc = rec.begin_scope("lf.material");
     shading.record_material(rec, &s.g.features, s.g.n, s.features)?;
     rec.end_scope(sc);
     let bg = [0.0; CHANNELS as usize];
     match kept {
-        Some(k) => raster.record_forward_kept(rec, s, cam, &bg, &b.frame, k)?,
+        Some(k) => raster.record_forward_weights(rec, s, cam, &bg, &b.frame, k)?,
         None => raster.record_forward_with(rec, s, cam, &bg, &b.frame)?,
     }
     let sc = rec.begin_scope("lf.samples");

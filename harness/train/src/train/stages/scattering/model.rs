@@ -9,7 +9,6 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
-use tgs_pipelines::KeptWeights;
 use crate::train::stages::rendered::Rendered;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
@@ -78,7 +77,7 @@ pub struct ScatteringModel {
     pub fuse_adam: bool,
     /// Training views' blend weights kept while only the colour trains
     /// (Stage III; cleared by any step of Stage I's).
-    kept: KeptViews<KeptWeights>,
+    kept: KeptViews,
     /// The training view the last forward rendered from its kept weights
     /// (its backward then uses them too).
     from_weights: Option<u32>,
@@ -119,7 +118,7 @@ impl ScatteringModel {
             let t = self.forward(cam, sh, background, profile)?;
             let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
             let (raster, set) = (&self.raster, &self.set);
-            self.kept.keep(at, |left| raster.keep_weights(&set.params, &b.frame, left));
+            self.kept.keep(at, |left| raster.keep_weights(&set.params, &b.frame, left, false));
             return Ok(t);
         };
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
@@ -154,7 +153,7 @@ impl ScatteringModel {
                 let c = self.adam.reduce_constants(s, &groups, it as u64)?;
                 return self.raster.record_colour_adam_weights(rec, &s.params, Moments { m: &s.m, v: &s.v, adam: &c, features_only: true }, sh, &b.frame, k);
             }
-            self.raster.record_backward_colour_weights(rec, &s.params, &s.grads, sh, &b.frame, k)?;
+            self.raster.record_backward_colour_weights(rec, tgs_pipelines::Splats::own(&s.params, sh), &s.grads, &s.grads.features, &b.frame, k)?;
             let sc = rec.begin_scope("adam");
             self.adam.record_set_features(rec, s, &groups[4], it as u64)?;
             rec.end_scope(sc);
