@@ -51,7 +51,8 @@ pub struct LightFieldBench {
 /// Time `iterations` Stage III iterations (after `warmup`) on workload `w`
 /// with the light field `network` (small or paper).
 /// The warm-up visits every view at least once: training's iterations
-/// after its first pass over the views reuse each view's kept binning
+/// after its first pass over the views render and differentiate each
+/// view's colours from its kept blend weights
 /// (`light_field.kept_binning_mib`), and those are what the timed ones
 /// stand for.
 pub fn light_field(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, network: LightPreset) -> Result<LightFieldBench> {

@@ -309,8 +309,10 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
 /// network, the reflection set and the scattering set within 1e-5
 /// (relative, per array) of steps that render every view in full (the kept
 /// weights sum the colour gradients in another order,
-/// tests/tests/kept_weights.rs). The second visit of each view sorts
-/// nothing and renders and differentiates its colours from the weights.
+/// tests/tests/kept_weights.rs). Every step takes the colour gradients
+/// from weights (a first visit captures them after its full render); the
+/// second visit of each view sorts nothing and renders its colours from
+/// them. With no budget nothing is captured.
 #[test]
 fn light_field_steps_from_kept_weights_match_steps_that_render_in_full() {
     let _one = COUNTING.lock().unwrap_or_else(|e| e.into_inner());
@@ -355,11 +357,10 @@ fn light_field_steps_from_kept_weights_match_steps_that_render_in_full() {
             assert_eq!(has(c, "raster.depth_sort"), i < 2, "step {i} with kept weights (scattering frozen: {frozen}): {c:?}");
             let from_weights = |k: &str| c.iter().filter(|n| *n == k).count();
             let sets = if frozen { 1 } else { 2 };
-            // A first visit renders in full; where the host reads the sample
-            // count first (the scattering colour training), the reflection
-            // set's weights are kept before its backward, which uses them.
-            let first_grads = if frozen { 0 } else { 1 };
-            assert_eq!((from_weights("raster.kept_colour"), from_weights("raster.kept_grad")), if i >= 2 { (sets, sets) } else { (0, first_grads) }, "step {i}: each set's colour from kept weights (scattering frozen: {frozen})");
+            // A first visit renders in full and captures its weights before
+            // the backward, which takes the colour gradient from them.
+            assert_eq!((from_weights("raster.kept_colour"), from_weights("raster.kept_grad")), (if i >= 2 { sets } else { 0 }, sets), "step {i}: each set's colour from kept weights (scattering frozen: {frozen})");
+            assert!(!has(&binned[i], "raster.kept_grad"), "step {i}: weights captured with no budget");
         }
     }
     check_validation(ctx);

@@ -19,7 +19,7 @@ impl Rasterizer {
     }
 
     /// The projection alone: every Gaussian's splat, colour, tile rectangle
-    /// and depth key (the rest of the binning reads them; a kept binning
+    /// and depth key (the rest of the binning reads them; a kept view
     /// needs only the splats and colours, `kept.rs`).
     pub(super) fn record_project(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
         let sc = rec.begin_scope("raster.project");

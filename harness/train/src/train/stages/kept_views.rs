@@ -5,7 +5,8 @@
 //! in full once, and its later renders and colour gradients sum the kept
 //! weights instead (`pipelines/src/raster/kept_weights.rs`: the same
 //! colour, the colour gradient up to the order of its sums). Views beyond
-//! the budget are rendered in full every time, as without it.
+//! the budget are rendered in full every time and their weights captured
+//! for that step alone, so every step takes its gradient from weights.
 
 use std::collections::HashMap;
 use tgs_pipelines::KeptWeights;
@@ -36,31 +37,35 @@ impl KeptViews {
         self.views.clear();
         self.stopped = false;
     }
-    /// After a forward of training view `at.view` that fitted its frame,
-    /// with nothing recorded on the frame since: keep what `make` returns
-    /// for it, given the bytes the budget has left (`Ok(None)`: it does not
-    /// fit), if the view is not kept yet and the budget has room. A device
-    /// that cannot hold it stops the keeping (said once on stderr), not the
-    /// run.
-    pub fn keep(&mut self, at: KeepAs, make: impl FnOnce(u64) -> anyhow::Result<Option<KeptWeights>>) {
+    /// After a full forward of training view `at.view` that fitted its
+    /// frame, with nothing recorded on the frame since, and no weights kept
+    /// for the view: its weights from `make`, kept if the budget has room
+    /// (then `None` is returned and [`Self::get`] has them), or returned
+    /// for this step alone, so that every step of a frozen set takes its
+    /// colour gradient from weights whatever the budget held before (a
+    /// resumed run steps as the run it continues). `None` too when the
+    /// budget is 0 (nothing is captured: the steps walk the tiles), when
+    /// `make` cannot keep them (a texel or record limit) and after the
+    /// device could not hold them once (said on stderr): that step walks
+    /// the tiles.
+    pub fn capture(&mut self, at: KeepAs, make: impl FnOnce() -> anyhow::Result<Option<KeptWeights>>) -> Option<KeptWeights> {
         let KeepAs { view, budget_mib } = at;
         if self.stopped || budget_mib == 0 || self.views.contains_key(&view) {
-            return;
+            return None;
         }
-        let held: u64 = self.views.values().map(KeptWeights::bytes).sum();
-        let budget = budget_mib as u64 * (1 << 20);
-        if held >= budget {
-            return;
-        }
-        match make(budget - held) {
-            Ok(Some(k)) => {
-                self.views.insert(view, k);
-            }
-            Ok(None) => {}
+        let w = match make() {
+            Ok(w) => w?,
             Err(e) => {
-                eprintln!("note: keeping training views' blend weights stopped after {} views ({e:#}); the others are rendered in full every time", self.views.len());
+                eprintln!("note: capturing training views' blend weights stopped after {} views ({e:#}); the others are rendered and differentiated in full", self.views.len());
                 self.stopped = true;
+                return None;
             }
+        };
+        let held: u64 = self.views.values().map(KeptWeights::bytes).sum();
+        if held + w.bytes() > budget_mib as u64 * (1 << 20) {
+            return Some(w);
         }
+        self.views.insert(view, w);
+        None
     }
 }

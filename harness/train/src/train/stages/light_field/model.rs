@@ -30,7 +30,7 @@ pub struct LightFieldStepInput<'a> {
     /// Global iteration: the scattering set's Adam step.
     pub global_iteration: u32,
     pub camera: &'a Camera,
-    /// The training view, and the budget of each set's kept binnings.
+    /// The training view, and the budget of each set's kept blend weights.
     pub keep: KeepAs,
     pub target: &'a Buffer<f32>,
     /// The frozen scattering colour of this view when the scattering set
@@ -108,6 +108,8 @@ pub struct LightFieldModel {
     /// Training views' blend weights and geometry planes of the reflection
     /// set (its geometry is frozen in Stage III).
     kept: KeptViews,
+    /// A view's weights captured for one step (the budget had no room).
+    transient: Option<KeptWeights>,
 }
 
 impl LightFieldModel {
@@ -134,6 +136,7 @@ impl LightFieldModel {
             count_host: Readback::new(ctx, "lf.count_host", 1)?,
             one_submission: true,
             kept: KeptViews::default(),
+            transient: None,
             ctx: ctx.clone(),
         })
     }
@@ -174,7 +177,7 @@ impl LightFieldModel {
 
     /// Reflection render + sample list of `cam`, re-run until the frame
     /// fits; returns the number of samples.
-    /// A training view (`keep`) uses and keeps its binning.
+    /// A training view (`keep`) uses and keeps its blend weights.
     fn forward(&mut self, cam: &Camera, keep: Option<KeepAs>, profile: bool, timings: &mut Vec<Timing>) -> Result<u32> {
         self.view_buffers(cam.width, cam.height)?;
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
@@ -191,9 +194,10 @@ impl LightFieldModel {
                 bail!("a training view's render from its kept weights did not fit its frame");
             }
         }
-        if let Some(at) = keep {
+        self.transient = None;
+        if let (Some(at), None) = (keep, kept) {
             let (raster, set) = (&self.raster, &self.set);
-            self.kept.keep(at, |left| raster.keep_weights(&set.params, &b.frame, left, true));
+            self.transient = self.kept.capture(at, || raster.keep_weights(&set.params, &b.frame, u64::MAX, true));
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -242,7 +246,10 @@ impl LightFieldModel {
         let n = pixels as usize;
         // The GPU-count step needs every pixel's sample within one block.
         let room = self.scratch.as_ref().is_some_and(|s| s.block() >= pixels);
-        let host_count = if train_scat || !room || !self.one_submission { Some(self.forward(cam, Some(x.keep), x.profile, &mut timings)?) } else { None };
+        // A view without kept weights renders in full in its own
+        // submission first, and its weights are captured for the backward.
+        let unkept = x.keep.budget_mib > 0 && self.kept.get(x.keep.view).is_none();
+        let host_count = if train_scat || !room || !self.one_submission || unkept { Some(self.forward(cam, Some(x.keep), x.profile, &mut timings)?) } else { None };
         let (scat, scat_grad) = match x.scat {
             Some(s) => (s, None),
             None => {
@@ -257,7 +264,7 @@ impl LightFieldModel {
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
         let material_len = (MATERIAL * self.set.len()) as usize;
         let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
-        let kept = self.kept.get(x.keep.view);
+        let kept = self.kept.get(x.keep.view).or(self.transient.as_ref());
         loop {
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
             let scratch = self.scratch.as_ref().context("light-field scratch")?;
@@ -332,11 +339,7 @@ impl LightFieldModel {
                 bail!("a training view's render from its kept weights did not fit its frame");
             }
         }
-        if host_count.is_none() {
-            let b = &self.sizes[&(cam.width, cam.height)];
-            let (raster, set) = (&self.raster, &self.set);
-            self.kept.keep(x.keep, |left| raster.keep_weights(&set.params, &b.frame, left, true));
-        }
+
         let count = match host_count {
             Some(n) => n,
             None => self.count_host.read()?[0],

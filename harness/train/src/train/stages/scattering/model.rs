@@ -9,6 +9,7 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
+use tgs_pipelines::KeptWeights;
 use crate::train::stages::rendered::Rendered;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
@@ -78,9 +79,11 @@ pub struct ScatteringModel {
     /// Training views' blend weights kept while only the colour trains
     /// (Stage III; cleared by any step of Stage I's).
     kept: KeptViews,
-    /// The training view the last forward rendered from its kept weights
-    /// (its backward then uses them too).
+    /// The training view the last forward rendered from its kept weights,
+    /// or in full with its weights captured (its backward then uses them).
     from_weights: Option<u32>,
+    /// A view's weights captured for one step (the budget had no room).
+    transient: Option<KeptWeights>,
 }
 
 impl ScatteringModel {
@@ -96,6 +99,7 @@ impl ScatteringModel {
             fuse_adam: ctx.caps().is_cpu(),
             kept: KeptViews::default(),
             from_weights: None,
+            transient: None,
         })
     }
 
@@ -108,17 +112,20 @@ impl ScatteringModel {
 
     /// The forward of training view `at.view` while the geometry is frozen
     /// (Stage III with the colour alone training): the colour planes from
-    /// its kept blend weights, or in full until it fits, its weights then
-    /// kept within the budget. Only the colour planes of a render from kept
-    /// weights are written; [`Self::record_backward_external`] then takes
-    /// the colour's gradient from the same weights.
+    /// its kept blend weights, or in full, its weights then captured (kept
+    /// within the budget, or for this step); only the colour planes of a
+    /// render from kept weights are written. [`Self::record_backward_external`]
+    /// then takes the colour's gradient from the same weights.
     pub fn forward_view_kept(&mut self, at: KeepAs, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
-        self.from_weights = None;
+        self.transient = None;
         let Some(k) = self.kept.get(at.view) else {
             let t = self.forward(cam, sh, background, profile)?;
             let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
             let (raster, set) = (&self.raster, &self.set);
-            self.kept.keep(at, |left| raster.keep_weights(&set.params, &b.frame, left, false));
+            self.transient = self.kept.capture(at, || raster.keep_weights(&set.params, &b.frame, u64::MAX, false));
+            if self.transient.is_some() || self.kept.get(at.view).is_some() {
+                self.from_weights = Some(at.view);
+            }
             return Ok(t);
         };
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
@@ -147,7 +154,8 @@ impl ScatteringModel {
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
         let groups = self.groups(cfg, lr_means, sh);
         let fused = self.fuse_adam && self.raster.can_fuse_adam();
-        if let (true, Some(k)) = (colour_only, self.from_weights.and_then(|v| self.kept.get(v))) {
+        let weights = self.from_weights.and_then(|v| self.kept.get(v).or(self.transient.as_ref()));
+        if let (true, Some(k)) = (colour_only, weights) {
             let s = &self.set;
             if fused {
                 let c = self.adam.reduce_constants(s, &groups, it as u64)?;
@@ -198,6 +206,7 @@ impl ScatteringModel {
     /// Run the forward of `cam` until it fits its frame.
     fn forward(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
         self.from_weights = None;
+        self.transient = None;
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
         self.raster.forward(&self.set.params, cam, background, sh, &mut b.frame, profile)
     }
@@ -218,6 +227,7 @@ impl ScatteringModel {
         let groups = self.groups(cfg, x.lr_means, sh);
         self.kept.clear();
         self.from_weights = None;
+        self.transient = None;
         let fused = self.fuse_adam && self.raster.can_fuse_adam();
         let (timings, values) = loop {
             let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
@@ -288,6 +298,7 @@ impl ScatteringModel {
     pub fn reset_opacity(&mut self) -> Result<()> {
         self.kept.clear();
         self.from_weights = None;
+        self.transient = None;
         let mut rec = Recorder::new(&self.ctx)?;
         self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
         rec.submit_and_wait()?;
