@@ -20,9 +20,12 @@
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
-layout(std430, binding = 2) readonly buffer Vals { uint vals[]; };
-layout(std430, binding = 3) readonly buffer Gid { uint gid[]; };
-layout(std430, binding = 4) readonly buffer Proj { float proj[]; };
+// The tile's splats as uniform texel buffers (one gather a read on
+// llvmpipe, where a storage-buffer load goes lane by lane).
+layout(binding = 2) uniform usamplerBuffer vals_t;
+layout(binding = 3) uniform usamplerBuffer gid_t;
+layout(binding = 4) uniform samplerBuffer proj_t;
+#define PROJ(at) texelFetch(proj_t, int(at)).r
 // Per pixel: T, count, stopped (3 planes of width x height words).
 layout(std430, binding = 5) buffer State { uint state[]; };
 #ifdef WRITE
@@ -61,17 +64,17 @@ void main() {
     uint base = pix[px];
 #endif
     for (uint q = start; q < end && !done; q++) {
-        uint g = gid[vals[q]];
+        uint g = texelFetch(gid_t, int(texelFetch(vals_t, int(q)).r)).r;
         uint o = PROJ_STRIDE * g;
-        vec4 box = vec4(proj[o + 16u], proj[o + 17u], proj[o + 18u], proj[o + 19u]);
+        vec4 box = vec4(PROJ(o + 16u), PROJ(o + 17u), PROJ(o + 18u), PROJ(o + 19u));
         if (!in_box(box, pf)) {
             continue;
         }
-        vec3 tu = vec3(proj[o], proj[o + 1u], proj[o + 2u]);
-        vec3 tv = vec3(proj[o + 3u], proj[o + 4u], proj[o + 5u]);
-        vec3 tw = vec3(proj[o + 6u], proj[o + 7u], proj[o + 8u]);
-        vec2 mu = vec2(proj[o + 9u], proj[o + 10u]);
-        float op = proj[o + 14u];
+        vec3 tu = vec3(PROJ(o), PROJ(o + 1u), PROJ(o + 2u));
+        vec3 tv = vec3(PROJ(o + 3u), PROJ(o + 4u), PROJ(o + 5u));
+        vec3 tw = vec3(PROJ(o + 6u), PROJ(o + 7u), PROJ(o + 8u));
+        vec2 mu = vec2(PROJ(o + 9u), PROJ(o + 10u));
+        float op = PROJ(o + 14u);
         Hit h;
         bool hit = intersect(tu, tv, tw, mu, pf, h);
         float alpha = hit ? min(ALPHA_MAX, op * h.g) : 0.0;
