@@ -6,14 +6,18 @@
 //! weights instead (`pipelines/src/raster/kept_weights.rs`: the same
 //! colour, the colour gradient up to the order of its sums). Views beyond
 //! the budget are rendered in full every time and their weights captured
-//! for that step alone, so every step takes its gradient from weights.
+//! for that step alone, so every step takes its gradient from weights; a
+//! view whose weights alone exceed the budget is never captured (its
+//! steps walk the tiles, whatever the history).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use tgs_pipelines::KeptWeights;
 
 #[derive(Default)]
 pub struct KeptViews {
     views: HashMap<u32, KeptWeights>,
+    /// Views whose weights alone exceed the budget (never captured).
+    too_big: HashSet<u32>,
     /// Keeping stopped (the device could not hold another view's): the
     /// views not kept by then are rendered in full every time, as without
     /// a budget, rather than the run failing for memory it did not need.
@@ -35,26 +39,33 @@ impl KeptViews {
     /// Drop everything kept (the geometry is about to change).
     pub fn clear(&mut self) {
         self.views.clear();
+        self.too_big.clear();
         self.stopped = false;
     }
     /// After a full forward of training view `at.view` that fitted its
     /// frame, with nothing recorded on the frame since, and no weights kept
-    /// for the view: its weights from `make`, kept if the budget has room
+    /// for the view: its weights from `make` (given the whole budget in
+    /// bytes; `Ok(None)` when they exceed it), kept if the budget has room
     /// (then `None` is returned and [`Self::get`] has them), or returned
     /// for this step alone, so that every step of a frozen set takes its
     /// colour gradient from weights whatever the budget held before (a
     /// resumed run steps as the run it continues). `None` too when the
-    /// budget is 0 (nothing is captured: the steps walk the tiles), when
-    /// `make` cannot keep them (a texel or record limit) and after the
-    /// device could not hold them once (said on stderr): that step walks
-    /// the tiles.
-    pub fn capture(&mut self, at: KeepAs, make: impl FnOnce() -> anyhow::Result<Option<KeptWeights>>) -> Option<KeptWeights> {
+    /// budget is 0 (nothing is captured: the steps walk the tiles), for a
+    /// view whose weights alone exceed the budget or a texel or record
+    /// limit (remembered: never captured again), and after the device could
+    /// not hold them once (said on stderr): that step walks the tiles.
+    pub fn capture(&mut self, at: KeepAs, make: impl FnOnce(u64) -> anyhow::Result<Option<KeptWeights>>) -> Option<KeptWeights> {
         let KeepAs { view, budget_mib } = at;
-        if self.stopped || budget_mib == 0 || self.views.contains_key(&view) {
+        if self.stopped || budget_mib == 0 || self.views.contains_key(&view) || self.too_big.contains(&view) {
             return None;
         }
-        let w = match make() {
-            Ok(w) => w?,
+        let budget = budget_mib as u64 * (1 << 20);
+        let w = match make(budget) {
+            Ok(Some(w)) => w,
+            Ok(None) => {
+                self.too_big.insert(view);
+                return None;
+            }
             Err(e) => {
                 eprintln!("note: capturing training views' blend weights stopped after {} views ({e:#}); the others are rendered and differentiated in full", self.views.len());
                 self.stopped = true;
@@ -62,7 +73,7 @@ impl KeptViews {
             }
         };
         let held: u64 = self.views.values().map(KeptWeights::bytes).sum();
-        if held + w.bytes() > budget_mib as u64 * (1 << 20) {
+        if held + w.bytes() > budget {
             return Some(w);
         }
         self.views.insert(view, w);

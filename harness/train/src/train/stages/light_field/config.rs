@@ -53,7 +53,9 @@ pub struct LightFieldConfig {
     /// geometry planes. Each view is then rendered in full once, and later
     /// its colour and the colour's gradient come from the weights
     /// (`stages/kept_views.rs`; about 3 MB per view of 33k Gaussians at
-    /// 64²); 0 renders every view in full every time. (The name is from
+    /// 64²); views past the budget capture their weights at every visit, a
+    /// view whose weights alone exceed it walks the tiles; 0 renders and
+    /// differentiates every view in full every time. (The name is from
     /// when the views kept their binnings.)
     pub kept_binning_mib: u32,
 }

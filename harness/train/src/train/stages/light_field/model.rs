@@ -197,7 +197,7 @@ impl LightFieldModel {
         self.transient = None;
         if let (Some(at), None) = (keep, kept) {
             let (raster, set) = (&self.raster, &self.set);
-            self.transient = self.kept.capture(at, || raster.keep_weights(&set.params, &b.frame, u64::MAX, true));
+            self.transient = self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.frame, budget, true));
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -339,7 +339,6 @@ impl LightFieldModel {
                 bail!("a training view's render from its kept weights did not fit its frame");
             }
         }
-
         let count = match host_count {
             Some(n) => n,
             None => self.count_host.read()?[0],

@@ -9,13 +9,12 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
-use tgs_pipelines::KeptWeights;
 use crate::train::stages::rendered::Rendered;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
-use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, KeptWeights, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one step of this model.
 pub struct StepInput<'a> {
@@ -122,7 +121,7 @@ impl ScatteringModel {
             let t = self.forward(cam, sh, background, profile)?;
             let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
             let (raster, set) = (&self.raster, &self.set);
-            self.transient = self.kept.capture(at, || raster.keep_weights(&set.params, &b.frame, u64::MAX, false));
+            self.transient = self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.frame, budget, false));
             if self.transient.is_some() || self.kept.get(at.view).is_some() {
                 self.from_weights = Some(at.view);
             }
