@@ -144,7 +144,9 @@ impl Rasterizer {
         }
         let most_per_pixel = counts.iter().copied().max().unwrap_or(0);
         let max_texels = self.ctx.caps().max_texel_buffer_elements;
-        let longest = (npix as u64 + 1 + total).max(n as u64 + 1 + total);
+        // The kernels read the lists, the projected colours and the image
+        // gradient as texel buffers.
+        let longest = (npix as u64 + 1 + total).max(n as u64 + 1 + total).max(frame.pfeat.len() as u64).max(frame.grad_out.len() as u64);
         let rest = if planes { (super::Plane::count(self.channels) - self.channels) as usize } else { 0 };
         if total > u32::MAX as u64 / 2 || longest > max_texels || weights_bytes(npix as u64, n as u64, total, rest as u64) > max_bytes {
             return Ok(None);
