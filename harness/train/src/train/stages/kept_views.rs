@@ -42,6 +42,12 @@ impl KeptViews {
         self.too_big.clear();
         self.stopped = false;
     }
+    /// Whether a full forward of `at.view` would capture its weights
+    /// ([`Self::capture`]): none are kept for it, and it is not past
+    /// capturing (budget 0, too big, or capturing stopped).
+    pub fn would_capture(&self, at: KeepAs) -> bool {
+        !self.stopped && at.budget_mib > 0 && !self.views.contains_key(&at.view) && !self.too_big.contains(&at.view)
+    }
     /// After a full forward of training view `at.view` that fitted its
     /// frame, with nothing recorded on the frame since, and no weights kept
     /// for the view: its weights from `make` (given the whole budget in
@@ -56,7 +62,7 @@ impl KeptViews {
     /// not hold them once (said on stderr): that step walks the tiles.
     pub fn capture(&mut self, at: KeepAs, make: impl FnOnce(u64) -> anyhow::Result<Option<KeptWeights>>) -> Option<KeptWeights> {
         let KeepAs { view, budget_mib } = at;
-        if self.stopped || budget_mib == 0 || self.views.contains_key(&view) || self.too_big.contains(&view) {
+        if !self.would_capture(at) {
             return None;
         }
         let budget = budget_mib as u64 * (1 << 20);

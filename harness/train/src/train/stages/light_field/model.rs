@@ -246,9 +246,9 @@ impl LightFieldModel {
         let n = pixels as usize;
         // The GPU-count step needs every pixel's sample within one block.
         let room = self.scratch.as_ref().is_some_and(|s| s.block() >= pixels);
-        // A view without kept weights renders in full in its own
-        // submission first, and its weights are captured for the backward.
-        let unkept = x.keep.budget_mib > 0 && self.kept.get(x.keep.view).is_none();
+        // A view whose weights would be captured renders in full in its
+        // own submission first, and they are captured for the backward.
+        let unkept = self.kept.would_capture(x.keep);
         let host_count = if train_scat || !room || !self.one_submission || unkept { Some(self.forward(cam, Some(x.keep), x.profile, &mut timings)?) } else { None };
         let (scat, scat_grad) = match x.scat {
             Some(s) => (s, None),
