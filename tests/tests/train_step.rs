@@ -345,8 +345,8 @@ fn light_field_steps_from_kept_weights_match_steps_that_render_in_full() {
     for frozen in [false, true] {
         let ((every, binned), (kept, copied)) = (run(0, frozen), run(512, frozen));
         // Each set's weights take 12.7-15.9 MB a view here. With 20 MiB the
-        // second view's do not fit beside the first's and are captured at
-        // each visit: the steps are those of an unlimited budget, bit for
+        // second view's do not fit beside the first's and are held beyond
+        // the budget: the steps are those of an unlimited budget, bit for
         // bit (what a resumed run, which keeps other views first, relies
         // on). With 12 MiB no view's fit alone: none is captured, and the
         // steps are those with no budget, bit for bit.

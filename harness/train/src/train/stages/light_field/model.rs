@@ -108,8 +108,6 @@ pub struct LightFieldModel {
     /// Training views' blend weights and geometry planes of the reflection
     /// set (its geometry is frozen in Stage III).
     kept: KeptViews,
-    /// A view's weights captured for one step (the budget had no room).
-    transient: Option<KeptWeights>,
 }
 
 impl LightFieldModel {
@@ -136,7 +134,6 @@ impl LightFieldModel {
             count_host: Readback::new(ctx, "lf.count_host", 1)?,
             one_submission: true,
             kept: KeptViews::default(),
-            transient: None,
             ctx: ctx.clone(),
         })
     }
@@ -194,10 +191,9 @@ impl LightFieldModel {
                 bail!("a training view's render from its kept weights did not fit its frame");
             }
         }
-        self.transient = None;
         if let (Some(at), None) = (keep, kept) {
             let (raster, set) = (&self.raster, &self.set);
-            self.transient = self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.frame, budget, true));
+            self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.frame, budget, true));
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -264,7 +260,7 @@ impl LightFieldModel {
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
         let material_len = (MATERIAL * self.set.len()) as usize;
         let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
-        let kept = self.kept.get(x.keep.view).or(self.transient.as_ref());
+        let kept = self.kept.get(x.keep.view);
         loop {
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
             let scratch = self.scratch.as_ref().context("light-field scratch")?;

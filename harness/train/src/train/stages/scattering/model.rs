@@ -14,7 +14,7 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
-use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, KeptWeights, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, TrainableSet};
 
 /// What the trainer passes for one step of this model.
 pub struct StepInput<'a> {
@@ -81,8 +81,6 @@ pub struct ScatteringModel {
     /// The training view the last forward rendered from its kept weights,
     /// or in full with its weights captured (its backward then uses them).
     from_weights: Option<u32>,
-    /// A view's weights captured for one step (the budget had no room).
-    transient: Option<KeptWeights>,
 }
 
 impl ScatteringModel {
@@ -98,7 +96,6 @@ impl ScatteringModel {
             fuse_adam: ctx.caps().is_cpu(),
             kept: KeptViews::default(),
             from_weights: None,
-            transient: None,
         })
     }
 
@@ -116,13 +113,12 @@ impl ScatteringModel {
     /// render from kept weights are written. [`Self::record_backward_external`]
     /// then takes the colour's gradient from the same weights.
     pub fn forward_view_kept(&mut self, at: KeepAs, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
-        self.transient = None;
         let Some(k) = self.kept.get(at.view) else {
             let t = self.forward(cam, sh, background, profile)?;
             let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
             let (raster, set) = (&self.raster, &self.set);
-            self.transient = self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.frame, budget, false));
-            if self.transient.is_some() || self.kept.get(at.view).is_some() {
+            self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.frame, budget, false));
+            if self.kept.get(at.view).is_some() {
                 self.from_weights = Some(at.view);
             }
             return Ok(t);
@@ -153,7 +149,7 @@ impl ScatteringModel {
         let b = self.sizes.get(&(cam.width, cam.height)).context("no render of this size yet")?;
         let groups = self.groups(cfg, lr_means, sh);
         let fused = self.fuse_adam && self.raster.can_fuse_adam();
-        let weights = self.from_weights.and_then(|v| self.kept.get(v).or(self.transient.as_ref()));
+        let weights = self.from_weights.and_then(|v| self.kept.get(v));
         if let (true, Some(k)) = (colour_only, weights) {
             let s = &self.set;
             if fused {
@@ -205,7 +201,6 @@ impl ScatteringModel {
     /// Run the forward of `cam` until it fits its frame.
     fn forward(&mut self, cam: &Camera, sh: u32, background: &[f32; 3], profile: bool) -> Result<Vec<Timing>> {
         self.from_weights = None;
-        self.transient = None;
         let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
         self.raster.forward(&self.set.params, cam, background, sh, &mut b.frame, profile)
     }
@@ -226,7 +221,6 @@ impl ScatteringModel {
         let groups = self.groups(cfg, x.lr_means, sh);
         self.kept.clear();
         self.from_weights = None;
-        self.transient = None;
         let fused = self.fuse_adam && self.raster.can_fuse_adam();
         let (timings, values) = loop {
             let b = view_buffers(&mut self.sizes, &self.raster, &self.loss, self.set.len(), cam.width, cam.height)?;
@@ -297,7 +291,6 @@ impl ScatteringModel {
     pub fn reset_opacity(&mut self) -> Result<()> {
         self.kept.clear();
         self.from_weights = None;
-        self.transient = None;
         let mut rec = Recorder::new(&self.ctx)?;
         self.densifier.record_opacity_reset(&mut rec, &self.set, 0.01)?;
         rec.submit_and_wait()?;
