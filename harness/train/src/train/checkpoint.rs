@@ -266,6 +266,15 @@ pub fn missing_settings_note(path: &Path, h: &Header, cfg: &TrainConfig) -> Resu
     )))
 }
 
+/// Print [`missing_settings_note`] as a warning unless `quiet` (what
+/// `--resume` and `--from` do with a checkpoint from an earlier tgs).
+pub fn warn_missing_settings(path: &Path, h: &Header, cfg: &TrainConfig, quiet: bool) -> Result<()> {
+    if let (Some(note), false) = (missing_settings_note(path, h, cfg)?, quiet) {
+        eprintln!("tgs: warning: {note}");
+    }
+    Ok(())
+}
+
 /// Parameters (the first five arrays) of a checkpoint as a host set.
 pub fn gaussians(h: &Header, arrays: &[Vec<f32>]) -> Result<HostGaussians> {
     if arrays.len() < 5 {

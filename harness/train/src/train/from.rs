@@ -115,11 +115,7 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
     if !cfg.wants_reflection() {
         bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
     }
-    if let Some(note) = checkpoint::missing_settings_note(&ckpt, &h, &cfg)? {
-        if !a.quiet {
-            eprintln!("tgs: warning: {note}");
-        }
-    }
+    checkpoint::warn_missing_settings(&ckpt, &h, &cfg, a.quiet)?;
     let inherited = inherited_settings(&h.config, &cfg, keep_two)?;
     if !a.quiet && !inherited.is_empty() {
         eprintln!("--from {}: these settings are that run's, not today's defaults (change them with --set KEY=VALUE):\n  {}", run.display(), inherited.join("\n  "));

@@ -96,11 +96,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
         let (h, arrays) = checkpoint::read(&ckpt)?;
         let cfg = resume_config(a, &h.config)?;
-        if let Some(note) = checkpoint::missing_settings_note(&ckpt, &h, &cfg)? {
-            if !a.quiet {
-                eprintln!("tgs: warning: {note}");
-            }
-        }
+        checkpoint::warn_missing_settings(&ckpt, &h, &cfg, a.quiet)?;
         let dir = PathBuf::from(&h.dataset);
         if let Some(given) = &a.dataset {
             let same = std::fs::canonicalize(given).map(|g| g == dir).unwrap_or(false);
