@@ -28,7 +28,10 @@
 // by lane (perf/RESULTS.md, forty-first entry): the camera (0), the ids (6),
 // offsets (7) and records (8, the records buffer itself), and the
 // parameters and moments through views 20-34 of the storage buffers 1-5,
-// 9-13 and 15-19 that the step writes. The same arithmetic.
+// 9-13 and 15-19 that the step writes. The same arithmetic. It writes a
+// Gaussian's features and their moments four at a time where they come in
+// fours (a store is a loop over the lanes on llvmpipe, whatever its width;
+// the reduce about a tenth faster, perf/RESULTS.md, forty-ninth entry).
 #include "common.glsl"
 
 #ifdef ADAM
@@ -46,7 +49,20 @@ layout(std430, binding = 1) PARAM_ACCESS buffer Means { float means[]; };
 layout(std430, binding = 2) PARAM_ACCESS buffer Scales { float log_scales[]; };
 layout(std430, binding = 3) PARAM_ACCESS buffer Quats { vec4 quats[]; };
 layout(std430, binding = 4) PARAM_ACCESS buffer Opac { float opacity[]; };
+#if defined(ADAM) && defined(TEXEL)
+// Read through views 24, 29 and 34; written four features at a time where
+// a Gaussian's features come in fours (FEAT4 below).
+layout(std430, binding = 5) writeonly buffer Feats { vec4 feats4[]; };
+#define W_FEATS(i) feats4[(i) >> 2u][(i) & 3u]
+#define W_M1_FEATS(i) m1_feats4[(i) >> 2u][(i) & 3u]
+#define W_M2_FEATS(i) m2_feats4[(i) >> 2u][(i) & 3u]
+#define FEAT4
+#else
 layout(std430, binding = 5) PARAM_ACCESS buffer Feats { float feats[]; };
+#define W_FEATS(i) feats[i]
+#define W_M1_FEATS(i) m1_feats[i]
+#define W_M2_FEATS(i) m2_feats[i]
+#endif
 #ifdef TEXEL
 layout(binding = 6) uniform usamplerBuffer ids_t;
 layout(binding = 7) uniform usamplerBuffer offsets_t;
@@ -119,12 +135,20 @@ layout(std430, binding = 9) buffer M1Means { float m1_means[]; };
 layout(std430, binding = 10) buffer M1Scales { float m1_scales[]; };
 layout(std430, binding = 11) buffer M1Quats { float m1_quats[]; };
 layout(std430, binding = 12) buffer M1Opac { float m1_opacity[]; };
+#ifdef FEAT4
+layout(std430, binding = 13) writeonly buffer M1Feats { vec4 m1_feats4[]; };
+#else
 layout(std430, binding = 13) buffer M1Feats { float m1_feats[]; };
+#endif
 layout(std430, binding = 15) buffer M2Means { float m2_means[]; };
 layout(std430, binding = 16) buffer M2Scales { float m2_scales[]; };
 layout(std430, binding = 17) buffer M2Quats { float m2_quats[]; };
 layout(std430, binding = 18) buffer M2Opac { float m2_opacity[]; };
+#ifdef FEAT4
+layout(std430, binding = 19) writeonly buffer M2Feats { vec4 m2_feats4[]; };
+#else
 layout(std430, binding = 19) buffer M2Feats { float m2_feats[]; };
+#endif
 
 // adam.comp's step of parameter P with moments M, V (written; read as
 // PR, MR, VR), gradient G, rate LR.
@@ -158,7 +182,7 @@ void put_opacity(uint i, float g) { ADAM_STEP(opacity[i], m1_opacity[i], m2_opac
 // already loaded.
 void put_feat_from(uint fb, uint i, float p, float g) {
     if (i < pc.feat_active) {
-        ADAM_STEP(feats[fb + i], m1_feats[fb + i], m2_feats[fb + i], p, R_M1_FEATS(fb + i), R_M2_FEATS(fb + i), g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
+        ADAM_STEP(W_FEATS(fb + i), W_M1_FEATS(fb + i), W_M2_FEATS(fb + i), p, R_M1_FEATS(fb + i), R_M2_FEATS(fb + i), g, i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
     }
 }
 // The same, loading the value (only for a feature that steps).
@@ -300,6 +324,11 @@ void main() {
         // the ADAM variant (whose loop also steps the coefficients) rounds
         // it as the plain reduce does.
         precise vec3 ddir = vec3(0.0);
+#ifdef FEAT4
+        // Each feature's gradient, stepped below four at a time: a store
+        // costs a loop over the lanes on CPU drivers, whatever its width.
+        float G[16u * CH];
+#endif
         for (uint c = 0u; c < CH; c++) {
             float v = 0.5;
             for (uint kk = 0u; kk < nk; kk++) {
@@ -311,9 +340,37 @@ void main() {
                 if (kk < nk) {
                     ddir += gc * coef * dY[kk];
                 }
+#ifdef FEAT4
+                G[kk * CH + c] = kk < nk ? Y[kk] * gc : 0.0;
+#else
                 put_feat_from(fb, kk * CH + c, coef, kk < nk ? Y[kk] * gc : 0.0);
+#endif
             }
         }
+#ifdef FEAT4
+        uint nf = nc * CH;
+        if ((nf & 3u) == 0u && (fb & 3u) == 0u) {
+            for (uint j = 0u; j < nf; j += 4u) {
+                vec4 pv = vec4(F[j], F[j + 1u], F[j + 2u], F[j + 3u]);
+                vec4 mv = vec4(R_M1_FEATS(fb + j), R_M1_FEATS(fb + j + 1u), R_M1_FEATS(fb + j + 2u), R_M1_FEATS(fb + j + 3u));
+                vec4 vv = vec4(R_M2_FEATS(fb + j), R_M2_FEATS(fb + j + 1u), R_M2_FEATS(fb + j + 2u), R_M2_FEATS(fb + j + 3u));
+                vec4 np = pv, nm = mv, nv = vv;
+                for (uint t = 0u; t < 4u; t++) {
+                    uint i = j + t;
+                    if (i < pc.feat_active) {
+                        ADAM_STEP(np[t], nm[t], nv[t], pv[t], mv[t], vv[t], G[i], i < pc.feat_split ? pc.lr_feats : pc.lr_rest)
+                    }
+                }
+                feats4[(fb + j) >> 2u] = np;
+                m1_feats4[(fb + j) >> 2u] = nm;
+                m2_feats4[(fb + j) >> 2u] = nv;
+            }
+        } else {
+            for (uint i = 0u; i < nf; i++) {
+                put_feat_from(fb, i, F[i], G[i]);
+            }
+        }
+#endif
         if (len > 0.0) {
             dmean += (ddir - dir * dot(dir, ddir)) / len;
         }

@@ -36,12 +36,19 @@ pub fn densify_cases() -> (HostGaussians, Vec<f32>, Vec<f32>, Vec<f32>) {
 /// SH colour's DC and rest at their own rates, the coefficients of degree
 /// 1 of 3 active.
 pub fn fused_groups() -> [AdamGroup; 5] {
+    fused_groups_of(3)
+}
+
+/// [`fused_groups`] for a set of SH degree `degree` (degree 1 active, or
+/// all of a degree-0 set).
+fn fused_groups_of(degree: u32) -> [AdamGroup; 5] {
+    let coeffs = (degree + 1) * (degree + 1);
     [
         AdamGroup::single(1e-3),
         AdamGroup::single(5e-3),
         AdamGroup::single(1e-3),
         AdamGroup::single(0.05),
-        AdamGroup { active: 3 * 4, ..AdamGroup::split(2.5e-3, 1.25e-4, 48, 3) },
+        AdamGroup { active: 3 * coeffs.min(4), ..AdamGroup::split(2.5e-3, 1.25e-4, 3 * coeffs, 3) },
     ]
 }
 
@@ -57,11 +64,18 @@ pub struct FusedCase {
 }
 
 pub fn fused_case(name: &str) -> FusedCase {
+    fused_case_of(name, 3)
+}
+
+/// [`fused_case`] with Gaussians of SH degree `degree`: at degree 0 a
+/// Gaussian has 3 features, which the CPU reduce cannot step four at a
+/// time (at degree 3 it has 48).
+pub fn fused_case_of(name: &str, degree: u32) -> FusedCase {
     use tgs_pipelines::Features;
     use crate::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
     let mut rng = Rng(seed(name));
-    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, Features::Sh { degree: 3 }));
+    let host = random_scene(&mut rng, &SceneSpec::new(400, 3, Features::Sh { degree }));
     let cam = default_camera(70, 45);
     let grad_out = random_grads(&mut rng, 3, 70 * 45);
-    FusedCase { host, cam, grad_out, adam: Adam::new(ctx_shared(), 1e-15).unwrap(), groups: fused_groups() }
+    FusedCase { host, cam, grad_out, adam: Adam::new(ctx_shared(), 1e-15).unwrap(), groups: fused_groups_of(degree) }
 }

@@ -3,7 +3,7 @@
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::{Adam, AdamArrays, AdamGroup, DensifyParams, Densifier, HostGaussians, TrainableSet};
 use tgs_tests::Rng;
-use tgs_tests::train_cases::{densify_cases as cases, fused_case, fused_groups, FusedCase};
+use tgs_tests::train_cases::{densify_cases as cases, fused_case, fused_case_of, fused_groups, FusedCase};
 use tgs_tests::{check_validation, ctx_shared, seed};
 
 #[test]
@@ -225,15 +225,17 @@ fn record_accesses(ctx: &tgs_engine::Context) -> Vec<tgs_pipelines::RecordAccess
 /// leaves bit for bit the parameters, moments and densification gradients
 /// of the backward followed by Adam's own pass: two steps at SH degree 1 of
 /// 3 (only the active coefficients stepped, DC and rest at their own
-/// rates), with the gradient records bound and reached by address.
+/// rates; the CPU reduce steps them four at a time, the inactive ones
+/// rewritten as they were), and two of a set of degree 0 (3 features per
+/// Gaussian, stepped one at a time), with the gradient records bound and
+/// reached by address.
 #[test]
 fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
     use tgs_pipelines::{Features, RasterKernels, Rasterizer};
     let ctx = ctx_shared();
-    let sh3 = Features::Sh { degree: 3 };
-    let FusedCase { host, cam, grad_out, adam, groups } = fused_case("the_reduce_with_adam_fused_matches_the_backward_then_adam");
-    for records in record_accesses(ctx) {
-        let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
+    for (degree, records) in [3, 0].into_iter().flat_map(|d| record_accesses(ctx).into_iter().map(move |r| (d, r))) {
+        let FusedCase { host, cam, grad_out, adam, groups } = fused_case_of("the_reduce_with_adam_fused_matches_the_backward_then_adam", degree);
+        let rast = Rasterizer::with_records(ctx, 3, Features::Sh { degree }, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
         if !rast.can_fuse_adam() {
             eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
             return;
@@ -262,7 +264,7 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
         };
         let (fused, separate) = (run(true), run(false));
         for ((name, a), (_, b)) in fused.iter().zip(&separate) {
-            assert!(a == b, "{records:?}: {name} differs between the fused and the separate step");
+            assert!(a == b, "{records:?}, SH degree {degree}: {name} differs between the fused and the separate step");
         }
         let before = TrainableSet::new(ctx, &host).unwrap();
         let params = |s: &[(String, Vec<u32>)], k: &str| s.iter().find(|a| a.0 == k).unwrap().1.clone();
