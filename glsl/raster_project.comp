@@ -5,7 +5,15 @@
 // Variant TEXEL (CPU devices): the camera and the Gaussians are read as
 // uniform texel buffers, which llvmpipe fetches as one gather where it
 // loads a storage buffer lane by lane (perf/RESULTS.md, forty-first entry).
+// Variant COLOUR (a view rendered from kept blend weights,
+// pipelines/src/raster/kept_weights.rs: the geometry is frozen and the
+// view's splats were captured with its weights): the features alone, for
+// every Gaussian, as the full kernel computes them; nothing else is
+// written (a store is a loop over the lanes on CPU drivers, and the splat,
+// rectangle, key and radius stores were most of this kernel there).
 // variant: TEXEL
+// variant: COLOUR
+// variant: TEXEL COLOUR
 #include "common.glsl"
 
 #ifdef TEXEL
@@ -51,8 +59,9 @@ void main() {
     if (g >= min(pc.n, pc.feat_end)) {
         return;
     }
-    depth_ids[g] = g;
     vec3 p = vec3(MEANS(3u * g), MEANS(3u * g + 1u), MEANS(3u * g + 2u));
+#ifndef COLOUR
+    depth_ids[g] = g;
     vec2 ls = vec2(LOG_SCALES(2u * g), LOG_SCALES(2u * g + 1u));
     Proj pr;
     bool ok = project(p, ls, QUAT(g), OPACITY(g), pr);
@@ -80,6 +89,7 @@ void main() {
     proj[b + 11u] = pr.s.n.x; proj[b + 12u] = pr.s.n.y; proj[b + 13u] = pr.s.n.z;
     proj[b + 14u] = pr.s.o; proj[b + 15u] = pr.pv.z;
     proj[b + 16u] = box.x; proj[b + 17u] = box.y; proj[b + 18u] = box.z; proj[b + 19u] = box.w;
+#endif
 
     // Features: SH evaluated for the view direction (+0.5, clamped at 0), or plain.
     uint fb = (g - pc.feat_base) * pc.coeffs * CH;

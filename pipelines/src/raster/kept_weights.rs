@@ -25,6 +25,8 @@ use tgs_engine::{Buffer, BufferBinding, Kernel, KernelDesc, Recorder};
 
 /// The kept-weights kernels for one tile size (the capture walks tiles).
 pub(super) struct KeptKernels {
+    /// The projection's variant that writes the colours alone.
+    project: Kernel,
     count: Kernel,
     write: Kernel,
     colour: Kernel,
@@ -81,7 +83,14 @@ impl Rasterizer {
         let push_bytes = std::mem::size_of::<Push>() as u32;
         let k = |name, spirv| Kernel::new(&self.ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false });
         let grad = if self.records == RecordAccess::Address { shaders::RASTER_KEPT_GRAD_RECORDS_BDA } else { shaders::RASTER_KEPT_GRAD };
+        // The colours as the tile kernels' projection computes them (its
+        // storage or texel variant).
+        let project = match self.kernels {
+            super::RasterKernels::Workgroup => shaders::RASTER_PROJECT_COLOUR,
+            super::RasterKernels::Subgroup => shaders::RASTER_PROJECT_TEXEL_COLOUR,
+        };
         let kernels = KeptKernels {
+            project: k("raster.project", project)?,
             count: k("raster.capture", shaders::RASTER_CAPTURE)?,
             write: k("raster.capture", shaders::RASTER_CAPTURE_WRITE)?,
             colour: k("raster.kept_colour", shaders::RASTER_KEPT_COLOUR)?,
@@ -229,8 +238,10 @@ impl Rasterizer {
     pub fn record_forward_weights(&self, rec: &mut Recorder, s: Splats, cam: &Camera, background: &[f32], frame: &Frame, kept: &KeptWeights) -> Result<()> {
         self.check_kept(kept, s.g, frame)?;
         let push = self.begin_forward(rec, &s, cam, background, frame)?;
-        self.record_project(rec, s.g, s.features, &push, frame)?;
         let k = self.kept_kernels(frame.tile)?;
+        // The splats are the weights' (frozen with the geometry): only the
+        // colours are projected again.
+        self.record_project_with(rec, &k.project, s.g, s.features, &push, frame)?;
         let bindings = [frame.cam.binding(), frame.pfeat.binding(), kept.pix.binding(), kept.pix_w.binding(), frame.out.binding()];
         let sc = rec.begin_scope("raster.kept_colour");
         for p in 0..kept.pixel_passes {
