@@ -22,26 +22,20 @@ impl Rasterizer {
     /// and depth key (the rest of the binning reads them; a kept view
     /// needs only the splats and colours, `kept.rs`).
     pub(super) fn record_project(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
-        self.record_project_with(rec, &self.tile_kernels(frame.tile)?.project, g, features, push, frame)
+        self.record_project_with(rec, &self.tile_kernels(frame.tile)?.project, true, g, features, push, frame)
     }
 
-    /// [`Rasterizer::record_project`] with `project`, the kernel or its
-    /// variant that writes the colours alone (kept_weights.rs).
-    pub(super) fn record_project_with(&self, rec: &mut Recorder, project: &Kernel, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
+    /// [`Rasterizer::record_project`] with `project`: the kernel
+    /// (`geometry`), or its variant that writes the colours alone and
+    /// declares the bindings up to theirs (kept_weights.rs).
+    pub(super) fn record_project_with(&self, rec: &mut Recorder, project: &Kernel, geometry: bool, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
         let sc = rec.begin_scope("raster.project");
         for slice in self.feature_slices(g.n) {
             let mut bindings = self.param_bindings(frame, g, features, slice);
-            bindings.extend([
-                frame.proj.binding(),
-                frame.pfeat.binding(),
-                frame.rects.binding(),
-                frame.tiles.binding(),
-                frame.depth_keys.binding(),
-                frame.depth_ids.binding(),
-                frame.radii.binding(),
-            ]);
-            // The colour variant declares the bindings up to the colours'.
-            bindings.truncate(project.bindings());
+            bindings.extend([frame.proj.binding(), frame.pfeat.binding()]);
+            if geometry {
+                bindings.extend([frame.rects.binding(), frame.tiles.binding(), frame.depth_keys.binding(), frame.depth_ids.binding(), frame.radii.binding()]);
+            }
             let p = Push { feat_base: slice.0, feat_end: slice.1, ..*push };
             let count = slice.1.min(g.n) - slice.0;
             rec.dispatch(project, &bindings, bytemuck::bytes_of(&p), self.groups(count))?;

@@ -241,7 +241,7 @@ impl Rasterizer {
         let k = self.kept_kernels(frame.tile)?;
         // The splats are the weights' (frozen with the geometry): only the
         // colours are projected again.
-        self.record_project_with(rec, &k.project, s.g, s.features, &push, frame)?;
+        self.record_project_with(rec, &k.project, false, s.g, s.features, &push, frame)?;
         let bindings = [frame.cam.binding(), frame.pfeat.binding(), kept.pix.binding(), kept.pix_w.binding(), frame.out.binding()];
         let sc = rec.begin_scope("raster.kept_colour");
         for p in 0..kept.pixel_passes {
