@@ -2,15 +2,14 @@
 // Fourier features of the light field's inputs (paper §3.4, NeRF style):
 // gamma(a) = [a, sin(2^0 pi a), cos(2^0 pi a), ..., sin(2^(L-1) pi a),
 // cos(2^(L-1) pi a)], each term over the 3 components (3 + 6L floats).
-// 2^k a is exact in f32 and is reduced to t in [-1, 1] by subtracting an
-// even integer (exact too), so sin(pi t) keeps f32 accuracy at L = 12 and
-// |a| >= 1 where sin(2^11 pi a) would lose ~3 digits.
+// The argument reduction: mlp/encoding.glsl.
 //
 // Samples: 6 floats each (x normalized, unit w), from sample `base` on (a
 // block of the samples: pipelines/src/mlp `Block`). Writes gamma(x) to the
 // first layer's input (row stride 3 + 6 L_x) and gamma(x), gamma(w) to the
 // skip layer's input after its first `width` columns, rows from 0.
 #include "common.glsl"
+#include "mlp/encoding.glsl"
 
 layout(std430, binding = 0) readonly buffer Samples { float samples[]; };
 layout(std430, binding = 1) writeonly buffer In0 { float in0[]; };
@@ -26,15 +25,6 @@ layout(push_constant) uniform Push {
     uint n_count;
     uint base;
 } pc;
-
-const float PI = 3.14159265358979;
-
-// sin(pi a 2^k), cos(pi a 2^k) with the argument reduced exactly.
-vec2 sincos_pi(float a, uint k) {
-    float t = a * float(1u << k);
-    t -= 2.0 * round(0.5 * t);
-    return vec2(sin(PI * t), cos(PI * t));
-}
 
 void main() {
     uint s = wg_linear() * WG + gl_LocalInvocationID.x;

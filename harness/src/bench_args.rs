@@ -102,7 +102,8 @@ pub(crate) enum Bench {
         #[arg(long, default_value_t = 3)]
         reps: u32,
         /// The GEMM kernel: auto (rows on CPU devices, tiled on GPUs;
-        /// TGS_MLP_GEMM overrides), tiled or rows.
+        /// TGS_MLP_GEMM overrides), tiled, rows or fused (the forward and
+        /// the input gradients each one kernel, the weight gradients tiled).
         #[arg(long, default_value = "auto")]
         gemm: String,
         #[arg(long)]

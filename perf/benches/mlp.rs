@@ -1,6 +1,6 @@
 //! `cargo bench --bench mlp`: the light-field MLP (encode, forward,
-//! backward, reduce) for both presets on 1,024 and 4,096 samples, on both
-//! GEMM kernels (tiled, rows: bit-identical results), GPU ms per
+//! backward, reduce) for both presets on 1,024 and 4,096 samples, on the
+//! three kernels (tiled, rows, fused: bit-identical results), GPU ms per
 //! kernel, samples/s and GFLOP/s, and the device. JSON goes to
 //! target/tgs-bench/mlp.json.
 
@@ -15,7 +15,7 @@ fn main() -> anyhow::Result<()> {
     let mut runs = Vec::new();
     for preset in ["paper", "small"] {
         for n in [1024u32, 4096] {
-            for gemm in [Gemm::Tiled, Gemm::Rows] {
+            for gemm in [Gemm::Tiled, Gemm::Rows, Gemm::Fused] {
                 let b = tgs::bench_mlp::mlp(
                     &ctx,
                     tgs_pipelines::MlpShape::preset(preset)?,

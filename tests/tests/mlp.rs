@@ -370,13 +370,14 @@ fn on_kernel(gemm: Gemm, shape: MlpShape, params: &[f32], flat: &[f32], d_out: &
     (bits(out), bits(g.download().unwrap()))
 }
 
-/// The tiled kernel (GPUs) and the row kernel (CPU devices) sum every
-/// element in the same order: their outputs and gradients are the same
-/// bits, with host and GPU counts, on products narrower and wider than
-/// every tile and column block, one weight chunk and many, and the paper
-/// network. (The other tests here run the kernel this device prefers.)
+/// The tiled kernel (GPUs), the row kernel (CPU devices) and the fused
+/// kernels sum every element in the same order: their outputs and
+/// gradients are the same bits, with host and GPU counts, on products
+/// narrower and wider than every tile, column block and fused block, one
+/// weight chunk and many, and the paper network (the fused kernels' widest
+/// plan). (The other tests here run the kernel this device prefers.)
 #[test]
-fn tiled_and_row_kernels_are_bit_identical() {
+fn tiled_row_and_fused_kernels_are_bit_identical() {
     let ctx = ctx_shared();
     let mut rng = Rng(seed("mlp kernels"));
     let cases = [
@@ -393,13 +394,31 @@ fn tiled_and_row_kernels_are_bit_identical() {
         let d_out: Vec<f32> = (0..OUT * cap).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
         for counted in [None, Some(cap)] {
             let (out_t, g_t) = on_kernel(Gemm::Tiled, shape, &params, &flat, &d_out, n, counted);
-            let (out_r, g_r) = on_kernel(Gemm::Rows, shape, &params, &flat, &d_out, n, counted);
             assert!(g_t.iter().all(|&b| f32::from_bits(b).is_finite()), "{shape:?}: non-finite gradient");
-            let diff = |a: &[u32], b: &[u32]| a.iter().zip(b).filter(|(x, y)| x != y).count();
-            assert_eq!(diff(&out_t, &out_r), 0, "{shape:?} n={n} counted={counted:?}: outputs differ between the kernels");
-            assert_eq!(diff(&g_t, &g_r), 0, "{shape:?} n={n} counted={counted:?}: gradients differ between the kernels");
+            for other in [Gemm::Rows, Gemm::Fused] {
+                let (out_o, g_o) = on_kernel(other, shape, &params, &flat, &d_out, n, counted);
+                let diff = |a: &[u32], b: &[u32]| a.iter().zip(b).filter(|(x, y)| x != y).count();
+                assert_eq!(diff(&out_t, &out_o), 0, "{shape:?} n={n} counted={counted:?}: {other:?} outputs differ from the tiled kernel's");
+                assert_eq!(diff(&g_t, &g_o), 0, "{shape:?} n={n} counted={counted:?}: {other:?} gradients differ from the tiled kernel's");
+            }
         }
     }
-    assert!(Gemm::parse("rows").is_ok() && Gemm::parse("tiles").is_err());
+    assert!(Gemm::parse("rows").is_ok() && Gemm::parse("fused").is_ok() && Gemm::parse("tiles").is_err());
+    check_validation(ctx);
+}
+
+/// The fused kernels refuse a layer wider than they take, naming the
+/// width and the way out, and plan the paper network within lavapipe's
+/// 32 KiB of shared memory (the bit-identity test above runs it).
+#[test]
+fn fused_kernels_refuse_what_they_cannot_hold() {
+    let ctx = ctx_shared();
+    let mlp = Mlp::with_gemm(ctx, Gemm::Fused).unwrap();
+    let wide = MlpShape { depth: 2, width: tgs_pipelines::mlp::FUSED_MAX_WIDTH + 1, skip: 1, levels_x: 2, levels_w: 1 };
+    let err = format!("{:#}", mlp.scratch(wide, 16).err().expect("a layer wider than the fused kernels take"));
+    assert!(err.contains("257") && err.contains("TGS_MLP_GEMM"), "{err}");
+    assert!(mlp.scratch(MlpShape::PAPER, 16).is_ok());
+    // The layer-by-layer kernels take it.
+    assert!(Mlp::with_gemm(ctx, Gemm::Tiled).unwrap().scratch(wide, 16).is_ok());
     check_validation(ctx);
 }

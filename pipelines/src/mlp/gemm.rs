@@ -168,6 +168,14 @@ pub enum Gemm {
     /// it loops over the lanes for a storage-buffer load), so each binding
     /// is also held to the device's `maxTexelBufferElements`.
     Rows,
+    /// The forward from the encoding to the head in one kernel and the
+    /// input gradients from the head's dZ down in another
+    /// (glsl/mlp/fused_*.comp, tiny-cuda-nn's fully fused MLP without
+    /// tensor cores: a workgroup's activations stay in shared memory); the
+    /// weight gradients on the tiled GEMM. For GPUs, layers up to
+    /// [`FUSED_MAX_WIDTH`](super::FUSED_MAX_WIDTH) wide; opt-in
+    /// (`TGS_MLP_GEMM=fused`) until a GPU has measured it.
+    Fused,
 }
 
 /// The environment variable that overrides [`Gemm::for_device`].
@@ -175,19 +183,20 @@ pub const GEMM_ENV: &str = "TGS_MLP_GEMM";
 
 impl Gemm {
     /// Rows on CPU devices, tiled elsewhere; the environment variable
-    /// `TGS_MLP_GEMM` (tiled, rows) overrides the choice.
+    /// `TGS_MLP_GEMM` (tiled, rows, fused) overrides the choice.
     pub fn for_device(ctx: &Context) -> Result<Gemm> {
         if let Ok(v) = std::env::var(GEMM_ENV) {
             return Gemm::parse(&v).with_context(|| format!("environment variable {GEMM_ENV}"));
         }
         Ok(if ctx.caps().is_cpu() { Gemm::Rows } else { Gemm::Tiled })
     }
-    /// By name: "tiled" or "rows".
+    /// By name: "tiled", "rows" or "fused".
     pub fn parse(name: &str) -> Result<Gemm> {
         match name {
             "tiled" => Ok(Gemm::Tiled),
             "rows" => Ok(Gemm::Rows),
-            _ => bail!("unknown MLP kernel '{name}' (tiled, rows)"),
+            "fused" => Ok(Gemm::Fused),
+            _ => bail!("unknown MLP kernel '{name}' (tiled, rows, fused)"),
         }
     }
     /// Floats one binding of this kernel may hold on a device: a storage
@@ -197,12 +206,13 @@ impl Gemm {
         let storage = caps.max_storage_buffer_range / 4;
         match self {
             Gemm::Rows => storage.min(caps.max_texel_buffer_elements),
-            Gemm::Tiled => storage,
+            Gemm::Tiled | Gemm::Fused => storage,
         }
     }
     pub fn name(&self) -> &'static str {
         match self {
             Gemm::Tiled => "tiled",
+            Gemm::Fused => "fused",
             Gemm::Rows => "rows",
         }
     }

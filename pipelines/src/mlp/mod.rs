@@ -17,8 +17,15 @@
 //! layer, each [W | b] row-major, [`MlpShape::offset`]) that a single Adam
 //! dispatch updates.
 
+mod fused;
 mod gemm;
+mod scratch;
 mod shape;
+
+pub use fused::FUSED_MAX_WIDTH;
+use fused::Fused;
+use scratch::Block;
+pub use scratch::MlpScratch;
 
 pub use gemm::{Gemm, GEMM_ENV};
 use gemm::{row_column_blocks, Product, BLOCKS, MAX_CHUNKS, MIN_CHUNK, NONE, RELU, RELU_DERIV, ROW_CONFIGS, SIGMOID};
@@ -39,81 +46,6 @@ pub fn weight_chunks(n: u32) -> (u32, u32) {
     (chunk, n.div_ceil(chunk).max(1))
 }
 
-/// Activations and gradients of up to `capacity` samples.
-pub struct MlpScratch {
-    shape: MlpShape,
-    capacity: u32,
-    /// Rows of the activation buffers: the samples are taken in blocks of
-    /// this many when the capacity's activations exceed one binding
-    /// ([`Mlp::scratch_in_blocks`]); the capacity otherwise.
-    block: u32,
-    /// Inputs, [`SAMPLE`] floats per sample (normalized x, unit w); the caller writes them.
-    pub samples: Buffer<f32>,
-    /// Outputs, RGB per sample, after [`Mlp::record_forward`].
-    pub out: Buffer<f32>,
-    in0: Buffer<f32>,
-    cat: Buffer<f32>,
-    /// Hidden outputs by layer; the layer before the skip writes into `cat`.
-    hidden: Vec<Option<Buffer<f32>>>,
-    d: [Buffer<f32>; 2],
-    part: Buffer<f32>,
-}
-
-impl MlpScratch {
-    pub fn capacity(&self) -> u32 {
-        self.capacity
-    }
-    /// The first `n` samples cut into blocks (one, [0, n), unless `n`
-    /// exceeds the block; none for `n` = 0).
-    fn blocks(&self, n: u32) -> Vec<Block> {
-        (0..n.div_ceil(self.block)).map(|k| Block { base: k * self.block, m: (n - k * self.block).min(self.block) }).collect()
-    }
-    /// Samples one pass of the kernels takes: the capacity, or the block
-    /// it is cut into ([`Mlp::scratch_in_blocks`]). The GPU-count paths
-    /// need the capacity within one block.
-    pub fn block(&self) -> u32 {
-        self.block
-    }
-    pub fn shape(&self) -> MlpShape {
-        self.shape
-    }
-    /// Bytes of device memory held.
-    pub fn bytes(&self) -> u64 {
-        let mut b = self.samples.bytes() + self.out.bytes() + self.in0.bytes() + self.cat.bytes() + self.part.bytes();
-        b += self.hidden.iter().flatten().map(|h| h.bytes()).sum::<u64>();
-        b + self.d.iter().map(|d| d.bytes()).sum::<u64>()
-    }
-    /// gamma(x) per sample (row stride `dx`), after a forward.
-    pub fn first_input(&self) -> &Buffer<f32> {
-        &self.in0
-    }
-    /// The skip layer's input [h, gamma(x), gamma(w)] per sample (row
-    /// stride `cat_width`), after a forward.
-    pub fn skip_input(&self) -> &Buffer<f32> {
-        &self.cat
-    }
-    /// Layer `l`'s input buffer and row stride.
-    fn input(&self, l: u32) -> (&Buffer<f32>, u32) {
-        let s = &self.shape;
-        match l {
-            0 => (&self.in0, s.dx()),
-            l if l == s.skip => (&self.cat, s.cat_width()),
-            _ => (self.hidden[l as usize - 1].as_ref().expect("hidden layer buffer"), s.width),
-        }
-    }
-    /// Layer `l`'s output buffer and row stride.
-    fn output(&self, l: u32) -> (&Buffer<f32>, u32) {
-        let s = &self.shape;
-        if l == s.depth {
-            (&self.out, OUT)
-        } else if l + 1 == s.skip {
-            (&self.cat, s.cat_width())
-        } else {
-            (self.hidden[l as usize].as_ref().expect("hidden layer buffer"), s.width)
-        }
-    }
-}
-
 pub struct Mlp {
     ctx: Arc<Context>,
     gemm_kind: Gemm,
@@ -123,13 +55,6 @@ pub struct Mlp {
     encode: Kernel,
     head_grad: Kernel,
     reduce: Kernel,
-}
-
-/// Samples [base, base + m) of a forward or backward taken as one block.
-#[derive(Clone, Copy)]
-struct Block {
-    base: u32,
-    m: u32,
 }
 
 /// Where a block's backward reads the output gradient and writes the
@@ -165,7 +90,9 @@ impl Mlp {
         let sb = ctx.caps().min_subgroup_size.clamp(1, ROW_CONFIGS[0].nb);
         let pipeline = |name, spirv, spec: &[(u32, u32)]| Kernel::new(ctx, &KernelDesc { name, spirv, spec, push_bytes: push, subgroup_size: None, full_subgroups: false });
         let gemm = match gemm_kind {
-            Gemm::Tiled => BLOCKS.iter().map(|&b| pipeline("mlp.gemm", shaders::MLP_GEMM, &[(3, b)])).collect::<Result<Vec<_>>>()?,
+            // The fused kernels are the scratch's (they depend on the
+            // shape); the weight gradients run on the tiled GEMM.
+            Gemm::Tiled | Gemm::Fused => BLOCKS.iter().map(|&b| pipeline("mlp.gemm", shaders::MLP_GEMM, &[(3, b)])).collect::<Result<Vec<_>>>()?,
             Gemm::Rows => ROW_CONFIGS.iter().map(|c| pipeline("mlp.gemm_rows", shaders::MLP_GEMM_ROWS, &[(3, c.nb), (4, sb), (5, c.rr), (6, c.wg)])).collect::<Result<Vec<_>>>()?,
         };
         Ok(Mlp {
@@ -188,8 +115,17 @@ impl Mlp {
     /// one binding); more are taken in blocks.
     pub fn max_capacity(&self, shape: &MlpShape) -> u32 {
         let max = self.gemm_kind.max_binding_floats(self.ctx.caps());
+        (max / self.widest(shape)).min(u32::MAX as u64) as u32
+    }
+
+    /// Floats per sample of the widest activation buffer of a block.
+    fn widest(&self, shape: &MlpShape) -> u64 {
         let widest = shape.cat_width().max(shape.dx()).max(1) as u64;
-        (max / widest).min(u32::MAX as u64) as u32
+        if self.gemm_kind == Gemm::Fused {
+            widest.max(Fused::floats_per_sample(shape))
+        } else {
+            widest
+        }
     }
 
     /// Memory for up to `capacity` samples of `shape`, in one block when
@@ -214,7 +150,7 @@ impl Mlp {
         let cap = capacity.max(1);
         let block = block.clamp(1, cap);
         let max = self.gemm_kind.max_binding_floats(self.ctx.caps());
-        let widest = shape.cat_width().max(shape.dx()) as u64;
+        let widest = self.widest(&shape);
         if block as u64 * widest > max || MAX_CHUNKS as u64 * shape.params() as u64 > max || cap as u64 * SAMPLE as u64 > max {
             bail!(
                 "a light field of {} x {} on {capacity} samples in blocks of {block} needs {} floats in one buffer; this device binds at most {max}",
@@ -225,9 +161,13 @@ impl Mlp {
         }
         let (c, blk) = (cap as usize, block as usize);
         let w = shape.width as usize;
+        let fused = if self.gemm_kind == Gemm::Fused { Some(Fused::new(ctx, shape, block)?) } else { None };
         let hidden = (0..shape.depth)
-            .map(|l| if l + 1 == shape.skip { Ok(None) } else { Buffer::uninit(ctx, &format!("mlp.h{l}"), blk * w).map(Some) })
+            .map(|l| if l + 1 == shape.skip || fused.is_some() { Ok(None) } else { Buffer::uninit(ctx, &format!("mlp.h{l}"), blk * w).map(Some) })
             .collect::<Result<Vec<_>>>()?;
+        // dZ of a hidden layer (width wide) or of the head (OUT wide); the
+        // fused backward keeps its own.
+        let d_len = if fused.is_some() { 1 } else { blk * w.max(OUT as usize) };
         Ok(MlpScratch {
             shape,
             capacity: cap,
@@ -237,9 +177,9 @@ impl Mlp {
             in0: Buffer::uninit(ctx, "mlp.in0", blk * shape.dx() as usize)?,
             cat: Buffer::uninit(ctx, "mlp.cat", blk * shape.cat_width() as usize)?,
             hidden,
-            // dZ of a hidden layer (width wide) or of the head (OUT wide).
-            d: [Buffer::uninit(ctx, "mlp.d0", blk * w.max(OUT as usize))?, Buffer::uninit(ctx, "mlp.d1", blk * w.max(OUT as usize))?],
+            d: [Buffer::uninit(ctx, "mlp.d0", d_len)?, Buffer::uninit(ctx, "mlp.d1", d_len)?],
             part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
+            fused,
         })
     }
 
@@ -321,6 +261,12 @@ impl Mlp {
     fn record_forward_block(&self, rec: &mut Recorder, params: &Buffer<f32>, b: Block, rows: Option<&Buffer<u32>>, s: &MlpScratch) -> Result<()> {
         let Block { base, m: n } = b;
         let sh = s.shape;
+        if let Some(f) = &s.fused {
+            let sc = rec.begin_scope("mlp.forward");
+            f.record_forward(rec, &sh, s.fused_io(params), b, rows)?;
+            rec.end_scope(sc);
+            return Ok(());
+        }
         let m_count = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.encode");
         let push = [n, sh.levels_x, sh.levels_w, sh.width, m_count, base];
@@ -329,14 +275,15 @@ impl Mlp {
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.forward");
         for l in 0..sh.layers() {
-            let (x, k) = s.input(l);
-            let (out, ld) = s.output(l);
+            let (x, k, x_off) = s.input(l);
+            let (out, ld, out_off) = s.output(l);
             // C (n x J) = act([X, 1] [W | b]^T).
             let p = Product {
                 m: n,
                 n: sh.fan_out(l),
                 kdim: k + 1,
                 k_chunk: k + 1,
+                a_off: x_off,
                 a_rs: k,
                 a_cs: 1,
                 a_ones_k: k,
@@ -344,7 +291,7 @@ impl Mlp {
                 b_rs: 1,
                 b_cs: k + 1,
                 b_ones_j: NONE,
-                c_off: if l == sh.depth { base * OUT } else { 0 },
+                c_off: if l == sh.depth { base * OUT } else { out_off },
                 c_rs: ld,
                 c_act: if l == sh.depth { SIGMOID } else { RELU },
                 m_count,
@@ -417,6 +364,10 @@ impl Mlp {
         let (chunk, chunks) = if rows.is_some() { (0, MAX_CHUNKS) } else { weight_chunks(n) };
         let counted = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.backward");
+        if let Some(f) = &s.fused {
+            // Every layer's dZ in one dispatch; the weight gradients below.
+            f.record_backward(rec, &sh, s.fused_io(params), d_out, b, rows)?;
+        } else {
         // The head's dZ = dY * sigmoid'(Z), from the caller's output
         // gradient at the block's place into the ping-pong buffer the head
         // reads (3 wide); the hidden layers' dZ is written by the
@@ -428,10 +379,11 @@ impl Mlp {
             let z = &s.d[(sh.depth % 2) as usize];
             rec.dispatch(&self.head_grad, &[d_out.binding(), s.out.binding(), z.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n * OUT))?;
         }
+        }
         for l in (0..sh.layers()).rev() {
-            let (x, k) = s.input(l);
+            let (x, k, x_off) = s.input(l);
             // This layer's dZ (row stride OUT for the head, width else).
-            let (dz, d_ld) = (&s.d[(l % 2) as usize], sh.fan_out(l));
+            let ((dz, dz_off), d_ld) = (s.dz(l), sh.fan_out(l));
             let j = sh.fan_out(l);
             // [dW | db] (J x (K + 1)) = dZ^T [X, 1], per chunk of samples.
             let pw = Product {
@@ -439,9 +391,11 @@ impl Mlp {
                 n: k + 1,
                 kdim: n,
                 k_chunk: chunk,
+                a_off: dz_off,
                 a_rs: 1,
                 a_cs: d_ld,
                 a_ones_k: NONE,
+                b_off: x_off,
                 b_rs: k,
                 b_cs: 1,
                 b_ones_j: k,
@@ -452,10 +406,10 @@ impl Mlp {
                 ..Default::default()
             };
             self.dispatch(rec, &pw, [dz, x, dz, &s.part], chunks, rows)?;
-            if l > 0 {
+            if l > 0 && s.fused.is_none() {
                 // dZ_{l-1} (n x width) = (dZ W[:, :width]) * ReLU'(Y_{l-1})
                 // (the skip layer's encoded columns need no gradient).
-                let (y, y_ld) = s.output(l - 1);
+                let (y, y_ld, y_off) = s.output(l - 1);
                 let pd = Product {
                     m: n,
                     n: sh.width,
@@ -468,6 +422,7 @@ impl Mlp {
                     b_rs: k + 1,
                     b_cs: 1,
                     b_ones_j: NONE,
+                    y_off,
                     y_rs: y_ld,
                     y_cs: 1,
                     c_rs: sh.width,
@@ -475,7 +430,7 @@ impl Mlp {
                     m_count: counted,
                     ..Default::default()
                 };
-                self.dispatch(rec, &pd, [dz, params, y, &s.d[((l - 1) % 2) as usize]], 1, rows)?;
+                self.dispatch(rec, &pd, [dz, params, y, s.dz(l - 1).0], 1, rows)?;
             }
         }
         rec.end_scope(sc);
