@@ -6,7 +6,8 @@
 //! and the paper's 8 x 256 on a few samples; the reference's own gradient
 //! against central differences; no NaN/Inf with saturated heads and huge or
 //! denormal inputs; bit-identical reruns; the tiled (GPU) and row (CPU
-//! device) GEMM kernels bit-identical to each other.
+//! device) GEMM kernels and the fused kernels bit-identical to each
+//! other, and the fused kernels against the reference on their own.
 
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::mlp::{weight_chunks, Gemm, Mlp, MlpShape, OUT};
@@ -43,8 +44,16 @@ struct GpuRun {
 }
 
 fn gpu(shape: MlpShape, params: &[f32], samples: &[[f64; 6]], d_out: &[[f64; 3]]) -> GpuRun {
+    gpu_on(None, shape, params, samples, d_out)
+}
+
+/// As [`gpu`], on a chosen kernel (None: the device's).
+fn gpu_on(gemm: Option<Gemm>, shape: MlpShape, params: &[f32], samples: &[[f64; 6]], d_out: &[[f64; 3]]) -> GpuRun {
     let ctx = ctx_shared();
-    let mlp = Mlp::new(ctx).unwrap();
+    let mlp = match gemm {
+        Some(g) => Mlp::with_gemm(ctx, g).unwrap(),
+        None => Mlp::new(ctx).unwrap(),
+    };
     let n = samples.len() as u32;
     let s = mlp.scratch(shape, n).unwrap();
     let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
@@ -86,6 +95,11 @@ fn compare(what: &str, gpu: &[f32], reference: &[f64], tol: f64) -> f64 {
 const KINK: f64 = 1e-4;
 
 fn check_network(shape: MlpShape, n: usize, extent: f64, rng: &mut Rng) {
+    check_network_on(None, shape, n, extent, rng)
+}
+
+/// As [`check_network`], on a chosen kernel (None: the device's).
+fn check_network_on(gemm: Option<Gemm>, shape: MlpShape, n: usize, extent: f64, rng: &mut Rng) {
     let params: Vec<f32> = shape.init_params(rng.next_u64());
     let p64: Vec<f64> = params.iter().map(|&v| v as f64).collect();
     // Samples with a hidden unit within KINK of its ReLU's kink are drawn
@@ -99,7 +113,7 @@ fn check_network(shape: MlpShape, n: usize, extent: f64, rng: &mut Rng) {
         })
         .collect();
     let d_out: Vec<[f64; 3]> = (0..n).map(|_| [0, 1, 2].map(|_| uni(rng, -1.0, 1.0) as f32 as f64)).collect();
-    let run = gpu(shape, &params, &samples, &d_out);
+    let run = gpu_on(gemm, shape, &params, &samples, &d_out);
     let out_ref: Vec<f64> = samples.iter().flat_map(|s| mlp_ref::forward(&shape, &p64, s).outputs.last().unwrap().clone()).collect();
     compare(&format!("{shape:?} n={n} outputs"), &run.out, &out_ref, 2e-5);
     let g_ref = mlp_ref::backward(&shape, &p64, &samples, &d_out);
@@ -420,5 +434,41 @@ fn fused_kernels_refuse_what_they_cannot_hold() {
     assert!(mlp.scratch(MlpShape::PAPER, 16).is_ok());
     // The layer-by-layer kernels take it.
     assert!(Mlp::with_gemm(ctx, Gemm::Tiled).unwrap().scratch(wide, 16).is_ok());
+    check_validation(ctx);
+}
+
+/// The fused kernels against the f64 reference on their own (the other
+/// reference tests run the kernel the device prefers): the small network
+/// at 1 sample, either side of its 32-sample block and two blocks, a
+/// network narrower than one column block, and the paper network either
+/// side of its block (16 samples within lavapipe's 32 KiB); no samples
+/// give zero gradients; reruns are the same bits; the GPU-count path at
+/// its capacity is the tiled kernel's, bit for bit.
+#[test]
+fn fused_kernels_match_reference() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("mlp fused"));
+    let fused = Some(Gemm::Fused);
+    for n in [1, 31, 32, 33, 64] {
+        check_network_on(fused, MlpShape::SMALL, n, 1.0, &mut rng);
+    }
+    check_network_on(fused, SMALL, 37, 1.0, &mut rng);
+    for n in [15, 17] {
+        check_network_on(fused, MlpShape::PAPER, n, 1.0, &mut rng);
+    }
+    let shape = MlpShape::SMALL;
+    let params = shape.init_params(rng.next_u64());
+    let empty = gpu_on(fused, shape, &params, &[], &[]);
+    assert!(empty.grads.iter().all(|&v| v == 0.0), "no samples must give zero gradients");
+    let samples = random_samples(&mut rng, 100, 1.0);
+    let d_out: Vec<[f64; 3]> = (0..samples.len()).map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64)).collect();
+    let a = gpu_on(fused, shape, &params, &samples, &d_out);
+    let b = gpu_on(fused, shape, &params, &samples, &d_out);
+    assert!(a.out.iter().zip(&b.out).all(|(x, y)| x.to_bits() == y.to_bits()), "fused outputs differ between runs");
+    assert!(a.grads.iter().zip(&b.grads).all(|(x, y)| x.to_bits() == y.to_bits()), "fused gradients differ between runs");
+    let flat: Vec<f32> = samples.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    let d: Vec<f32> = d_out.iter().flat_map(|v| v.map(|c| c as f32)).collect();
+    let n = samples.len() as u32;
+    assert_eq!(on_kernel(Gemm::Fused, shape, &params, &flat, &d, n, Some(n)), on_kernel(Gemm::Tiled, shape, &params, &flat, &d, n, Some(n)), "the GPU count at capacity");
     check_validation(ctx);
 }
