@@ -183,3 +183,31 @@ impl Fused {
         rec.dispatch(&self.backward, &bindings, bytemuck::bytes_of(&push), groups)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The plan takes the largest block that fits: the small network's 32
+    /// samples everywhere; the paper network's 16 with 8 staged rows in
+    /// NVIDIA's 48 KiB, with 4 in lavapipe's 32 KiB, 8 samples in 20 KiB;
+    /// nothing in 4 KiB, and nothing wider than 256 (named).
+    #[test]
+    fn plans_fit_the_shared_memory() {
+        let plan = |shape: &MlpShape, kib: u32| FusedPlan::for_shape(shape, kib * 1024).map(|p| (p.rows(), p.cb, p.kc));
+        assert_eq!(plan(&MlpShape::SMALL, 32).unwrap(), (32, 8, 8));
+        assert_eq!(plan(&MlpShape::PAPER, 48).unwrap(), (16, 32, 8));
+        assert_eq!(plan(&MlpShape::PAPER, 32).unwrap(), (16, 32, 4));
+        assert_eq!(plan(&MlpShape::PAPER, 20).unwrap(), (8, 32, 4));
+        for (kib, shape) in [(4, MlpShape::PAPER), (32, MlpShape { width: FUSED_MAX_WIDTH + 1, ..MlpShape::PAPER })] {
+            let e = plan(&shape, kib).unwrap_err().to_string();
+            assert!(e.contains("fused light-field kernels"), "{e}");
+        }
+        for kib in [20, 32, 48] {
+            for shape in [MlpShape::SMALL, MlpShape::PAPER] {
+                let p = FusedPlan::for_shape(&shape, kib * 1024).unwrap();
+                assert!(p.shared_bytes(&shape) <= kib as u64 * 1024 && 8 * p.cb >= shape.width);
+            }
+        }
+    }
+}
