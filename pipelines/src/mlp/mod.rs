@@ -368,17 +368,16 @@ impl Mlp {
             // Every layer's dZ in one dispatch; the weight gradients below.
             f.record_backward(rec, &sh, s.fused_io(params), d_out, b, rows)?;
         } else {
-        // The head's dZ = dY * sigmoid'(Z), from the caller's output
-        // gradient at the block's place into the ping-pong buffer the head
-        // reads (3 wide); the hidden layers' dZ is written by the
-        // input-gradient product of the layer above, the ReLU's derivative
-        // taken in its epilogue. Both products of a layer read dZ as it is.
-        {
+            // The head's dZ = dY * sigmoid'(Z), from the caller's output
+            // gradient at the block's place into the ping-pong buffer the
+            // head reads (3 wide); the hidden layers' dZ is written by the
+            // input-gradient product of the layer above, the ReLU's
+            // derivative taken in its epilogue. Both products of a layer
+            // read dZ as it is.
             let push = [n, base * OUT, counted];
             let r = rows.map(|r| r.binding()).unwrap_or_else(|| d_out.binding());
-            let z = &s.d[(sh.depth % 2) as usize];
+            let (z, _) = s.dz(sh.depth);
             rec.dispatch(&self.head_grad, &[d_out.binding(), s.out.binding(), z.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n * OUT))?;
-        }
         }
         for l in (0..sh.layers()).rev() {
             let (x, k, x_off) = s.input(l);
@@ -410,6 +409,7 @@ impl Mlp {
                 // dZ_{l-1} (n x width) = (dZ W[:, :width]) * ReLU'(Y_{l-1})
                 // (the skip layer's encoded columns need no gradient).
                 let (y, y_ld, y_off) = s.output(l - 1);
+                let (dz_below, dz_below_off) = s.dz(l - 1);
                 let pd = Product {
                     m: n,
                     n: sh.width,
@@ -425,12 +425,13 @@ impl Mlp {
                     y_off,
                     y_rs: y_ld,
                     y_cs: 1,
+                    c_off: dz_below_off,
                     c_rs: sh.width,
                     c_act: RELU_DERIV,
                     m_count: counted,
                     ..Default::default()
                 };
-                self.dispatch(rec, &pd, [dz, params, y, s.dz(l - 1).0], 1, rows)?;
+                self.dispatch(rec, &pd, [dz, params, y, dz_below], 1, rows)?;
             }
         }
         rec.end_scope(sc);
