@@ -202,6 +202,12 @@ impl LightFieldModel {
         Ok(count)
     }
 
+    /// The kernel the MLP runs on (`TGS_MLP_GEMM` chooses; the results
+    /// are the same bits on each).
+    pub fn mlp_kernel(&self) -> &'static str {
+        self.mlp.gemm().name()
+    }
+
     /// Samples the light field takes in one pass (0 before the first view).
     pub fn mlp_block(&self) -> u32 {
         self.scratch.as_ref().map_or(0, |s| s.block())

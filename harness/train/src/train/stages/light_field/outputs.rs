@@ -14,13 +14,14 @@ impl LightFieldModel {
     pub fn start_message(&self, label: &str, lf: &LightFieldConfig) -> String {
         let s = &self.net.shape;
         format!(
-            "Stage {}: light field {} x {} (L {} / {}, {} parameters) on pixels with R > {}, {} iterations{}",
+            "Stage {}: light field {} x {} (L {} / {}, {} parameters, {} kernel) on pixels with R > {}, {} iterations{}",
             label,
             s.depth,
             s.width,
             s.levels_x,
             s.levels_w,
             s.params(),
+            self.mlp_kernel(),
             lf.threshold,
             lf.iterations,
             match (lf.train_scattering, lf.scattering_colour_only()) {
