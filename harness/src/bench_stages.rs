@@ -78,6 +78,8 @@ pub struct StagesBench {
     pub height: u32,
     pub train_views: u32,
     pub mlp: String,
+    /// The kernel Stage III's MLP runs on (`TGS_MLP_GEMM` chooses).
+    pub mlp_kernel: String,
     pub train: u32,
     pub train_light_field: u32,
     pub warmup: u32,
@@ -131,6 +133,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         height: cam.height,
         train_views: data.train.len() as u32,
         mlp: spec.mlp.clone(),
+        mlp_kernel: tgs_pipelines::mlp::Gemm::for_device(ctx)?.name().into(),
         train: spec.train,
         train_light_field: spec.train_light_field,
         warmup: spec.warmup,
@@ -200,8 +203,8 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
 pub fn print_stages(b: &StagesBench) {
     println!("device: {}", b.device);
     println!(
-        "stages on '{}' ({}x{}, {} training views), Stage III network '{}': per stage {} untimed ({} in Stage III), {} warm-up, {} timed iterations",
-        b.scene, b.width, b.height, b.train_views, b.mlp, b.train, b.train_light_field, b.warmup, b.iterations
+        "stages on '{}' ({}x{}, {} training views), Stage III network '{}' on the {} kernel: per stage {} untimed ({} in Stage III), {} warm-up, {} timed iterations",
+        b.scene, b.width, b.height, b.train_views, b.mlp, b.mlp_kernel, b.train, b.train_light_field, b.warmup, b.iterations
     );
     if !b.set.is_empty() {
         println!("settings over the quick preset: {}", b.set.join(", "));
