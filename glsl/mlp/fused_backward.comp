@@ -28,7 +28,7 @@ shared float dzs[BR * WMAX];
 
 void main() {
     uint n = pc.n_count != 0u ? min(pc.n, rows[0]) : pc.n;
-    uint r0 = block_id() * BR;
+    uint r0 = wg_linear() * BR;
     if (r0 >= n) {
         return;
     }
@@ -37,7 +37,7 @@ void main() {
     uint width = pc.width, cat_w = cat_width();
 
     // The head: rows past the block's samples get no gradient.
-    for (uint e = t; e < BR * OUT; e += 64u) {
+    for (uint e = t; e < BR * OUT; e += WG) {
         uint i = e / OUT, j = e % OUT, row = r0 + i;
         float z = 0.0;
         if (i < m) {
@@ -62,7 +62,7 @@ void main() {
             barrier();
             // B(k, j) = W[k][j] for the h columns j < width: rows of W, read
             // along j.
-            for (uint e = t; e < KC * width; e += 64u) {
+            for (uint e = t; e < KC * width; e += WG) {
                 uint kc = e / width, j = e % width;
                 if (kc < kn) {
                     ws[kc * WMAX + j] = params[woff + (k0 + kc) * ld + j];

@@ -14,9 +14,11 @@
 #ifndef TGS_MLP_FUSED_COMMON_GLSL
 #define TGS_MLP_FUSED_COMMON_GLSL
 
+#include "common.glsl"
 #extension GL_EXT_control_flow_attributes : require
 
-layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
+// The workgroup (WG, spec constant 0) is 64 invocations: the 8 x 8 grid
+// (pipelines/src/mlp/fused.rs sets it).
 // Rows per invocation (the block is 8 RB rows).
 layout(constant_id = 3) const uint RB = 4;
 // Columns per invocation: layers up to 8 CB wide.
@@ -71,9 +73,4 @@ uint layer_offset(uint l) {
     }
     return off;
 }
-// The workgroup's linear id (a 2-D grid past 65,535 workgroups).
-uint block_id() {
-    return gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
-}
-
 #endif

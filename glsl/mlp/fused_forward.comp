@@ -28,7 +28,7 @@ shared float act[BR * STRIDE];
 
 void main() {
     uint n = pc.n_count != 0u ? min(pc.n, rows[0]) : pc.n;
-    uint r0 = block_id() * BR;
+    uint r0 = wg_linear() * BR;
     // A block past the samples (uniform) has nothing to do.
     if (r0 >= n) {
         return;
@@ -39,7 +39,7 @@ void main() {
 
     // gamma(x), gamma(w): one invocation per (row, component); rows past
     // the block's samples encode its last sample and are never written out.
-    for (uint e = t; e < BR * 6u; e += 64u) {
+    for (uint e = t; e < BR * 6u; e += WG) {
         uint i = e / 6u, comp = e % 6u, part = comp / 3u, d = comp % 3u;
         uint row = r0 + min(i, m - 1u);
         float v = samples[6u * (pc.base + row) + comp];
@@ -86,7 +86,7 @@ void main() {
             uint kn = min(KC, kdim + 1u - k0);
             barrier();
             // B(k, j) = W[j][k]: consecutive invocations read consecutive k.
-            for (uint e = t; e < KC * jdim; e += 64u) {
+            for (uint e = t; e < KC * jdim; e += WG) {
                 uint kc = e % KC, j = e / KC;
                 if (kc < kn) {
                     ws[kc * WMAX + j] = params[woff + j * (kdim + 1u) + k0 + kc];

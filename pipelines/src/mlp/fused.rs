@@ -125,7 +125,8 @@ impl Fused {
 
     pub(super) fn new(ctx: &Arc<Context>, shape: MlpShape, block: u32) -> Result<Fused> {
         let plan = FusedPlan::for_shape(&shape, ctx.caps().max_shared_memory)?;
-        let spec = [(3, plan.rb), (4, plan.cb), (5, shape.cat_width()), (6, plan.kc)];
+        // The workgroup is the 8 x 8 grid of glsl/mlp/fused_common.glsl.
+        let spec = [(0, 64), (3, plan.rb), (4, plan.cb), (5, shape.cat_width()), (6, plan.kc)];
         let push_bytes = std::mem::size_of::<Push>() as u32;
         let kernel = |name, spirv| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: false });
         let layer_stride = block.max(1) * shape.width.max(OUT);

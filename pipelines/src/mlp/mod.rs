@@ -167,7 +167,7 @@ impl Mlp {
             .collect::<Result<Vec<_>>>()?;
         // dZ of a hidden layer (width wide) or of the head (OUT wide); the
         // fused backward keeps its own.
-        let d_len = if fused.is_some() { 1 } else { blk * w.max(OUT as usize) };
+        let d = if fused.is_some() { Vec::new() } else { (0..2).map(|i| Buffer::uninit(ctx, &format!("mlp.d{i}"), blk * w.max(OUT as usize))).collect::<Result<Vec<_>>>()? };
         Ok(MlpScratch {
             shape,
             capacity: cap,
@@ -177,7 +177,7 @@ impl Mlp {
             in0: Buffer::uninit(ctx, "mlp.in0", blk * shape.dx() as usize)?,
             cat: Buffer::uninit(ctx, "mlp.cat", blk * shape.cat_width() as usize)?,
             hidden,
-            d: [Buffer::uninit(ctx, "mlp.d0", d_len)?, Buffer::uninit(ctx, "mlp.d1", d_len)?],
+            d,
             part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
             fused,
         })

@@ -29,7 +29,9 @@ pub struct MlpScratch {
     pub(super) cat: Buffer<f32>,
     /// Hidden outputs by layer; the layer before the skip writes into `cat`.
     pub(super) hidden: Vec<Option<Buffer<f32>>>,
-    pub(super) d: [Buffer<f32>; 2],
+    /// dZ of the layer-by-layer backward, two buffers it alternates
+    /// between (none with the fused kernels, which keep every layer's).
+    pub(super) d: Vec<Buffer<f32>>,
     pub(super) part: Buffer<f32>,
     /// The fused kernels of this shape and their activations
     /// ([`Gemm::Fused`](super::Gemm::Fused); the hidden layers' outputs and dZ are theirs then).
