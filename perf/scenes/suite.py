@@ -97,6 +97,7 @@ def main():
     ap.add_argument("--only", action="append", help="scene names to run, in this order (repeatable; default: all, by name)")
     ap.add_argument("--stage1", default="", help="KEY=VALUE;... for Stage I (part of its run directory's identity: use a new --runs when changing it)")
     ap.add_argument("--seed-masks", metavar="ROOT", help="every Stage II seeds from ROOT/SCENE's glass masks (reflection.seed_masks; `mitsuba_scenes.py --train-masks` writes them); use its own --runs names or variants")
+    ap.add_argument("--stage3", action="store_true", help="also train Stage III from every variant's Stage II (`RUNS/SCENE/sSEED/VARIANT-III`) and print a table per variant against issue 42's PSNR and time aims")
     ap.add_argument("--tgs", default=os.path.join(os.path.dirname(__file__), "..", "..", "target", "debug", "tgs"))
     a = ap.parse_args()
     scenes = sorted(d for d in os.listdir(a.scenes) if os.path.exists(os.path.join(a.scenes, d, "transforms_train.json")))
@@ -111,8 +112,8 @@ def main():
     variants = []
     for v in a.variant or ["default"]:
         name, _, sets = v.partition(":")
-        if not name or "/" in name or name == "I":
-            raise SystemExit(f"bad variant name '{name}' (a plain name other than I)")
+        if not name or "/" in name or name == "I" or name.endswith("-III"):
+            raise SystemExit(f"bad variant name '{name}' (a plain name other than I, not ending in -III)")
         variants.append((name, [kv for kv in sets.split(";") if kv]))
     stage1_sets = [kv for kv in a.stage1.split(";") if kv]
 
@@ -134,7 +135,10 @@ def main():
                 masks = [f"reflection.seed_masks={os.path.abspath(d)}"]
             for name, kvs in variants:
                 m2 = train(a.tgs, os.path.join(base, name), [data, "--from", one, "--stages", "II"] + sets(masks + kvs), f"{scene} seed {seed} {name}")
-                res[(scene, seed, name)] = (stage(m1, "I"), stage(m2, "II"))
+                m3 = None
+                if a.stage3:
+                    m3 = train(a.tgs, os.path.join(base, name + "-III"), [data, "--from", os.path.join(base, name), "--stages", "III"], f"{scene} seed {seed} {name} Stage III")
+                res[(scene, seed, name)] = (stage(m1, "I"), stage(m2, "II"), stage(m3, "III") if m3 else None)
 
     for name, kvs in variants:
         print(f"\n### {name}" + (f": `{'; '.join(kvs)}`" if kvs else " (today's defaults)"))
@@ -173,6 +177,42 @@ def main():
         if known:
             w = max(known, key=known.get)
             print(f"| **worst** ({w}) | | | | {known[w]:.2f} | | | | | | | | |")
+        if a.stage3:
+            print_stage3(scenes, seeds, name, res)
+
+
+def print_stage3(scenes, seeds, name, res):
+    """Issue 42's other two aims per scene: test PSNR after Stage III at
+    least Stage I's + 0.3 dB, and Stage II's wall time at most half of Stage
+    I's (the seconds are timings only when nothing else ran beside them)."""
+    print(f"\n{name}, all three stages: test PSNR and wall time (aims: III − I ≥ 0.3 dB; II / I time ≤ 0.5)\n")
+    print("| scene | PSNR I | PSNR II | PSNR III | III − I dB | Stage I s | Stage II s | II / I time | Stage III s | III / II time |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    cols = {k: [] for k in ("p1", "p2", "p3", "d", "s1", "s2", "q", "s3", "q3")}
+    for scene in scenes:
+        rows = [res[(scene, s, name)] for s in seeds]
+        test = lambda r, st, key: (r[st] or {}).get("test", {}).get(key) if r[st] else None
+        wall = lambda r, st: (r[st] or {}).get("wall_s") if r[st] else None
+        ratio = lambda x, y: x / y if x is not None and y else None
+        p1 = [test(r, 0, "psnr") for r in rows]
+        p2 = [test(r, 1, "psnr") for r in rows]
+        p3 = [test(r, 2, "psnr") for r in rows]
+        d = [c - b if b is not None and c is not None else None for b, c in zip(p1, p3)]
+        s1 = [wall(r, 0) for r in rows]
+        s2 = [wall(r, 1) for r in rows]
+        s3 = [wall(r, 2) for r in rows]
+        q = [ratio(y, x) for x, y in zip(s1, s2)]
+        q3 = [ratio(z, y) for y, z in zip(s2, s3)]
+        for k, v in zip(cols, (p1, p2, p3, d, s1, s2, q, s3, q3)):
+            cols[k].append(mean(v))
+        print(f"| {scene} | {fmt(p1, 2)} | {fmt(p2, 2)} | {fmt(p3, 2)} | {fmt(d, 2)} | {fmt(s1, 0)} | {fmt(s2, 0)} | {fmt(q, 2)} | {fmt(s3, 0)} | {fmt(q3, 2)} |")
+    m = {k: mean(v) for k, v in cols.items()}
+    f = lambda v, dg: "–" if v is None else f"{v:.{dg}f}"
+    print(f"| **mean** | {f(m['p1'], 2)} | {f(m['p2'], 2)} | {f(m['p3'], 2)} | {f(m['d'], 2)} | {f(m['s1'], 0)} | {f(m['s2'], 0)} | {f(m['q'], 2)} | {f(m['s3'], 0)} | {f(m['q3'], 2)} |")
+    known = [(v, s) for v, s in zip(cols["d"], scenes) if v is not None]
+    if known:
+        v, s = min(known)
+        print(f"| **worst** ({s}) | | | | {v:.2f} | | | | | |")
 
 
 if __name__ == "__main__":
