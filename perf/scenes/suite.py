@@ -33,6 +33,12 @@ not retrained; a half-written one (no metrics.json) is an error naming it.
     python3 perf/scenes/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
         --seed-masks /tmp/masks --variant masks --variant 'masks-halfway:reflection.seed_normal=halfway'
 
+`--stage3` also trains Stage III from every variant's Stage II
+(`RUNS/SCENE/sSEED/VARIANT-III`) and prints, per variant, the test PSNR
+of all three stages and their wall times against issue 42's other aims
+(Stage III at least Stage I + 0.3 dB; Stage II at most half of Stage I's
+time; the seconds are timings only when nothing else ran beside them).
+
 Only the Python standard library is needed.
 """
 import argparse

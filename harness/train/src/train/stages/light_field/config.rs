@@ -40,7 +40,12 @@ pub struct LightFieldConfig {
     /// colour against frozen +0.06 dB on the built-in glass, +0.17 on
     /// `lantern`, +0.10 on `pane`, normals unchanged, ~30% more time per
     /// Stage III iteration; "all" fits the training views' transmitted
-    /// detail and lost 0.15 dB on the built-in glass.
+    /// detail and lost 0.15 dB on the built-in glass. On the eight
+    /// path-traced suite scenes with Stage II from their glass masks
+    /// (fifty-first entry) "all" gained 0.03–0.28 dB over "colour" on
+    /// seven and lost 0.44 dB on `facade` (a room front seen from one
+    /// side), its normals beside the glass 0.3–0.9 degrees worse, at 1.8–3.7
+    /// times the Stage III time: by the worst scene, not the default.
     pub scattering_params: ScatteringParams,
     /// High-frequency loss weight and percentile (as in `[reflection]`).
     pub lambda_hf: f32,
