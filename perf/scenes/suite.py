@@ -34,7 +34,8 @@ not retrained; a half-written one (no metrics.json) is an error naming it.
         --seed-masks /tmp/masks --variant masks --variant 'masks-halfway:reflection.seed_normal=halfway'
 
 `--stage3` also trains Stage III from every variant's Stage II
-(`RUNS/SCENE/sSEED/VARIANT-III`) and prints, per variant, the test PSNR
+(`RUNS/SCENE/sSEED/VARIANT-III`, with the variant's `light_field.` pairs)
+and prints, per variant, the test PSNR
 of all three stages and their wall times against issue 42's other aims
 (Stage III at least Stage I + 0.3 dB; Stage II at most half of Stage I's
 time; the seconds are timings only when nothing else ran beside them).
@@ -143,7 +144,9 @@ def main():
                 m2 = train(a.tgs, os.path.join(base, name), [data, "--from", one, "--stages", "II"] + sets(masks + kvs), f"{scene} seed {seed} {name}")
                 m3 = None
                 if a.stage3:
-                    m3 = train(a.tgs, os.path.join(base, name + "-III"), [data, "--from", os.path.join(base, name), "--stages", "III"], f"{scene} seed {seed} {name} Stage III")
+                    # Stage III takes the variant's own Stage III settings (`--from` refuses the others).
+                    lf = [kv for kv in kvs if kv.startswith("light_field.")]
+                    m3 = train(a.tgs, os.path.join(base, name + "-III"), [data, "--from", os.path.join(base, name), "--stages", "III"] + sets(lf), f"{scene} seed {seed} {name} Stage III")
                 res[(scene, seed, name)] = (stage(m1, "I"), stage(m2, "II"), stage(m3, "III") if m3 else None)
 
     for name, kvs in variants:
