@@ -90,6 +90,21 @@ def fmt(vals, digits=1):
     return f"{mean:.{digits}f} ({max(vals) - min(vals):.{digits}f})"
 
 
+def test_value(row, st, key):
+    """`key` of a (Stage I, Stage II, Stage III) record row's stage `st` on the test views."""
+    return row[st].get("test", {}).get(key) if row[st] else None
+
+
+def wall(row, st):
+    """Wall seconds of a record row's stage `st`."""
+    return row[st].get("wall_s") if row[st] else None
+
+
+def cell(v, digits=1):
+    """A mean-row cell: `v` to `digits` places, or – where nothing was measured."""
+    return "–" if v is None else f"{v:.{digits}f}"
+
+
 def mean(vals):
     vals = [v for v in vals if v is not None]
     return sum(vals) / len(vals) if vals else None
@@ -158,7 +173,7 @@ def main():
         cols = {k: [] for k in ("i", "ray", "ii", "r1", "rr", "cov", "off", "o1", "o2", "p1", "p2", "g1", "g2", "rc", "s")}
         for scene in scenes:
             rows = [res[(scene, s, name)] for s in seeds]
-            t = lambda r, st, key: (r[st] or {}).get("test", {}) .get(key) if r[st] else None
+            t = test_value
             i = [t(r, 0, "normal_mae_deg") for r in rows]
             ray = [t(r, 0, "normal_mae_ray_facing_deg") for r in rows]
             ii = [t(r, 1, "normal_mae_deg") for r in rows]
@@ -174,13 +189,13 @@ def main():
             g1 = [k3(t(r, 1, "reflection_gain_mask")) for r in rows]
             g2 = [k3(t(r, 1, "reflection_gain_outside")) for r in rows]
             rc = [t(r, 0, "residual_contrast") for r in rows]
-            sec = [(r[1] or {}).get("wall_s") for r in rows]
+            sec = [wall(r, 1) for r in rows]
             ratios[scene] = mean(r1)
             for k, v in zip(cols, (i, ray, ii, r1, rr, cov, off, o1, o2, p1, p2, g1, g2, rc, sec)):
                 cols[k].append(mean(v))
             print(f"| {scene} | {fmt(i)}° | {fmt(ray)}° | {fmt(ii)}° | {fmt(r1, 2)} | {fmt(rr, 2)} | {fmt(cov, 2)} | {fmt(off, 2)} | {fmt(o1)}° → {fmt(o2)}° | {fmt(p1, 2)} → {fmt(p2, 2)} | {fmt(g1, 2)} / {fmt(g2, 2)} | {fmt(rc, 2)} | {fmt(sec, 0)} |")
         m = {k: mean(v) for k, v in cols.items()}
-        f = lambda v, d=1: "–" if v is None else f"{v:.{d}f}"
+        f = cell
         print(f"| **mean** | {f(m['i'])}° | {f(m['ray'])}° | {f(m['ii'])}° | {f(m['r1'], 2)} | {f(m['rr'], 2)} | {f(m['cov'], 2)} | {f(m['off'], 2)} | {f(m['o1'])}° → {f(m['o2'])}° | {f(m['p1'], 2)} → {f(m['p2'], 2)} | {f(m['g1'], 2)} / {f(m['g2'], 2)} | {f(m['rc'], 2)} | {f(m['s'], 0)} |")
         known = {k: v for k, v in ratios.items() if v is not None}
         if known:
@@ -200,12 +215,10 @@ def print_stage3(scenes, seeds, name, res):
     cols = {k: [] for k in ("p1", "p2", "p3", "d", "s1", "s2", "q", "s3", "q3")}
     for scene in scenes:
         rows = [res[(scene, s, name)] for s in seeds]
-        test = lambda r, st, key: (r[st] or {}).get("test", {}).get(key) if r[st] else None
-        wall = lambda r, st: (r[st] or {}).get("wall_s") if r[st] else None
         ratio = lambda x, y: x / y if x is not None and y else None
-        p1 = [test(r, 0, "psnr") for r in rows]
-        p2 = [test(r, 1, "psnr") for r in rows]
-        p3 = [test(r, 2, "psnr") for r in rows]
+        p1 = [test_value(r, 0, "psnr") for r in rows]
+        p2 = [test_value(r, 1, "psnr") for r in rows]
+        p3 = [test_value(r, 2, "psnr") for r in rows]
         d = [c - b if b is not None and c is not None else None for b, c in zip(p1, p3)]
         s1 = [wall(r, 0) for r in rows]
         s2 = [wall(r, 1) for r in rows]
@@ -216,7 +229,7 @@ def print_stage3(scenes, seeds, name, res):
             cols[k].append(mean(v))
         print(f"| {scene} | {fmt(p1, 2)} | {fmt(p2, 2)} | {fmt(p3, 2)} | {fmt(d, 2)} | {fmt(s1, 0)} | {fmt(s2, 0)} | {fmt(q, 2)} | {fmt(s3, 0)} | {fmt(q3, 2)} |")
     m = {k: mean(v) for k, v in cols.items()}
-    f = lambda v, dg: "–" if v is None else f"{v:.{dg}f}"
+    f = cell
     print(f"| **mean** | {f(m['p1'], 2)} | {f(m['p2'], 2)} | {f(m['p3'], 2)} | {f(m['d'], 2)} | {f(m['s1'], 0)} | {f(m['s2'], 0)} | {f(m['q'], 2)} | {f(m['s3'], 0)} | {f(m['q3'], 2)} |")
     known = [(v, s) for v, s in zip(cols["d"], scenes) if v is not None]
     if known:
