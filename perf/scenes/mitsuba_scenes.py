@@ -40,6 +40,10 @@ model can gain at most. Mitsuba still picks the reflection lobe with
 probability R at a glass hit and then returns nothing, so the glass carries
 somewhat more Monte Carlo noise than in `NAME`.
 
+`--sampler-seed N` (N >= 1) renders with other sampler seeds than the
+default 0: the same images up to their Monte Carlo noise, for measuring
+that noise (`noise_floor.py`); `--split test` renders the test views only.
+
 Masks and normals are ray-cast here in numpy against the same primitives
 (16 stratified rays per pixel for the mask, the pixel centre for the normal),
 so they do not depend on the renderer's sampling.
@@ -329,8 +333,12 @@ def main():
     ap.add_argument("--train", type=int, default=60)
     ap.add_argument("--test", type=int, default=12)
     ap.add_argument("--no-reflection", action="store_true", help="glass transmits only; writes NAME_norefl")
+    ap.add_argument("--sampler-seed", type=int, default=0, help="0: the default seeds; N >= 1 other ones (the same images up to Monte Carlo noise)")
+    ap.add_argument("--split", choices=["both", "train", "test"], default="both", help="which views to render")
     ap.add_argument("--train-masks", metavar="DATASET", help="only write DATASET's training views' glass masks into --out (one --scene)")
     a = ap.parse_args()
+    if not 0 <= a.sampler_seed <= 1000:
+        raise SystemExit(f"--sampler-seed must be in 0..=1000, not {a.sampler_seed}")
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     if a.train_masks:
@@ -343,7 +351,7 @@ def main():
                 names.append(m)
     for name in names:
         root = os.path.join(a.out, name + ("_norefl" if a.no_reflection else ""))
-        if os.path.exists(os.path.join(root, "transforms_train.json")):
+        if any(os.path.exists(os.path.join(root, f"transforms_{sp}.json")) for sp in ("train", "test")):
             raise SystemExit(f"{root} already holds a dataset; this script never writes over one (remove it or pick another --out)")
         prims = build(mi, name, not a.no_reflection)
         scene_d = {"type": "scene", "integrator": {"type": "path", "max_depth": 12}, "sky": {"type": "sunsky", "sun_direction": [0.45, -0.35, 0.82], "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], 90)}}
@@ -353,16 +361,20 @@ def main():
             scene = mi.load_dict(scene_d)
         rng = np.random.default_rng({"globe": 1, "pane": 2, "diffuse": 3}.get(name, 100 + SCENES.index(name)))  # the first three as before
         for split, n, offset in (("train", a.train, 0.0), ("test", a.test, 0.37)):
+            # The cameras come from one stream: drawn for every split, rendered for the chosen.
+            poses = cameras(n, offset, rng, name in FRONT_ONLY)
+            if a.split not in ("both", split):
+                continue
             os.makedirs(os.path.join(root, split), exist_ok=True)
             frames = []
-            for i, c2w in enumerate(cameras(n, offset, rng, name in FRONT_ONLY)):
+            for i, c2w in enumerate(poses):
                 t0 = time.time()
                 o = c2w[:3, 3]
                 sensor = mi.load_dict({"type": "perspective", "fov": math.degrees(fov), "fov_axis": "x",
                                        "to_world": mi.ScalarTransform4f().look_at(origin=o.tolist(), target=(o - c2w[:3, 2]).tolist(), up=c2w[:3, 1].tolist()),
-                                       "sampler": {"type": "independent", "sample_count": a.spp, "seed": 1000 * (split == "test") + i},
+                                       "sampler": {"type": "independent", "sample_count": a.spp, "seed": 1000 * (split == "test") + i + 100_000 * a.sampler_seed},
                                        "film": {"type": "hdrfilm", "width": a.res, "height": a.res, "pixel_format": "rgb"}})
-                img = np.array(mi.render(scene, sensor=sensor, seed=i))[:, :, :3]
+                img = np.array(mi.render(scene, sensor=sensor, seed=i + 100_000 * a.sampler_seed))[:, :, :3]
                 stem = f"{split}/r_{i}"
                 write_png(mi, os.path.join(root, stem + ".png"), img, True)
                 frame = {"file_path": "./" + stem, "transform_matrix": c2w.tolist()}
