@@ -25,7 +25,6 @@ better model could still remove). Errors are pooled over the views; the
 images are 8-bit PNGs. Needs numpy and Pillow.
 """
 import argparse
-import glob
 import os
 import sys
 
@@ -33,7 +32,7 @@ import numpy as np
 from PIL import Image
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from psnr_split import load_rgb  # noqa: E402
+from psnr_split import load_rgb, test_masks  # noqa: E402
 
 
 def neighbours(a):
@@ -64,12 +63,8 @@ def main():
     ap.add_argument("again", help="the same test views rendered with other sampler seeds (mitsuba_scenes.py --sampler-seed)")
     ap.add_argument("renders", nargs="*", help="folders holding NAME.png per test view")
     a = ap.parse_args()
-    masks = sorted(glob.glob(os.path.join(a.dataset, "test", "*_mask.png")))
-    if not masks:
-        sys.exit(f"{a.dataset}/test: no NAME_mask.png")
     views = []
-    for p in masks:
-        n = os.path.basename(p)[: -len("_mask.png")]
+    for n, p in test_masks(a.dataset):
         gt = load_rgb(os.path.join(a.dataset, "test", n + ".png"))
         other = os.path.join(a.again, "test", n + ".png")
         if not os.path.isfile(other):

@@ -40,6 +40,15 @@ def box_down(a, f):
     return a[: h * f, : w * f].reshape(h, f, w, f, *a.shape[2:]).mean(axis=(1, 3))
 
 
+def test_masks(dataset):
+    """(view name, mask path) of every test view of `dataset` that has
+    test/NAME_mask.png, by path; exits when none has."""
+    masks = sorted(glob.glob(os.path.join(dataset, "test", "*_mask.png")))
+    if not masks:
+        sys.exit(f"{dataset}/test: no NAME_mask.png")
+    return [(os.path.basename(p)[: -len("_mask.png")], p) for p in masks]
+
+
 def psnr(errors):
     return -10 * np.log10(np.concatenate(errors).mean())
 
@@ -52,13 +61,9 @@ def main():
     a = ap.parse_args()
     if a.downscale < 1:
         sys.exit(f"--downscale must be at least 1, not {a.downscale}")
-    masks = sorted(glob.glob(os.path.join(a.dataset, "test", "*_mask.png")))
-    if not masks:
-        sys.exit(f"{a.dataset}/test: no NAME_mask.png")
     # The truth and the masks, read and downscaled once for every render folder.
     views = []
-    for p in masks:
-        n = os.path.basename(p)[: -len("_mask.png")]
+    for n, p in test_masks(a.dataset):
         gt = box_down(load_rgb(os.path.join(a.dataset, "test", n + ".png")), a.downscale)
         m = box_down((np.asarray(Image.open(p).convert("L")) > 127).astype(np.float64), a.downscale) > 0.999
         views.append((n, gt, m))
