@@ -63,7 +63,7 @@ def main():
     ap.add_argument("again", help="the same test views rendered with other sampler seeds (mitsuba_scenes.py --sampler-seed)")
     ap.add_argument("renders", nargs="*", help="folders holding NAME.png per test view")
     a = ap.parse_args()
-    views = []
+    names, truth, on, off, kept, noise, cores, share = [], [], [], [], [], [], 0, []
     for n, p in test_masks(a.dataset):
         gt = load_rgb(os.path.join(a.dataset, "test", n + ".png"))
         other = os.path.join(a.again, "test", n + ".png")
@@ -72,31 +72,34 @@ def main():
         b = load_rgb(other)
         if b.shape != gt.shape:
             sys.exit(f"{other} is {b.shape[1]}x{b.shape[0]}, {a.dataset}'s test views {gt.shape[1]}x{gt.shape[0]}")
-        m = np.asarray(Image.open(p).convert("L")) > 127
+        glass = np.asarray(Image.open(p).convert("L")) > 127
         core = fireflies(gt)
-        views.append((n, gt, m, grown(core | fireflies(b)), ((gt - b) ** 2).mean(axis=-1) / 2, int(core.sum())))
-    cores = sum(v[5] for v in views)
-    clean = [(m & ~ff, ~m & ~ff) for _, _, m, ff, _, _ in views]
+        ff = grown(core | fireflies(b))
+        names.append(n)
+        truth.append(gt)
+        on.append(glass & ~ff)
+        off.append(~glass & ~ff)
+        kept.append(~ff)
+        noise.append(((gt - b) ** 2).mean(axis=-1) / 2)
+        cores += int(core.sum())
+        share.append(ff.mean())
 
     def pooled(errs, sel):
         return np.concatenate([e[s] for e, s in zip(errs, sel)]).mean()
 
-    noise = [v[4] for v in views]
-    on, off = [c[0] for c in clean], [c[1] for c in clean]
-    both = [c[0] | c[1] for c in clean]
-    print(f"{a.dataset}: {len(views)} test views, {cores / len(views):.1f} fireflies per view "
-          f"(with the other rendering's and their neighbours {np.mean([v[3].mean() for v in views]) * 100:.1f}% of the pixels, left out below)")
+    print(f"{a.dataset}: {len(names)} test views, {cores / len(names):.1f} fireflies per view "
+          f"(with the other rendering's and their neighbours {np.mean(share) * 100:.1f}% of the pixels, left out below)")
     print(f"  noise variance without them (x1e3): glass {pooled(noise, on) * 1e3:.3f}, off the glass {pooled(noise, off) * 1e3:.3f}, "
-          f"all {pooled(noise, both) * 1e3:.3f}: an exact model's PSNR {psnr(pooled(noise, both)):.2f} dB")
+          f"all {pooled(noise, kept) * 1e3:.3f}: an exact model's PSNR {psnr(pooled(noise, kept)):.2f} dB")
     for r in a.renders:
         errs = []
-        for n, gt, *_ in views:
+        for n, gt in zip(names, truth):
             img = load_rgb(os.path.join(r, n + ".png"))
             if img.shape != gt.shape:
                 sys.exit(f"{r}/{n}.png is {img.shape[1]}x{img.shape[0]}, the test views {gt.shape[1]}x{gt.shape[0]}")
             errs.append(((img - gt) ** 2).mean(axis=-1))
         every = np.concatenate([e.ravel() for e in errs]).mean()
-        print(f"  {r}: PSNR {psnr(every):.3f} dB, without fireflies {psnr(pooled(errs, both)):.3f} dB; "
+        print(f"  {r}: PSNR {psnr(every):.3f} dB, without fireflies {psnr(pooled(errs, kept)):.3f} dB; "
               f"error beyond the noise (x1e3) glass {(pooled(errs, on) - pooled(noise, on)) * 1e3:.3f}, off {(pooled(errs, off) - pooled(noise, off)) * 1e3:.3f}")
 
 
