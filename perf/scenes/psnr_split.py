@@ -8,6 +8,12 @@ render `RENDERS/NAME.png` (a run's `renders/stage1`, `renders/stage2` or
 
     python3 perf/scenes/psnr_split.py DATASET --downscale 4 RUN/renders/stage1 RUN/renders/test
 
+With `--train-masks DIR` it compares the training views instead, each with
+the glass mask `DIR/NAME.png` (what `mitsuba_scenes.py --train-masks`
+writes) and the render `RENDERS/NAME.png` (`tgs render RUN --cameras train
+--out RENDERS`): set beside the test split, how much of a stage's gain on
+the glass is fit to the views it trained on and how much carries to new ones.
+
 The ground truth is box-downscaled by `--downscale` (RGBA over a white
 background, as `tgs train`'s default), the mask likewise, a pixel counting as
 glass when all its sub-pixels are. Errors are pooled over the views, so the
@@ -16,6 +22,7 @@ glass when all its sub-pixels are. Errors are pooled over the views, so the
 """
 import argparse
 import glob
+import json
 import os
 import sys
 
@@ -49,6 +56,27 @@ def test_masks(dataset):
     return [(os.path.basename(p)[: -len("_mask.png")], p) for p in masks]
 
 
+def train_masks(dataset, masks):
+    """(view name, ground truth path, mask path) of every training frame of
+    `dataset` (transforms_train.json) with MASKS/NAME.png; exits when none has."""
+    tf = os.path.join(dataset, "transforms_train.json")
+    try:
+        with open(tf) as f:
+            frames = json.load(f)["frames"]
+    except (OSError, ValueError, KeyError) as e:
+        sys.exit(f"{tf}: cannot read its frames ({e})")
+    views = []
+    for fr in frames:
+        rel = fr["file_path"] if fr["file_path"].endswith(".png") else fr["file_path"] + ".png"
+        n = os.path.basename(rel)[: -len(".png")]
+        m = os.path.join(masks, n + ".png")
+        if os.path.exists(m):
+            views.append((n, os.path.join(dataset, rel), m))
+    if not views:
+        sys.exit(f"{masks}: no NAME.png for any training frame of {dataset}")
+    return views
+
+
 def psnr(errors):
     return -10 * np.log10(np.concatenate(errors).mean())
 
@@ -58,13 +86,18 @@ def main():
     ap.add_argument("dataset", help="Blender-format dataset with test/NAME_mask.png")
     ap.add_argument("renders", nargs="+", help="folders holding NAME.png per test view")
     ap.add_argument("--downscale", type=int, default=1, help="the run's --downscale")
+    ap.add_argument("--train-masks", metavar="DIR", help="compare the training views, with the glass masks DIR/NAME.png")
     a = ap.parse_args()
     if a.downscale < 1:
         sys.exit(f"--downscale must be at least 1, not {a.downscale}")
+    if a.train_masks:
+        paths = train_masks(a.dataset, a.train_masks)
+    else:
+        paths = [(n, os.path.join(a.dataset, "test", n + ".png"), p) for n, p in test_masks(a.dataset)]
     # The truth and the masks, read and downscaled once for every render folder.
     views = []
-    for n, p in test_masks(a.dataset):
-        gt = box_down(load_rgb(os.path.join(a.dataset, "test", n + ".png")), a.downscale)
+    for n, g, p in paths:
+        gt = box_down(load_rgb(g), a.downscale)
         m = box_down((np.asarray(Image.open(p).convert("L")) > 127).astype(np.float64), a.downscale) > 0.999
         views.append((n, gt, m))
     for run in a.renders:
