@@ -14,6 +14,19 @@ opening and for the rest.
 
     python3 perf/scenes/tube_opening.py SUITE/cylinder RUN [RUN ...]
 
+`--lid MASKS` (the training views' glass masks, `mitsuba_scenes.py
+--train-masks`) prints instead what those masks say against the lid: for
+rings of points just under the open top, how many of the training views
+see them outside their glass mask, exactly and with the masks grown by one
+pixel (a mask pixel is glass only where all of it is, so a point on the
+glass near an outline can fall just outside it). The hull carves a point
+that at least a tenth of the views seeing it leave out
+(`reflection.seed_agree` 0.9); the wall's rings are printed beside the
+lid's for comparison (they ignore occlusion by Stage I's surface, which
+the hull's test leaves out).
+
+    python3 perf/scenes/tube_opening.py SUITE/cylinder --lid MASKS/cylinder
+
 Needs numpy and Pillow.
 """
 import argparse
@@ -42,11 +55,59 @@ def through_opening(o, d):
     return top & ~(wall & (t_wall < t_top))
 
 
+def grow(mask):
+    """`mask` grown by one pixel (8-neighbourhood)."""
+    p = np.pad(mask, 1)
+    h, w = mask.shape
+    return np.any([p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+
+
+def lid_report(dataset, masks):
+    """`--lid`: per ring of points, the training views that see it and how
+    many of them leave it outside their glass mask (exact; grown by one pixel)."""
+    meta = json.load(open(os.path.join(dataset, "transforms_train.json")))
+    views = []
+    for f in meta["frames"]:
+        name = os.path.basename(f["file_path"])
+        m = np.array(Image.open(os.path.join(masks, f"{name}.png")).convert("L")) > 127
+        views.append((np.array(f["transform_matrix"], float), m, grow(m)))
+    h, w = views[0][1].shape
+    fx = 0.5 * w / np.tan(0.5 * meta["camera_angle_x"])
+
+    def outside(points):
+        seen, out, out_grown = (np.zeros(len(points)) for _ in range(3))
+        for c2w, m, g in views:
+            p = (points - c2w[:3, 3]) @ c2w[:3, :3]
+            z = -p[:, 2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u, v = p[:, 0] / z * fx + w / 2, -p[:, 1] / z * fx + h / 2
+            ok = (z > 0) & (u >= 0) & (v >= 0) & (u < w) & (v < h)
+            ui, vi = np.clip(np.nan_to_num(u), 0, w - 1).astype(int), np.clip(np.nan_to_num(v), 0, h - 1).astype(int)
+            seen += ok
+            out += ok & ~m[vi, ui]
+            out_grown += ok & ~g[vi, ui]
+        return seen, out, out_grown
+
+    th = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    print("| ring | views seeing it | outside the mask (mean, max) | grown by 1 px (mean, max) | carved at agreement 0.9, exact / grown |")
+    print("|---|---|---|---|---|")
+    rings = [(f"lid r = {r:.1f}", r, Z1 - 0.02) for r in np.arange(0.0, 0.85, 0.1)] + [(f"wall z = {z:.2f}", R, z) for z in (0.2, 0.6, 1.0, 1.25)]
+    for label, r, z in rings:
+        pts = np.stack([r * np.cos(th), r * np.sin(th), np.full_like(th, z)], 1)
+        s, o, g = outside(pts)
+        print(f"| {label} | {s.mean():.0f} | {o.mean():.1f}, {o.max():.0f} | {g.mean():.1f}, {g.max():.0f} | {(o > 0.1 * s).mean():.2f} / {(g > 0.1 * s).mean():.2f} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("dataset")
-    ap.add_argument("runs", nargs="+")
+    ap.add_argument("runs", nargs="*")
+    ap.add_argument("--lid", metavar="MASKS", help="the training views' glass masks (VIEW.png): what they say against the lid")
     a = ap.parse_args()
+    if a.lid:
+        return lid_report(a.dataset, a.lid)
+    if not a.runs:
+        raise SystemExit("give at least one RUN (or --lid MASKS)")
     meta = json.load(open(os.path.join(a.dataset, "transforms_test.json")))
     errs = {r: ([], []) for r in a.runs}
     for f in meta["frames"]:
