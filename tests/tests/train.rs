@@ -481,5 +481,5 @@ fn from_names_inherited_settings_that_differ_from_the_defaults() {
     // A setting whose presets differ is named with both.
     saved.light_field.iterations = 77;
     let got = inherited_settings(&saved, &saved, true).unwrap();
-    assert!(got.contains(&"light_field.iterations = 77 (default 1000 quick, 20000 paper)".to_string()), "{got:?}");
+    assert!(got.contains(&"light_field.iterations = 77 (default 2000 quick, 20000 paper)".to_string()), "{got:?}");
 }
