@@ -32,9 +32,13 @@ Needs numpy and Pillow.
 import argparse
 import json
 import os
+import sys
 
 import numpy as np
 from PIL import Image
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from noise_floor import grown  # noqa: E402
 
 R, Z0, Z1 = 0.85, 0.005, 1.305
 
@@ -55,13 +59,6 @@ def through_opening(o, d):
     return top & ~(wall & (t_wall < t_top))
 
 
-def grow(mask):
-    """`mask` grown by one pixel (8-neighbourhood)."""
-    p = np.pad(mask, 1)
-    h, w = mask.shape
-    return np.any([p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
-
-
 def lid_report(dataset, masks):
     """`--lid`: per ring of points, the training views that see it and how
     many of them leave it outside their glass mask (exact; grown by one pixel)."""
@@ -70,7 +67,7 @@ def lid_report(dataset, masks):
     for f in meta["frames"]:
         name = os.path.basename(f["file_path"])
         m = np.array(Image.open(os.path.join(masks, f"{name}.png")).convert("L")) > 127
-        views.append((np.array(f["transform_matrix"], float), m, grow(m)))
+        views.append((np.array(f["transform_matrix"], float), m, grown(m)))
     h, w = views[0][1].shape
     fx = 0.5 * w / np.tan(0.5 * meta["camera_angle_x"])
 
