@@ -117,6 +117,8 @@ fn stage_of(name: &str) -> Option<&'static str> {
 pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse_adam: Option<bool>) -> Result<TrainBench> {
     ensure!(iterations > 0, "--iterations must be at least 1");
     ensure!(w.views > 0, "--views must be at least 1");
+    ensure!(w.width > 0 && w.height > 0, "--res {}: the image must be at least 1x1", w.width.min(w.height));
+    ensure!(w.points > 0, "--points 0: at least one Gaussian is needed");
     let spec = SpheresSpec { width: w.width, height: w.height, points: w.points, train: w.views, ..SpheresSpec::NAMED[0].1 };
     let data = spheres::dataset(&spec)?;
     let profiled = profiled(iterations);
@@ -130,6 +132,9 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
         // Densification off: the count stays fixed, as in Brush's timing.
         densify_until: 0,
         max_gaussians: w.points,
+        // The spheres' points are the initial Gaussians; init_points (random
+        // initialisation) is unused but may not exceed max_gaussians.
+        init_points: w.points.max(1),
         test_interval: 0,
         checkpoint_interval: 0,
         stages: "I".into(),
@@ -162,7 +167,8 @@ pub fn train_from(ctx: &Arc<Context>, run: &Path, warmup: u32, iterations: u32, 
     let cfg = &mut h.config;
     cfg.iterations = h.iteration.saturating_add(warmup).saturating_add(iterations).saturating_add(profiled + 1);
     cfg.densify_until = 0;
-    cfg.max_gaussians = h.n;
+    cfg.max_gaussians = h.n.max(1);
+    cfg.init_points = cfg.init_points.min(cfg.max_gaussians);
     cfg.test_interval = 0;
     cfg.checkpoint_interval = 0;
     cfg.stages = "I".into();

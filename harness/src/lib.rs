@@ -4,7 +4,7 @@
 //! crate's, training and evaluation the `tgs-train` crate's; both are
 //! re-exported here under their module names (`tgs::data`, `tgs::train`, ...).
 
-pub use tgs_train::{data, eval, export, lpips, outdir, scene, train};
+pub use tgs_train::{data, eval, export, lock, lpips, outdir, scene, train};
 
 pub mod bench;
 pub mod bench_light_field;

@@ -209,6 +209,11 @@ fn run(cli: Cli) -> Result<()> {
                 Some(d) => Some(tgs::outdir::OutDir::open(d, Some(&data.root))?),
                 None => None,
             };
+            // Only a writer locks: eval without --out reads the run.
+            let _lock = match out {
+                Some(d) => Some(tgs::lock::lock_output(d, run, "tgs eval", false)?),
+                None => None,
+            };
             let m = tgs::eval::evaluate(&mut tr, &data.test, dir.as_mut())?;
             println!("{}", serde_json::to_string_pretty(&m)?);
             Ok(())

@@ -92,6 +92,7 @@ pub fn render(ctx: &Arc<Context>, run: &Path, which: &str, frames: u32, out: &Pa
         bail!("the run's dataset has no {which} cameras");
     }
     let mut dir = OutDir::open(out, Some(&data.root))?;
+    let _lock = crate::lock::lock_output(out, run, "tgs render", false)?;
     let bar = indicatif::ProgressBar::new(cams.len() as u64);
     for (name, cam) in &cams {
         let r = tr.render(cam)?;

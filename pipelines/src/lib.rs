@@ -40,7 +40,7 @@ pub use util::Iota;
 pub mod raster;
 pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, KeptWeights, Moments, Plane, RasterKernels, Rasterizer, RecordAccess, Splats, GATE_SLOTS};
 pub mod train;
-pub use train::{Adam, AdamArrays, AdamGroup, DensifyParams, DensifyReport, Densifier, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights, TrainableSet};
+pub use train::{Adam, AdamArrays, AdamGroup, DensifyParams, DensifyReport, Densifier, Guard, SetGuard, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights, TrainableSet};
 pub mod reflection;
 pub use reflection::{ColorInputs, CompositePriors, EnvMap, EnvProxy, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
 pub mod mlp;

@@ -233,7 +233,7 @@ fn colmap_text_and_binary_agree() {
     let dir = |d: &Path| d.join("sparse/0");
     assert_eq!(parse_cameras_txt(&std::fs::read_to_string(dir(&t).join("cameras.txt")).unwrap()).unwrap(), parse_cameras_bin(&std::fs::read(dir(&b).join("cameras.bin")).unwrap()).unwrap());
     assert_eq!(parse_images_txt(&std::fs::read_to_string(dir(&t).join("images.txt")).unwrap()).unwrap(), parse_images_bin(&std::fs::read(dir(&b).join("images.bin")).unwrap()).unwrap());
-    let (pt, pb) = (parse_points_txt(&std::fs::read_to_string(dir(&t).join("points3D.txt")).unwrap()).unwrap(), parse_points_bin(&std::fs::read(dir(&b).join("points3D.bin")).unwrap()).unwrap());
+    let (pt, pb) = (parse_points_txt(&std::fs::read_to_string(dir(&t).join("points3D.txt")).unwrap()).unwrap().0, parse_points_bin(&std::fs::read(dir(&b).join("points3D.bin")).unwrap()).unwrap().0);
     assert_eq!((pt.positions.clone(), pt.colors.clone()), (pb.positions, pb.colors));
     assert_eq!(pt.positions, vec![[0.5, 0.25, 1.0], [-1.0, 0.0, 0.5]]);
 

@@ -9,11 +9,11 @@ use tgs_tests::ctx_shared;
 #[test]
 fn grids_expand_and_bad_grids_are_refused() {
     let g = Grid::parse("[base]\niterations = 100\n[knobs]\niterations = [50, 100, 200]\nsh_degree = [1, 3]\n", "g").unwrap();
-    let names: Vec<String> = g.runs().unwrap().into_iter().map(|r| r.0).collect();
+    let names: Vec<String> = g.runs(true).unwrap().into_iter().map(|r| r.0).collect();
     // The base has iterations = 100 and the quick preset's sh_degree 3: those values are the base run.
     assert_eq!(names, ["base", "iterations=50", "iterations=200", "sh_degree=1"]);
     let p = Grid::parse("mode = \"product\"\n[knobs]\niterations = [50, 100]\n[knobs.light_field]\npreset = [\"small\", \"paper\"]\n", "p").unwrap();
-    let names: Vec<String> = p.runs().unwrap().into_iter().map(|r| r.0).collect();
+    let names: Vec<String> = p.runs(true).unwrap().into_iter().map(|r| r.0).collect();
     assert_eq!(names.len(), 4, "{names:?}");
     assert!(names.contains(&"iterations=100,light_field.preset=paper".to_string()), "{names:?}");
     for (text, says) in [
@@ -25,7 +25,7 @@ fn grids_expand_and_bad_grids_are_refused() {
         ("[knobs]\nno_such_key = [1]\n", "no_such_key"),
         ("[knobs\n", "not valid TOML"),
     ] {
-        let e = Grid::parse(text, "grid.toml").and_then(|g| g.runs()).err().unwrap_or_else(|| panic!("accepted: {text}"));
+        let e = Grid::parse(text, "grid.toml").and_then(|g| g.runs(true)).err().unwrap_or_else(|| panic!("accepted: {text}"));
         assert!(format!("{e:#}").contains(says), "{text}: {e:#}");
     }
 }

@@ -60,6 +60,7 @@ pub fn resolved(path: &Path) -> Result<PathBuf> {
 /// holds a dataset's transforms or COLMAP model).
 pub fn refuse_dataset(dir: &Path, dataset: Option<&Path>) -> Result<()> {
     let d = resolved(dir)?;
+    refuse_system_dir(dir, &d)?;
     if let Some(ds) = dataset {
         let ds = resolved(ds)?;
         if d.starts_with(&ds) {
@@ -70,6 +71,22 @@ pub fn refuse_dataset(dir: &Path, dataset: Option<&Path>) -> Result<()> {
         if is_dataset_dir(a) {
             bail!("{}: inside the dataset {} (it holds a transforms file or a COLMAP model); tgs never writes into a dataset: choose an --out outside it", dir.display(), a.display());
         }
+    }
+    Ok(())
+}
+
+/// The folders of the system itself: an output there, or inside the
+/// first six, is a slip (`--out /`), never a place for a run.
+const SYSTEM_DIRS: [&str; 12] = ["/proc", "/sys", "/dev", "/boot", "/etc", "/usr", "/bin", "/sbin", "/lib", "/lib64", "/var", "/run"];
+
+/// Refuse the root directory, the user's home itself, the system's
+/// folders ([`SYSTEM_DIRS`]) and anything inside /proc, /sys, /dev,
+/// /boot, /etc or /usr (`resolved` is `dir` through [`resolved`]).
+fn refuse_system_dir(dir: &Path, resolved: &Path) -> Result<()> {
+    let home = std::env::var_os("HOME").filter(|h| !h.is_empty()).map(PathBuf::from).and_then(|h| std::fs::canonicalize(h).ok());
+    let inside = SYSTEM_DIRS[..6].iter().any(|s| resolved.starts_with(s));
+    if resolved.parent().is_none() || SYSTEM_DIRS.iter().any(|s| resolved == Path::new(s)) || inside || home.as_deref() == Some(resolved) {
+        bail!("{}: a system folder ({}); tgs writes its outputs into a directory of their own: choose an --out such as runs/NAME", dir.display(), resolved.display());
     }
     Ok(())
 }

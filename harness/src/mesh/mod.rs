@@ -154,6 +154,8 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
     let (lo, hi) = (e.lo, e.hi);
     let side = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f32, f32::max);
     let voxel = match args.voxel {
+        // Fewer than two voxels across the surfaces leaves no surface to extract.
+        Some(v) if side > 0.0 && v > 0.5 * side => bail!("--voxel {v}: larger than half the surfaces' box ({side:.4} along its longest side), so the mesh would be empty; give at most {:.4} (or leave --voxel out: two pixels' footprint)", 0.5 * side),
         Some(v) => v,
         None => {
             // Two pixels' footprint, unless that puts more than
@@ -225,6 +227,7 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
     }
     let out = args.out.clone().unwrap_or_else(|| run.to_path_buf());
     let mut dir = OutDir::open(&out, Some(&data.root))?;
+    let _lock = crate::lock::lock_output(&out, run, "tgs mesh", false)?;
     // Refuse before any work if a file is in the way.
     for name in ["mesh_scene.ply", "mesh_glass.ply"] {
         dir.check(name)?;

@@ -54,6 +54,10 @@ sh_degree = [1, 3]
 "light_field.threshold" = [0.0, 0.01, 0.05]
 "#;
 
+/// The most runs a grid may make: each trains a model (minutes at least),
+/// so more is a mistake in the grid, not a plan.
+pub const MAX_RUNS: usize = 10_000;
+
 /// Settings as (key, value), in order.
 pub type Settings = Vec<(String, toml::Value)>;
 
@@ -109,7 +113,13 @@ impl Grid {
 
     /// The runs: each a list of (key, value) overriding the base, named
     /// after them ("base" for none). Each run's settings are checked.
-    pub fn runs(&self) -> Result<Vec<(String, Settings)>> {
+    pub fn runs(&self, quiet: bool) -> Result<Vec<(String, Settings)>> {
+        let count = if self.product { self.knobs.iter().try_fold(1usize, |n, (_, v)| n.checked_mul(v.len())) } else { Some(1 + self.knobs.iter().map(|(_, v)| v.len()).sum::<usize>()) };
+        match count {
+            Some(n) if n <= MAX_RUNS => {}
+            Some(n) => bail!("the grid makes {n} runs; at most {MAX_RUNS} (every run trains a model: split the grid)"),
+            None => bail!("the grid makes more runs than can be counted; at most {MAX_RUNS} (every run trains a model: split the grid)"),
+        }
         let mut sets: Vec<Settings> = vec![Vec::new()];
         if self.product {
             for (k, vals) in &self.knobs {
@@ -122,7 +132,14 @@ impl Grid {
         }
         let mut out: Vec<(String, Settings)> = Vec::new();
         let mut seen: Vec<crate::train::TrainConfig> = Vec::new();
+        let bar = (!quiet && sets.len() >= 1000).then(|| {
+            eprintln!("sweep: checking the settings of the grid's {} runs", sets.len());
+            indicatif::ProgressBar::new(sets.len() as u64)
+        });
         for s in sets {
+            if let Some(b) = &bar {
+                b.inc(1);
+            }
             let cfg = self.config(&s).with_context(|| format!("grid run {}", name_of(&s)))?;
             // A knob value equal to the base's is the base run.
             if seen.contains(&cfg) {
@@ -130,6 +147,9 @@ impl Grid {
             }
             seen.push(cfg);
             out.push((name_of(&s), s));
+        }
+        if let Some(b) = bar {
+            b.finish_and_clear();
         }
         Ok(out)
     }
@@ -325,13 +345,19 @@ pub struct SweepOutcome {
 }
 
 pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
+    // SIGINT / SIGTERM from here on stop the sweep at the next safe point
+    // (between runs, or a run's next iteration); a second one aborts.
+    crate::train::run::install_signal_handler();
+    let signals = crate::train::run::signals_received();
+    let stop = || crate::train::run::signals_received() > signals;
     let grid = match &a.grid {
-        Some(p) => Grid::parse(&std::fs::read_to_string(p).with_context(|| format!("{}: cannot read the grid", p.display()))?, &p.display().to_string())?,
+        Some(p) => Grid::parse(&crate::train::config::read_text_capped(p, "grid")?, &p.display().to_string())?,
         None => Grid::parse(DEFAULT_GRID, "the default grid")?,
     };
-    let runs = grid.runs()?;
+    let runs = grid.runs(a.quiet)?;
     let keys: Vec<String> = grid.knobs.iter().map(|k| k.0.clone()).collect();
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the sweep directory", a.out.display()))?;
+    crate::outdir::refuse_dataset(&a.out, a.dataset.as_deref())?;
+    let _lock = crate::lock::create_and_lock(&a.out, "tgs sweep", a.quiet)?;
     // Without a dataset: the built-in scene, written once to OUT/scene as `tgs train` does.
     let dataset = crate::train::run::dataset_dir(&TrainArgs { dataset: a.dataset.clone(), out: a.out.clone(), ..Default::default() }, a.quiet)?;
     let csv = a.out.join("sweep.csv");
@@ -359,6 +385,9 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         if rows.iter().any(|r| &r.name == name) {
             continue;
         }
+        if stop() {
+            return Ok(SweepOutcome { rows, trained, interrupted: true });
+        }
         if !a.quiet {
             eprintln!("sweep: run {}/{}: {name}", i + 1, runs.len());
         }
@@ -369,7 +398,7 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         }
         let args = TrainArgs { dataset: Some(dataset.clone()), out: dir.clone(), preset: Some(grid.preset.clone()), set: grid.set_args(set), profile: true, quiet: a.quiet, ..Default::default() };
         let o = train(ctx, &args).with_context(|| format!("sweep run {name}"))?;
-        if o.interrupted {
+        if o.interrupted || stop() {
             return Ok(SweepOutcome { rows, trained, interrupted: true });
         }
         let m: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).with_context(|| format!("{}: no metrics.json", dir.display()))?)?;

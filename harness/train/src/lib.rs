@@ -7,4 +7,4 @@ pub mod eval;
 pub mod lpips;
 pub mod train;
 
-pub use tgs_dataset::{data, export, outdir, scene};
+pub use tgs_dataset::{data, export, lock, outdir, scene};

@@ -2,16 +2,19 @@
 //! distortion weight) forward and backward, the high-frequency loss, the
 //! fused Adam step, and the
 //! adaptive density control (statistics, clone/split/prune with scan
-//! compaction, opacity reset) on a trainable Gaussian set.
+//! compaction, opacity reset) on a trainable Gaussian set, and the
+//! divergence guard.
 
 mod adam;
 mod densify;
+mod guard;
 mod hf;
 mod loss;
 mod set;
 
 pub use adam::{Adam, AdamArrays, AdamGroup};
 pub use densify::{DensifyParams, DensifyReport, Densifier};
+pub use guard::{Guard, SetGuard, SET_ARRAYS};
 pub use hf::{HfLoss, HfStats};
 pub use loss::{ImageLoss, LossIo, LossScratch, LossValues, LossWeights};
 pub use set::TrainableSet;

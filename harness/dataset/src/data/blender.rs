@@ -17,6 +17,8 @@ struct Transforms {
     fl_y: Option<Num>,
     cx: Option<Num>,
     cy: Option<Num>,
+    w: Option<Num>,
+    h: Option<Num>,
     frames: Vec<Frame>,
 }
 
@@ -26,6 +28,13 @@ struct Frame {
     transform_matrix: Vec<Vec<Num>>,
     normal_path: Option<String>,
     mask_path: Option<String>,
+    // Per-frame intrinsics (nerfstudio's layout) override the file's.
+    fl_x: Option<Num>,
+    fl_y: Option<Num>,
+    cx: Option<Num>,
+    cy: Option<Num>,
+    w: Option<Num>,
+    h: Option<Num>,
 }
 
 /// A number as written in the file. Python's `json.dump` writes NaN and
@@ -105,8 +114,12 @@ fn check_rigid(m: &[[f64; 4]; 4]) -> Result<()> {
 pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let (mut files, mut all_alpha) = (Vec::new(), true);
     let train = load_split(root, "train", opts, &mut files, &mut all_alpha)?.context("transforms_train.json vanished")?;
-    let test = load_split(root, "test", opts, &mut files, &mut all_alpha)?.unwrap_or_default();
+    let test = load_split(root, "test", opts, &mut files, &mut all_alpha)?;
     let mut warnings = Vec::new();
+    if test.is_none() {
+        warnings.push(format!("{}: no transforms_test.json: there are no test views, so no test metrics or renders", root.display()));
+    }
+    let test = test.unwrap_or_default();
     if !all_alpha {
         warnings.extend(backdrop_warning(&train, opts.background).map(|w| format!("{}: {w}", root.display())));
     }
@@ -116,9 +129,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let points = if ply.is_file() {
         files.push(ply.clone());
         let (pts, skipped) = crate::export::ply::read_points(&ply)?;
-        if skipped > 0 {
-            warnings.push(format!("{}: {skipped} of {} points have NaN or infinite coordinates and are skipped", ply.display(), skipped + pts.positions.len()));
-        }
+        warnings.extend(super::points_warning(&ply, pts.positions.len(), skipped));
         Some(pts)
     } else {
         None::<Points>
@@ -165,6 +176,9 @@ fn check_one_pose_per_file(root: &Path, train: &[(View, String)], test: &[(View,
 /// directory, and tgs reads nothing outside it.
 fn resolve(root: &Path, rel: &str, default_ext: &str) -> Result<std::path::PathBuf> {
     let mut depth = 0i32;
+    if !Path::new(rel).components().any(|c| matches!(c, std::path::Component::Normal(_))) {
+        bail!("file path '{rel}' names no file inside the dataset directory");
+    }
     for c in Path::new(rel).components() {
         match c {
             std::path::Component::Normal(_) => depth += 1,
@@ -178,6 +192,41 @@ fn resolve(root: &Path, rel: &str, default_ext: &str) -> Result<std::path::PathB
     }
     let p = root.join(rel.trim_start_matches("./"));
     Ok(if p.extension().is_none() { p.with_extension(default_ext) } else { p })
+}
+
+/// Intrinsics as a transforms file gives them (each optional).
+#[derive(Clone, Copy)]
+struct Intrinsics {
+    fl_x: Option<f64>,
+    fl_y: Option<f64>,
+    cx: Option<f64>,
+    cy: Option<f64>,
+    w: Option<f64>,
+    h: Option<f64>,
+}
+
+impl Intrinsics {
+    /// These (a frame's), each falling back to `file`'s.
+    fn or(self, file: &Intrinsics) -> Intrinsics {
+        Intrinsics { fl_x: self.fl_x.or(file.fl_x), fl_y: self.fl_y.or(file.fl_y), cx: self.cx.or(file.cx), cy: self.cy.or(file.cy), w: self.w.or(file.w), h: self.h.or(file.h) }
+    }
+}
+
+/// The intrinsics must describe the image they come with: `w` and `h`,
+/// where given, its size; the principal point inside it. Intrinsics
+/// written for another size (a resized image folder) would train a
+/// misplaced camera without a word.
+fn check_intrinsics_fit((fw, fh, cx, cy): (Option<f64>, Option<f64>, Option<f64>, Option<f64>), (w, h): (u32, u32)) -> Result<()> {
+    if fw.is_some_and(|v| v != w as f64) || fh.is_some_and(|v| v != h as f64) {
+        let show = |v: Option<f64>, d: u32| v.map_or(format!("{d} (not given)"), |v| format!("{v}"));
+        bail!("the transforms give w = {}, h = {} but the image is {w}x{h}: intrinsics (fl_x, cx, ...) written for another image size; scale them to the image or use the images they were written for", show(fw, w), show(fh, h));
+    }
+    for (name, v, size) in [("cx", cx, w), ("cy", cy, h)] {
+        if let Some(c) = v.filter(|&c| !(c > 0.0 && c < size as f64)) {
+            bail!("{name} = {c} lies outside the {w}x{h} image: intrinsics written for another image size, or not in pixels");
+        }
+    }
+    Ok(())
 }
 
 /// Convert a Blender/OpenGL camera-to-world matrix to our world-to-view rows.
@@ -199,11 +248,14 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std:
     if !path.is_file() {
         return Ok(None);
     }
+    super::image_io::regular_file(&path, "transforms file")?;
     let text = std::fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?;
     files.push(path.clone());
-    let tf: Transforms = serde_json::from_str(&quote_non_finite(&text)).with_context(|| format!("{}: not a valid transforms file", path.display()))?;
+    // A byte-order mark (Windows editors write one) is not JSON.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let tf: Transforms = serde_json::from_str(&quote_non_finite(text)).with_context(|| format!("{}: not a valid transforms file", path.display()))?;
     let opt = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose().with_context(|| path.display().to_string());
-    let (fl_x, fl_y, cx, cy) = (opt(&tf.fl_x, "fl_x")?, opt(&tf.fl_y, "fl_y")?, opt(&tf.cx, "cx")?, opt(&tf.cy, "cy")?);
+    let file_intrinsics = Intrinsics { fl_x: opt(&tf.fl_x, "fl_x")?, fl_y: opt(&tf.fl_y, "fl_y")?, cx: opt(&tf.cx, "cx")?, cy: opt(&tf.cy, "cy")?, w: opt(&tf.w, "w")?, h: opt(&tf.h, "h")? };
     let angle_x = opt(&tf.camera_angle_x, "camera_angle_x")?;
     if tf.frames.is_empty() {
         bail!("{}: the {split} split has no frames", path.display());
@@ -230,6 +282,9 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std:
         *all_alpha &= alpha;
         let (w, h) = (image.width, image.height);
         let image = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
+        let fopt = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose().with_context(what);
+        let Intrinsics { fl_x, fl_y, cx, cy, w: file_w, h: file_h } = Intrinsics { fl_x: fopt(&f.fl_x, "fl_x")?, fl_y: fopt(&f.fl_y, "fl_y")?, cx: fopt(&f.cx, "cx")?, cy: fopt(&f.cy, "cy")?, w: fopt(&f.w, "w")?, h: fopt(&f.h, "h")? }.or(&file_intrinsics);
+        check_intrinsics_fit((file_w, file_h, cx, cy), (w, h)).with_context(|| format!("{}: {}", what(), img_path.display()))?;
         let fx = match (fl_x, angle_x) {
             (Some(fx), _) => fx,
             (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),

@@ -94,7 +94,12 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
             train.push(view);
         }
     }
-    Ok(Dataset { root: root.to_path_buf(), format: "colmap", train, test, points: Some(points), background: opts.background, files, warnings: Vec::new() })
+    let mut warnings = Vec::new();
+    if let (Some((pts, skipped)), Some(file)) = (&points, files.iter().find(|p| p.file_stem().is_some_and(|s| s == "points3D"))) {
+        warnings.extend(super::points_warning(file, pts.positions.len(), *skipped));
+    }
+    let points = points.map(|(p, _)| p);
+    Ok(Dataset { root: root.to_path_buf(), format: "colmap", train, test, points, background: opts.background, files, warnings })
 }
 
 /// Our camera from a COLMAP camera and image pose.
@@ -127,7 +132,9 @@ pub fn to_camera(c: &ColmapCamera, im: &ColmapImage) -> Result<Camera> {
 }
 
 /// Read cameras, images and points from a model directory (binary preferred).
-pub fn read_model(dir: &Path) -> Result<(Vec<ColmapCamera>, Vec<ColmapImage>, Points)> {
+/// The points come with the number skipped for non-finite coordinates,
+/// None without a points3D file.
+pub fn read_model(dir: &Path) -> Result<(Vec<ColmapCamera>, Vec<ColmapImage>, Option<(Points, usize)>)> {
     let bin = dir.join("cameras.bin").is_file();
     if bin {
         let read = |name: &str| {
@@ -139,8 +146,8 @@ pub fn read_model(dir: &Path) -> Result<(Vec<ColmapCamera>, Vec<ColmapImage>, Po
         let (p, b) = read("images.bin")?;
         let ims = parse_images_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?;
         let pts = match read("points3D.bin") {
-            Ok((p, b)) => parse_points_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?,
-            Err(_) => Points::default(),
+            Ok((p, b)) => Some(parse_points_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?),
+            Err(_) => None,
         };
         Ok((cams, ims, pts))
     } else {
@@ -153,8 +160,8 @@ pub fn read_model(dir: &Path) -> Result<(Vec<ColmapCamera>, Vec<ColmapImage>, Po
         let (p, t) = read("images.txt")?;
         let ims = parse_images_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?;
         let pts = match read("points3D.txt") {
-            Ok((p, t)) => parse_points_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?,
-            Err(_) => Points::default(),
+            Ok((p, t)) => Some(parse_points_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?),
+            Err(_) => None,
         };
         Ok((cams, ims, pts))
     }
@@ -230,8 +237,10 @@ fn is_points2d_line(l: &str) -> bool {
     t.len() % 3 == 0 && t.chunks(3).all(|p| p[0].parse::<f64>().is_ok() && p[1].parse::<f64>().is_ok() && p[2].parse::<i64>().is_ok())
 }
 
-pub fn parse_points_txt(text: &str) -> Result<Points> {
-    let mut pts = Points::default();
+/// The points and how many were skipped for NaN or infinite coordinates
+/// (an f64 past f32's range counts as infinite).
+pub fn parse_points_txt(text: &str) -> Result<(Points, usize)> {
+    let (mut pts, mut skipped) = (Points::default(), 0);
     for (ln, l) in content_lines(text) {
         let mut it = l.split_whitespace();
         let _id: u64 = num(it.next(), ln, "point id")?;
@@ -240,9 +249,11 @@ pub fn parse_points_txt(text: &str) -> Result<Points> {
         if p.iter().all(|v| v.is_finite()) {
             pts.positions.push(p);
             pts.colors.push(c);
+        } else {
+            skipped += 1;
         }
     }
-    Ok(pts)
+    Ok((pts, skipped))
 }
 
 struct Cursor<'a> {
@@ -317,10 +328,11 @@ pub fn parse_images_bin(b: &[u8]) -> Result<Vec<ColmapImage>> {
     Ok(out)
 }
 
-pub fn parse_points_bin(b: &[u8]) -> Result<Points> {
+/// As [`parse_points_txt`], from points3D.bin.
+pub fn parse_points_bin(b: &[u8]) -> Result<(Points, usize)> {
     let mut c = Cursor { b, at: 0 };
     let n = c.count(43)?;
-    let mut pts = Points::default();
+    let (mut pts, mut skipped) = (Points::default(), 0);
     for _ in 0..n {
         c.u64()?;
         let p = [c.f64()? as f32, c.f64()? as f32, c.f64()? as f32];
@@ -331,7 +343,9 @@ pub fn parse_points_bin(b: &[u8]) -> Result<Points> {
         if p.iter().all(|v| v.is_finite()) {
             pts.positions.push(p);
             pts.colors.push([rgb[0] as f32 / 255.0, rgb[1] as f32 / 255.0, rgb[2] as f32 / 255.0]);
+        } else {
+            skipped += 1;
         }
     }
-    Ok(pts)
+    Ok((pts, skipped))
 }

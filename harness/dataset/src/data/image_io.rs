@@ -81,7 +81,7 @@ pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<ImageF> {
 
 /// [`read_rgb`], and whether the file had an alpha channel.
 pub fn read_rgb_alpha(path: &Path, background: [f32; 3]) -> Result<(ImageF, bool)> {
-    let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?;
+    let img = open_image(path, "image")?;
     let rgba = img.to_rgba32f();
     let has_alpha = img.color().has_alpha();
     let (w, h) = rgba.dimensions();
@@ -131,7 +131,84 @@ pub fn read_grey_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
 }
 
 fn open_mask(path: &Path) -> Result<image::DynamicImage> {
-    image::open(path).with_context(|| format!("{}: cannot read the mask", path.display()))
+    open_image(path, "mask")
+}
+
+/// An image file decoded (`what`: "image", "mask" for the messages): a
+/// regular file only (a FIFO would block and a device never end), its
+/// format read from its first bytes, a JPEG only when whole
+/// ([`jpeg_complete`]: the decoder fills a truncated one with grey rows
+/// and says nothing). The decoder's message is said once (its error's
+/// source repeats it).
+pub fn open_image(path: &Path, what: &str) -> Result<image::DynamicImage> {
+    regular_file(path, what)?;
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
+    if bytes.starts_with(&[0xFF, 0xD8]) {
+        if let Err(e) = jpeg_complete(&bytes) {
+            bail!("{}: cannot read the {what}: a truncated or damaged JPEG ({e})", path.display());
+        }
+    }
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().with_context(|| format!("{}: cannot read the {what}", path.display()))?;
+    reader.decode().map_err(|e| anyhow::anyhow!("{}: cannot read the {what}: {e}", path.display()))
+}
+
+/// Refuse a path that is not a regular file (a FIFO blocks a reader and a
+/// device never ends), naming it.
+pub fn regular_file(path: &Path, what: &str) -> Result<()> {
+    let meta = std::fs::metadata(path).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
+    if !meta.is_file() {
+        bail!("{}: not a regular file (a directory, FIFO or device); the {what} must be a file", path.display());
+    }
+    Ok(())
+}
+
+/// Whether a JPEG's bytes run whole to its end-of-image marker: the
+/// segments walked by their lengths, each scan's entropy-coded data to
+/// the next marker (0xFF followed by neither 0x00, a restart marker nor
+/// fill), until EOI. Bytes after EOI (camera trailers) are allowed.
+pub fn jpeg_complete(b: &[u8]) -> std::result::Result<(), String> {
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return Err("no start-of-image marker".into());
+    }
+    let mut i = 2;
+    loop {
+        // Fill bytes before a marker.
+        while b.get(i) == Some(&0xFF) && b.get(i + 1) == Some(&0xFF) {
+            i += 1;
+        }
+        match (b.get(i), b.get(i + 1)) {
+            (Some(0xFF), Some(&m)) => {
+                i += 2;
+                match m {
+                    0xD9 => return Ok(()),
+                    0x01 | 0xD0..=0xD7 => continue,
+                    _ => {}
+                }
+                let len = match (b.get(i), b.get(i + 1)) {
+                    (Some(&h), Some(&l)) => u16::from_be_bytes([h, l]) as usize,
+                    _ => return Err(format!("it ends inside marker 0xFF{m:02X}")),
+                };
+                if len < 2 || i + len > b.len() {
+                    return Err(format!("segment 0xFF{m:02X} runs past the end of the file"));
+                }
+                i += len;
+                if m == 0xDA {
+                    // Entropy-coded data: to the next real marker.
+                    loop {
+                        match (b.get(i), b.get(i + 1)) {
+                            (Some(0xFF), Some(0x00 | 0xD0..=0xD7)) => i += 2,
+                            (Some(0xFF), Some(0xFF)) => i += 1,
+                            (Some(0xFF), Some(_)) => break,
+                            (Some(_), _) => i += 1,
+                            (None, _) => return Err("it ends inside the image data, before its end-of-image marker".into()),
+                        }
+                    }
+                }
+            }
+            (None, _) | (Some(0xFF), None) => return Err("it ends before its end-of-image marker".into()),
+            (Some(&x), _) => return Err(format!("byte 0x{x:02X} at offset {i} where a marker belongs")),
+        }
+    }
 }
 
 /// The mask's size and its pixels at or above 128 in grey.
@@ -165,6 +242,7 @@ pub fn read_normals(path: &Path) -> Result<ImageF> {
 
 /// A float32 or float64 `.npy` array of shape (H, W) or (H, W, C), C order.
 pub fn read_npy(path: &Path) -> Result<ImageF> {
+    regular_file(path, "array")?;
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     parse_npy(&bytes).with_context(|| format!("{}: not a valid .npy array", path.display()))
 }
@@ -247,6 +325,7 @@ pub fn write_npy(path: &Path, img: &ImageF) -> Result<()> {
 
 /// RGB(A) channels of an EXR file.
 pub fn read_exr(path: &Path) -> Result<ImageF> {
+    regular_file(path, "EXR")?;
     let img = exr::prelude::read_first_rgba_layer_from_file(
         path,
         |res, _| ImageF::new(res.width() as u32, res.height() as u32, 3),

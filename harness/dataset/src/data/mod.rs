@@ -80,6 +80,10 @@ impl Dataset {
         if ds.train.is_empty() {
             bail!("{}: the training split is empty", root.display());
         }
+        let all: Vec<View> = ds.train.iter().chain(&ds.test).cloned().collect();
+        if let Some(o) = camera_outlier(&all, CAMERA_OUTLIER_FACTOR) {
+            bail!("{}: {o}: a pose in other units or a corrupt transform; fix or remove that view", root.display());
+        }
         Ok(ds)
     }
 
@@ -102,6 +106,53 @@ impl Dataset {
         let far = centres.iter().map(|c| (0..3).map(|k| (c[k] - mean[k]).powi(2)).sum::<f32>().sqrt()).fold(0.0f32, f32::max);
         (1.1 * far.max(1e-6), mean)
     }
+}
+
+/// Fewer initial points than this are warned about: the Gaussians start
+/// from them alone.
+pub const FEW_POINTS: usize = 100;
+
+/// What to say of a dataset's initial points (`path`): those skipped for
+/// NaN or infinite coordinates, none left (random points instead), or
+/// few left.
+pub fn points_warning(path: &Path, kept: usize, skipped: usize) -> Option<String> {
+    let skipped_note = if skipped > 0 { format!("{skipped} of {} points have NaN or infinite coordinates and are skipped; ", skipped + kept) } else { String::new() };
+    let what = if kept == 0 {
+        "it holds no usable point: the Gaussians start from init_points random points instead".to_string()
+    } else if kept < FEW_POINTS {
+        format!("only {kept} usable point(s): training starts from {kept} Gaussian(s) and densification must grow the rest (delete the file to start from init_points random points)")
+    } else if skipped > 0 {
+        return Some(format!("{}: {}", path.display(), skipped_note.trim_end_matches("; ")));
+    } else {
+        return None;
+    };
+    Some(format!("{}: {skipped_note}{what}", path.display()))
+}
+
+/// A camera this many times farther from the cameras' median point than
+/// their median distance from it is refused at load time.
+pub const CAMERA_OUTLIER_FACTOR: f64 = 1e4;
+
+/// The camera farthest from the views' median centre (per axis), when it
+/// lies more than `factor` times the median distance from there, said by
+/// name and distance. None with fewer than three views or all cameras at
+/// one point.
+pub fn camera_outlier(views: &[View], factor: f64) -> Option<String> {
+    if views.len() < 3 {
+        return None;
+    }
+    let centres: Vec<[f64; 3]> = views.iter().map(|v| v.camera.centre().map(f64::from)).collect();
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mid: [f64; 3] = std::array::from_fn(|k| median(centres.iter().map(|c| c[k]).collect()));
+    let dist: Vec<f64> = centres.iter().map(|c| (0..3).map(|k| (c[k] - mid[k]).powi(2)).sum::<f64>().sqrt()).collect();
+    let typical = median(dist.clone());
+    let (i, far) = dist.iter().copied().enumerate().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    (typical > 0.0 && far > factor * typical).then(|| {
+        format!("view '{}': its camera lies {far:.3e} from the cameras' median point, {:.1e} times their median distance ({typical:.3})", views[i].name, far / typical)
+    })
 }
 
 /// The narrowest field of view a dataset camera may have: focal lengths

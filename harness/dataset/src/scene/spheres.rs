@@ -52,7 +52,7 @@ impl SpheresSpec {
 
     fn validate(&self) -> Result<()> {
         if self.width == 0 || self.height == 0 || self.train == 0 || self.points == 0 {
-            bail!("spheres scene: width, height, training views and points must be at least 1 ({self:?})");
+            bail!("spheres scene: width, height, training views and points must be at least 1 (width {}, height {}, {} training views, {} points)", self.width, self.height, self.train, self.points);
         }
         // The images are rendered in host memory (f32 RGB) before anything
         // else: refuse sizes that cannot fit rather than abort mid-way.

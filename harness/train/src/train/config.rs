@@ -186,7 +186,7 @@ impl TrainConfig {
 
     /// Overlay the keys of a TOML file.
     pub fn merge_toml_file(&mut self, path: &Path) -> Result<()> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the config", path.display()))?;
+        let text = read_text_capped(path, "config")?;
         let table: toml::Table = text.parse().with_context(|| format!("{}: not valid TOML", path.display()))?;
         self.merge(table).with_context(|| format!("{}", path.display()))
     }
@@ -282,6 +282,10 @@ impl TrainConfig {
                 if !f.is_finite() {
                     bail!("setting '{k}' is {f}; it must be a finite number");
                 }
+                let lr = k.rsplit('.').next().is_some_and(|last| last.starts_with("lr"));
+                if lr && *f > super::divergence::LR_LIMIT {
+                    bail!("{k} = {:e}: beyond any sane learning rate (at most {}; Adam moves a parameter by about its rate every iteration)", *f as f32, super::divergence::LR_LIMIT);
+                }
             }
         }
         if self.iterations == 0 {
@@ -294,6 +298,9 @@ impl TrainConfig {
             if v == 0 {
                 bail!("{k} must be at least 1");
             }
+        }
+        if self.init_points > self.max_gaussians {
+            bail!("init_points {} is more than max_gaussians {}: densification could never grow such a set; lower init_points or raise max_gaussians too", self.init_points, self.max_gaussians);
         }
         if !(0.0..=1.0).contains(&self.lambda_ssim) {
             bail!("lambda_ssim must be in [0, 1], not {}", self.lambda_ssim);
@@ -380,6 +387,27 @@ pub fn paper_schedule_note(preset: &str, sizes: &[(u32, u32)]) -> Option<String>
         if sizes.iter().all(|&s| s == (w, h)) && !sizes.is_empty() { format!(" at {w}x{h}") } else { String::new() },
         pixels as f64 / 1e6
     ))
+}
+
+/// The most bytes a settings file (`--config`, `sweep --grid`) may hold.
+pub const SETTINGS_FILE_LIMIT: u64 = 1 << 20;
+
+/// A settings file's text (`what`: "config", "grid"): a regular file of
+/// at most [`SETTINGS_FILE_LIMIT`] bytes of UTF-8, read no further than
+/// that (`/dev/zero` or a FIFO is refused, not read until memory runs out).
+pub fn read_text_capped(path: &Path, what: &str) -> Result<String> {
+    use std::io::Read as _;
+    let meta = std::fs::metadata(path).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
+    if !meta.is_file() {
+        bail!("{}: not a regular file; the {what} must be a TOML file", path.display());
+    }
+    let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
+    let mut bytes = Vec::new();
+    f.take(SETTINGS_FILE_LIMIT + 1).read_to_end(&mut bytes).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
+    if bytes.len() as u64 > SETTINGS_FILE_LIMIT {
+        bail!("{}: over {} KiB; a {what} file is a few lines of TOML", path.display(), SETTINGS_FILE_LIMIT >> 10);
+    }
+    String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text; the {what} must be a TOML file", path.display()))
 }
 
 /// A table's keys with section keys as `section.key` (one level).

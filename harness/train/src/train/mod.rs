@@ -6,6 +6,7 @@ pub mod arrays;
 pub mod checkpoint;
 pub mod clock;
 pub mod config;
+pub mod divergence;
 pub mod from;
 pub mod report;
 pub mod run;

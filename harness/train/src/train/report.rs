@@ -45,12 +45,14 @@ impl Reporter {
 
     /// A stage began: its message, the log's event line, and the bar's new
     /// length (`total`: the schedule's, which a skipped stage shortens).
-    pub fn stage_event(&mut self, msg: &str, event: &Value, total: u32) -> Result<()> {
+    pub fn stage_event(&mut self, msg: &str, event: Option<&Value>, total: u32) -> Result<()> {
         if let Some(b) = &self.bar {
             b.set_length(total as u64);
         }
         self.say(msg);
-        writeln!(self.log, "{event}")?;
+        if let Some(e) = event {
+            writeln!(self.log, "{e}")?;
+        }
         Ok(())
     }
 

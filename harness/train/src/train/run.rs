@@ -23,10 +23,11 @@ use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 use super::clock::{Before, Clocks};
+use super::divergence::{high_learning_rates, likely_cause, DivergenceGuard, LR_WARN_FACTOR, MEANS_LIMIT};
 use super::report::{lpips_text, Reporter};
 use tgs_engine::Context;
 
@@ -42,19 +43,30 @@ pub struct Outcome {
 }
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+/// Signals received by this process: never reset, so that a caller
+/// running several trainings (a sweep) sees a signal that arrived while
+/// none was in its loop, and a second signal aborts whatever runs.
+static SIGNALS: AtomicU32 = AtomicU32::new(0);
 
 /// Ctrl-C (SIGINT), SIGTERM (what batch schedulers send before killing a
 /// job) and SIGHUP all stop training at the end of the iteration with a
-/// checkpoint; a second one exits at once.
-fn install_signal_handler() {
+/// checkpoint (a sweep: at the next safe point); a second one exits at
+/// once. Installed once per process; later calls do nothing.
+pub fn install_signal_handler() {
     // A second installation in one process (tests) fails harmlessly.
     let _ = ctrlc::set_handler(|| {
-        if INTERRUPTED.swap(true, Ordering::SeqCst) {
-            eprintln!("\nsecond interrupt: exiting without a checkpoint");
+        INTERRUPTED.store(true, Ordering::SeqCst);
+        if SIGNALS.fetch_add(1, Ordering::SeqCst) >= 1 {
+            eprintln!("\nsecond interrupt: exiting at once");
             std::process::exit(130);
         }
-        eprintln!("\ninterrupted (Ctrl-C or SIGTERM): finishing the iteration and writing a checkpoint (interrupt again to abort)");
+        eprintln!("\ninterrupted (Ctrl-C or SIGTERM): stopping at the next safe point with a checkpoint (interrupt again to abort)");
     });
+}
+
+/// Signals this process has received so far (see [`install_signal_handler`]).
+pub fn signals_received() -> u32 {
+    SIGNALS.load(Ordering::SeqCst)
 }
 
 /// Ask a running `train` in this process to stop at the next iteration (as Ctrl-C does).
@@ -73,7 +85,9 @@ fn show_warnings(data: &Dataset, quiet: bool) {
 
 pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     crate::outdir::refuse_dataset(&a.out, a.dataset.as_deref())?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
+    // One writer per run directory, for the whole run (released on return).
+    let _lock = crate::lock::create_and_lock(&a.out, "tgs train", a.quiet)?;
+    let signals_at_start = signals_received();
     let ckpt = a.out.join(CHECKPOINT);
     let start = Instant::now();
     if a.resume && a.from.is_some() {
@@ -144,9 +158,13 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         atomic_write(&a.out.join(RUN_RECORD), serde_json::to_string_pretty(&rec)?.as_bytes())?;
     }
     show_warnings(&data, a.quiet);
+    preflight(&tr, &data, a.quiet)?;
     atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
     install_signal_handler();
-    INTERRUPTED.store(false, Ordering::SeqCst);
+    // A request_stop() of an earlier training in this process is spent;
+    // a signal that arrived since this one started is not.
+    INTERRUPTED.store(signals_received() > signals_at_start, Ordering::SeqCst);
+    let guard = DivergenceGuard::install(&mut tr)?;
 
     let total = tr.schedule.total();
     let mut report = Reporter::open(&a.out, a.resume, a.quiet, total, tr.iteration)?;
@@ -208,21 +226,25 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             let b = tr.begin_next(Some(files), a.quiet)?;
             let mut event = json!({"iteration": tr.iteration, "stage": label, "event": "begin"});
             event.as_object_mut().expect("an object").extend(b.event);
-            Some((b.message, event))
+            Some((b.message, event, resumed))
         } else {
             None
         };
-        if let Some((msg, event)) = begun {
-            report.stage_event(&msg, &event, tr.schedule.total())?;
+        if let Some((msg, event, resumed)) = begun {
+            // A stage begun again on --resume was logged when it first began.
+            report.stage_event(&msg, (!resumed).then_some(&event), tr.schedule.total())?;
             clocks.next_stage();
             last_closed = tr.done();
             atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
             continue;
         }
         let r = tr.step(a.profile)?;
-        if !r.loss.is_finite() {
+        let bad = guard.check(&tr)?;
+        if !r.loss.is_finite() || !bad.is_empty() {
+            let what = if r.loss.is_finite() { format!("{} went non-finite or past {MEANS_LIMIT:e} scene extents", bad.join(", ")) } else { format!("the loss is {}", r.loss) };
             checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str, &identity)?;
-            bail!("iteration {}: the loss is {} (state saved to checkpoint-nonfinite.bin)", r.iteration, r.loss);
+            let kept = checkpoint::read(&ckpt).map(|(h, _)| format!("{} holds iteration {}, the last state saved before", ckpt.display(), h.iteration)).unwrap_or_else(|_| format!("no checkpoint was saved before (checkpoint_interval {})", tr.cfg.checkpoint_interval));
+            bail!("iteration {}: training diverged: {what}; {}. Stopped; {kept}, and the diverged state is in checkpoint-nonfinite.bin", r.iteration, likely_cause(&tr.cfg, &data));
         }
         first_loss.get_or_insert(r.loss);
         last_loss = r.loss;
@@ -301,6 +323,24 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: clocks.total_s() })
 }
 
+
+/// What can be checked before any training: learning rates far above the
+/// presets' (warned; above the limit they were refused with the settings)
+/// and the paths the later stages will read (`reflection.seed_masks`),
+/// read now rather than after Stage I has trained.
+fn preflight(tr: &Trainer, data: &Dataset, quiet: bool) -> Result<()> {
+    if !quiet {
+        for w in high_learning_rates(&tr.cfg)? {
+            eprintln!("tgs: warning: {w}: {LR_WARN_FACTOR}x or more the presets'; training may diverge");
+        }
+    }
+    let rc = &tr.cfg.reflection;
+    if tr.cfg.wants_reflection() && !rc.seed_masks.is_empty() && tr.later.is_none() {
+        let names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
+        super::stages::reflection::stage::seed_masks(Path::new(&rc.seed_masks), &names, &tr.views.cameras, tr.cfg.downscale).context("checked before training")?;
+    }
+    Ok(())
+}
 
 /// metrics.json's record of a finished stage.
 fn stage_record(stage: &str, tr: &Trainer, wall_s: f64, m: Option<&Metrics>) -> serde_json::Value {

@@ -13,7 +13,7 @@ use super::schedule::{Schedule, Stage};
 use super::stages::light_field::LightFieldModel;
 use super::stages::kind::by_stage;
 use super::stages::reflection::{reflection_decides, ReflDecision, ReflectionModel};
-use super::stages::scattering::init::{far_points, gaussians_from_points, random_points};
+use super::stages::scattering::init::{check_budget, far_points, gaussians_from_points, random_points};
 use super::stages::scattering::ScatteringModel;
 use super::stages::{scattering, Begun, Iteration, LaterKind, LaterStage, RunPaths, ScatCache, Shared, Transition, Views};
 use crate::data::Dataset;
@@ -66,8 +66,13 @@ impl Trainer {
     pub fn new(ctx: &Arc<Context>, cfg: TrainConfig, data: &Dataset) -> Result<Trainer> {
         let mut rng = Rng::new(cfg.seed);
         let points = match &data.points {
-            Some(p) if !p.positions.is_empty() => p.clone(),
+            Some(p) if !p.positions.is_empty() => {
+                check_budget(ctx.caps(), p.positions.len() as u64, cfg.sh_degree, "the dataset's points")?;
+                p.clone()
+            }
             _ => {
+                let far = (cfg.init_far_fraction as f64 * cfg.init_points as f64).round() as u64;
+                check_budget(ctx.caps(), cfg.init_points as u64 + far, cfg.sh_degree, "init_points (with init_far_fraction)")?;
                 let mut p = random_points(cfg.init_points, cfg.init_half_extent, &mut rng);
                 let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
                 let (extent, centre) = data.extent();

@@ -111,3 +111,36 @@ pub fn gaussians_from_points(points: &Points, sh_degree: u32, rng: &mut Rng) -> 
     g
 }
 
+
+/// Device bytes per trained Gaussian beyond its four copies of the
+/// parameters (values, gradients, two Adam moments): the densification
+/// statistics and a frame's per-Gaussian projection and sort records, a
+/// generous bound.
+const FRAME_BYTES_PER_GAUSSIAN: u64 = 256;
+
+/// Refuse `n` initial Gaussians at `sh_degree` before any is made when
+/// they cannot fit: more than the device's memory (four copies of the
+/// parameters and per-frame records) or than the host's available memory
+/// (points, Gaussians, the nearest-neighbour search).
+pub fn check_budget(caps: &tgs_engine::Capabilities, n: u64, sh_degree: u32, what: &str) -> anyhow::Result<()> {
+    let floats = 10 + 3 * (sh_degree as u64 + 1).pow(2);
+    let device = n.saturating_mul(4 * 4 * floats + FRAME_BYTES_PER_GAUSSIAN);
+    let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+    if caps.device_local_bytes > 0 && device > caps.device_local_bytes {
+        anyhow::bail!("{what}: {n} Gaussians need about {:.1} GiB of device memory, more than {}'s {:.1} GiB", gib(device), caps.device_name, gib(caps.device_local_bytes));
+    }
+    let host = n.saturating_mul(4 * (6 + floats) + 64);
+    if let Some(avail) = host_available_bytes() {
+        if host > avail {
+            anyhow::bail!("{what}: {n} Gaussians need about {:.1} GiB of host memory to initialise, more than the {:.1} GiB available", gib(host), gib(avail));
+        }
+    }
+    Ok(())
+}
+
+/// The host's available memory (Linux: MemAvailable), if known.
+fn host_available_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib * 1024)
+}

@@ -14,7 +14,7 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
-use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, SetGuard, TrainableSet};
 
 /// What the trainer passes for one step of this model.
 pub struct StepInput<'a> {
@@ -81,6 +81,9 @@ pub struct ScatteringModel {
     /// The training view the last forward rendered from its kept weights,
     /// or in full with its weights captured (its backward then uses them).
     from_weights: Option<u32>,
+    /// The divergence guard recorded into every step (the driver's; off
+    /// for benches and tests that step the model themselves).
+    pub guard: Option<SetGuard>,
 }
 
 impl ScatteringModel {
@@ -96,6 +99,7 @@ impl ScatteringModel {
             fuse_adam: ctx.caps().is_cpu(),
             kept: KeptViews::default(),
             from_weights: None,
+            guard: None,
         })
     }
 
@@ -253,6 +257,11 @@ impl ScatteringModel {
             if !fused {
                 let sc = rec.begin_scope("adam");
                 self.adam.record_set_gated(&mut rec, &self.set, &groups, it as u64, adam_args)?;
+                rec.end_scope(sc);
+            }
+            if let Some(g) = &self.guard {
+                let sc = rec.begin_scope("guard");
+                g.record(&mut rec, &self.set)?;
                 rec.end_scope(sc);
             }
             let t = rec.submit_and_wait()?;
