@@ -1,7 +1,7 @@
 //! Adam and adaptive density control on the GPU against CPU expectations.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Adam, AdamArrays, AdamGroup, DensifyParams, Densifier, HostGaussians, TrainableSet};
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, DensifyParams, Densifier, Guard, HostGaussians, TrainableSet};
 use tgs_tests::Rng;
 use tgs_tests::train_cases::{densify_cases as cases, fused_case, fused_case_of, fused_groups, FusedCase};
 use tgs_tests::{check_validation, ctx_shared, seed};
@@ -346,3 +346,52 @@ fn the_fused_reduce_refuses_groups_it_cannot_express() {
     check_validation(ctx);
 }
 
+
+/// The divergence guard against the host: a flag per array, set exactly
+/// when a value is NaN, infinite or past its limit (a bad value first,
+/// last, in the middle, at a window's edge), checked whole and in windows
+/// of 64 (offsets of 256 bytes), cleared between recordings.
+#[test]
+fn guard_flags_exactly_the_arrays_with_bad_values() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("guard_flags_exactly"));
+    let n = 1000;
+    let limit = 50.0f32;
+    let base: Vec<f32> = (0..n).map(|_| rng.uniform(-40.0, 40.0) as f32).collect();
+    let bad = [(0, f32::NAN), (n - 1, f32::INFINITY), (500, f32::NEG_INFINITY), (64, 50.5), (63, -1e30), (128, f32::MAX)];
+    let mut arrays = vec![base.clone(), vec![limit; n], vec![-limit; n]];
+    for (i, v) in bad {
+        let mut a = base.clone();
+        a[i] = v;
+        arrays.push(a);
+    }
+    let bufs: Vec<Buffer<f32>> = arrays.iter().map(|a| Buffer::from_slice(ctx, "guarded", a).unwrap()).collect();
+    let host: Vec<usize> = arrays.iter().enumerate().filter(|(_, a)| a.iter().any(|v| !(v.abs() <= limit))).map(|(k, _)| k).collect();
+    assert_eq!(host, (3..arrays.len()).collect::<Vec<_>>());
+    for guard in [Guard::new(ctx, bufs.len()).unwrap(), Guard::new(ctx, bufs.len()).unwrap().window(64)] {
+        for round in 0..2 {
+            let mut rec = Recorder::new(ctx).unwrap();
+            guard.record_clear(&mut rec).unwrap();
+            for (k, b) in bufs.iter().enumerate() {
+                // Round 1 checks only the clean arrays: the flags of round 0 must not stay.
+                let n_checked = if round == 0 || k < 3 { n } else { 0 };
+                guard.record_check(&mut rec, b, n_checked, limit, k).unwrap();
+            }
+            guard.record_read(&mut rec).unwrap();
+            rec.submit_and_wait().unwrap();
+            assert_eq!(guard.tripped().unwrap(), if round == 0 { host.clone() } else { vec![] });
+        }
+    }
+    // f32::MAX as the limit: only NaN and infinities trip.
+    let guard = Guard::new(ctx, bufs.len()).unwrap();
+    let mut rec = Recorder::new(ctx).unwrap();
+    guard.record_clear(&mut rec).unwrap();
+    for (k, b) in bufs.iter().enumerate() {
+        guard.record_check(&mut rec, b, n, f32::MAX, k).unwrap();
+    }
+    guard.record_read(&mut rec).unwrap();
+    rec.submit_and_wait().unwrap();
+    assert_eq!(guard.tripped().unwrap(), vec![3, 4, 5]);
+    assert!(guard.record_check(&mut Recorder::new(ctx).unwrap(), &bufs[0], n, limit, bufs.len()).is_err());
+    check_validation(ctx);
+}

@@ -155,7 +155,7 @@ pub fn grid_for(e: &Extent, args: &MeshArgs) -> Result<TsdfGrid> {
     let side = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f32, f32::max);
     let voxel = match args.voxel {
         // Fewer than two voxels across the surfaces leaves no surface to extract.
-        Some(v) if side > 0.0 && v > 0.5 * side => bail!("--voxel {v}: larger than half the surfaces' box ({side:.4} along its longest side), so the mesh would be empty; give at most {:.4} (or leave --voxel out: two pixels' footprint)", 0.5 * side),
+        Some(v) if side > 0.0 && v > 0.5 * side => bail!("--voxel {v:e}: larger than half the surfaces' box ({side:.4} along its longest side), so the mesh would be empty; give at most {:.4} (or leave --voxel out: two pixels' footprint)", 0.5 * side),
         Some(v) => v,
         None => {
             // Two pixels' footprint, unless that puts more than

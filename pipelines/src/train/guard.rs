@@ -25,6 +25,8 @@ pub struct Guard {
     kernel: Kernel,
     flags: Buffer<u32>,
     readback: Readback<u32>,
+    /// Values per dispatch, forced ([`Guard::window`]).
+    window: Option<usize>,
 }
 
 impl Guard {
@@ -38,7 +40,15 @@ impl Guard {
             kernel: kernel(ctx, "guard.finite", shaders::GUARD_FINITE, std::mem::size_of::<Push>() as u32)?,
             flags: Buffer::new(ctx, "guard.flags", slots)?,
             readback: Readback::new(ctx, "guard.readback", slots)?,
+            window: None,
         })
+    }
+
+    /// This guard with every array checked a window of about `elements`
+    /// at a time even when it fits one binding (tests compare the two).
+    pub fn window(mut self, elements: usize) -> Guard {
+        self.window = Some(elements);
+        self
     }
 
     pub fn slots(&self) -> usize {
@@ -60,7 +70,7 @@ impl Guard {
         // Arrays past one storage binding (SH 3 features of a million
         // Gaussians on lavapipe) are checked a window at a time.
         let fit = (self.ctx.caps().max_storage_buffer_range / 4) as usize;
-        let per = crate::slice_units(n <= fit, fit as u64, None).map_or(n, |u| u as usize);
+        let per = crate::slice_units(n <= fit, fit as u64, self.window.map(|w| w as u64)).map_or(n, |u| u as usize);
         let mut start = 0;
         while start < n {
             let len = per.min(n - start);

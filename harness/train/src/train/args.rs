@@ -114,6 +114,7 @@ pub(crate) fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainCon
         cfg.validate().with_context(|| format!("--iterations {n}"))?;
     }
     cfg.validate()?;
+    cfg.validate_together()?;
     Ok(cfg)
 }
 

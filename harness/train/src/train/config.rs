@@ -273,6 +273,16 @@ impl TrainConfig {
         due && self.iterations.saturating_sub(it) >= self.opacity_reset_min_after.max(1)
     }
 
+    /// The rules between settings, checked once all are given (each
+    /// `--set` is validated alone as it is applied): the initial set no
+    /// larger than densification's cap.
+    pub fn validate_together(&self) -> Result<()> {
+        if self.init_points > self.max_gaussians {
+            bail!("init_points {} is more than max_gaussians {}: densification could never grow such a set; lower init_points or raise max_gaussians too", self.init_points, self.max_gaussians);
+        }
+        Ok(())
+    }
+
     pub fn validate(&self) -> Result<()> {
         // Every float setting must be a number: NaN or infinity anywhere is
         // an error naming the key.
@@ -298,9 +308,6 @@ impl TrainConfig {
             if v == 0 {
                 bail!("{k} must be at least 1");
             }
-        }
-        if self.init_points > self.max_gaussians {
-            bail!("init_points {} is more than max_gaussians {}: densification could never grow such a set; lower init_points or raise max_gaussians too", self.init_points, self.max_gaussians);
         }
         if !(0.0..=1.0).contains(&self.lambda_ssim) {
             bail!("lambda_ssim must be in [0, 1], not {}", self.lambda_ssim);
