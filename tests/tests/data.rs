@@ -632,3 +632,19 @@ fn jpeg_captures_load_in_both_layouts() {
     let px = Dataset::load(&b, &LoadOptions::default()).unwrap().train[0].image.data[..3].to_vec();
     assert!(px.iter().all(|&v| (v - 64.0 / 255.0).abs() < 1e-6), "grey + alpha pixel {px:?}");
 }
+
+#[test]
+fn colmap_points_skipped_or_few_are_said() {
+    // NaN and 1e40 (past f32) were dropped without a word; one point left trained one Gaussian silently.
+    let c = colmap_fixture("colmap-badpoints", false);
+    std::fs::write(c.join("sparse/0/points3D.txt"), "1 NaN 0 1 255 0 0 0.1\n2 1e40 0 1 0 255 0 0.1\n3 0.5 0.25 1 0 0 255 0.1\n").unwrap();
+    let ds = Dataset::load(&c, &LoadOptions::default()).unwrap();
+    assert_eq!(ds.points.as_ref().unwrap().positions.len(), 1);
+    let w = ds.warnings.join("\n");
+    assert!(w.contains("points3D.txt") && w.contains("2 of 3 points have NaN or infinite coordinates") && w.contains("only 1 usable point"), "{w}");
+    // Without a points3D file: random points, as before, and nothing to say of a file.
+    let c = colmap_fixture("colmap-nopointsfile", false);
+    std::fs::remove_file(c.join("sparse/0/points3D.txt")).unwrap();
+    let ds = Dataset::load(&c, &LoadOptions::default()).unwrap();
+    assert!(ds.points.is_none() && ds.warnings.is_empty(), "{:?}", ds.warnings);
+}

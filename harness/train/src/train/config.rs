@@ -293,8 +293,8 @@ impl TrainConfig {
                     bail!("setting '{k}' is {f}; it must be a finite number");
                 }
                 let lr = k.rsplit('.').next().is_some_and(|last| last.starts_with("lr"));
-                if lr && *f > super::divergence::LR_LIMIT {
-                    bail!("{k} = {:e}: beyond any sane learning rate (at most {}; Adam moves a parameter by about its rate every iteration)", *f as f32, super::divergence::LR_LIMIT);
+                if lr && *f > LR_LIMIT {
+                    bail!("{k} = {:e}: beyond any sane learning rate (at most {}; Adam moves a parameter by about its rate every iteration)", *f as f32, LR_LIMIT);
                 }
             }
         }
@@ -395,6 +395,10 @@ pub fn paper_schedule_note(preset: &str, sizes: &[(u32, u32)]) -> Option<String>
         pixels as f64 / 1e6
     ))
 }
+
+/// A learning rate (a setting named `lr...`) above this is refused before
+/// training: Adam moves a parameter by about its rate every iteration.
+pub const LR_LIMIT: f64 = 1e3;
 
 /// The most bytes a settings file (`--config`, `sweep --grid`) may hold.
 pub const SETTINGS_FILE_LIMIT: u64 = 1 << 20;

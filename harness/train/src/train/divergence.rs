@@ -18,10 +18,6 @@ use tgs_pipelines::SetGuard;
 /// lie at `init_far_depth` (30) extents.
 pub const MEANS_LIMIT: f32 = 1e6;
 
-/// A learning rate above this is refused before training: Adam moves a
-/// parameter by about its rate every iteration.
-pub const LR_LIMIT: f64 = 1e3;
-
 /// A learning rate this many times the larger of the two presets' is
 /// warned about before training.
 pub const LR_WARN_FACTOR: f64 = 100.0;
