@@ -13,13 +13,29 @@ use tgs_pipelines::Camera;
 #[derive(Deserialize)]
 struct Transforms {
     camera_angle_x: Option<Num>,
+    #[serde(flatten)]
+    intrinsics: IntrinsicsText,
+    frames: Vec<Frame>,
+}
+
+/// Intrinsics as written: the file's, or a frame's (nerfstudio's layout),
+/// which override the file's.
+#[derive(Deserialize)]
+struct IntrinsicsText {
     fl_x: Option<Num>,
     fl_y: Option<Num>,
     cx: Option<Num>,
     cy: Option<Num>,
     w: Option<Num>,
     h: Option<Num>,
-    frames: Vec<Frame>,
+}
+
+impl IntrinsicsText {
+    /// Each given value, checked to be a finite number.
+    fn finite(&self) -> Result<Intrinsics> {
+        let f = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose();
+        Ok(Intrinsics { fl_x: f(&self.fl_x, "fl_x")?, fl_y: f(&self.fl_y, "fl_y")?, cx: f(&self.cx, "cx")?, cy: f(&self.cy, "cy")?, w: f(&self.w, "w")?, h: f(&self.h, "h")? })
+    }
 }
 
 #[derive(Deserialize)]
@@ -28,13 +44,8 @@ struct Frame {
     transform_matrix: Vec<Vec<Num>>,
     normal_path: Option<String>,
     mask_path: Option<String>,
-    // Per-frame intrinsics (nerfstudio's layout) override the file's.
-    fl_x: Option<Num>,
-    fl_y: Option<Num>,
-    cx: Option<Num>,
-    cy: Option<Num>,
-    w: Option<Num>,
-    h: Option<Num>,
+    #[serde(flatten)]
+    intrinsics: IntrinsicsText,
 }
 
 /// A number as written in the file. Python's `json.dump` writes NaN and
@@ -255,7 +266,7 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std:
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let tf: Transforms = serde_json::from_str(&quote_non_finite(text)).with_context(|| format!("{}: not a valid transforms file", path.display()))?;
     let opt = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose().with_context(|| path.display().to_string());
-    let file_intrinsics = Intrinsics { fl_x: opt(&tf.fl_x, "fl_x")?, fl_y: opt(&tf.fl_y, "fl_y")?, cx: opt(&tf.cx, "cx")?, cy: opt(&tf.cy, "cy")?, w: opt(&tf.w, "w")?, h: opt(&tf.h, "h")? };
+    let file_intrinsics = tf.intrinsics.finite().with_context(|| path.display().to_string())?;
     let angle_x = opt(&tf.camera_angle_x, "camera_angle_x")?;
     if tf.frames.is_empty() {
         bail!("{}: the {split} split has no frames", path.display());
@@ -282,8 +293,7 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std:
         *all_alpha &= alpha;
         let (w, h) = (image.width, image.height);
         let image = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
-        let fopt = |v: &Option<Num>, name: &str| v.as_ref().map(|n| n.finite(name)).transpose().with_context(what);
-        let Intrinsics { fl_x, fl_y, cx, cy, w: file_w, h: file_h } = Intrinsics { fl_x: fopt(&f.fl_x, "fl_x")?, fl_y: fopt(&f.fl_y, "fl_y")?, cx: fopt(&f.cx, "cx")?, cy: fopt(&f.cy, "cy")?, w: fopt(&f.w, "w")?, h: fopt(&f.h, "h")? }.or(&file_intrinsics);
+        let Intrinsics { fl_x, fl_y, cx, cy, w: file_w, h: file_h } = f.intrinsics.finite().with_context(what)?.or(&file_intrinsics);
         check_intrinsics_fit((file_w, file_h, cx, cy), (w, h)).with_context(|| format!("{}: {}", what(), img_path.display()))?;
         let fx = match (fl_x, angle_x) {
             (Some(fx), _) => fx,

@@ -132,9 +132,11 @@ pub fn to_camera(c: &ColmapCamera, im: &ColmapImage) -> Result<Camera> {
 }
 
 /// Read cameras, images and points from a model directory (binary preferred).
-/// The points come with the number skipped for non-finite coordinates,
-/// None without a points3D file.
-pub fn read_model(dir: &Path) -> Result<(Vec<ColmapCamera>, Vec<ColmapImage>, Option<(Points, usize)>)> {
+/// A model as read: cameras, images, and the points with the number
+/// skipped for non-finite coordinates (None without a points3D file).
+pub type Model = (Vec<ColmapCamera>, Vec<ColmapImage>, Option<(Points, usize)>);
+
+pub fn read_model(dir: &Path) -> Result<Model> {
     let bin = dir.join("cameras.bin").is_file();
     if bin {
         let read = |name: &str| {
