@@ -131,11 +131,11 @@ pub fn to_camera(c: &ColmapCamera, im: &ColmapImage) -> Result<Camera> {
     Ok(cam)
 }
 
-/// Read cameras, images and points from a model directory (binary preferred).
 /// A model as read: cameras, images, and the points with the number
 /// skipped for non-finite coordinates (None without a points3D file).
 pub type Model = (Vec<ColmapCamera>, Vec<ColmapImage>, Option<(Points, usize)>);
 
+/// Read cameras, images and points from a model directory (binary preferred).
 pub fn read_model(dir: &Path) -> Result<Model> {
     let bin = dir.join("cameras.bin").is_file();
     if bin {
