@@ -342,6 +342,10 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     tr.iteration = h.iteration;
     tr.stack = h.stack;
     tr.views.extent = h.extent;
+    // Inside a later stage the views were held out and the order is over those left.
+    if tr.iteration > tr.cfg.iterations {
+        tr.hold_out_validation(false);
+    }
     Ok(tr)
 }
 

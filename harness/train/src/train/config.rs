@@ -84,6 +84,15 @@ pub struct TrainConfig {
     pub checkpoint_interval: u32,
     /// The stages to run, in order: "I", "I,II" or "I,II,III".
     pub stages: String,
+    /// Hold every n-th training view (views n-1, 2n-1, ...) out of the
+    /// later stages (seeding, cache, gradients) and measure each stage on
+    /// them (`validation` in metrics.json); 0: none, all views train every
+    /// stage. With it, Stage II's reflection set is kept only when it
+    /// raises the validation PSNR over Stage I's by more than
+    /// `validation_margin_db` (else Stage I's model is the result).
+    pub validation_every: u32,
+    /// The validation PSNR gain (dB) a later stage must show to be kept.
+    pub validation_margin_db: f32,
     /// Stage II settings (`[reflection]` in TOML, `--set reflection.KEY=V`).
     pub reflection: ReflectionConfig,
     /// Stage III settings (`[light_field]`, `--set light_field.KEY=V`).
@@ -143,6 +152,8 @@ impl TrainConfig {
             test_interval: 5000,
             checkpoint_interval: 5000,
             stages: "I,II,III".into(),
+            validation_every: 0,
+            validation_margin_db: 0.0,
             reflection: ReflectionConfig::default(),
             light_field: LightFieldConfig::default(),
         }
@@ -314,6 +325,9 @@ impl TrainConfig {
         }
         if self.downscale == 0 {
             bail!("downscale must be at least 1");
+        }
+        if self.validation_every == 1 {
+            bail!("validation_every 1 would hold out every training view; give 0 (none) or n >= 2 (every n-th view)");
         }
         let non_negative = [
             ("lr_means", self.lr_means),

@@ -16,6 +16,7 @@ pub mod settings;
 pub mod stage;
 pub mod stages;
 pub mod trainer;
+pub mod validation;
 
 pub use config::TrainConfig;
 pub use schedule::{Schedule, Stage};

@@ -27,6 +27,7 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 use super::clock::{Before, Clocks};
+use super::validation::{back_to_stage_one, end_here, Validation};
 use super::divergence::{high_learning_rates, likely_cause, DivergenceGuard, LR_WARN_FACTOR, MEANS_LIMIT};
 use super::report::{lpips_text, Reporter};
 use tgs_engine::Context;
@@ -198,7 +199,13 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         checkpoint::save(tr, &ckpt, &dataset_str, &identity)?;
         clocks.save(&a.out, tr.iteration)
     };
-    let view_names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
+    let validation = Validation::of(&data, &tr.cfg);
+    // The later stages' views (the validation views held out).
+    let view_names = validation.later_view_names(&data);
+    // A run whose Stage II was dropped ended there (stages.json says so).
+    if a.resume && validation.drops_stage_two(&stages) && tr.iteration > tr.cfg.iterations && tr.later.is_none() {
+        end_here(&mut tr);
+    }
     // Set when a skipped Stage II closed the last stage for good.
     let mut last_closed = false;
     while !tr.done() {
@@ -217,9 +224,18 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
                 if first_round {
                     checkpoint::save(&tr, &a.out.join(stage_checkpoint(entry)), &dataset_str, &identity)?;
                 }
-                close_stage(&mut tr, &data, &a.out, &mut stages, &clocks, &prev)?;
+                let val = validation.measure(&mut tr)?;
+                close_stage(&mut tr, &data, &a.out, &mut stages, &clocks, &prev, val)?;
                 if !a.quiet {
                     eprintln!("Stage {prev} done");
+                }
+                if prev == "II" && validation.drops_stage_two(&stages) {
+                    tr = back_to_stage_one(ctx, &a.out, &data, &tr)?;
+                    let msg = "Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's (validation_margin_db); Stage I's model is the result";
+                    report.stage_event(msg, Some(&json!({"iteration": tr.iteration, "stage": "II", "event": "dropped", "validation": validation.verdicts(&stages)})), tr.schedule.total())?;
+                    last_closed = true;
+                    atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
+                    continue;
                 }
             }
             let files = RunPaths { dir: &a.out, dataset: &data.root, view_names: &view_names };
@@ -281,15 +297,26 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         return Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics: None, wall_s: clocks.total_s() });
     }
     let train_s = clocks.train_s();
-    write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
-    if let Some(m) = &tr.later {
-        m.write_outputs(&a.out)?;
-    }
-    let metrics = if data.test.is_empty() { None } else { Some(evaluate(&mut tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?) };
+    let test_metrics = |tr: &mut Trainer| -> Result<Option<Metrics>> { if data.test.is_empty() { Ok(None) } else { Ok(Some(evaluate(tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?)) } };
+    let mut metrics = test_metrics(&mut tr)?;
     if !last_closed {
         let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
         stages.retain(|s| s["stage"] != last_stage.as_str());
-        stages.push(stage_record(&last_stage, &tr, clocks.stage_s(), metrics.as_ref()));
+        let mut rec = stage_record(&last_stage, &tr, clocks.stage_s(), metrics.as_ref());
+        rec["validation"] = json!(validation.measure(&mut tr)?);
+        stages.push(rec);
+        if last_stage == "II" && validation.drops_stage_two(&stages) {
+            tr = back_to_stage_one(ctx, &a.out, &data, &tr)?;
+            if !a.quiet {
+                eprintln!("Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's; Stage I's model is the result");
+            }
+            save_run(&tr, &clocks)?;
+            metrics = test_metrics(&mut tr)?;
+        }
+    }
+    write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
+    if let Some(m) = &tr.later {
+        m.write_outputs(&a.out)?;
     }
     let timings: BTreeMap<String, f64> = timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64)).collect();
     let doc = json!({
@@ -303,7 +330,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         "final_loss": last_loss,
         "test": metrics,
         "stages": stages,
-        "reflection": tr.decision,
+        "reflection": reflection_record(&tr, &validation, &stages),
+        "validation": validation.report(&stages),
         "gpu_ms_per_iteration": if a.profile { json!(timings) } else { json!(null) },
     });
     atomic_write(&a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?.as_bytes())?;
@@ -342,6 +370,16 @@ fn preflight(tr: &Trainer, data: &Dataset, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+/// metrics.json's `reflection`: the Stage II decision and, with a
+/// validation slice, whether its set was kept.
+fn reflection_record(tr: &Trainer, validation: &Validation, stages: &[serde_json::Value]) -> serde_json::Value {
+    let mut r = json!(tr.decision);
+    if let (true, Some(o)) = (validation.is_on(), r.as_object_mut()) {
+        o.insert("kept".into(), json!(!validation.drops_stage_two(stages)));
+    }
+    r
+}
+
 /// metrics.json's record of a finished stage.
 fn stage_record(stage: &str, tr: &Trainer, wall_s: f64, m: Option<&Metrics>) -> serde_json::Value {
     let its = tr.schedule.iterations_of(stage);
@@ -376,12 +414,13 @@ fn renders_dir(label: &str) -> String {
 /// its record in `stages`. A stage taken
 /// from another run (--from) keeps that run's record (its wall time, where
 /// it came from); the test metrics are re-measured.
-fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str) -> Result<()> {
+fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str, validation: Option<serde_json::Value>) -> Result<()> {
     let dir = out.join("renders").join(renders_dir(stage));
     let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&mut OutDir::open(&dir, Some(&data.root))?))?) };
     let from = stages.iter().find(|s| s["stage"] == stage && s.get("from").is_some()).cloned();
     stages.retain(|s| s["stage"] != stage);
     let mut rec = stage_record(stage, tr, clock.stage_s(), m.as_ref());
+    rec["validation"] = json!(validation);
     if let Some(f) = from {
         rec["wall_s"] = f["wall_s"].clone();
         rec["from"] = f["from"].clone();

@@ -58,6 +58,9 @@ pub struct Trainer {
     pub rng: Rng,
     /// Training views not yet used in this pass (popped from the back).
     pub stack: Vec<u32>,
+    /// The validation views (`validation_every`) have been dropped from
+    /// `views`: from the first later stage on.
+    pub held_out: bool,
 }
 
 impl Trainer {
@@ -103,6 +106,7 @@ impl Trainer {
             iteration: 0,
             rng,
             stack: Vec::new(),
+            held_out: false,
             cfg,
         })
     }
@@ -175,6 +179,7 @@ impl Trainer {
     /// measured (Stage II's residual maps).
     pub fn begin_next(&mut self, files: Option<RunPaths<'_>>, quiet: bool) -> Result<Begun> {
         let kind = self.next_begins().context("the next iteration begins no stage")?;
+        self.hold_out_validation(true);
         let (entry, label) = self.next_entry();
         let round = self.schedule.round(entry);
         let t = Transition {
@@ -192,6 +197,21 @@ impl Trainer {
             self.schedule.end_before(entry);
         }
         Ok(b)
+    }
+
+    /// From the first later stage on, train without the validation views
+    /// (`validation_every`); `fresh`: the view order starts anew over the
+    /// views left (false where a checkpoint's order, already over them, is
+    /// kept).
+    pub fn hold_out_validation(&mut self, fresh: bool) {
+        if self.held_out || self.cfg.validation_every == 0 {
+            return;
+        }
+        self.views.hold_out(self.cfg.validation_every);
+        if fresh {
+            self.stack.clear();
+        }
+        self.held_out = true;
     }
 
     /// One training iteration.

@@ -21,3 +21,23 @@ pub struct Views {
     pub extent: f32,
     pub centre: [f32; 3],
 }
+
+impl Views {
+    /// Whether training view `i` is a validation view: every `every`-th
+    /// (views every-1, 2 every-1, ...); none with `every` 0.
+    pub fn is_validation(i: usize, every: u32) -> bool {
+        every > 0 && i % every as usize == every as usize - 1
+    }
+
+    /// Drop the validation views (the scene's frame stays that of all
+    /// the training cameras).
+    pub fn hold_out(&mut self, every: u32) {
+        let keep: Vec<bool> = (0..self.cameras.len()).map(|i| !Self::is_validation(i, every)).collect();
+        let mut k = keep.iter();
+        self.cameras.retain(|_| *k.next().unwrap_or(&true));
+        let mut k = keep.iter();
+        self.targets.retain(|_| *k.next().unwrap_or(&true));
+        let mut k = keep.iter();
+        self.masks.retain(|_| *k.next().unwrap_or(&true));
+    }
+}

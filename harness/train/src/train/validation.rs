@@ -1,0 +1,103 @@
+//! The validation slice (`validation_every`): training views that Stage I
+//! trains on but the later stages never see (not in their seeding, cache
+//! or gradients), measured after every stage. A later stage that cannot
+//! raise their PSNR by `validation_margin_db` has shown no evidence that
+//! what it changed is right: Stage II's reflection set is then dropped and
+//! Stage I's model is the run's result; Stage III's verdict is reported.
+
+use super::checkpoint;
+use super::config::TrainConfig;
+use super::rundir::stage_checkpoint;
+use super::stages::Views;
+use super::trainer::Trainer;
+use crate::data::{Dataset, View};
+use crate::eval::evaluate;
+use anyhow::{Context as _, Result};
+use serde_json::{json, Value};
+use std::path::Path;
+use std::sync::Arc;
+use tgs_engine::Context;
+
+pub struct Validation {
+    pub views: Vec<View>,
+    pub every: u32,
+    pub margin_db: f64,
+}
+
+impl Validation {
+    /// The validation views of `data` under `cfg` (none when off).
+    pub fn of(data: &Dataset, cfg: &TrainConfig) -> Validation {
+        let views = data.train.iter().enumerate().filter(|(i, _)| Views::is_validation(*i, cfg.validation_every)).map(|(_, v)| v.clone()).collect();
+        Validation { views, every: cfg.validation_every, margin_db: cfg.validation_margin_db as f64 }
+    }
+
+    pub fn is_on(&self) -> bool {
+        !self.views.is_empty()
+    }
+
+    /// The names of the training views the later stages train on.
+    pub fn later_view_names(&self, data: &Dataset) -> Vec<String> {
+        data.train.iter().enumerate().filter(|(i, _)| !Views::is_validation(*i, self.every)).map(|(_, v)| v.name.clone()).collect()
+    }
+
+    /// The current model on the validation views, for a stage's record.
+    pub fn measure(&self, tr: &mut Trainer) -> Result<Option<Value>> {
+        if !self.is_on() {
+            return Ok(None);
+        }
+        let m = evaluate(tr, &self.views, None).context("measuring the validation views")?;
+        Ok(Some(json!({"psnr": m.psnr, "ssim": m.ssim, "views": m.views})))
+    }
+
+    /// Each stage record's validation PSNR, its gain over the last stage
+    /// kept before it, and whether it is kept (Stage I always is).
+    pub fn verdicts(&self, stages: &[Value]) -> Vec<Value> {
+        let mut best: Option<f64> = None;
+        let mut out = Vec::new();
+        for s in stages {
+            let Some(psnr) = s["validation"]["psnr"].as_f64() else { continue };
+            let gain = best.map(|b| psnr - b);
+            let kept = gain.is_none_or(|g| g > self.margin_db);
+            if kept {
+                best = Some(psnr);
+            }
+            out.push(json!({"stage": s["stage"], "psnr": psnr, "gain_db": gain, "kept": kept}));
+        }
+        out
+    }
+
+    /// Whether the records say Stage II's set is to be dropped.
+    pub fn drops_stage_two(&self, stages: &[Value]) -> bool {
+        self.is_on() && self.verdicts(stages).iter().any(|v| v["stage"] == "II" && v["kept"] == false)
+    }
+
+    /// metrics.json's `validation`.
+    pub fn report(&self, stages: &[Value]) -> Value {
+        if !self.is_on() {
+            return Value::Null;
+        }
+        json!({"every": self.every, "views": self.views.len(), "margin_db": self.margin_db, "stages": self.verdicts(stages),
+               "acted_on": "Stage II: a set not kept is dropped (Stage I's model is the result); Stage III: reported only"})
+    }
+}
+
+/// The trainer as Stage I left it (`OUT/checkpoint-stage1.bin`), at
+/// `tr`'s iteration with the schedule ended there: what a run whose
+/// Stage II was dropped keeps.
+pub fn back_to_stage_one(ctx: &Arc<Context>, out: &Path, data: &Dataset, tr: &Trainer) -> Result<Trainer> {
+    let path = out.join(stage_checkpoint(1));
+    let mut t = checkpoint::restore(ctx, &path, checkpoint::read(&path)?, data).with_context(|| format!("{}: Stage I's model, kept over Stage II's", path.display()))?;
+    t.iteration = tr.iteration;
+    // What Stage II measured and decided stays on record.
+    t.decision = tr.decision.clone();
+    end_here(&mut t);
+    Ok(t)
+}
+
+/// End `tr`'s schedule at its iteration (nothing more to train).
+pub fn end_here(tr: &mut Trainer) {
+    if !tr.done() {
+        let (entry, _) = tr.next_entry();
+        tr.schedule.end_before(entry);
+    }
+}
