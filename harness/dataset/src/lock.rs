@@ -67,6 +67,11 @@ pub fn lock_dir(dir: &Path, command: &str, quiet: bool) -> Result<DirLock> {
             let who = if who.is_empty() { "another process (it has not written its name yet)".to_string() } else { who.to_string() };
             bail!("{}: in use by {who}; one command writes a run directory at a time: wait for it to end, stop it, or choose another --out", dir.display());
         }
+        // A file system without locks (some FUSE mounts; Linux ENOLCK 37,
+        // ENOSYS 38, EOPNOTSUPP 95): said, not fatal.
+        Err(TryLockError::Error(e)) if matches!(e.raw_os_error(), Some(37 | 38 | 95)) || e.kind() == std::io::ErrorKind::Unsupported => {
+            eprintln!("tgs: warning: {}: this file system cannot lock ({e}); a second command writing here would not be refused", path.display());
+        }
         Err(TryLockError::Error(e)) => return Err(e).with_context(|| format!("{}: cannot lock", path.display())),
     }
     let _ = file.read_to_string(&mut holder);

@@ -1,7 +1,8 @@
 //! Divergence caught as it happens: after every iteration the GPU checks
-//! the parameters of the sets being trained (NaN, infinity, positions
-//! beyond [`MEANS_LIMIT`] scene extents) into one flag per array, read
-//! back with a word per array. The driver stops at the first tripped
+//! the geometry and opacity of the sets being trained (NaN, infinity,
+//! positions beyond [`MEANS_LIMIT`] scene extents) into one flag per
+//! array, read back with a word per array; colours show in the loss,
+//! which the driver checks too. The driver stops at the first tripped
 //! flag with the likely cause: a learning rate far above the presets',
 //! or a camera far outside the others.
 

@@ -19,7 +19,7 @@ use tgs_engine::Context;
 /// Settings that only shape the stages after Stage I: `--from RUN` may
 /// change them (everything else trained RUN's Stage I and must stay).
 fn later_stage_setting(k: &str) -> bool {
-    k.starts_with("reflection.") || k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval")
+    k.starts_with("reflection.") || k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval" | "validation_every" | "validation_margin_db")
 }
 
 /// `--from RUN --stages III`: Stage III starts from RUN's finished Stage II.
