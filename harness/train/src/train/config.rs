@@ -93,6 +93,10 @@ pub struct TrainConfig {
     pub validation_every: u32,
     /// The validation PSNR gain (dB) a later stage must show to be kept.
     pub validation_margin_db: f32,
+    /// Hold the validation views out of Stage I too, so that no stage has
+    /// seen them (Stage I then trains on fewer views; without it Stage I
+    /// has fitted them and the comparison leans its way).
+    pub validation_all_stages: bool,
     /// Stage II settings (`[reflection]` in TOML, `--set reflection.KEY=V`).
     pub reflection: ReflectionConfig,
     /// Stage III settings (`[light_field]`, `--set light_field.KEY=V`).
@@ -154,6 +158,7 @@ impl TrainConfig {
             stages: "I,II,III".into(),
             validation_every: 0,
             validation_margin_db: 0.0,
+            validation_all_stages: false,
             reflection: ReflectionConfig::default(),
             light_field: LightFieldConfig::default(),
         }

@@ -96,7 +96,7 @@ impl Trainer {
         let cameras = data.train.iter().map(|v| v.camera).collect();
         let masks = data.train.iter().map(|v| v.mask.clone()).collect();
         let (extent, centre) = data.extent();
-        Ok(Trainer {
+        let mut tr = Trainer {
             schedule: Schedule::from_config(&cfg),
             scattering: ScatteringModel::new(ctx, g, cfg.sh_degree, cfg.adam_eps)?,
             later: None,
@@ -108,7 +108,11 @@ impl Trainer {
             stack: Vec::new(),
             held_out: false,
             cfg,
-        })
+        };
+        if tr.cfg.validation_all_stages {
+            tr.hold_out_validation(true);
+        }
+        Ok(tr)
     }
 
     /// The device context the models run on.
