@@ -371,10 +371,11 @@ fn preflight(tr: &Trainer, data: &Dataset, quiet: bool) -> Result<()> {
 }
 
 /// metrics.json's `reflection`: the Stage II decision and, with a
-/// validation slice, whether its set was kept.
+/// validation slice and a Stage II that ran, whether its set was kept.
 fn reflection_record(tr: &Trainer, validation: &Validation, stages: &[serde_json::Value]) -> serde_json::Value {
     let mut r = json!(tr.decision);
-    if let (true, Some(o)) = (validation.is_on(), r.as_object_mut()) {
+    let ran = tr.decision.as_ref().is_some_and(|d| d.run);
+    if let (true, true, Some(o)) = (validation.is_on(), ran, r.as_object_mut()) {
         o.insert("kept".into(), json!(!validation.drops_stage_two(stages)));
     }
     r
