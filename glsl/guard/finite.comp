@@ -1,9 +1,9 @@
 #version 460
-// Divergence guard: flag[slot] = 1 when any of the first n values of
+// Divergence guard: flag[slot] = stamp when any of the first n values of
 // `data` is NaN, infinite or larger in magnitude than `limit`. Every
 // invocation that finds one stores the same value (no atomics, no
-// read-modify-write), so the flag is deterministic; the host clears it
-// before and reads it after.
+// read-modify-write), so the flag is deterministic; the host gives each
+// round of checks a new stamp, so no clearing pass is needed.
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Data { float data[]; };
@@ -12,6 +12,7 @@ layout(push_constant) uniform Push {
     uint n;
     uint slot;
     float limit;
+    uint stamp;
 } pc;
 
 void main() {
@@ -21,6 +22,6 @@ void main() {
     }
     float x = data[t];
     if (isnan(x) || isinf(x) || !(abs(x) <= pc.limit)) {
-        flag[pc.slot] = 1u;
+        flag[pc.slot] = pc.stamp;
     }
 }

@@ -1,8 +1,8 @@
-//! The divergence guard: one flag per checked array, set on the GPU when
-//! any value is NaN, infinite or beyond the array's limit
-//! (`glsl/guard/finite.comp`), read back with the submission that checks.
-//! A training step's state is checked this way every iteration for a
-//! pass over its parameters, with no read-back of the parameters.
+//! The divergence guard: one flag per checked array, set on the GPU to the
+//! round's stamp when any value is NaN, infinite or beyond the array's
+//! limit (`glsl/guard/finite.comp`), read back with the submission that
+//! checks. A new stamp per round replaces a clearing pass: on lavapipe
+//! every extra command in a step's submission costs a synchronisation.
 
 use super::{dispatch_items, kernel};
 use crate::shaders;
@@ -18,6 +18,7 @@ struct Push {
     n: u32,
     slot: u32,
     limit: f32,
+    stamp: u32,
 }
 
 pub struct Guard {
@@ -27,6 +28,8 @@ pub struct Guard {
     readback: Readback<u32>,
     /// Values per dispatch, forced ([`Guard::window`]).
     window: Option<usize>,
+    /// The current round's stamp (never 0, the flags' initial value).
+    stamp: std::cell::Cell<u32>,
 }
 
 impl Guard {
@@ -41,6 +44,7 @@ impl Guard {
             flags: Buffer::new(ctx, "guard.flags", slots)?,
             readback: Readback::new(ctx, "guard.readback", slots)?,
             window: None,
+            stamp: std::cell::Cell::new(1),
         })
     }
 
@@ -55,9 +59,11 @@ impl Guard {
         self.flags.len()
     }
 
-    /// Clear every flag (record before the checks).
-    pub fn record_clear(&self, rec: &mut Recorder) -> Result<()> {
-        rec.fill(&self.flags.binding(), 0)
+    /// Start a round of checks: flags set by earlier rounds no longer
+    /// count (nothing is recorded).
+    pub fn next_round(&self) {
+        let s = self.stamp.get().wrapping_add(1);
+        self.stamp.set(if s == 0 { 1 } else { s });
     }
 
     /// Check the first `n` values of `data` into flag `slot`: set when one
@@ -74,7 +80,7 @@ impl Guard {
         let mut start = 0;
         while start < n {
             let len = per.min(n - start);
-            let p = Push { n: len as u32, slot: slot as u32, limit };
+            let p = Push { n: len as u32, slot: slot as u32, limit, stamp: self.stamp.get() };
             dispatch_items(rec, &self.kernel, &[data.slice(start, len), self.flags.binding()], bytemuck::bytes_of(&p), p.n, None)?;
             start += len;
         }
@@ -86,23 +92,26 @@ impl Guard {
         rec.read_back(&self.flags, 0, &self.readback)
     }
 
-    /// The slots whose flag is set, once the recording has completed.
+    /// The slots whose flag this round set, once the recording has completed.
     pub fn tripped(&self) -> Result<Vec<usize>> {
-        Ok(self.readback.read()?.iter().enumerate().filter(|(_, &f)| f != 0).map(|(i, _)| i).collect())
+        let stamp = self.stamp.get();
+        Ok(self.readback.read()?.iter().enumerate().filter(|(_, &f)| f == stamp).map(|(i, _)| i).collect())
     }
 }
 
-/// The arrays [`SetGuard`] checks, the first four of `Gaussians::buffers`.
-pub const SET_ARRAYS: [&str; 4] = ["means", "log-scales", "rotations", "opacity"];
+/// The arrays [`SetGuard`] checks: the first of `Gaussians::buffers`.
+pub const SET_ARRAYS: [&str; 1] = ["means"];
 
-/// The guard over one Gaussian set's geometry and opacity (means, log-
-/// scales, rotations, opacity): every value finite, the positions within
-/// `means_limit` of the origin. Recorded into the submission that steps
-/// the set, so it costs dispatches, not a submission of its own. The
-/// features (48 of a Gaussian's 58 values at SH 3) are left out: checking
-/// them every iteration cost as much as the rest several times over on
-/// lavapipe, and a non-finite colour shows in the loss of any view that
-/// sees it, which the driver checks.
+/// The guard over one Gaussian set's positions: every value finite and
+/// within `means_limit` of the origin. Recorded into the submission that
+/// steps the set: one dispatch and one copy. Positions are what runs away
+/// without the loss showing it (a Gaussian far outside the scene is
+/// culled); the other parameters cannot overflow under the learning rates
+/// allowed (Adam zeroes non-finite gradients and moves a value by about
+/// its rate, at most 1e3, an iteration), and a non-finite value among them
+/// makes the loss of any view that sees it non-finite, which the driver
+/// checks. Checking the other arrays too (and clearing the flags) cost
+/// 9% of a Stage I iteration on lavapipe (perf/RESULTS.md, fifty-fifth).
 pub struct SetGuard {
     guard: Guard,
     pub means_limit: f32,
@@ -113,13 +122,11 @@ impl SetGuard {
         Ok(SetGuard { guard: Guard::new(ctx, SET_ARRAYS.len())?, means_limit })
     }
 
-    /// Clear, check `set`'s parameter arrays and copy the flags for
-    /// [`SetGuard::tripped`].
+    /// Check `set`'s positions and copy the flag for [`SetGuard::tripped`].
     pub fn record(&self, rec: &mut Recorder, set: &TrainableSet) -> Result<()> {
-        self.guard.record_clear(rec)?;
-        for (k, b) in set.params.buffers().iter().enumerate().take(SET_ARRAYS.len()) {
-            self.guard.record_check(rec, b, b.len(), if k == 0 { self.means_limit } else { f32::MAX }, k)?;
-        }
+        self.guard.next_round();
+        let means = &set.params.means;
+        self.guard.record_check(rec, means, means.len(), self.means_limit, 0)?;
         self.guard.record_read(rec)
     }
 

@@ -1,8 +1,8 @@
 //! Divergence caught as it happens: after every iteration the GPU checks
-//! the geometry and opacity of the sets being trained (NaN, infinity,
-//! positions beyond [`MEANS_LIMIT`] scene extents) into one flag per
-//! array, read back with a word per array; colours show in the loss,
-//! which the driver checks too. The driver stops at the first tripped
+//! the positions of the sets being trained (NaN, infinity, beyond
+//! [`MEANS_LIMIT`] scene extents) into a flag per set, read back with a
+//! word each; any other non-finite parameter shows in the loss, which the
+//! driver checks too (`tgs_pipelines::SetGuard` says why that suffices). The driver stops at the first tripped
 //! flag with the likely cause: a learning rate far above the presets',
 //! or a camera far outside the others.
 
