@@ -9,7 +9,7 @@
 use anyhow::{bail, Context as _, Result};
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, SeekFrom, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The lock file in a locked directory.
 pub const LOCK_FILE: &str = ".tgs-lock";
@@ -18,14 +18,6 @@ pub const LOCK_FILE: &str = ".tgs-lock";
 #[derive(Debug)]
 pub struct DirLock {
     file: File,
-    path: PathBuf,
-}
-
-impl DirLock {
-    /// The locked directory's lock file.
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
 }
 
 impl Drop for DirLock {
@@ -51,11 +43,8 @@ fn host_name() -> String {
 /// releasing it (killed, crashed, its machine gone) is said on stderr.
 pub fn lock_dir(dir: &Path, command: &str, quiet: bool) -> Result<DirLock> {
     let path = dir.join(LOCK_FILE);
-    let meta = std::fs::symlink_metadata(&path);
-    if let Ok(m) = &meta {
-        if !m.file_type().is_file() {
-            bail!("{}: exists and is not a regular file (tgs keeps its lock there); move it away", path.display());
-        }
+    if std::fs::symlink_metadata(&path).is_ok_and(|m| !m.file_type().is_file()) {
+        bail!("{}: exists and is not a regular file (tgs keeps its lock there); move it away", path.display());
     }
     let mut file = OpenOptions::new().read(true).write(true).create(true).truncate(false).open(&path).with_context(|| format!("{}: cannot open the lock file", path.display()))?;
     let mut holder = String::new();
@@ -81,7 +70,7 @@ pub fn lock_dir(dir: &Path, command: &str, quiet: bool) -> Result<DirLock> {
     let since = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
     let line = format!("{command} (PID {} on {}, since Unix time {since})\n", std::process::id(), host_name());
     file.set_len(0).and_then(|_| file.seek(SeekFrom::Start(0))).and_then(|_| file.write_all(line.as_bytes())).and_then(|_| file.flush()).with_context(|| format!("{}: cannot write", path.display()))?;
-    Ok(DirLock { file, path })
+    Ok(DirLock { file })
 }
 
 /// Create `dir` (and its parents) and lock it as [`lock_dir`] does.

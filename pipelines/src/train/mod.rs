@@ -14,7 +14,7 @@ mod set;
 
 pub use adam::{Adam, AdamArrays, AdamGroup};
 pub use densify::{DensifyParams, DensifyReport, Densifier};
-pub use guard::{Guard, SetGuard, SET_ARRAYS};
+pub use guard::{Guard, SetGuard};
 pub use hf::{HfLoss, HfStats};
 pub use loss::{ImageLoss, LossIo, LossScratch, LossValues, LossWeights};
 pub use set::TrainableSet;

@@ -221,23 +221,23 @@ impl Intrinsics {
     fn or(self, file: &Intrinsics) -> Intrinsics {
         Intrinsics { fl_x: self.fl_x.or(file.fl_x), fl_y: self.fl_y.or(file.fl_y), cx: self.cx.or(file.cx), cy: self.cy.or(file.cy), w: self.w.or(file.w), h: self.h.or(file.h) }
     }
-}
 
-/// The intrinsics must describe the image they come with: `w` and `h`,
-/// where given, its size; the principal point inside it. Intrinsics
-/// written for another size (a resized image folder) would train a
-/// misplaced camera without a word.
-fn check_intrinsics_fit((fw, fh, cx, cy): (Option<f64>, Option<f64>, Option<f64>, Option<f64>), (w, h): (u32, u32)) -> Result<()> {
-    if fw.is_some_and(|v| v != w as f64) || fh.is_some_and(|v| v != h as f64) {
-        let show = |v: Option<f64>, d: u32| v.map_or(format!("{d} (not given)"), |v| format!("{v}"));
-        bail!("the transforms give w = {}, h = {} but the image is {w}x{h}: intrinsics (fl_x, cx, ...) written for another image size; scale them to the image or use the images they were written for", show(fw, w), show(fh, h));
-    }
-    for (name, v, size) in [("cx", cx, w), ("cy", cy, h)] {
-        if let Some(c) = v.filter(|&c| !(c > 0.0 && c < size as f64)) {
-            bail!("{name} = {c} lies outside the {w}x{h} image: intrinsics written for another image size, or not in pixels");
+    /// They must describe the `w`x`h` image they come with: `w` and `h`,
+    /// where given, its size; the principal point inside it. Intrinsics
+    /// written for another size (a resized image folder) would train a
+    /// misplaced camera without a word.
+    fn check_fit(&self, w: u32, h: u32) -> Result<()> {
+        if self.w.is_some_and(|v| v != w as f64) || self.h.is_some_and(|v| v != h as f64) {
+            let show = |v: Option<f64>, d: u32| v.map_or(format!("{d} (not given)"), |v| format!("{v}"));
+            bail!("the transforms give w = {}, h = {} but the image is {w}x{h}: intrinsics (fl_x, cx, ...) written for another image size; scale them to the image or use the images they were written for", show(self.w, w), show(self.h, h));
         }
+        for (name, v, size) in [("cx", self.cx, w), ("cy", self.cy, h)] {
+            if let Some(c) = v.filter(|&c| !(c > 0.0 && c < size as f64)) {
+                bail!("{name} = {c} lies outside the {w}x{h} image: intrinsics written for another image size, or not in pixels");
+            }
+        }
+        Ok(())
     }
-    Ok(())
 }
 
 /// Convert a Blender/OpenGL camera-to-world matrix to our world-to-view rows.
@@ -293,8 +293,9 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std:
         *all_alpha &= alpha;
         let (w, h) = (image.width, image.height);
         let image = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
-        let Intrinsics { fl_x, fl_y, cx, cy, w: file_w, h: file_h } = f.intrinsics.finite().with_context(what)?.or(&file_intrinsics);
-        check_intrinsics_fit((file_w, file_h, cx, cy), (w, h)).with_context(|| format!("{}: {}", what(), img_path.display()))?;
+        let intrinsics = f.intrinsics.finite().with_context(what)?.or(&file_intrinsics);
+        intrinsics.check_fit(w, h).with_context(|| format!("{}: {}", what(), img_path.display()))?;
+        let Intrinsics { fl_x, fl_y, cx, cy, .. } = intrinsics;
         let fx = match (fl_x, angle_x) {
             (Some(fx), _) => fx,
             (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),

@@ -95,8 +95,8 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         }
     }
     let mut warnings = Vec::new();
-    if let (Some((pts, skipped)), Some(file)) = (&points, files.iter().find(|p| p.file_stem().is_some_and(|s| s == "points3D"))) {
-        warnings.extend(super::points_warning(file, pts.positions.len(), *skipped));
+    if let Some((pts, skipped)) = &points {
+        warnings.extend(super::points_warning(&dir.join(format!("points3D.{ext}")), pts.positions.len(), *skipped));
     }
     let points = points.map(|(p, _)| p);
     Ok(Dataset { root: root.to_path_buf(), format: "colmap", train, test, points, background: opts.background, files, warnings })

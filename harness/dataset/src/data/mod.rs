@@ -80,8 +80,7 @@ impl Dataset {
         if ds.train.is_empty() {
             bail!("{}: the training split is empty", root.display());
         }
-        let all: Vec<View> = ds.train.iter().chain(&ds.test).cloned().collect();
-        if let Some(o) = camera_outlier(&all, CAMERA_OUTLIER_FACTOR) {
+        if let Some(o) = camera_outlier(ds.train.iter().chain(&ds.test), CAMERA_OUTLIER_FACTOR) {
             bail!("{}: {o}: a pose in other units or a corrupt transform; fix or remove that view", root.display());
         }
         Ok(ds)
@@ -137,7 +136,8 @@ pub const CAMERA_OUTLIER_FACTOR: f64 = 1e4;
 /// lies more than `factor` times the median distance from there, said by
 /// name and distance. None with fewer than three views or all cameras at
 /// one point.
-pub fn camera_outlier(views: &[View], factor: f64) -> Option<String> {
+pub fn camera_outlier<'a>(views: impl IntoIterator<Item = &'a View>, factor: f64) -> Option<String> {
+    let views: Vec<&View> = views.into_iter().collect();
     if views.len() < 3 {
         return None;
     }

@@ -308,8 +308,7 @@ impl TrainConfig {
                 if !f.is_finite() {
                     bail!("setting '{k}' is {f}; it must be a finite number");
                 }
-                let lr = k.rsplit('.').next().is_some_and(|last| last.starts_with("lr"));
-                if lr && *f > LR_LIMIT {
+                if is_learning_rate(k) && *f > LR_LIMIT {
                     bail!("{k} = {:e}: beyond any sane learning rate (at most {}; Adam moves a parameter by about its rate every iteration)", *f as f32, LR_LIMIT);
                 }
             }
@@ -419,6 +418,12 @@ pub fn paper_schedule_note(preset: &str, sizes: &[(u32, u32)]) -> Option<String>
 /// training: Adam moves a parameter by about its rate every iteration.
 pub const LR_LIMIT: f64 = 1e3;
 
+/// Whether the setting `key` (`section.key` or `key`) is a learning rate:
+/// its own name starts with `lr`.
+pub fn is_learning_rate(key: &str) -> bool {
+    key.rsplit('.').next().is_some_and(|last| last.starts_with("lr"))
+}
+
 /// The most bytes a settings file (`--config`, `sweep --grid`) may hold.
 pub const SETTINGS_FILE_LIMIT: u64 = 1 << 20;
 
@@ -427,10 +432,7 @@ pub const SETTINGS_FILE_LIMIT: u64 = 1 << 20;
 /// that (`/dev/zero` or a FIFO is refused, not read until memory runs out).
 pub fn read_text_capped(path: &Path, what: &str) -> Result<String> {
     use std::io::Read as _;
-    let meta = std::fs::metadata(path).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
-    if !meta.is_file() {
-        bail!("{}: not a regular file; the {what} must be a TOML file", path.display());
-    }
+    crate::data::image_io::regular_file(path, what)?;
     let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
     let mut bytes = Vec::new();
     f.take(SETTINGS_FILE_LIMIT + 1).read_to_end(&mut bytes).with_context(|| format!("{}: cannot read the {what}", path.display()))?;

@@ -2,12 +2,12 @@
 //! the positions of the sets being trained (NaN, infinity, beyond
 //! [`MEANS_LIMIT`] scene extents) into a flag per set, read back with a
 //! word each; any other non-finite parameter shows in the loss, which the
-//! driver checks too (`tgs_pipelines::SetGuard` says why that suffices). The driver stops at the first tripped
-//! flag with the likely cause: a learning rate far above the presets',
-//! or a camera far outside the others.
+//! driver checks too (`tgs_pipelines::SetGuard` says why that suffices).
+//! The driver stops at the first tripped flag with the likely cause: a
+//! setting far above the presets', or a camera far outside the others.
 
 use super::args::settings;
-use super::config::TrainConfig;
+use super::config::{is_learning_rate, TrainConfig};
 use super::trainer::Trainer;
 use crate::data::Dataset;
 use anyhow::{Context as _, Result};
@@ -41,22 +41,20 @@ impl DivergenceGuard {
         Ok(DivergenceGuard { scattering: SetGuard::new(&ctx, limit)?, later: SetGuard::new(&ctx, limit)? })
     }
 
-    /// The arrays of the trained state after the last step that hold a
-    /// NaN, an infinity or a position past [`MEANS_LIMIT`] scene extents,
-    /// as "the scattering set's means" and the like.
+    /// The sets whose positions after the last step hold a NaN, an
+    /// infinity or one past [`MEANS_LIMIT`] scene extents, as "the
+    /// scattering set's means" and the like.
     pub fn check(&self, tr: &Trainer) -> Result<Vec<String>> {
-        let name = |set: &str, bad: Vec<&str>| bad.into_iter().map(|a| format!("the {set} set's {a}")).collect::<Vec<_>>();
+        let name = |set: &str, bad: bool| bad.then(|| format!("the {set} set's means"));
         let Some(m) = &tr.later else {
             let g = tr.scattering.guard.as_ref().context("Stage I's guard was not installed")?;
-            return Ok(name("scattering", g.tripped()?));
+            return Ok(name("scattering", g.tripped()?).into_iter().collect());
         };
         let mut rec = Recorder::new(&tr.context())?;
         self.scattering.record(&mut rec, &tr.scattering.set)?;
         self.later.record(&mut rec, m.set())?;
         rec.submit_and_wait()?;
-        let mut out = name("scattering", self.scattering.tripped()?);
-        out.extend(name("reflection", self.later.tripped()?));
-        Ok(out)
+        Ok([name("scattering", self.scattering.tripped()?), name("reflection", self.later.tripped()?)].into_iter().flatten().collect())
     }
 }
 
@@ -65,7 +63,7 @@ impl DivergenceGuard {
 fn numbers(cfg: &TrainConfig, lr_only: bool) -> Result<Vec<(String, f64)>> {
     Ok(settings(cfg)?
         .into_iter()
-        .filter(|(k, _)| !lr_only || k.rsplit('.').next().is_some_and(|last| last.starts_with("lr")))
+        .filter(|(k, _)| !lr_only || is_learning_rate(k))
         .filter_map(|(k, v)| v.as_float().or(v.as_integer().map(|i| i as f64)).map(|f| (k, f)))
         .collect())
 }
@@ -103,7 +101,8 @@ pub fn high_learning_rates(cfg: &TrainConfig) -> Result<Vec<String>> {
 }
 
 /// What most likely made a run diverge: settings (learning rates, initial
-/// extents, ...) far above the presets', else the training camera farthest out among the others.
+/// extents, ...) far above the presets', else the training camera
+/// farthest out among the others.
 pub fn likely_cause(cfg: &TrainConfig, data: &Dataset) -> String {
     let high = far_above_presets(cfg, false).unwrap_or_default();
     if !high.is_empty() {

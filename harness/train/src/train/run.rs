@@ -159,7 +159,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         atomic_write(&a.out.join(RUN_RECORD), serde_json::to_string_pretty(&rec)?.as_bytes())?;
     }
     show_warnings(&data, a.quiet);
-    preflight(&tr, &data, a.quiet)?;
+    let validation = Validation::of(&data, &tr.cfg);
+    preflight(&tr, &data, &validation, a.quiet)?;
     atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
     install_signal_handler();
     // A request_stop() of an earlier training in this process is spent;
@@ -199,7 +200,6 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         checkpoint::save(tr, &ckpt, &dataset_str, &identity)?;
         clocks.save(&a.out, tr.iteration)
     };
-    let validation = Validation::of(&data, &tr.cfg);
     // The later stages' views (the validation views held out).
     let view_names = validation.later_view_names(&data);
     // A run whose Stage II was dropped ended there (stages.json says so).
@@ -230,9 +230,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
                     eprintln!("Stage {prev} done");
                 }
                 if prev == "II" && validation.drops_stage_two(&stages) {
-                    tr = back_to_stage_one(ctx, &a.out, &data, &tr)?;
-                    let msg = "Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's (validation_margin_db); Stage I's model is the result";
-                    report.stage_event(msg, Some(&json!({"iteration": tr.iteration, "stage": "II", "event": "dropped", "validation": validation.verdicts(&stages)})), tr.schedule.total())?;
+                    tr = drop_stage_two(ctx, &a.out, &data, &tr, &mut report, &validation, &stages)?;
                     last_closed = true;
                     atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
                     continue;
@@ -306,10 +304,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         rec["validation"] = json!(validation.measure(&mut tr)?);
         stages.push(rec);
         if last_stage == "II" && validation.drops_stage_two(&stages) {
-            tr = back_to_stage_one(ctx, &a.out, &data, &tr)?;
-            if !a.quiet {
-                eprintln!("Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's; Stage I's model is the result");
-            }
+            tr = drop_stage_two(ctx, &a.out, &data, &tr, &mut report, &validation, &stages)?;
             save_run(&tr, &clocks)?;
             metrics = test_metrics(&mut tr)?;
         }
@@ -356,7 +351,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
 /// presets' (warned; above the limit they were refused with the settings)
 /// and the paths the later stages will read (`reflection.seed_masks`),
 /// read now rather than after Stage I has trained.
-fn preflight(tr: &Trainer, data: &Dataset, quiet: bool) -> Result<()> {
+fn preflight(tr: &Trainer, data: &Dataset, validation: &Validation, quiet: bool) -> Result<()> {
     if !quiet {
         for w in high_learning_rates(&tr.cfg)? {
             eprintln!("tgs: warning: {w}: {LR_WARN_FACTOR}x or more the presets'; training may diverge");
@@ -364,10 +359,20 @@ fn preflight(tr: &Trainer, data: &Dataset, quiet: bool) -> Result<()> {
     }
     let rc = &tr.cfg.reflection;
     if tr.cfg.wants_reflection() && !rc.seed_masks.is_empty() && tr.later.is_none() {
-        let names: Vec<String> = data.train.iter().map(|v| v.name.clone()).collect();
+        // The names of the views the trainer holds (without the validation views once held out).
+        let names: Vec<String> = if tr.held_out { validation.later_view_names(data) } else { data.train.iter().map(|v| v.name.clone()).collect() };
         super::stages::reflection::stage::seed_masks(Path::new(&rc.seed_masks), &names, &tr.views.cameras, tr.cfg.downscale).context("checked before training")?;
     }
     Ok(())
+}
+
+/// Stage II's set did not raise the validation views' PSNR: the run goes
+/// back to Stage I's model ([`back_to_stage_one`]), says so and logs it.
+fn drop_stage_two(ctx: &Arc<Context>, out: &Path, data: &Dataset, tr: &Trainer, report: &mut Reporter, validation: &Validation, stages: &[serde_json::Value]) -> Result<Trainer> {
+    let t = back_to_stage_one(ctx, out, data, tr)?;
+    let msg = "Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's (validation_margin_db); Stage I's model is the result";
+    report.stage_event(msg, Some(&json!({"iteration": t.iteration, "stage": "II", "event": "dropped", "validation": validation.verdicts(stages)})), t.schedule.total())?;
+    Ok(t)
 }
 
 /// metrics.json's `reflection`: the Stage II decision and, with a

@@ -74,12 +74,11 @@ impl Trainer {
                 p.clone()
             }
             _ => {
-                let far = (cfg.init_far_fraction as f64 * cfg.init_points as f64).round() as u64;
-                check_budget(ctx.caps(), cfg.init_points as u64 + far, cfg.sh_degree, "init_points (with init_far_fraction)")?;
+                let n = (cfg.init_far_fraction as f64 * cfg.init_points as f64).round() as u32;
+                check_budget(ctx.caps(), cfg.init_points as u64 + n as u64, cfg.sh_degree, "init_points (with init_far_fraction)")?;
                 let mut p = random_points(cfg.init_points, cfg.init_half_extent, &mut rng);
                 let cams: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
                 let (extent, centre) = data.extent();
-                let n = (cfg.init_far_fraction as f64 * cfg.init_points as f64).round() as u32;
                 let far = far_points(n, &cams, cfg.init_half_extent, (centre, extent), cfg.init_far_depth * extent, &mut rng);
                 p.positions.extend(far.positions);
                 p.colors.extend(far.colors);

@@ -32,12 +32,15 @@ impl Views {
     /// Drop the validation views (the scene's frame stays that of all
     /// the training cameras).
     pub fn hold_out(&mut self, every: u32) {
-        let keep: Vec<bool> = (0..self.cameras.len()).map(|i| !Self::is_validation(i, every)).collect();
-        let mut k = keep.iter();
-        self.cameras.retain(|_| *k.next().unwrap_or(&true));
-        let mut k = keep.iter();
-        self.targets.retain(|_| *k.next().unwrap_or(&true));
-        let mut k = keep.iter();
-        self.masks.retain(|_| *k.next().unwrap_or(&true));
+        fn keep<T>(v: &mut Vec<T>, every: u32) {
+            let mut i = 0;
+            v.retain(|_| {
+                i += 1;
+                !Views::is_validation(i - 1, every)
+            });
+        }
+        keep(&mut self.cameras, every);
+        keep(&mut self.targets, every);
+        keep(&mut self.masks, every);
     }
 }
