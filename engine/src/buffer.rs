@@ -21,9 +21,7 @@ pub(crate) struct RawBuffer {
 
 impl RawBuffer {
     pub(crate) fn new(ctx: &Arc<Context>, name: &str, bytes: u64, location: MemoryLocation) -> Result<Arc<Self>> {
-        let mut usage = vk::BufferUsageFlags::STORAGE_BUFFER
-            | vk::BufferUsageFlags::TRANSFER_SRC
-            | vk::BufferUsageFlags::TRANSFER_DST;
+        let mut usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
         if location == MemoryLocation::GpuOnly {
             // Texel-buffer reads: kernels that read an input through a
             // uniform texel buffer (cheaper than a storage-buffer load on
@@ -36,30 +34,25 @@ impl RawBuffer {
         // Vulkan forbids empty buffers; keep a small one so empty inputs need no special cases.
         let size = bytes.max(16).next_multiple_of(4);
         if size > ctx.caps.max_memory_allocation {
-            bail!(
-                "buffer '{name}' needs {:.1} MiB, over this device's largest allocation ({:.1} MiB)",
-                size as f64 / 1048576.0,
-                ctx.caps.max_memory_allocation as f64 / 1048576.0
-            );
+            bail!("buffer '{name}' needs {:.1} MiB, over this device's largest allocation ({:.1} MiB)", size as f64 / 1048576.0, ctx.caps.max_memory_allocation as f64 / 1048576.0);
         }
         let d = &ctx.device;
         let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: the create info is complete and `d` is this context's live device.
         let raw = unsafe { d.create_buffer(&info, None) }.with_context(|| format!("vkCreateBuffer '{name}'"))?;
+        // SAFETY: `raw` was just created on `d` and is not yet destroyed.
         let req = unsafe { d.get_buffer_memory_requirements(raw) };
-        let alloc = ctx
-            .allocator
-            .lock()
-            .map_err(|_| anyhow!("allocator lock poisoned"))?
-            .allocate(&AllocationCreateDesc {
-                name,
-                requirements: req,
-                location,
-                linear: true,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            });
+        let alloc = ctx.allocator.lock().map_err(|_| anyhow!("allocator lock poisoned"))?.allocate(&AllocationCreateDesc {
+            name,
+            requirements: req,
+            location,
+            linear: true,
+            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+        });
         let alloc = match alloc {
             Ok(a) => a,
             Err(e) => {
+                // SAFETY: `raw` was created on `d`, is bound to no memory and used by nothing yet.
                 unsafe { d.destroy_buffer(raw, None) };
                 return Err(match e {
                     gpu_allocator::AllocationError::OutOfMemory => anyhow!(
@@ -71,8 +64,11 @@ impl RawBuffer {
                 });
             }
         };
+        // SAFETY: `raw` and the allocation's memory belong to `d`; the allocation is at least `req.size` at
+        // an offset of the required alignment.
         if let Err(e) = unsafe { d.bind_buffer_memory(raw, alloc.memory(), alloc.offset()) } {
             let _ = ctx.allocator.lock().map(|mut a| a.free(alloc));
+            // SAFETY: binding failed, so `raw` is used by nothing; it is destroyed once.
             unsafe { d.destroy_buffer(raw, None) };
             return Err(anyhow!("vkBindBufferMemory '{name}': {e}"));
         }
@@ -98,6 +94,8 @@ impl RawBuffer {
 
 impl Drop for RawBuffer {
     fn drop(&mut self) {
+        // SAFETY: the last owner is dropping it; every recording that used it kept a clone until its
+        // submission completed, so the GPU no longer reads it.
         unsafe { self.ctx.device.destroy_buffer(self.raw, None) };
         if let Some(a) = self.alloc.get_mut().ok().and_then(|a| a.take()) {
             self.ctx.memory_freed(a.size());
@@ -159,9 +157,7 @@ impl<T: Pod> Buffer<T> {
     }
 
     fn alloc(ctx: &Arc<Context>, name: &str, len: usize) -> Result<Self> {
-        let bytes = (len as u64)
-            .checked_mul(std::mem::size_of::<T>() as u64)
-            .ok_or_else(|| anyhow!("buffer '{name}': size overflow"))?;
+        let bytes = (len as u64).checked_mul(std::mem::size_of::<T>() as u64).ok_or_else(|| anyhow!("buffer '{name}': size overflow"))?;
         Ok(Buffer { inner: RawBuffer::new(ctx, name, bytes, MemoryLocation::GpuOnly)?, len, _t: PhantomData })
     }
 
@@ -201,24 +197,14 @@ impl<T: Pod> Buffer<T> {
 
     /// The whole buffer as a binding.
     pub fn binding(&self) -> BufferBinding {
-        BufferBinding {
-            buffer: self.inner.raw,
-            offset: 0,
-            range: self.inner.bytes.max(16).next_multiple_of(4),
-            keep: Some(self.inner.clone() as Arc<dyn Any + Send + Sync>),
-        }
+        BufferBinding { buffer: self.inner.raw, offset: 0, range: self.inner.bytes.max(16).next_multiple_of(4), keep: Some(self.inner.clone() as Arc<dyn Any + Send + Sync>) }
     }
 
     /// Elements `[start, start+count)` as a binding. This is how buffers larger
     /// than `maxStorageBufferRange` (128 MiB on lavapipe) are bound in windows.
     pub fn slice(&self, start: usize, count: usize) -> BufferBinding {
         let sz = std::mem::size_of::<T>() as u64;
-        BufferBinding {
-            buffer: self.inner.raw,
-            offset: start as u64 * sz,
-            range: (count as u64 * sz).max(4),
-            keep: Some(self.inner.clone() as Arc<dyn Any + Send + Sync>),
-        }
+        BufferBinding { buffer: self.inner.raw, offset: start as u64 * sz, range: (count as u64 * sz).max(4), keep: Some(self.inner.clone() as Arc<dyn Any + Send + Sync>) }
     }
 
     /// GPU virtual address (needs `bufferDeviceAddress`), for kernels that
@@ -228,6 +214,8 @@ impl<T: Pod> Buffer<T> {
             bail!("buffer device address is not enabled on {}", self.inner.ctx.caps.device_name);
         }
         let info = vk::BufferDeviceAddressInfo::default().buffer(self.inner.raw);
+        // SAFETY: bufferDeviceAddress is enabled (checked above) and the buffer was created with the
+        // device-address usage on this device.
         Ok(unsafe { self.inner.ctx.device.get_buffer_device_address(&info) })
     }
 

@@ -59,10 +59,7 @@ impl Capabilities {
         let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
         let mut sg_ctrl = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
         let mut driver = vk::PhysicalDeviceDriverProperties::default();
-        let mut props2 = vk::PhysicalDeviceProperties2::default()
-            .push_next(&mut subgroup)
-            .push_next(&mut sg_ctrl)
-            .push_next(&mut driver);
+        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut subgroup).push_next(&mut sg_ctrl).push_next(&mut driver);
         instance.get_physical_device_properties2(pd, &mut props2);
         let props = props2.properties;
 
@@ -80,30 +77,19 @@ impl Capabilities {
             instance.get_physical_device_features2(pd, &mut f2);
         }
         let api13 = vk::api_version_major(props.api_version) >= 1 && vk::api_version_minor(props.api_version) >= 3;
-        let sg_ctrl_ok = api13 && f13.subgroup_size_control == vk::TRUE
-            && sg_ctrl.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE);
-        let (min_sg, max_sg) = if sg_ctrl_ok {
-            (sg_ctrl.min_subgroup_size, sg_ctrl.max_subgroup_size)
-        } else {
-            (subgroup.subgroup_size, subgroup.subgroup_size)
-        };
+        let sg_ctrl_ok = api13 && f13.subgroup_size_control == vk::TRUE && sg_ctrl.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE);
+        let (min_sg, max_sg) = if sg_ctrl_ok { (sg_ctrl.min_subgroup_size, sg_ctrl.max_subgroup_size) } else { (subgroup.subgroup_size, subgroup.subgroup_size) };
         let need = vk::SubgroupFeatureFlags::BASIC
             | vk::SubgroupFeatureFlags::VOTE
             | vk::SubgroupFeatureFlags::ARITHMETIC
             | vk::SubgroupFeatureFlags::BALLOT
             | vk::SubgroupFeatureFlags::SHUFFLE;
-        let subgroup_ops_ok = subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE)
-            && subgroup.supported_operations.contains(need);
+        let subgroup_ops_ok = subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE) && subgroup.supported_operations.contains(need);
 
         let qf = instance.get_physical_device_queue_family_properties(pd);
         let ts_bits = qf.get(queue_family as usize).map(|q| q.timestamp_valid_bits).unwrap_or(0);
         let mem = instance.get_physical_device_memory_properties(pd);
-        let device_local_bytes = mem.memory_heaps_as_slice()
-            .iter()
-            .filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
-            .map(|h| h.size)
-            .max()
-            .unwrap_or(0);
+        let device_local_bytes = mem.memory_heaps_as_slice().iter().filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL)).map(|h| h.size).max().unwrap_or(0);
         let mut maint3 = vk::PhysicalDeviceMaintenance3Properties::default();
         let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut maint3);
         instance.get_physical_device_properties2(pd, &mut p2);
@@ -145,12 +131,7 @@ impl Capabilities {
     }
 
     pub fn api_version_string(&self) -> String {
-        format!(
-            "{}.{}.{}",
-            vk::api_version_major(self.api_version),
-            vk::api_version_minor(self.api_version),
-            vk::api_version_patch(self.api_version)
-        )
+        format!("{}.{}.{}", vk::api_version_major(self.api_version), vk::api_version_minor(self.api_version), vk::api_version_patch(self.api_version))
     }
 
     pub fn is_cpu(&self) -> bool {

@@ -77,6 +77,8 @@ pub struct Context {
 }
 
 pub(crate) fn load_entry() -> Result<ash::Entry> {
+    // SAFETY: loading the system's Vulkan loader runs its initialisers; nothing of ours is shared with it
+    // yet.
     unsafe { ash::Entry::load() }.map_err(|e| {
         anyhow!(
             "cannot load the Vulkan loader (libvulkan.so.1): {e}. Install it with \
@@ -88,20 +90,15 @@ pub(crate) fn load_entry() -> Result<ash::Entry> {
 type Debug = Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>;
 
 pub(crate) fn create_instance(entry: &ash::Entry, validation: bool) -> Result<(ash::Instance, bool)> {
-    let app = vk::ApplicationInfo::default()
-        .application_name(c"tgs")
-        .engine_name(c"tgs-engine")
-        .api_version(vk::API_VERSION_1_3);
+    let app = vk::ApplicationInfo::default().application_name(c"tgs").engine_name(c"tgs-engine").api_version(vk::API_VERSION_1_3);
     let use_layer = validation && validation::layer_available(entry);
     if validation && !use_layer {
         eprintln!("tgs: validation requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)");
     }
     let layers = if use_layer { vec![validation::LAYER.as_ptr()] } else { vec![] };
     let exts = if use_layer { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
-    let info = vk::InstanceCreateInfo::default()
-        .application_info(&app)
-        .enabled_layer_names(&layers)
-        .enabled_extension_names(&exts);
+    let info = vk::InstanceCreateInfo::default().application_info(&app).enabled_layer_names(&layers).enabled_extension_names(&exts);
+    // SAFETY: the create info and the strings it points to live until the call returns.
     let instance = unsafe { entry.create_instance(&info, None) }.map_err(|e| match e {
         vk::Result::ERROR_INCOMPATIBLE_DRIVER => anyhow!(
             "no Vulkan driver found (VK_ERROR_INCOMPATIBLE_DRIVER). Without a GPU, install lavapipe: \
@@ -116,13 +113,10 @@ fn create_messenger(entry: &ash::Entry, instance: &ash::Instance, log: &Arc<Vali
     let du = ash::ext::debug_utils::Instance::new(entry, instance);
     let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
         .message_severity(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING)
-        .message_type(
-            vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                | vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-        )
+        .message_type(vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION | vk::DebugUtilsMessageTypeFlagsEXT::GENERAL | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE)
         .pfn_user_callback(Some(validation::callback))
         .user_data(Arc::as_ptr(log) as *mut std::ffi::c_void);
+    // SAFETY: `du` belongs to the live instance; the callback is a plain function with no captured state.
     let m = unsafe { du.create_debug_utils_messenger(&info, None) }.context("creating the validation messenger")?;
     Ok(Some((du, m)))
 }
@@ -130,9 +124,7 @@ fn create_messenger(entry: &ash::Entry, instance: &ash::Instance, log: &Arc<Vali
 impl Context {
     /// Create a headless instance and device.
     pub fn new(opts: &ContextOptions) -> Result<Arc<Context>> {
-        let validation = opts
-            .validation
-            .unwrap_or_else(|| std::env::var("TGS_VALIDATION").map(|v| v == "1").unwrap_or(false));
+        let validation = opts.validation.unwrap_or_else(|| std::env::var("TGS_VALIDATION").map(|v| v == "1").unwrap_or(false));
         let entry = load_entry()?;
         let (instance, layer_on) = create_instance(&entry, validation)?;
         let log = Arc::new(ValidationLog::default());
@@ -140,6 +132,8 @@ impl Context {
             match create_messenger(&entry, &instance, &log) {
                 Ok(d) => d,
                 Err(e) => {
+                    // SAFETY: no device or messenger was created from the instance yet, and nothing else
+                    // holds it.
                     unsafe { instance.destroy_instance(None) };
                     return Err(e);
                 }
@@ -147,6 +141,8 @@ impl Context {
         } else {
             None
         };
+        // SAFETY: called only on failure paths, after every object created from the instance is destroyed;
+        // each handle is destroyed once.
         let destroy = |instance: &ash::Instance, debug: &Debug| unsafe {
             if let Some((du, m)) = debug {
                 du.destroy_debug_utils_messenger(*m, None);
@@ -167,17 +163,16 @@ impl Context {
             };
             let prio = [1.0f32];
             let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qf).queue_priorities(&prio)];
-            let mut f12 = vk::PhysicalDeviceVulkan12Features::default()
-                .buffer_device_address(features.buffer_device_address);
-            let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
-                .subgroup_size_control(features.subgroup_size_control)
-                .compute_full_subgroups(features.compute_full_subgroups);
+            let mut f12 = vk::PhysicalDeviceVulkan12Features::default().buffer_device_address(features.buffer_device_address);
+            let mut f13 =
+                vk::PhysicalDeviceVulkan13Features::default().subgroup_size_control(features.subgroup_size_control).compute_full_subgroups(features.compute_full_subgroups);
             let mut dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).push_next(&mut f12);
             if api13 {
                 dinfo = dinfo.push_next(&mut f13);
             }
-            let device = unsafe { instance.create_device(*pd, &dinfo, None) }
-                .with_context(|| format!("vkCreateDevice on {}", caps.device_name))?;
+            // SAFETY: `pd` comes from this instance and the create info (queues, features, extensions) lives
+            // until the call returns.
+            let device = unsafe { instance.create_device(*pd, &dinfo, None) }.with_context(|| format!("vkCreateDevice on {}", caps.device_name))?;
             Ok::<_, anyhow::Error>((*pd, device, qf, features))
         })();
         let (pd, device, qf, features) = match result {
@@ -190,6 +185,8 @@ impl Context {
         match Self::finish(entry, instance, pd, device, qf, None, features, debug, log) {
             Ok(c) => Ok(c),
             Err((e, instance, device, debug)) => {
+                // SAFETY: `finish` failed before anything was created on the device; it is idle and owned
+                // here.
                 unsafe { device.destroy_device(None) };
                 destroy(&instance, &debug);
                 Err(e)
@@ -209,16 +206,16 @@ impl Context {
         let instance = ash::Instance::load(info.entry.static_fn(), info.instance);
         let props = instance.get_physical_device_properties(info.physical_device);
         if vk::api_version_major(props.api_version) == 1 && vk::api_version_minor(props.api_version) < 2 {
-            bail!("adopted device supports Vulkan {}.{}; tgs needs 1.2",
-                vk::api_version_major(props.api_version), vk::api_version_minor(props.api_version));
+            bail!("adopted device supports Vulkan {}.{}; tgs needs 1.2", vk::api_version_major(props.api_version), vk::api_version_minor(props.api_version));
         }
         let device = ash::Device::load(instance.fp_v1_0(), info.device);
-        Self::finish(info.entry, instance, info.physical_device, device, info.queue_family_index,
-            Some(info.queue), info.enabled, None, Arc::new(ValidationLog::default()))
-        .map_err(|(e, ..)| e)
+        Self::finish(info.entry, instance, info.physical_device, device, info.queue_family_index, Some(info.queue), info.enabled, None, Arc::new(ValidationLog::default()))
+            .map_err(|(e, ..)| e)
     }
 
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    // The parts of a device being built, and an error that hands back the
+    // handles the caller owns and must destroy (built once per context).
+    #[allow(clippy::too_many_arguments, clippy::type_complexity, clippy::result_large_err)]
     fn finish(
         entry: ash::Entry,
         instance: ash::Instance,
@@ -230,6 +227,7 @@ impl Context {
         debug: Debug,
         validation: Arc<ValidationLog>,
     ) -> std::result::Result<Arc<Context>, (anyhow::Error, ash::Instance, ash::Device, Debug)> {
+        // SAFETY: `physical` comes from `instance` (checked by the caller, or by `adopt`'s contract).
         let mut caps = unsafe { Capabilities::query(&instance, physical, queue_family) };
         // Report what is enabled, not merely what exists.
         caps.buffer_device_address &= features.buffer_device_address;
@@ -252,6 +250,7 @@ impl Context {
             Err(e) => return Err((anyhow!("creating the memory allocator: {e}"), instance, device, debug)),
         };
         let owns = adopted_queue.is_none();
+        // SAFETY: the device was created (or adopted) with one queue of `queue_family`.
         let queue = adopted_queue.unwrap_or_else(|| unsafe { device.get_device_queue(queue_family, 0) });
         Ok(Arc::new(Context {
             entry,
@@ -341,6 +340,8 @@ impl Context {
     pub fn submit_and_wait(&self, cmd: vk::CommandBuffer) -> Result<()> {
         let d = &self.device;
         self.submissions.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: the fence is unsignalled (new or reset by the spare pool) and the command buffer has ended
+        // recording; the queue is used under its lock, as external synchronisation requires.
         unsafe {
             let spare = self.spare.lock().ok().and_then(|mut s| s.take_fence());
             let fence = match spare {
@@ -394,12 +395,16 @@ impl Context {
     }
 
     pub fn wait_idle(&self) -> Result<()> {
+        // SAFETY: the device is live for the context's lifetime; waiting is always allowed.
         unsafe { self.device.device_wait_idle() }.context("vkDeviceWaitIdle")
     }
 }
 
 impl Drop for Context {
     fn drop(&mut self) {
+        // SAFETY: the context is dropped only when no recorder, buffer or kernel holds it (they keep an Arc);
+        // after the wait the device is idle, so every object made on it can be destroyed, and an adopted
+        // device is left to its host.
         unsafe {
             let _ = self.device.device_wait_idle();
             if let Ok(spare) = self.spare.get_mut() {

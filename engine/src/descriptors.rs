@@ -35,6 +35,7 @@ impl DescriptorArena {
         let spare = self.ctx.spare.lock().ok().and_then(|mut s| s.take_descriptor_pool());
         let pool = match spare {
             Some(p) => p,
+            // SAFETY: the pool sizes the create info points to live until the call returns.
             None => unsafe { self.ctx.device.create_descriptor_pool(&info, None) }?,
         };
         self.pools.push(pool);
@@ -55,10 +56,7 @@ impl DescriptorArena {
                     );
                 }
                 if b.offset % caps.min_texel_buffer_offset_alignment != 0 {
-                    bail!(
-                        "kernel '{kernel}' binding {i}: offset {} is not a multiple of minTexelBufferOffsetAlignment ({})",
-                        b.offset, caps.min_texel_buffer_offset_alignment
-                    );
+                    bail!("kernel '{kernel}' binding {i}: offset {} is not a multiple of minTexelBufferOffsetAlignment ({})", b.offset, caps.min_texel_buffer_offset_alignment);
                 }
                 continue;
             }
@@ -70,16 +68,15 @@ impl DescriptorArena {
                 );
             }
             if b.offset % caps.min_storage_buffer_offset_alignment != 0 {
-                bail!(
-                    "kernel '{kernel}' binding {i}: offset {} is not a multiple of minStorageBufferOffsetAlignment ({})",
-                    b.offset, caps.min_storage_buffer_offset_alignment
-                );
+                bail!("kernel '{kernel}' binding {i}: offset {} is not a multiple of minStorageBufferOffsetAlignment ({})", b.offset, caps.min_storage_buffer_offset_alignment);
             }
         }
         let layouts = [layout];
         let mut set = None;
         if let Some(&pool) = self.pools.last() {
             let info = vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts);
+            // SAFETY: `pool` is this arena's and the layout lives as long as the kernel that asked; failure
+            // (a full pool) is handled below.
             if let Ok(s) = unsafe { self.ctx.device.allocate_descriptor_sets(&info) } {
                 set = Some(s[0]);
             }
@@ -89,13 +86,11 @@ impl DescriptorArena {
             None => {
                 let pool = self.new_pool()?;
                 let info = vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts);
+                // SAFETY: a new, empty pool sized for at least one set of any kernel.
                 unsafe { self.ctx.device.allocate_descriptor_sets(&info) }?[0]
             }
         };
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings
-            .iter()
-            .map(|b| [vk::DescriptorBufferInfo { buffer: b.buffer, offset: b.offset, range: b.range }])
-            .collect();
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bindings.iter().map(|b| [vk::DescriptorBufferInfo { buffer: b.buffer, offset: b.offset, range: b.range }]).collect();
         // A view per texel binding (kept until the recording is dropped).
         let mut views: Vec<[vk::BufferView; 1]> = Vec::with_capacity(bindings.len());
         for (b, k) in bindings.iter().zip(kinds) {
@@ -108,6 +103,8 @@ impl DescriptorArena {
                 BindingKind::TexelU32 => vk::Format::R32_UINT,
             };
             let info = vk::BufferViewCreateInfo::default().buffer(b.buffer).format(format).offset(b.offset).range(b.range);
+            // SAFETY: the buffer is alive (the recording keeps it) and the range lies inside it with the
+            // texel format's alignment.
             let view = unsafe { self.ctx.device.create_buffer_view(&info, None) }?;
             self.views.push(view);
             views.push([view]);
@@ -125,6 +122,8 @@ impl DescriptorArena {
                 }
             })
             .collect();
+        // SAFETY: every write names a set of this arena and a live buffer or view; the set is not in use by a
+        // pending submission (it was allocated for this recording).
         unsafe { self.ctx.device.update_descriptor_sets(&writes, &[]) };
         Ok(set)
     }
@@ -134,12 +133,14 @@ impl Drop for DescriptorArena {
     fn drop(&mut self) {
         // The recording that used these sets has completed (or never ran).
         for v in self.views.drain(..) {
+            // SAFETY: the recording that used these views has completed or never ran.
             unsafe { self.ctx.device.destroy_buffer_view(v, None) };
         }
         let mut spare = self.ctx.spare.lock();
         for p in self.pools.drain(..) {
             match spare.as_mut() {
                 Ok(s) => s.give_descriptor_pool(&self.ctx.device, p),
+                // SAFETY: as above: no set of the pool is in use; it is destroyed once.
                 Err(_) => unsafe { self.ctx.device.destroy_descriptor_pool(p, None) },
             }
         }

@@ -89,7 +89,13 @@ impl Kernel {
     /// The kernel of `desc`: the context's pipeline for it, built now if
     /// this context has not built it before.
     pub fn new(ctx: &Arc<Context>, desc: &KernelDesc) -> Result<Kernel> {
-        let key = PipelineKey { spirv: desc.spirv.to_vec(), spec: desc.spec.to_vec(), push_bytes: desc.push_bytes, subgroup_size: desc.subgroup_size, full_subgroups: desc.full_subgroups };
+        let key = PipelineKey {
+            spirv: desc.spirv.to_vec(),
+            spec: desc.spec.to_vec(),
+            push_bytes: desc.push_bytes,
+            subgroup_size: desc.subgroup_size,
+            full_subgroups: desc.full_subgroups,
+        };
         let mut built = ctx.pipelines.lock().map_err(|_| anyhow::anyhow!("kernel '{}': the context's pipeline table is poisoned", desc.name))?;
         let p = match built.get(&key) {
             Some(p) => p.clone(),
@@ -121,33 +127,30 @@ impl Kernel {
         // would shift every later one.
         if let Some(want) = spirv::push_constant_bytes(&words) {
             if want != desc.push_bytes {
-                bail!("kernel '{name}': the shader's push-constant block is {want} bytes, its wrapper declares {} (the Rust struct and the GLSL block must match)", desc.push_bytes);
+                bail!(
+                    "kernel '{name}': the shader's push-constant block is {want} bytes, its wrapper declares {} (the Rust struct and the GLSL block must match)",
+                    desc.push_bytes
+                );
             }
         }
         if desc.push_bytes > ctx.caps.max_push_constants {
             bail!("kernel '{name}' needs {} push-constant bytes; device allows {}", desc.push_bytes, ctx.caps.max_push_constants);
         }
         let d = &ctx.device;
+        // SAFETY: `words` is a whole SPIR-V module (spirv::words checked its size) compiled from the crate's
+        // GLSL; every create info and what it points to lives until its call returns, and each object is made
+        // on this live device.
         unsafe {
-            let module = d
-                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-                .with_context(|| format!("creating shader module '{name}'"))?;
+            let module = d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None).with_context(|| format!("creating shader module '{name}'"))?;
             let lb: Vec<_> = kinds
                 .iter()
                 .enumerate()
                 .map(|(b, k)| {
-                    vk::DescriptorSetLayoutBinding::default()
-                        .binding(b as u32)
-                        .descriptor_type(descriptor_type(*k))
-                        .descriptor_count(1)
-                        .stage_flags(vk::ShaderStageFlags::COMPUTE)
+                    vk::DescriptorSetLayoutBinding::default().binding(b as u32).descriptor_type(descriptor_type(*k)).descriptor_count(1).stage_flags(vk::ShaderStageFlags::COMPUTE)
                 })
                 .collect();
             let set_layout = d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&lb), None)?;
-            let ranges = [vk::PushConstantRange::default()
-                .stage_flags(vk::ShaderStageFlags::COMPUTE)
-                .offset(0)
-                .size(desc.push_bytes)];
+            let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).offset(0).size(desc.push_bytes)];
             let sls = [set_layout];
             let mut pli = vk::PipelineLayoutCreateInfo::default().set_layouts(&sls);
             if desc.push_bytes > 0 {
@@ -155,12 +158,7 @@ impl Kernel {
             }
             let layout = d.create_pipeline_layout(&pli, None)?;
 
-            let entries: Vec<_> = desc
-                .spec
-                .iter()
-                .enumerate()
-                .map(|(i, (id, _))| vk::SpecializationMapEntry { constant_id: *id, offset: (i * 4) as u32, size: 4 })
-                .collect();
+            let entries: Vec<_> = desc.spec.iter().enumerate().map(|(i, (id, _))| vk::SpecializationMapEntry { constant_id: *id, offset: (i * 4) as u32, size: 4 }).collect();
             let data: Vec<u8> = desc.spec.iter().flat_map(|(_, v)| v.to_le_bytes()).collect();
             let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&data);
             let mut flags = vk::PipelineShaderStageCreateFlags::empty();
@@ -168,12 +166,7 @@ impl Kernel {
                 flags |= vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS;
             }
             let mut req = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default();
-            let mut stage = vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::COMPUTE)
-                .module(module)
-                .name(c"main")
-                .specialization_info(&spec)
-                .flags(flags);
+            let mut stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(module).name(c"main").specialization_info(&spec).flags(flags);
             if let Some(sg) = desc.subgroup_size {
                 let c = &ctx.caps;
                 if sg != c.subgroup_size {
@@ -183,7 +176,9 @@ impl Kernel {
                         d.destroy_descriptor_set_layout(set_layout, None);
                         bail!(
                             "kernel '{name}' asks for subgroup size {sg}; {} supports {}..{}{}",
-                            c.device_name, c.min_subgroup_size, c.max_subgroup_size,
+                            c.device_name,
+                            c.min_subgroup_size,
+                            c.max_subgroup_size,
                             if c.subgroup_size_control { "" } else { " (no subgroup size control)" }
                         );
                     }

@@ -53,11 +53,13 @@ impl Profiler {
         }
         let capacity = max_scopes * 2;
         let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(capacity);
+        // SAFETY: timestamps are supported (checked above) and the create info is complete.
         let pool = unsafe { ctx.device.create_query_pool(&info, None) }?;
         Ok(Some(Profiler { ctx: ctx.clone(), pool, capacity, next: 0, scopes: Vec::new(), dropped: 0 }))
     }
 
     pub(crate) fn reset(&mut self, cmd: vk::CommandBuffer) {
+        // SAFETY: `cmd` is recording, outside a render pass, and the pool is this profiler's.
         unsafe { self.ctx.device.cmd_reset_query_pool(cmd, self.pool, 0, self.capacity) };
         self.next = 0;
         self.scopes.clear();
@@ -70,6 +72,7 @@ impl Profiler {
         }
         let q = self.next;
         self.next += 2;
+        // SAFETY: `q` < capacity (checked above) and was reset at the start of this recording.
         unsafe { self.ctx.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.pool, q) };
         self.scopes.push((name.to_string(), q, u32::MAX));
         Some(self.scopes.len() - 1)
@@ -77,6 +80,7 @@ impl Profiler {
 
     pub(crate) fn end(&mut self, cmd: vk::CommandBuffer, scope: usize) {
         let q = self.scopes[scope].1 + 1;
+        // SAFETY: `q` is the pair of the query the scope began with, inside the pool and reset.
         unsafe { self.ctx.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.pool, q) };
         self.scopes[scope].2 = q;
     }
@@ -87,14 +91,9 @@ impl Profiler {
             return Ok(Vec::new());
         }
         let mut data = vec![0u64; self.next as usize];
-        unsafe {
-            self.ctx.device.get_query_pool_results(
-                self.pool,
-                0,
-                &mut data,
-                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
-            )
-        }?;
+        // SAFETY: the submission that wrote these queries completed (results are read after submit_and_wait);
+        // `data` holds one u64 for each query asked for.
+        unsafe { self.ctx.device.get_query_pool_results(self.pool, 0, &mut data, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT) }?;
         let bits = self.ctx.caps.timestamp_valid_bits;
         let mask = if bits >= 64 { u64::MAX } else { (1u64 << bits) - 1 };
         let period = self.ctx.caps.timestamp_period as f64;
@@ -112,6 +111,7 @@ impl Profiler {
 
 impl Drop for Profiler {
     fn drop(&mut self) {
+        // SAFETY: the recording that used the pool has completed or never ran.
         unsafe { self.ctx.device.destroy_query_pool(self.pool, None) };
     }
 }

@@ -68,24 +68,24 @@ impl Recorder {
         let (pool, cmd) = match spare {
             Some(pc) => pc,
             None => {
+                // SAFETY: the create info names this context's queue family.
                 let pool = unsafe { d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(ctx.queue_family), None) }?;
+                // SAFETY: `pool` was just created on `d`.
                 match unsafe {
-                    d.allocate_command_buffers(
-                        &vk::CommandBufferAllocateInfo::default()
-                            .command_pool(pool)
-                            .level(vk::CommandBufferLevel::PRIMARY)
-                            .command_buffer_count(1),
-                    )
+                    d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).level(vk::CommandBufferLevel::PRIMARY).command_buffer_count(1))
                 } {
                     Ok(c) => (pool, c[0]),
                     Err(e) => {
+                        // SAFETY: the allocation failed, so the pool holds no command buffer in use.
                         unsafe { d.destroy_command_pool(pool, None) };
                         return Err(anyhow!("allocating a command buffer: {e}"));
                     }
                 }
             }
         };
+        // SAFETY: `cmd` is a fresh or reset primary command buffer of `pool`, in the initial state.
         if let Err(e) = unsafe { d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT)) } {
+            // SAFETY: beginning failed, so `cmd` is not pending.
             unsafe { d.destroy_command_pool(pool, None) };
             return Err(anyhow!("beginning a command buffer: {e}"));
         }
@@ -155,6 +155,7 @@ impl Recorder {
                     | vk::AccessFlags::TRANSFER_WRITE
                     | vk::AccessFlags::INDIRECT_COMMAND_READ,
             )];
+        // SAFETY: `self.cmd` is recording (check_open) and the barrier is a plain memory barrier.
         unsafe {
             self.ctx.device.cmd_pipeline_barrier(
                 self.cmd,
@@ -187,6 +188,8 @@ impl Recorder {
         let set = self.arena.bind(&k.name, k.set_layout, &k.kinds, bindings)?;
         self.before();
         let d = &self.ctx.device;
+        // SAFETY: `self.cmd` is recording; the pipeline, its layout and the set were made on this device and
+        // outlive the recording (the set's arena and the kernel are kept).
         unsafe {
             d.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, k.pipeline);
             d.cmd_bind_descriptor_sets(self.cmd, vk::PipelineBindPoint::COMPUTE, k.layout, 0, &[set], &[]);
@@ -213,6 +216,8 @@ impl Recorder {
         }
         self.bind(kernel, bindings, push)?;
         if groups.iter().all(|&g| g > 0) {
+            // SAFETY: `self.cmd` is recording with a compute pipeline and its descriptor set bound (bind
+            // above); every group count is positive.
             unsafe { self.ctx.device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]) };
         }
         self.dirty = true;
@@ -226,6 +231,7 @@ impl Recorder {
         if let Some(keep) = &args.keep {
             self.keep.push(keep.clone());
         }
+        // SAFETY: as above, with the indirect arguments' buffer kept alive by the recording.
         unsafe { self.ctx.device.cmd_dispatch_indirect(self.cmd, args.buffer, args.offset) };
         self.dirty = true;
         Ok(())
@@ -235,6 +241,9 @@ impl Recorder {
     pub fn fill(&mut self, dst: &BufferBinding, value: u32) -> Result<()> {
         self.check_open()?;
         self.before();
+        // SAFETY: `self.cmd` is recording; the range lies inside its buffer and is whole 4-byte elements
+        // (Buffer::binding of u32/f32 elements, or BufferBinding::external's contract), and the recording
+        // keeps a tgs buffer alive.
         unsafe { self.ctx.device.cmd_fill_buffer(self.cmd, dst.buffer, dst.offset, dst.range, value) };
         if let Some(k) = &dst.keep {
             self.keep.push(k.clone());
@@ -249,10 +258,11 @@ impl Recorder {
         if data.is_empty() {
             return Ok(());
         }
-        if data.len() > 65536 || data.len() % 4 != 0 || data.len() as u64 > dst.range {
+        if data.len() > 65536 || !data.len().is_multiple_of(4) || data.len() as u64 > dst.range {
             bail!("update of {} bytes into a range of {}", data.len(), dst.range);
         }
         self.before();
+        // SAFETY: the data is at most 65,536 bytes, a multiple of 4, and fits the range (checked above).
         unsafe { self.ctx.device.cmd_update_buffer(self.cmd, dst.buffer, dst.offset, data) };
         if let Some(k) = &dst.keep {
             self.keep.push(k.clone());
@@ -272,6 +282,8 @@ impl Recorder {
         }
         self.before();
         let region = [vk::BufferCopy { src_offset: src.offset, dst_offset: dst.offset, size: bytes }];
+        // SAFETY: both ranges lie inside their buffers and the copy fits both (checked above); the recording
+        // keeps tgs buffers alive.
         unsafe { self.ctx.device.cmd_copy_buffer(self.cmd, src.buffer, dst.buffer, &region) };
         for k in [&src.keep, &dst.keep].into_iter().flatten() {
             self.keep.push(k.clone());
@@ -284,6 +296,8 @@ impl Recorder {
         self.check_open()?;
         self.before();
         let region = [vk::BufferCopy { src_offset: src_off, dst_offset: dst_off, size: bytes }];
+        // SAFETY: the crate's callers (Buffer's upload and download) copy within both buffers: the staging
+        // buffer is sized from the same range; the recording keeps both alive.
         unsafe { self.ctx.device.cmd_copy_buffer(self.cmd, src.raw, dst.raw, &region) };
         self.keep.push(src.clone());
         self.keep.push(dst.clone());
@@ -343,6 +357,7 @@ impl Recorder {
             let mb = [vk::MemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
                 .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE | vk::AccessFlags::HOST_READ)];
+            // SAFETY: `self.cmd` is recording (it has not ended yet).
             unsafe {
                 self.ctx.device.cmd_pipeline_barrier(
                     self.cmd,
@@ -357,10 +372,12 @@ impl Recorder {
         } else {
             if self.host_reads {
                 let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::TRANSFER_WRITE).dst_access_mask(vk::AccessFlags::HOST_READ)];
+                // SAFETY: as above: the last command of the recording.
                 unsafe {
                     self.ctx.device.cmd_pipeline_barrier(self.cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::HOST, vk::DependencyFlags::empty(), &mb, &[], &[])
                 };
             }
+            // SAFETY: `self.cmd` is recording; it ends once (`ended` is set below).
             unsafe { self.ctx.device.end_command_buffer(self.cmd) }?;
         }
         self.ended = true;
@@ -390,6 +407,8 @@ impl Recorder {
 impl Drop for Recorder {
     fn drop(&mut self) {
         if self.owned {
+            // SAFETY: the pool is owned by this recorder and its command buffer is no longer pending: it
+            // completed, never ran, or the device was waited for above.
             unsafe {
                 if self.ended && !self.submitted {
                     // Possibly handed to another queue: be safe.

@@ -48,6 +48,7 @@ pub struct DeviceInfo {
 }
 
 pub(crate) fn pick_queue_family(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Option<u32> {
+    // SAFETY: `pd` was enumerated from `instance`.
     let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
     // Prefer a compute-only family (async compute), then any with compute.
     let compute = |q: &vk::QueueFamilyProperties| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.queue_count > 0;
@@ -59,10 +60,12 @@ pub(crate) fn pick_queue_family(instance: &ash::Instance, pd: vk::PhysicalDevice
 }
 
 pub(crate) fn describe_all(instance: &ash::Instance) -> Result<Vec<(vk::PhysicalDevice, DeviceInfo)>> {
+    // SAFETY: the instance is live for this call.
     let pds = unsafe { instance.enumerate_physical_devices() }?;
     let mut out = Vec::new();
     for (index, pd) in pds.into_iter().enumerate() {
         let qf = pick_queue_family(instance, pd);
+        // SAFETY: `pd` was enumerated from `instance`.
         let caps = unsafe { Capabilities::query(instance, pd, qf.unwrap_or(0)) };
         let unusable = if vk::api_version_minor(caps.api_version) < 2 && vk::api_version_major(caps.api_version) == 1 {
             Some(format!("Vulkan {} < 1.2", caps.api_version_string()))
@@ -89,13 +92,7 @@ fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
 }
 
 pub(crate) fn choose(devices: &[(vk::PhysicalDevice, DeviceInfo)], sel: &DeviceSelector) -> Result<usize> {
-    let names = || {
-        devices
-            .iter()
-            .map(|(_, d)| format!("  [{}] {}", d.index, d.caps.device_name))
-            .collect::<Vec<_>>()
-            .join("\n")
-    };
+    let names = || devices.iter().map(|(_, d)| format!("  [{}] {}", d.index, d.caps.device_name)).collect::<Vec<_>>().join("\n");
     if devices.is_empty() {
         bail!(
             "no Vulkan device found. Without a GPU, install Mesa's CPU driver lavapipe \
@@ -118,9 +115,7 @@ pub(crate) fn choose(devices: &[(vk::PhysicalDevice, DeviceInfo)], sel: &DeviceS
         }
         DeviceSelector::Name(n) => {
             let lower = n.to_lowercase();
-            let hits: Vec<usize> = (0..devices.len())
-                .filter(|&i| devices[i].1.caps.device_name.to_lowercase().contains(&lower))
-                .collect();
+            let hits: Vec<usize> = (0..devices.len()).filter(|&i| devices[i].1.caps.device_name.to_lowercase().contains(&lower)).collect();
             match hits.as_slice() {
                 [] => bail!("--device {n:?}: no Vulkan device name contains it; devices are:\n{}", names()),
                 [i] => usable(*i),
@@ -131,18 +126,12 @@ pub(crate) fn choose(devices: &[(vk::PhysicalDevice, DeviceInfo)], sel: &DeviceS
             }
         }
         DeviceSelector::Best => {
-            let best = (0..devices.len())
-                .filter(|&i| devices[i].1.unusable.is_none())
-                .min_by_key(|&i| (type_rank(devices[i].1.caps.device_type), i));
+            let best = (0..devices.len()).filter(|&i| devices[i].1.unusable.is_none()).min_by_key(|&i| (type_rank(devices[i].1.caps.device_type), i));
             match best {
                 Some(i) => Ok(i),
                 None => bail!(
                     "no Vulkan device is usable by tgs (needs Vulkan 1.2, a compute queue and subgroup ops):\n{}",
-                    devices
-                        .iter()
-                        .map(|(_, d)| format!("  [{}] {}: {}", d.index, d.caps.device_name, d.unusable.clone().unwrap_or_default()))
-                        .collect::<Vec<_>>()
-                        .join("\n")
+                    devices.iter().map(|(_, d)| format!("  [{}] {}: {}", d.index, d.caps.device_name, d.unusable.clone().unwrap_or_default())).collect::<Vec<_>>().join("\n")
                 ),
             }
         }
@@ -154,6 +143,7 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>> {
     let entry = crate::context::load_entry()?;
     let instance = crate::context::create_instance(&entry, false)?.0;
     let list = describe_all(&instance);
+    // SAFETY: nothing was created from this instance (describe_all only queries).
     unsafe { instance.destroy_instance(None) };
     Ok(list?.into_iter().map(|(_, d)| d).collect())
 }

@@ -33,6 +33,8 @@ impl Spare {
 
     /// Take back a command pool whose command buffer is no longer pending.
     pub(crate) fn give_commands(&mut self, device: &ash::Device, pool: vk::CommandPool, cmd: vk::CommandBuffer) {
+        // SAFETY: the caller gives back a pool whose command buffer is not pending; a pool not kept is
+        // destroyed once.
         unsafe {
             if self.commands.len() < KEEP && device.reset_command_pool(pool, vk::CommandPoolResetFlags::empty()).is_ok() {
                 self.commands.push((pool, cmd));
@@ -43,6 +45,8 @@ impl Spare {
     }
     /// Take back a descriptor pool none of whose sets is in use.
     pub(crate) fn give_descriptor_pool(&mut self, device: &ash::Device, pool: vk::DescriptorPool) {
+        // SAFETY: no set of the pool is in use by a pending submission (the caller's contract); a pool not
+        // kept is destroyed once.
         unsafe {
             if self.descriptor_pools.len() < KEEP_DESCRIPTOR_POOLS && device.reset_descriptor_pool(pool, vk::DescriptorPoolResetFlags::empty()).is_ok() {
                 self.descriptor_pools.push(pool);
@@ -53,6 +57,8 @@ impl Spare {
     }
     /// Take back a fence that is not in use by a pending submission.
     pub(crate) fn give_fence(&mut self, device: &ash::Device, fence: vk::Fence) {
+        // SAFETY: the fence is not used by a pending submission (the caller waited on it); one not kept is
+        // destroyed once.
         unsafe {
             if self.fences.len() < KEEP && device.reset_fences(&[fence]).is_ok() {
                 self.fences.push(fence);
@@ -64,6 +70,8 @@ impl Spare {
 
     /// Destroy everything held (the device must be idle).
     pub(crate) fn destroy(&mut self, device: &ash::Device) {
+        // SAFETY: the device is idle (the context's Drop waited) and each object here is held only by this
+        // pool.
         unsafe {
             for (pool, _) in self.commands.drain(..) {
                 device.destroy_command_pool(pool, None);

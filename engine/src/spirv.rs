@@ -5,7 +5,7 @@ use anyhow::{bail, Result};
 
 /// Words of a SPIR-V module from bytes (as embedded with `include_bytes!`).
 pub(crate) fn words(bytes: &[u8]) -> Result<Vec<u32>> {
-    if bytes.len() % 4 != 0 || bytes.len() < 20 {
+    if !bytes.len().is_multiple_of(4) || bytes.len() < 20 {
         bail!("SPIR-V of {} bytes is not a whole module", bytes.len());
     }
     let w: Vec<u32> = bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();

@@ -13,6 +13,11 @@ pub(crate) struct ValidationLog {
     pub errors: Mutex<Vec<String>>,
 }
 
+/// The validation layer's messenger callback: errors go to the context's log.
+///
+/// # Safety
+/// Called by the layer only, with `data` null or valid for the call and
+/// `user` null or the context's `ValidationLog`, which outlives the messenger.
 pub(crate) unsafe extern "system" fn callback(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     _types: vk::DebugUtilsMessageTypeFlagsEXT,
@@ -22,11 +27,7 @@ pub(crate) unsafe extern "system" fn callback(
     if data.is_null() || user.is_null() {
         return vk::FALSE;
     }
-    let msg = if (*data).p_message.is_null() {
-        String::from("(no message)")
-    } else {
-        CStr::from_ptr((*data).p_message).to_string_lossy().into_owned()
-    };
+    let msg = if (*data).p_message.is_null() { String::from("(no message)") } else { CStr::from_ptr((*data).p_message).to_string_lossy().into_owned() };
     if severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR) {
         eprintln!("[vulkan validation error] {msg}");
         let log = &*(user as *const ValidationLog);
@@ -40,7 +41,6 @@ pub(crate) unsafe extern "system" fn callback(
 }
 
 pub(crate) fn layer_available(entry: &ash::Entry) -> bool {
-    unsafe { entry.enumerate_instance_layer_properties() }
-        .map(|ls| ls.iter().any(|l| l.layer_name_as_c_str().ok() == Some(LAYER)))
-        .unwrap_or(false)
+    // SAFETY: the entry holds the loaded loader; the query has no other precondition.
+    unsafe { entry.enumerate_instance_layer_properties() }.map(|ls| ls.iter().any(|l| l.layer_name_as_c_str().ok() == Some(LAYER))).unwrap_or(false)
 }

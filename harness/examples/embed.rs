@@ -50,16 +50,16 @@ struct Host {
 
 impl Host {
     fn new() -> Result<Host> {
+        // SAFETY: a host's ordinary Vulkan set-up: every create info lives until its call returns and each
+        // handle comes from the object before it.
         unsafe {
             let entry = ash::Entry::load().context("no Vulkan loader")?;
             let app = vk::ApplicationInfo::default().application_name(c"tgs embed example").api_version(vk::API_VERSION_1_3);
             let instance = entry.create_instance(&vk::InstanceCreateInfo::default().application_info(&app), None)?;
             let physical = *instance.enumerate_physical_devices()?.first().context("no Vulkan device")?;
-            let family = instance
-                .get_physical_device_queue_family_properties(physical)
-                .iter()
-                .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE))
-                .context("no compute queue")? as u32;
+            let family =
+                instance.get_physical_device_queue_family_properties(physical).iter().position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE)).context("no compute queue")?
+                    as u32;
             // Enable what tgs can use, when the device has it.
             let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
             let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f13);
@@ -69,9 +69,8 @@ impl Host {
                 subgroup_size_control: f13.subgroup_size_control == vk::TRUE,
                 compute_full_subgroups: f13.compute_full_subgroups == vk::TRUE,
             };
-            let mut want13 = vk::PhysicalDeviceVulkan13Features::default()
-                .subgroup_size_control(features.subgroup_size_control)
-                .compute_full_subgroups(features.compute_full_subgroups);
+            let mut want13 =
+                vk::PhysicalDeviceVulkan13Features::default().subgroup_size_control(features.subgroup_size_control).compute_full_subgroups(features.compute_full_subgroups);
             let prio = [1.0f32];
             let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&prio)];
             let device = instance.create_device(physical, &vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut want13), None)?;
@@ -82,6 +81,8 @@ impl Host {
 
     /// A host-visible storage buffer the host owns (its memory too).
     fn buffer(&self, bytes: u64) -> Result<(vk::Buffer, vk::DeviceMemory)> {
+        // SAFETY: `buf` and `mem` are new objects of this device; the memory type was chosen from the
+        // buffer's requirements.
         unsafe {
             let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
             let buf = self.device.create_buffer(&vk::BufferCreateInfo::default().size(bytes).usage(usage), None)?;
@@ -102,6 +103,8 @@ fn main() -> Result<()> {
     let a = args()?;
     let host = Host::new()?;
     // tgs runs on the host's device and queue; it never destroys them.
+    // SAFETY: the handles are the host's own, belong together, and outlive `ctx` (it is dropped before they
+    // are destroyed below).
     let ctx = unsafe {
         Context::adopt(AdoptInfo {
             entry: host.entry.clone(),
@@ -122,16 +125,25 @@ fn main() -> Result<()> {
     let bytes = 4 * SceneRenderer::output_len(cam.width, cam.height) as u64;
     let (out, mem) = host.buffer(bytes)?;
     let d = &host.device;
+    // SAFETY: the create info names the host's queue family.
     let pool = unsafe { d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(host.family), None)? };
+    // SAFETY: a default create info on the host's device.
     let fence = unsafe { d.create_fence(&vk::FenceCreateInfo::default(), None)? };
     let mut recordings = 0;
     loop {
         // The host's frame: its command buffer, tgs's commands inside it.
+        // SAFETY: `pool` is the host's and no command buffer of it is pending (each frame is waited for).
         let cmd = unsafe { d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1))?[0] };
+        // SAFETY: `cmd` was just allocated: it is in the initial state.
         unsafe { d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())? };
+        // SAFETY: `cmd` is a primary command buffer of a pool of the context's queue family, and recording.
         let mut rec = unsafe { Recorder::record_into(&ctx, cmd, 0)? };
+        // SAFETY: `out` is a live storage buffer of the host's device holding `bytes` bytes, alive until the
+        // frame completes.
         scene.record(&mut rec, &cam, &unsafe { BufferBinding::external(out, 0, bytes) })?;
         rec.finish()?;
+        // SAFETY: the recording finished inside `cmd`; the fence is unsignalled and waited for before it is
+        // reset.
         unsafe {
             d.end_command_buffer(cmd)?;
             d.queue_submit(host.queue, &[vk::SubmitInfo::default().command_buffers(&[cmd])], fence)?;
@@ -139,6 +151,7 @@ fn main() -> Result<()> {
             d.reset_fences(&[fence])?;
         }
         drop(rec);
+        // SAFETY: the submission that used `cmd` completed (the fence was waited for).
         unsafe { d.free_command_buffers(pool, &[cmd]) };
         recordings += 1;
         // The first frame of a size may outgrow tgs's buffers: record it again.
@@ -147,6 +160,7 @@ fn main() -> Result<()> {
         }
     }
     // "Present": read the host's buffer and write a PNG.
+    // SAFETY: the memory is host-visible and coherent, `bytes` long, and the GPU's writes completed.
     let planes = unsafe {
         let p = d.map_memory(mem, 0, bytes, vk::MemoryMapFlags::empty())? as *const f32;
         let v = std::slice::from_raw_parts(p, SceneRenderer::output_len(cam.width, cam.height)).to_vec();
@@ -158,6 +172,8 @@ fn main() -> Result<()> {
 
     drop(scene);
     drop(ctx);
+    // SAFETY: tgs's context is dropped and the queue is idle, so nothing uses these objects; each is
+    // destroyed once.
     unsafe {
         d.destroy_fence(fence, None);
         d.destroy_command_pool(pool, None);

@@ -93,10 +93,21 @@ pub fn check_size(ctx: &Context, flag: &str, count: u64, largest: u64, total: u6
         bail!("{flag} 0: nothing to time (give at least 1)");
     }
     if largest > range {
-        bail!("{flag} {count}: its largest buffer would be {:.1} MiB, over {}'s {:.0} MiB per storage binding (at most {} at this size)", largest as f64 / 1048576.0, c.device_name, range as f64 / 1048576.0, (count as u128 * range as u128 / largest as u128));
+        bail!(
+            "{flag} {count}: its largest buffer would be {:.1} MiB, over {}'s {:.0} MiB per storage binding (at most {} at this size)",
+            largest as f64 / 1048576.0,
+            c.device_name,
+            range as f64 / 1048576.0,
+            (count as u128 * range as u128 / largest as u128)
+        );
     }
     if c.device_local_bytes > 0 && total > c.device_local_bytes {
-        bail!("{flag} {count}: it needs about {:.1} GiB, more than {}'s {:.1} GiB of device memory", total as f64 / (1u64 << 30) as f64, c.device_name, c.device_local_bytes as f64 / (1u64 << 30) as f64);
+        bail!(
+            "{flag} {count}: it needs about {:.1} GiB, more than {}'s {:.1} GiB of device memory",
+            total as f64 / (1u64 << 30) as f64,
+            c.device_name,
+            c.device_local_bytes as f64 / (1u64 << 30) as f64
+        );
     }
     Ok(())
 }
@@ -206,21 +217,21 @@ pub fn scan(ctx: &Arc<Context>, n: u32, reps: u32) -> Result<ScanBench> {
         std::hint::black_box(&out);
         cpu = cpu.min(t0.elapsed().as_secs_f64() * 1e3);
     }
-    Ok(ScanBench {
-        device: ctx.caps().describe(),
-        n,
-        reps,
-        kernels,
-        gpu_ms,
-        gpu_melems_per_s: n as f64 / (gpu_ms * 1e3),
-        cpu_ms: cpu,
-    })
+    Ok(ScanBench { device: ctx.caps().describe(), n, reps, kernels, gpu_ms, gpu_melems_per_s: n as f64 / (gpu_ms * 1e3), cpu_ms: cpu })
 }
 
 pub fn print_sort(b: &SortBench) {
     println!(
         "sort n={} bits={} [{}]: GPU {:.3} ms ({:.1} Mkeys/s), wall {:.3} ms; CPU sort_unstable_by_key {:.3} ms ({:.1} Mkeys/s); GPU/CPU speed-up {:.2}x{}",
-        b.n, b.bits, b.config, b.gpu_ms, b.gpu_mkeys_per_s, b.wall_ms, b.cpu_sort_unstable_ms, b.cpu_mkeys_per_s, b.speedup_vs_cpu,
+        b.n,
+        b.bits,
+        b.config,
+        b.gpu_ms,
+        b.gpu_mkeys_per_s,
+        b.wall_ms,
+        b.cpu_sort_unstable_ms,
+        b.cpu_mkeys_per_s,
+        b.speedup_vs_cpu,
         if b.verified { "" } else { "  ** OUTPUT NOT SORTED **" }
     );
     for k in &b.kernels {
@@ -229,10 +240,7 @@ pub fn print_sort(b: &SortBench) {
 }
 
 pub fn print_scan(b: &ScanBench) {
-    println!(
-        "scan n={}: GPU {:.3} ms ({:.1} Melems/s); CPU {:.3} ms",
-        b.n, b.gpu_ms, b.gpu_melems_per_s, b.cpu_ms
-    );
+    println!("scan n={}: GPU {:.3} ms ({:.1} Melems/s); CPU {:.3} ms", b.n, b.gpu_ms, b.gpu_melems_per_s, b.cpu_ms);
     for k in &b.kernels {
         println!("    {:<16} {:>10.3} ms  ({} calls)", k.name, k.ms, k.calls);
     }
@@ -269,7 +277,10 @@ pub fn lpips(size: u32, reps: u32, json: bool) -> Result<()> {
     }
     let sec = t.elapsed().as_secs_f64() / reps as f64;
     let threads = std::thread::available_parallelism().map(|t| t.get()).unwrap_or(1);
-    let cpu = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|c| c.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|m| m.trim().to_string())).unwrap_or_else(|| "unknown CPU".into());
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|c| c.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|m| m.trim().to_string()))
+        .unwrap_or_else(|| "unknown CPU".into());
     let device = format!("CPU: {cpu}, {threads} threads");
     if json {
         println!("{}", serde_json::json!({"device": device, "size": size, "reps": reps, "seconds_per_pair": sec, "gflop_per_s": flops / sec / 1e9, "lpips": d}));

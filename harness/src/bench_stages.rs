@@ -45,7 +45,8 @@ pub struct StagesSpec {
 
 /// The settings the bench sets itself from its own options: a `--set` of
 /// one of them is refused rather than silently overwritten.
-pub const BENCH_KEYS: [&str; 8] = ["iterations", "densify_until", "test_interval", "checkpoint_interval", "stages", "reflection.iterations", "light_field.iterations", "light_field.preset"];
+pub const BENCH_KEYS: [&str; 8] =
+    ["iterations", "densify_until", "test_interval", "checkpoint_interval", "stages", "reflection.iterations", "light_field.iterations", "light_field.preset"];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct StageTimes {

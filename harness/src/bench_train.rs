@@ -93,7 +93,6 @@ impl Workload {
     pub fn square(res: u32, points: u32) -> Workload {
         Workload { width: res, height: res, points, views: 20 }
     }
-
 }
 
 /// Top-level scopes of a training step, by stage. Scopes named `sort.*`

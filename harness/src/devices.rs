@@ -42,7 +42,15 @@ pub fn select(devs: Vec<DeviceInfo>, sel: &DeviceSelector) -> Result<Vec<DeviceI
         DeviceSelector::Name(n) => devs.iter().filter(|d| d.caps.device_name.to_lowercase().contains(&n.to_lowercase())).cloned().collect(),
     };
     if picked.is_empty() {
-        anyhow::bail!("--device {}: no such Vulkan device (there are: {})", match sel { DeviceSelector::Index(i) => i.to_string(), DeviceSelector::Name(n) => n.clone(), _ => String::new() }, if devs.is_empty() { "none".to_string() } else { names() });
+        anyhow::bail!(
+            "--device {}: no such Vulkan device (there are: {})",
+            match sel {
+                DeviceSelector::Index(i) => i.to_string(),
+                DeviceSelector::Name(n) => n.clone(),
+                _ => String::new(),
+            },
+            if devs.is_empty() { "none".to_string() } else { names() }
+        );
     }
     Ok(picked)
 }
@@ -60,13 +68,7 @@ pub fn run(json_out: bool, sel: &DeviceSelector) -> Result<()> {
         let c = &d.caps;
         println!("[{}] {} ({:?})", d.index, c.device_name, c.device_type);
         println!("    driver        {} — {} (Vulkan {})", c.driver_name, c.driver_info, c.api_version_string());
-        println!(
-            "    subgroup      {} (range {}..{}{})",
-            c.subgroup_size,
-            c.min_subgroup_size,
-            c.max_subgroup_size,
-            if c.subgroup_size_control { ", size control" } else { "" }
-        );
+        println!("    subgroup      {} (range {}..{}{})", c.subgroup_size, c.min_subgroup_size, c.max_subgroup_size, if c.subgroup_size_control { ", size control" } else { "" });
         println!(
             "    limits        shared {} KiB, storage range {} MiB, workgroups {:?}, invocations {}, push {} B",
             c.max_shared_memory / 1024,

@@ -1,7 +1,7 @@
 use anyhow::{Context as _, Result};
+use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use tgs::train::run::TrainArgs;
-use clap::{Parser, Subcommand};
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
 use tgs_pipelines::SortConfig;
 
@@ -167,10 +167,7 @@ enum SceneCmd {
 }
 
 fn context(cli: &Cli) -> Result<std::sync::Arc<Context>> {
-    Context::new(&ContextOptions {
-        device: DeviceSelector::from_arg_or_env(cli.device.as_deref()),
-        validation: Some(cli.validate),
-    })
+    Context::new(&ContextOptions { device: DeviceSelector::from_arg_or_env(cli.device.as_deref()), validation: Some(cli.validate) })
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -227,7 +224,15 @@ fn run(cli: Cli) -> Result<()> {
         }
         Cmd::Mesh { run, voxel, resolution, trunc, depth_max, max_mib, out } => {
             let ctx = context(&cli)?;
-            let args = tgs::mesh::MeshArgs { voxel: *voxel, resolution: *resolution, trunc: *trunc, depth_max: *depth_max, max_bytes: max_mib.saturating_mul(1 << 20), out: out.clone(), progress: true };
+            let args = tgs::mesh::MeshArgs {
+                voxel: *voxel,
+                resolution: *resolution,
+                trunc: *trunc,
+                depth_max: *depth_max,
+                max_bytes: max_mib.saturating_mul(1 << 20),
+                out: out.clone(),
+                progress: true,
+            };
             for r in tgs::mesh::mesh(&ctx, run, &args)? {
                 eprintln!("{}: {} vertices, {} triangles", r.path.display(), r.mesh.positions.len(), r.mesh.triangles.len());
             }
@@ -279,11 +284,7 @@ fn run(cli: Cli) -> Result<()> {
                 Bench::Sort { n, bits, reps, radix_bits, wg, kpt, json } => {
                     let cfg = if radix_bits.is_some() || wg.is_some() || kpt.is_some() {
                         let d = SortConfig::for_device(ctx.caps());
-                        Some(SortConfig {
-                            radix_bits: radix_bits.unwrap_or(d.radix_bits),
-                            wg: wg.unwrap_or(d.wg),
-                            kpt: kpt.unwrap_or(d.kpt),
-                        })
+                        Some(SortConfig { radix_bits: radix_bits.unwrap_or(d.radix_bits), wg: wg.unwrap_or(d.wg), kpt: kpt.unwrap_or(d.kpt) })
                     } else {
                         None
                     };
@@ -308,7 +309,11 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 Bench::Train { res, points, views, real_scale, from, iterations, warmup, separate_adam, fused_adam, light_field, json } => {
                     use tgs::bench_train::Workload;
-                    let w = if *real_scale { Workload { points: points.unwrap_or(Workload::REAL_SCALE.points), ..Workload::REAL_SCALE } } else { Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) } };
+                    let w = if *real_scale {
+                        Workload { points: points.unwrap_or(Workload::REAL_SCALE.points), ..Workload::REAL_SCALE }
+                    } else {
+                        Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) }
+                    };
                     if let Some(net) = light_field {
                         let net = tgs::train::settings::LightPreset::parse(net).map_err(|e| anyhow::anyhow!("--light-field: {e}"))?;
                         let b = tgs::bench_light_field::light_field(&ctx, w, *warmup, *iterations, net)?;
@@ -319,7 +324,13 @@ fn run(cli: Cli) -> Result<()> {
                         }
                         return Ok(());
                     }
-                    let fuse = if *separate_adam { Some(false) } else if *fused_adam { Some(true) } else { None };
+                    let fuse = if *separate_adam {
+                        Some(false)
+                    } else if *fused_adam {
+                        Some(true)
+                    } else {
+                        None
+                    };
                     let b = match from {
                         Some(run) => tgs::bench_train::train_from(&ctx, run, *warmup, *iterations, fuse)?,
                         None => tgs::bench_train::train(&ctx, w, *warmup, *iterations, fuse)?,
@@ -349,7 +360,15 @@ fn run(cli: Cli) -> Result<()> {
                     }
                 }
                 Bench::Stages { scene, train, train_light_field, warmup, iterations, mlp, set, json } => {
-                    let spec = tgs::bench_stages::StagesSpec { scene: scene.clone(), train: *train, train_light_field: *train_light_field, warmup: *warmup, iterations: *iterations, mlp: mlp.clone(), set: set.clone() };
+                    let spec = tgs::bench_stages::StagesSpec {
+                        scene: scene.clone(),
+                        train: *train,
+                        train_light_field: *train_light_field,
+                        warmup: *warmup,
+                        iterations: *iterations,
+                        mlp: mlp.clone(),
+                        set: set.clone(),
+                    };
                     let b = tgs::bench_stages::stages(&ctx, &spec)?;
                     if *json {
                         println!("{}", serde_json::to_string_pretty(&b)?);

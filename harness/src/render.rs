@@ -3,15 +3,14 @@
 //! cameras' mean height, looking at the point nearest all their optical axes).
 
 use crate::eval::{world_normals, write_outputs};
-use crate::scene::trace::{cross, dot, sub};
 use crate::outdir::OutDir;
+use crate::scene::trace::{cross, dot, sub};
 use crate::train::run::open_run;
 use anyhow::{bail, Result};
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
 use tgs_pipelines::Camera;
-
 
 /// `frames` cameras orbiting the training cameras (intrinsics of the first).
 pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
@@ -31,7 +30,9 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
             }
         }
     }
-    let det = |m: &[[f64; 3]; 3]| m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
     let d = det(&a);
     let n = centres.len() as f64;
     let mean = [0, 1, 2].map(|k| centres.iter().map(|c| c[k]).sum::<f64>() / n);
@@ -54,10 +55,14 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
     // Orbit in the plane perpendicular to `up` at the cameras' mean height.
     let rel: Vec<[f64; 3]> = centres.iter().map(|c| sub(*c, target)).collect();
     let height = rel.iter().map(|r| dot(*r, up)).sum::<f64>() / n;
-    let radius = rel.iter().map(|r| {
-        let h = dot(*r, up);
-        (dot(*r, *r) - h * h).max(0.0).sqrt()
-    }).sum::<f64>() / n;
+    let radius = rel
+        .iter()
+        .map(|r| {
+            let h = dot(*r, up);
+            (dot(*r, *r) - h * h).max(0.0).sqrt()
+        })
+        .sum::<f64>()
+        / n;
     let e0 = {
         let r = rel[0];
         let h = dot(r, up);

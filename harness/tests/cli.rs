@@ -186,7 +186,10 @@ fn divergence_stops_at_once_with_the_cause() {
     std::fs::remove_file(base.join("ds/points3d.ply")).unwrap();
     let out = base.s("run");
     // Random initial points in a cube of 1e30: positions past 1e6 scene extents at iteration 1.
-    let t = refused(&["train", &ds, "--out", &out, "--iterations", "200", "--set", "init_half_extent=1e30"], &["iteration 1:", "diverged", "means", "likely cause: init_half_extent = 1e30", "checkpoint-nonfinite.bin"]);
+    let t = refused(
+        &["train", &ds, "--out", &out, "--iterations", "200", "--set", "init_half_extent=1e30"],
+        &["iteration 1:", "diverged", "means", "likely cause: init_half_extent = 1e30", "checkpoint-nonfinite.bin"],
+    );
     assert!(!t.contains("iteration 2:"), "{t}");
     assert!(base.join("run/checkpoint-nonfinite.bin").is_file() && !base.join("run/point_cloud.ply").exists() && !base.join("run/metrics.json").exists());
     // Rates beyond any sane bound are refused before training; high ones warned about.
@@ -242,7 +245,15 @@ fn inputs_are_checked_before_any_work() {
     refused(&["train", &ds, "--out", &out, "--set", "init_points=200000000"], &["init_points 200000000", "max_gaussians"]);
     refused(&["train", &ds, "--out", &out, "--set", "init_points=2000000000", "--set", "max_gaussians=2000000000"], &["init_points", "GiB of device memory"]);
     // A grid of a million runs: refused at once with its size.
-    std::fs::write(base.join("huge.toml"), format!("mode = \"product\"\n[knobs]\niterations = [{}]\nsh_degree = [0, 1, 2, 3]\nlambda_ssim = [{}]\n", (1..=500).map(|i| i.to_string()).collect::<Vec<_>>().join(","), (0..=500).map(|i| format!("{}", i as f64 / 500.0)).collect::<Vec<_>>().join(","))).unwrap();
+    std::fs::write(
+        base.join("huge.toml"),
+        format!(
+            "mode = \"product\"\n[knobs]\niterations = [{}]\nsh_degree = [0, 1, 2, 3]\nlambda_ssim = [{}]\n",
+            (1..=500).map(|i| i.to_string()).collect::<Vec<_>>().join(","),
+            (0..=500).map(|i| format!("{}", i as f64 / 500.0)).collect::<Vec<_>>().join(",")
+        ),
+    )
+    .unwrap();
     let t0 = Instant::now();
     refused(&["sweep", &ds, "--out", &base.s("huge"), "--grid", &base.s("huge.toml")], &["1002000 runs", "at most 10000"]);
     assert!(t0.elapsed() < Duration::from_secs(10));

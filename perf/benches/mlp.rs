@@ -16,13 +16,7 @@ fn main() -> anyhow::Result<()> {
     for preset in ["paper", "small"] {
         for n in [1024u32, 4096] {
             for gemm in [Gemm::Tiled, Gemm::Rows, Gemm::Fused] {
-                let b = tgs::bench_mlp::mlp(
-                    &ctx,
-                    tgs_pipelines::MlpShape::preset(preset)?,
-                    n,
-                    reps,
-                    Some(gemm),
-                )?;
+                let b = tgs::bench_mlp::mlp(&ctx, tgs_pipelines::MlpShape::preset(preset)?, n, reps, Some(gemm))?;
                 tgs::bench_mlp::print_mlp(&b);
                 runs.push(b);
             }

@@ -4,17 +4,8 @@
 
 use std::path::Path;
 
-const LIBS: &[&str] = &[
-    "SPIRV",
-    "glslang",
-    "MachineIndependent",
-    "GenericCodeGen",
-    "OSDependent",
-    "OGLCompiler",
-    "glslang-default-resource-limits",
-    "SPIRV-Tools-opt",
-    "SPIRV-Tools",
-];
+const LIBS: &[&str] =
+    &["SPIRV", "glslang", "MachineIndependent", "GenericCodeGen", "OSDependent", "OGLCompiler", "glslang-default-resource-limits", "SPIRV-Tools-opt", "SPIRV-Tools"];
 
 fn main() {
     println!("cargo:rerun-if-env-changed=SHADERC_LIB_DIR");
@@ -37,8 +28,6 @@ fn main() {
             }
             println!("cargo:rustc-link-lib=dylib=stdc++");
         }
-        None => println!(
-            "cargo:warning=static glslang not found (looked in {dirs:?}); install glslang-dev spirv-tools (scripts/setup.sh)"
-        ),
+        None => println!("cargo:warning=static glslang not found (looked in {dirs:?}); install glslang-dev spirv-tools (scripts/setup.sh)"),
     }
 }

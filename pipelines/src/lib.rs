@@ -28,19 +28,21 @@ pub(crate) fn slice_units(whole_fits: bool, fit: u64, forced: Option<u64>) -> Op
     (per > 0).then_some(per)
 }
 
+pub mod rng;
 pub mod scan;
 pub mod sort;
-pub mod rng;
 pub mod util;
 
+pub use rng::Rng;
 pub use scan::{Count, PrefixSum, ScanScratch};
 pub use sort::{RadixSort, SortConfig, SortScratch};
-pub use rng::Rng;
 pub use util::Iota;
 pub mod raster;
 pub use raster::{Camera, Features, Frame, Gaussians, HostGaussians, KeptWeights, Moments, Plane, RasterKernels, Rasterizer, RecordAccess, Splats, GATE_SLOTS};
 pub mod train;
-pub use train::{Adam, AdamArrays, AdamGroup, DensifyParams, DensifyReport, Densifier, Guard, SetGuard, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights, TrainableSet};
+pub use train::{
+    Adam, AdamArrays, AdamGroup, Densifier, DensifyParams, DensifyReport, Guard, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights, SetGuard, TrainableSet,
+};
 pub mod reflection;
 pub use reflection::{ColorInputs, CompositePriors, EnvMap, EnvProxy, Fresnel, HostEnvMap, ReflectionShading, TexelScratch};
 pub mod mlp;

@@ -134,7 +134,11 @@ impl TsdfFusion {
         }
         let range = self.ctx.caps().max_storage_buffer_range;
         if n.saturating_mul(4) > range {
-            bail!("a {x}x{y}x{z} voxel grid needs {:.1} MiB per array, over this device's storage-buffer range of {:.1} MiB: choose a larger voxel", (n * 4) as f64 / 1048576.0, range as f64 / 1048576.0);
+            bail!(
+                "a {x}x{y}x{z} voxel grid needs {:.1} MiB per array, over this device's storage-buffer range of {:.1} MiB: choose a larger voxel",
+                (n * 4) as f64 / 1048576.0,
+                range as f64 / 1048576.0
+            );
         }
         grid.validate()?;
         let n = n as usize;
@@ -154,7 +158,15 @@ impl TsdfFusion {
             bail!("TSDF fusion of an empty {}x{} view", cam.width, cam.height);
         }
         if depth.len() < npix || weight.len() < npix || colour.len() < 3 * npix {
-            bail!("TSDF fusion of a {}x{} view: depth {}, weight {}, colour {} values (need {npix}, {npix}, {})", cam.width, cam.height, depth.len(), weight.len(), colour.len(), 3 * npix);
+            bail!(
+                "TSDF fusion of a {}x{} view: depth {}, weight {}, colour {} values (need {npix}, {npix}, {})",
+                cam.width,
+                cam.height,
+                depth.len(),
+                weight.len(),
+                colour.len(),
+                3 * npix
+            );
         }
         let g = &vol.grid;
         let pc = Push {

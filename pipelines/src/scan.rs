@@ -65,11 +65,7 @@ impl ScanScratch {
             lens.push(l);
         }
         let levels = lens.len() as u32;
-        let sums = lens[1..]
-            .iter()
-            .enumerate()
-            .map(|(i, &len)| Buffer::new(ctx, &format!("scan.sums{i}"), len as usize))
-            .collect::<Result<Vec<_>>>()?;
+        let sums = lens[1..].iter().enumerate().map(|(i, &len)| Buffer::new(ctx, &format!("scan.sums{i}"), len as usize)).collect::<Result<Vec<_>>>()?;
         Ok(ScanScratch {
             capacity,
             levels,
@@ -120,9 +116,7 @@ impl Plan {
 impl PrefixSum {
     pub fn new(ctx: &Arc<Context>) -> Result<PrefixSum> {
         let s = spec(ctx);
-        let k = |name, spirv, push_bytes, spec: &[(u32, u32)], full| {
-            Kernel::new(ctx, &KernelDesc { name, spirv, spec, push_bytes, subgroup_size: None, full_subgroups: full })
-        };
+        let k = |name, spirv, push_bytes, spec: &[(u32, u32)], full| Kernel::new(ctx, &KernelDesc { name, spirv, spec, push_bytes, subgroup_size: None, full_subgroups: full });
         Ok(PrefixSum {
             ctx: ctx.clone(),
             plan: k("scan.plan", shaders::SCAN_PLAN, 32, &[], false)?,

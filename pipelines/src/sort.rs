@@ -42,11 +42,7 @@ impl SortConfig {
     pub fn for_device(caps: &Capabilities) -> SortConfig {
         let budget = caps.max_shared_memory.min(28 * 1024);
         let min_sg = caps.min_subgroup_size.max(1);
-        let candidates = [
-            SortConfig { wg: 256, kpt: 8, radix_bits: 8 },
-            SortConfig { wg: 128, kpt: 16, radix_bits: 8 },
-            SortConfig { wg: 256, kpt: 8, radix_bits: 4 },
-        ];
+        let candidates = [SortConfig { wg: 256, kpt: 8, radix_bits: 8 }, SortConfig { wg: 128, kpt: 16, radix_bits: 8 }, SortConfig { wg: 256, kpt: 8, radix_bits: 4 }];
         for c in candidates {
             if c.shared_bytes(min_sg) <= budget && c.wg % caps.max_subgroup_size.max(1) == 0 {
                 return c;
@@ -70,7 +66,7 @@ impl SortConfig {
         if self.wg * self.kpt > 65535 {
             bail!("sort partition wg*kpt = {} must be below 65,536 (16-bit counters)", self.wg * self.kpt);
         }
-        if self.wg % caps.max_subgroup_size.max(1) != 0 {
+        if !self.wg.is_multiple_of(caps.max_subgroup_size.max(1)) {
             bail!("sort workgroup {} is not a multiple of the subgroup size {}", self.wg, caps.max_subgroup_size);
         }
         if self.kpt == 0 || self.kpt > 32 {
@@ -126,9 +122,7 @@ impl RadixSort {
     pub fn with_config(ctx: &Arc<Context>, cfg: SortConfig) -> Result<RadixSort> {
         cfg.check(ctx.caps())?;
         let spec = [(0, cfg.wg), (1, ctx.caps().min_subgroup_size.max(1)), (2, cfg.kpt), (3, cfg.radix_bits)];
-        let k = |name, spirv, push_bytes| {
-            Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: true })
-        };
+        let k = |name, spirv, push_bytes| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: true });
         Ok(RadixSort {
             ctx: ctx.clone(),
             cfg,
@@ -217,12 +211,7 @@ impl RadixSort {
         if passes % 2 == 1 {
             let sc = rec.begin_scope("sort.copy");
             // Only the first n (known on the GPU) move: the caller's data past n stays.
-            rec.dispatch_indirect(
-                &self.copy,
-                &[params.clone(), scratch.keys.binding(), scratch.vals.binding(), keys.binding(), vals.binding()],
-                &[],
-                &parts_args,
-            )?;
+            rec.dispatch_indirect(&self.copy, &[params.clone(), scratch.keys.binding(), scratch.vals.binding(), keys.binding(), vals.binding()], &[], &parts_args)?;
             rec.end_scope(sc);
         }
         Ok(())

@@ -23,17 +23,15 @@ impl Default for Host {
 
 impl Host {
     pub fn new() -> Host {
+        // SAFETY: a test host's Vulkan set-up: every create info lives until its call returns and each handle
+        // comes from the object before it.
         unsafe {
             let entry = ash::Entry::load().unwrap();
             let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_3);
             let instance = entry.create_instance(&vk::InstanceCreateInfo::default().application_info(&app), None).unwrap();
             let pds = instance.enumerate_physical_devices().unwrap();
             let pd = pds[0];
-            let qf = instance
-                .get_physical_device_queue_family_properties(pd)
-                .iter()
-                .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE))
-                .unwrap() as u32;
+            let qf = instance.get_physical_device_queue_family_properties(pd).iter().position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE)).unwrap() as u32;
             let prio = [1.0f32];
             let qi = [vk::DeviceQueueCreateInfo::default().queue_family_index(qf).queue_priorities(&prio)];
             let device = instance.create_device(pd, &vk::DeviceCreateInfo::default().queue_create_infos(&qi), None).unwrap();
@@ -44,6 +42,8 @@ impl Host {
 
     /// tgs on this host's device and queue (the host enabled no optional features).
     pub fn adopt(&self) -> Arc<Context> {
+        // SAFETY: the handles are this host's, belong together, and outlive the context (tests drop it before
+        // Host::destroy).
         unsafe {
             Context::adopt(AdoptInfo {
                 entry: self.entry.clone(),
@@ -61,6 +61,8 @@ impl Host {
     /// Record with `f` into a command buffer of the host's own pool, submit
     /// it on the host's queue and wait.
     pub fn submit(&self, f: impl FnOnce(vk::CommandBuffer)) {
+        // SAFETY: the pool, command buffer and fence are new and used only here; the submission is waited for
+        // before they are destroyed.
         unsafe {
             let d = &self.device;
             let pool = d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(self.qf), None).unwrap();
@@ -78,6 +80,8 @@ impl Host {
 
     /// A host-visible, coherent storage buffer of `bytes` the host owns.
     pub fn buffer(&self, bytes: u64) -> HostBuffer {
+        // SAFETY: `buffer` and `memory` are new objects of this device; the memory type was chosen from the
+        // buffer's requirements.
         unsafe {
             let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
             let buffer = self.device.create_buffer(&vk::BufferCreateInfo::default().size(bytes).usage(usage), None).unwrap();
@@ -92,6 +96,8 @@ impl Host {
     }
 
     pub fn read(&self, b: &HostBuffer) -> Vec<f32> {
+        // SAFETY: the memory is host-visible and coherent, `b.bytes` long, and no submission writing it is
+        // pending.
         unsafe {
             let p = self.device.map_memory(b.memory, 0, b.bytes, vk::MemoryMapFlags::empty()).unwrap() as *const f32;
             let v = std::slice::from_raw_parts(p, (b.bytes / 4) as usize).to_vec();
@@ -101,6 +107,8 @@ impl Host {
     }
 
     pub fn free(&self, b: HostBuffer) {
+        // SAFETY: the caller's submissions that used the buffer have completed; each handle is destroyed
+        // once.
         unsafe {
             self.device.destroy_buffer(b.buffer, None);
             self.device.free_memory(b.memory, None);
@@ -109,6 +117,8 @@ impl Host {
 
     /// Destroy the host's device and instance (after everything using them).
     pub fn destroy(self) {
+        // SAFETY: everything made on the device (tgs's context included) is gone; the device is waited for
+        // before it is destroyed.
         unsafe {
             self.device.device_wait_idle().unwrap();
             self.device.destroy_device(None);

@@ -1,15 +1,17 @@
 //! Helpers shared by the integration tests.
 
 pub mod host;
+pub mod lightfield_ref;
+pub mod loss_ref;
+pub mod lpips_ref;
+pub mod mesh_checks;
+pub mod mlp_ref;
 pub mod raster_ref;
 pub mod raster_util;
-pub mod loss_ref;
 pub mod reflection_ref;
-pub mod mlp_ref;
-pub mod lightfield_ref;
-pub mod lpips_ref;
-pub mod tsdf_ref;
+pub mod seed_scenes;
 pub mod train_cases;
+pub mod tsdf_ref;
 
 use std::sync::Arc;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
@@ -60,9 +62,10 @@ impl Rng {
 
 /// A seed from `TGS_SEED` or the clock; printed so a failure can be re-run.
 pub fn seed(test: &str) -> u64 {
-    let s = std::env::var("TGS_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or_else(|| {
-        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(1)
-    });
+    let s = std::env::var("TGS_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(1));
     eprintln!("{test}: seed {s} (re-run with TGS_SEED={s})");
     s
 }

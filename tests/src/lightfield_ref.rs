@@ -25,7 +25,7 @@ impl Cam {
     fn ray(&self, x: f64, y: f64) -> V3 {
         [(x - self.cx) / self.fx, (y - self.cy) / self.fy, 1.0]
     }
-    fn to_world_dir(&self, v: V3) -> V3 {
+    fn to_world_dir(self, v: V3) -> V3 {
         let r = &self.rot;
         [0, 1, 2].map(|j| r[0][j] * v[0] + r[1][j] * v[1] + r[2][j] * v[2])
     }

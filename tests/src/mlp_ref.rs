@@ -77,7 +77,17 @@ pub fn backward(shape: &MlpShape, params: &[f64], samples: &[[f64; 6]], d_out: &
             let (k, j) = (shape.fan_in(l) as usize, shape.fan_out(l) as usize);
             let y = &t.outputs[l as usize];
             let x = &t.inputs[l as usize];
-            let dz: Vec<f64> = (0..j).map(|r| if l == shape.depth { dy[r] * y[r] * (1.0 - y[r]) } else if y[r] > 0.0 { dy[r] } else { 0.0 }).collect();
+            let dz: Vec<f64> = (0..j)
+                .map(|r| {
+                    if l == shape.depth {
+                        dy[r] * y[r] * (1.0 - y[r])
+                    } else if y[r] > 0.0 {
+                        dy[r]
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
             let off = shape.offset(l) as usize;
             for r in 0..j {
                 for c in 0..k {

@@ -581,7 +581,11 @@ pub fn square_box_tiles(s: &RefScene, cam: &Camera, degree: u32, tile: u32) -> u
         .filter_map(|g| project(s, g, &c, degree))
         .map(|sp| {
             let r = rect_of([sp.mu[0] - sp.radius, sp.mu[1] - sp.radius, sp.mu[0] + sp.radius, sp.mu[1] + sp.radius], c.tiles());
-            if rect_empty(r) { 0 } else { (r[2] - r[0]) * (r[3] - r[1]) }
+            if rect_empty(r) {
+                0
+            } else {
+                (r[2] - r[0]) * (r[3] - r[1])
+            }
         })
         .sum()
 }

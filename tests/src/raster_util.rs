@@ -176,6 +176,7 @@ pub fn ref_loss(s: &RefScene, cam: &Camera, bg: &[f64], degree: u32, weights: &[
 /// threshold crossed by the perturbation) and are left out and counted (at
 /// most 2%). Groups whose gradient is exactly zero everywhere are reported
 /// and must be in `zero_ok`.
+#[allow(clippy::too_many_arguments)] // a test helper: the scene, the camera and the check's knobs
 pub fn check_gradients(rast: &Rasterizer, host: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, rng: &mut Rng, zero_ok: &[&str], what: &str) {
     check_gradients_with(rast, host, cam, bg, degree, rng, zero_ok, 0.02, what)
 }

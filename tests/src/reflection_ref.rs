@@ -17,7 +17,13 @@ fn sigmoid(x: f64) -> f64 {
 /// coordinates (x, y) (method-notes §2.6 table, inverted).
 pub fn cube_coords(d: V3) -> (usize, f64, f64) {
     let a = [d[0].abs(), d[1].abs(), d[2].abs()];
-    let axis = if a[0] >= a[1] && a[0] >= a[2] { 0 } else if a[1] >= a[2] { 1 } else { 2 };
+    let axis = if a[0] >= a[1] && a[0] >= a[2] {
+        0
+    } else if a[1] >= a[2] {
+        1
+    } else {
+        2
+    };
     let ma = a[axis];
     if ma <= 0.0 || !ma.is_finite() {
         return (4, 0.0, 0.0);

@@ -12,14 +12,14 @@ pub fn densify_cases() -> (HostGaussians, Vec<f32>, Vec<f32>, Vec<f32>) {
     let logit = |o: f32| (o / (1.0 - o)).ln();
     // (opacity, log-scale, mean grad, views, max radius)
     let spec: [(f32, f32, f32, f32, f32); 8] = [
-        (0.5, -4.0, 1e-5, 3.0, 4.0), // 0 keep
-        (0.5, -4.0, 5e-4, 2.0, 4.0), // 1 clone
-        (0.5, -1.0, 5e-4, 2.0, 4.0), // 2 split
+        (0.5, -4.0, 1e-5, 3.0, 4.0),  // 0 keep
+        (0.5, -4.0, 5e-4, 2.0, 4.0),  // 1 clone
+        (0.5, -1.0, 5e-4, 2.0, 4.0),  // 2 split
         (0.01, -4.0, 1e-5, 2.0, 4.0), // 3 prune: opacity
-        (0.5, 0.5, 1e-5, 2.0, 4.0),  // 4 prune: world size
+        (0.5, 0.5, 1e-5, 2.0, 4.0),   // 4 prune: world size
         (0.5, -4.0, 1e-5, 2.0, 40.0), // 5 prune: screen size
-        (0.5, -4.0, 1.0, 0.0, 0.0),  // 6 never seen: keep
-        (0.5, -2.5, 3e-4, 1.0, 4.0), // 7 split (scale 0.082 > 0.01 * extent)
+        (0.5, -4.0, 1.0, 0.0, 0.0),   // 6 never seen: keep
+        (0.5, -2.5, 3e-4, 1.0, 4.0),  // 7 split (scale 0.082 > 0.01 * extent)
     ];
     let (mut acc, mut den, mut rad) = (vec![], vec![], vec![]);
     for (i, &(o, ls, gr, views, r)) in spec.iter().enumerate() {
@@ -71,8 +71,8 @@ pub fn fused_case(name: &str) -> FusedCase {
 /// Gaussian has 3 features, which the CPU reduce cannot step four at a
 /// time (at degree 3 it has 48).
 pub fn fused_case_of(name: &str, degree: u32) -> FusedCase {
-    use tgs_pipelines::Features;
     use crate::raster_util::{default_camera, random_grads, random_scene, SceneSpec};
+    use tgs_pipelines::Features;
     let mut rng = Rng(seed(name));
     let host = random_scene(&mut rng, &SceneSpec::new(400, 3, Features::Sh { degree }));
     let cam = default_camera(70, 45);

@@ -60,7 +60,14 @@ fn train_bench_from_a_trained_run() {
     let ds = tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("bench-from-scene"));
     let run = base.join("run");
     let set = ["stages=\"I\"", "background=\"black\"", "test_interval=0", "checkpoint_interval=0", "densify_from=1000"];
-    let args = tgs::train::run::TrainArgs { dataset: Some(ds), out: run.clone(), iterations: Some(12), set: set.iter().map(|s| s.to_string()).collect(), quiet: true, ..Default::default() };
+    let args = tgs::train::run::TrainArgs {
+        dataset: Some(ds),
+        out: run.clone(),
+        iterations: Some(12),
+        set: set.iter().map(|s| s.to_string()).collect(),
+        quiet: true,
+        ..Default::default()
+    };
     tgs::train::run::train(ctx, &args).unwrap();
     let ckpt = run.join("checkpoint.bin");
     let before = std::fs::read(&ckpt).unwrap();

@@ -94,7 +94,7 @@ fn normals_read_from_npy_png_and_exr_alike() {
 }
 
 fn expect_err(r: anyhow::Result<Dataset>, needles: &[&str]) {
-    let e = format!("{:#}", r.err().expect("loading should fail"));
+    let e = format!("{:#}", r.expect_err("loading should fail"));
     for n in needles {
         assert!(e.contains(n), "error '{e}' should mention '{n}'");
     }
@@ -112,7 +112,11 @@ fn blender_bad_inputs_name_the_file() {
     expect_err(Dataset::load(&d, &opts), &["a.png", "cannot read"]);
 
     let d = blender_fixture("nonfinite", 4, 4);
-    std::fs::write(d.join("transforms_train.json"), r#"{"camera_angle_x": 0.8, "frames": [{"file_path": "./train/a", "transform_matrix": [[1,0,0,0],[0,0,-1,1e999],[0,1,0,0],[0,0,0,1]]}]}"#).unwrap();
+    std::fs::write(
+        d.join("transforms_train.json"),
+        r#"{"camera_angle_x": 0.8, "frames": [{"file_path": "./train/a", "transform_matrix": [[1,0,0,0],[0,0,-1,1e999],[0,1,0,0],[0,0,0,1]]}]}"#,
+    )
+    .unwrap();
     expect_err(Dataset::load(&d, &opts), &["transforms_train.json"]);
 
     let d = blender_fixture("notfour", 4, 4);
@@ -155,7 +159,14 @@ struct Img {
 
 fn images() -> Vec<Img> {
     // Nine images (names deliberately unsorted): identity rotation, cameras at z = -4 - i/10.
-    (0..9).map(|i| Img { name: ["c.png", "a.png", "i.png", "b.png", "h.png", "d.png", "g.png", "e.png", "f.png"][i], q: [1.0, 0.0, 0.0, 0.0], t: [0.0, 0.0, 4.0 + i as f64 / 10.0], cam: 1 + (i % 2) as u32 }).collect()
+    (0..9)
+        .map(|i| Img {
+            name: ["c.png", "a.png", "i.png", "b.png", "h.png", "d.png", "g.png", "e.png", "f.png"][i],
+            q: [1.0, 0.0, 0.0, 0.0],
+            t: [0.0, 0.0, 4.0 + i as f64 / 10.0],
+            cam: 1 + (i % 2) as u32,
+        })
+        .collect()
 }
 
 fn write_text_model(dir: &Path, model2: &str) {
@@ -231,9 +242,18 @@ fn colmap_text_and_binary_agree() {
     let t = colmap_fixture("colmap-txt", false);
     let b = colmap_fixture("colmap-bin", true);
     let dir = |d: &Path| d.join("sparse/0");
-    assert_eq!(parse_cameras_txt(&std::fs::read_to_string(dir(&t).join("cameras.txt")).unwrap()).unwrap(), parse_cameras_bin(&std::fs::read(dir(&b).join("cameras.bin")).unwrap()).unwrap());
-    assert_eq!(parse_images_txt(&std::fs::read_to_string(dir(&t).join("images.txt")).unwrap()).unwrap(), parse_images_bin(&std::fs::read(dir(&b).join("images.bin")).unwrap()).unwrap());
-    let (pt, pb) = (parse_points_txt(&std::fs::read_to_string(dir(&t).join("points3D.txt")).unwrap()).unwrap().0, parse_points_bin(&std::fs::read(dir(&b).join("points3D.bin")).unwrap()).unwrap().0);
+    assert_eq!(
+        parse_cameras_txt(&std::fs::read_to_string(dir(&t).join("cameras.txt")).unwrap()).unwrap(),
+        parse_cameras_bin(&std::fs::read(dir(&b).join("cameras.bin")).unwrap()).unwrap()
+    );
+    assert_eq!(
+        parse_images_txt(&std::fs::read_to_string(dir(&t).join("images.txt")).unwrap()).unwrap(),
+        parse_images_bin(&std::fs::read(dir(&b).join("images.bin")).unwrap()).unwrap()
+    );
+    let (pt, pb) = (
+        parse_points_txt(&std::fs::read_to_string(dir(&t).join("points3D.txt")).unwrap()).unwrap().0,
+        parse_points_bin(&std::fs::read(dir(&b).join("points3D.bin")).unwrap()).unwrap().0,
+    );
     assert_eq!((pt.positions.clone(), pt.colors.clone()), (pb.positions, pb.colors));
     assert_eq!(pt.positions, vec![[0.5, 0.25, 1.0], [-1.0, 0.0, 0.5]]);
 
@@ -340,7 +360,11 @@ fn hostile_inputs_are_refused_not_trained() {
     // Python's json.dump writes NaN and Infinity as bare words.
     for (word, shown) in [("NaN", "NaN"), ("Infinity", "Infinity"), ("-Infinity", "-Infinity")] {
         let d = blender_fixture(&format!("nan{shown}"), 4, 4);
-        std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": [[1,0,0,0],[0,0,-1,{word}],[0,1,0,0],[0,0,0,1]]}}]}}"#)).unwrap();
+        std::fs::write(
+            d.join("transforms_train.json"),
+            format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": [[1,0,0,0],[0,0,-1,{word}],[0,1,0,0],[0,0,0,1]]}}]}}"#),
+        )
+        .unwrap();
         expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "frame 0", "transform_matrix[1][3]", shown]);
     }
     let d = blender_fixture("nan-fov", 4, 4);
@@ -474,7 +498,11 @@ fn accepted_nonsense_is_refused_or_warned_about() {
     // One image twice in a split, and one image with two poses across the splits.
     let d = blender_fixture("dupframe", 4, 4);
     let two = r#"[[1,0,0,0],[0,0,-1,-5],[0,1,0,0],[0,0,0,1]]"#;
-    std::fs::write(d.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}, {{"file_path": "./train/a", "transform_matrix": {two}}}]}}"#)).unwrap();
+    std::fs::write(
+        d.join("transforms_train.json"),
+        format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": {C2W}}}, {{"file_path": "./train/a", "transform_matrix": {two}}}]}}"#),
+    )
+    .unwrap();
     expect_err(Dataset::load(&d, &opts), &["transforms_train.json", "./train/a", "twice", "frames 0 and 1"]);
     let d = blender_fixture("twoposes", 4, 4);
     std::fs::write(d.join("transforms_test.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "./train/a", "transform_matrix": {two}}}]}}"#)).unwrap();
@@ -621,7 +649,8 @@ fn jpeg_captures_load_in_both_layouts() {
     // composited on the (white) background.
     let rgba16: Vec<u8> = (0..48).flat_map(|_| [0xffffu16, 0x8000, 0, 0x8000]).flat_map(|v| v.to_ne_bytes()).collect();
     image::save_buffer(b.join("train/a.png"), &rgba16, 8, 6, image::ExtendedColorType::Rgba16).unwrap();
-    let frame = |f: &str| std::fs::write(b.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "{f}", "transform_matrix": {C2W}}}]}}"#)).unwrap();
+    let frame =
+        |f: &str| std::fs::write(b.join("transforms_train.json"), format!(r#"{{"camera_angle_x": 0.8, "frames": [{{"file_path": "{f}", "transform_matrix": {C2W}}}]}}"#)).unwrap();
     frame("./train/a");
     let px = Dataset::load(&b, &LoadOptions::default()).unwrap().train[0].image.data[..3].to_vec();
     let a = 0x8000 as f32 / 65535.0;

@@ -13,7 +13,6 @@ use tgs_engine::{BufferBinding, Recorder};
 use tgs_tests::ctx_shared;
 use tgs_tests::host::Host;
 
-
 fn args(out: &Path, set: &[&str], stages: &str, from: Option<&Path>) -> TrainArgs {
     let _ = std::fs::remove_dir_all(out);
     let scene = tgs_tests::tiny_glass_scene(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("embed-scene"));
@@ -47,7 +46,11 @@ fn check_run(host: &Host, run: &Path, stage: &str) {
         loop {
             let mut rec = None;
             host.submit(|cmd| {
+                // SAFETY: `cmd` is the host's primary command buffer, recording, from a pool of the adopted
+                // queue family.
                 let mut r = unsafe { Recorder::record_into(&ctx, cmd, 0) }.unwrap();
+                // SAFETY: `out` is a live storage buffer of the host's device, `out.bytes` long, alive until
+                // the submission completes.
                 scene.record(&mut r, cam, &unsafe { BufferBinding::external(out.buffer, 0, out.bytes) }).unwrap();
                 r.finish().unwrap();
                 rec = Some(r);

@@ -34,6 +34,8 @@ fn validation_layer_is_active_and_catches_errors() {
     assert!(ctx_shared().validation_enabled(), "tests must run with the validation layer");
     // A fresh context, so the deliberate error does not fail the other tests.
     let ctx = Context::new(&ContextOptions { device: DeviceSelector::from_arg_or_env(None), validation: Some(true) }).unwrap();
+    // SAFETY: a deliberately invalid create info for the validation layer to report; a buffer it may still
+    // return is destroyed at once.
     unsafe {
         // Invalid: size 0 (VUID-VkBufferCreateInfo-size-00912).
         let info = vk::BufferCreateInfo::default().size(0).usage(vk::BufferUsageFlags::STORAGE_BUFFER);
@@ -58,12 +60,12 @@ fn adopts_a_host_device_and_leaves_it_alive() {
     let scratch = sort.scratch(10_000).unwrap();
 
     // Record into the host's own command buffer; the host submits it.
+    // SAFETY: the host's own command buffer and objects, waited for before they are freed; the buffers tgs
+    // records into are alive until then.
     unsafe {
         let d = &host.device;
         let pool = d.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(host.qf), None).unwrap();
-        let cmd = d
-            .allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1))
-            .unwrap()[0];
+        let cmd = d.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1)).unwrap()[0];
         d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).unwrap();
         let mut rec = Recorder::record_into(&ctx, cmd, 16).unwrap();
         sort.record(&mut rec, &kb, &vb, &Count::Host(10_000), 32, &scratch).unwrap();
@@ -84,11 +86,10 @@ fn adopts_a_host_device_and_leaves_it_alive() {
     drop(ctx);
 
     // The host's device is still alive and usable after tgs is gone.
+    // SAFETY: tgs's context is dropped; the host's device is live and the buffer is destroyed before the
+    // wait.
     unsafe {
-        let b = host
-            .device
-            .create_buffer(&vk::BufferCreateInfo::default().size(64).usage(vk::BufferUsageFlags::STORAGE_BUFFER), None)
-            .unwrap();
+        let b = host.device.create_buffer(&vk::BufferCreateInfo::default().size(64).usage(vk::BufferUsageFlags::STORAGE_BUFFER), None).unwrap();
         host.device.destroy_buffer(b, None);
         host.device.device_wait_idle().unwrap();
         host.device.destroy_device(None);
@@ -280,7 +281,7 @@ fn read_backs_ride_their_submission() {
         rec.submit_and_wait().unwrap();
         assert_eq!(back.read().unwrap(), (990..1000).map(|i| i + start).collect::<Vec<_>>());
     }
-    let err = Recorder::new(ctx).unwrap().read_back(&src, 995, &back).err().expect("a read-back past the end");
+    let err = Recorder::new(ctx).unwrap().read_back(&src, 995, &back).expect_err("a read-back past the end");
     assert!(err.to_string().contains("test.readback_src"), "{err}");
     check_validation(ctx);
 }
@@ -390,7 +391,9 @@ fn pipelines_are_built_once_per_context() {
 #[test]
 fn texel_buffer_bindings_read_exactly() {
     let ctx = tgs_tests::ctx();
-    let k = Kernel::new(&ctx, &KernelDesc { name: "util.texel_read", spirv: shaders::UTIL_TEXEL_READ, spec: &[(0, 256)], push_bytes: 4, subgroup_size: None, full_subgroups: false }).unwrap();
+    let k =
+        Kernel::new(&ctx, &KernelDesc { name: "util.texel_read", spirv: shaders::UTIL_TEXEL_READ, spec: &[(0, 256)], push_bytes: 4, subgroup_size: None, full_subgroups: false })
+            .unwrap();
     assert_eq!(k.bindings(), 3);
     let n = 1000usize;
     let f: Vec<f32> = (0..n + 8).map(|i| (i as f32 * 0.37).sin() * 1e3 + if i % 7 == 0 { f32::MIN_POSITIVE } else { 0.0 }).collect();

@@ -5,8 +5,8 @@
 //! wall the map's depth records.
 
 use tgs::train::stages::reflection::env_init::{outside_box, scene_env_map, SceneLight};
-use tgs::train::stages::scattering::init::SH_C0;
 use tgs::train::stages::reflection::seed::quat_for_normal;
+use tgs::train::stages::scattering::init::SH_C0;
 use tgs_pipelines::{HostEnvMap, HostGaussians};
 use tgs_tests::reflection_ref as rr;
 use tgs_tests::{check_validation, ctx_shared};

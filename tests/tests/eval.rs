@@ -100,7 +100,19 @@ fn error_off_the_mask_counts_only_the_pixels_outside_it() {
         })
         .collect();
     let off: Vec<usize> = (0..n).filter(|&i| !mask[i] && i != hole).collect();
-    let want = off.iter().map(|&i| if i == empty { 90.0 } else if i < w as usize { 30.0 } else { 0.0 }).sum::<f64>() / off.len() as f64;
+    let want = off
+        .iter()
+        .map(|&i| {
+            if i == empty {
+                90.0
+            } else if i < w as usize {
+                30.0
+            } else {
+                0.0
+            }
+        })
+        .sum::<f64>()
+        / off.len() as f64;
     let got = normal_mae_outside(&out, &v).unwrap();
     assert!((got - want).abs() < 1e-3, "off-mask MAE {got} vs {want}");
     // On the mask: 90 everywhere.

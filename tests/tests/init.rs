@@ -5,8 +5,8 @@
 
 use tgs::train::stages::scattering::init::{far_points, random_points};
 use tgs::train::stages::scattering::knn::knn3_mean_sq;
-use tgs_pipelines::Rng;
 use tgs_pipelines::Camera;
+use tgs_pipelines::Rng;
 use tgs_tests::raster_util::bits;
 
 fn ring(n: usize, radius: f32, height: f32) -> Vec<Camera> {
@@ -99,7 +99,11 @@ fn knn3_brute(pts: &[[f32; 3]]) -> Vec<f32> {
             let mut d: Vec<f32> = (0..pts.len()).filter(|&j| j != i).map(|j| (0..3).map(|k| (pts[i][k] - pts[j][k]).powi(2)).sum::<f32>()).collect();
             d.sort_by(|a, b| a.total_cmp(b));
             d.truncate(3);
-            if d.is_empty() { 1e-7 } else { d.iter().sum::<f32>() / d.len() as f32 }
+            if d.is_empty() {
+                1e-7
+            } else {
+                d.iter().sum::<f32>() / d.len() as f32
+            }
         })
         .collect()
 }

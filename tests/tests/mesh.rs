@@ -63,8 +63,11 @@ fn sphere_grid(dims: u32) -> TsdfGrid {
     TsdfGrid { origin: CENTRE.map(|c| c as f32 - 0.5 * side), voxel, dims: [dims; 3], trunc: 3.0 * voxel, depth_max: f32::INFINITY }
 }
 
+/// A view to fuse: its camera, depth, weight and colour planes.
+type DepthView = (Camera, Vec<f32>, Vec<f32>, Vec<f32>);
+
 /// Fuse `views` on the GPU.
-fn fuse_gpu(grid: TsdfGrid, views: &[(Camera, Vec<f32>, Vec<f32>, Vec<f32>)]) -> HostTsdf {
+fn fuse_gpu(grid: TsdfGrid, views: &[DepthView]) -> HostTsdf {
     let ctx = ctx_shared();
     let fusion = TsdfFusion::new(ctx).unwrap();
     let vol = fusion.volume(grid, 1 << 30).unwrap();
@@ -77,11 +80,14 @@ fn fuse_gpu(grid: TsdfGrid, views: &[(Camera, Vec<f32>, Vec<f32>, Vec<f32>)]) ->
     vol.download().unwrap()
 }
 
-fn sphere_views(n: usize, size: u32) -> Vec<(Camera, Vec<f32>, Vec<f32>, Vec<f32>)> {
-    cameras(n, size).into_iter().map(|c| {
-        let (d, w, col) = sphere_view(&c);
-        (c, d, w, col)
-    }).collect()
+fn sphere_views(n: usize, size: u32) -> Vec<DepthView> {
+    cameras(n, size)
+        .into_iter()
+        .map(|c| {
+            let (d, w, col) = sphere_view(&c);
+            (c, d, w, col)
+        })
+        .collect()
 }
 
 fn bits(v: &HostTsdf) -> Vec<u32> {
@@ -137,7 +143,14 @@ fn fusion_matches_the_f64_reference_and_meshes_the_sphere() {
     assert!(mesh.triangles.len() > 1000, "{} triangles", mesh.triangles.len());
     let d: Vec<f64> = mesh.positions.iter().map(|&p| distance(p)).collect();
     let (mean, max) = (d.iter().sum::<f64>() / d.len() as f64, d.iter().cloned().fold(0.0, f64::max));
-    eprintln!("sphere mesh: {} vertices, {} triangles; distance to the sphere mean {:.4} max {:.4} (voxel {:.4})", mesh.positions.len(), mesh.triangles.len(), mean, max, grid.voxel);
+    eprintln!(
+        "sphere mesh: {} vertices, {} triangles; distance to the sphere mean {:.4} max {:.4} (voxel {:.4})",
+        mesh.positions.len(),
+        mesh.triangles.len(),
+        mean,
+        max,
+        grid.voxel
+    );
     // Measured: mean 0.13, max 0.56 voxels (the projective distance, the
     // nearest pixel's depth and linear interpolation on the edges).
     assert!(mean < 0.2 * grid.voxel as f64 && max < 0.75 * grid.voxel as f64, "mean {mean} max {max}");
@@ -151,10 +164,15 @@ fn fusion_matches_the_f64_reference_and_meshes_the_sphere() {
         assert!(n[0] * c[0] + n[1] * c[1] + n[2] * c[2] > 0.0, "a face points inwards");
     }
     // Colours are the fused normals' colours: close to the vertex's own.
-    let worst = mesh.positions.iter().zip(&mesh.colors).map(|(p, c)| {
-        let l = (0..3).map(|k| (p[k] as f64 - CENTRE[k]).powi(2)).sum::<f64>().sqrt();
-        (0..3).map(|k| (c[k] as f64 - (0.5 + 0.5 * (p[k] as f64 - CENTRE[k]) / l)).abs()).fold(0.0, f64::max)
-    }).fold(0.0, f64::max);
+    let worst = mesh
+        .positions
+        .iter()
+        .zip(&mesh.colors)
+        .map(|(p, c)| {
+            let l = (0..3).map(|k| (p[k] as f64 - CENTRE[k]).powi(2)).sum::<f64>().sqrt();
+            (0..3).map(|k| (c[k] as f64 - (0.5 + 0.5 * (p[k] as f64 - CENTRE[k]) / l)).abs()).fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max);
     assert!(worst < 0.15, "vertex colour off by {worst}");
     // The extraction is a function of the grid.
     assert_eq!(extract(&gpu, grid.origin, grid.voxel, 0.0), mesh);
@@ -182,7 +200,7 @@ fn hard_cases_leave_the_grid_finite_and_are_refused_with_their_sizes() {
     let cams = cameras(4, 16);
     // A view that sees nothing: the grid stays empty, the mesh too.
     let empty = (cams[0], vec![0f32; 256], vec![0f32; 256], vec![0f32; 768]);
-    let g = fuse_gpu(grid, &[empty.clone()]);
+    let g = fuse_gpu(grid, std::slice::from_ref(&empty));
     assert!(g.weight.iter().all(|&w| w == 0.0) && g.tsdf.iter().all(|&t| t == 0.0));
     assert!(extract(&g, grid.origin, grid.voxel, 0.0).triangles.is_empty());
     // Weight but no depth (0), NaN and infinite depths: nothing fused, nothing NaN.
@@ -225,7 +243,13 @@ fn hard_cases_leave_the_grid_finite_and_are_refused_with_their_sizes() {
     assert!(e.contains("1024x1024x1024") && e.contains("MiB") && e.contains("voxel"), "{e}");
     let e = format!("{:#}", fusion.volume(TsdfGrid { dims: [100, 100, 100], ..grid }, 1 << 20).err().unwrap());
     assert!(e.contains("100x100x100") && e.contains("19.1 MiB"), "{e}");
-    for bad in [TsdfGrid { dims: [0, 4, 4], ..grid }, TsdfGrid { voxel: 0.0, ..grid }, TsdfGrid { voxel: f32::NAN, ..grid }, TsdfGrid { trunc: -1.0, ..grid }, TsdfGrid { dims: [1 << 16, 1 << 16, 2], ..grid }] {
+    for bad in [
+        TsdfGrid { dims: [0, 4, 4], ..grid },
+        TsdfGrid { voxel: 0.0, ..grid },
+        TsdfGrid { voxel: f32::NAN, ..grid },
+        TsdfGrid { trunc: -1.0, ..grid },
+        TsdfGrid { dims: [1 << 16, 1 << 16, 2], ..grid },
+    ] {
         assert!(fusion.volume(bad, u64::MAX).is_err(), "{bad:?} accepted");
     }
     // Wrong image sizes are refused.

@@ -152,9 +152,8 @@ fn reference_gradient_matches_finite_differences() {
     let params: Vec<f64> = shape.init_params(rng.next_u64()).iter().map(|&v| v as f64).collect();
     let samples = random_samples(&mut rng, 4, 1.0);
     let d_out: Vec<[f64; 3]> = (0..4).map(|_| [0, 1, 2].map(|_| uni(&mut rng, -1.0, 1.0))).collect();
-    let loss = |p: &[f64]| -> f64 {
-        samples.iter().zip(&d_out).map(|(s, d)| mlp_ref::forward(&shape, p, s).outputs.last().unwrap().iter().zip(d).map(|(o, d)| o * d).sum::<f64>()).sum()
-    };
+    let loss =
+        |p: &[f64]| -> f64 { samples.iter().zip(&d_out).map(|(s, d)| mlp_ref::forward(&shape, p, s).outputs.last().unwrap().iter().zip(d).map(|(o, d)| o * d).sum::<f64>()).sum() };
     let g = mlp_ref::backward(&shape, &params, &samples, &d_out);
     let h = 1e-6;
     let mut checked = 0;
@@ -224,12 +223,7 @@ fn saturated_and_extreme_inputs_stay_finite() {
     let shape = MlpShape { depth: 3, width: 24, skip: 2, levels_x: 12, levels_w: 4 };
     // Large weights saturate the sigmoid head (outputs 0 and 1).
     let params: Vec<f32> = shape.init_params(rng.next_u64()).iter().map(|v| v * 40.0).collect();
-    let samples: Vec<[f64; 6]> = vec![
-        [1e4, -1e4, 3e7, 1.0, 0.0, 0.0],
-        [1e-40, -1e-42, 0.0, 0.0, 1.0, 0.0],
-        [-1.0, 1.0, -1.0, 0.0, 0.0, -1.0],
-        [2.5, -7.75, 100.0, 0.6, 0.8, 0.0],
-    ];
+    let samples: Vec<[f64; 6]> = vec![[1e4, -1e4, 3e7, 1.0, 0.0, 0.0], [1e-40, -1e-42, 0.0, 0.0, 1.0, 0.0], [-1.0, 1.0, -1.0, 0.0, 0.0, -1.0], [2.5, -7.75, 100.0, 0.6, 0.8, 0.0]];
     let samples: Vec<[f64; 6]> = samples.iter().map(|s| s.map(|v| v as f32 as f64)).collect();
     let d_out = vec![[1.0, -1.0, 0.5]; samples.len()];
     let run = gpu(shape, &params, &samples, &d_out);

@@ -82,7 +82,7 @@ fn records_by_binding_and_by_address_agree() {
             })
             .into_iter()
             .collect();
-            assert_eq!(bits(&runs[0].out), bits(&runs[1].out), "{kernels:?}: images differ");
+        assert_eq!(bits(&runs[0].out), bits(&runs[1].out), "{kernels:?}: images differ");
         let (a, b) = (runs[0].grads.as_ref().unwrap(), runs[1].grads.as_ref().unwrap());
         assert!(a.means.iter().any(|v| *v != 0.0));
         for ((name, x), (_, y)) in named_arrays(a).into_iter().zip(named_arrays(b)) {
@@ -285,7 +285,13 @@ fn workgroup_and_subgroup_kernels_agree() {
             eprintln!("   [{i}] workgroup {} subgroup {} (rms {rms:.3e})", x[i], y[i]);
         }
         assert!(rms > 0.0, "{name}: all zero");
-        assert!(loose.len() * 100 <= x.len() && tight.len() * 50 <= x.len(), "{name}: {} (1e-3) and {} (1e-4) of {} elements differ between the two backwards", loose.len(), tight.len(), x.len());
+        assert!(
+            loose.len() * 100 <= x.len() && tight.len() * 50 <= x.len(),
+            "{name}: {} (1e-3) and {} (1e-4) of {} elements differ between the two backwards",
+            loose.len(),
+            tight.len(),
+            x.len()
+        );
     }
     check_validation(ctx);
 }

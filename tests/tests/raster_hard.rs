@@ -112,8 +112,8 @@ fn behind_camera_and_near_plane() {
     s.push([0.0, 0.0, -1.0], [-1.0, -1.0], q, 2.0, &feats(&mut rng, 48)); // behind
     s.push([0.01, 0.0, 0.1], [-1.0, -1.0], q, 2.0, &feats(&mut rng, 48)); // before the near plane
     s.push([0.0, 0.01, 0.2], [-1.0, -1.0], q, 2.0, &feats(&mut rng, 48)); // exactly at it (culled)
-    // Straddling: centre just past the near plane, tilted and large, so
-    // part of the splat is hit in front of z = 0.2 (those hits are skipped).
+                                                                          // Straddling: centre just past the near plane, tilted and large, so
+                                                                          // part of the splat is hit in front of z = 0.2 (those hits are skipped).
     s.push([0.0, 0.0, 0.25], [0.0, 0.0], [0.8, 0.5, 0.0, 0.0], 1.0, &feats(&mut rng, 48));
     s.push([0.05, -0.02, 0.21], [-0.5, -0.5], [0.9, 0.0, 0.4, 0.0], 1.0, &feats(&mut rng, 48));
     for _ in 0..10 {
@@ -412,7 +412,11 @@ fn pixel_boxes_hold_every_reached_pixel() {
         let t = r.map(|v| (v * frame.tile) as f64);
         let count = |lo: f64, hi: f64, tlo: f64, thi: f64, max: f64| {
             let (a, z) = (lo.ceil().max(tlo), hi.floor().min(thi - 1.0).min(max));
-            if z >= a { (z - a + 1.0) as usize } else { 0 }
+            if z >= a {
+                (z - a + 1.0) as usize
+            } else {
+                0
+            }
         };
         in_boxes += count(b[0], b[2], t[0], t[2], w) * count(b[1], b[3], t[1], t[3], h);
         in_tiles += count(t[0], t[2], t[0], t[2], w) * count(t[1], t[3], t[1], t[3], h);

@@ -11,7 +11,7 @@
 //! and these cases share the reference's helpers.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{ColorInputs, CompositePriors, EnvProxy, Camera, EnvMap, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
+use tgs_pipelines::{Camera, ColorInputs, CompositePriors, EnvMap, EnvProxy, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, ReflectionShading};
 use tgs_tests::reflection_ref::{self as rr, CompositePixel, ReflGaussian, V3};
 use tgs_tests::{check_validation, ctx_shared, seed, Rng};
 
@@ -280,20 +280,14 @@ fn check_backward(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel
     check_backward_with(gs, env, res, fresnel, rng, &what, &gpu, &loss)
 }
 
+/// A function of the set, the texels and the feature gradients.
+type SetFn<'a, T> = dyn Fn(&[ReflGaussian], &[f64], &[f64]) -> T + 'a;
+
 /// The colour backward `gpu` (Gaussians, texels, feature gradients) against
 /// central differences of the reference `loss` (the same arguments; the
 /// inputs rounded to f32 as the GPU sees them).
 #[allow(clippy::too_many_arguments)]
-fn check_backward_with(
-    gs: &[ReflGaussian],
-    env: &[f64],
-    res: usize,
-    fresnel: Fresnel,
-    rng: &mut Rng,
-    what: &str,
-    gpu: &dyn Fn(&[ReflGaussian], &[f64], &[f64]) -> Backward,
-    loss: &dyn Fn(&[ReflGaussian], &[f64], &[f64]) -> f64,
-) -> Backward {
+fn check_backward_with(gs: &[ReflGaussian], env: &[f64], res: usize, fresnel: Fresnel, rng: &mut Rng, what: &str, gpu: &SetFn<'_, Backward>, loss: &SetFn<'_, f64>) -> Backward {
     let ch = fresnel.channels() as usize;
     let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(rng, -1.0, 1.0)).collect();
     // The reference sees the f32-rounded inputs the GPU sees.
@@ -406,7 +400,11 @@ fn parallax_proxy_lookup_matches_reference() {
                 assert!(got_i.iter().all(|v| v.is_finite()), "res {res} {fresnel:?} Gaussian {i}: {got_i:?}");
                 if (0..ch).all(|c| (got_i[c] as f64 - want[c]).abs() < 2e-4) {
                     let o: f64 = (0..3).map(|k| (g32.p[k] - PROXY.0[k]).powi(2)).sum::<f64>().sqrt();
-                    if o < PROXY.1 { inside += 1 } else { off += 1 }
+                    if o < PROXY.1 {
+                        inside += 1
+                    } else {
+                        off += 1
+                    }
                     continue;
                 }
                 // A tie on a seam (as in the test without a proxy).
@@ -471,7 +469,11 @@ fn depth_mapped_lookup_matches_reference() {
                 let got_i = &got[ch * i..ch * (i + 1)];
                 assert!(got_i.iter().all(|v| v.is_finite()), "res {res} {fresnel:?} Gaussian {i}: {got_i:?}");
                 if (0..ch).all(|c| (got_i[c] as f64 - want[c]).abs() < 2e-4) {
-                    if last.is_some() { moved += 1 } else { kept += 1 }
+                    if last.is_some() {
+                        moved += 1
+                    } else {
+                        kept += 1
+                    }
                     continue;
                 }
                 // f32 and f64 may take a different number of steps where a
@@ -484,7 +486,7 @@ fn depth_mapped_lookup_matches_reference() {
                 // the mirror direction the first depth lookup takes.
                 let nudge = |v: V3, k: usize| {
                     let mut v = norm(v);
-                    v[k / 2] += if k % 2 == 0 { 1e-6 } else { -1e-6 };
+                    v[k / 2] += if k.is_multiple_of(2) { 1e-6 } else { -1e-6 };
                     v
                 };
                 let matches = |d2: V3| (0..3).all(|c| (got_i[c] as f64 - rr::color_along(&g32, &env, res, d2, schlick)[c]).abs() < 2e-4);
@@ -545,10 +547,13 @@ fn depth_mapped_backward_matches_finite_differences() {
         let gpu = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| gpu_backward_light(gs, env, res, fresnel, dfeat, Some(PROXY), Some(&depth));
         let loss = |gs: &[ReflGaussian], env: &[f64], dfeat: &[f64]| {
             let ch = fresnel.channels() as usize;
-            gs.iter().enumerate().map(|(i, g)| {
-                let d = rr::proxy_dir(g.p, rr::mirror_dir(g, CENTRE), radii[i].map(|r| (c32, r)));
-                rr::color_along(g, env, res, d, schlick).iter().enumerate().map(|(c, v)| v * dfeat[ch * i + c]).sum::<f64>()
-            }).sum()
+            gs.iter()
+                .enumerate()
+                .map(|(i, g)| {
+                    let d = rr::proxy_dir(g.p, rr::mirror_dir(g, CENTRE), radii[i].map(|r| (c32, r)));
+                    rr::color_along(g, env, res, d, schlick).iter().enumerate().map(|(c, v)| v * dfeat[ch * i + c]).sum::<f64>()
+                })
+                .sum()
         };
         let a = check_backward_with(&gs, &env, res, fresnel, &mut rng, "depth-mapped lookup", &gpu, &loss);
         // Bit-identical on a rerun.
@@ -569,10 +574,12 @@ fn color_backward_matches_finite_differences() {
     for proxy in [None, Some(PROXY)] {
         for fresnel in [Fresnel::Off, Fresnel::Schlick] {
             let env = random_env(&mut rng, 3);
-            let gs: Vec<_> = (0..24).map(|_| {
-                let w = random_dir(&mut rng);
-                random_gaussian(&mut rng, w)
-            }).collect();
+            let gs: Vec<_> = (0..24)
+                .map(|_| {
+                    let w = random_dir(&mut rng);
+                    random_gaussian(&mut rng, w)
+                })
+                .collect();
             check_backward(&gs, &env, 3, fresnel, &mut rng, "random directions", proxy);
         }
     }
@@ -585,10 +592,12 @@ fn texel_gradients_sum_many_gaussians_per_texel_deterministically() {
     // texel's slots span several reduction chunks.
     let mut rng = Rng(seed("texel_sum"));
     let env = random_env(&mut rng, 1);
-    let gs: Vec<_> = (0..300).map(|_| {
-        let w = random_dir(&mut rng);
-        random_gaussian(&mut rng, w)
-    }).collect();
+    let gs: Vec<_> = (0..300)
+        .map(|_| {
+            let w = random_dir(&mut rng);
+            random_gaussian(&mut rng, w)
+        })
+        .collect();
     let ch = Fresnel::Off.channels() as usize;
     let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64).collect();
     let a = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat, None);
@@ -647,7 +656,15 @@ fn degenerate_reflection_gaussians_stay_finite() {
 // ---- the deferred composite ----
 
 fn comp_camera(w: u32, h: u32) -> Camera {
-    Camera { width: w, height: h, fx: 1.1 * w as f32, fy: 1.05 * w as f32, cx: 0.45 * w as f32, cy: 0.55 * h as f32, world_to_view: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] }
+    Camera {
+        width: w,
+        height: h,
+        fx: 1.1 * w as f32,
+        fy: 1.05 * w as f32,
+        cx: 0.45 * w as f32,
+        cy: 0.55 * h as f32,
+        world_to_view: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+    }
 }
 
 /// Random per-pixel inputs with the hard cases in the first pixels: no
@@ -734,7 +751,9 @@ fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_i
     let mut rec = Recorder::new(ctx).unwrap();
     let inputs = tgs_pipelines::reflection::CompositeInputs { scat: &s, refl: &r };
     shading.record_composite(&mut rec, cam, fresnel, &inputs, &li).unwrap();
-    shading.record_composite_backward(&mut rec, cam, fresnel, &inputs, &tgs_pipelines::reflection::CompositeGrads { loss_grad: &gi, refl_grad: &gr, scat_grad: Some(&gs) }, prior).unwrap();
+    shading
+        .record_composite_backward(&mut rec, cam, fresnel, &inputs, &tgs_pipelines::reflection::CompositeGrads { loss_grad: &gi, refl_grad: &gr, scat_grad: Some(&gs) }, prior)
+        .unwrap();
     rec.submit_and_wait().unwrap();
     (li.download().unwrap(), gr.download().unwrap(), gs.download().unwrap())
 }

@@ -6,26 +6,13 @@
 //! radial normals; no residual gives no seeds, and neither does residual
 //! over every view (glass that fills the frame: nothing is carved).
 
-use tgs::train::stages::reflection::seed::{fit_plane, hull_seeding, jacobi_eigen, min_hits, pixel_of, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView};
+use tgs::train::stages::reflection::seed::{
+    fit_plane, hull_seeding, jacobi_eigen, min_hits, pixel_of, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView,
+};
 use tgs_pipelines::Camera;
 use tgs_tests::raster_util::splat_normal;
+use tgs_tests::seed_scenes::*;
 use tgs_tests::{seed, Rng};
-
-type V3 = [f64; 3];
-
-fn uniform(r: &mut Rng) -> f64 {
-    (r.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-}
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn norm(a: V3) -> V3 {
-    let l = dot(a, a).sqrt();
-    a.map(|c| c / l)
-}
 
 #[test]
 fn quaternion_for_a_normal_has_that_normal() {
@@ -70,80 +57,6 @@ fn jacobi_eigenpairs_of_symmetric_matrices() {
     }
 }
 
-const SPHERE_R: f64 = 0.5;
-const BALL_R: f64 = 0.2;
-const SIZE: u32 = 64;
-
-/// First positive t of the ray o + t d (d unit) on the sphere of radius r at the origin.
-fn hit(o: V3, d: V3, r: f64) -> Option<f64> {
-    let b = dot(o, d);
-    let c = dot(o, o) - r * r;
-    let disc = b * b - c;
-    if disc < 0.0 {
-        return None;
-    }
-    let t = -b - disc.sqrt();
-    (t > 0.0).then_some(t)
-}
-
-/// A ring of cameras around the origin, each view's residual (0.03 on the
-/// glass sphere's silhouette, plus that on a fraction `noise` of the other
-/// pixels, at random) and Stage I depth (the opaque inner ball; none
-/// elsewhere).
-fn views(noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    ring(24, noise, glass)
-}
-
-/// A `SIZE`² view from `eye` towards `target` (vertical field of view
-/// `fov`) and its two per-pixel planes: `pixel` maps the pixel's unit world
-/// ray direction, and the length of its view ray at view depth 1 (which
-/// turns a distance along the ray into view depth), to (residual, depth).
-fn cast(eye: V3, target: [f32; 3], fov: f32, mut pixel: impl FnMut(V3, f64) -> (f32, f32)) -> (Camera, Vec<f32>, Vec<f32>) {
-    let cam = Camera::look_at(eye.map(|c| c as f32), target, [0.0, 0.0, 1.0], fov, SIZE, SIZE);
-    let m = cam.world_to_view;
-    let n = (SIZE * SIZE) as usize;
-    let (mut r, mut z) = (vec![0.0f32; n], vec![0.0f32; n]);
-    for p in 0..n {
-        let (u, v) = ((p as u32 % SIZE) as f64, (p as u32 / SIZE) as f64);
-        let dv = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
-        // World direction R^T d_view.
-        let d = norm([0, 1, 2].map(|j| (0..3).map(|k| m[k][j] as f64 * dv[k]).sum::<f64>()));
-        (r[p], z[p]) = pixel(d, dot(dv, dv).sqrt());
-    }
-    (cam, r, z)
-}
-
-/// [`views`] from `count` cameras.
-fn ring(count: usize, noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let mut rng = Rng(7);
-    let (mut cams, mut res, mut depth) = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..count {
-        let a = i as f64 * std::f64::consts::TAU / count as f64;
-        let h = if i % 2 == 0 { 0.4 } else { 1.0 };
-        let e = [3.0 * a.cos(), 3.0 * a.sin(), h];
-        let (cam, r, z) = cast(e, [0.0; 3], 0.7, |d, len| {
-            let r = if (glass && hit(e, d, SPHERE_R).is_some()) || uniform(&mut rng) < noise { 0.03 } else { 0.0 };
-            (r, hit(e, d, BALL_R).map_or(0.0, |t| (t / len) as f32))
-        });
-        cams.push(cam);
-        res.push(r);
-        depth.push(z);
-    }
-    (cams, res, depth)
-}
-
-/// Each seed's angle in degrees between its normal and the sphere's radial
-/// direction at its position, sorted.
-fn radial_error(set: &[Seed]) -> Vec<f64> {
-    let mut e: Vec<f64> = set.iter().map(|s| {
-        let x = s.position.map(f64::from);
-        let r = dot(x, x).sqrt();
-        dot(s.normal.map(f64::from), x.map(|c| c / r)).clamp(-1.0, 1.0).acos().to_degrees()
-    }).collect();
-    e.sort_by(f64::total_cmp);
-    e
-}
-
 #[test]
 fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     let (cams, res, depth) = views(0.05, true);
@@ -162,7 +75,14 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     off.sort_by(f64::total_cmp);
     let radial = radial_error(&seeds);
     let pct = |v: &[f64], q: f64| v[((v.len() - 1) as f64 * q) as usize];
-    eprintln!("distance to the sphere: 5% {:.3} median {:.3} 95% {:.3}; normal error median {:.1} 90% {:.1} deg", pct(&off, 0.05), pct(&off, 0.5), pct(&off, 0.95), pct(&radial, 0.5), pct(&radial, 0.9));
+    eprintln!(
+        "distance to the sphere: 5% {:.3} median {:.3} 95% {:.3}; normal error median {:.1} 90% {:.1} deg",
+        pct(&off, 0.05),
+        pct(&off, 0.5),
+        pct(&off, 0.95),
+        pct(&radial, 0.5),
+        pct(&radial, 0.9)
+    );
     // A visual hull encloses the surface: seeds are on or just outside it
     // (never inside by more than the march step), mostly within 10% of its radius.
     assert!(pct(&off, 0.01) > -0.03, "seeds inside the glass: {:.3}", pct(&off, 0.01));
@@ -182,10 +102,15 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
         assert_eq!((v.position, v.scale), (s.position, s.scale));
         let n = v.normal.map(f64::from);
         let x = v.position.map(f64::from);
-        let best = cams.iter().enumerate().map(|(i, c)| {
-            let d = sub(c.centre().map(f64::from), x);
-            (dot(n, d) / dot(d, d).sqrt(), i)
-        }).max_by(|a, b| a.0.total_cmp(&b.0)).unwrap();
+        let best = cams
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let d = sub(c.centre().map(f64::from), x);
+                (dot(n, d) / dot(d, d).sqrt(), i)
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+            .unwrap();
         assert!(best.0 > 1.0 - 1e-5, "seed normal {n:?} faces no camera (best cosine {})", best.0);
         used.insert(best.1);
     }
@@ -225,7 +150,13 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
         assert!(cos > 1.0 - 1e-5 && (dot(nh, nh) - 1.0).abs() < 1e-4, "halfway {nh:?} against the bisector of {ng:?} and {nv:?}");
     }
     let eh = radial_error(&half);
-    assert!(pct(&eh, 0.5) < pct(&ev, 0.5) - 10.0 && pct(&eh, 0.5) > pct(&eg, 0.5), "halfway median {:.1} against gradient {:.1} and view {:.1} deg", pct(&eh, 0.5), pct(&eg, 0.5), pct(&ev, 0.5));
+    assert!(
+        pct(&eh, 0.5) < pct(&ev, 0.5) - 10.0 && pct(&eh, 0.5) > pct(&eg, 0.5),
+        "halfway median {:.1} against gradient {:.1} and view {:.1} deg",
+        pct(&eh, 0.5),
+        pct(&eg, 0.5),
+        pct(&ev, 0.5)
+    );
     assert_eq!(half, residual_hull_seeds(&sv, &ph));
 }
 
@@ -321,14 +252,28 @@ fn min_hits_is_the_binomial_tail_quantile() {
 fn seeds_on_the_glass_through_dense_residual_noise() {
     let (cams, res, depth) = ring(48, 0.3, true);
     let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-    let near = |set: &[Seed]| set.iter().filter(|s| {
-        let x = s.position.map(f64::from);
-        (dot(x, x).sqrt() - SPHERE_R).abs() < 0.05
-    }).count() as f64 / set.len().max(1) as f64;
+    let near = |set: &[Seed]| {
+        set.iter()
+            .filter(|s| {
+                let x = s.position.map(f64::from);
+                (dot(x, x).sqrt() - SPHERE_R).abs() < 0.05
+            })
+            .count() as f64
+            / set.len().max(1) as f64
+    };
     let base = SeedParams { max_rays: 3000, ..SeedParams::default() };
     let at = |a: f64| residual_hull_seeds(&sv, &SeedParams { significance: a, ..base });
     let (loose, default, tight) = (at(1.0), at(base.significance), at(1e-8));
-    eprintln!("within 0.05 of the glass: {:.1}% of {} seeds without the test, {:.1}% of {} at {:e}, {:.1}% of {} at 1e-8", 100.0 * near(&loose), loose.len(), 100.0 * near(&default), default.len(), base.significance, 100.0 * near(&tight), tight.len());
+    eprintln!(
+        "within 0.05 of the glass: {:.1}% of {} seeds without the test, {:.1}% of {} at {:e}, {:.1}% of {} at 1e-8",
+        100.0 * near(&loose),
+        loose.len(),
+        100.0 * near(&default),
+        default.len(),
+        base.significance,
+        100.0 * near(&tight),
+        tight.len()
+    );
     assert!(near(&loose) < 0.2, "without the test: {:.2} on the glass", near(&loose));
     assert!(near(&default) > 2.0 * near(&loose), "default {:.2} against {:.2} without", near(&default), near(&loose));
     assert!(tight.len() > 300 && near(&tight) > 0.75, "at 1e-8: {} seeds, {:.2} on the glass", tight.len(), near(&tight));
@@ -348,7 +293,13 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     // Views whose image the seed projects into.
     let seen_by = |s: &Seed| cams.iter().filter(|c| pixel_of(c, s.position.map(f64::from)).is_some()).count();
     let mean_seen = |set: &[Seed]| set.iter().map(seen_by).sum::<usize>() as f64 / set.len().max(1) as f64;
-    eprintln!("without the test, first agreeing / most agreeing point: {:.1}% / {:.1}% within 0.05 of the glass, seen by {:.1} / {:.1} views", 100.0 * near(&loose), 100.0 * near(&dropped.seeds), mean_seen(&loose), mean_seen(&dropped.seeds));
+    eprintln!(
+        "without the test, first agreeing / most agreeing point: {:.1}% / {:.1}% within 0.05 of the glass, seen by {:.1} / {:.1} views",
+        100.0 * near(&loose),
+        100.0 * near(&dropped.seeds),
+        mean_seen(&loose),
+        mean_seen(&dropped.seeds)
+    );
     assert!(near(&dropped.seeds) > near(&loose) + 0.1, "most agreeing {:.2} against first agreeing {:.2} on the glass", near(&dropped.seeds), near(&loose));
     assert!(mean_seen(&dropped.seeds) > mean_seen(&loose));
     // There the masks have no outline to take a normal from: the seeds
@@ -356,16 +307,22 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     assert_eq!(base.normal, SeedNormal::Halfway);
     for sd in &dropped.seeds {
         let (n, x) = (sd.normal.map(f64::from), sd.position.map(f64::from));
-        let best = cams.iter().map(|c| {
-            let d = sub(c.centre().map(f64::from), x);
-            dot(n, d) / dot(d, d).sqrt()
-        }).fold(-1.0f64, f64::max);
+        let best = cams
+            .iter()
+            .map(|c| {
+                let d = sub(c.centre().map(f64::from), x);
+                dot(n, d) / dot(d, d).sqrt()
+            })
+            .fold(-1.0f64, f64::max);
         assert!(best > 1.0 - 1e-5, "fallback seed normal {n:?} faces no camera (best cosine {best})");
     }
     assert_eq!(seeding(1e-300), dropped);
     assert_eq!(hull_seeding(&sv, &SeedParams { significance: 1e-300, normal: SeedNormal::View, ..base }), dropped);
     // Looser levels before that fallback (`relax`; Stage II's with masks): the first that some point beats, not one below the test's.
-    assert_eq!(hull_seeding(&sv, &SeedParams { significance: 1e-300, relax: &[1e-301, 1e-8, 1.0], ..base }), HullSeeding { seeds: tight.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false, significance_relaxed: Some(1e-8) });
+    assert_eq!(
+        hull_seeding(&sv, &SeedParams { significance: 1e-300, relax: &[1e-301, 1e-8, 1.0], ..base }),
+        HullSeeding { seeds: tight.clone(), rim_views: 0, rim_seeds: 0, significance_dropped: false, significance_relaxed: Some(1e-8) }
+    );
 }
 
 /// The march and the normals run on threads, each on a contiguous run of
@@ -386,34 +343,6 @@ fn seeds_are_the_same_at_any_thread_count() {
     }
 }
 
-/// A window in a wall, captured from one side (a shop window, a facade):
-/// the wall is the plane x = 0, the glass fills |y| <= 1, 0.2 <= z <= 1.2
-/// of it, the room's back wall is x = -2, and the cameras stand on the +x
-/// side within 50 degrees of the window's normal. Each view's mask is the
-/// window and its Stage I depth the wall, or the back wall through the window.
-fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..count {
-        let a = (-50.0 + 100.0 * i as f64 / (count - 1) as f64).to_radians();
-        let h = if i % 2 == 0 { 0.5 } else { 1.6 };
-        let e = [3.5 * a.cos(), 3.5 * a.sin(), h];
-        let (cam, r, z) = cast(e, [0.0, 0.0, 0.7], 0.8, |d, len| {
-            if d[0] >= -1e-9 {
-                return (0.0, 0.0);
-            }
-            let t = -e[0] / d[0];
-            let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
-            let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
-            let t = if glass { (-2.0 - e[0]) / d[0] } else { t };
-            (glass as u8 as f32, (t / len) as f32)
-        });
-        cams.push(cam);
-        masks.push(r);
-        depth.push(z);
-    }
-    (cams, masks, depth)
-}
-
 /// The window's masks make a wedge for a hull (no view sees the glass
 /// from the side), and its first points lie in front of the glass; the
 /// rim (the wall, at the masks' edges in every view) gives each view the
@@ -431,7 +360,17 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
     let off = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.position[0] as f64).abs()).collect());
     let tilt = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.normal[0] as f64).clamp(-1.0, 1.0).acos().to_degrees()).collect());
-    eprintln!("window: {} hull seeds a median {:.3} off the glass, normals {:.1} degrees; with the rim {} seeds ({} on the planes of {} views) {:.4} off, {:.2} degrees", hull.seeds.len(), off(&hull), tilt(&hull), rim.seeds.len(), rim.rim_seeds, rim.rim_views, off(&rim), tilt(&rim));
+    eprintln!(
+        "window: {} hull seeds a median {:.3} off the glass, normals {:.1} degrees; with the rim {} seeds ({} on the planes of {} views) {:.4} off, {:.2} degrees",
+        hull.seeds.len(),
+        off(&hull),
+        tilt(&hull),
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views,
+        off(&rim),
+        tilt(&rim)
+    );
     assert_eq!((hull.rim_views, hull.rim_seeds), (0, 0));
     assert!(hull.seeds.len() > 500 && off(&hull) > 0.1, "the wedge: {} seeds a median {} in front", hull.seeds.len(), off(&hull));
     assert_eq!(rim.rim_views, cams.len(), "every view's window is ringed by wall");
@@ -447,22 +386,37 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
     // extra ring meet the plane on the wall, behind Stage I's surface, and
     // their first hull points lie in the wedge in front of the plane: they
     // are dropped, not seeded there.
-    let grown: Vec<Vec<f32>> = masks.iter().map(|m| {
-        let n = SIZE as i64;
-        (0..m.len() as i64).map(|i| {
-            let (x, y) = (i % n, i / n);
-            let near = (-1..=1).any(|dy: i64| (-1..=1).any(|dx: i64| {
-                let (a, b) = (x + dx, y + dy);
-                a >= 0 && b >= 0 && a < n && b < n && m[(b * n + a) as usize] > 0.5
-            }));
-            near as u8 as f32
-        }).collect()
-    }).collect();
+    let grown: Vec<Vec<f32>> = masks
+        .iter()
+        .map(|m| {
+            let n = SIZE as i64;
+            (0..m.len() as i64)
+                .map(|i| {
+                    let (x, y) = (i % n, i / n);
+                    let near = (-1..=1).any(|dy: i64| {
+                        (-1..=1).any(|dx: i64| {
+                            let (a, b) = (x + dx, y + dy);
+                            a >= 0 && b >= 0 && a < n && b < n && m[(b * n + a) as usize] > 0.5
+                        })
+                    });
+                    near as u8 as f32
+                })
+                .collect()
+        })
+        .collect();
     let sv: Vec<SeedView> = cams.iter().zip(grown.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
     let hull = hull_seeding(&sv, &base);
     let rim = hull_seeding(&sv, &SeedParams { rim: true, ..base });
     let front = |h: &HullSeeding| h.seeds.iter().filter(|s| s.position[0] > 0.1).count();
-    eprintln!("grown masks: {} of {} hull seeds more than 0.1 in front; with the rim {} of {} ({} on the planes of {} views)", front(&hull), hull.seeds.len(), front(&rim), rim.seeds.len(), rim.rim_seeds, rim.rim_views);
+    eprintln!(
+        "grown masks: {} of {} hull seeds more than 0.1 in front; with the rim {} of {} ({} on the planes of {} views)",
+        front(&hull),
+        hull.seeds.len(),
+        front(&rim),
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views
+    );
     assert_eq!(rim.rim_views, cams.len());
     assert!(front(&hull) > hull.seeds.len() / 4, "the grown masks' wedge");
     assert!(front(&rim) == 0 && off(&rim) < 0.01, "{} seeds in the wedge, median {} off", front(&rim), off(&rim));
@@ -482,10 +436,12 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
 fn rim_plane_fit_recovers_the_plane_through_outliers() {
     let mut rng = Rng(seed("rim_plane_fit_recovers_the_plane_through_outliers"));
     let want = [0.12, -0.05, 0.31];
-    let mut pts: Vec<[f64; 3]> = (0..200).map(|_| {
-        let (x, y) = (uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5);
-        [x, y, want[0] * x + want[1] * y + want[2]]
-    }).collect();
+    let mut pts: Vec<[f64; 3]> = (0..200)
+        .map(|_| {
+            let (x, y) = (uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5);
+            [x, y, want[0] * x + want[1] * y + want[2]]
+        })
+        .collect();
     let got = fit_plane(&pts).expect("a plane");
     assert!((0..3).all(|k| (got[k] - want[k]).abs() < 1e-9), "{got:?}");
     for (i, p) in pts.iter_mut().enumerate() {

@@ -5,7 +5,7 @@
 //! bit.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Adam, DensifyParams, Densifier, HostGaussians, TrainableSet};
+use tgs_pipelines::{Adam, Densifier, DensifyParams, HostGaussians, TrainableSet};
 use tgs_tests::train_cases::{densify_cases as cases, fused_case, FusedCase};
 use tgs_tests::{check_validation, ctx_shared, seed, Rng};
 

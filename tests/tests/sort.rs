@@ -66,8 +66,7 @@ fn check(sort: &RadixSort, keys_in: &[u32], bits: u32, what: &str) {
     pairs.sort_unstable();
     let idx: Vec<u32> = pairs.into_iter().map(|p| p.1).collect();
     if let Some(i) = (0..n).find(|&i| gv[i] != idx[i]) {
-        panic!("{what}: first mismatch at {i}: value {} (key {:#x}), expected {} (key {:#x})",
-            gv[i], keys_in[gv[i] as usize], idx[i], keys_in[idx[i] as usize]);
+        panic!("{what}: first mismatch at {i}: value {} (key {:#x}), expected {} (key {:#x})", gv[i], keys_in[gv[i] as usize], idx[i], keys_in[idx[i] as usize]);
     }
     let ek: Vec<u32> = idx.iter().map(|&i| keys_in[i as usize]).collect();
     assert!(gk == ek, "{what}: keys differ although values match");

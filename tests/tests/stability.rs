@@ -66,7 +66,12 @@ fn long_run_of_every_stage_stays_finite_and_bounded() {
         let means = get(&format!("{set}param.means"));
         assert!(max_abs(means) < 10.0 * e, "{set}means up to {} (extent {e})", max_abs(means));
         let ls = get(&format!("{set}param.log_scales"));
-        assert!(ls.iter().all(|&s| s < e.ln() && s > -30.0), "{set}log_scales in [{}, {}]", ls.iter().cloned().fold(f32::INFINITY, f32::min), ls.iter().cloned().fold(f32::NEG_INFINITY, f32::max));
+        assert!(
+            ls.iter().all(|&s| s < e.ln() && s > -30.0),
+            "{set}log_scales in [{}, {}]",
+            ls.iter().cloned().fold(f32::INFINITY, f32::min),
+            ls.iter().cloned().fold(f32::NEG_INFINITY, f32::max)
+        );
         assert!(max_abs(get(&format!("{set}param.opacity"))) < 50.0);
         assert!(max_abs(get(&format!("{set}param.features"))) < 50.0, "{set}features up to {}", max_abs(get(&format!("{set}param.features"))));
     }

@@ -11,8 +11,8 @@
 //! pulling R down.
 
 use std::sync::Arc;
-use tgs::train::stages::reflection::{ReflStepInput, ReflectionModel};
 use tgs::train::stages::reflection::seed::quat_for_normal;
+use tgs::train::stages::reflection::{ReflStepInput, ReflectionModel};
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Context, Recorder};
 use tgs_pipelines::{Camera, EnvMap, Features, Fresnel, Gaussians, HostEnvMap, HostGaussians, Plane, Rasterizer, ReflectionShading};
@@ -242,7 +242,12 @@ fn stage_two_turns_tilted_normals_back_to_a_mirror_sphere() {
     for lambda_normal in [0.0, 0.05] {
         let o = run(ctx_shared(), &Setup { lambda_normal, ..Setup::default() });
         println!("grey map, normal consistency {lambda_normal}: normal error {:.2} -> {:.2} degrees", o.before, o.after);
-        assert!(o.after.is_finite() && o.after < 8.0, "with normal consistency {lambda_normal} Stage II left the normals {:.2} degrees off the sphere (from {:.2})", o.after, o.before);
+        assert!(
+            o.after.is_finite() && o.after < 8.0,
+            "with normal consistency {lambda_normal} Stage II left the normals {:.2} degrees off the sphere (from {:.2})",
+            o.after,
+            o.before
+        );
     }
 }
 

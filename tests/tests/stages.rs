@@ -88,9 +88,23 @@ fn the_run_directory_claims_every_stage_file() {
     // The list as it was written out by hand before the stages listed
     // their own files.
     for f in [
-        "run.json", "config.toml", "log.jsonl", "checkpoint.bin", "checkpoint-stage1.bin", "checkpoint-stage2.bin", "checkpoint-nonfinite.bin",
-        "checkpoint-time.json", "stages.json", "point_cloud.ply", "reflection.ply", "light_field.safetensors", "envmap.exr", "envmap.png",
-        "envmap_depth.exr", "envmap_depth.png", "metrics.json",
+        "run.json",
+        "config.toml",
+        "log.jsonl",
+        "checkpoint.bin",
+        "checkpoint-stage1.bin",
+        "checkpoint-stage2.bin",
+        "checkpoint-nonfinite.bin",
+        "checkpoint-time.json",
+        "stages.json",
+        "point_cloud.ply",
+        "reflection.ply",
+        "light_field.safetensors",
+        "envmap.exr",
+        "envmap.png",
+        "envmap_depth.exr",
+        "envmap_depth.png",
+        "metrics.json",
     ] {
         assert!(files.iter().any(|g| g == f), "{f} is not claimed");
     }

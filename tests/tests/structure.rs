@@ -72,7 +72,12 @@ fn paths_after(s: &str, at: usize) -> Vec<Vec<String>> {
                 let end = rest[i..].find('}').map(|e| i + e).unwrap_or(rest.len());
                 return rest[i + 1..end]
                     .split(',')
-                    .map(|item| head.iter().cloned().chain(item.trim().split("::").map(|x| x.trim().to_string()).filter(|x| !x.is_empty() && x.chars().all(|c| c.is_alphanumeric() || c == '_'))).collect())
+                    .map(|item| {
+                        head.iter()
+                            .cloned()
+                            .chain(item.trim().split("::").map(|x| x.trim().to_string()).filter(|x| !x.is_empty() && x.chars().all(|c| c.is_alphanumeric() || c == '_')))
+                            .collect()
+                    })
                     .collect();
             }
             continue;

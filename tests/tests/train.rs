@@ -8,9 +8,9 @@ use std::sync::Mutex;
 use tgs::data::{Dataset, LoadOptions};
 use tgs::train::checkpoint;
 use tgs::train::config::{paper_schedule_note, ReflectionConfig};
+use tgs::train::run::{request_stop, train, TrainArgs};
 use tgs::train::stages::reflection::seed::SeedNormal;
 use tgs::train::TrainConfig;
-use tgs::train::run::{request_stop, train, TrainArgs};
 use tgs_tests::{check_validation, ctx_shared};
 
 /// The driver's stop flag is process-wide: one driver run at a time.
@@ -18,10 +18,7 @@ static DRIVER: Mutex<()> = Mutex::new(());
 
 fn scene() -> PathBuf {
     static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-    DIR.get_or_init(|| {
-        tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("train-scene"))
-    })
-    .clone()
+    DIR.get_or_init(|| tgs_tests::tiny_glass_scene(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("train-scene"))).clone()
 }
 
 /// The schedule of the end-to-end run: 300 iterations with densification
@@ -79,7 +76,14 @@ fn stage_one_trains_and_resumes_exactly() {
     let m = o.metrics.clone().expect("test metrics");
     let ds = Dataset::load(&scene(), &LoadOptions { background: [0.0; 3], ..Default::default() }).unwrap();
     let baseline = mean_colour_psnr(&ds);
-    eprintln!("test PSNR {:.2} dB (mean-colour baseline {baseline:.2} dB), SSIM {:.3}, normal MAE {:?}; loss {:.4} -> {:.4}", m.psnr, m.ssim, m.normals.normal_mae_deg, o.first_loss.unwrap(), o.last_loss);
+    eprintln!(
+        "test PSNR {:.2} dB (mean-colour baseline {baseline:.2} dB), SSIM {:.3}, normal MAE {:?}; loss {:.4} -> {:.4}",
+        m.psnr,
+        m.ssim,
+        m.normals.normal_mae_deg,
+        o.first_loss.unwrap(),
+        o.last_loss
+    );
     // The log: one line per iteration; the loss of the last 20 well below the first 10.
     let log = log_lines(&full);
     assert_eq!(log.len(), 300);
@@ -130,7 +134,8 @@ fn stage_one_trains_and_resumes_exactly() {
         let p = full.join("renders/test").join(f);
         assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "{} missing", p.display());
     }
-    let leftovers: Vec<_> = std::fs::read_dir(&full).unwrap().filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| n.ends_with(".tmp")).collect();
+    let leftovers: Vec<_> =
+        std::fs::read_dir(&full).unwrap().filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| n.ends_with(".tmp")).collect();
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
     let img = image::open(full.join("renders/test/r_0.png")).unwrap();
     assert_eq!((img.width(), img.height()), (48, 48));
@@ -253,7 +258,10 @@ fn paper_preset_notes_small_datasets() {
 fn named_settings_read_and_write_as_their_names() {
     use tgs::train::settings::{EnvStart, LightFresnel, LightPreset, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams};
     assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::Auto);
-    assert_eq!((SeedNormal::Auto.for_source(true), SeedNormal::Auto.for_source(false), SeedNormal::View.for_source(true)), (SeedNormal::Plane, SeedNormal::Halfway, SeedNormal::View));
+    assert_eq!(
+        (SeedNormal::Auto.for_source(true), SeedNormal::Auto.for_source(false), SeedNormal::View.for_source(true)),
+        (SeedNormal::Plane, SeedNormal::Halfway, SeedNormal::View)
+    );
     for (n, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient), ("halfway", SeedNormal::Halfway), ("auto", SeedNormal::Auto)] {
         assert_eq!(SeedNormal::parse(n), Ok(want));
     }

@@ -1,9 +1,9 @@
 //! Adam and adaptive density control on the GPU against CPU expectations.
 
 use tgs_engine::{Buffer, Recorder};
-use tgs_pipelines::{Adam, AdamArrays, AdamGroup, DensifyParams, Densifier, Guard, HostGaussians, TrainableSet};
-use tgs_tests::Rng;
+use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Densifier, DensifyParams, Guard, HostGaussians, TrainableSet};
 use tgs_tests::train_cases::{densify_cases as cases, fused_case, fused_case_of, fused_groups, FusedCase};
+use tgs_tests::Rng;
 use tgs_tests::{check_validation, ctx_shared, seed};
 
 #[test]
@@ -14,7 +14,8 @@ fn adam_matches_f64_reference_and_ignores_non_finite_gradients() {
     let group = AdamGroup::split(0.01, 0.001, 4, 1);
     let adam = Adam::new(ctx, 1e-15).unwrap();
     let p0: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
-    let (param, grad, m, v) = (Buffer::from_slice(ctx, "p", &p0).unwrap(), Buffer::<f32>::new(ctx, "g", n).unwrap(), Buffer::<f32>::new(ctx, "m", n).unwrap(), Buffer::<f32>::new(ctx, "v", n).unwrap());
+    let (param, grad, m, v) =
+        (Buffer::from_slice(ctx, "p", &p0).unwrap(), Buffer::<f32>::new(ctx, "g", n).unwrap(), Buffer::<f32>::new(ctx, "m", n).unwrap(), Buffer::<f32>::new(ctx, "v", n).unwrap());
     let (mut p, mut m64, mut v64) = (p0.iter().map(|&x| x as f64).collect::<Vec<_>>(), vec![0f64; n], vec![0f64; n]);
     for t in 1..=6u64 {
         let mut g: Vec<f32> = (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32 * if rng.below(10) == 0 { 0.0 } else { 1.0 }).collect();
@@ -65,7 +66,8 @@ fn densify(seed_value: u32) -> (HostGaussians, HostGaussians, HostGaussians, [Ve
         dst.features.upload(&src.features).unwrap();
     }
     let d = Densifier::new(ctx).unwrap();
-    let p = DensifyParams { grad_threshold: 2e-4, dense_scale: 0.01 * 5.0, opacity_min: 0.05, prune_big: true, big_screen: 20.0, big_world: 0.1 * 5.0, grow: true, seed: seed_value };
+    let p =
+        DensifyParams { grad_threshold: 2e-4, dense_scale: 0.01 * 5.0, opacity_min: 0.05, prune_big: true, big_screen: 20.0, big_world: 0.1 * 5.0, grow: true, seed: seed_value };
     let r = d.densify(&mut set, &p).unwrap();
     assert_eq!((r.before, r.after), (8, 8), "kept 0, 6 (2) + clone 1 (2) + split 2, 7 (4) = 8");
     check_validation(ctx);
@@ -148,7 +150,7 @@ fn opacity_reset_caps_opacity_and_clears_its_moments() {
     let ones = vec![1.0f32; 8];
     set.m.opacity.upload(&ones).unwrap();
     set.v.opacity.upload(&ones).unwrap();
-    set.m.means.upload(&vec![1.0f32; 24]).unwrap();
+    set.m.means.upload(&[1.0f32; 24]).unwrap();
     let d = Densifier::new(ctx).unwrap();
     let mut rec = Recorder::new(ctx).unwrap();
     d.record_opacity_reset(&mut rec, &set, 0.01).unwrap();
@@ -288,7 +290,9 @@ fn the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam() {
     let ctx = ctx_shared();
     let sh3 = Features::Sh { degree: 3 };
     let FusedCase { host, cam, grad_out, adam, groups } = fused_case("the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam");
-    let bits_of = |set: &TrainableSet| -> Vec<(String, Vec<u32>)> { set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect() };
+    let bits_of = |set: &TrainableSet| -> Vec<(String, Vec<u32>)> {
+        set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect()
+    };
     let initial = bits_of(&TrainableSet::new(ctx, &host).unwrap());
     for records in record_accesses(ctx) {
         let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
@@ -345,7 +349,6 @@ fn the_fused_reduce_refuses_groups_it_cannot_express() {
     assert!(adam.reduce_constants(&set, &wrong_block, 1).is_err());
     check_validation(ctx);
 }
-
 
 /// The divergence guard against the host: a flag per array, set exactly
 /// when a value is NaN, infinite or past its limit (a bad value first,

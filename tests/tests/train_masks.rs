@@ -25,7 +25,14 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let _ = std::fs::remove_dir_all(&base);
     let scene = tgs_tests::tiny_glass_scene(&base.join("scene"));
     let stage1 = base.join("stage1");
-    let a1 = TrainArgs { dataset: Some(scene.clone()), out: stage1.clone(), preset: Some("quick".into()), set: sets(&["stages=\"I\"", "iterations=200", "test_interval=0", "checkpoint_interval=0"]), quiet: true, ..Default::default() };
+    let a1 = TrainArgs {
+        dataset: Some(scene.clone()),
+        out: stage1.clone(),
+        preset: Some("quick".into()),
+        set: sets(&["stages=\"I\"", "iterations=200", "test_interval=0", "checkpoint_interval=0"]),
+        quiet: true,
+        ..Default::default()
+    };
     assert_eq!(train(ctx, &a1).unwrap().iteration, 200);
     // One Stage II step from that Stage I with the settings `extra`: the
     // decision metrics.json records and reflection.ply's bytes.
@@ -89,12 +96,19 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     // A directory with no view's mask is refused, naming it.
     let empty = base.join("no-masks");
     std::fs::create_dir_all(&empty).unwrap();
-    let a = TrainArgs { out: base.join("refused"), set: vec![format!("reflection.seed_masks={}", empty.display())], quiet: true, from: Some(stage1.clone()), stages: Some("II".into()), ..Default::default() };
-    let e = format!("{:#}", train(ctx, &a).err().expect("a directory without masks is refused"));
+    let a = TrainArgs {
+        out: base.join("refused"),
+        set: vec![format!("reflection.seed_masks={}", empty.display())],
+        quiet: true,
+        from: Some(stage1.clone()),
+        stages: Some("II".into()),
+        ..Default::default()
+    };
+    let e = format!("{:#}", train(ctx, &a).expect_err("a directory without masks is refused"));
     assert!(e.contains("no-masks") && e.contains("no glass mask") && e.contains("r_0.png"), "{e}");
     // The views' image folder, its files named as their masks would be: refused, not read as masks.
     let a = TrainArgs { set: vec![format!("reflection.seed_masks={}", scene.join("train").display())], ..a };
-    let e = format!("{:#}", train(ctx, &a).err().expect("colour images are refused as masks"));
+    let e = format!("{:#}", train(ctx, &a).expect_err("colour images are refused as masks"));
     assert!(e.contains("colour image") && e.contains("r_0.png"), "{e}");
 
     // Turned off: the residual's seeds, recorded without masks.
@@ -118,7 +132,22 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     }
     std::fs::write(&tf, serde_json::to_string(&doc).unwrap()).unwrap();
     let out = base.join("partial-run");
-    let a = TrainArgs { dataset: Some(partial), out: out.clone(), preset: Some("quick".into()), set: sets(&["stages=\"I,II\"", "iterations=20", "reflection.iterations=1", "reflection.min_residual=0", "reflection.min_view_dependence=0", "test_interval=0", "checkpoint_interval=0"]), quiet: true, ..Default::default() };
+    let a = TrainArgs {
+        dataset: Some(partial),
+        out: out.clone(),
+        preset: Some("quick".into()),
+        set: sets(&[
+            "stages=\"I,II\"",
+            "iterations=20",
+            "reflection.iterations=1",
+            "reflection.min_residual=0",
+            "reflection.min_view_dependence=0",
+            "test_interval=0",
+            "checkpoint_interval=0",
+        ]),
+        quiet: true,
+        ..Default::default()
+    };
     assert_eq!(train(ctx, &a).unwrap().iteration, 21);
     let dp = json(&out.join("metrics.json"))["reflection"].clone();
     assert!(dp["run"] == true && dp["seed_mask_source"] == "dataset" && dp["seed_mask_views"] == serde_json::json!([n.div_ceil(4), n]), "{dp}");

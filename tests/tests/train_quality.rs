@@ -32,9 +32,22 @@ fn method_on_glass() {
     let _ = std::fs::remove_dir_all(&out);
     // The quick preset's Stage I schedule at half its length (every
     // iteration-counted setting halved).
-    let stage1 = ["iterations=1500", "sh_interval=250", "normal_from=750", "dist_from=500", "densify_from=150", "densify_until=1000", "opacity_reset_interval=500", "opacity_reset_min_after=150"];
+    let stage1 = [
+        "iterations=1500",
+        "sh_interval=250",
+        "normal_from=750",
+        "dist_from=500",
+        "densify_from=150",
+        "densify_until=1000",
+        "opacity_reset_interval=500",
+        "opacity_reset_min_after=150",
+    ];
     // The residual's seeds (the path of a dataset without training masks).
-    let set = stage1.iter().chain(&["reflection.iterations=200", "light_field.iterations=100", "test_interval=0", "checkpoint_interval=0", "reflection.dataset_masks=false"]).map(|s| s.to_string()).collect();
+    let set = stage1
+        .iter()
+        .chain(&["reflection.iterations=200", "light_field.iterations=100", "test_interval=0", "checkpoint_interval=0", "reflection.dataset_masks=false"])
+        .map(|s| s.to_string())
+        .collect();
     // No dataset: the built-in glass scene, written to OUT/scene.
     let o = train(ctx, &TrainArgs { out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }).unwrap();
     assert_eq!(o.iteration, 1800);
@@ -65,7 +78,11 @@ fn method_on_glass() {
     };
     let (mean, median) = stats(reports[0].mesh.positions.iter().map(|p| truth.surface_distance(p.map(f64::from))).collect());
     let (gmean, gmedian) = stats(reports[1].mesh.positions.iter().map(|p| Scene::glass_distance(p.map(f64::from))).collect());
-    eprintln!("meshes: scene {} triangles, distance mean {mean:.3} median {median:.3}; glass {} triangles, distance mean {gmean:.3} median {gmedian:.3}", reports[0].mesh.triangles.len(), reports[1].mesh.triangles.len());
+    eprintln!(
+        "meshes: scene {} triangles, distance mean {mean:.3} median {median:.3}; glass {} triangles, distance mean {gmean:.3} median {gmedian:.3}",
+        reports[0].mesh.triangles.len(),
+        reports[1].mesh.triangles.len()
+    );
     // Measured (lavapipe, thirtieth session, 1,500 Stage I iterations):
     // scene mean 0.292, median 0.209 (voxel 0.14: two pixels at the walls'
     // depth; 0.246 and 0.189 after 3,000); glass mean 0.422, median 0.453.
@@ -83,14 +100,26 @@ fn method_on_glass() {
     // normals beside the glass near Stage I's.
     let masked = tgs_tests::TempDir::new("quality-masks");
     let _ = std::fs::remove_dir_all(&masked);
-    let am = TrainArgs { out: masked.to_path_buf(), from: Some(out.to_path_buf()), stages: Some("II,III".into()), set: vec!["reflection.dataset_masks=true".into()], quiet: true, ..Default::default() };
+    let am = TrainArgs {
+        out: masked.to_path_buf(),
+        from: Some(out.to_path_buf()),
+        stages: Some("II,III".into()),
+        set: vec!["reflection.dataset_masks=true".into()],
+        quiet: true,
+        ..Default::default()
+    };
     assert_eq!(train(ctx, &am).unwrap().iteration, 1800);
     let mm: serde_json::Value = serde_json::from_slice(&std::fs::read(masked.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(mm["reflection"]["seed_mask_source"], "dataset");
     let ms = &mm["stages"];
     let mget = |i: usize, k: &str| ms[i]["test"][k].as_f64().unwrap_or_else(|| panic!("masked stage {i} {k}: {ms}"));
     let (mae_m, out1, out_m) = (mget(1, "normal_mae_deg"), get(0, "normal_mae_outside_deg"), mget(1, "normal_mae_outside_deg"));
-    eprintln!("masks: Stage II MAE {mae_m:.2} ({:.3}x Stage I), beside the glass {out_m:.2} (Stage I {out1:.2}); PSNR II {:.3} III {:.3}", mae_m / mae1, mget(1, "psnr"), mget(2, "psnr"));
+    eprintln!(
+        "masks: Stage II MAE {mae_m:.2} ({:.3}x Stage I), beside the glass {out_m:.2} (Stage I {out1:.2}); PSNR II {:.3} III {:.3}",
+        mae_m / mae1,
+        mget(1, "psnr"),
+        mget(2, "psnr")
+    );
     assert!(mae_m < 0.6 * mae1 && mae_m < 0.5 * mae2, "masked Stage II glass normal MAE {mae_m:.2} vs Stage I {mae1:.2}, residual seeds {mae2:.2}");
     assert!(out_m < out1 + 5.0, "masked Stage II normals beside the glass {out_m:.2} vs Stage I {out1:.2}");
     assert!(mget(2, "psnr") > get(0, "psnr"), "masked Stage III PSNR {} vs Stage I {}", mget(2, "psnr"), get(0, "psnr"));

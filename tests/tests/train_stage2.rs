@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use tgs::train::checkpoint;
 use tgs::train::run::{train, TrainArgs};
 use tgs_tests::raster_util::bits;
+use tgs_tests::mesh_checks::meshes_of_the_run;
 use tgs_tests::{check_validation, ctx_shared};
 
 fn scene() -> PathBuf {
@@ -16,69 +17,13 @@ fn scene() -> PathBuf {
 }
 
 fn args(out: &Path, extra: &[&str]) -> TrainArgs {
-    let mut set: Vec<String> = ["stages=\"I,II\"", "iterations=300", "reflection.iterations=150", "test_interval=0", "checkpoint_interval=0", "reflection.dataset_masks=false"].iter().map(|s| s.to_string()).collect();
+    let mut set: Vec<String> = ["stages=\"I,II\"", "iterations=300", "reflection.iterations=150", "test_interval=0", "checkpoint_interval=0", "reflection.dataset_masks=false"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
     set.extend(extra.iter().map(|s| s.to_string()));
     let _ = std::fs::remove_dir_all(out);
     TrainArgs { dataset: Some(scene()), out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }
-}
-
-/// `tgs mesh` on a Stage I + II run of the tiny glass scene: the scene mesh
-/// near the room's true surfaces (distances in scene units; the glass
-/// sphere's radius is 0.75, the room's 5), a glass mesh, a rerun
-/// bit-identical, and what it refuses.
-fn meshes_of_the_run(ctx: &std::sync::Arc<tgs_engine::Context>, run: &Path) {
-    use tgs::mesh::{mesh, ply, MeshArgs};
-    use tgs::scene::trace::Scene;
-    let reports = mesh(ctx, run, &MeshArgs::default()).unwrap();
-    assert_eq!(reports.iter().map(|r| r.path.file_name().unwrap().to_str().unwrap()).collect::<Vec<_>>(), ["mesh_scene.ply", "mesh_glass.ply"]);
-    let truth = Scene::new();
-    let stats = |d: &mut Vec<f64>| {
-        d.sort_by(f64::total_cmp);
-        (d.iter().sum::<f64>() / d.len() as f64, d[d.len() / 2])
-    };
-    let m = ply::read_mesh(&run.join("mesh_scene.ply")).unwrap();
-    assert_eq!(m.positions.len(), reports[0].mesh.positions.len());
-    let (mean, median) = stats(&mut m.positions.iter().map(|p| truth.surface_distance(p.map(f64::from))).collect());
-    let g = ply::read_mesh(&run.join("mesh_glass.ply")).unwrap();
-    let (gmean, gmedian) = stats(&mut g.positions.iter().map(|p| Scene::glass_distance(p.map(f64::from))).collect());
-    eprintln!("scene mesh: {} triangles, distance mean {mean:.3} median {median:.3}; glass mesh: {} triangles, distance mean {gmean:.3} median {gmedian:.3}", m.triangles.len(), g.triangles.len());
-    assert!(m.triangles.len() > 1000 && g.triangles.len() > 100);
-    // Measured (lavapipe): mean 0.252, median 0.186 at a voxel of 0.18
-    // (two pixels at the walls' depth: 48x48 views).
-    assert!(mean < 0.35 && median < 0.27, "scene mesh mean {mean} median {median}");
-    // The glass mesh is where the reflection set is. After this short Stage
-    // I (300 iterations) the residual hull puts it in front of the cameras,
-    // about 0.9 from the glass (measured): the mesh shows it, and the test
-    // of the glass mesh against the true glass is in train_quality.rs.
-    assert!(gmean.is_finite() && g.positions.iter().flatten().all(|v| v.is_finite()));
-    // Again into the same directory (its own files): the same bytes.
-    let before = std::fs::read(run.join("mesh_glass.ply")).unwrap();
-    mesh(ctx, run, &MeshArgs::default()).unwrap();
-    assert!(std::fs::read(run.join("mesh_glass.ply")).unwrap() == before, "a rerun of tgs mesh differs");
-    // Never into the dataset, never over a file tgs did not write.
-    let e = format!("{:#}", mesh(ctx, run, &MeshArgs { out: Some(scene().join("meshes")), ..Default::default() }).unwrap_err());
-    assert!(e.contains("dataset"), "{e}");
-    let other = run.join("elsewhere");
-    std::fs::create_dir_all(&other).unwrap();
-    std::fs::write(other.join("mesh_glass.ply"), b"mine").unwrap();
-    let e = format!("{:#}", mesh(ctx, run, &MeshArgs { out: Some(other.clone()), ..Default::default() }).unwrap_err());
-    assert!(e.contains("mesh_glass.ply") && e.contains("not written by tgs"), "{e}");
-    assert_eq!(std::fs::read(other.join("mesh_glass.ply")).unwrap(), b"mine");
-    assert!(!other.join("mesh_scene.ply").exists(), "nothing is written before the refusal");
-    // A grid over the memory limit is refused with its size.
-    let e = format!("{:#}", mesh(ctx, run, &MeshArgs { voxel: Some(0.001), max_bytes: 1 << 26, out: Some(run.join("fine")), ..Default::default() }).unwrap_err());
-    assert!(e.contains("MiB") && e.contains("voxel"), "{e}");
-    // Bad options are refused before any work, naming the option.
-    for (bad, what) in [
-        (MeshArgs { voxel: Some(-1.0), ..Default::default() }, "voxel size -1"),
-        (MeshArgs { trunc: Some(f32::NAN), ..Default::default() }, "truncation distance NaN"),
-        (MeshArgs { depth_max: Some(0.0), ..Default::default() }, "maximum depth 0"),
-        (MeshArgs { resolution: 0, ..Default::default() }, "--resolution"),
-    ] {
-        let e = format!("{:#}", mesh(ctx, run, &MeshArgs { out: Some(run.join("bad")), ..bad }).unwrap_err());
-        assert!(e.contains(what) && (what.starts_with("--") || e.contains("--voxel, --trunc, --depth-max")), "{e}");
-        assert!(!run.join("bad").join("mesh_scene.ply").exists());
-    }
 }
 
 fn json(path: &Path) -> serde_json::Value {
@@ -149,7 +94,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert_eq!((count("I"), count("II")), (300, 150));
     assert!(log.iter().all(|l| l["loss"].as_f64().is_none_or(f64::is_finite)));
 
-    meshes_of_the_run(ctx, &out);
+    meshes_of_the_run(ctx, &out, &scene());
 
     // --from: Stage II started from a Stage I-only run in a new directory is
     // the same Stage II, bit for bit, with the other run's Stage I record.
@@ -158,7 +103,16 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert_eq!(train(ctx, &a1).unwrap().iteration, 300);
     let from = tgs_tests::TempDir::new("stage2-from");
     let _ = std::fs::remove_dir_all(&from);
-    let af = TrainArgs { dataset: None, out: from.to_path_buf(), preset: None, set: vec!["reflection.iterations=150".into(), "test_interval=0".into()], quiet: true, from: Some(stage1.to_path_buf()), stages: Some("II".into()), ..Default::default() };
+    let af = TrainArgs {
+        dataset: None,
+        out: from.to_path_buf(),
+        preset: None,
+        set: vec!["reflection.iterations=150".into(), "test_interval=0".into()],
+        quiet: true,
+        from: Some(stage1.to_path_buf()),
+        stages: Some("II".into()),
+        ..Default::default()
+    };
     assert_eq!(train(ctx, &af).unwrap().iteration, 450);
     // (EXR chunks may be written in any order: the PNG is compared.)
     for f in ["reflection.ply", "envmap.png", "point_cloud.ply"] {
@@ -172,7 +126,7 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     // What --from refuses, with the reason named.
     let refused = |a: TrainArgs, words: &[&str]| {
         let _ = std::fs::remove_dir_all(&a.out);
-        let e = format!("{:#}", train(ctx, &a).err().expect("should be refused"));
+        let e = format!("{:#}", train(ctx, &a).expect_err("should be refused"));
         for w in words {
             assert!(e.contains(w), "'{w}' not in: {e}");
         }
@@ -241,7 +195,9 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
         std::fs::copy(&src, masks.join(format!("r_{i}.png"))).unwrap();
     }
     assert!(all_px > 0 && glass_px > 0);
-    let with_masks = |dir: &Path, extra: &[&str]| one_step("seed-masks-run", std::iter::once(format!("reflection.seed_masks={}", dir.display())).chain(extra.iter().map(|s| s.to_string())).collect());
+    let with_masks = |dir: &Path, extra: &[&str]| {
+        one_step("seed-masks-run", std::iter::once(format!("reflection.seed_masks={}", dir.display())).chain(extra.iter().map(|s| s.to_string())).collect())
+    };
     let (dm, masked_ply) = with_masks(&masks, &[]).unwrap();
     let coverage = dm["seed_mask_coverage"].as_f64().unwrap();
     assert!((coverage - glass_px as f64 / all_px as f64).abs() < 1e-12, "{dm}");
@@ -250,7 +206,13 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert_eq!(dm["seed_rim"], serde_json::json!([0, 0]), "{dm}");
     assert!(d.get("seed_rim").is_none(), "the residual's seeds have no rim: {d}");
     let (dd, default_ply) = seeding("1e-6");
-    eprintln!("mean distance of the seeds to the glass: {:.3} from the glass masks ({} seeds), {:.3} from the residual ({} seeds)", glass(&masked_ply), dm["seeds"], glass(&default_ply), dd["seeds"]);
+    eprintln!(
+        "mean distance of the seeds to the glass: {:.3} from the glass masks ({} seeds), {:.3} from the residual ({} seeds)",
+        glass(&masked_ply),
+        dm["seeds"],
+        glass(&default_ply),
+        dd["seeds"]
+    );
     assert!(dm["seeds"].as_u64().unwrap() > 100, "{dm}");
     assert!(glass(&masked_ply) < 0.5 * glass(&default_ply), "the glass masks' seeds are no nearer the glass than the residual's");
     // Their normals: "auto" takes the plane of the neighbouring seeds,
@@ -278,13 +240,16 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert!(forced["run"] == true && forced["seeds"] == dm["seeds"], "{forced}");
     // What it refuses, naming the file or the setting.
     refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.join("nowhere").display())], ..af.clone() }, &["reflection.seed_masks", "nowhere", "not a directory"]);
-    refused(TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.display()), "reflection.init=copy".into()], ..af.clone() }, &["reflection.seed_masks", "reflection.init = \"copy\""]);
+    refused(
+        TrainArgs { set: vec![format!("reflection.seed_masks={}", masks.display()), "reflection.init=copy".into()], ..af.clone() },
+        &["reflection.seed_masks", "reflection.init = \"copy\""],
+    );
     // A view without a mask takes no part in the seeding (train_masks.rs: a directory with none is refused).
     std::fs::rename(masks.join("r_1.png"), masks.join("r_1.bak")).unwrap();
     let (n, (dp, _)) = (dm["seed_mask_views"][1].as_u64().unwrap(), with_masks(&masks, &[]).unwrap());
     assert!(dm["seed_mask_views"] == serde_json::json!([n, n]) && dp["seed_mask_views"] == serde_json::json!([n - 1, n]), "{dm}\n{dp}");
     tgs::data::image_io::write_mask(&masks.join("r_1.png"), 3, 3, &[true; 9]).unwrap();
-    let e = format!("{:#}", with_masks(&masks, &[]).err().expect("a mask of the wrong size is refused"));
+    let e = format!("{:#}", with_masks(&masks, &[]).expect_err("a mask of the wrong size is refused"));
     assert!(e.contains("r_1.png") && e.contains("3x3"), "{e}");
     let _ = std::fs::remove_dir_all(&masks);
 
@@ -371,7 +336,8 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     // says what it holds, and a sphere radius beside it is refused.
     let deep = tgs_tests::TempDir::new("stage2-depth");
     let _ = std::fs::remove_dir_all(&deep);
-    let ad = TrainArgs { out: deep.to_path_buf(), set: vec!["reflection.iterations=20".into(), "test_interval=0".into(), "reflection.env_init=\"scene-depth\"".into()], ..af.clone() };
+    let ad =
+        TrainArgs { out: deep.to_path_buf(), set: vec!["reflection.iterations=20".into(), "test_interval=0".into(), "reflection.env_init=\"scene-depth\"".into()], ..af.clone() };
     assert_eq!(train(ctx, &ad).unwrap().iteration, 320);
     let md = json(&deep.join("metrics.json"));
     let di = &md["reflection"]["env_from"]["depth"];
@@ -440,7 +406,10 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     aa.set.push("reflection.train_scattering=false".into());
     assert_eq!(train(ctx, &aa).unwrap().iteration, 450);
     for f in ["reflection.ply", "point_cloud.ply"] {
-        assert!(std::fs::read(out.join(f)).unwrap() == std::fs::read(again.join(f)).unwrap(), "{f}: Stage II --from a run whose Stage II trained the colour differs from the Stage I + II run");
+        assert!(
+            std::fs::read(out.join(f)).unwrap() == std::fs::read(again.join(f)).unwrap(),
+            "{f}: Stage II --from a run whose Stage II trained the colour differs from the Stage I + II run"
+        );
     }
     // Without that file (a run from before it was written) it is refused.
     let _ = std::fs::remove_dir_all(&again);
@@ -461,7 +430,8 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
         assert_eq!(m["stages"].as_array().unwrap().len(), 1);
         assert!(!out.join("reflection.ply").exists() && !out.join("envmap.exr").exists());
         // Stage I's record keeps Stage I's time (not the moments after the skip).
-        let elapsed: Vec<f64> = std::fs::read_to_string(out.join("log.jsonl")).unwrap().lines().filter_map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["elapsed_s"].as_f64()).collect();
+        let elapsed: Vec<f64> =
+            std::fs::read_to_string(out.join("log.jsonl")).unwrap().lines().filter_map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["elapsed_s"].as_f64()).collect();
         assert_eq!(elapsed.len(), 300);
         let span = elapsed[299] - elapsed[0];
         let wall = m["stages"][0]["wall_s"].as_f64().unwrap();

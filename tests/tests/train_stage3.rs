@@ -23,7 +23,8 @@ fn scene() -> PathBuf {
 }
 
 fn args(out: &Path) -> TrainArgs {
-    let set: Vec<String> = ["iterations=300", "reflection.iterations=100", "light_field.iterations=120", "test_interval=0", "checkpoint_interval=0"].iter().map(|s| s.to_string()).collect();
+    let set: Vec<String> =
+        ["iterations=300", "reflection.iterations=100", "light_field.iterations=120", "test_interval=0", "checkpoint_interval=0"].iter().map(|s| s.to_string()).collect();
     let _ = std::fs::remove_dir_all(out);
     TrainArgs { dataset: Some(scene()), out: out.to_path_buf(), preset: Some("quick".into()), set, quiet: true, ..Default::default() }
 }
@@ -65,7 +66,15 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     assert_eq!(shape, tgs_pipelines::MlpShape::SMALL);
     assert!(params.iter().all(|v| v.is_finite()) && params.len() == shape.params() as usize);
     assert!(shade.half_extent.iter().all(|&h| h > 0.0) && (shade.threshold - 0.01).abs() < 1e-9, "{shade:?}");
-    for f in ["reflection.ply", "point_cloud.ply", "renders/stage1/r_0.png", "renders/stage2/r_0.png", "renders/test/r_0_phi_mask.png", "renders/test/r_0_refl.png", "renders/test/r_0_F0.png"] {
+    for f in [
+        "reflection.ply",
+        "point_cloud.ply",
+        "renders/stage1/r_0.png",
+        "renders/stage2/r_0.png",
+        "renders/test/r_0_phi_mask.png",
+        "renders/test/r_0_refl.png",
+        "renders/test/r_0_F0.png",
+    ] {
         assert!(full.join(f).is_file(), "missing {f}");
     }
     assert!(!full.join("envmap.exr").exists(), "Stage III drops the environment map");
@@ -126,7 +135,16 @@ fn stage_three_runs_on_glass_and_resumes_exactly() {
     }
     let from = base.join("from");
     let _ = std::fs::remove_dir_all(&from);
-    let af = TrainArgs { dataset: None, out: from.clone(), preset: None, set: vec!["light_field.iterations=120".into()], quiet: true, from: Some(two.clone()), stages: Some("III".into()), ..Default::default() };
+    let af = TrainArgs {
+        dataset: None,
+        out: from.clone(),
+        preset: None,
+        set: vec!["light_field.iterations=120".into()],
+        quiet: true,
+        from: Some(two.clone()),
+        stages: Some("III".into()),
+        ..Default::default()
+    };
     assert_eq!(train(ctx, &af).unwrap().iteration, 520);
     let (hc, ac) = checkpoint::read(&from.join("checkpoint.bin")).unwrap();
     assert_eq!((ha.iteration, ha.rng), (hc.iteration, hc.rng));

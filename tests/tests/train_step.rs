@@ -7,15 +7,15 @@
 //! must change nothing before the host grows the frame and runs the step
 //! again.
 
-use tgs::train::stages::scattering::init::{gaussians_from_points, random_points};
+use tgs::train::config::LightFieldConfig;
 use tgs::train::stages::light_field::{KeepAs, LightFieldModel, LightFieldStepInput};
 use tgs::train::stages::reflection::{ReflStepInput, ReflectionModel};
-use tgs_pipelines::Rng;
+use tgs::train::stages::scattering::init::{gaussians_from_points, random_points};
 use tgs::train::stages::scattering::{ScatteringModel, StepInput};
-use tgs::train::config::LightFieldConfig;
 use tgs::train::TrainConfig;
 use tgs_engine::{Buffer, Recorder};
 use tgs_pipelines::mlp::MlpShape;
+use tgs_pipelines::Rng;
 use tgs_pipelines::{Camera, Features, HostEnvMap, HostGaussians, Rasterizer, ShadeParams};
 use tgs_tests::{check_validation, ctx_shared};
 
@@ -230,7 +230,12 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     assert_eq!(ctx.submissions() - submitted, 1, "a Stage II step that fits is one submission (loss and high-frequency statistics ride it back)");
 
     // One Adam step moved the geometry, the material and the map.
-    assert_one_step(&before, (&reflection_bits(&a), out_a.loss), (&reflection_bits(&b), out_b.loss), &["param.means", "param.quats", "param.features", "adam_v.features", "env.params", "env.v"]);
+    assert_one_step(
+        &before,
+        (&reflection_bits(&a), out_a.loss),
+        (&reflection_bits(&b), out_b.loss),
+        &["param.means", "param.quats", "param.features", "adam_v.features", "env.params", "env.v"],
+    );
     check_validation(ctx);
 }
 
@@ -254,7 +259,18 @@ fn an_overflowed_light_field_step_updates_nothing_before_it_is_run_again() {
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
     let mut scattering = ScatteringModel::new(ctx, &g, 3, 1e-15).unwrap();
-    let input = LightFieldStepInput { iteration: 1, global_iteration: 1, camera: &cam, keep: KeepAs { view: 0, budget_mib: 0 }, target: &target, scat: Some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: false };
+    let input = LightFieldStepInput {
+        iteration: 1,
+        global_iteration: 1,
+        camera: &cam,
+        keep: KeepAs { view: 0, budget_mib: 0 },
+        target: &target,
+        scat: Some(&scat),
+        sh_degree: 3,
+        background: [0.0; 3],
+        lr_means: 1e-3,
+        profile: false,
+    };
     let shape = MlpShape { depth: 2, width: 32, skip: 1, levels_x: 4, levels_w: 2 };
     let shade = ShadeParams { centre: [0.0; 3], half_extent: [1.5; 3], threshold: 0.01, schlick: true };
     let model = || {
@@ -333,7 +349,18 @@ fn light_field_steps_from_kept_weights_match_steps_that_render_in_full() {
         for (it, view) in [0u32, 1, 0, 1].into_iter().enumerate() {
             let cam = &cams[view as usize];
             let it = it as u32 + 1;
-            let input = LightFieldStepInput { iteration: it, global_iteration: it, camera: cam, keep: KeepAs { view, budget_mib }, target: &target, scat: frozen.then_some(&scat), sh_degree: 3, background: [0.0; 3], lr_means: 1e-3, profile: true };
+            let input = LightFieldStepInput {
+                iteration: it,
+                global_iteration: it,
+                camera: cam,
+                keep: KeepAs { view, budget_mib },
+                target: &target,
+                scat: frozen.then_some(&scat),
+                sh_degree: 3,
+                background: [0.0; 3],
+                lr_means: 1e-3,
+                profile: true,
+            };
             let out = m.step(&cfg, &mut scattering, &input).unwrap();
             assert!(out.loss.is_finite());
             scopes.push(out.timings.iter().map(|t| t.name.clone()).collect());
@@ -374,7 +401,11 @@ fn light_field_steps_from_kept_weights_match_steps_that_render_in_full() {
             let sets = if frozen { 1 } else { 2 };
             // A first visit renders in full and captures its weights before
             // the backward, which takes the colour gradient from them.
-            assert_eq!((from_weights("raster.kept_colour"), from_weights("raster.kept_grad")), (if i >= 2 { sets } else { 0 }, sets), "step {i}: each set's colour from kept weights (scattering frozen: {frozen})");
+            assert_eq!(
+                (from_weights("raster.kept_colour"), from_weights("raster.kept_grad")),
+                (if i >= 2 { sets } else { 0 }, sets),
+                "step {i}: each set's colour from kept weights (scattering frozen: {frozen})"
+            );
             assert!(!has(&binned[i], "raster.kept_grad"), "step {i}: weights captured with no budget");
         }
     }

@@ -67,8 +67,20 @@ fn validation_views_reach_no_later_stage() {
     assert_eq!(later_stages(&run, |_, _| {}), plain, "Stages II and III rerun differently");
     // Views 3, 7, 11, 15 are the validation views of 16 (every 4th).
     let grey = |img: &mut Vec<f32>| img.iter_mut().for_each(|v| *v = 0.5);
-    assert_eq!(later_stages(&run, |i, img| if i % 4 == 3 { grey(img) }), plain, "a validation view's image changed Stages II / III");
-    assert_ne!(later_stages(&run, |i, img| if i == 2 { grey(img) }), plain, "a training view's image changed nothing: the test cannot tell");
+    assert_eq!(
+        later_stages(&run, |i, img| if i % 4 == 3 {
+            grey(img)
+        }),
+        plain,
+        "a validation view's image changed Stages II / III"
+    );
+    assert_ne!(
+        later_stages(&run, |i, img| if i == 2 {
+            grey(img)
+        }),
+        plain,
+        "a training view's image changed nothing: the test cannot tell"
+    );
     check_validation(ctx_shared());
 }
 

@@ -64,7 +64,7 @@ fn a_residual_fixed_to_the_surface_has_little_spread_and_one_that_follows_the_vi
     // A reflection: the same point's residual is +0.05 in even views and
     // -0.05 in odd ones (mean absolute deviation 0.05 where both are seen).
     let refl = |i: usize, x: [f32; 3]| {
-        let s = if i % 2 == 0 { 0.05 } else { -0.05 };
+        let s = if i.is_multiple_of(2) { 0.05 } else { -0.05 };
         let m = misfit(i, x);
         [m[0] + s, m[1] + s, m[2] + s]
     };
@@ -110,7 +110,7 @@ fn large_views_are_reduced_and_measure_the_same() {
     let big = ring(12, 4.0, 1.5, 256, 192);
     let small = ring(12, 4.0, 1.5, 128, 96);
     let refl = |i: usize, x: [f32; 3]| {
-        let s = if i % 3 == 0 { 0.04 } else { -0.02 };
+        let s = if i.is_multiple_of(3) { 0.04 } else { -0.02 };
         [0.05 * (2.0 * x[0]).sin() + s, s, s]
     };
     let reduced = maps(&big, &refl, 128);

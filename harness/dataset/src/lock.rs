@@ -69,7 +69,11 @@ pub fn lock_dir(dir: &Path, command: &str, quiet: bool) -> Result<DirLock> {
     }
     let since = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
     let line = format!("{command} (PID {} on {}, since Unix time {since})\n", std::process::id(), host_name());
-    file.set_len(0).and_then(|_| file.seek(SeekFrom::Start(0))).and_then(|_| file.write_all(line.as_bytes())).and_then(|_| file.flush()).with_context(|| format!("{}: cannot write", path.display()))?;
+    file.set_len(0)
+        .and_then(|_| file.seek(SeekFrom::Start(0)))
+        .and_then(|_| file.write_all(line.as_bytes()))
+        .and_then(|_| file.flush())
+        .with_context(|| format!("{}: cannot write", path.display()))?;
     Ok(DirLock { file })
 }
 

@@ -69,7 +69,11 @@ pub fn refuse_dataset(dir: &Path, dataset: Option<&Path>) -> Result<()> {
     }
     for a in d.ancestors() {
         if is_dataset_dir(a) {
-            bail!("{}: inside the dataset {} (it holds a transforms file or a COLMAP model); tgs never writes into a dataset: choose an --out outside it", dir.display(), a.display());
+            bail!(
+                "{}: inside the dataset {} (it holds a transforms file or a COLMAP model); tgs never writes into a dataset: choose an --out outside it",
+                dir.display(),
+                a.display()
+            );
         }
     }
     Ok(())

@@ -245,7 +245,12 @@ pub fn mesh(ctx: &Arc<Context>, run: &Path, args: &MeshArgs) -> Result<Vec<MeshR
         let grid = grid_for(&extent, args).with_context(|| format!("the {label} mesh's grid"))?;
         if args.progress {
             let [x, y, z] = grid.dims;
-            eprintln!("{label}: {x}x{y}x{z} voxels of {:.4} ({:.0} MiB), truncation {:.4}", grid.voxel, (x as f64 * y as f64 * z as f64 * BYTES_PER_VOXEL as f64) / 1048576.0, grid.trunc);
+            eprintln!(
+                "{label}: {x}x{y}x{z} voxels of {:.4} ({:.0} MiB), truncation {:.4}",
+                grid.voxel,
+                (x as f64 * y as f64 * z as f64 * BYTES_PER_VOXEL as f64) / 1048576.0,
+                grid.trunc
+            );
         }
         surfaces.push((Fusing::new(ctx, &fusion, grid, args, npix, label)?, name));
     }

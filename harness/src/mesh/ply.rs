@@ -48,7 +48,13 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
     let end = bytes.windows(11).position(|w| w == b"end_header\n").with_context(|| format!("{}: no PLY header", path.display()))? + 11;
     let header = std::str::from_utf8(&bytes[..end]).with_context(|| format!("{}: header is not text", path.display()))?;
     let count = |el: &str| -> Result<usize> {
-        header.lines().find_map(|l| l.strip_prefix(&format!("element {el} "))).with_context(|| format!("{}: no element {el}", path.display()))?.trim().parse().with_context(|| format!("{}: element {el} count", path.display()))
+        header
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("element {el} ")))
+            .with_context(|| format!("{}: no element {el}", path.display()))?
+            .trim()
+            .parse()
+            .with_context(|| format!("{}: element {el} count", path.display()))
     };
     if !header.contains("property list uchar uint vertex_indices") || !header.contains("property uchar blue") {
         bail!("{}: not a mesh in tgs's PLY layout", path.display());

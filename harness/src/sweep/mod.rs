@@ -114,7 +114,8 @@ impl Grid {
     /// The runs: each a list of (key, value) overriding the base, named
     /// after them ("base" for none). Each run's settings are checked.
     pub fn runs(&self, quiet: bool) -> Result<Vec<(String, Settings)>> {
-        let count = if self.product { self.knobs.iter().try_fold(1usize, |n, (_, v)| n.checked_mul(v.len())) } else { Some(1 + self.knobs.iter().map(|(_, v)| v.len()).sum::<usize>()) };
+        let count =
+            if self.product { self.knobs.iter().try_fold(1usize, |n, (_, v)| n.checked_mul(v.len())) } else { Some(1 + self.knobs.iter().map(|(_, v)| v.len()).sum::<usize>()) };
         match count {
             Some(n) if n <= MAX_RUNS => {}
             Some(n) => bail!("the grid makes {n} runs; at most {MAX_RUNS} (every run trains a model: split the grid)"),
@@ -369,7 +370,11 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
     let before = rows.len();
     rows.retain(|r| runs.iter().zip(&run_keys).any(|((n, _), k)| &r.name == n && &r.key == k));
     if rows.len() < before && !a.quiet {
-        eprintln!("sweep: {} row(s) of {} were trained with other settings or another dataset (the base, preset, defaults or data changed): dropped, their runs train again", before - rows.len(), csv.display());
+        eprintln!(
+            "sweep: {} row(s) of {} were trained with other settings or another dataset (the base, preset, defaults or data changed): dropped, their runs train again",
+            before - rows.len(),
+            csv.display()
+        );
     }
     // No font for the plots' text: said before any training, and the sweep
     // goes on without plots (the CSV holds every number they show).
@@ -396,7 +401,15 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         if dir.exists() {
             std::fs::remove_dir_all(&dir).with_context(|| format!("{}: cannot remove the unfinished run", dir.display()))?;
         }
-        let args = TrainArgs { dataset: Some(dataset.clone()), out: dir.clone(), preset: Some(grid.preset.clone()), set: grid.set_args(set), profile: true, quiet: a.quiet, ..Default::default() };
+        let args = TrainArgs {
+            dataset: Some(dataset.clone()),
+            out: dir.clone(),
+            preset: Some(grid.preset.clone()),
+            set: grid.set_args(set),
+            profile: true,
+            quiet: a.quiet,
+            ..Default::default()
+        };
         let o = train(ctx, &args).with_context(|| format!("sweep run {name}"))?;
         if o.interrupted || stop() {
             return Ok(SweepOutcome { rows, trained, interrupted: true });

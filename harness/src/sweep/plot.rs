@@ -172,7 +172,13 @@ fn one(path: &Path, rows: &[Row], (what, better): (&str, &str), y: impl Fn(&Row)
         .map_err(|e| err(&e))?;
     let seconds = |v: &f64| {
         let s = if log { 10f64.powf(*v) } else { *v };
-        if s >= 100.0 { format!("{s:.0}") } else if s >= 1.0 { format!("{s:.1}") } else { format!("{s:.2}") }
+        if s >= 100.0 {
+            format!("{s:.0}")
+        } else if s >= 1.0 {
+            format!("{s:.1}")
+        } else {
+            format!("{s:.2}")
+        }
     };
     let x_desc = if log { "training wall time (s, log scale)" } else { "training wall time (s)" };
     chart.configure_mesh().x_desc(x_desc).y_desc(what).x_label_formatter(&seconds).draw().map_err(|e| err(&e))?;
@@ -180,7 +186,11 @@ fn one(path: &Path, rows: &[Row], (what, better): (&str, &str), y: impl Fn(&Row)
     chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, BLUE.mix(0.7).filled()))).map_err(|e| err(&e))?.label("run").legend(|(x, y)| Circle::new((x, y), 4, BLUE.filled()));
     let front: Vec<usize> = pareto(rows, |r| if higher_better { y(r) } else { -y(r) }).into_iter().filter(|&i| rows[i].wall_s.is_finite() && y(&rows[i]).is_finite()).collect();
     let line: Vec<(f64, f64)> = front.iter().map(|&i| (tx(rows[i].wall_s), y(&rows[i]))).collect();
-    chart.draw_series(LineSeries::new(line.clone(), RED.stroke_width(2))).map_err(|e| err(&e))?.label("Pareto front").legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], RED.stroke_width(2)));
+    chart
+        .draw_series(LineSeries::new(line.clone(), RED.stroke_width(2)))
+        .map_err(|e| err(&e))?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], RED.stroke_width(2)));
     chart.draw_series(line.iter().map(|&p| Circle::new(p, 6, RED.stroke_width(2)))).map_err(|e| err(&e))?;
     // Numbers beside the front's points, placed clear of each other and of
     // every point (all runs' markers count).
@@ -292,7 +302,13 @@ mod drawn {
         let dir = std::env::temp_dir().join(format!("tgs-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let mut rows: Vec<Row> = (0..10)
-            .map(|k| Row { name: format!("reflection.lr_quats=1e-{k},reflection.iterations={}", 100 * k), wall_s: 30.0 + k as f64, psnr: 28.0 + 0.02 * k as f64, normal_mae_deg: 40.0 - 0.1 * k as f64, ..Row::default() })
+            .map(|k| Row {
+                name: format!("reflection.lr_quats=1e-{k},reflection.iterations={}", 100 * k),
+                wall_s: 30.0 + k as f64,
+                psnr: 28.0 + 0.02 * k as f64,
+                normal_mae_deg: 40.0 - 0.1 * k as f64,
+                ..Row::default()
+            })
             .collect();
         rows.push(Row { name: "paper".into(), wall_s: 700.0, psnr: 28.5, normal_mae_deg: 30.0, ..Row::default() });
         draw(&dir, &rows).unwrap();

@@ -8,8 +8,8 @@
 
 use crate::data::image_io::{depth_grey, write_exr, write_png, ImageF};
 use crate::data::View;
-use crate::train::trainer::Rendered;
 use crate::outdir::OutDir;
+use crate::train::trainer::Rendered;
 use crate::train::Trainer;
 use anyhow::Result;
 use serde::Serialize;
@@ -138,18 +138,22 @@ pub fn ssim(a: &[f32], b: &[f32], w: usize, h: usize, channels: usize) -> f64 {
         let mut out = vec![0.0; w * h];
         for y in 0..h {
             for x in 0..w {
-                tmp[y * w + x] = (-5i64..=5).filter_map(|t| {
-                    let xx = x as i64 + t;
-                    (xx >= 0 && xx < w as i64).then(|| g[(t + 5) as usize] * src[y * w + xx as usize])
-                }).sum();
+                tmp[y * w + x] = (-5i64..=5)
+                    .filter_map(|t| {
+                        let xx = x as i64 + t;
+                        (xx >= 0 && xx < w as i64).then(|| g[(t + 5) as usize] * src[y * w + xx as usize])
+                    })
+                    .sum();
             }
         }
         for y in 0..h {
             for x in 0..w {
-                out[y * w + x] = (-5i64..=5).filter_map(|t| {
-                    let yy = y as i64 + t;
-                    (yy >= 0 && yy < h as i64).then(|| g[(t + 5) as usize] * tmp[yy as usize * w + x])
-                }).sum();
+                out[y * w + x] = (-5i64..=5)
+                    .filter_map(|t| {
+                        let yy = y as i64 + t;
+                        (yy >= 0 && yy < h as i64).then(|| g[(t + 5) as usize] * tmp[yy as usize * w + x])
+                    })
+                    .sum();
             }
         }
         out
@@ -295,7 +299,9 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
         let min_r = tr.cfg.reflection.normal_min_r;
         let covered = |i: usize| r.layers.as_ref().is_some_and(|l| crate::train::stages::reflection::reflection_decides(&l.1, i, min_r));
         let coverage = match (&r.layers, &v.mask) {
-            (Some(_), Some(mask)) if mask.iter().any(|&m| m) => Some((0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64 / mask.iter().filter(|&&m| m).count() as f64),
+            (Some(_), Some(mask)) if mask.iter().any(|&m| m) => {
+                Some((0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64 / mask.iter().filter(|&&m| m).count() as f64)
+            }
             _ => None,
         };
         let outside = match (&r.layers, &v.mask) {

@@ -31,7 +31,10 @@ pub fn weights_path() -> PathBuf {
     if let Some(p) = std::env::var_os("TGS_LPIPS_WEIGHTS") {
         return PathBuf::from(p);
     }
-    let cache = std::env::var_os("XDG_CACHE_HOME").map(PathBuf::from).or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache"))).unwrap_or_else(|| PathBuf::from(".cache"));
+    let cache = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(|| PathBuf::from(".cache"));
     cache.join("tgs").join("lpips-alex-v0.1.safetensors")
 }
 
@@ -242,8 +245,15 @@ fn parse_safetensors(b: &[u8]) -> Result<Vec<Tensor>> {
         if t["dtype"] != "F32" {
             bail!("{name}: dtype {}, not F32", t["dtype"]);
         }
-        let shape: Vec<usize> = t["shape"].as_array().context("shape")?.iter().map(|d| d.as_u64().map(|d| d as usize)).collect::<Option<_>>().with_context(|| format!("{name}: bad shape"))?;
-        let off: Vec<usize> = t["data_offsets"].as_array().context("data_offsets")?.iter().map(|d| d.as_u64().map(|d| d as usize)).collect::<Option<_>>().with_context(|| format!("{name}: bad data_offsets"))?;
+        let shape: Vec<usize> =
+            t["shape"].as_array().context("shape")?.iter().map(|d| d.as_u64().map(|d| d as usize)).collect::<Option<_>>().with_context(|| format!("{name}: bad shape"))?;
+        let off: Vec<usize> = t["data_offsets"]
+            .as_array()
+            .context("data_offsets")?
+            .iter()
+            .map(|d| d.as_u64().map(|d| d as usize))
+            .collect::<Option<_>>()
+            .with_context(|| format!("{name}: bad data_offsets"))?;
         ensure!(off.len() == 2 && off[0] <= off[1] && off[1] <= data.len(), "{name}: data_offsets {off:?} outside the {} data bytes", data.len());
         let count = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).context("shape overflows")?;
         ensure!(off[1] - off[0] == 4 * count, "{name}: {} bytes for shape {shape:?}", off[1] - off[0]);

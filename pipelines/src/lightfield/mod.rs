@@ -101,7 +101,17 @@ impl LightFieldShading {
         let sg = ctx.caps().min_subgroup_size.max(1);
         let backward = |flag: u32| {
             let spec = [(0, WG), (1, sg), (2, 1), (3, flag)];
-            Kernel::new(ctx, &KernelDesc { name: "lf.composite_backward", spirv: shaders::LIGHTFIELD_COMPOSITE_BACKWARD, spec: &spec, push_bytes: pb, subgroup_size: None, full_subgroups: false })
+            Kernel::new(
+                ctx,
+                &KernelDesc {
+                    name: "lf.composite_backward",
+                    spirv: shaders::LIGHTFIELD_COMPOSITE_BACKWARD,
+                    spec: &spec,
+                    push_bytes: pb,
+                    subgroup_size: None,
+                    full_subgroups: false,
+                },
+            )
         };
         Ok(LightFieldShading {
             ctx: ctx.clone(),

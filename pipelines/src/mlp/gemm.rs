@@ -75,7 +75,7 @@ fn row_group(m: u32) -> usize {
 pub(super) fn row_column_blocks(m: u32, n: u32) -> Vec<(u32, u32, usize)> {
     let first = row_config(m, n);
     let nb = ROW_CONFIGS[first].nb;
-    if n <= nb || n % nb == 0 {
+    if n <= nb || n.is_multiple_of(nb) {
         return vec![(0, n, first)];
     }
     let main = n / nb * nb;

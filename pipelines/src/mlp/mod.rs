@@ -22,13 +22,13 @@ mod gemm;
 mod scratch;
 mod shape;
 
-pub use fused::FUSED_MAX_WIDTH;
 use fused::Fused;
+pub use fused::FUSED_MAX_WIDTH;
 use scratch::Block;
 pub use scratch::MlpScratch;
 
-pub use gemm::{Gemm, GEMM_ENV};
 use gemm::{row_column_blocks, Product, BLOCKS, MAX_CHUNKS, MIN_CHUNK, NONE, RELU, RELU_DERIV, ROW_CONFIGS, SIGMOID};
+pub use gemm::{Gemm, GEMM_ENV};
 
 pub use shape::{MlpShape, OUT, SAMPLE};
 
@@ -220,7 +220,12 @@ impl Mlp {
                     y_off: p.y_off + j0 * p.y_cs,
                     ..*p
                 };
-                rec.dispatch(&self.gemm[k], &[a.clone(), b.clone(), y.clone(), c.clone(), r.clone()], bytemuck::bytes_of(&q), [cols.div_ceil(cfg.nb), row_groups(cfg.wg * cfg.rr), chunks])?;
+                rec.dispatch(
+                    &self.gemm[k],
+                    &[a.clone(), b.clone(), y.clone(), c.clone(), r.clone()],
+                    bytemuck::bytes_of(&q),
+                    [cols.div_ceil(cfg.nb), row_groups(cfg.wg * cfg.rr), chunks],
+                )?;
             }
             return Ok(());
         }

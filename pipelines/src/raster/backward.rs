@@ -85,7 +85,15 @@ impl Rasterizer {
     /// intersection gradient records (their feature entries only, the rest
     /// zero, with `colour_only`). Returns the records' binding for the
     /// per-Gaussian reduce.
-    pub(super) fn record_tile_backward(&self, rec: &mut Recorder, g: &Gaussians, features: &Buffer<f32>, sh_degree: u32, frame: &Frame, colour_only: bool) -> Result<BufferBinding> {
+    pub(super) fn record_tile_backward(
+        &self,
+        rec: &mut Recorder,
+        g: &Gaussians,
+        features: &Buffer<f32>,
+        sh_degree: u32,
+        frame: &Frame,
+        colour_only: bool,
+    ) -> Result<BufferBinding> {
         self.check_inputs(g, features, frame)?;
         let tk = self.tile_kernels(frame.tile)?;
         let kernel = if colour_only { tk.backward_colour()? } else { &tk.backward };

@@ -28,7 +28,17 @@ impl Rasterizer {
     /// [`Rasterizer::record_project`] with `project`: the kernel
     /// (`geometry`), or its variant that writes the colours alone and
     /// declares the bindings up to theirs (kept_weights.rs).
-    pub(super) fn record_project_with(&self, rec: &mut Recorder, project: &Kernel, geometry: bool, g: &Gaussians, features: &Buffer<f32>, push: &Push, frame: &Frame) -> Result<()> {
+    #[allow(clippy::too_many_arguments)] // the kernel's bindings, each its own input
+    pub(super) fn record_project_with(
+        &self,
+        rec: &mut Recorder,
+        project: &Kernel,
+        geometry: bool,
+        g: &Gaussians,
+        features: &Buffer<f32>,
+        push: &Push,
+        frame: &Frame,
+    ) -> Result<()> {
         let sc = rec.begin_scope("raster.project");
         for slice in self.feature_slices(g.n) {
             let mut bindings = self.param_bindings(frame, g, features, slice);

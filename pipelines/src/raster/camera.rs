@@ -42,15 +42,7 @@ impl Camera {
         let y = cross(z, x);
         let f = 0.5 * height as f64 / (0.5 * fov_y as f64).tan();
         let row = |r: [f64; 3]| [r[0] as f32, r[1] as f32, r[2] as f32, -dot(r, e) as f32];
-        Camera {
-            width,
-            height,
-            fx: f as f32,
-            fy: f as f32,
-            cx: (width as f32 - 1.0) * 0.5,
-            cy: (height as f32 - 1.0) * 0.5,
-            world_to_view: [row(x), row(y), row(z)],
-        }
+        Camera { width, height, fx: f as f32, fy: f as f32, cx: (width as f32 - 1.0) * 0.5, cy: (height as f32 - 1.0) * 0.5, world_to_view: [row(x), row(y), row(z)] }
     }
 
     /// Camera centre in world space: -R^T t.

@@ -3,7 +3,7 @@
 //! a whole training iteration, and the capacity check that grows a frame
 //! when a view did not fit.
 
-use super::{Camera, Frame, Gaussians, IntersectionBuffers, Push, RecordAccess, Rasterizer, Splats, GATE_PUSH_WORDS, GATE_SLOTS};
+use super::{Camera, Frame, Gaussians, IntersectionBuffers, Push, Rasterizer, RecordAccess, Splats, GATE_PUSH_WORDS, GATE_SLOTS};
 use anyhow::{bail, Result};
 use tgs_engine::{groups_2d, Buffer, BufferBinding, Recorder};
 

@@ -6,10 +6,10 @@
 //! counters back (8 bytes) and grows the frame when the intersections or the
 //! longest tile outgrew it; the caller then re-runs that view.
 
-use crate::sort::SortScratch;
 use crate::scan::ScanScratch;
-use tgs_engine::{Buffer, Readback};
+use crate::sort::SortScratch;
 use anyhow::Result;
+use tgs_engine::{Buffer, Readback};
 
 /// Output planes, each `width * height` floats, in this order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

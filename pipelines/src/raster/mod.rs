@@ -231,7 +231,7 @@ impl Rasterizer {
         }
         // The Subgroup backward's workgroup is exactly one subgroup.
         let sg = caps.subgroup_size;
-        if kernels == RasterKernels::Subgroup && (caps.min_subgroup_size != caps.max_subgroup_size || sg == 0 || WG % sg != 0) {
+        if kernels == RasterKernels::Subgroup && (caps.min_subgroup_size != caps.max_subgroup_size || sg == 0 || !WG.is_multiple_of(sg)) {
             bail!("the one-subgroup backward needs a fixed subgroup size dividing {WG}; {} has {}..={}", caps.device_name, caps.min_subgroup_size, caps.max_subgroup_size);
         }
         if let Some(s) = span {
@@ -240,9 +240,7 @@ impl Rasterizer {
             }
         }
         let spec = [(0, WG), (1, min_sg), (4, channels), (5, batch)];
-        let k = |name, spirv, push_bytes, full| {
-            Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full })
-        };
+        let k = |name, spirv, push_bytes, full| Kernel::new(ctx, &KernelDesc { name, spirv, spec: &spec, push_bytes, subgroup_size: None, full_subgroups: full });
         let push = std::mem::size_of::<Push>() as u32;
         let by_address = records == RecordAccess::Address;
         let reduce = if by_address { shaders::RASTER_REDUCE_RECORDS_BDA } else { shaders::RASTER_REDUCE };
@@ -258,7 +256,10 @@ impl Rasterizer {
             gather: k("raster.gather", shaders::RASTER_GATHER, 4, false)?,
             emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
             plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
-            gate: Kernel::new(ctx, &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 4 * GATE_PUSH_WORDS as u32, subgroup_size: None, full_subgroups: false })?,
+            gate: Kernel::new(
+                ctx,
+                &KernelDesc { name: "raster.gate", spirv: shaders::RASTER_GATE, spec: &[], push_bytes: 4 * GATE_PUSH_WORDS as u32, subgroup_size: None, full_subgroups: false },
+            )?,
             ranges: k("raster.ranges", shaders::RASTER_RANGES, 0, false)?,
             reduce: k("raster.reduce", reduce, push, false)?,
             reduce_adam: std::array::from_fn(|_| std::sync::OnceLock::new()),
@@ -447,13 +448,7 @@ impl Rasterizer {
         let own = std::ptr::eq(features, &g.features);
         let (channels, coeffs) = if own { (g.channels, g.coeffs) } else { (self.channels, self.features.coeffs()) };
         if channels != self.channels || coeffs != self.features.coeffs() {
-            bail!(
-                "Gaussian set has {} channels x {} coefficients; this rasterizer takes {} x {}",
-                channels,
-                coeffs,
-                self.channels,
-                self.features.coeffs()
-            );
+            bail!("Gaussian set has {} channels x {} coefficients; this rasterizer takes {} x {}", channels, coeffs, self.channels, self.features.coeffs());
         }
         if features.len() < (channels * coeffs * g.n) as usize {
             bail!("feature buffer '{}' has {} values; {} Gaussians x {} need {}", features.name(), features.len(), g.n, channels * coeffs, channels * coeffs * g.n);

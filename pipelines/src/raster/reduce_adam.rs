@@ -107,7 +107,11 @@ impl Rasterizer {
             bail!("Adam steps {} features per Gaussian (rate split at {}); the set has {per}", adam.feat_active, adam.feat_split);
         }
         if !self.can_fuse_adam() {
-            bail!("{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)", self.ctx.caps().device_name, std::mem::size_of::<PushAdam>());
+            bail!(
+                "{} cannot run the fused reduce and Adam step ({BINDINGS} storage buffers, {} push-constant bytes)",
+                self.ctx.caps().device_name,
+                std::mem::size_of::<PushAdam>()
+            );
         }
         Ok(())
     }
@@ -115,7 +119,17 @@ impl Rasterizer {
     /// The per-Gaussian reduce of the gradient records `records` (ranked by
     /// `frame.depth_ids`, ranges in `frame.offsets`) with `step`'s Adam
     /// step fused (see [`Rasterizer::record_backward_adam`]).
-    pub(super) fn record_reduce_adam(&self, rec: &mut Recorder, g: &Gaussians, step: Moments, sh_degree: u32, frame: &Frame, records: BufferBinding, gate: Option<&BufferBinding>) -> Result<()> {
+    #[allow(clippy::too_many_arguments)] // the kernel's bindings, each its own input
+    pub(super) fn record_reduce_adam(
+        &self,
+        rec: &mut Recorder,
+        g: &Gaussians,
+        step: Moments,
+        sh_degree: u32,
+        frame: &Frame,
+        records: BufferBinding,
+        gate: Option<&BufferBinding>,
+    ) -> Result<()> {
         let Moments { m, v, adam, features_only } = step;
         // CPU devices read the reduce's inputs as texel buffers where the
         // records fit one texel view (variant TEXEL): the same arithmetic.

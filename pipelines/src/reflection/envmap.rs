@@ -205,7 +205,11 @@ impl EnvMap {
 
     /// Refinements the colour kernels make (0 without a depth map).
     pub fn depth_iters(&self) -> u32 {
-        if self.depth.is_some() && self.proxy.is_some() { DEPTH_ITERS } else { 0 }
+        if self.depth.is_some() && self.proxy.is_some() {
+            DEPTH_ITERS
+        } else {
+            0
+        }
     }
 
     /// The arrays a checkpoint stores, named, in a fixed order (the

@@ -204,7 +204,15 @@ impl ReflectionShading {
     }
 
     fn color_push(g: &Gaussians, env: &EnvMap, cam: &Camera, fresnel: Fresnel) -> ColorPush {
-        ColorPush { n: g.n, channels: fresnel.channels(), res: env.res, schlick: fresnel.flag(), centre: cam.centre(), depth_iters: env.depth_iters(), proxy: envmap::EnvProxy::packed(env.proxy) }
+        ColorPush {
+            n: g.n,
+            channels: fresnel.channels(),
+            res: env.res,
+            schlick: fresnel.flag(),
+            centre: cam.centre(),
+            depth_iters: env.depth_iters(),
+            proxy: envmap::EnvProxy::packed(env.proxy),
+        }
     }
 
     /// The map's depth, or (never read without one) its texels.

@@ -1,12 +1,12 @@
 //! Fused Adam (PyTorch form) over one parameter buffer per dispatch.
 
+use super::TrainableSet;
 use super::{dispatch_items, grid, kernel};
+use crate::raster::ReduceAdam;
 use crate::shaders;
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use super::TrainableSet;
-use crate::raster::ReduceAdam;
 use tgs_engine::{Buffer, BufferBinding, Context, Kernel, Recorder};
 
 /// One parameter group: a learning rate, or two (elements with index modulo
@@ -35,7 +35,11 @@ impl AdamGroup {
 
     /// The elements stepped of an array of `len`.
     pub fn items(&self, len: usize) -> usize {
-        if self.active >= self.stride { len } else { len / self.stride.max(1) as usize * self.active as usize }
+        if self.active >= self.stride {
+            len
+        } else {
+            len / self.stride.max(1) as usize * self.active as usize
+        }
     }
 }
 

@@ -4,12 +4,12 @@
 //! checks. A new stamp per round replaces a clearing pass: on lavapipe
 //! every extra command in a step's submission costs a synchronisation.
 
+use super::TrainableSet;
 use super::{dispatch_items, kernel};
 use crate::shaders;
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-use super::TrainableSet;
 use tgs_engine::{Buffer, Context, Kernel, Readback, Recorder};
 
 #[repr(C)]

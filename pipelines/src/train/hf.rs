@@ -38,7 +38,8 @@ impl HfStats {
 impl HfLoss {
     pub fn new(ctx: &Arc<Context>) -> Result<HfLoss> {
         let spec = [(0, SELECT_WG), (1, ctx.caps().min_subgroup_size.max(1)), (2, 1)];
-        let select = Kernel::new(ctx, &KernelDesc { name: "loss.hf_select", spirv: shaders::LOSS_HF_SELECT, spec: &spec, push_bytes: 8, subgroup_size: None, full_subgroups: false })?;
+        let select =
+            Kernel::new(ctx, &KernelDesc { name: "loss.hf_select", spirv: shaders::LOSS_HF_SELECT, spec: &spec, push_bytes: 8, subgroup_size: None, full_subgroups: false })?;
         Ok(HfLoss { ctx: ctx.clone(), select, grad: kernel(ctx, "loss.hf_grad", shaders::LOSS_HF_GRAD, 8)? })
     }
 
@@ -68,7 +69,12 @@ impl HfLoss {
             bail!("the high-frequency loss of {pixels} pixels exceeds a CPU driver's per-invocation loop budget");
         }
         rec.dispatch(&self.select, &[render.binding(), target.binding(), s.stats.binding()], bytemuck::cast_slice(&[pixels, pct.to_bits()]), [1, 1, 1])?;
-        rec.dispatch(&self.grad, &[render.binding(), target.binding(), s.stats.binding(), grad.binding()], bytemuck::cast_slice(&[pixels, weight.to_bits()]), grid(&self.ctx, pixels))?;
+        rec.dispatch(
+            &self.grad,
+            &[render.binding(), target.binding(), s.stats.binding(), grad.binding()],
+            bytemuck::cast_slice(&[pixels, weight.to_bits()]),
+            grid(&self.ctx, pixels),
+        )?;
         rec.read_back(&s.stats, 0, &s.stats_host)
     }
 }

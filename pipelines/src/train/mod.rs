@@ -13,7 +13,7 @@ mod loss;
 mod set;
 
 pub use adam::{Adam, AdamArrays, AdamGroup};
-pub use densify::{DensifyParams, DensifyReport, Densifier};
+pub use densify::{Densifier, DensifyParams, DensifyReport};
 pub use guard::{Guard, SetGuard};
 pub use hf::{HfLoss, HfStats};
 pub use loss::{ImageLoss, LossIo, LossScratch, LossValues, LossWeights};

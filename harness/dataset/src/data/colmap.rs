@@ -236,7 +236,7 @@ pub fn parse_images_txt(text: &str) -> Result<Vec<ColmapImage>> {
 /// (the id an integer, -1 for none).
 fn is_points2d_line(l: &str) -> bool {
     let t: Vec<&str> = l.split_whitespace().collect();
-    t.len() % 3 == 0 && t.chunks(3).all(|p| p[0].parse::<f64>().is_ok() && p[1].parse::<f64>().is_ok() && p[2].parse::<i64>().is_ok())
+    t.len().is_multiple_of(3) && t.chunks(3).all(|p| p[0].parse::<f64>().is_ok() && p[1].parse::<f64>().is_ok() && p[2].parse::<i64>().is_ok())
 }
 
 /// The points and how many were skipped for NaN or infinite coordinates

@@ -119,7 +119,9 @@ pub fn points_warning(path: &Path, kept: usize, skipped: usize) -> Option<String
     let what = if kept == 0 {
         "it holds no usable point: the Gaussians start from init_points random points instead".to_string()
     } else if kept < FEW_POINTS {
-        format!("only {kept} usable point(s): training starts from {kept} Gaussian(s) and densification must grow the rest (delete the file to start from init_points random points)")
+        format!(
+            "only {kept} usable point(s): training starts from {kept} Gaussian(s) and densification must grow the rest (delete the file to start from init_points random points)"
+        )
     } else if skipped > 0 {
         return Some(format!("{}: {}", path.display(), skipped_note.trim_end_matches("; ")));
     } else {
@@ -150,9 +152,8 @@ pub fn camera_outlier<'a>(views: impl IntoIterator<Item = &'a View>, factor: f64
     let dist: Vec<f64> = centres.iter().map(|c| (0..3).map(|k| (c[k] - mid[k]).powi(2)).sum::<f64>().sqrt()).collect();
     let typical = median(dist.clone());
     let (i, far) = dist.iter().copied().enumerate().max_by(|a, b| a.1.total_cmp(&b.1))?;
-    (typical > 0.0 && far > factor * typical).then(|| {
-        format!("view '{}': its camera lies {far:.3e} from the cameras' median point, {:.1e} times their median distance ({typical:.3})", views[i].name, far / typical)
-    })
+    (typical > 0.0 && far > factor * typical)
+        .then(|| format!("view '{}': its camera lies {far:.3e} from the cameras' median point, {:.1e} times their median distance ({typical:.3})", views[i].name, far / typical))
 }
 
 /// The narrowest field of view a dataset camera may have: focal lengths
@@ -185,15 +186,7 @@ pub fn downscale_camera(cam: &Camera, factor: u32) -> Camera {
         return *cam;
     }
     let f = factor as f32;
-    Camera {
-        width: cam.width / factor,
-        height: cam.height / factor,
-        fx: cam.fx / f,
-        fy: cam.fy / f,
-        cx: (cam.cx + 0.5) / f - 0.5,
-        cy: (cam.cy + 0.5) / f - 0.5,
-        ..*cam
-    }
+    Camera { width: cam.width / factor, height: cam.height / factor, fx: cam.fx / f, fy: cam.fy / f, cx: (cam.cx + 0.5) / f - 0.5, cy: (cam.cy + 0.5) / f - 0.5, ..*cam }
 }
 
 /// Downscale a mask: a pixel stays set only when all its sub-pixels are.

@@ -35,7 +35,9 @@ pub const SCENES: [SceneSpec; 3] = [
 pub fn spec(name: &str) -> Result<SceneSpec> {
     match SCENES.iter().find(|s| s.name == name) {
         Some(s) => Ok(*s),
-        None => bail!("unknown scene '{name}' (built-in: {}, {})", SCENES.iter().map(|s| s.name).collect::<Vec<_>>().join(", "), spheres::SpheresSpec::NAMED.map(|s| s.0).join(", ")),
+        None => {
+            bail!("unknown scene '{name}' (built-in: {}, {})", SCENES.iter().map(|s| s.name).collect::<Vec<_>>().join(", "), spheres::SpheresSpec::NAMED.map(|s| s.0).join(", "))
+        }
     }
 }
 
@@ -45,7 +47,7 @@ const TARGET: V3 = [0.0, 0.0, 0.55];
 /// Camera `i` of `n` on the ring (test views sit between train views).
 fn eye(i: u32, n: u32, test: bool) -> V3 {
     let a = (i as f64 + if test { 0.5 } else { 0.0 }) * std::f64::consts::TAU / n as f64;
-    let h = if i % 2 == 0 { 1.15 } else { 1.65 };
+    let h = if i.is_multiple_of(2) { 1.15 } else { 1.65 };
     let r = if test { 2.5 } else { 2.7 };
     [r * a.cos(), r * a.sin(), h]
 }
@@ -168,7 +170,20 @@ pub fn make_named(name: &str, dir: &Path, progress: impl FnMut(u32, u32)) -> Res
 
 /// One line per built-in scene: name, size, views.
 pub fn list() -> Vec<String> {
-    let mut out: Vec<String> = SCENES.iter().map(|s| format!("{:12} {}x{} px, {} train + {} test views, {}", s.name, s.size, s.size, s.train, s.test, if s.glass { "glass sphere in a room" } else { "the same room without the glass (diffuse only)" })).collect();
+    let mut out: Vec<String> = SCENES
+        .iter()
+        .map(|s| {
+            format!(
+                "{:12} {}x{} px, {} train + {} test views, {}",
+                s.name,
+                s.size,
+                s.size,
+                s.train,
+                s.test,
+                if s.glass { "glass sphere in a room" } else { "the same room without the glass (diffuse only)" }
+            )
+        })
+        .collect();
     for (name, s) in spheres::SpheresSpec::NAMED {
         out.push(format!("{name:12} {}x{} px, {} train + {} test views, {} initial points (Brush's workload)", s.width, s.height, s.train, s.test, s.points));
     }

@@ -8,16 +8,16 @@
 //! numpy's, so positions differ from the Python script's; the workload
 //! (sizes, counts, coverage) is the same.
 
+use super::trace::{cross, dot, hit_sphere, norm};
 use crate::data::blender::gl_c2w_to_w2v;
 use crate::data::image_io::{write_png, ImageF};
 use crate::data::{Dataset, Points, View};
 use crate::export::ply::write_points;
-use super::trace::{cross, dot, hit_sphere, norm};
-use tgs_pipelines::Rng;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::path::Path;
 use tgs_pipelines::Camera;
+use tgs_pipelines::Rng;
 
 /// (centre, radius, colour) of each sphere.
 const SPHERES: [([f64; 3], f64, [f64; 3]); 5] = [
@@ -52,13 +52,26 @@ impl SpheresSpec {
 
     fn validate(&self) -> Result<()> {
         if self.width == 0 || self.height == 0 || self.train == 0 || self.points == 0 {
-            bail!("spheres scene: width, height, training views and points must be at least 1 (width {}, height {}, {} training views, {} points)", self.width, self.height, self.train, self.points);
+            bail!(
+                "spheres scene: width, height, training views and points must be at least 1 (width {}, height {}, {} training views, {} points)",
+                self.width,
+                self.height,
+                self.train,
+                self.points
+            );
         }
         // The images are rendered in host memory (f32 RGB) before anything
         // else: refuse sizes that cannot fit rather than abort mid-way.
         let bytes = 12 * self.width as u64 * self.height as u64 * (self.train as u64 + self.test as u64) + 24 * self.points as u64;
         if self.width > 16384 || self.height > 16384 || bytes > 16 << 30 {
-            bail!("spheres scene: {}x{} with {} views and {} points needs {:.1} GiB of host memory (at most 16384 pixels a side and 16 GiB)", self.width, self.height, self.train + self.test, self.points, bytes as f64 / (1u64 << 30) as f64);
+            bail!(
+                "spheres scene: {}x{} with {} views and {} points needs {:.1} GiB of host memory (at most 16384 pixels a side and 16 GiB)",
+                self.width,
+                self.height,
+                self.train + self.test,
+                self.points,
+                bytes as f64 / (1u64 << 30) as f64
+            );
         }
         if !(self.fov_x > 0.0 && self.fov_x < std::f64::consts::PI) {
             bail!("spheres scene: field of view {} is not in (0, pi)", self.fov_x);
@@ -171,9 +184,21 @@ fn camera(spec: &SpheresSpec, c2w: &[[f64; 4]; 4]) -> Camera {
 pub fn dataset(spec: &SpheresSpec) -> Result<Dataset> {
     spec.validate()?;
     let views = |test: bool| -> Vec<View> {
-        split(spec, test).into_iter().map(|(stem, c2w, image)| View { name: stem.rsplit('/').next().unwrap_or(&stem).to_string(), camera: camera(spec, &c2w), image, normals: None, mask: None }).collect()
+        split(spec, test)
+            .into_iter()
+            .map(|(stem, c2w, image)| View { name: stem.rsplit('/').next().unwrap_or(&stem).to_string(), camera: camera(spec, &c2w), image, normals: None, mask: None })
+            .collect()
     };
-    Ok(Dataset { root: "spheres (in memory)".into(), format: "spheres", train: views(false), test: views(true), points: Some(points(spec.points, 3)), background: [0.0; 3], files: Vec::new(), warnings: Vec::new() })
+    Ok(Dataset {
+        root: "spheres (in memory)".into(),
+        format: "spheres",
+        train: views(false),
+        test: views(true),
+        points: Some(points(spec.points, 3)),
+        background: [0.0; 3],
+        files: Vec::new(),
+        warnings: Vec::new(),
+    })
 }
 
 /// Write the scene in the Blender layout (RGB PNGs on black, transforms,

@@ -84,12 +84,7 @@ impl Scene {
             let h = 0.7 + 0.35 * ((i * 5) % 3) as f64;
             blocks.push(Box3 { lo: [c[0] - 0.35, c[1] - 0.35, 0.0], hi: [c[0] + 0.35, c[1] + 0.35, h], color: hue(i as f64 / 8.0) });
         }
-        Scene {
-            blocks,
-            inner_box: Box3 { lo: [-0.38, -0.3, 0.05], hi: [-0.04, 0.04, 0.39], color: [0.15, 0.6, 0.55] },
-            ball: ([0.18, 0.15, 0.33], 0.26),
-            glass: true,
-        }
+        Scene { blocks, inner_box: Box3 { lo: [-0.38, -0.3, 0.05], hi: [-0.04, 0.04, 0.39], color: [0.15, 0.6, 0.55] }, ball: ([0.18, 0.15, 0.33], 0.26), glass: true }
     }
 
     /// Nearest hit with t in (eps, tmax).
@@ -181,7 +176,8 @@ impl Scene {
             Material::Diffuse(albedo) => {
                 let l = norm(SUN);
                 let lit = dot(n, l).max(0.0);
-                let shadow = if lit > 0.0 && self.intersect(add(h.p, mul(n, 1e-5)), l, f64::INFINITY, false).is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3) { 0.0 } else { 1.0 };
+                let shadow =
+                    if lit > 0.0 && self.intersect(add(h.p, mul(n, 1e-5)), l, f64::INFINITY, false).is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3) { 0.0 } else { 1.0 };
                 mul(albedo, 0.35 + 0.65 * lit * shadow)
             }
             Material::Glass => {

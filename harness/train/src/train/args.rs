@@ -4,9 +4,9 @@
 use super::config::{flatten, TrainConfig};
 use super::rundir::DEFAULT_SCENE;
 use crate::data::{Dataset, LoadOptions};
-use std::path::{Path, PathBuf};
 use anyhow::{bail, Context as _, Result};
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 #[derive(Clone, Debug, Default)]
 pub struct TrainArgs {

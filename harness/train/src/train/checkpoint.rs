@@ -10,7 +10,6 @@
 //! before the checksums, are still read.)
 
 use super::config::TrainConfig;
-use tgs_pipelines::Rng;
 use super::trainer::Trainer;
 use crate::data::fingerprint::Fingerprint;
 use crate::data::Dataset;
@@ -19,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
+use tgs_pipelines::Rng;
 use tgs_pipelines::{HostGaussians, TrainableSet};
 
 use super::arrays::{check_arrays, host_set, upload_set};
@@ -294,7 +294,11 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     if let Some(id) = &h.identity {
         let now = data.fingerprint()?;
         if let Some(c) = id.fingerprint.changes(&now) {
-            bail!("{}: the dataset {} changed since this checkpoint was written: {c}; the run cannot continue on other data (train a new run)", path.display(), data.root.display());
+            bail!(
+                "{}: the dataset {} changed since this checkpoint was written: {c}; the run cannot continue on other data (train a new run)",
+                path.display(),
+                data.root.display()
+            );
         }
     }
     h.config.validate().map_err(|e| bad(format!("settings: {e:#}")))?;

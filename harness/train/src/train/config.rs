@@ -2,13 +2,13 @@
 //! `paper` preset), a `quick` preset for minutes on a CPU driver, a TOML
 //! file, and `--set key=value` overrides, applied in that order.
 
+use super::settings::LightPreset;
+use super::stage::Stage;
+pub use super::stages::light_field::config::LightFieldConfig;
+pub use super::stages::reflection::config::ReflectionConfig;
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
-pub use super::stages::light_field::config::LightFieldConfig;
-use super::stage::Stage;
-use super::settings::LightPreset;
-pub use super::stages::reflection::config::ReflectionConfig;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -285,7 +285,7 @@ impl TrainConfig {
         let due = it > 0
             && it < self.densify_until
             && self.opacity_reset_interval > 0
-            && (it % self.opacity_reset_interval == 0 || (white_background && it == self.densify_from));
+            && (it.is_multiple_of(self.opacity_reset_interval) || (white_background && it == self.densify_from));
         due && self.iterations.saturating_sub(it) >= self.opacity_reset_min_after.max(1)
     }
 
@@ -294,7 +294,11 @@ impl TrainConfig {
     /// larger than densification's cap.
     pub fn validate_together(&self) -> Result<()> {
         if self.init_points > self.max_gaussians {
-            bail!("init_points {} is more than max_gaussians {}: densification could never grow such a set; lower init_points or raise max_gaussians too", self.init_points, self.max_gaussians);
+            bail!(
+                "init_points {} is more than max_gaussians {}: densification could never grow such a set; lower init_points or raise max_gaussians too",
+                self.init_points,
+                self.max_gaussians
+            );
         }
         Ok(())
     }
@@ -352,7 +356,12 @@ impl TrainConfig {
                 bail!("{k} must be non-negative, not {v}");
             }
         }
-        for (k, v) in [("init_half_extent", self.init_half_extent), ("init_far_depth", self.init_far_depth), ("max_screen_size", self.max_screen_size), ("max_world_size", self.max_world_size)] {
+        for (k, v) in [
+            ("init_half_extent", self.init_half_extent),
+            ("init_far_depth", self.init_far_depth),
+            ("max_screen_size", self.max_screen_size),
+            ("max_world_size", self.max_world_size),
+        ] {
             if v <= 0.0 {
                 bail!("{k} must be positive, not {v}");
             }
@@ -375,7 +384,8 @@ impl TrainConfig {
             "white" => Ok([1.0; 3]),
             "black" => Ok([0.0; 3]),
             s => {
-                let v: Vec<f32> = s.split(',').map(|t| t.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|_| anyhow::anyhow!("background '{s}' is not white, black or r,g,b"))?;
+                let v: Vec<f32> =
+                    s.split(',').map(|t| t.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|_| anyhow::anyhow!("background '{s}' is not white, black or r,g,b"))?;
                 match v.as_slice() {
                     [r, g, b] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b]),
                     _ => bail!("background '{s}' must be three values in [0, 1]"),

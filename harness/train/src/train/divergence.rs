@@ -61,11 +61,7 @@ impl DivergenceGuard {
 /// The numeric settings of `cfg` by key; only learning rates (every
 /// setting named `lr...`) with `lr_only`.
 fn numbers(cfg: &TrainConfig, lr_only: bool) -> Result<Vec<(String, f64)>> {
-    Ok(settings(cfg)?
-        .into_iter()
-        .filter(|(k, _)| !lr_only || is_learning_rate(k))
-        .filter_map(|(k, v)| v.as_float().or(v.as_integer().map(|i| i as f64)).map(|f| (k, f)))
-        .collect())
+    Ok(settings(cfg)?.into_iter().filter(|(k, _)| !lr_only || is_learning_rate(k)).filter_map(|(k, v)| v.as_float().or(v.as_integer().map(|i| i as f64)).map(|f| (k, f))).collect())
 }
 
 /// Settings (learning rates only with `lr_only`) at least
@@ -79,7 +75,8 @@ fn far_above_presets(cfg: &TrainConfig, lr_only: bool) -> Result<Vec<String>> {
         .filter_map(|(k, v)| {
             let ps: Vec<f64> = presets.iter().filter_map(|p| preset_value(p, &k)).collect();
             let top = ps.iter().copied().fold(0.0, f64::max);
-            (top > 0.0 && v >= LR_WARN_FACTOR * top).then(|| format!("{k} = {} (quick / paper presets: {})", short(v), ps.iter().map(|p| short(*p)).collect::<Vec<_>>().join(" / ")))
+            (top > 0.0 && v >= LR_WARN_FACTOR * top)
+                .then(|| format!("{k} = {} (quick / paper presets: {})", short(v), ps.iter().map(|p| short(*p)).collect::<Vec<_>>().join(" / ")))
         })
         .collect())
 }

@@ -3,9 +3,9 @@
 //! stages' settings free to change.
 
 use super::args::{apply_args, changed_settings, settings, show};
+use super::args::{load_dataset, TrainArgs};
 use super::checkpoint;
 use super::config::TrainConfig;
-use super::args::{load_dataset, TrainArgs};
 use super::rundir::{CHECKPOINT, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::stages::{light_field, reflection};
 use super::trainer::Trainer;
@@ -82,7 +82,13 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
         );
     }
     if h.iteration < h.config.iterations {
-        bail!("--from {}: its Stage I stopped at iteration {} of {}; finish it first (tgs train --out {} --resume)", run.display(), h.iteration, h.config.iterations, run.display());
+        bail!(
+            "--from {}: its Stage I stopped at iteration {} of {}; finish it first (tgs train --out {} --resume)",
+            run.display(),
+            h.iteration,
+            h.config.iterations,
+            run.display()
+        );
     }
     if a.preset.is_some() {
         bail!("--from {}: the run's own settings are used (--preset would change how its Stage I was trained); change Stage II with --set reflection.KEY=VALUE", run.display());

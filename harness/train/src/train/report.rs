@@ -96,7 +96,7 @@ impl Reporter {
         if let Some(b) = &self.bar {
             b.set_position(r.iteration as u64);
             b.set_message(msg);
-        } else if !self.quiet && (r.iteration % 100 == 0 || r.iteration == total) {
+        } else if !self.quiet && (r.iteration.is_multiple_of(100) || r.iteration == total) {
             let eta = (total - r.iteration) as f64 / its.max(1e-9);
             eprintln!("[{}/{total}] {msg} {its:.2} it/s ETA {eta:.0}s", r.iteration);
         }

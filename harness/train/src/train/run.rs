@@ -6,30 +6,31 @@
 
 use super::args::resume_config;
 pub use super::args::{config_from_args, dataset_dir, load_dataset, TrainArgs, RESUMABLE_SETTINGS};
-pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::checkpoint;
-use super::from::start_from;
-pub use super::from::inherited_settings;
+use super::clock::{Before, Clocks};
 use super::config::paper_schedule_note;
-use super::trainer::Trainer;
+use super::divergence::{high_learning_rates, likely_cause, DivergenceGuard, LR_WARN_FACTOR, MEANS_LIMIT};
+pub use super::from::inherited_settings;
+use super::from::start_from;
+use super::records::{close_stage, read_stage_records, reflection_record, stage_record, truncate_log, write_stage_records, Closing};
+use super::report::{lpips_text, Reporter};
+pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
+use super::signals::{arm, stop_requested};
+pub use super::signals::{install_signal_handler, request_stop, signals_received};
+use super::stages::RunPaths;
+use super::trainer::{StepReport, Trainer};
+use super::validation::{back_to_stage_one, end_here, Validation};
 use crate::data::Dataset;
 use crate::eval::{evaluate, Metrics};
-use crate::outdir::OutDir;
 use crate::export::atomic_write;
 use crate::export::ply::write_splats;
-use super::schedule::Stage;
-use super::stages::RunPaths;
+use crate::outdir::OutDir;
 use anyhow::{bail, Context as _, Result};
-use serde_json::json;
+use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-use super::clock::{Before, Clocks};
-use super::validation::{back_to_stage_one, end_here, Validation};
-use super::divergence::{high_learning_rates, likely_cause, DivergenceGuard, LR_WARN_FACTOR, MEANS_LIMIT};
-use super::report::{lpips_text, Reporter};
 use tgs_engine::Context;
 
 /// What a finished (or interrupted) run reports.
@@ -43,38 +44,6 @@ pub struct Outcome {
     pub wall_s: f64,
 }
 
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-/// Signals received by this process: never reset, so that a caller
-/// running several trainings (a sweep) sees a signal that arrived while
-/// none was in its loop, and a second signal aborts whatever runs.
-static SIGNALS: AtomicU32 = AtomicU32::new(0);
-
-/// Ctrl-C (SIGINT), SIGTERM (what batch schedulers send before killing a
-/// job) and SIGHUP all stop training at the end of the iteration with a
-/// checkpoint (a sweep: at the next safe point); a second one exits at
-/// once. Installed once per process; later calls do nothing.
-pub fn install_signal_handler() {
-    // A second installation in one process (tests) fails harmlessly.
-    let _ = ctrlc::set_handler(|| {
-        INTERRUPTED.store(true, Ordering::SeqCst);
-        if SIGNALS.fetch_add(1, Ordering::SeqCst) >= 1 {
-            eprintln!("\nsecond interrupt: exiting at once");
-            std::process::exit(130);
-        }
-        eprintln!("\ninterrupted (Ctrl-C or SIGTERM): stopping at the next safe point with a checkpoint (interrupt again to abort)");
-    });
-}
-
-/// Signals this process has received so far (see [`install_signal_handler`]).
-pub fn signals_received() -> u32 {
-    SIGNALS.load(Ordering::SeqCst)
-}
-
-/// Ask a running `train` in this process to stop at the next iteration (as Ctrl-C does).
-pub fn request_stop() {
-    INTERRUPTED.store(true, Ordering::SeqCst);
-}
-
 /// The dataset's warnings on stderr (unless quiet).
 fn show_warnings(data: &Dataset, quiet: bool) {
     if !quiet {
@@ -82,6 +51,45 @@ fn show_warnings(data: &Dataset, quiet: bool) {
             eprintln!("tgs: warning: {w}");
         }
     }
+}
+
+/// A trainer ready to run, with its dataset and where it came from.
+struct Opened {
+    tr: Trainer,
+    data: Dataset,
+    /// The dataset's path as the run records it.
+    dataset: String,
+    identity: checkpoint::Identity,
+    /// With --from: the other run's records of the stages kept (metrics.json `stages`).
+    from_record: Vec<Value>,
+}
+
+/// Everything of a run beside its trainer: where it writes, what it has
+/// measured and recorded so far.
+struct Run<'a> {
+    ctx: &'a Arc<Context>,
+    a: &'a TrainArgs,
+    ckpt: PathBuf,
+    data: Dataset,
+    dataset: String,
+    identity: checkpoint::Identity,
+    validation: Validation,
+    report: Reporter,
+    clocks: Clocks,
+    stages: Vec<Value>,
+    /// The later stages' views (the validation views held out).
+    view_names: Vec<String>,
+    /// GPU milliseconds and samples per kernel scope.
+    timing_sums: BTreeMap<String, (f64, u64)>,
+    first_loss: Option<f64>,
+    last_loss: f64,
+    loop_start: Instant,
+    start_it: u32,
+    /// The schedule's length as the run began (the progress bar's and the
+    /// periodic checkpoints' end).
+    total: u32,
+    /// Set when a dropped or skipped stage closed the last stage for good.
+    last_closed: bool,
 }
 
 pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
@@ -94,8 +102,6 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     if a.resume && a.from.is_some() {
         bail!("--resume continues OUT's own run; --from starts a new one from another run's Stage I: give one of them");
     }
-    // With --from: the other run's records of the stages kept (metrics.json `stages`).
-    let mut from_record: Vec<serde_json::Value> = Vec::new();
     if !a.resume && ckpt.is_file() {
         bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
     }
@@ -105,57 +111,17 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
             dir.file(&f)?;
         }
     }
-    let (mut tr, data, dataset_str, identity) = if a.resume {
-        if !ckpt.is_file() {
-            bail!("{}: no checkpoint to resume from", ckpt.display());
-        }
-        let (h, arrays) = checkpoint::read(&ckpt)?;
-        let cfg = resume_config(a, &h.config)?;
-        checkpoint::warn_missing_settings(&ckpt, &h, &cfg, a.quiet)?;
-        let dir = PathBuf::from(&h.dataset);
-        if let Some(given) = &a.dataset {
-            let same = std::fs::canonicalize(given).map(|g| g == dir).unwrap_or(false);
-            if !same {
-                bail!("--resume continues the run on its own dataset {}; {} was given (leave it out, or start a new run with another --out)", dir.display(), given.display());
-            }
-        }
-        check_run_record(&a.out, &h)?;
-        let data = load_dataset(&dir, &h.config)?;
-        let dataset = h.dataset.clone();
-        let identity = match &h.identity {
-            Some(id) => id.clone(),
-            None => checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? },
-        };
-        let h_stage1 = h.config.iterations;
-        let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
-        let total = super::schedule::Schedule::from_config(&cfg).total();
-        if total < tr.iteration || cfg.iterations < tr.iteration.min(h_stage1) {
-            bail!("--iterations {} ({total} in all stages): the checkpoint is already at iteration {}", cfg.iterations, tr.iteration);
-        }
-        if tr.iteration > h_stage1 && cfg.iterations != h_stage1 {
-            bail!("iterations {}: the run finished Stage I at {h_stage1} and is in Stage II; Stage I's length cannot change now", cfg.iterations);
-        }
-        tr.cfg = cfg;
-        tr.schedule = super::schedule::Schedule::from_config(&tr.cfg);
-        truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
-        (tr, data, dataset, identity)
+    let Opened { mut tr, data, dataset, identity, from_record } = if a.resume {
+        resume_trainer(ctx, a, &ckpt)?
     } else if let Some(run) = &a.from {
         let (tr, data, dataset, kept) = start_from(ctx, a, run)?;
-        from_record = kept;
         let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
-        (tr, data, dataset, identity)
+        Opened { tr, data, dataset, identity, from_record: kept }
     } else {
-        let cfg = config_from_args(a)?;
-        let dir = dataset_dir(a, a.quiet)?;
-        let data = load_dataset(&dir, &cfg)?;
-        let tr = Trainer::new(ctx, cfg, &data)?;
-        // Absolute, so that --resume, eval and render work from any directory.
-        let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
-        let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
-        (tr, data, abs.to_string_lossy().into_owned(), identity)
+        new_trainer(ctx, a)?
     };
     if !a.resume || !a.out.join(RUN_RECORD).is_file() {
-        let rec = json!({"run_id": identity.run_id, "dataset": dataset_str, "dataset_files": identity.fingerprint.files.len(), "dataset_digest": format!("{:016x}", identity.fingerprint.digest())});
+        let rec = json!({"run_id": identity.run_id, "dataset": dataset, "dataset_files": identity.fingerprint.files.len(), "dataset_digest": format!("{:016x}", identity.fingerprint.digest())});
         atomic_write(&a.out.join(RUN_RECORD), serde_json::to_string_pretty(&rec)?.as_bytes())?;
     }
     show_warnings(&data, a.quiet);
@@ -163,189 +129,316 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     preflight(&tr, &data, &validation, a.quiet)?;
     atomic_write(&a.out.join("config.toml"), toml::to_string(&tr.cfg)?.as_bytes())?;
     install_signal_handler();
-    // A request_stop() of an earlier training in this process is spent;
-    // a signal that arrived since this one started is not.
-    INTERRUPTED.store(signals_received() > signals_at_start, Ordering::SeqCst);
+    arm(signals_at_start);
     let guard = DivergenceGuard::install(&mut tr)?;
-
     let total = tr.schedule.total();
-    let mut report = Reporter::open(&a.out, a.resume, a.quiet, total, tr.iteration)?;
-    let note = if a.resume { None } else { a.preset.as_deref().and_then(|p| paper_schedule_note(p, &data.train.iter().map(|v| (v.camera.width, v.camera.height)).collect::<Vec<_>>())) };
-    if let (Some(n), false) = (&note, a.quiet) {
-        eprintln!("tgs: {n}");
-    }
-    if !a.quiet {
-        eprintln!(
-            "training on {} ({} train / {} test views, {}) with {} Gaussians on {}",
-            data.root.display(),
-            data.train.len(),
-            data.test.len(),
-            data.format,
-            tr.scattering.set.len(),
-            ctx.caps().describe()
-        );
-    }
-    let mut timing_sums: BTreeMap<String, (f64, u64)> = BTreeMap::new();
-    let mut first_loss = None;
-    let mut last_loss = f64::NAN;
+    let report = Reporter::open(&a.out, a.resume, a.quiet, total, tr.iteration)?;
+    say_start(ctx, a, &tr, &data);
     let loop_start = Instant::now();
-    let start_it = tr.iteration;
-    let mut interrupted = false;
-    let mut stages: Vec<serde_json::Value> = read_stage_records(&a.out, a.resume);
+    let mut stages = read_stage_records(&a.out, a.resume);
     stages.extend(from_record);
     let before = if a.resume { Before::read(&a.out, tr.iteration) } else { Before::default() };
-    let mut clocks = Clocks::new(start, before);
-    // checkpoint.bin and, beside it, the clocks at its iteration.
-    let save_run = |tr: &Trainer, clocks: &Clocks| -> Result<()> {
-        checkpoint::save(tr, &ckpt, &dataset_str, &identity)?;
-        clocks.save(&a.out, tr.iteration)
-    };
-    // The later stages' views (the validation views held out).
     let view_names = validation.later_view_names(&data);
+    let start_it = tr.iteration;
+    let clocks = Clocks::new(start, before);
+    let mut run = Run {
+        ctx,
+        a,
+        ckpt,
+        data,
+        dataset,
+        identity,
+        validation,
+        report,
+        clocks,
+        stages,
+        view_names,
+        timing_sums: BTreeMap::new(),
+        first_loss: None,
+        last_loss: f64::NAN,
+        loop_start,
+        start_it,
+        total,
+        last_closed: false,
+    };
     // A run whose Stage II was dropped ended there (stages.json says so).
-    if a.resume && validation.drops_stage_two(&stages) && tr.iteration > tr.cfg.iterations && tr.later.is_none() {
+    if a.resume && run.validation.drops_stage_two(&run.stages) && tr.iteration > tr.cfg.iterations && tr.later.is_none() {
         end_here(&mut tr);
     }
-    // Set when a skipped Stage II closed the last stage for good.
-    let mut last_closed = false;
     while !tr.done() {
-        // Between stages: close the last one, start the next, say so.
         let (entry, label) = tr.next_entry();
-        let first_round = tr.schedule.round(entry) == 1;
-        let begun = if let Some(kind) = tr.next_begins() {
-            // A resume inside the stage begins it again (to rebuild what
-            // is not checkpointed) without closing the stage before.
-            let resumed = tr.later.as_ref().map(|m| m.stage()) == Some(kind.stage());
-            let prev = tr.schedule.label(entry.saturating_sub(1));
-            if !resumed {
-                // The state at the end of the stage before
-                // (checkpoint-stage1.bin, ...), for --from; not as a
-                // stage begins again (reflection.reseed).
-                if first_round {
-                    checkpoint::save(&tr, &a.out.join(stage_checkpoint(entry)), &dataset_str, &identity)?;
-                }
-                let val = validation.measure(&mut tr)?;
-                close_stage(&mut tr, &data, &a.out, &mut stages, &clocks, &prev, val)?;
-                if !a.quiet {
-                    eprintln!("Stage {prev} done");
-                }
-                if prev == "II" && validation.drops_stage_two(&stages) {
-                    tr = drop_stage_two(ctx, &a.out, &data, &tr, &mut report, &validation, &stages)?;
-                    last_closed = true;
-                    atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
-                    continue;
-                }
-            }
-            let files = RunPaths { dir: &a.out, dataset: &data.root, view_names: &view_names };
-            let b = tr.begin_next(Some(files), a.quiet)?;
-            let mut event = json!({"iteration": tr.iteration, "stage": label, "event": "begin"});
-            event.as_object_mut().expect("an object").extend(b.event);
-            Some((b.message, event, resumed))
-        } else {
-            None
-        };
-        if let Some((msg, event, resumed)) = begun {
-            // A stage begun again on --resume was logged when it first began.
-            report.stage_event(&msg, (!resumed).then_some(&event), tr.schedule.total())?;
-            clocks.next_stage();
-            last_closed = tr.done();
-            atomic_write(&a.out.join("stages.json"), serde_json::to_string_pretty(&stages)?.as_bytes())?;
+        if tr.next_begins().is_some() {
+            run.between_stages(&mut tr, entry, &label)?;
             continue;
         }
         let r = tr.step(a.profile)?;
-        let bad = guard.check(&tr)?;
-        if !r.loss.is_finite() || !bad.is_empty() {
-            let what = if r.loss.is_finite() { format!("{} went non-finite or past {MEANS_LIMIT:e} scene extents", bad.join(", ")) } else { format!("the loss is {}", r.loss) };
-            checkpoint::save(&tr, &a.out.join("checkpoint-nonfinite.bin"), &dataset_str, &identity)?;
-            let kept = checkpoint::read(&ckpt).map(|(h, _)| format!("{} holds iteration {}, the last state saved before", ckpt.display(), h.iteration)).unwrap_or_else(|_| format!("no checkpoint was saved before (checkpoint_interval {})", tr.cfg.checkpoint_interval));
-            bail!("iteration {}: training diverged: {what}; {}. Stopped; {kept}, and the diverged state is in checkpoint-nonfinite.bin", r.iteration, likely_cause(&tr.cfg, &data));
+        run.stop_if_diverged(&tr, &guard, &r)?;
+        run.after_step(&mut tr, &r, &label)?;
+        if stop_requested() {
+            return run.interrupted(&tr);
         }
-        first_loss.get_or_insert(r.loss);
-        last_loss = r.loss;
+    }
+    run.finish(tr)
+}
+
+/// Continue OUT's own run from its checkpoint, with the settings
+/// `--resume` may change.
+fn resume_trainer(ctx: &Arc<Context>, a: &TrainArgs, ckpt: &Path) -> Result<Opened> {
+    if !ckpt.is_file() {
+        bail!("{}: no checkpoint to resume from", ckpt.display());
+    }
+    let (h, arrays) = checkpoint::read(ckpt)?;
+    let cfg = resume_config(a, &h.config)?;
+    checkpoint::warn_missing_settings(ckpt, &h, &cfg, a.quiet)?;
+    let dir = PathBuf::from(&h.dataset);
+    if let Some(given) = &a.dataset {
+        let same = std::fs::canonicalize(given).map(|g| g == dir).unwrap_or(false);
+        if !same {
+            bail!("--resume continues the run on its own dataset {}; {} was given (leave it out, or start a new run with another --out)", dir.display(), given.display());
+        }
+    }
+    check_run_record(&a.out, &h)?;
+    let data = load_dataset(&dir, &h.config)?;
+    let dataset = h.dataset.clone();
+    let identity = match &h.identity {
+        Some(id) => id.clone(),
+        None => checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? },
+    };
+    let h_stage1 = h.config.iterations;
+    let mut tr = checkpoint::restore(ctx, ckpt, (h, arrays), &data)?;
+    let total = super::schedule::Schedule::from_config(&cfg).total();
+    if total < tr.iteration || cfg.iterations < tr.iteration.min(h_stage1) {
+        bail!("--iterations {} ({total} in all stages): the checkpoint is already at iteration {}", cfg.iterations, tr.iteration);
+    }
+    if tr.iteration > h_stage1 && cfg.iterations != h_stage1 {
+        bail!("iterations {}: the run finished Stage I at {h_stage1} and is in Stage II; Stage I's length cannot change now", cfg.iterations);
+    }
+    tr.cfg = cfg;
+    tr.schedule = super::schedule::Schedule::from_config(&tr.cfg);
+    truncate_log(&a.out.join("log.jsonl"), tr.iteration)?;
+    Ok(Opened { tr, data, dataset, identity, from_record: Vec::new() })
+}
+
+/// A new run on the dataset and settings the arguments give.
+fn new_trainer(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Opened> {
+    let cfg = config_from_args(a)?;
+    let dir = dataset_dir(a, a.quiet)?;
+    let data = load_dataset(&dir, &cfg)?;
+    let tr = Trainer::new(ctx, cfg, &data)?;
+    // Absolute, so that --resume, eval and render work from any directory.
+    let abs = std::fs::canonicalize(&dir).unwrap_or(dir);
+    let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
+    Ok(Opened { tr, data, dataset: abs.to_string_lossy().into_owned(), identity, from_record: Vec::new() })
+}
+
+/// The paper schedule's note for a preset and what the run trains on, on stderr.
+fn say_start(ctx: &Arc<Context>, a: &TrainArgs, tr: &Trainer, data: &Dataset) {
+    if a.quiet {
+        return;
+    }
+    let sizes: Vec<(u32, u32)> = data.train.iter().map(|v| (v.camera.width, v.camera.height)).collect();
+    if let Some(n) = a.preset.as_deref().filter(|_| !a.resume).and_then(|p| paper_schedule_note(p, &sizes)) {
+        eprintln!("tgs: {n}");
+    }
+    eprintln!(
+        "training on {} ({} train / {} test views, {}) with {} Gaussians on {}",
+        data.root.display(),
+        data.train.len(),
+        data.test.len(),
+        data.format,
+        tr.scattering.set.len(),
+        ctx.caps().describe()
+    );
+}
+
+impl Run<'_> {
+    /// checkpoint.bin and, beside it, the clocks at its iteration.
+    fn save(&self, tr: &Trainer) -> Result<()> {
+        checkpoint::save(tr, &self.ckpt, &self.dataset, &self.identity)?;
+        self.clocks.save(&self.a.out, tr.iteration)
+    }
+
+    /// Between stages: close the last one (or drop it), start the next, say so.
+    fn between_stages(&mut self, tr: &mut Trainer, entry: usize, label: &str) -> Result<()> {
+        let out = &self.a.out;
+        let first_round = tr.schedule.round(entry) == 1;
+        let kind = tr.next_begins().context("a stage to begin")?;
+        // A resume inside the stage begins it again (to rebuild what is
+        // not checkpointed) without closing the stage before.
+        let resumed = tr.later.as_ref().map(|m| m.stage()) == Some(kind.stage());
+        if !resumed {
+            // The state at the end of the stage before (checkpoint-stage1.bin,
+            // ...), for --from; not as a stage begins again (reflection.reseed).
+            if first_round {
+                checkpoint::save(tr, &out.join(stage_checkpoint(entry)), &self.dataset, &self.identity)?;
+            }
+            let prev = tr.schedule.label(entry.saturating_sub(1));
+            let validation = self.validation.measure(tr)?;
+            close_stage(tr, &self.data, out, &mut self.stages, Closing { stage: &prev, clock: &self.clocks, validation })?;
+            if !self.a.quiet {
+                eprintln!("Stage {prev} done");
+            }
+            if prev == "II" && self.validation.drops_stage_two(&self.stages) {
+                *tr = self.drop_stage_two(tr)?;
+                self.last_closed = true;
+                return write_stage_records(out, &self.stages);
+            }
+        }
+        let files = RunPaths { dir: out, dataset: &self.data.root, view_names: &self.view_names };
+        let b = tr.begin_next(Some(files), self.a.quiet)?;
+        let mut event = json!({"iteration": tr.iteration, "stage": label, "event": "begin"});
+        event.as_object_mut().expect("an object").extend(b.event);
+        // A stage begun again on --resume was logged when it first began.
+        self.report.stage_event(&b.message, (!resumed).then_some(&event), tr.schedule.total())?;
+        self.clocks.next_stage();
+        self.last_closed = tr.done();
+        write_stage_records(out, &self.stages)
+    }
+
+    /// Stage II's set did not raise the validation views' PSNR: the run goes
+    /// back to Stage I's model ([`back_to_stage_one`]), says so and logs it.
+    fn drop_stage_two(&mut self, tr: &Trainer) -> Result<Trainer> {
+        let t = back_to_stage_one(self.ctx, &self.a.out, &self.data, tr)?;
+        let msg = "Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's (validation_margin_db); Stage I's model is the result";
+        let event = json!({"iteration": t.iteration, "stage": "II", "event": "dropped", "validation": self.validation.verdicts(&self.stages)});
+        self.report.stage_event(msg, Some(&event), t.schedule.total())?;
+        Ok(t)
+    }
+
+    /// A non-finite loss or a set the guard flags ends the run with the
+    /// diverged state saved apart and the likely cause named.
+    fn stop_if_diverged(&self, tr: &Trainer, guard: &DivergenceGuard, r: &StepReport) -> Result<()> {
+        let bad = guard.check(tr)?;
+        if r.loss.is_finite() && bad.is_empty() {
+            return Ok(());
+        }
+        let what = if r.loss.is_finite() { format!("{} went non-finite or past {MEANS_LIMIT:e} scene extents", bad.join(", ")) } else { format!("the loss is {}", r.loss) };
+        checkpoint::save(tr, &self.a.out.join("checkpoint-nonfinite.bin"), &self.dataset, &self.identity)?;
+        let kept = checkpoint::read(&self.ckpt)
+            .map(|(h, _)| format!("{} holds iteration {}, the last state saved before", self.ckpt.display(), h.iteration))
+            .unwrap_or_else(|_| format!("no checkpoint was saved before (checkpoint_interval {})", tr.cfg.checkpoint_interval));
+        bail!(
+            "iteration {}: training diverged: {what}; {}. Stopped; {kept}, and the diverged state is in checkpoint-nonfinite.bin",
+            r.iteration,
+            likely_cause(&tr.cfg, &self.data)
+        );
+    }
+
+    /// After a step: the losses and timings, the log line (with the test
+    /// metrics when due) and the periodic checkpoint.
+    fn after_step(&mut self, tr: &mut Trainer, r: &StepReport, label: &str) -> Result<()> {
+        self.first_loss.get_or_insert(r.loss);
+        self.last_loss = r.loss;
         for t in &r.timings {
-            let e = timing_sums.entry(t.name.clone()).or_insert((0.0, 0));
+            let e = self.timing_sums.entry(t.name.clone()).or_insert((0.0, 0));
             e.0 += t.ms;
             e.1 += 1;
         }
-        let elapsed = loop_start.elapsed().as_secs_f64();
-        let its = (r.iteration - start_it) as f64 / elapsed.max(1e-9);
+        let total = self.total;
+        let elapsed = self.loop_start.elapsed().as_secs_f64();
+        let its = (r.iteration - self.start_it) as f64 / elapsed.max(1e-9);
         let phi = tr.later.as_mut().and_then(|m| m.take_coverage());
-        let mut line = Reporter::iteration_line(&r, &label, its, clocks.total_s(), phi);
+        let mut line = Reporter::iteration_line(r, label, its, self.clocks.total_s(), phi);
         let cfg = &tr.cfg;
-        if cfg.test_interval > 0 && r.iteration % cfg.test_interval == 0 && r.iteration < total && !data.test.is_empty() {
-            let m = evaluate(&mut tr, &data.test, None)?;
-            report.test_metrics(&mut line, r.iteration, &m);
+        if cfg.test_interval > 0 && r.iteration.is_multiple_of(cfg.test_interval) && r.iteration < total && !self.data.test.is_empty() {
+            let m = evaluate(tr, &self.data.test, None)?;
+            self.report.test_metrics(&mut line, r.iteration, &m);
         }
-        report.iteration(&r, &line, total, its)?;
+        self.report.iteration(r, &line, total, its)?;
         let ck = tr.cfg.checkpoint_interval;
-        if ck > 0 && r.iteration % ck == 0 && r.iteration < total {
-            save_run(&tr, &clocks)?;
+        if ck > 0 && r.iteration.is_multiple_of(ck) && r.iteration < total {
+            self.save(tr)?;
         }
-        if INTERRUPTED.load(Ordering::SeqCst) {
-            interrupted = true;
-            break;
+        Ok(())
+    }
+
+    /// Stopped by a signal or request_stop(): the checkpoint, and how to go on.
+    fn interrupted(self, tr: &Trainer) -> Result<Outcome> {
+        self.report.finish();
+        self.save(tr)?;
+        if !self.a.quiet {
+            eprintln!("stopped at iteration {}; checkpoint {}; continue with --resume", tr.iteration, self.ckpt.display());
         }
+        Ok(Outcome { iteration: tr.iteration, interrupted: true, first_loss: self.first_loss, last_loss: self.last_loss, metrics: None, wall_s: self.clocks.total_s() })
     }
-    report.finish();
-    save_run(&tr, &clocks)?;
-    if interrupted {
-        if !a.quiet {
-            eprintln!("stopped at iteration {}; checkpoint {}; continue with --resume", tr.iteration, ckpt.display());
+
+    /// The test metrics of the model as it is (renders in OUT/renders/test).
+    fn test_metrics(&self, tr: &mut Trainer) -> Result<Option<Metrics>> {
+        if self.data.test.is_empty() {
+            return Ok(None);
         }
-        return Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics: None, wall_s: clocks.total_s() });
+        Ok(Some(evaluate(tr, &self.data.test, Some(&mut OutDir::open(&self.a.out.join("renders/test"), Some(&self.data.root))?))?))
     }
-    let train_s = clocks.train_s();
-    let test_metrics = |tr: &mut Trainer| -> Result<Option<Metrics>> { if data.test.is_empty() { Ok(None) } else { Ok(Some(evaluate(tr, &data.test, Some(&mut OutDir::open(&a.out.join("renders/test"), Some(&data.root))?))?)) } };
-    let mut metrics = test_metrics(&mut tr)?;
-    if !last_closed {
-        let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
-        stages.retain(|s| s["stage"] != last_stage.as_str());
-        let mut rec = stage_record(&last_stage, &tr, clocks.stage_s(), metrics.as_ref());
-        rec["validation"] = json!(validation.measure(&mut tr)?);
-        stages.push(rec);
-        if last_stage == "II" && validation.drops_stage_two(&stages) {
-            tr = drop_stage_two(ctx, &a.out, &data, &tr, &mut report, &validation, &stages)?;
-            save_run(&tr, &clocks)?;
-            metrics = test_metrics(&mut tr)?;
+
+    /// The end of training: the last stage closed (or dropped), the outputs
+    /// and metrics.json written, the summary said.
+    fn finish(mut self, mut tr: Trainer) -> Result<Outcome> {
+        self.report.finish();
+        self.save(&tr)?;
+        let train_s = self.clocks.train_s();
+        let mut metrics = self.test_metrics(&mut tr)?;
+        if !self.last_closed {
+            let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
+            self.stages.retain(|s| s["stage"] != last_stage.as_str());
+            let mut rec = stage_record(&last_stage, &tr, self.clocks.stage_s(), metrics.as_ref());
+            rec["validation"] = json!(self.validation.measure(&mut tr)?);
+            self.stages.push(rec);
+            if last_stage == "II" && self.validation.drops_stage_two(&self.stages) {
+                tr = self.drop_stage_two(&tr)?;
+                self.save(&tr)?;
+                metrics = self.test_metrics(&mut tr)?;
+            }
         }
+        write_splats(&self.a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
+        if let Some(m) = &tr.later {
+            m.write_outputs(&self.a.out)?;
+        }
+        let timings: BTreeMap<String, f64> = self.timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - self.start_it).max(1) as f64)).collect();
+        let doc = json!({
+            "dataset": self.dataset,
+            "device": self.ctx.caps().describe(),
+            "iterations": tr.iteration,
+            "gaussians": tr.scattering.set.len(),
+            "train_wall_s": train_s,
+            "total_wall_s": self.clocks.total_s(),
+            "first_loss": self.first_loss,
+            "final_loss": self.last_loss,
+            "test": metrics,
+            "stages": self.stages,
+            "reflection": reflection_record(&tr, &self.validation, &self.stages),
+            "validation": self.validation.report(&self.stages),
+            "gpu_ms_per_iteration": if self.a.profile { json!(timings) } else { json!(null) },
+        });
+        atomic_write(&self.a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?.as_bytes())?;
+        self.say_done(&tr, metrics.as_ref(), train_s, &timings);
+        Ok(Outcome { iteration: tr.iteration, interrupted: false, first_loss: self.first_loss, last_loss: self.last_loss, metrics, wall_s: self.clocks.total_s() })
     }
-    write_splats(&a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
-    if let Some(m) = &tr.later {
-        m.write_outputs(&a.out)?;
-    }
-    let timings: BTreeMap<String, f64> = timing_sums.iter().map(|(k, (ms, _))| (k.clone(), ms / (tr.iteration - start_it).max(1) as f64)).collect();
-    let doc = json!({
-        "dataset": dataset_str,
-        "device": ctx.caps().describe(),
-        "iterations": tr.iteration,
-        "gaussians": tr.scattering.set.len(),
-        "train_wall_s": train_s,
-        "total_wall_s": clocks.total_s(),
-        "first_loss": first_loss,
-        "final_loss": last_loss,
-        "test": metrics,
-        "stages": stages,
-        "reflection": reflection_record(&tr, &validation, &stages),
-        "validation": validation.report(&stages),
-        "gpu_ms_per_iteration": if a.profile { json!(timings) } else { json!(null) },
-    });
-    atomic_write(&a.out.join("metrics.json"), serde_json::to_string_pretty(&doc)?.as_bytes())?;
-    if !a.quiet {
-        if let Some(m) = &metrics {
+
+    /// The summary on stderr (unless quiet).
+    fn say_done(&self, tr: &Trainer, metrics: Option<&Metrics>, train_s: f64, timings: &BTreeMap<String, f64>) {
+        if self.a.quiet {
+            return;
+        }
+        if let Some(m) = metrics {
             let mae = m.normals.normal_mae_deg.map(|v| format!(", normal MAE {v:.2}°")).unwrap_or_default();
-            eprintln!("done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{}{mae}", tr.iteration, tr.scattering.set.len(), m.psnr, m.ssim, lpips_text(m.lpips));
+            eprintln!(
+                "done: {} iterations in {train_s:.1}s, {} Gaussians; test PSNR {:.2}, SSIM {:.4}{}{mae}",
+                tr.iteration,
+                tr.scattering.set.len(),
+                m.psnr,
+                m.ssim,
+                lpips_text(m.lpips)
+            );
         }
-        if a.profile {
+        if self.a.profile {
             eprintln!("GPU ms per iteration by kernel:");
-            for (k, v) in &timings {
+            for (k, v) in timings {
                 eprintln!("  {k:24} {v:9.3}");
             }
         }
-        eprintln!("outputs in {}", a.out.display());
+        eprintln!("outputs in {}", self.a.out.display());
     }
-    Ok(Outcome { iteration: tr.iteration, interrupted, first_loss, last_loss, metrics, wall_s: clocks.total_s() })
 }
-
 
 /// What can be checked before any training: learning rates far above the
 /// presets' (warned; above the limit they were refused with the settings)
@@ -362,98 +455,6 @@ fn preflight(tr: &Trainer, data: &Dataset, validation: &Validation, quiet: bool)
         // The names of the views the trainer holds (without the validation views once held out).
         let names: Vec<String> = if tr.held_out { validation.later_view_names(data) } else { data.train.iter().map(|v| v.name.clone()).collect() };
         super::stages::reflection::stage::seed_masks(Path::new(&rc.seed_masks), &names, &tr.views.cameras, tr.cfg.downscale).context("checked before training")?;
-    }
-    Ok(())
-}
-
-/// Stage II's set did not raise the validation views' PSNR: the run goes
-/// back to Stage I's model ([`back_to_stage_one`]), says so and logs it.
-fn drop_stage_two(ctx: &Arc<Context>, out: &Path, data: &Dataset, tr: &Trainer, report: &mut Reporter, validation: &Validation, stages: &[serde_json::Value]) -> Result<Trainer> {
-    let t = back_to_stage_one(ctx, out, data, tr)?;
-    let msg = "Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's (validation_margin_db); Stage I's model is the result";
-    report.stage_event(msg, Some(&json!({"iteration": t.iteration, "stage": "II", "event": "dropped", "validation": validation.verdicts(stages)})), t.schedule.total())?;
-    Ok(t)
-}
-
-/// metrics.json's `reflection`: the Stage II decision and, with a
-/// validation slice and a Stage II that ran, whether its set was kept.
-fn reflection_record(tr: &Trainer, validation: &Validation, stages: &[serde_json::Value]) -> serde_json::Value {
-    let mut r = json!(tr.decision);
-    let ran = tr.decision.as_ref().is_some_and(|d| d.run);
-    if let (true, true, Some(o)) = (validation.is_on(), ran, r.as_object_mut()) {
-        o.insert("kept".into(), json!(!validation.drops_stage_two(stages)));
-    }
-    r
-}
-
-/// metrics.json's record of a finished stage.
-fn stage_record(stage: &str, tr: &Trainer, wall_s: f64, m: Option<&Metrics>) -> serde_json::Value {
-    let its = tr.schedule.iterations_of(stage);
-    let test = m.map(|m| {
-        json!({"psnr": m.psnr, "ssim": m.ssim, "lpips": m.lpips, "normal_mae_deg": m.normals.normal_mae_deg, "normal_mae_scattering_deg": m.normals.normal_mae_scattering_deg,
-               "reflection_coverage": m.normals.reflection_coverage, "normal_mae_covered_deg": m.normals.normal_mae_covered_deg,
-               "reflection_outside_mask": m.normals.reflection_outside_mask, "normal_mae_ray_facing_deg": m.normals.normal_mae_ray_facing_deg,
-               "normal_mae_outside_deg": m.normals.normal_mae_outside_deg,
-               "reflection_gain_mask": m.normals.reflection_gain_mask, "reflection_gain_outside": m.normals.reflection_gain_outside,
-               "residual_contrast": m.normals.residual_contrast})
-    });
-    json!({"stage": stage, "iterations": its, "wall_s": wall_s, "test": test})
-}
-
-/// The stage records of the run so far (kept in stages.json across a resume).
-fn read_stage_records(out: &Path, resume: bool) -> Vec<serde_json::Value> {
-    if !resume {
-        return Vec::new();
-    }
-    std::fs::read(out.join("stages.json")).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default()
-}
-
-/// Where a closed stage's test renders go: renders/stage1, stage2,
-/// stage3, and stage2.2 / stage3.2 for a second round.
-fn renders_dir(label: &str) -> String {
-    let (name, round) = label.split_once('.').map(|(n, r)| (n, format!(".{r}"))).unwrap_or((label, String::new()));
-    let n = Stage::named(name).map(Stage::number).unwrap_or(0);
-    format!("stage{n}{round}")
-}
-
-/// Close `stage`: its test metrics (renders in OUT/renders/stageN) into
-/// its record in `stages`. A stage taken
-/// from another run (--from) keeps that run's record (its wall time, where
-/// it came from); the test metrics are re-measured.
-fn close_stage(tr: &mut Trainer, data: &Dataset, out: &Path, stages: &mut Vec<serde_json::Value>, clock: &Clocks, stage: &str, validation: Option<serde_json::Value>) -> Result<()> {
-    let dir = out.join("renders").join(renders_dir(stage));
-    let m = if data.test.is_empty() { None } else { Some(evaluate(tr, &data.test, Some(&mut OutDir::open(&dir, Some(&data.root))?))?) };
-    let from = stages.iter().find(|s| s["stage"] == stage && s.get("from").is_some()).cloned();
-    stages.retain(|s| s["stage"] != stage);
-    let mut rec = stage_record(stage, tr, clock.stage_s(), m.as_ref());
-    rec["validation"] = json!(validation);
-    if let Some(f) = from {
-        rec["wall_s"] = f["wall_s"].clone();
-        rec["from"] = f["from"].clone();
-    }
-    stages.push(rec);
-    Ok(())
-}
-
-/// Drop the log lines of iterations after `iteration` (those a killed run
-/// logged past its last checkpoint, which the resumed run logs again).
-fn truncate_log(path: &Path, iteration: u32) -> Result<()> {
-    let text = match std::fs::read_to_string(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(e).with_context(|| format!("{}: cannot read", path.display())),
-    };
-    let mut kept = String::new();
-    for line in text.lines() {
-        // A line torn by the kill does not parse: it is dropped too.
-        let it = serde_json::from_str::<serde_json::Value>(line).ok().and_then(|v| v["iteration"].as_u64());
-        if it.is_some_and(|i| i <= iteration as u64) {
-            kept.push_str(line);
-            kept.push('\n');
-        }
-    }
-    if kept.len() != text.len() {
-        atomic_write(path, kept.as_bytes())?;
     }
     Ok(())
 }

@@ -40,14 +40,5 @@ pub fn run_files() -> Vec<String> {
 }
 
 /// The files every run writes directly into its directory.
-const RUN_FILES: [&str; 9] = [
-    RUN_RECORD,
-    "config.toml",
-    "log.jsonl",
-    CHECKPOINT,
-    "checkpoint-nonfinite.bin",
-    super::clock::CLOCK_FILE,
-    "stages.json",
-    "point_cloud.ply",
-    "metrics.json",
-];
+const RUN_FILES: [&str; 9] =
+    [RUN_RECORD, "config.toml", "log.jsonl", CHECKPOINT, "checkpoint-nonfinite.bin", super::clock::CLOCK_FILE, "stages.json", "point_cloud.ply", "metrics.json"];

@@ -3,8 +3,8 @@
 //! (`reflection.reseed`).
 
 use super::config::TrainConfig;
-use super::stages::LATER;
 pub use super::stage::Stage;
+use super::stages::LATER;
 
 /// The stage schedule: each stage with its iteration count, run in order.
 #[derive(Clone, Debug, PartialEq)]

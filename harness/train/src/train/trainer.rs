@@ -10,8 +10,8 @@
 
 use super::config::TrainConfig;
 use super::schedule::{Schedule, Stage};
-use super::stages::light_field::LightFieldModel;
 use super::stages::kind::by_stage;
+use super::stages::light_field::LightFieldModel;
 use super::stages::reflection::{reflection_decides, ReflDecision, ReflectionModel};
 use super::stages::scattering::init::{check_budget, far_points, gaussians_from_points, random_points};
 use super::stages::scattering::ScatteringModel;

@@ -6,6 +6,6 @@ pub mod model;
 pub mod outputs;
 pub mod stage;
 
-pub use crate::train::stages::reflection::bounds::normalization_box;
 pub use crate::train::stages::kept_views::KeepAs;
+pub use crate::train::stages::reflection::bounds::normalization_box;
 pub use model::{LightFieldModel, LightFieldStepInput, MlpParams};

@@ -12,6 +12,7 @@ use crate::train::config::TrainConfig;
 use crate::train::stages::composite::{CompositeLoss, HfSetting};
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
 use crate::train::stages::rendered::{PhiLayers, ReflRendered, R_PLANE};
+use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
@@ -21,7 +22,6 @@ use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShadi
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
 use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, KeptWeights, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
-use crate::train::stages::scattering::ExternalStep;
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -314,7 +314,12 @@ impl LightFieldModel {
             self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
             rec.end_scope(sc);
             if train_scat {
-                scattering.record_backward_external(&mut rec, cfg, cam, &ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only })?;
+                scattering.record_backward_external(
+                    &mut rec,
+                    cfg,
+                    cam,
+                    &ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only },
+                )?;
             }
             let (n, s) = (&self.net, &self.set);
             let np = n.shape.params() as usize;
@@ -414,7 +419,15 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
 /// rasterization into `b.frame` and the view's sample list (Phi's inputs,
 /// `b.samples.count`), with the model's shading and raster kernels.
 /// A training view's kept weights, where given, stand for the rasterization.
-fn record_forward(rec: &mut Recorder, (shading, raster, kept): (&LightFieldShading, &Rasterizer, Option<&KeptWeights>), s: Splats, cam: &Camera, shade: &ShadeParams, b: &ViewBuffers, scratch: &MlpScratch) -> Result<()> {
+fn record_forward(
+    rec: &mut Recorder,
+    (shading, raster, kept): (&LightFieldShading, &Rasterizer, Option<&KeptWeights>),
+    s: Splats,
+    cam: &Camera,
+    shade: &ShadeParams,
+    b: &ViewBuffers,
+    scratch: &MlpScratch,
+) -> Result<()> {
     let sc = rec.begin_scope("lf.material");
     shading.record_material(rec, &s.g.features, s.g.n, s.features)?;
     rec.end_scope(sc);

@@ -4,14 +4,14 @@
 
 use super::checkpoint::LightFieldHeader;
 use super::model::{LightFieldModel, LightFieldStepInput};
-use crate::train::stages::reflection::checkpoint::host_reflection_set;
-use crate::train::stages::kept_views::KeepAs;
-use crate::train::stages::kind::RenderLayer;
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
+use crate::train::stages::kept_views::KeepAs;
+use crate::train::stages::kind::RenderLayer;
 use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
-use crate::train::stages::reflection::ReflDecision;
 use crate::train::stages::reflection::bounds::normalization_box;
+use crate::train::stages::reflection::checkpoint::host_reflection_set;
+use crate::train::stages::reflection::ReflDecision;
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};

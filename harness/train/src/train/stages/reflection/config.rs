@@ -300,7 +300,10 @@ impl ReflectionConfig {
             bail!("reflection.env_radius must be 0 (light infinitely far) or a positive multiple of the camera distance up to 1e6, not {}", self.env_radius);
         }
         if self.env_radius > 0.0 && self.env_init == EnvStart::SceneDepth {
-            bail!("reflection.env_radius = {} puts the light on one sphere, and reflection.env_init = \"scene-depth\" at the scene's depth per direction: set one of them", self.env_radius);
+            bail!(
+                "reflection.env_radius = {} puts the light on one sphere, and reflection.env_init = \"scene-depth\" at the scene's depth per direction: set one of them",
+                self.env_radius
+            );
         }
         if self.scattering_sh > 3 {
             bail!("reflection.scattering_sh must be 0..=3 (an SH degree), not {}", self.scattering_sh);
@@ -332,7 +335,18 @@ impl ReflectionConfig {
         if !(0.0..=1.0).contains(&self.normal_min_r) {
             bail!("reflection.normal_min_r must be in [0, 1] (a reflection weight), not {}", self.normal_min_r);
         }
-        for (k, v) in [("lr_env", self.lr_env), ("lr_f0", self.lr_f0), ("lr_r", self.lr_r), ("lr_opacity", self.lr_opacity), ("lr_quats", self.lr_quats), ("lr_scales", self.lr_scales), ("lr_means_scale", self.lr_means_scale), ("lambda_normal", self.lambda_normal), ("lambda_r", self.lambda_r), ("lambda_area", self.lambda_area)] {
+        for (k, v) in [
+            ("lr_env", self.lr_env),
+            ("lr_f0", self.lr_f0),
+            ("lr_r", self.lr_r),
+            ("lr_opacity", self.lr_opacity),
+            ("lr_quats", self.lr_quats),
+            ("lr_scales", self.lr_scales),
+            ("lr_means_scale", self.lr_means_scale),
+            ("lambda_normal", self.lambda_normal),
+            ("lambda_r", self.lambda_r),
+            ("lambda_area", self.lambda_area),
+        ] {
             if !(v >= 0.0 && v.is_finite()) {
                 bail!("reflection.{k} must be non-negative and finite, not {v}");
             }

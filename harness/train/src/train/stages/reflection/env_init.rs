@@ -178,7 +178,11 @@ pub fn scene_env_map(ctx: &Arc<Context>, scene: SceneLight, refl_means: &[f32], 
         let far = FAR * if found.is_empty() { half.iter().copied().fold(1e-3f32, f32::max) * 2.0 } else { farthest };
         env.depth = Some(dist.iter().map(|d| d.unwrap_or(far)).collect());
         env.proxy = Some(EnvProxy { centre, radius: far });
-        info.depth = Some(DepthInfo { surface_share: found.len() as f32 / dist.len() as f32, nearest: if found.is_empty() { far } else { nearest }, farthest: if found.is_empty() { far } else { farthest } });
+        info.depth = Some(DepthInfo {
+            surface_share: found.len() as f32 / dist.len() as f32,
+            nearest: if found.is_empty() { far } else { nearest },
+            farthest: if found.is_empty() { far } else { farthest },
+        });
     }
     env.validate()?;
     Ok((env, info))

@@ -7,23 +7,24 @@
 //! on the reflection set, the backward through all of it, Adam, and
 //! prune-only density control. Never refers to the trainer.
 
-use crate::train::config::TrainConfig;
-use crate::train::stages::rendered::{ReflRendered, R_PLANE};
-use crate::train::stages::composite::{CompositeLoss, HfSetting};
 use super::config::ReflectionConfig;
-use crate::train::logit;
-use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use super::seed::{quat_for_normal, Seed};
+use crate::train::config::TrainConfig;
+use crate::train::logit;
 use crate::train::settings::RotationGrad;
+use crate::train::stages::composite::{CompositeLoss, HfSetting};
+use crate::train::stages::rendered::{ReflRendered, R_PLANE};
+use crate::train::stages::scattering::ExternalStep;
+use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::reflection::{ColorInputs, CompositeGrads, CompositeInputs, TexelScratch, MATERIAL};
 use tgs_pipelines::Splats;
-use crate::train::stages::scattering::ExternalStep;
 use tgs_pipelines::{
-    Adam, AdamArrays, AdamGroup, Camera, CompositePriors, DensifyParams, Densifier, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossIo, LossScratch, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet,
+    Adam, AdamArrays, AdamGroup, Camera, CompositePriors, Densifier, DensifyParams, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossIo, LossScratch, LossWeights,
+    Plane, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -274,7 +275,7 @@ impl ReflectionModel {
         }
 
         let mut densified = None;
-        if rc.prune_interval > 0 && x.iteration % rc.prune_interval == 0 && x.iteration > 0 {
+        if rc.prune_interval > 0 && x.iteration.is_multiple_of(rc.prune_interval) && x.iteration > 0 {
             let p = DensifyParams {
                 grad_threshold: f32::INFINITY,
                 dense_scale: 0.0,

@@ -74,10 +74,7 @@ impl ReflDecision {
                 iterations,
             ) + if d.seed_mask_coverage.is_none() && (d.seeds > 0 || d.hull_empty) { RESIDUAL_NOTE } else { "" }
         } else if d.seed_mask_coverage.is_some() {
-            format!(
-                "Stage II skipped: the glass masks ({}) mark no pixel of any training view: no glass to reflect",
-                d.mask_setting()
-            )
+            format!("Stage II skipped: the glass masks ({}) mark no pixel of any training view: no glass to reflect", d.mask_setting())
         } else if d.residual_mean < d.threshold {
             format!(
                 "Stage II skipped: the Stage I residual {:.4} is below reflection.min_residual {:.4} ({:.1}% of pixels above 0.05): the scene shows no view-dependent energy worth a reflection set",

@@ -2,26 +2,26 @@
 //! residual, the decision whether the scene calls for a reflection set, the
 //! seeds and the light), and one iteration of the reflection set.
 
-use std::borrow::Cow;
 use super::bounds::normalization_box;
+use super::checkpoint::{host_reflection_set, ReflHeader};
 use super::env_init::{scene_env_map, SceneLight};
 use super::model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
+use super::outputs::write_residual;
 use super::seed::{hull_seeding, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
-use super::checkpoint::{host_reflection_set, ReflHeader};
-use super::outputs::write_residual;
+use crate::data::downscale_mask;
+use crate::data::image_io::read_grey_mask;
 use crate::outdir::OutDir;
-use crate::train::stages::kind::RenderLayer;
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
+use crate::train::stages::kind::RenderLayer;
 use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};
-use crate::data::downscale_mask;
-use crate::data::image_io::read_grey_mask;
 use anyhow::{bail, Context as _, Result};
 use std::any::Any;
+use std::borrow::Cow;
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context};
@@ -117,7 +117,6 @@ impl LaterKind for Kind {
     }
 }
 
-
 /// Where the hull's glass masks came from (metrics.json's
 /// `reflection.seed_mask_source`).
 enum MaskSource {
@@ -138,6 +137,9 @@ impl MaskSource {
     }
 }
 
+/// Per training view, its glass mask (None: the view has none).
+type ViewMasks<'a> = Cow<'a, [Option<Vec<bool>>]>;
+
 /// The glass masks Stage II seeds from, per training view (None for a
 /// view without one, which then takes no part in the seeding):
 /// `reflection.seed_masks` when it names a directory, else the dataset's
@@ -146,7 +148,7 @@ impl MaskSource {
 /// otherwise.
 /// The dataset's masks are lent, not copied (a view's mask is a byte per
 /// pixel).
-fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(Option<Cow<'a, [Option<Vec<bool>>]>>, MaskSource)> {
+fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(Option<ViewMasks<'a>>, MaskSource)> {
     let rc = &shared.cfg.reflection;
     let v = shared.views;
     if !rc.seed_masks.is_empty() {
@@ -165,7 +167,13 @@ fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(Option<Cow<
     for (i, (m, cam)) in v.masks.iter().zip(&v.cameras).enumerate() {
         let n = (cam.width * cam.height) as usize;
         if let Some(m) = m.as_ref().filter(|m| m.len() != n) {
-            bail!("reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image", names.get(i).cloned().unwrap_or_else(|| i.to_string()), m.len(), cam.width, cam.height);
+            bail!(
+                "reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image",
+                names.get(i).cloned().unwrap_or_else(|| i.to_string()),
+                m.len(),
+                cam.width,
+                cam.height
+            );
         }
     }
     Ok((Some(Cow::Borrowed(&v.masks[..])), MaskSource::Dataset))
@@ -196,13 +204,24 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
             } else if f > 1 && (w / f, h / f) == (cam.width, cam.height) {
                 Ok(Some(downscale_mask(w, h, &m, f)))
             } else {
-                bail!("reflection.seed_masks: {} is {w}x{h}; training view {name} is {}x{}{}", path.display(), cam.width, cam.height, if f > 1 { format!(" ({f} times that before downscale)") } else { String::new() })
+                bail!(
+                    "reflection.seed_masks: {} is {w}x{h}; training view {name} is {}x{}{}",
+                    path.display(),
+                    cam.width,
+                    cam.height,
+                    if f > 1 { format!(" ({f} times that before downscale)") } else { String::new() }
+                )
             }
         })
         .collect::<Result<Vec<_>>>()
         .and_then(|m| {
             if m.iter().all(Option::is_none) {
-                bail!("reflection.seed_masks: {} holds no glass mask of any of the {} training views (VIEW.png, e.g. {}.png)", dir.display(), names.len(), names.first().and_then(|n| Path::new(n).file_stem()).map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
+                bail!(
+                    "reflection.seed_masks: {} holds no glass mask of any of the {} training views (VIEW.png, e.g. {}.png)",
+                    dir.display(),
+                    names.len(),
+                    names.first().and_then(|n| Path::new(n).file_stem()).map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+                );
             }
             Ok(m)
         })
@@ -236,7 +255,15 @@ const VD_SAMPLES: usize = 1 << 16;
 /// which make the stage run whatever the residual measured (if any pixel
 /// is glass). Returns the decision and the new reflection set with its
 /// light (None when one exists or the stage does not run).
-pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, reseed: bool, round: u32, masks: Option<&[Option<Vec<bool>>]>, mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>) -> Result<(ReflDecision, Option<ReflectionModel>)> {
+pub fn begin(
+    s: Shared<'_>,
+    existing: Option<u32>,
+    kept: Option<&ReflDecision>,
+    reseed: bool,
+    round: u32,
+    masks: Option<&[Option<Vec<bool>>]>,
+    mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>,
+) -> Result<(ReflDecision, Option<ReflectionModel>)> {
     let (cfg, v) = (s.cfg, s.views);
     let shading = ReflectionShading::new(&v.ctx)?;
     let sh = cfg.sh_degree_at(cfg.iterations);
@@ -331,7 +358,14 @@ pub fn begin(s: Shared<'_>, existing: Option<u32>, kept: Option<&ReflDecision>, 
         if existing.is_none() {
             let rc = &cfg.reflection;
             let views: Vec<SeedView> = maps.iter().map(|(i, r, z)| SeedView { camera: v.cameras[*i], residual: r, depth: z }).collect();
-            let p = SeedParams { threshold: rc.min_residual, agree: rc.seed_agree, max_rays: rc.seed_rays, normal: rc.seed_normal.for_source(masks.is_some()), significance: rc.seed_significance as f64, ..SeedParams::default() };
+            let p = SeedParams {
+                threshold: rc.min_residual,
+                agree: rc.seed_agree,
+                max_rays: rc.seed_rays,
+                normal: rc.seed_normal.for_source(masks.is_some()),
+                significance: rc.seed_significance as f64,
+                ..SeedParams::default()
+            };
             let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, relax: &MASK_SIGNIFICANCE, ..p } } else { p };
             let seeds = if hull {
                 let h = hull_seeding(&views, &p);
@@ -435,7 +469,6 @@ pub fn reflection_decides(refl: &ReflRendered, i: usize, min_r: f32) -> bool {
     refl.refl_plane(Plane::Alpha)[i] >= 0.5 && refl.r()[i] >= min_r
 }
 
-
 /// The cube map's parallax proxy for `reflection.env_radius` = `radius`:
 /// centred on the box of the reflection set's starting positions `means`
 /// (as `env_init = "scene"` renders from), of `radius` x the mean distance
@@ -445,10 +478,14 @@ pub fn env_proxy(means: &[f32], cameras: &[Camera], radius: f32) -> Option<EnvPr
         return None;
     }
     let (centre, _) = normalization_box(means);
-    let dist = cameras.iter().map(|c| {
-        let e = c.centre();
-        (0..3).map(|k| ((e[k] - centre[k]) as f64).powi(2)).sum::<f64>().sqrt()
-    }).sum::<f64>() / cameras.len() as f64;
+    let dist = cameras
+        .iter()
+        .map(|c| {
+            let e = c.centre();
+            (0..3).map(|k| ((e[k] - centre[k]) as f64).powi(2)).sum::<f64>().sqrt()
+        })
+        .sum::<f64>()
+        / cameras.len() as f64;
     let r = (radius as f64 * dist) as f32;
     (r > 0.0 && r.is_finite()).then_some(EnvProxy { centre, radius: r })
 }

@@ -63,7 +63,6 @@ impl VdMap {
         let d = self.depth[i];
         (d.is_finite() && d > 0.0).then_some(d as f64)
     }
-
 }
 
 /// The measured view dependence of a residual.
@@ -93,7 +92,7 @@ pub fn view_dependence(views: &[VdMap], sphere: ([f32; 3], f32), max_samples: us
     for a in views {
         for i in 0..a.pixels() {
             k += 1;
-            if k % stride != 0 {
+            if !k.is_multiple_of(stride) {
                 continue;
             }
             let Some(z) = a.depth_at(i) else { continue };

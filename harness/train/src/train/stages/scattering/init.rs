@@ -3,9 +3,9 @@
 //! the mean squared distance to the 3 nearest neighbours, random rotation,
 //! opacity 0.1, SH DC from the point colour, higher SH zero.
 
-use tgs_pipelines::Rng;
-use crate::data::Points;
 use super::knn::knn3_mean_sq;
+use crate::data::Points;
+use tgs_pipelines::Rng;
 use tgs_pipelines::{Camera, HostGaussians};
 
 pub const SH_C0: f32 = 0.282_094_8;
@@ -110,7 +110,6 @@ pub fn gaussians_from_points(points: &Points, sh_degree: u32, rng: &mut Rng) -> 
     }
     g
 }
-
 
 /// Device bytes per trained Gaussian beyond its four copies of the
 /// parameters (values, gradients, two Adam moments): the densification

@@ -109,7 +109,11 @@ pub fn knn3_mean_sq(pts: &[[f32; 3]]) -> Vec<f32> {
             let mut best = [f32::INFINITY; 3];
             tree.nearest(0, i, &mut best);
             let found: Vec<f32> = best.iter().copied().filter(|d| d.is_finite()).collect();
-            if found.is_empty() { 1e-7 } else { found.iter().sum::<f32>() / found.len() as f32 }
+            if found.is_empty() {
+                1e-7
+            } else {
+                found.iter().sum::<f32>() / found.len() as f32
+            }
         })
         .collect()
 }

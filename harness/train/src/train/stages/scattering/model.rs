@@ -14,7 +14,10 @@ use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder, Timing};
-use tgs_pipelines::{Adam, AdamGroup, Camera, DensifyParams, Densifier, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, SetGuard, TrainableSet};
+use tgs_pipelines::{
+    Adam, AdamGroup, Camera, Densifier, DensifyParams, Features, Frame, HostGaussians, ImageLoss, LossScratch, LossValues, LossWeights, Moments, Plane, Rasterizer, SetGuard,
+    TrainableSet,
+};
 
 /// What the trainer passes for one step of this model.
 pub struct StepInput<'a> {
@@ -216,11 +219,8 @@ impl ScatteringModel {
     /// `cfg`'s schedule says so (its own submissions).
     pub fn step(&mut self, cfg: &TrainConfig, x: &StepInput) -> Result<StepOutput> {
         let (it, cam, sh) = (x.iteration, x.camera, x.sh_degree);
-        let weights = LossWeights {
-            ssim: cfg.lambda_ssim,
-            normal: if it > cfg.normal_from { cfg.lambda_normal } else { 0.0 },
-            dist: if it > cfg.dist_from { cfg.lambda_dist } else { 0.0 },
-        };
+        let weights =
+            LossWeights { ssim: cfg.lambda_ssim, normal: if it > cfg.normal_from { cfg.lambda_normal } else { 0.0 }, dist: if it > cfg.dist_from { cfg.lambda_dist } else { 0.0 } };
         let stats = it < cfg.densify_until;
         let groups = self.groups(cfg, x.lr_means, sh);
         self.kept.clear();
@@ -327,7 +327,7 @@ impl ScatteringModel {
     /// a `width` x `height` view, downloaded.
     pub fn last_plane(&self, width: u32, height: u32, plane: Plane) -> Result<Vec<f32>> {
         let b = self.sizes.get(&(width, height)).context("no render of this size yet")?;
-        let n = b.frame.pixels() as usize;
+        let n = b.frame.pixels();
         b.frame.out.download_range(plane.index(3) as usize * n, n)
     }
 

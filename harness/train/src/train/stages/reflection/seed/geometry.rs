@@ -14,7 +14,11 @@ pub(super) fn dot(a: V3, b: V3) -> f64 {
 }
 pub(super) fn normalize(a: V3) -> V3 {
     let l = dot(a, a).sqrt();
-    if l > 0.0 && l.is_finite() { [a[0] / l, a[1] / l, a[2] / l] } else { [0.0, 0.0, 1.0] }
+    if l > 0.0 && l.is_finite() {
+        [a[0] / l, a[1] / l, a[2] / l]
+    } else {
+        [0.0, 0.0, 1.0]
+    }
 }
 
 /// The pixel (row-major index) world point `x` projects to in `cam`, and

@@ -60,8 +60,8 @@ mod rim;
 pub use geometry::pixel_of;
 pub(crate) use geometry::unproject_pixel;
 use geometry::{box_blur, dot, image_point, in_parallel, normalize, sub, V3};
-pub use normals::{jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 use normals::{gradient_pixels, surfels};
+pub use normals::{jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 pub use rim::fit_plane;
 use tgs_pipelines::Camera;
 
@@ -178,7 +178,11 @@ impl SeedNormal {
     /// `lantern` 50.8 against 47.5 (seed 0; its Stage I 47.7), and beside
     /// the glass 5 to 7 degrees worse on the rooms.
     pub fn without_outline(self) -> SeedNormal {
-        if self.uses_field() { SeedNormal::View } else { self }
+        if self.uses_field() {
+            SeedNormal::View
+        } else {
+            self
+        }
     }
 }
 
@@ -294,10 +298,12 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict
 pub fn min_hits(views: usize, coverage: f64, alpha: f64) -> Vec<u32> {
     let p = coverage.clamp(0.0, 1.0);
     // ln n! for n in 0..=views: the whole table is O(views^2) at worst.
-    let ln_fact: Vec<f64> = std::iter::once(0.0).chain((1..=views).scan(0.0f64, |acc, i| {
-        *acc += (i as f64).ln();
-        Some(*acc)
-    })).collect();
+    let ln_fact: Vec<f64> = std::iter::once(0.0)
+        .chain((1..=views).scan(0.0f64, |acc, i| {
+            *acc += (i as f64).ln();
+            Some(*acc)
+        }))
+        .collect();
     (0..=views)
         .map(|n| {
             if alpha >= 1.0 || p <= 0.0 {
@@ -385,7 +391,11 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
 
 /// Each view's membrane where [`SeedParams::rim`] asks for them.
 fn membranes(prepared: &[Prepared], p: &SeedParams) -> Vec<Option<rim::Membrane>> {
-    if p.rim { rim::membranes(prepared) } else { vec![None; prepared.len()] }
+    if p.rim {
+        rim::membranes(prepared)
+    } else {
+        vec![None; prepared.len()]
+    }
 }
 
 /// Per ray: the first hull point after carved space with the significance
@@ -412,7 +422,8 @@ fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[Option<rim::Membran
     let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
     // Every `stride`-th residual pixel over the views, in view order.
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
-    let rays: Vec<(usize, usize)> = prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
+    let rays: Vec<(usize, usize)> =
+        prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
     found.rim_views = membranes.iter().filter(|m| m.is_some()).count();
     for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, membranes)) {
         found.significant.extend(part.significant);
@@ -483,4 +494,3 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
     }
     found
 }
-

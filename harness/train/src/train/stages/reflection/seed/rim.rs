@@ -77,10 +77,12 @@ impl Membrane {
 /// `img` grown by one pixel (3 x 3; nothing beyond the image).
 fn dilate(img: &[bool], w: usize, h: usize) -> Vec<bool> {
     let at = |x: i64, y: i64| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h && img[y as usize * w + x as usize];
-    (0..w * h).map(|i| {
-        let (x, y) = ((i % w) as i64, (i / w) as i64);
-        (-1..=1).any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy)))
-    }).collect()
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            (-1..=1).any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy)))
+        })
+        .collect()
 }
 
 /// A view's mask edge as the rim reads it.
@@ -97,7 +99,7 @@ impl Edge {
         let ring: Vec<bool> = dilate(mask, w, h).iter().zip(mask).map(|(&g, &m)| g && !m).collect();
         let outside: Vec<bool> = mask.iter().map(|&m| !m).collect();
         let open = dilate(&outside, w, h);
-        let border = |i: usize| i % w == 0 || i % w == w - 1 || i / w == 0 || i / w == h - 1;
+        let border = |i: usize| i.is_multiple_of(w) || i % w == w - 1 || i / w == 0 || i / w == h - 1;
         let band: Vec<bool> = (0..w * h).map(|i| ring[i] || (mask[i] && (open[i] || border(i)))).collect();
         Edge { near: dilate(&band, w, h), ring }
     }
@@ -197,7 +199,9 @@ pub fn fit_plane(pts: &[[f64; 3]]) -> Option<[f64; 3]> {
 /// The solution of the 3 x 3 system `a` x = `b` (Cramer's rule), None
 /// where `a` is singular.
 fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let det = |m: [[f64; 3]; 3]| m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
     let d = det(a);
     let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
     if !(d.abs() > 1e-12 * scale.powi(3)) {

@@ -1,0 +1,129 @@
+//! The synthetic scenes the seeding tests (tests/tests/seed.rs) cast their
+//! residual and depth planes from: a glass sphere around an opaque ball
+//! seen from a ring of cameras, and a window in a wall seen from one side;
+//! with the f64 vector helpers they use.
+
+use crate::Rng;
+use tgs::train::stages::reflection::seed::Seed;
+use tgs_pipelines::Camera;
+
+pub type V3 = [f64; 3];
+
+pub fn uniform(r: &mut Rng) -> f64 {
+    (r.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+}
+pub fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+pub fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+pub fn norm(a: V3) -> V3 {
+    let l = dot(a, a).sqrt();
+    a.map(|c| c / l)
+}
+
+pub const SPHERE_R: f64 = 0.5;
+pub const BALL_R: f64 = 0.2;
+pub const SIZE: u32 = 64;
+
+/// First positive t of the ray o + t d (d unit) on the sphere of radius r at the origin.
+pub fn hit(o: V3, d: V3, r: f64) -> Option<f64> {
+    let b = dot(o, d);
+    let c = dot(o, o) - r * r;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let t = -b - disc.sqrt();
+    (t > 0.0).then_some(t)
+}
+
+/// A ring of cameras around the origin, each view's residual (0.03 on the
+/// glass sphere's silhouette, plus that on a fraction `noise` of the other
+/// pixels, at random) and Stage I depth (the opaque inner ball; none
+/// elsewhere).
+pub fn views(noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    ring(24, noise, glass)
+}
+
+/// A `SIZE`² view from `eye` towards `target` (vertical field of view
+/// `fov`) and its two per-pixel planes: `pixel` maps the pixel's unit world
+/// ray direction, and the length of its view ray at view depth 1 (which
+/// turns a distance along the ray into view depth), to (residual, depth).
+pub fn cast(eye: V3, target: [f32; 3], fov: f32, mut pixel: impl FnMut(V3, f64) -> (f32, f32)) -> (Camera, Vec<f32>, Vec<f32>) {
+    let cam = Camera::look_at(eye.map(|c| c as f32), target, [0.0, 0.0, 1.0], fov, SIZE, SIZE);
+    let m = cam.world_to_view;
+    let n = (SIZE * SIZE) as usize;
+    let (mut r, mut z) = (vec![0.0f32; n], vec![0.0f32; n]);
+    for p in 0..n {
+        let (u, v) = ((p as u32 % SIZE) as f64, (p as u32 / SIZE) as f64);
+        let dv = [(u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64, 1.0];
+        // World direction R^T d_view.
+        let d = norm([0, 1, 2].map(|j| (0..3).map(|k| m[k][j] as f64 * dv[k]).sum::<f64>()));
+        (r[p], z[p]) = pixel(d, dot(dv, dv).sqrt());
+    }
+    (cam, r, z)
+}
+
+/// [`views`] from `count` cameras.
+pub fn ring(count: usize, noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let mut rng = Rng(7);
+    let (mut cams, mut res, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..count {
+        let a = i as f64 * std::f64::consts::TAU / count as f64;
+        let h = if i % 2 == 0 { 0.4 } else { 1.0 };
+        let e = [3.0 * a.cos(), 3.0 * a.sin(), h];
+        let (cam, r, z) = cast(e, [0.0; 3], 0.7, |d, len| {
+            let r = if (glass && hit(e, d, SPHERE_R).is_some()) || uniform(&mut rng) < noise { 0.03 } else { 0.0 };
+            (r, hit(e, d, BALL_R).map_or(0.0, |t| (t / len) as f32))
+        });
+        cams.push(cam);
+        res.push(r);
+        depth.push(z);
+    }
+    (cams, res, depth)
+}
+
+/// Each seed's angle in degrees between its normal and the sphere's radial
+/// direction at its position, sorted.
+pub fn radial_error(set: &[Seed]) -> Vec<f64> {
+    let mut e: Vec<f64> = set
+        .iter()
+        .map(|s| {
+            let x = s.position.map(f64::from);
+            let r = dot(x, x).sqrt();
+            dot(s.normal.map(f64::from), x.map(|c| c / r)).clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .collect();
+    e.sort_by(f64::total_cmp);
+    e
+}
+
+/// A window in a wall, captured from one side (a shop window, a facade):
+/// the wall is the plane x = 0, the glass fills |y| <= 1, 0.2 <= z <= 1.2
+/// of it, the room's back wall is x = -2, and the cameras stand on the +x
+/// side within 50 degrees of the window's normal. Each view's mask is the
+/// window and its Stage I depth the wall, or the back wall through the window.
+pub fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..count {
+        let a = (-50.0 + 100.0 * i as f64 / (count - 1) as f64).to_radians();
+        let h = if i % 2 == 0 { 0.5 } else { 1.6 };
+        let e = [3.5 * a.cos(), 3.5 * a.sin(), h];
+        let (cam, r, z) = cast(e, [0.0, 0.0, 0.7], 0.8, |d, len| {
+            if d[0] >= -1e-9 {
+                return (0.0, 0.0);
+            }
+            let t = -e[0] / d[0];
+            let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
+            let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
+            let t = if glass { (-2.0 - e[0]) / d[0] } else { t };
+            (glass as u8 as f32, (t / len) as f32)
+        });
+        cams.push(cam);
+        masks.push(r);
+        depth.push(z);
+    }
+    (cams, masks, depth)
+}
