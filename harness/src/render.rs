@@ -99,7 +99,8 @@ pub fn render(ctx: &Arc<Context>, run: &Path, which: &str, frames: u32, out: &Pa
     let mut dir = OutDir::open(out, Some(&data.root))?;
     let _lock = crate::lock::lock_output(out, run, "tgs render", false)?;
     let bar = indicatif::ProgressBar::new(cams.len() as u64);
-    for (name, cam) in &cams {
+    let stems = crate::data::file_stems(cams.iter().map(|(n, _)| n.as_str()));
+    for ((_, cam), name) in cams.iter().zip(&stems) {
         let r = tr.render(cam)?;
         write_outputs(&mut dir, name, &r, &world_normals(&r, cam), cam)?;
         bar.inc(1);

@@ -300,3 +300,37 @@ fn sweep_rows_follow_the_settings_and_the_dataset() {
     assert_eq!(sweep(ctx_shared(), &a(grid(8))).unwrap().trained, 2);
     check_validation(ctx_shared());
 }
+
+/// Views named with their image's extension (COLMAP's `0000.jpg`, a
+/// Blender `file_path` ending in `.png`) write `NAME.png`, not
+/// `NAME.png.png`, unless two views would then share a file; glass masks
+/// named the old way are still read.
+#[test]
+fn files_per_view_drop_the_image_extension() {
+    let names = ["0000.jpg", "IMG_1.JPG", "r_0", "a.b.png", "x.png", "x.jpg", "dir/y.exr", ".png", "dir/.png"];
+    assert_eq!(tgs::data::file_stems(names), ["0000", "IMG_1", "r_0", "a.b", "x.png", "x.jpg", "dir/y", ".png", "dir/.png"]);
+
+    let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
+    let base = tgs_tests::TempDir::created("reliability-stems");
+    let ds = own_scene(&base);
+    let path = ds.join("transforms_test.json");
+    let mut t: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    for f in t["frames"].as_array_mut().unwrap() {
+        f["file_path"] = format!("{}.png", f["file_path"].as_str().unwrap()).into();
+    }
+    std::fs::write(&path, serde_json::to_vec(&t).unwrap()).unwrap();
+    let run = base.join("run");
+    train(ctx_shared(), &tiny_args(&ds, &run, 2)).unwrap();
+    let renders = run.join("renders/test");
+    assert!(renders.join("r_0.png").is_file() && renders.join("r_0_normal.png").is_file(), "renders/test/r_0.png");
+    assert!(!renders.join("r_0.png.png").exists(), "renders/test/r_0.png.png written");
+
+    // reflection.seed_masks: DIR/r_0.png, or the old DIR/r_0.png.png.
+    let cam = tgs_pipelines::Camera::look_at([0.0, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0], 0.8, 4, 3);
+    let masks = base.join("masks");
+    std::fs::create_dir_all(&masks).unwrap();
+    image::save_buffer(masks.join("r_1.png.png"), &[255u8; 12], 4, 3, image::ExtendedColorType::L8).unwrap();
+    let got = tgs::train::stages::reflection::stage::seed_masks(&masks, &["r_0.png".into(), "r_1.png".into()], &[cam, cam], 1).unwrap();
+    assert_eq!(got, [None, Some(vec![true; 12])]);
+    check_validation(ctx_shared());
+}

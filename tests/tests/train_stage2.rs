@@ -8,8 +8,8 @@
 use std::path::{Path, PathBuf};
 use tgs::train::checkpoint;
 use tgs::train::run::{train, TrainArgs};
-use tgs_tests::raster_util::bits;
 use tgs_tests::mesh_checks::meshes_of_the_run;
+use tgs_tests::raster_util::bits;
 use tgs_tests::{check_validation, ctx_shared};
 
 fn scene() -> PathBuf {

@@ -289,7 +289,8 @@ pub fn residual_contrast(scat: &[f32], gt: &[f32], mask: &[bool]) -> Option<f64>
 /// Render, measure and (with `out`) write every view.
 pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) -> Result<Metrics> {
     let mut per_view = Vec::new();
-    for v in views {
+    let stems = crate::data::file_stems(views.iter().map(|v| v.name.as_str()));
+    for (v, stem) in views.iter().zip(&stems) {
         let r = tr.render(&v.camera)?;
         let (w, h) = (r.width as usize, r.height as usize);
         let rgb = &r.planes[..3 * w * h];
@@ -334,7 +335,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
             },
         };
         if let Some(dir) = out.as_deref_mut() {
-            write_outputs(dir, &v.name, &r, &normals, &v.camera)?;
+            write_outputs(dir, stem, &r, &normals, &v.camera)?;
         }
         per_view.push(m);
     }

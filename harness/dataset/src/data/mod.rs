@@ -114,6 +114,29 @@ pub const FEW_POINTS: usize = 100;
 /// What to say of a dataset's initial points (`path`): those skipped for
 /// NaN or infinite coordinates, none left (random points instead), or
 /// few left.
+/// The image extensions a view's name may end in (COLMAP names views by
+/// their image file, `0000.jpg`).
+const IMAGE_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "exr", "tif", "tiff"];
+
+/// The names the files written per view take (renders, residual maps):
+/// each view's name without its image extension (`0000.jpg` → `0000`), or
+/// the whole name where two views would otherwise share one.
+pub fn file_stems<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<String> {
+    let names: Vec<&str> = names.into_iter().collect();
+    let strip = |n: &str| -> String {
+        match n.rsplit_once('.') {
+            Some((stem, ext)) if !stem.is_empty() && !stem.ends_with('/') && IMAGE_EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str()) => stem.to_string(),
+            _ => n.to_string(),
+        }
+    };
+    let stems: Vec<String> = names.iter().map(|n| strip(n)).collect();
+    let mut count = std::collections::HashMap::new();
+    for s in &stems {
+        *count.entry(s.as_str()).or_insert(0) += 1;
+    }
+    names.iter().zip(&stems).map(|(n, s)| if count[s.as_str()] > 1 { n.to_string() } else { s.clone() }).collect()
+}
+
 pub fn points_warning(path: &Path, kept: usize, skipped: usize) -> Option<String> {
     let skipped_note = if skipped > 0 { format!("{skipped} of {} points have NaN or infinite coordinates and are skipped; ", skipped + kept) } else { String::new() };
     let what = if kept == 0 {

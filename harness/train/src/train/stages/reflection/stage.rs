@@ -77,7 +77,8 @@ impl LaterKind for Kind {
         let iterations = shared.cfg.reflection.iterations;
         let kept = decision.clone();
         let (masks, source) = if existing.is_some() { (None, MaskSource::None) } else { glass_masks(&shared, names)? };
-        let (mut d, model) = begin(shared, existing, kept.as_ref(), reseed, round, masks.as_deref(), |i, cam, r| match (&mut maps, names.get(i)) {
+        let stems = crate::data::file_stems(names.iter().map(String::as_str));
+        let (mut d, model) = begin(shared, existing, kept.as_ref(), reseed, round, masks.as_deref(), |i, cam, r| match (&mut maps, stems.get(i)) {
             (Some(maps), Some(name)) if existing.is_none() => write_residual(maps, name, cam, r),
             _ => Ok(()),
         })?;
@@ -193,10 +194,10 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
         .zip(cameras)
         .map(|(name, cam)| {
             let stem = Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| name.clone());
-            let path = dir.join(format!("{stem}.png"));
-            if !path.is_file() {
+            // NAME without its extension; NAME.png (`0000.jpg.png`, as renders were once named) too.
+            let Some(path) = [format!("{stem}.png"), format!("{name}.png")].into_iter().map(|f| dir.join(f)).find(|p| p.is_file()) else {
                 return Ok(None);
-            }
+            };
             let (w, h, m) = read_grey_mask(&path).with_context(|| "reflection.seed_masks")?;
             let f = downscale.max(1);
             if (w, h) == (cam.width, cam.height) {
