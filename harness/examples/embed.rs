@@ -97,6 +97,20 @@ impl Host {
             Ok((buf, mem))
         }
     }
+    /// Read `bytes` of the host-visible `mem` (the colour planes of a
+    /// `width`x`height` frame tgs rendered) and write them as a PNG.
+    fn present(&self, mem: vk::DeviceMemory, bytes: u64, (width, height): (u32, u32), out: &std::path::Path) -> Result<()> {
+        let d = &self.device;
+        // SAFETY: the memory is host-visible and coherent, `bytes` long, and the GPU's writes completed.
+        let planes = unsafe {
+            let p = d.map_memory(mem, 0, bytes, vk::MemoryMapFlags::empty())? as *const f32;
+            let v = std::slice::from_raw_parts(p, SceneRenderer::output_len(width, height)).to_vec();
+            d.unmap_memory(mem);
+            v
+        };
+        tgs::data::image_io::write_png(out, &tgs::data::image_io::ImageF::from_planar(width, height, 3, &planes))?;
+        Ok(())
+    }
 }
 
 fn main() -> Result<()> {
@@ -160,14 +174,7 @@ fn main() -> Result<()> {
         }
     }
     // "Present": read the host's buffer and write a PNG.
-    // SAFETY: the memory is host-visible and coherent, `bytes` long, and the GPU's writes completed.
-    let planes = unsafe {
-        let p = d.map_memory(mem, 0, bytes, vk::MemoryMapFlags::empty())? as *const f32;
-        let v = std::slice::from_raw_parts(p, SceneRenderer::output_len(cam.width, cam.height)).to_vec();
-        d.unmap_memory(mem);
-        v
-    };
-    tgs::data::image_io::write_png(&a.out, &tgs::data::image_io::ImageF::from_planar(cam.width, cam.height, 3, &planes))?;
+    host.present(mem, bytes, (cam.width, cam.height), &a.out)?;
     println!("rendered in {recordings} recording(s) of the host's command buffer; wrote {}", a.out.display());
 
     drop(scene);

@@ -1,7 +1,11 @@
 //! The `tgs bench` subcommands and their options (the command line's
 //! part; the benchmarks themselves are the library's `bench*` modules).
 
+use anyhow::{bail, Context as _, Result};
 use std::path::PathBuf;
+use std::sync::Arc;
+use tgs_engine::Context;
+use tgs_pipelines::SortConfig;
 
 #[derive(clap::Subcommand)]
 pub(crate) enum Bench {
@@ -158,4 +162,102 @@ pub(crate) enum Bench {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// A benchmark's result as JSON, or printed for people.
+fn show<T: serde::Serialize>(b: &T, json: bool, print: impl FnOnce(&T)) -> Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(b)?);
+    } else {
+        print(b);
+    }
+    Ok(())
+}
+
+impl Bench {
+    /// Run the benchmark on `ctx` (all but `lpips`, which needs no device).
+    pub(crate) fn run(&self, ctx: &Arc<Context>) -> Result<()> {
+        match self {
+            Bench::Sort { n, bits, reps, radix_bits, wg, kpt, json } => {
+                let cfg = if radix_bits.is_some() || wg.is_some() || kpt.is_some() {
+                    let d = SortConfig::for_device(ctx.caps());
+                    Some(SortConfig { radix_bits: radix_bits.unwrap_or(d.radix_bits), wg: wg.unwrap_or(d.wg), kpt: kpt.unwrap_or(d.kpt) })
+                } else {
+                    None
+                };
+                let b = tgs::bench::sort(ctx, *n, *bits, *reps, cfg)?;
+                show(&b, *json, |b| {
+                    println!("device: {}", b.device);
+                    tgs::bench::print_sort(b);
+                })?;
+                if !b.verified {
+                    bail!("the GPU sort produced unsorted output");
+                }
+                Ok(())
+            }
+            Bench::Raster { n, width, height, reps, json } => show(&tgs::bench_raster::raster(ctx, *n, *width, *height, *reps)?, *json, tgs::bench_raster::print_raster),
+            Bench::Train { .. } => self.train(ctx),
+            Bench::Mlp { preset, depth, width, skip, levels, n, reps, gemm, json } => {
+                let gemm = if gemm == "auto" { None } else { Some(tgs_pipelines::mlp::Gemm::parse(gemm).context("--gemm (auto, tiled, rows)")?) };
+                let mut shape = tgs_pipelines::MlpShape::preset(preset)?;
+                shape.depth = depth.unwrap_or(shape.depth);
+                shape.width = width.unwrap_or(shape.width);
+                shape.skip = skip.unwrap_or(shape.skip);
+                if let Some(l) = levels {
+                    shape.levels_x = *l;
+                    shape.levels_w = *l;
+                }
+                show(&tgs::bench_mlp::mlp(ctx, shape, *n, *reps, gemm)?, *json, |b| {
+                    println!("device: {}", b.device);
+                    tgs::bench_mlp::print_mlp(b);
+                })
+            }
+            Bench::Stages { scene, train, train_light_field, warmup, iterations, mlp, set, json } => {
+                let spec = tgs::bench_stages::StagesSpec {
+                    scene: scene.clone(),
+                    train: *train,
+                    train_light_field: *train_light_field,
+                    warmup: *warmup,
+                    iterations: *iterations,
+                    mlp: mlp.clone(),
+                    set: set.clone(),
+                };
+                show(&tgs::bench_stages::stages(ctx, &spec)?, *json, tgs::bench_stages::print_stages)
+            }
+            Bench::Lpips { size, reps, json } => tgs::bench::lpips(*size, *reps, *json),
+            Bench::Scan { n, reps, json } => show(&tgs::bench::scan(ctx, *n, *reps)?, *json, |b| {
+                println!("device: {}", b.device);
+                tgs::bench::print_scan(b);
+            }),
+        }
+    }
+
+    /// `tgs bench train`: a Stage I workload, a run's state, or the light field.
+    fn train(&self, ctx: &Arc<Context>) -> Result<()> {
+        let Bench::Train { res, points, views, real_scale, from, iterations, warmup, separate_adam, fused_adam, light_field, json } = self else {
+            unreachable!("called for bench train")
+        };
+        use tgs::bench_train::Workload;
+        let w = if *real_scale {
+            Workload { points: points.unwrap_or(Workload::REAL_SCALE.points), ..Workload::REAL_SCALE }
+        } else {
+            Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) }
+        };
+        if let Some(net) = light_field {
+            let net = tgs::train::settings::LightPreset::parse(net).map_err(|e| anyhow::anyhow!("--light-field: {e}"))?;
+            return show(&tgs::bench_light_field::light_field(ctx, w, *warmup, *iterations, net)?, *json, tgs::bench_light_field::print_light_field);
+        }
+        let fuse = if *separate_adam {
+            Some(false)
+        } else if *fused_adam {
+            Some(true)
+        } else {
+            None
+        };
+        let b = match from {
+            Some(run) => tgs::bench_train::train_from(ctx, run, *warmup, *iterations, fuse)?,
+            None => tgs::bench_train::train(ctx, w, *warmup, *iterations, fuse)?,
+        };
+        show(&b, *json, tgs::bench_train::print_train)
+    }
 }

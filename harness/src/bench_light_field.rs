@@ -75,14 +75,7 @@ pub fn light_field(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32
     cfg.light_field.iterations = warmup.saturating_add(iterations).saturating_add(profiled);
     ctx.reset_peak_memory();
     let mut tr = Trainer::new(ctx, cfg.clone(), &data)?;
-    let scat = tr.scattering.set.params.download()?;
-    let mut refl = HostGaussians::new(tgs_pipelines::reflection::MATERIAL, 1);
-    let logit = |p: f32| (p / (1.0 - p)).ln();
-    let (f0, r) = (logit(cfg.reflection.f0_init), logit(cfg.reflection.r_init));
-    for i in (0..scat.len()).step_by(REFLECTION_EVERY) {
-        let g = |v: &[f32], k: usize| -> Vec<f32> { v[k * i..k * (i + 1)].to_vec() };
-        refl.push(g(&scat.means, 3).try_into().unwrap(), g(&scat.log_scales, 2).try_into().unwrap(), g(&scat.quats, 4).try_into().unwrap(), scat.opacity[i], &[f0, f0, f0, r]);
-    }
+    let refl = reflection_set(&tr, &cfg)?;
     let reflection_gaussians = refl.len() as u32;
     let mut model = light_field::stage::begin(&cfg, ctx, TrainableSet::new(ctx, &refl)?)?;
     let sh = cfg.sh_degree_at(cfg.iterations);
@@ -136,6 +129,20 @@ pub fn light_field(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32
         mlp_block: model.mlp_block(),
         peak_memory_mib: ctx.memory_use().peak_bytes as f64 / 1048576.0,
     })
+}
+
+/// The reflection set the bench trains: every `REFLECTION_EVERY`-th
+/// Gaussian of the scattering set, with the initial material.
+fn reflection_set(tr: &Trainer, cfg: &TrainConfig) -> Result<HostGaussians> {
+    let scat = tr.scattering.set.params.download()?;
+    let mut refl = HostGaussians::new(tgs_pipelines::reflection::MATERIAL, 1);
+    let logit = |p: f32| (p / (1.0 - p)).ln();
+    let (f0, r) = (logit(cfg.reflection.f0_init), logit(cfg.reflection.r_init));
+    for i in (0..scat.len()).step_by(REFLECTION_EVERY) {
+        let g = |v: &[f32], k: usize| -> Vec<f32> { v[k * i..k * (i + 1)].to_vec() };
+        refl.push(g(&scat.means, 3).try_into().unwrap(), g(&scat.log_scales, 2).try_into().unwrap(), g(&scat.quats, 4).try_into().unwrap(), scat.opacity[i], &[f0, f0, f0, r]);
+    }
+    Ok(refl)
 }
 
 pub fn print_light_field(b: &LightFieldBench) {

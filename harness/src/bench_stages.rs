@@ -107,23 +107,7 @@ pub fn stages(ctx: &Arc<Context>, spec: &StagesSpec) -> Result<StagesBench> {
 }
 
 fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<StagesBench> {
-    let mut cfg = TrainConfig::quick();
-    for kv in &spec.set {
-        let key = kv.split_once('=').map(|(k, _)| k.trim()).unwrap_or(kv.as_str());
-        ensure!(!BENCH_KEYS.contains(&key), "--set '{kv}': the bench sets {key} itself (see --train, --train-light-field, --iterations and --mlp)");
-        cfg.set(kv)?;
-    }
-    let profiled = spec.iterations.clamp(1, 5);
-    let timed = spec.warmup + spec.iterations + profiled;
-    let per_stage = spec.train + timed;
-    cfg.iterations = per_stage;
-    cfg.densify_until = spec.train.min(cfg.densify_until);
-    cfg.test_interval = 0;
-    cfg.checkpoint_interval = 0;
-    cfg.stages = "I,II,III".into();
-    cfg.reflection.iterations = per_stage;
-    cfg.light_field.iterations = spec.train_light_field + timed;
-    cfg.light_field.preset = crate::train::settings::LightPreset::parse(&spec.mlp).map_err(anyhow::Error::msg)?;
+    let (cfg, profiled) = bench_config(spec)?;
     let data = crate::train::run::load_dataset(dir, &cfg)?;
     let cam = data.train.first().context("the scene has no training views")?.camera;
     let mut tr = Trainer::new(ctx, cfg, &data)?;
@@ -159,46 +143,76 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
             }
             Some(t.elapsed().as_secs_f64() * 1e3)
         };
-        let untimed = if stage == light_field::stage::STAGE { spec.train_light_field } else { spec.train };
-        for _ in 0..untimed + spec.warmup {
-            tr.step(false)?;
-        }
-        let mut walls = Vec::new();
-        for _ in 0..spec.iterations {
-            let t = Instant::now();
-            tr.step(false)?;
-            walls.push(t.elapsed().as_secs_f64() * 1e3);
-        }
-        let mut all = Vec::new();
-        let mut phi = Vec::new();
-        for _ in 0..profiled {
-            let r = tr.step(true)?;
-            ensure!(r.stage == stage, "the schedule is at Stage {}, not {}", r.stage.name(), stage.name());
-            all.push(r.timings);
-            if let Some(f) = tr.later.as_mut().and_then(|m| m.take_coverage()) {
-                phi.push(f);
-            }
-        }
-        let kernels = average(all);
-        let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
-        let reflection_gaussians = if stage == Stage::SCATTERING { None } else { tr.later.as_ref().map(|m| m.set().len()) };
-        let mem = ctx.memory_use();
-        out.stages.push(StageTimes {
-            stage: stage.name().into(),
-            scattering_gaussians: tr.scattering.set.len(),
-            reflection_gaussians,
-            phi_fraction: (!phi.is_empty()).then(|| phi.iter().sum::<f64>() / phi.len() as f64),
-            wall_ms,
-            wall_ms_best: walls.iter().copied().fold(f64::INFINITY, f64::min),
-            it_per_s: 1e3 / wall_ms,
-            gpu_ms: kernels.iter().filter(|k| !nested_scope(&k.name)).map(|k| k.ms).sum(),
-            kernels,
-            switch_ms,
-            memory_mib: mib(mem.live_bytes),
-            peak_memory_mib: mib(mem.peak_bytes),
-        });
+        out.stages.push(time_stage(ctx, &mut tr, spec, stage, profiled, switch_ms)?);
     }
     Ok(out)
+}
+
+/// The quick preset with the bench's lengths: every stage `train` (Stage
+/// III `train_light_field`) untimed iterations, then the warm-up, timed and
+/// profiled ones; and how many are profiled.
+fn bench_config(spec: &StagesSpec) -> Result<(TrainConfig, u32)> {
+    let mut cfg = TrainConfig::quick();
+    for kv in &spec.set {
+        let key = kv.split_once('=').map(|(k, _)| k.trim()).unwrap_or(kv.as_str());
+        ensure!(!BENCH_KEYS.contains(&key), "--set '{kv}': the bench sets {key} itself (see --train, --train-light-field, --iterations and --mlp)");
+        cfg.set(kv)?;
+    }
+    let profiled = spec.iterations.clamp(1, 5);
+    let timed = spec.warmup + spec.iterations + profiled;
+    let per_stage = spec.train + timed;
+    cfg.iterations = per_stage;
+    cfg.densify_until = spec.train.min(cfg.densify_until);
+    cfg.test_interval = 0;
+    cfg.checkpoint_interval = 0;
+    cfg.stages = "I,II,III".into();
+    cfg.reflection.iterations = per_stage;
+    cfg.light_field.iterations = spec.train_light_field + timed;
+    cfg.light_field.preset = crate::train::settings::LightPreset::parse(&spec.mlp).map_err(anyhow::Error::msg)?;
+    Ok((cfg, profiled))
+}
+
+/// One stage begun: its untimed and warm-up iterations, then the timed
+/// ones (wall) and the profiled ones (GPU timestamps per kernel).
+fn time_stage(ctx: &Arc<Context>, tr: &mut Trainer, spec: &StagesSpec, stage: Stage, profiled: u32, switch_ms: Option<f64>) -> Result<StageTimes> {
+    let untimed = if stage == light_field::stage::STAGE { spec.train_light_field } else { spec.train };
+    for _ in 0..untimed + spec.warmup {
+        tr.step(false)?;
+    }
+    let mut walls = Vec::new();
+    for _ in 0..spec.iterations {
+        let t = Instant::now();
+        tr.step(false)?;
+        walls.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let mut all = Vec::new();
+    let mut phi = Vec::new();
+    for _ in 0..profiled {
+        let r = tr.step(true)?;
+        ensure!(r.stage == stage, "the schedule is at Stage {}, not {}", r.stage.name(), stage.name());
+        all.push(r.timings);
+        if let Some(f) = tr.later.as_mut().and_then(|m| m.take_coverage()) {
+            phi.push(f);
+        }
+    }
+    let kernels = average(all);
+    let wall_ms = walls.iter().sum::<f64>() / walls.len() as f64;
+    let reflection_gaussians = if stage == Stage::SCATTERING { None } else { tr.later.as_ref().map(|m| m.set().len()) };
+    let mem = ctx.memory_use();
+    Ok(StageTimes {
+        stage: stage.name().into(),
+        scattering_gaussians: tr.scattering.set.len(),
+        reflection_gaussians,
+        phi_fraction: (!phi.is_empty()).then(|| phi.iter().sum::<f64>() / phi.len() as f64),
+        wall_ms,
+        wall_ms_best: walls.iter().copied().fold(f64::INFINITY, f64::min),
+        it_per_s: 1e3 / wall_ms,
+        gpu_ms: kernels.iter().filter(|k| !nested_scope(&k.name)).map(|k| k.ms).sum(),
+        kernels,
+        switch_ms,
+        memory_mib: mib(mem.live_bytes),
+        peak_memory_mib: mib(mem.peak_bytes),
+    })
 }
 
 pub fn print_stages(b: &StagesBench) {

@@ -3,7 +3,6 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use tgs::train::run::TrainArgs;
 use tgs_engine::{Context, ContextOptions, DeviceSelector};
-use tgs_pipelines::SortConfig;
 
 mod bench_args;
 use bench_args::Bench;
@@ -174,7 +173,6 @@ fn run(cli: Cli) -> Result<()> {
     match &cli.cmd {
         Cmd::Devices { json } => tgs::devices::run(*json, &DeviceSelector::from_arg_or_env(cli.device.as_deref())),
         Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, stages, from, profile, quiet } => {
-            let ctx = context(&cli)?;
             let args = TrainArgs {
                 dataset: dataset.clone(),
                 out: out.clone(),
@@ -190,40 +188,20 @@ fn run(cli: Cli) -> Result<()> {
                 profile: *profile,
                 quiet: *quiet,
             };
-            let o = tgs::train::run::train(&ctx, &args)?;
+            let o = tgs::train::run::train(&context(&cli)?, &args)?;
             if o.interrupted {
                 std::process::exit(130);
             }
             Ok(())
         }
-        Cmd::Eval { run, out } => {
-            let ctx = context(&cli)?;
-            let (mut tr, data) = tgs::train::run::open_run(&ctx, run)?;
-            if data.test.is_empty() {
-                anyhow::bail!("{}: the dataset has no test views", data.root.display());
-            }
-            let mut dir = match out {
-                Some(d) => Some(tgs::outdir::OutDir::open(d, Some(&data.root))?),
-                None => None,
-            };
-            // Only a writer locks: eval without --out reads the run.
-            let _lock = match out {
-                Some(d) => Some(tgs::lock::lock_output(d, run, "tgs eval", false)?),
-                None => None,
-            };
-            let m = tgs::eval::evaluate(&mut tr, &data.test, dir.as_mut())?;
-            println!("{}", serde_json::to_string_pretty(&m)?);
-            Ok(())
-        }
+        Cmd::Eval { run, out } => eval(&context(&cli)?, run, out.as_deref()),
         Cmd::Render { run, cameras, frames, out } => {
-            let ctx = context(&cli)?;
             let dir = out.clone().unwrap_or_else(|| run.join("renders").join(cameras));
-            let n = tgs::render::render(&ctx, run, cameras, *frames, &dir)?;
+            let n = tgs::render::render(&context(&cli)?, run, cameras, *frames, &dir)?;
             eprintln!("{n} views written to {}", dir.display());
             Ok(())
         }
         Cmd::Mesh { run, voxel, resolution, trunc, depth_max, max_mib, out } => {
-            let ctx = context(&cli)?;
             let args = tgs::mesh::MeshArgs {
                 voxel: *voxel,
                 resolution: *resolution,
@@ -233,163 +211,80 @@ fn run(cli: Cli) -> Result<()> {
                 out: out.clone(),
                 progress: true,
             };
-            for r in tgs::mesh::mesh(&ctx, run, &args)? {
+            for r in tgs::mesh::mesh(&context(&cli)?, run, &args)? {
                 eprintln!("{}: {} vertices, {} triangles", r.path.display(), r.mesh.positions.len(), r.mesh.triangles.len());
             }
             Ok(())
         }
-        Cmd::Scene { what } => match what {
-            SceneCmd::List => {
-                for line in tgs::scene::list() {
-                    println!("{line}");
-                }
-                Ok(())
-            }
-            SceneCmd::Make { name, out } => {
-                let bar = indicatif::ProgressBar::new(0);
-                tgs::scene::make_named(name, out, |d, total| {
-                    bar.set_length(total as u64);
-                    bar.set_position(d as u64)
-                })?;
-                bar.finish_and_clear();
-                eprintln!("scene '{name}' written to {}", out.display());
-                Ok(())
-            }
-        },
+        Cmd::Scene { what } => scene(what),
         Cmd::Sweep { dataset, out, grid, print_grid, quiet } => {
             if *print_grid {
                 print!("{}", tgs::sweep::DEFAULT_GRID.trim_start());
                 return Ok(());
             }
-            let ctx = context(&cli)?;
             let out = out.as_ref().context("--out DIR is needed")?;
-            let a = tgs::sweep::SweepArgs { dataset: dataset.clone(), out: out.clone(), grid: grid.clone(), quiet: *quiet };
-            let o = tgs::sweep::sweep(&ctx, &a)?;
-            if o.interrupted {
-                eprintln!("sweep interrupted after {} new run(s); run the same command again to resume", o.trained);
-                std::process::exit(130);
-            }
-            eprintln!("sweep: {} runs ({} trained now); {} and plots in {}", o.rows.len(), o.trained, out.join("sweep.csv").display(), out.display());
-            let front = tgs::sweep::pareto(&o.rows, |r| r.psnr);
-            println!("{:48} {:>9} {:>8} {:>8} {:>8} {:>9}  pareto", "run", "wall s", "PSNR", "SSIM", "LPIPS", "MAE °");
-            for (i, r) in o.rows.iter().enumerate() {
-                println!("{:48} {:9.1} {:8.3} {:8.4} {:8.4} {:9.2}  {}", r.name, r.wall_s, r.psnr, r.ssim, r.lpips, r.normal_mae_deg, if front.contains(&i) { "*" } else { "" });
-            }
-            Ok(())
+            sweep(&context(&cli)?, &tgs::sweep::SweepArgs { dataset: dataset.clone(), out: out.clone(), grid: grid.clone(), quiet: *quiet })
         }
         Cmd::Bench { what: Bench::Lpips { size, reps, json } } => tgs::bench::lpips(*size, *reps, *json),
-        Cmd::Bench { what } => {
-            let ctx = context(&cli)?;
-            match what {
-                Bench::Sort { n, bits, reps, radix_bits, wg, kpt, json } => {
-                    let cfg = if radix_bits.is_some() || wg.is_some() || kpt.is_some() {
-                        let d = SortConfig::for_device(ctx.caps());
-                        Some(SortConfig { radix_bits: radix_bits.unwrap_or(d.radix_bits), wg: wg.unwrap_or(d.wg), kpt: kpt.unwrap_or(d.kpt) })
-                    } else {
-                        None
-                    };
-                    let b = tgs::bench::sort(&ctx, *n, *bits, *reps, cfg)?;
-                    if *json {
-                        println!("{}", serde_json::to_string_pretty(&b)?);
-                    } else {
-                        println!("device: {}", b.device);
-                        tgs::bench::print_sort(&b);
-                    }
-                    if !b.verified {
-                        anyhow::bail!("the GPU sort produced unsorted output");
-                    }
-                }
-                Bench::Raster { n, width, height, reps, json } => {
-                    let b = tgs::bench_raster::raster(&ctx, *n, *width, *height, *reps)?;
-                    if *json {
-                        println!("{}", serde_json::to_string_pretty(&b)?);
-                    } else {
-                        tgs::bench_raster::print_raster(&b);
-                    }
-                }
-                Bench::Train { res, points, views, real_scale, from, iterations, warmup, separate_adam, fused_adam, light_field, json } => {
-                    use tgs::bench_train::Workload;
-                    let w = if *real_scale {
-                        Workload { points: points.unwrap_or(Workload::REAL_SCALE.points), ..Workload::REAL_SCALE }
-                    } else {
-                        Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) }
-                    };
-                    if let Some(net) = light_field {
-                        let net = tgs::train::settings::LightPreset::parse(net).map_err(|e| anyhow::anyhow!("--light-field: {e}"))?;
-                        let b = tgs::bench_light_field::light_field(&ctx, w, *warmup, *iterations, net)?;
-                        if *json {
-                            println!("{}", serde_json::to_string_pretty(&b)?);
-                        } else {
-                            tgs::bench_light_field::print_light_field(&b);
-                        }
-                        return Ok(());
-                    }
-                    let fuse = if *separate_adam {
-                        Some(false)
-                    } else if *fused_adam {
-                        Some(true)
-                    } else {
-                        None
-                    };
-                    let b = match from {
-                        Some(run) => tgs::bench_train::train_from(&ctx, run, *warmup, *iterations, fuse)?,
-                        None => tgs::bench_train::train(&ctx, w, *warmup, *iterations, fuse)?,
-                    };
-                    if *json {
-                        println!("{}", serde_json::to_string_pretty(&b)?);
-                    } else {
-                        tgs::bench_train::print_train(&b);
-                    }
-                }
-                Bench::Mlp { preset, depth, width, skip, levels, n, reps, gemm, json } => {
-                    let gemm = if gemm == "auto" { None } else { Some(tgs_pipelines::mlp::Gemm::parse(gemm).context("--gemm (auto, tiled, rows)")?) };
-                    let mut shape = tgs_pipelines::MlpShape::preset(preset)?;
-                    shape.depth = depth.unwrap_or(shape.depth);
-                    shape.width = width.unwrap_or(shape.width);
-                    shape.skip = skip.unwrap_or(shape.skip);
-                    if let Some(l) = levels {
-                        shape.levels_x = *l;
-                        shape.levels_w = *l;
-                    }
-                    let b = tgs::bench_mlp::mlp(&ctx, shape, *n, *reps, gemm)?;
-                    if *json {
-                        println!("{}", serde_json::to_string_pretty(&b)?);
-                    } else {
-                        println!("device: {}", b.device);
-                        tgs::bench_mlp::print_mlp(&b);
-                    }
-                }
-                Bench::Stages { scene, train, train_light_field, warmup, iterations, mlp, set, json } => {
-                    let spec = tgs::bench_stages::StagesSpec {
-                        scene: scene.clone(),
-                        train: *train,
-                        train_light_field: *train_light_field,
-                        warmup: *warmup,
-                        iterations: *iterations,
-                        mlp: mlp.clone(),
-                        set: set.clone(),
-                    };
-                    let b = tgs::bench_stages::stages(&ctx, &spec)?;
-                    if *json {
-                        println!("{}", serde_json::to_string_pretty(&b)?);
-                    } else {
-                        tgs::bench_stages::print_stages(&b);
-                    }
-                }
-                Bench::Lpips { .. } => {} // above: on the CPU, no device
-                Bench::Scan { n, reps, json } => {
-                    let b = tgs::bench::scan(&ctx, *n, *reps)?;
-                    if *json {
-                        println!("{}", serde_json::to_string_pretty(&b)?);
-                    } else {
-                        println!("device: {}", b.device);
-                        tgs::bench::print_scan(&b);
-                    }
-                }
+        Cmd::Bench { what } => what.run(&context(&cli)?),
+    }
+}
+
+/// `tgs eval RUN [--out DIR]`: the test metrics as JSON (renders into DIR).
+fn eval(ctx: &std::sync::Arc<Context>, run: &std::path::Path, out: Option<&std::path::Path>) -> Result<()> {
+    let (mut tr, data) = tgs::train::run::open_run(ctx, run)?;
+    if data.test.is_empty() {
+        anyhow::bail!("{}: the dataset has no test views", data.root.display());
+    }
+    let mut dir = match out {
+        Some(d) => Some(tgs::outdir::OutDir::open(d, Some(&data.root))?),
+        None => None,
+    };
+    // Only a writer locks: eval without --out reads the run.
+    let _lock = match out {
+        Some(d) => Some(tgs::lock::lock_output(d, run, "tgs eval", false)?),
+        None => None,
+    };
+    let m = tgs::eval::evaluate(&mut tr, &data.test, dir.as_mut())?;
+    println!("{}", serde_json::to_string_pretty(&m)?);
+    Ok(())
+}
+
+/// `tgs scene list` and `tgs scene make NAME --out DIR`.
+fn scene(what: &SceneCmd) -> Result<()> {
+    match what {
+        SceneCmd::List => {
+            for line in tgs::scene::list() {
+                println!("{line}");
             }
-            Ok(())
+        }
+        SceneCmd::Make { name, out } => {
+            let bar = indicatif::ProgressBar::new(0);
+            tgs::scene::make_named(name, out, |d, total| {
+                bar.set_length(total as u64);
+                bar.set_position(d as u64)
+            })?;
+            bar.finish_and_clear();
+            eprintln!("scene '{name}' written to {}", out.display());
         }
     }
+    Ok(())
+}
+
+/// `tgs sweep`: the runs, then their table with the Pareto front marked.
+fn sweep(ctx: &std::sync::Arc<Context>, a: &tgs::sweep::SweepArgs) -> Result<()> {
+    let o = tgs::sweep::sweep(ctx, a)?;
+    if o.interrupted {
+        eprintln!("sweep interrupted after {} new run(s); run the same command again to resume", o.trained);
+        std::process::exit(130);
+    }
+    eprintln!("sweep: {} runs ({} trained now); {} and plots in {}", o.rows.len(), o.trained, a.out.join("sweep.csv").display(), a.out.display());
+    let front = tgs::sweep::pareto(&o.rows, |r| r.psnr);
+    println!("{:48} {:>9} {:>8} {:>8} {:>8} {:>9}  pareto", "run", "wall s", "PSNR", "SSIM", "LPIPS", "MAE °");
+    for (i, r) in o.rows.iter().enumerate() {
+        println!("{:48} {:9.1} {:8.3} {:8.4} {:8.4} {:9.2}  {}", r.name, r.wall_s, r.psnr, r.ssim, r.lpips, r.normal_mae_deg, if front.contains(&i) { "*" } else { "" });
+    }
+    Ok(())
 }
 
 fn main() {

@@ -367,24 +367,8 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
     let base_cfg = grid.config(&[])?;
     let digest = crate::train::run::load_dataset(&dataset, &base_cfg)?.fingerprint()?.digest();
     let run_keys: Vec<String> = runs.iter().map(|(_, s)| Ok(run_key(&toml::to_string(&grid.config(s)?)?, digest))).collect::<Result<_>>()?;
-    let before = rows.len();
-    rows.retain(|r| runs.iter().zip(&run_keys).any(|((n, _), k)| &r.name == n && &r.key == k));
-    if rows.len() < before && !a.quiet {
-        eprintln!(
-            "sweep: {} row(s) of {} were trained with other settings or another dataset (the base, preset, defaults or data changed): dropped, their runs train again",
-            before - rows.len(),
-            csv.display()
-        );
-    }
-    // No font for the plots' text: said before any training, and the sweep
-    // goes on without plots (the CSV holds every number they show).
-    let plots = match plot::font_ready() {
-        Ok(()) => true,
-        Err(e) => {
-            eprintln!("sweep: plots not drawn: {e:#}");
-            false
-        }
-    };
+    drop_stale_rows(&mut rows, &runs, &run_keys, &csv, a.quiet);
+    let plots = plots_ready();
     let mut trained = 0;
     for (i, (name, set)) in runs.iter().enumerate() {
         if rows.iter().any(|r| &r.name == name) {
@@ -431,6 +415,33 @@ pub fn sweep(ctx: &Arc<Context>, a: &SweepArgs) -> Result<SweepOutcome> {
         }
     }
     Ok(SweepOutcome { rows, trained, interrupted: false })
+}
+
+/// Drop the CSV's rows whose run key no longer matches (other settings or
+/// another dataset): their runs train again.
+fn drop_stale_rows(rows: &mut Vec<Row>, runs: &[(String, Settings)], run_keys: &[String], csv: &Path, quiet: bool) {
+    let before = rows.len();
+    rows.retain(|r| runs.iter().zip(run_keys).any(|((n, _), k)| &r.name == n && &r.key == k));
+    if rows.len() < before && !quiet {
+        eprintln!(
+            "sweep: {} row(s) of {} were trained with other settings or another dataset (the base, preset, defaults or data changed): dropped, their runs train again",
+            before - rows.len(),
+            csv.display()
+        );
+    }
+}
+
+/// Whether the plots can be drawn: without a font for their text, said
+/// before any training, and the sweep goes on without them (the CSV holds
+/// every number they show).
+fn plots_ready() -> bool {
+    match plot::font_ready() {
+        Ok(()) => true,
+        Err(e) => {
+            eprintln!("sweep: plots not drawn: {e:#}");
+            false
+        }
+    }
 }
 
 /// A run's key: FNV-1a over its settings (TOML) and the dataset digest.

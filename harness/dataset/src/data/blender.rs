@@ -274,15 +274,7 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std:
     let mut views = Vec::with_capacity(tf.frames.len());
     for (i, f) in tf.frames.iter().enumerate() {
         let what = || format!("{}: frame {i} ('{}')", path.display(), f.file_path);
-        if f.transform_matrix.len() != 4 || f.transform_matrix.iter().any(|r| r.len() != 4) {
-            bail!("{}: transform_matrix is not 4x4", what());
-        }
-        let mut m = [[0f64; 4]; 4];
-        for (i, row) in f.transform_matrix.iter().enumerate() {
-            for (j, v) in row.iter().enumerate() {
-                m[i][j] = v.finite(&format!("transform_matrix[{i}][{j}]")).with_context(what)?;
-            }
-        }
+        let m = frame_matrix(f).with_context(what)?;
         check_rigid(&m).with_context(what)?;
         if let Some(j) = tf.frames[..i].iter().position(|g| g.file_path == f.file_path) {
             bail!("{}: file_path '{}' is given twice (frames {j} and {i}): each image must be one frame", path.display(), f.file_path);
@@ -295,46 +287,80 @@ fn load_split(root: &Path, split: &str, opts: &LoadOptions, files: &mut Vec<std:
         let image = image.downscale(opts.downscale).with_context(|| format!("{}: {}", what(), img_path.display()))?;
         let intrinsics = f.intrinsics.finite().with_context(what)?.or(&file_intrinsics);
         intrinsics.check_fit(w, h).with_context(|| format!("{}: {}", what(), img_path.display()))?;
-        let Intrinsics { fl_x, fl_y, cx, cy, .. } = intrinsics;
-        let fx = match (fl_x, angle_x) {
-            (Some(fx), _) => fx,
-            (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),
-            (None, Some(a)) => bail!("{}: camera_angle_x {a} is not in (0, pi)", path.display()),
-            (None, None) => bail!("{}: neither camera_angle_x nor fl_x is given", path.display()),
-        };
-        let fy = fl_y.unwrap_or(fx);
-        // Principal point in pixel-edge coordinates (centre W/2), shifted to centres at integers.
-        let cx = cx.unwrap_or(0.5 * w as f64) - 0.5;
-        let cy = cy.unwrap_or(0.5 * h as f64) - 0.5;
-        let cam = Camera { width: w, height: h, fx: fx as f32, fy: fy as f32, cx: cx as f32, cy: cy as f32, world_to_view: gl_c2w_to_w2v(&m) };
+        let cam = frame_camera(intrinsics, angle_x, (w, h), &m).with_context(|| path.display().to_string())?;
         cam.validate().with_context(what)?;
         super::check_field_of_view(&cam).with_context(what)?;
-        let normals = match &f.normal_path {
-            Some(p) => {
-                let np = resolve(root, p, "npy").with_context(what)?;
-                files.push(np.clone());
-                let n = read_normals(&np).with_context(what)?;
-                if (n.width, n.height) != (w, h) {
-                    bail!("{}: normals are {}x{} but the image is {w}x{h}", np.display(), n.width, n.height);
-                }
-                Some(downscale_normals(&n, opts.downscale)?)
-            }
-            None => None,
-        };
-        let mask = match &f.mask_path {
-            Some(p) => {
-                let mp = resolve(root, p, "png").with_context(what)?;
-                files.push(mp.clone());
-                let (mw, mh, m) = read_mask(&mp).with_context(what)?;
-                if (mw, mh) != (w, h) {
-                    bail!("{}: mask is {mw}x{mh} but the image is {w}x{h}", mp.display());
-                }
-                Some(downscale_mask(w, h, &m, opts.downscale))
-            }
-            None => None,
-        };
+        let (normals, mask) = frame_geometry(root, f, (w, h), opts, files).with_context(what)?;
         let name = Path::new(&f.file_path).file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| format!("{split}_{i}"));
         views.push((View { name, camera: downscale_camera(&cam, opts.downscale), image, normals, mask }, img_path.to_string_lossy().into_owned()));
     }
     Ok(Some(views))
+}
+
+/// A frame's `transform_matrix`: 4x4 and finite (naming the entry).
+fn frame_matrix(f: &Frame) -> Result<[[f64; 4]; 4]> {
+    if f.transform_matrix.len() != 4 || f.transform_matrix.iter().any(|r| r.len() != 4) {
+        bail!("transform_matrix is not 4x4");
+    }
+    let mut m = [[0f64; 4]; 4];
+    for (i, row) in f.transform_matrix.iter().enumerate() {
+        for (j, v) in row.iter().enumerate() {
+            m[i][j] = v.finite(&format!("transform_matrix[{i}][{j}]"))?;
+        }
+    }
+    Ok(m)
+}
+
+/// A `w`x`h` frame's camera from its intrinsics (or the file's
+/// `camera_angle_x`) and its camera-to-world matrix `m` (OpenGL axes).
+fn frame_camera(intrinsics: Intrinsics, angle_x: Option<f64>, (w, h): (u32, u32), m: &[[f64; 4]; 4]) -> Result<Camera> {
+    let Intrinsics { fl_x, fl_y, cx, cy, .. } = intrinsics;
+    let fx = match (fl_x, angle_x) {
+        (Some(fx), _) => fx,
+        (None, Some(a)) if a > 0.0 && a < std::f64::consts::PI => 0.5 * w as f64 / (0.5 * a).tan(),
+        (None, Some(a)) => bail!("camera_angle_x {a} is not in (0, pi)"),
+        (None, None) => bail!("neither camera_angle_x nor fl_x is given"),
+    };
+    let fy = fl_y.unwrap_or(fx);
+    // Principal point in pixel-edge coordinates (centre W/2), shifted to centres at integers.
+    let cx = cx.unwrap_or(0.5 * w as f64) - 0.5;
+    let cy = cy.unwrap_or(0.5 * h as f64) - 0.5;
+    let cam = Camera { width: w, height: h, fx: fx as f32, fy: fy as f32, cx: cx as f32, cy: cy as f32, world_to_view: gl_c2w_to_w2v(m) };
+    Ok(cam)
+}
+
+/// A `w`x`h` frame's ground-truth normals and glass mask, where it names
+/// them (their files added to `files`), downscaled as the image is.
+fn frame_geometry(
+    root: &Path,
+    f: &Frame,
+    (w, h): (u32, u32),
+    opts: &LoadOptions,
+    files: &mut Vec<std::path::PathBuf>,
+) -> Result<(Option<super::image_io::ImageF>, Option<Vec<bool>>)> {
+    let normals = match &f.normal_path {
+        Some(p) => {
+            let np = resolve(root, p, "npy")?;
+            files.push(np.clone());
+            let n = read_normals(&np)?;
+            if (n.width, n.height) != (w, h) {
+                bail!("{}: normals are {}x{} but the image is {w}x{h}", np.display(), n.width, n.height);
+            }
+            Some(downscale_normals(&n, opts.downscale)?)
+        }
+        None => None,
+    };
+    let mask = match &f.mask_path {
+        Some(p) => {
+            let mp = resolve(root, p, "png")?;
+            files.push(mp.clone());
+            let (mw, mh, m) = read_mask(&mp)?;
+            if (mw, mh) != (w, h) {
+                bail!("{}: mask is {mw}x{mh} but the image is {w}x{h}", mp.display());
+            }
+            Some(downscale_mask(w, h, &m, opts.downscale))
+        }
+        None => None,
+    };
+    Ok((normals, mask))
 }

@@ -71,25 +71,7 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
         bail!("--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)", run.display());
     }
     let (mut h, mut arrays) = checkpoint::read(&ckpt)?;
-    // Past Stage I, a stage that trained the scattering set changed it.
-    let stage_two_trained = h.iteration > h.config.iterations && h.config.reflection.train_scattering;
-    let stage_three_trained = h.holds(light_field::stage::STAGE) && h.config.light_field.train_scattering;
-    if !keep_two && (stage_two_trained || stage_three_trained) {
-        bail!(
-            "--from {}: its Stage {} trained the scattering set, and the run has no {STAGE_ONE_CHECKPOINT} (Stage I's own state; runs from before it was written lack it): train Stage I again",
-            run.display(),
-            if stage_two_trained { "II" } else { "III" }
-        );
-    }
-    if h.iteration < h.config.iterations {
-        bail!(
-            "--from {}: its Stage I stopped at iteration {} of {}; finish it first (tgs train --out {} --resume)",
-            run.display(),
-            h.iteration,
-            h.config.iterations,
-            run.display()
-        );
-    }
+    check_stage_one(run, &h, keep_two)?;
     if a.preset.is_some() {
         bail!("--from {}: the run's own settings are used (--preset would change how its Stage I was trained); change Stage II with --set reflection.KEY=VALUE", run.display());
     }
@@ -99,28 +81,7 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
         base.stages = TrainConfig::default().stages;
     }
     let cfg = apply_args(base, a).with_context(|| format!("--from {}", run.display()))?;
-    if keep_two {
-        let end = h.config.iterations + h.config.reflection.iterations;
-        if !h.holds(reflection::stage::STAGE) || h.iteration != end {
-            bail!(
-                "--from {} --stages III starts from that run's finished Stage II; it is at iteration {} (Stage II ends at {end}{}) and has no {STAGE_TWO_CHECKPOINT}",
-                run.display(),
-                h.iteration,
-                if !h.holds(reflection::stage::STAGE) { ", and it holds no Stage II state" } else { "" }
-            );
-        }
-        let conflicts = changed_settings(&h.config, &cfg, stage_three_setting)?;
-        if !conflicts.is_empty() {
-            bail!("--from {} --stages III reuses that run's Stages I and II; these options would change how they were trained:\n  {}\nonly light_field.*, reflection.reseed, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
-        }
-    }
-    let conflicts = changed_settings(&h.config, &cfg, later_stage_setting)?;
-    if !conflicts.is_empty() {
-        bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
-    }
-    if !cfg.wants_reflection() {
-        bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
-    }
+    check_settings(run, &h, &cfg, keep_two)?;
     checkpoint::warn_missing_settings(&ckpt, &h, &cfg, a.quiet)?;
     let inherited = inherited_settings(&h.config, &cfg, keep_two)?;
     if !a.quiet && !inherited.is_empty() {
@@ -141,18 +102,75 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
     tr.iteration = if keep_two { cfg.iterations + cfg.reflection.iterations } else { cfg.iterations };
     tr.cfg = cfg;
     tr.schedule = super::schedule::Schedule::from_config(&tr.cfg);
+    let recs = kept_records(run, keep_two);
+    Ok((tr, data, dataset, recs))
+}
+
+/// RUN's Stage I state is there to start from: finished, and not changed
+/// by a later stage that trained the scattering set (unless Stage II is kept).
+fn check_stage_one(run: &Path, h: &checkpoint::Header, keep_two: bool) -> Result<()> {
+    // Past Stage I, a stage that trained the scattering set changed it.
+    let stage_two_trained = h.iteration > h.config.iterations && h.config.reflection.train_scattering;
+    let stage_three_trained = h.holds(light_field::stage::STAGE) && h.config.light_field.train_scattering;
+    if !keep_two && (stage_two_trained || stage_three_trained) {
+        bail!(
+            "--from {}: its Stage {} trained the scattering set, and the run has no {STAGE_ONE_CHECKPOINT} (Stage I's own state; runs from before it was written lack it): train Stage I again",
+            run.display(),
+            if stage_two_trained { "II" } else { "III" }
+        );
+    }
+    if h.iteration < h.config.iterations {
+        bail!(
+            "--from {}: its Stage I stopped at iteration {} of {}; finish it first (tgs train --out {} --resume)",
+            run.display(),
+            h.iteration,
+            h.config.iterations,
+            run.display()
+        );
+    }
+    Ok(())
+}
+
+/// The settings may change only the stages that train again: with
+/// `--stages III`, RUN's Stage II must be finished and stay as trained.
+fn check_settings(run: &Path, h: &checkpoint::Header, cfg: &TrainConfig, keep_two: bool) -> Result<()> {
+    if keep_two {
+        let end = h.config.iterations + h.config.reflection.iterations;
+        if !h.holds(reflection::stage::STAGE) || h.iteration != end {
+            bail!(
+                "--from {} --stages III starts from that run's finished Stage II; it is at iteration {} (Stage II ends at {end}{}) and has no {STAGE_TWO_CHECKPOINT}",
+                run.display(),
+                h.iteration,
+                if !h.holds(reflection::stage::STAGE) { ", and it holds no Stage II state" } else { "" }
+            );
+        }
+        let conflicts = changed_settings(&h.config, cfg, stage_three_setting)?;
+        if !conflicts.is_empty() {
+            bail!("--from {} --stages III reuses that run's Stages I and II; these options would change how they were trained:\n  {}\nonly light_field.*, reflection.reseed, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+        }
+    }
+    let conflicts = changed_settings(&h.config, cfg, later_stage_setting)?;
+    if !conflicts.is_empty() {
+        bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+    }
+    if !cfg.wants_reflection() {
+        bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
+    }
+    Ok(())
+}
+
+/// RUN's records of the stages kept, each marked with where it came from.
+fn kept_records(run: &Path, keep_two: bool) -> Vec<serde_json::Value> {
     let abs = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
     let kept: &[&str] = if keep_two { &["I", "II"] } else { &["I"] };
     let records = stage_records_of(run);
-    let recs = kept
-        .iter()
+    kept.iter()
         .map(|st| {
             let mut rec = records.iter().find(|s| s["stage"] == *st).cloned().unwrap_or_else(|| json!({"stage": st}));
             rec["from"] = json!(abs.to_string_lossy());
             rec
         })
-        .collect();
-    Ok((tr, data, dataset, recs))
+        .collect()
 }
 
 /// A finished run's stage records: stages.json (written when Stage II

@@ -99,31 +99,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     let signals_at_start = signals_received();
     let ckpt = a.out.join(CHECKPOINT);
     let start = Instant::now();
-    if a.resume && a.from.is_some() {
-        bail!("--resume continues OUT's own run; --from starts a new one from another run's Stage I: give one of them");
-    }
-    if !a.resume && ckpt.is_file() {
-        bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
-    }
-    if !a.resume {
-        let mut dir = OutDir::open(&a.out, a.dataset.as_deref())?;
-        for f in run_files() {
-            dir.file(&f)?;
-        }
-    }
-    let Opened { mut tr, data, dataset, identity, from_record } = if a.resume {
-        resume_trainer(ctx, a, &ckpt)?
-    } else if let Some(run) = &a.from {
-        let (tr, data, dataset, kept) = start_from(ctx, a, run)?;
-        let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
-        Opened { tr, data, dataset, identity, from_record: kept }
-    } else {
-        new_trainer(ctx, a)?
-    };
-    if !a.resume || !a.out.join(RUN_RECORD).is_file() {
-        let rec = json!({"run_id": identity.run_id, "dataset": dataset, "dataset_files": identity.fingerprint.files.len(), "dataset_digest": format!("{:016x}", identity.fingerprint.digest())});
-        atomic_write(&a.out.join(RUN_RECORD), serde_json::to_string_pretty(&rec)?.as_bytes())?;
-    }
+    let Opened { mut tr, data, dataset, identity, from_record } = open_trainer(ctx, a, &ckpt)?;
     show_warnings(&data, a.quiet);
     let validation = Validation::of(&data, &tr.cfg);
     preflight(&tr, &data, &validation, a.quiet)?;
@@ -179,6 +155,38 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         }
     }
     run.finish(tr)
+}
+
+/// The trainer the arguments ask for (`--resume`, `--from` or a new run),
+/// with OUT prepared and its run record (run.json) written.
+fn open_trainer(ctx: &Arc<Context>, a: &TrainArgs, ckpt: &Path) -> Result<Opened> {
+    if a.resume && a.from.is_some() {
+        bail!("--resume continues OUT's own run; --from starts a new one from another run's Stage I: give one of them");
+    }
+    if !a.resume && ckpt.is_file() {
+        bail!("{} already holds a run (checkpoint.bin): pass --resume to continue it, or choose another --out", a.out.display());
+    }
+    if !a.resume {
+        let mut dir = OutDir::open(&a.out, a.dataset.as_deref())?;
+        for f in run_files() {
+            dir.file(&f)?;
+        }
+    }
+    let opened = if a.resume {
+        resume_trainer(ctx, a, ckpt)?
+    } else if let Some(run) = &a.from {
+        let (tr, data, dataset, kept) = start_from(ctx, a, run)?;
+        let identity = checkpoint::Identity { run_id: checkpoint::new_run_id(), fingerprint: data.fingerprint()? };
+        Opened { tr, data, dataset, identity, from_record: kept }
+    } else {
+        new_trainer(ctx, a)?
+    };
+    if !a.resume || !a.out.join(RUN_RECORD).is_file() {
+        let (identity, dataset) = (&opened.identity, &opened.dataset);
+        let rec = json!({"run_id": identity.run_id, "dataset": dataset, "dataset_files": identity.fingerprint.files.len(), "dataset_digest": format!("{:016x}", identity.fingerprint.digest())});
+        atomic_write(&a.out.join(RUN_RECORD), serde_json::to_string_pretty(&rec)?.as_bytes())?;
+    }
+    Ok(opened)
 }
 
 /// Continue OUT's own run from its checkpoint, with the settings

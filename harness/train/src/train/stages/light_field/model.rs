@@ -110,6 +110,23 @@ pub struct LightFieldModel {
     kept: KeptViews,
 }
 
+/// What every recording of one Stage III step shares (see
+/// [`LightFieldModel::step`]).
+struct Pass<'a> {
+    /// The scattering colour composited over, and its gradient when it trains.
+    scat: &'a Buffer<f32>,
+    scat_grad: Option<&'a Buffer<f32>>,
+    /// The sample count the host read (None: the GPU counts in the pass).
+    host_count: Option<u32>,
+    weights: LossWeights,
+    it: u64,
+    net_group: AdamGroup,
+    material_group: AdamGroup,
+    material_len: usize,
+    train_scat: bool,
+    colour_only: bool,
+}
+
 impl LightFieldModel {
     /// Stage III from the reflection set `set` (its Adam moments kept) and a
     /// network `net`; `shade` fixes the normalization box.
@@ -245,7 +262,6 @@ impl LightFieldModel {
         }
         self.view_buffers(cam.width, cam.height)?;
         let pixels = cam.width * cam.height;
-        let n = pixels as usize;
         // The GPU-count step needs every pixel's sample within one block.
         let room = self.scratch.as_ref().is_some_and(|s| s.block() >= pixels);
         // A view whose weights would be captured renders in full in its
@@ -266,83 +282,17 @@ impl LightFieldModel {
         // Material only: f0 (3) at lr_f0, r at lr_r; the geometry is frozen.
         let material_len = (MATERIAL * self.set.len()) as usize;
         let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
-        let kept = self.kept.get(x.keep.view);
+        let kept = self.kept.get(x.keep.view).is_some();
+        let pass = Pass { scat, scat_grad, host_count, weights, it, net_group, material_group, material_len, train_scat, colour_only };
         loop {
-            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
-            let scratch = self.scratch.as_ref().context("light-field scratch")?;
-            let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
-            match host_count {
-                Some(n) => self.mlp.record_forward(&mut rec, &self.net.params, n, scratch)?,
-                None => {
-                    record_forward(&mut rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
-                    self.mlp.record_forward_counted(&mut rec, &self.net.params, &b.samples.count, scratch)?;
-                }
-            }
-            let sc = rec.begin_scope("lf.composite");
-            self.shading.record_composite(&mut rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out }, &b.loss_in)?;
-            rec.end_scope(sc);
-            let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
-            self.objective.record(&mut rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
-            let sc = rec.begin_scope("lf.composite_backward");
-            if let Some(g) = scat_grad {
-                // The composite writes the colour planes; the scattering
-                // geometry planes get no gradient in Stage III.
-                CompositeLoss::clear_scattering_geometry(&mut rec, g, n)?;
-            }
-            let r_prior = CompositePriors::of_means(lf.lambda_r, 0.0, pixels).r;
-            let inputs = CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out };
-            let grads = CompositeGrads { loss_grad: &b.loss_grad, d_phi, refl_grad: &b.frame.grad_out, scat_grad };
-            self.shading.record_composite_backward(&mut rec, cam, &self.shade, &inputs, &grads, r_prior)?;
-            rec.end_scope(sc);
-            if lf.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
-            }
-            match host_count {
-                Some(n) => self.mlp.record_backward(&mut rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
-                None => self.mlp.record_backward_counted(&mut rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
-            }
-            // The reflection set's geometry is frozen: its material alone
-            // needs gradients (from the view's kept weights, or the
-            // feature-only tile backward).
-            let s = Splats::coloured(&self.set.params, &self.feat);
-            match kept {
-                Some(k) => self.raster.record_backward_colour_weights(&mut rec, s, &self.set.grads, &self.dfeat, &b.frame, k)?,
-                None => self.raster.record_backward_colour_with(&mut rec, s, &self.set.grads, &self.dfeat, &b.frame)?,
-            }
-            let sc = rec.begin_scope("lf.material_backward");
-            self.shading.record_material_backward(&mut rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
-            rec.end_scope(sc);
-            if train_scat {
-                scattering.record_backward_external(
-                    &mut rec,
-                    cfg,
-                    cam,
-                    &ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only },
-                )?;
-            }
-            let (n, s) = (&self.net, &self.set);
-            let np = n.shape.params() as usize;
-            let net_arrays = AdamArrays { param: &n.params, grad: &n.grads, m: &n.m, v: &n.v, n: np };
-            let material_arrays = AdamArrays { param: &s.params.features, grad: &s.grads.features, m: &s.m.features, v: &s.v.features, n: material_len };
-            if host_count.is_some() {
-                let sc = rec.begin_scope("adam");
-                self.adam.record(&mut rec, net_arrays, &net_group, it)?;
-                self.adam.record(&mut rec, material_arrays, &material_group, it)?;
-                rec.end_scope(sc);
-            } else {
-                let args = self.raster.record_fit_gate(&mut rec, &b.frame, &[self.adam.grid(np), self.adam.grid(material_len)])?;
-                let sc = rec.begin_scope("adam");
-                self.adam.record_gated(&mut rec, net_arrays, &net_group, it, &args[0])?;
-                self.adam.record_gated(&mut rec, material_arrays, &material_group, it, &args[1])?;
-                rec.end_scope(sc);
-                rec.read_back(&b.samples.count, 0, &self.count_host)?;
-            }
+            self.record_pass(&mut rec, cfg, scattering, x, &pass)?;
             timings.extend(rec.submit_and_wait()?);
+            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
             if host_count.is_some() || self.raster.fit(&mut b.frame)? {
                 break;
             }
-            if kept.is_some() {
+            if kept {
                 bail!("a training view's render from its kept weights did not fit its frame");
             }
         }
@@ -359,6 +309,81 @@ impl LightFieldModel {
             loss += lf.lambda_r as f64 * crate::train::mean(&b.r_host.read()?);
         }
         Ok(StepOutput { loss, values, densified: None, timings })
+    }
+
+    /// One recording of a Stage III step (see [`Self::step`]): the forward
+    /// where it was not run apart, the composite, the losses, the backward
+    /// and Adam, gated on the frame having fitted where the GPU counted.
+    fn record_pass(&mut self, rec: &mut Recorder, cfg: &TrainConfig, scattering: &ScatteringModel, x: &LightFieldStepInput, p: &Pass<'_>) -> Result<()> {
+        let Pass { scat, scat_grad, host_count, weights, it, ref net_group, ref material_group, material_len, train_scat, colour_only } = *p;
+        let kept = self.kept.get(x.keep.view);
+        let (cam, lf) = (x.camera, &cfg.light_field);
+        let (pixels, n) = (cam.width * cam.height, (cam.width * cam.height) as usize);
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
+        let scratch = self.scratch.as_ref().context("light-field scratch")?;
+        let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
+        match host_count {
+            Some(n) => self.mlp.record_forward(rec, &self.net.params, n, scratch)?,
+            None => {
+                record_forward(rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
+                self.mlp.record_forward_counted(rec, &self.net.params, &b.samples.count, scratch)?;
+            }
+        }
+        let sc = rec.begin_scope("lf.composite");
+        self.shading.record_composite(rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out }, &b.loss_in)?;
+        rec.end_scope(sc);
+        let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
+        self.objective.record(rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
+        let sc = rec.begin_scope("lf.composite_backward");
+        if let Some(g) = scat_grad {
+            // The composite writes the colour planes; the scattering
+            // geometry planes get no gradient in Stage III.
+            CompositeLoss::clear_scattering_geometry(rec, g, n)?;
+        }
+        let r_prior = CompositePriors::of_means(lf.lambda_r, 0.0, pixels).r;
+        let inputs = CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out };
+        let grads = CompositeGrads { loss_grad: &b.loss_grad, d_phi, refl_grad: &b.frame.grad_out, scat_grad };
+        self.shading.record_composite_backward(rec, cam, &self.shade, &inputs, &grads, r_prior)?;
+        rec.end_scope(sc);
+        if lf.lambda_r > 0.0 {
+            rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
+        }
+        match host_count {
+            Some(n) => self.mlp.record_backward(rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
+            None => self.mlp.record_backward_counted(rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
+        }
+        // The reflection set's geometry is frozen: its material alone
+        // needs gradients (from the view's kept weights, or the
+        // feature-only tile backward).
+        let s = Splats::coloured(&self.set.params, &self.feat);
+        match kept {
+            Some(k) => self.raster.record_backward_colour_weights(rec, s, &self.set.grads, &self.dfeat, &b.frame, k)?,
+            None => self.raster.record_backward_colour_with(rec, s, &self.set.grads, &self.dfeat, &b.frame)?,
+        }
+        let sc = rec.begin_scope("lf.material_backward");
+        self.shading.record_material_backward(rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
+        rec.end_scope(sc);
+        if train_scat {
+            scattering.record_backward_external(rec, cfg, cam, &ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only })?;
+        }
+        let (n, s) = (&self.net, &self.set);
+        let np = n.shape.params() as usize;
+        let net_arrays = AdamArrays { param: &n.params, grad: &n.grads, m: &n.m, v: &n.v, n: np };
+        let material_arrays = AdamArrays { param: &s.params.features, grad: &s.grads.features, m: &s.m.features, v: &s.v.features, n: material_len };
+        if host_count.is_some() {
+            let sc = rec.begin_scope("adam");
+            self.adam.record(rec, net_arrays, net_group, it)?;
+            self.adam.record(rec, material_arrays, material_group, it)?;
+            rec.end_scope(sc);
+        } else {
+            let args = self.raster.record_fit_gate(rec, &b.frame, &[self.adam.grid(np), self.adam.grid(material_len)])?;
+            let sc = rec.begin_scope("adam");
+            self.adam.record_gated(rec, net_arrays, net_group, it, &args[0])?;
+            self.adam.record_gated(rec, material_arrays, material_group, it, &args[1])?;
+            rec.end_scope(sc);
+            rec.read_back(&b.samples.count, 0, &self.count_host)?;
+        }
+        Ok(())
     }
 
     /// Render `cam` composited over the scattering colour `scat` (3 planes).

@@ -81,6 +81,19 @@ pub struct ReflectionModel {
     sizes: HashMap<(u32, u32), ViewBuffers>,
 }
 
+/// What every recording of one Stage II step shares (see
+/// [`ReflectionModel::step`]).
+struct Pass<'a> {
+    /// The scattering colour composited over, and its gradient when it trains.
+    scat: &'a Buffer<f32>,
+    scat_grad: Option<&'a Buffer<f32>>,
+    /// The trained scattering model, its SH degree and Adam step count.
+    scat_model: Option<(&'a ScatteringModel, u32, u32)>,
+    weights: LossWeights,
+    groups: [AdamGroup; 5],
+    it: u64,
+}
+
 impl ReflectionModel {
     /// A reflection set with the geometry of the scattering Gaussians `copy`
     /// (when given) followed by the residual-hull `seeds` (opacity
@@ -209,55 +222,13 @@ impl ReflectionModel {
             AdamGroup::split(rc.lr_f0, rc.lr_r, MATERIAL, 3),
         ];
         let it = x.iteration as u64;
+        let pass = Pass { scat, scat_grad, scat_model, weights, groups, it };
         let (timings, values) = loop {
             self.view_buffers(cam.width, cam.height)?;
-            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-            let pixels = cam.width * cam.height;
-            let n = pixels as usize;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
-            record_forward(&mut rec, (&self.shading, &self.raster), &ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel }, &self.feat, &b.frame)?;
-            let sc = rec.begin_scope("refl.composite");
-            self.shading.record_composite(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
-            rec.end_scope(sc);
-            let hf = HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile };
-            self.objective.record(&mut rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
-            let sc = rec.begin_scope("refl.composite_backward");
-            if let Some(g) = scat_grad {
-                // The composite writes the colour planes; the scattering
-                // geometry planes get no gradient.
-                CompositeLoss::clear_scattering_geometry(&mut rec, g, n)?;
-            }
-            let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, pixels);
-            let g = CompositeGrads { loss_grad: &b.loss_grad, refl_grad: &b.frame.grad_out, scat_grad };
-            self.shading.record_composite_backward(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &g, prior)?;
-            rec.end_scope(sc);
-            if rc.lambda_r > 0.0 {
-                rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
-            }
-            if rc.lambda_area > 0.0 {
-                rec.read_back(&b.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, &b.alpha_host)?;
-            }
-            if let Some((m, sh, it)) = scat_model {
-                m.record_backward_external(&mut rec, cfg, cam, &ExternalStep { sh_degree: sh, lr_means: x.lr_means, iteration: it, colour_only: true })?;
-            }
-            self.raster.record_backward_with(&mut rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
-            if rc.rotation_grad == RotationGrad::Reflection {
-                // The colour's backward adds the mirror direction's part to zeros.
-                rec.fill(&self.set.grads.quats.binding(), 0)?;
-            }
-            let sc = rec.begin_scope("refl.color_backward");
-            let x = ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel };
-            self.shading.record_color_backward(&mut rec, &x, &self.dfeat, &self.set.grads, &self.texels)?;
-            rec.end_scope(sc);
-            let e = &self.env;
-            let mut grids = self.adam.set_grids(&self.set, &groups).to_vec();
-            grids.push(self.adam.grid(e.len()));
-            let args = self.raster.record_fit_gate(&mut rec, &b.frame, &grids)?;
-            let sc = rec.begin_scope("adam");
-            self.adam.record_set_gated(&mut rec, &self.set, &groups, it, &args[..5])?;
-            self.adam.record_gated(&mut rec, AdamArrays { param: &e.params, grad: &e.grads, m: &e.m, v: &e.v, n: e.len() }, &AdamGroup::single(rc.lr_env), it, &args[5])?;
-            rec.end_scope(sc);
+            self.record_pass(&mut rec, cfg, x, &pass)?;
             let t = rec.submit_and_wait()?;
+            let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
             if self.raster.fit(&mut b.frame)? {
                 break (t, b.loss.values()?);
             }
@@ -290,6 +261,60 @@ impl ReflectionModel {
             densified = Some((r.before, r.after));
         }
         Ok(StepOutput { loss, values, densified, timings })
+    }
+
+    /// One recording of a Stage II step (see [`Self::step`]): the forward,
+    /// the composite, the losses, the backward and Adam gated on the frame
+    /// having fitted.
+    fn record_pass(&mut self, rec: &mut Recorder, cfg: &TrainConfig, x: &ReflStepInput, p: &Pass<'_>) -> Result<()> {
+        let Pass { scat, scat_grad, scat_model, weights, ref groups, it } = *p;
+        let (cam, rc) = (x.camera, &cfg.reflection);
+        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
+        let pixels = cam.width * cam.height;
+        let n = pixels as usize;
+        record_forward(rec, (&self.shading, &self.raster), &ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel }, &self.feat, &b.frame)?;
+        let sc = rec.begin_scope("refl.composite");
+        self.shading.record_composite(rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
+        rec.end_scope(sc);
+        let hf = HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile };
+        self.objective.record(rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
+        let sc = rec.begin_scope("refl.composite_backward");
+        if let Some(g) = scat_grad {
+            // The composite writes the colour planes; the scattering
+            // geometry planes get no gradient.
+            CompositeLoss::clear_scattering_geometry(rec, g, n)?;
+        }
+        let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, pixels);
+        let g = CompositeGrads { loss_grad: &b.loss_grad, refl_grad: &b.frame.grad_out, scat_grad };
+        self.shading.record_composite_backward(rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &g, prior)?;
+        rec.end_scope(sc);
+        if rc.lambda_r > 0.0 {
+            rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
+        }
+        if rc.lambda_area > 0.0 {
+            rec.read_back(&b.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, &b.alpha_host)?;
+        }
+        if let Some((m, sh, it)) = scat_model {
+            m.record_backward_external(rec, cfg, cam, &ExternalStep { sh_degree: sh, lr_means: x.lr_means, iteration: it, colour_only: true })?;
+        }
+        self.raster.record_backward_with(rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
+        if rc.rotation_grad == RotationGrad::Reflection {
+            // The colour's backward adds the mirror direction's part to zeros.
+            rec.fill(&self.set.grads.quats.binding(), 0)?;
+        }
+        let sc = rec.begin_scope("refl.color_backward");
+        let x = ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel };
+        self.shading.record_color_backward(rec, &x, &self.dfeat, &self.set.grads, &self.texels)?;
+        rec.end_scope(sc);
+        let e = &self.env;
+        let mut grids = self.adam.set_grids(&self.set, groups).to_vec();
+        grids.push(self.adam.grid(e.len()));
+        let args = self.raster.record_fit_gate(rec, &b.frame, &grids)?;
+        let sc = rec.begin_scope("adam");
+        self.adam.record_set_gated(rec, &self.set, groups, it, &args[..5])?;
+        self.adam.record_gated(rec, AdamArrays { param: &e.params, grad: &e.grads, m: &e.m, v: &e.v, n: e.len() }, &AdamGroup::single(rc.lr_env), it, &args[5])?;
+        rec.end_scope(sc);
+        Ok(())
     }
 
     /// Render `cam` composited over the scattering colour `scat` (3 planes).

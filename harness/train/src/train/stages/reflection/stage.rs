@@ -9,8 +9,6 @@ use super::model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::outputs::write_residual;
 use super::seed::{hull_seeding, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
-use crate::data::downscale_mask;
-use crate::data::image_io::read_grey_mask;
 use crate::outdir::OutDir;
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
@@ -19,9 +17,8 @@ use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};
-use anyhow::{bail, Context as _, Result};
+use anyhow::{Context as _, Result};
 use std::any::Any;
-use std::borrow::Cow;
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context};
@@ -29,6 +26,8 @@ use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, Plane, ReflectionShading, Trai
 
 pub use super::decision::ReflDecision;
 pub use super::env_init::EnvInit;
+pub use super::masks::seed_masks;
+use super::masks::{glass_masks, MaskSource};
 
 /// Stage II.
 pub const STAGE: Stage = Stage("II");
@@ -118,116 +117,6 @@ impl LaterKind for Kind {
     }
 }
 
-/// Where the hull's glass masks came from (metrics.json's
-/// `reflection.seed_mask_source`).
-enum MaskSource {
-    /// `reflection.seed_masks`: this directory.
-    Dir(String),
-    /// `reflection.dataset_masks`: the training views' `mask_path`.
-    Dataset,
-    None,
-}
-
-impl MaskSource {
-    fn recorded(&self) -> Option<String> {
-        match self {
-            MaskSource::Dir(d) => Some(d.clone()),
-            MaskSource::Dataset => Some("dataset".into()),
-            _ => None,
-        }
-    }
-}
-
-/// Per training view, its glass mask (None: the view has none).
-type ViewMasks<'a> = Cow<'a, [Option<Vec<bool>>]>;
-
-/// The glass masks Stage II seeds from, per training view (None for a
-/// view without one, which then takes no part in the seeding):
-/// `reflection.seed_masks` when it names a directory, else the dataset's
-/// own training masks when `reflection.dataset_masks` is on, the set has
-/// hull seeds and any training view has one; None (the residual's masks)
-/// otherwise.
-/// The dataset's masks are lent, not copied (a view's mask is a byte per
-/// pixel).
-fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(Option<ViewMasks<'a>>, MaskSource)> {
-    let rc = &shared.cfg.reflection;
-    let v = shared.views;
-    if !rc.seed_masks.is_empty() {
-        if names.len() != v.cameras.len() {
-            bail!("reflection.seed_masks needs the training views' names, which only a run with a directory has");
-        }
-        let m = seed_masks(Path::new(&rc.seed_masks), names, &v.cameras, shared.cfg.downscale)?;
-        return Ok((Some(Cow::Owned(m)), MaskSource::Dir(rc.seed_masks.clone())));
-    }
-    if !rc.dataset_masks || !rc.init.parts().1 {
-        return Ok((None, MaskSource::None));
-    }
-    if v.masks.iter().all(Option::is_none) {
-        return Ok((None, MaskSource::None));
-    }
-    for (i, (m, cam)) in v.masks.iter().zip(&v.cameras).enumerate() {
-        let n = (cam.width * cam.height) as usize;
-        if let Some(m) = m.as_ref().filter(|m| m.len() != n) {
-            bail!(
-                "reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image",
-                names.get(i).cloned().unwrap_or_else(|| i.to_string()),
-                m.len(),
-                cam.width,
-                cam.height
-            );
-        }
-    }
-    Ok((Some(Cow::Borrowed(&v.masks[..])), MaskSource::Dataset))
-}
-
-/// `reflection.seed_masks`: each training view's glass mask from
-/// `dir/NAME.png` (NAME the view's name without its extension), at the
-/// view's size or `downscale` times it (then reduced as the dataset's
-/// masks are: glass only where every pixel it covers is); None for a view
-/// without one. Refused when no view has one.
-pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u32) -> Result<Vec<Option<Vec<bool>>>> {
-    if !dir.is_dir() {
-        bail!("reflection.seed_masks: {} is not a directory", dir.display());
-    }
-    names
-        .iter()
-        .zip(cameras)
-        .map(|(name, cam)| {
-            let stem = Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| name.clone());
-            // NAME without its extension; NAME.png (`0000.jpg.png`, as renders were once named) too.
-            let Some(path) = [format!("{stem}.png"), format!("{name}.png")].into_iter().map(|f| dir.join(f)).find(|p| p.is_file()) else {
-                return Ok(None);
-            };
-            let (w, h, m) = read_grey_mask(&path).with_context(|| "reflection.seed_masks")?;
-            let f = downscale.max(1);
-            if (w, h) == (cam.width, cam.height) {
-                Ok(Some(m))
-            } else if f > 1 && (w / f, h / f) == (cam.width, cam.height) {
-                Ok(Some(downscale_mask(w, h, &m, f)))
-            } else {
-                bail!(
-                    "reflection.seed_masks: {} is {w}x{h}; training view {name} is {}x{}{}",
-                    path.display(),
-                    cam.width,
-                    cam.height,
-                    if f > 1 { format!(" ({f} times that before downscale)") } else { String::new() }
-                )
-            }
-        })
-        .collect::<Result<Vec<_>>>()
-        .and_then(|m| {
-            if m.iter().all(Option::is_none) {
-                bail!(
-                    "reflection.seed_masks: {} holds no glass mask of any of the {} training views (VIEW.png, e.g. {}.png)",
-                    dir.display(),
-                    names.len(),
-                    names.first().and_then(|n| Path::new(n).file_stem()).map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
-                );
-            }
-            Ok(m)
-        })
-}
-
 /// With glass masks (`SeedParams::relax`): the significance levels tried,
 /// in order, where no hull point beats chance at
 /// `reflection.seed_significance`. The masks are no noise, but few masked
@@ -257,67 +146,28 @@ const VD_SAMPLES: usize = 1 << 16;
 /// is glass). Returns the decision and the new reflection set with its
 /// light (None when one exists or the stage does not run).
 pub fn begin(
-    s: Shared<'_>,
+    mut s: Shared<'_>,
     existing: Option<u32>,
     kept: Option<&ReflDecision>,
     reseed: bool,
     round: u32,
     masks: Option<&[Option<Vec<bool>>]>,
-    mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>,
+    on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>,
 ) -> Result<(ReflDecision, Option<ReflectionModel>)> {
     let (cfg, v) = (s.cfg, s.views);
-    let shading = ReflectionShading::new(&v.ctx)?;
     let sh = cfg.sh_degree_at(cfg.iterations);
-    let sh_view = cfg.reflection.scattering_degree(sh);
-    let (mut sum, mut over, mut pixels) = (0.0f64, 0usize, 0usize);
-    s.cache.clear();
-    // Per view: residual magnitude and Stage I surface depth (seeding),
-    // and both reduced for the view-dependence measure.
-    // (view, hull map, depth) of the views that seed.
-    let mut maps: Vec<(usize, Vec<f32>, Vec<f32>)> = Vec::new();
-    let mut vd_maps: Vec<VdMap> = Vec::new();
     let (copy, hull) = cfg.reflection.init.parts();
-    for (i, cam) in v.cameras.iter().enumerate() {
-        let n = (cam.width * cam.height) as usize;
-        let buf = Buffer::<f32>::new(&v.ctx, "train.scat_cache", 3 * n)?;
-        s.scattering.render_color_into(cam, sh, &v.background, &buf)?;
-        let r = residual(&v.ctx, &shading, &v.targets[i], &buf, n as u32)?;
-        let mag = &r[3 * n..4 * n];
-        sum += mag.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
-        over += mag.iter().filter(|&&v| v > 0.05).count();
-        pixels += n;
-        on_view(i, cam, &r)?;
-        // The frame still holds this view's render.
-        let depth = s.scattering.last_plane(cam.width, cam.height, Plane::Median)?;
-        // Stage II's scattering layer at its own degree (the residual
-        // above, for the decision and the seeds, is Stage I's colour).
-        if sh_view != sh {
-            s.scattering.render_color_into(cam, sh_view, &v.background, &buf)?;
-        }
-        vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
-        if hull && existing.is_none() {
-            // Given masks stand in for the residual: 1 on the glass, 0
-            // elsewhere, taken as they are (no blur, threshold 0.5).
-            // A view without a mask among masked ones takes no part.
-            match masks.map(|m| m.get(i).and_then(Option::as_ref)) {
-                Some(Some(m)) => maps.push((i, m.iter().map(|&g| g as u8 as f32).collect(), depth)),
-                Some(None) => {}
-                None => maps.push((i, mag.to_vec(), depth)),
-            }
-        }
-        s.cache.push(buf, sh_view);
-    }
+    let m = measure_views(&mut s, sh, hull && existing.is_none(), masks, on_view)?;
     // A resumed Stage II (its set exists) keeps the decision and seed
     // counts it was started with; only the cache was needed.
     if let (Some(kept), true) = (kept, existing.is_some()) {
         return Ok((kept.clone(), None));
     }
     let views = v.cameras.len().max(1);
-    let vd = view_dependence(&vd_maps, (v.centre, v.extent), VD_SAMPLES);
-    drop(vd_maps);
+    let vd = view_dependence(&m.vd_maps, (v.centre, v.extent), VD_SAMPLES);
     let mut d = ReflDecision {
-        residual_mean: sum / views as f64,
-        residual_fraction_over_0_05: over as f64 / pixels.max(1) as f64,
+        residual_mean: m.sum / views as f64,
+        residual_fraction_over_0_05: m.over as f64 / m.pixels.max(1) as f64,
         threshold: cfg.reflection.min_residual as f64,
         view_dependence: vd.spread,
         view_dependence_samples: vd.samples,
@@ -357,59 +207,147 @@ pub fn begin(
     let mut model = None;
     if d.run {
         if existing.is_none() {
-            let rc = &cfg.reflection;
-            let views: Vec<SeedView> = maps.iter().map(|(i, r, z)| SeedView { camera: v.cameras[*i], residual: r, depth: z }).collect();
-            let p = SeedParams {
-                threshold: rc.min_residual,
-                agree: rc.seed_agree,
-                max_rays: rc.seed_rays,
-                normal: rc.seed_normal.for_source(masks.is_some()),
-                significance: rc.seed_significance as f64,
-                ..SeedParams::default()
-            };
-            let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, relax: &MASK_SIGNIFICANCE, ..p } } else { p };
-            let seeds = if hull {
-                let h = hull_seeding(&views, &p);
-                d.seed_significance = h.significance_relaxed;
-                d.significance_dropped = h.significance_dropped;
-                d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
-                h.seeds
-            } else {
-                Vec::new()
-            };
-            // No ray crossed carved space into the hull (e.g. a Stage I
-            // too short to carve anything): the paper's initialisation,
-            // a copy of the Stage I set, rather than no Stage II.
-            d.hull_empty = hull && seeds.is_empty();
-            let g = if copy || d.hull_empty { Some(s.scattering.set.params.download()?) } else { None };
-            d.seeds = seeds.len() as u32;
-            d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
-            let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
-            means.extend(seeds.iter().flat_map(|s| s.position));
-            use crate::train::settings::EnvStart;
-            let mut env = if matches!(rc.env_init, EnvStart::Scene | EnvStart::SceneDepth) {
-                let scat = s.scattering.set.params.download()?;
-                let depth = rc.env_init == EnvStart::SceneDepth;
-                let (env, info) = scene_env_map(&v.ctx, SceneLight { set: &scat, sh_degree: sh, background: &v.background }, &means, rc.env_res, cfg.adam_eps, depth)?;
-                d.env_from = Some(info);
-                // The depth map's proxy: at the centre it was rendered from.
-                d.env_proxy = env.proxy.map(|p| EnvProxy::packed(Some(p)));
-                env
-            } else {
-                HostEnvMap::constant(rc.env_res, 0.0)?
-            };
-            if rc.env_radius > 0.0 {
-                let p = env_proxy(&means, &v.cameras, rc.env_radius);
-                d.env_proxy = p.map(|p| EnvProxy::packed(Some(p)));
-                env.proxy = p;
-            }
-            model = Some(ReflectionModel::from_scattering(&v.ctx, g.as_ref(), &seeds, env, rc, cfg.adam_eps)?);
+            model = Some(seed_model(&s, &mut d, &m.maps, masks, (copy, hull), sh)?);
         }
         d.reflection_gaussians = model.as_ref().map(|m| m.set.len()).or(existing).unwrap_or(0);
     } else {
         s.cache.clear();
     }
     Ok((d, model))
+}
+
+/// What [`measure_views`] measured of the training views.
+struct Measured {
+    /// The sum over views of the mean residual magnitude.
+    sum: f64,
+    /// Pixels whose residual magnitude is over 0.05, and pixels in all.
+    over: usize,
+    pixels: usize,
+    /// (view, hull map, depth) of the views that seed.
+    maps: Vec<(usize, Vec<f32>, Vec<f32>)>,
+    /// Every view reduced for the view-dependence measure.
+    vd_maps: Vec<VdMap>,
+}
+
+/// Render every training view with the frozen scattering set (cached in
+/// `s.cache` for Stage II at its own SH degree), measure the residual and
+/// Stage I's surface depth, and keep the hull's maps when `seeding`
+/// (each view's glass mask where `masks` are given, else its residual).
+fn measure_views(
+    s: &mut Shared<'_>,
+    sh: u32,
+    seeding: bool,
+    masks: Option<&[Option<Vec<bool>>]>,
+    mut on_view: impl FnMut(usize, &Camera, &[f32]) -> Result<()>,
+) -> Result<Measured> {
+    let (cfg, v) = (s.cfg, s.views);
+    let shading = ReflectionShading::new(&v.ctx)?;
+    let sh_view = cfg.reflection.scattering_degree(sh);
+    let mut m = Measured { sum: 0.0, over: 0, pixels: 0, maps: Vec::new(), vd_maps: Vec::new() };
+    s.cache.clear();
+    for (i, cam) in v.cameras.iter().enumerate() {
+        let n = (cam.width * cam.height) as usize;
+        let buf = Buffer::<f32>::new(&v.ctx, "train.scat_cache", 3 * n)?;
+        s.scattering.render_color_into(cam, sh, &v.background, &buf)?;
+        let r = residual(&v.ctx, &shading, &v.targets[i], &buf, n as u32)?;
+        let mag = &r[3 * n..4 * n];
+        m.sum += mag.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
+        m.over += mag.iter().filter(|&&v| v > 0.05).count();
+        m.pixels += n;
+        on_view(i, cam, &r)?;
+        // The frame still holds this view's render.
+        let depth = s.scattering.last_plane(cam.width, cam.height, Plane::Median)?;
+        // Stage II's scattering layer at its own degree (the residual
+        // above, for the decision and the seeds, is Stage I's colour).
+        if sh_view != sh {
+            s.scattering.render_color_into(cam, sh_view, &v.background, &buf)?;
+        }
+        m.vd_maps.push(VdMap::new(cam, &r, &depth, VD_MAX_SIDE));
+        if seeding {
+            // Given masks stand in for the residual: 1 on the glass, 0
+            // elsewhere, taken as they are (no blur, threshold 0.5).
+            // A view without a mask among masked ones takes no part.
+            match masks.map(|m| m.get(i).and_then(Option::as_ref)) {
+                Some(Some(mask)) => m.maps.push((i, mask.iter().map(|&g| g as u8 as f32).collect(), depth)),
+                Some(None) => {}
+                None => m.maps.push((i, mag.to_vec(), depth)),
+            }
+        }
+        s.cache.push(buf, sh_view);
+    }
+    Ok(m)
+}
+
+/// The new reflection set: the hull's seeds from `maps` (and a copy of
+/// the Stage I set with `init` "copy", or when the hull is empty), with its
+/// light; what it did is recorded in `d`. `init`: (copy, hull).
+fn seed_model(
+    s: &Shared<'_>,
+    d: &mut ReflDecision,
+    maps: &[(usize, Vec<f32>, Vec<f32>)],
+    masks: Option<&[Option<Vec<bool>>]>,
+    init: (bool, bool),
+    sh: u32,
+) -> Result<ReflectionModel> {
+    let (cfg, v) = (s.cfg, s.views);
+    let (copy, hull) = init;
+    let rc = &cfg.reflection;
+    let views: Vec<SeedView> = maps.iter().map(|(i, r, z)| SeedView { camera: v.cameras[*i], residual: r, depth: z }).collect();
+    let p = SeedParams {
+        threshold: rc.min_residual,
+        agree: rc.seed_agree,
+        max_rays: rc.seed_rays,
+        normal: rc.seed_normal.for_source(masks.is_some()),
+        significance: rc.seed_significance as f64,
+        ..SeedParams::default()
+    };
+    let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, relax: &MASK_SIGNIFICANCE, ..p } } else { p };
+    let seeds = if hull {
+        let h = hull_seeding(&views, &p);
+        d.seed_significance = h.significance_relaxed;
+        d.significance_dropped = h.significance_dropped;
+        d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
+        h.seeds
+    } else {
+        Vec::new()
+    };
+    // No ray crossed carved space into the hull (e.g. a Stage I
+    // too short to carve anything): the paper's initialisation,
+    // a copy of the Stage I set, rather than no Stage II.
+    d.hull_empty = hull && seeds.is_empty();
+    let g = if copy || d.hull_empty { Some(s.scattering.set.params.download()?) } else { None };
+    d.seeds = seeds.len() as u32;
+    d.copied = g.as_ref().map(|g| g.len() as u32).unwrap_or(0);
+    let mut means: Vec<f32> = g.as_ref().map(|g| g.means.clone()).unwrap_or_default();
+    means.extend(seeds.iter().flat_map(|s| s.position));
+    let env = initial_light(s, d, &means, sh)?;
+    ReflectionModel::from_scattering(&v.ctx, g.as_ref(), &seeds, env, rc, cfg.adam_eps)
+}
+
+/// The reflection set's first light (`reflection.env_init`: black, or the
+/// scene seen from the set's points, with its depth), with the proxy
+/// sphere of `reflection.env_radius`; recorded in `d`.
+fn initial_light(s: &Shared<'_>, d: &mut ReflDecision, means: &[f32], sh: u32) -> Result<HostEnvMap> {
+    use crate::train::settings::EnvStart;
+    let (cfg, v) = (s.cfg, s.views);
+    let rc = &cfg.reflection;
+    let mut env = if matches!(rc.env_init, EnvStart::Scene | EnvStart::SceneDepth) {
+        let scat = s.scattering.set.params.download()?;
+        let depth = rc.env_init == EnvStart::SceneDepth;
+        let (env, info) = scene_env_map(&v.ctx, SceneLight { set: &scat, sh_degree: sh, background: &v.background }, means, rc.env_res, cfg.adam_eps, depth)?;
+        d.env_from = Some(info);
+        // The depth map's proxy: at the centre it was rendered from.
+        d.env_proxy = env.proxy.map(|p| EnvProxy::packed(Some(p)));
+        env
+    } else {
+        HostEnvMap::constant(rc.env_res, 0.0)?
+    };
+    if rc.env_radius > 0.0 {
+        let p = env_proxy(means, &v.cameras, rc.env_radius);
+        d.env_proxy = p.map(|p| EnvProxy::packed(Some(p)));
+        env.proxy = p;
+    }
+    Ok(env)
 }
 
 impl LaterStage for ReflectionModel {

@@ -1,0 +1,121 @@
+//! The glass masks Stage II may seed from: a directory of them
+//! (`reflection.seed_masks`) or the dataset's own training masks
+//! (`reflection.dataset_masks`), and where they came from for the record.
+
+use crate::data::downscale_mask;
+use crate::data::image_io::read_grey_mask;
+use crate::train::stages::shared::Shared;
+use anyhow::{bail, Context as _, Result};
+use std::borrow::Cow;
+use std::path::Path;
+use tgs_pipelines::Camera;
+
+/// Where the hull's glass masks came from (metrics.json's
+/// `reflection.seed_mask_source`).
+pub(super) enum MaskSource {
+    /// `reflection.seed_masks`: this directory.
+    Dir(String),
+    /// `reflection.dataset_masks`: the training views' `mask_path`.
+    Dataset,
+    None,
+}
+
+impl MaskSource {
+    pub(super) fn recorded(&self) -> Option<String> {
+        match self {
+            MaskSource::Dir(d) => Some(d.clone()),
+            MaskSource::Dataset => Some("dataset".into()),
+            _ => None,
+        }
+    }
+}
+
+/// Per training view, its glass mask (None: the view has none).
+pub(super) type ViewMasks<'a> = Cow<'a, [Option<Vec<bool>>]>;
+
+/// The glass masks Stage II seeds from, per training view (None for a
+/// view without one, which then takes no part in the seeding):
+/// `reflection.seed_masks` when it names a directory, else the dataset's
+/// own training masks when `reflection.dataset_masks` is on, the set has
+/// hull seeds and any training view has one; None (the residual's masks)
+/// otherwise.
+/// The dataset's masks are lent, not copied (a view's mask is a byte per
+/// pixel).
+pub(super) fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(Option<ViewMasks<'a>>, MaskSource)> {
+    let rc = &shared.cfg.reflection;
+    let v = shared.views;
+    if !rc.seed_masks.is_empty() {
+        if names.len() != v.cameras.len() {
+            bail!("reflection.seed_masks needs the training views' names, which only a run with a directory has");
+        }
+        let m = seed_masks(Path::new(&rc.seed_masks), names, &v.cameras, shared.cfg.downscale)?;
+        return Ok((Some(Cow::Owned(m)), MaskSource::Dir(rc.seed_masks.clone())));
+    }
+    if !rc.dataset_masks || !rc.init.parts().1 {
+        return Ok((None, MaskSource::None));
+    }
+    if v.masks.iter().all(Option::is_none) {
+        return Ok((None, MaskSource::None));
+    }
+    for (i, (m, cam)) in v.masks.iter().zip(&v.cameras).enumerate() {
+        let n = (cam.width * cam.height) as usize;
+        if let Some(m) = m.as_ref().filter(|m| m.len() != n) {
+            bail!(
+                "reflection.dataset_masks: training view {} has a glass mask of {} pixels for a {}x{} image",
+                names.get(i).cloned().unwrap_or_else(|| i.to_string()),
+                m.len(),
+                cam.width,
+                cam.height
+            );
+        }
+    }
+    Ok((Some(Cow::Borrowed(&v.masks[..])), MaskSource::Dataset))
+}
+
+/// `reflection.seed_masks`: each training view's glass mask from
+/// `dir/NAME.png` (NAME the view's name without its extension), at the
+/// view's size or `downscale` times it (then reduced as the dataset's
+/// masks are: glass only where every pixel it covers is); None for a view
+/// without one. Refused when no view has one.
+pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u32) -> Result<Vec<Option<Vec<bool>>>> {
+    if !dir.is_dir() {
+        bail!("reflection.seed_masks: {} is not a directory", dir.display());
+    }
+    names
+        .iter()
+        .zip(cameras)
+        .map(|(name, cam)| {
+            let stem = Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| name.clone());
+            // NAME without its extension; NAME.png (`0000.jpg.png`, as renders were once named) too.
+            let Some(path) = [format!("{stem}.png"), format!("{name}.png")].into_iter().map(|f| dir.join(f)).find(|p| p.is_file()) else {
+                return Ok(None);
+            };
+            let (w, h, m) = read_grey_mask(&path).with_context(|| "reflection.seed_masks")?;
+            let f = downscale.max(1);
+            if (w, h) == (cam.width, cam.height) {
+                Ok(Some(m))
+            } else if f > 1 && (w / f, h / f) == (cam.width, cam.height) {
+                Ok(Some(downscale_mask(w, h, &m, f)))
+            } else {
+                bail!(
+                    "reflection.seed_masks: {} is {w}x{h}; training view {name} is {}x{}{}",
+                    path.display(),
+                    cam.width,
+                    cam.height,
+                    if f > 1 { format!(" ({f} times that before downscale)") } else { String::new() }
+                )
+            }
+        })
+        .collect::<Result<Vec<_>>>()
+        .and_then(|m| {
+            if m.iter().all(Option::is_none) {
+                bail!(
+                    "reflection.seed_masks: {} holds no glass mask of any of the {} training views (VIEW.png, e.g. {}.png)",
+                    dir.display(),
+                    names.len(),
+                    names.first().and_then(|n| Path::new(n).file_stem()).map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+                );
+            }
+            Ok(m)
+        })
+}
