@@ -1,4 +1,4 @@
-//! Compiles every `glsl/*.comp` and `glsl/FAMILY/*.comp` to SPIR-V with
+//! Compiles every `glsl/FAMILY/*.comp` (and any `glsl/*.comp`) to SPIR-V with
 //! shaderc (glslang) and generates `shaders.rs` embedding them (constants
 //! `STEM` and `FAMILY_STEM`). Includes are resolved against `glsl/`.
 //! A shader with a line `// variant: NAME` is compiled once more with the

@@ -19,7 +19,7 @@
 use tgs_pipelines::{Camera, HostGaussians};
 
 const NEAR: f64 = 0.2;
-/// The low-pass filter's size as raster_common.glsl writes it (not 1/sqrt 2
+/// The low-pass filter's size as raster/common.glsl writes it (not 1/sqrt 2
 /// to the last digit: the reference takes the GPU's constant).
 #[allow(clippy::approx_constant)]
 const FILTER_SIZE: f64 = 0.707106;
@@ -254,7 +254,7 @@ fn cutoff2(o: f64) -> Option<f64> {
 }
 
 /// Pixel bounds [x_lo, y_lo, x_hi, y_hi] of where the splat can reach
-/// alpha 1/255 at squared cutoff k2 (raster_project.glsl `pixel_bounds`):
+/// alpha 1/255 at squared cutoff k2 (raster/project.glsl `pixel_bounds`):
 /// the splat-plane ellipse of radius k (its screen box about its own centre)
 /// joined with the low-pass disc of radius k / sqrt(2) about mu; the whole
 /// plane when the ellipse reaches the camera plane (unbounded on screen).
@@ -297,7 +297,7 @@ fn rect_contains(a: [usize; 4], b: [usize; 4]) -> bool {
     rect_empty(b) || (!rect_empty(a) && a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3])
 }
 
-/// The splat's tile rectangle (raster_project.glsl `tile_rect`).
+/// The splat's tile rectangle (raster/project.glsl `tile_rect`).
 fn rect_at(tu: V3, tv: V3, tw: V3, mu: [f64; 2], o: f64, tiles: [f64; 3]) -> [usize; 4] {
     match cutoff2(o) {
         Some(k2) => rect_of(pixel_bounds(tu, tv, tw, mu, k2), tiles),
@@ -539,7 +539,7 @@ pub struct SplatReach {
     pub pixels: Option<[f64; 4]>,
     /// Whether its cutoff ellipse misses the camera plane (bounded on screen).
     pub bounded: bool,
-    /// The GPU's pixel box in f64 (raster_project.glsl `pixel_box`: the
+    /// The GPU's pixel box in f64 (raster/project.glsl `pixel_box`: the
     /// pixel bounds widened by one pixel) where the splat is bounded and
     /// its bounding conic is well conditioned.
     pub pixel_box: Option<[f64; 4]>,

@@ -342,7 +342,7 @@ fn gradient_records_past_the_binding_limit() {
 }
 
 /// The pixel box of every splat, outside which the tile kernels skip it
-/// (raster_project.glsl `pixel_box`), holds every pixel the f64 reference
+/// (raster/project.glsl `pixel_box`), holds every pixel the f64 reference
 /// sees it reach alpha 1/255 (tiny, huge, faint, thin, edge-on and
 /// near-plane splats; the box is computed once per splat, whatever the
 /// subgroup size), equals the reference's box where the splat is bounded on

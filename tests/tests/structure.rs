@@ -243,3 +243,20 @@ fn rust_files_stay_under_500_lines_or_say_why() {
         .collect();
     assert!(long.is_empty(), "files over 500 lines with no reason at their top (\"Longer than 500 lines on purpose: ...\"):\n{}", long.join("\n"));
 }
+
+/// Every kernel lies in a folder named for its family (glsl/raster/,
+/// glsl/sort/, ...), as pipelines/src/ does; only shared includes
+/// (`*.glsl`) may lie at the top.
+#[test]
+fn kernels_lie_in_family_folders() {
+    let glsl = root().join("glsl");
+    let flat: Vec<String> = std::fs::read_dir(&glsl)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "comp"))
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert!(flat.is_empty(), "kernels outside a family folder in glsl/: {flat:?}");
+    let families = std::fs::read_dir(&glsl).unwrap().filter(|e| e.as_ref().unwrap().path().is_dir()).count();
+    assert!(families >= 10, "only {families} family folders in glsl/");
+}

@@ -78,7 +78,7 @@ impl Camera {
         Ok(())
     }
 
-    /// The camera block of the rasterizer kernels (see glsl/raster_common.glsl).
+    /// The camera block of the rasterizer kernels (see glsl/raster/common.glsl).
     pub(crate) fn pack(&self, background: &[f32]) -> Vec<f32> {
         let mut v = Vec::with_capacity(20 + background.len());
         for r in &self.world_to_view {

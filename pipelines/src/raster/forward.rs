@@ -160,8 +160,8 @@ mod gate_layout {
     /// x, y, z for every one of GATE_SLOTS slots.
     #[test]
     fn gate_shader_array_matches_gate_slots() {
-        let src = include_str!("../../../glsl/raster_gate.comp");
+        let src = include_str!("../../../glsl/raster/gate.comp");
         let want = format!("uint grids[{}];", 3 * super::GATE_SLOTS);
-        assert!(src.contains(&want), "glsl/raster_gate.comp should declare `{want}` (3 x GATE_SLOTS)");
+        assert!(src.contains(&want), "glsl/raster/gate.comp should declare `{want}` (3 x GATE_SLOTS)");
     }
 }

@@ -115,7 +115,7 @@ impl Frame {
     }
     /// Pixel boxes [x_lo, y_lo, x_hi, y_hi] of the first `n` Gaussians from
     /// the last forward: the tile kernels evaluate a splat only at pixel
-    /// centres inside its box (glsl/raster_project.glsl `pixel_box`;
+    /// centres inside its box (glsl/raster/project.glsl `pixel_box`;
     /// +-3e38 where the splat is unbounded on screen, undefined for culled
     /// ones). One read-back, for inspection.
     pub fn download_pixel_boxes(&self, n: usize) -> anyhow::Result<Vec<[f32; 4]>> {

@@ -2,14 +2,14 @@
 //! (Stage III, where the scattering set's colour alone trains): each
 //! pixel's contributions (the Gaussian and its weight w = alpha T, in
 //! blending order) and its final transmittance, captured once after a
-//! forward that fitted its frame (`glsl/raster_capture.comp`), and the same
+//! forward that fitted its frame (`glsl/raster/capture.comp`), and the same
 //! contributions grouped by Gaussian. With the geometry and opacity fixed,
 //! a view's colour is linear in the Gaussians' colours: a later render is
 //! C = sum_j w_j c_j + T bg over the pixel's list
-//! (`glsl/raster_kept_colour.comp`, bit for bit the tile forward's colour
+//! (`glsl/raster/kept_colour.comp`, bit for bit the tile forward's colour
 //! planes; the other planes are not written) and the colour gradient of
 //! Gaussian g is sum w gC over the pixels it reached
-//! (`glsl/raster_kept_grad.comp`), in pixel order, as one gradient record
+//! (`glsl/raster/kept_grad.comp`), in pixel order, as one gradient record
 //! per Gaussian that the per-Gaussian reduce then takes through the SH
 //! chain rule (and, fused, Adam) as after the tile backward. Neither walks
 //! a tile's splats or intersects a ray with one: on lavapipe the

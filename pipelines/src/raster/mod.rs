@@ -76,10 +76,10 @@ use crate::WG;
 /// Dispatches one [`Rasterizer::record_fit_gate`] can gate.
 pub const GATE_SLOTS: usize = 8;
 /// The gate's push constants: capacity, count, two pads, then x, y, z per
-/// slot (`glsl/raster_gate.comp`, whose array holds 3 x GATE_SLOTS).
+/// slot (`glsl/raster/gate.comp`, whose array holds 3 x GATE_SLOTS).
 const GATE_PUSH_WORDS: usize = 4 + 3 * GATE_SLOTS;
 /// Floats per Gaussian in a frame's projection buffer (`PROJ_STRIDE` in
-/// glsl/raster_common.glsl: the splat, its depth and its pixel box).
+/// glsl/raster/common.glsl: the splat, its depth and its pixel box).
 const PROJ_STRIDE: usize = 20;
 /// Loop iterations per invocation we allow on devices with a loop limiter
 /// (lavapipe stops loops after 65,535).

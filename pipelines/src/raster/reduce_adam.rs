@@ -1,9 +1,9 @@
 //! The backward with the Adam step fused into the per-Gaussian reduce
-//! (`glsl/raster_reduce.comp`, variant `ADAM`): each Gaussian's gradient is
+//! (`glsl/raster/reduce.comp`, variant `ADAM`): each Gaussian's gradient is
 //! summed from its intersection records as in [`Rasterizer::record_backward`]
 //! and then steps its parameters and moments directly, instead of being
 //! written out for a separate Adam pass over every parameter array. The
-//! arithmetic is adam.comp's, so the result equals the backward followed by
+//! arithmetic is adam/step.comp's, so the result equals the backward followed by
 //! `Adam::record_set` (tests/tests/train_kernels.rs compares them bit for bit).
 
 use super::{Frame, Gaussians, Push, Rasterizer};

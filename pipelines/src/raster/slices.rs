@@ -3,7 +3,7 @@
 //! reduced in slices of Gaussians: each dispatch of the projection and of
 //! the per-Gaussian reduce binds its slice's part of the features (and of
 //! their moments or gradients) and takes the push constants
-//! `feat_base` / `feat_end` (glsl/raster_common.glsl). The results are the
+//! `feat_base` / `feat_end` (glsl/raster/common.glsl). The results are the
 //! whole binding's, bit for bit (tests/tests/slices.rs). Adam's
 //! own pass (`Adam::slice`) and the densification's copy
 //! (`Densifier::slice`) slice their arrays likewise.

@@ -45,7 +45,7 @@ impl AdamGroup {
 
 /// One parameter array of a set: parameter, gradient, first and second
 /// moments, and its length in floats.
-/// The four arrays one Adam step reads and writes (glsl/adam.comp's
+/// The four arrays one Adam step reads and writes (glsl/adam/step.comp's
 /// bindings 0..=3), over their first `n` elements.
 #[derive(Clone, Copy)]
 pub struct AdamArrays<'a> {
@@ -86,7 +86,7 @@ pub struct Adam {
 impl Adam {
     /// Adam with betas (0.9, 0.999) and the given epsilon.
     pub fn new(ctx: &Arc<Context>, eps: f32) -> Result<Adam> {
-        Ok(Adam { ctx: ctx.clone(), kernel: kernel(ctx, "adam", shaders::ADAM, std::mem::size_of::<Push>() as u32)?, beta1: 0.9, beta2: 0.999, eps, slice: None })
+        Ok(Adam { ctx: ctx.clone(), kernel: kernel(ctx, "adam", shaders::ADAM_STEP, std::mem::size_of::<Push>() as u32)?, beta1: 0.9, beta2: 0.999, eps, slice: None })
     }
 
     /// This Adam with every array stepped in slices of about `elements`

@@ -72,7 +72,7 @@ impl Densifier {
             stats: kernel(ctx, "densify.stats", shaders::DENSIFY_STATS, 4)?,
             mark: kernel(ctx, "densify.mark", shaders::DENSIFY_MARK, std::mem::size_of::<MarkPush>() as u32)?,
             apply: kernel(ctx, "densify.apply", shaders::DENSIFY_APPLY, 24)?,
-            reset: kernel(ctx, "densify.opacity_reset", shaders::OPACITY_RESET, 8)?,
+            reset: kernel(ctx, "densify.opacity_reset", shaders::DENSIFY_OPACITY_RESET, 8)?,
             slice: None,
         })
     }
@@ -176,7 +176,7 @@ impl Densifier {
         // The output offsets, read back only when an array is copied in
         // slices (the SH 3 features of a million Gaussians: 183 MiB).
         let mut offsets: Option<Vec<u32>> = None;
-        // Modes of densify_apply.comp: 0 moments, 1 copy, 2 means, 3 log-scales.
+        // Modes of densify/apply.comp: 0 moments, 1 copy, 2 means, 3 log-scales.
         for (src, dst, is_param) in [(&set.params, &params, true), (&set.m, &m, false), (&set.v, &v, false)] {
             let mode = is_param as u32;
             // Parameters: means and log-scales have modes of their own.

@@ -9,7 +9,7 @@ use anyhow::{bail, Result};
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Readback, Recorder};
 
-/// Selection workgroup size (glsl/loss_hf_select.comp's reduction tree).
+/// Selection workgroup size (glsl/loss/hf_select.comp's reduction tree).
 const SELECT_WG: u32 = 256;
 
 pub struct HfLoss {

@@ -7,7 +7,7 @@
 // dL/d(dx) of the two difference vectors per pixel to `scratch` (6 floats)
 // for loss_grad to gather (no scatter, no atomics). Partial sums of
 // (1 - alpha N.s) go to partials[4 * wg + 3].
-#include "loss_common.glsl"
+#include "loss/common.glsl"
 
 layout(std430, binding = 0) readonly buffer Render { float render[]; };
 layout(std430, binding = 1) writeonly buffer Scratch { float scratch[]; };

@@ -20,10 +20,10 @@
 // dL/dalpha_i = T_i V_i - S_i / (1 - alpha_i), where V_i combines every
 // output's value for splat i with its upstream gradient and
 // S_i = sum_{j>i} w_j V_j + T_final (g_C . background).
-// COLOUR_ONLY: the feature gradients alone (see raster_backward_sg.comp).
+// COLOUR_ONLY: the feature gradients alone (see raster/backward_sg.comp).
 #include "common.glsl"
-#include "raster_common.glsl"
-#include "raster_pixel_grad.glsl"
+#include "raster/common.glsl"
+#include "raster/pixel_grad.glsl"
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
@@ -38,7 +38,7 @@ layout(std430, binding = 9) readonly buffer GradOut { float gout[]; };
 layout(std430, binding = 10) buffer BState { float bstate[]; };
 #define RECORDS_BINDING 11
 #define RECORDS_ACCESS writeonly
-#include "raster_records.glsl"
+#include "raster/records.glsl"
 
 shared float part[MAX_SG * BATCH * KREC];
 shared uint s_last[MAX_SG];

@@ -2,7 +2,7 @@
 // Scan, level down-sweep: exclusive prefix sum within each block of WG * KPT
 // elements, plus the block's offset from the scanned level above (if any).
 // `src` and `dst` may be the same buffer.
-#include "wg_scan.glsl"
+#include "scan/wg_scan.glsl"
 
 layout(std430, binding = 0) readonly buffer Params { uint params[]; };
 layout(std430, binding = 1) readonly buffer Src { uint src[]; };

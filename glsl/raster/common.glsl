@@ -58,7 +58,7 @@ layout(push_constant) uniform Push {
     uint feat_base;
     uint feat_end;
 #ifdef ADAM
-    // The reduce with the Adam step fused (raster_reduce.comp, variant ADAM):
+    // The reduce with the Adam step fused (raster/reduce.comp, variant ADAM):
     // rates of means, log-scales, rotations, opacity, features (the first
     // `feat_split` of each Gaussian's features; the rest use lr_rest), the
     // number of each Gaussian's features stepped, and Adam's constants
@@ -73,7 +73,7 @@ layout(push_constant) uniform Push {
 // Floats per projected splat in the projection buffer: the Splat below
 // (tu, tv, tw, mu, n, o: 0..15), the view depth (15), and the pixel box
 // (16..20: lo.x, lo.y, hi.x, hi.y) outside which the splat's alpha stays
-// below ALPHA_MIN (raster_project.glsl `pixel_box`).
+// below ALPHA_MIN (raster/project.glsl `pixel_box`).
 #define PROJ_STRIDE 20u
 
 // Projected splat: what the rasterizer needs.

@@ -1,5 +1,5 @@
 // One pixel's share of one splat's gradient (method-notes §1.7), shared by
-// the two backward layouts (raster_backward.comp, raster_backward_sg.comp).
+// the two backward layouts (raster/backward.comp, raster/backward_sg.comp).
 // Back to front: given the hit, the splat's alpha at the pixel, the pixel's
 // transmittance T and suffix sum S after the splat, and V (every output's
 // value for the splat combined with its upstream gradient), returns the
@@ -8,7 +8,7 @@
 //   dL/dalpha = T_i V - S / (1 - alpha),  S += w V,  T_i = T / (1 - alpha).
 #ifndef TGS_RASTER_PIXEL_GRAD_GLSL
 #define TGS_RASTER_PIXEL_GRAD_GLSL
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 struct PixelRec {
     vec3 dTu, dTv, dTw, dn;

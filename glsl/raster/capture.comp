@@ -5,7 +5,7 @@
 // forward's walk of each pixel's tile, front to back, span by span, with
 // its decisions (the pixel box, the ray-splat hit, alpha >= ALPHA_MIN, the
 // stop below T_MIN) and its weight w = alpha T, the same arithmetic as
-// raster_forward.comp and raster_forward_sg.comp, so a pixel's colour is
+// raster/forward.comp and raster/forward_sg.comp, so a pixel's colour is
 // sum_j w_j c_j + T bg over the splats it blended, in their order.
 // One invocation per pixel (tile-major: TILE^2 consecutive invocations are
 // one tile), no subgroup operations, no shared memory: it runs once per
@@ -16,7 +16,7 @@
 // pixel's final transmittance. The walk's state (T, count, stopped)
 // carries over between span passes in `state`.
 #include "common.glsl"
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };

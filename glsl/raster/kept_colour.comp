@@ -1,6 +1,6 @@
 #version 460
 // The colour planes of a view from its kept blend weights
-// (raster_capture.comp; pipelines/src/raster/kept_weights.rs), for a set
+// (raster/capture.comp; pipelines/src/raster/kept_weights.rs), for a set
 // whose geometry and opacity are those the weights were captured with:
 // out[c][px] = sum_j w_j c_j + T bg_c over the pixel's contributions in
 // blending order, with the projection's colours c of this step. The same
@@ -11,7 +11,7 @@
 // drivers), the sum carried over in the colour planes as the tile forward
 // carries it; the last pass (span_index + 1 = spans) adds the background.
 #include "common.glsl"
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 layout(std430, binding = 0) readonly buffer Cam { float cam[]; };
 // Read as uniform texel buffers (one gather a read on llvmpipe).

@@ -1,15 +1,15 @@
 #version 460
 // Per-pixel 2DGS forward in ONE SUBGROUP per tile (for CPU drivers; see
-// raster_backward_sg.comp): invocation l owns the PPT = TILE^2 / WG pixels
+// raster/backward_sg.comp): invocation l owns the PPT = TILE^2 / WG pixels
 // l, l + WG, ... of the tile (8x8 where the frame allows, else 16x16) with
 // their blending state in registers and walks the tile's splats front to
 // back (each at the pixels of its box only), reading each splat straight
 // from the projection buffer (the same address in every invocation): no
 // shared-memory staging, no barriers. The math, the outputs and the span
-// handling are raster_forward.comp's (method-notes §1.5); the walk stops
+// handling are raster/forward.comp's (method-notes §1.5); the walk stops
 // when every pixel of the tile is saturated.
 #include "common.glsl"
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = TILE * TILE
 
@@ -31,7 +31,7 @@ layout(std430, binding = 6) buffer Out { float outp[]; };
 layout(std430, binding = 7) buffer FState { float fstate[]; };
 layout(std430, binding = 8) buffer UState { uint ustate[]; };
 layout(std430, binding = 9) buffer Stats { uint stats[]; };
-#include "raster_pixel_blend.glsl"
+#include "raster/pixel_blend.glsl"
 
 void main() {
     uint tile = wg_linear();

@@ -2,7 +2,7 @@
 // Radix sort, up-sweep: digit histogram of each partition of WG * KPT keys,
 // written digit-major (hist[d * partitions + p]) so that one exclusive scan
 // of `hist` yields every (digit, partition) output offset, in stable order.
-#include "sort_common.glsl"
+#include "sort/common.glsl"
 
 layout(std430, binding = 0) readonly buffer Params { uint params[]; };
 layout(std430, binding = 1) readonly buffer Keys { uint keys[]; };

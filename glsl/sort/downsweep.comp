@@ -17,8 +17,8 @@
 // halves shared memory: 8-bit digits fit lavapipe's 32 KiB. Works for any
 // subgroup size from MIN_SG to 128; arrays are sized by specialization
 // constants.
-#include "sort_common.glsl"
-#include "wg_scan.glsl"
+#include "sort/common.glsl"
+#include "scan/wg_scan.glsl"
 
 layout(std430, binding = 0) readonly buffer Params { uint params[]; };
 layout(std430, binding = 1) readonly buffer KeysIn { uint keys_in[]; };

@@ -17,8 +17,8 @@
 // the screen-space gradient used by densification (in NDC units, as 3DGS).
 // Variant ADAM steps the Gaussian's parameters with Adam instead of writing
 // its gradients (bindings 9-13 then hold the first moments, 15-19 the
-// second ones; adam.comp's arithmetic, so the result is the same as this
-// kernel followed by adam.comp): one pass over the parameters fewer.
+// second ones; adam/step.comp's arithmetic, so the result is the same as this
+// kernel followed by adam/step.comp): one pass over the parameters fewer.
 // ADAM COLOUR_ONLY (after the COLOUR_ONLY tile backward, for a set whose
 // geometry does not train): sums the feature records alone and steps the
 // features alone; means, scales, rotations, opacity and their moments are
@@ -106,7 +106,7 @@ layout(std430, binding = 6) readonly buffer Ids { uint ids[]; };
 layout(std430, binding = 7) readonly buffer Offsets { uint offsets[]; };
 #define RECORDS_BINDING 8
 #define RECORDS_ACCESS readonly
-#include "raster_records.glsl"
+#include "raster/records.glsl"
 #define IDS(at) ids[at]
 #define OFFSETS(at) offsets[at]
 #define REC(at) RECORDS[at]
@@ -128,7 +128,7 @@ layout(std430, binding = 7) readonly buffer Offsets { uint offsets[]; };
 #endif
 layout(std430, binding = 14) writeonly buffer Densify { vec2 densify[]; };
 
-#include "raster_project.glsl"
+#include "raster/project.glsl"
 
 #ifdef ADAM
 layout(std430, binding = 9) buffer M1Means { float m1_means[]; };
@@ -150,7 +150,7 @@ layout(std430, binding = 19) writeonly buffer M2Feats { vec4 m2_feats4[]; };
 layout(std430, binding = 19) buffer M2Feats { float m2_feats[]; };
 #endif
 
-// adam.comp's step of parameter P with moments M, V (written; read as
+// adam/step.comp's step of parameter P with moments M, V (written; read as
 // PR, MR, VR), gradient G, rate LR.
 #define ADAM_STEP(P, M, V, PR, MR, VR, G, LR) { \
     float g_ = (G); \

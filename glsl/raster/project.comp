@@ -51,7 +51,7 @@ layout(std430, binding = 11) writeonly buffer Ids { uint depth_ids[]; };
 // Screen radius in pixels (0 when culled): densification statistics.
 layout(std430, binding = 12) writeonly buffer Radii { float radii[]; };
 
-#include "raster_project.glsl"
+#include "raster/project.glsl"
 
 void main() {
     // The Gaussians of this slice (pc.feat_base on; all of them unsliced).

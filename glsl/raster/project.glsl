@@ -1,13 +1,13 @@
 // The per-Gaussian 2DGS projection (method-notes §1.3), shared by the
 // forward projection and the per-Gaussian backward. Expects a float buffer
-// `cam` (layout in raster_common.glsl) to be declared before inclusion, or
+// `cam` (layout in raster/common.glsl) to be declared before inclusion, or
 // a macro CAM(i) that reads its float i.
 #ifndef TGS_RASTER_PROJECT_GLSL
 #define TGS_RASTER_PROJECT_GLSL
 #ifndef CAM
 #define CAM(at) cam[at]
 #endif
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 vec3 cam_row(uint i) {
     return vec3(CAM(4u * i), CAM(4u * i + 1u), CAM(4u * i + 2u));
@@ -122,7 +122,7 @@ vec4 pixel_bounds_of(Proj pr, out bool bounded) {
 }
 
 // The pixels a tile kernel evaluates the splat at (see `in_box` in
-// raster_common.glsl): the bounds above widened by one pixel on each side,
+// raster/common.glsl): the bounds above widened by one pixel on each side,
 // so that f32 rounding of the bounds never drops a pixel whose alpha
 // reaches ALPHA_MIN; every pixel when the splat is unbounded on screen.
 vec4 pixel_box(vec4 b, bool bounded) {

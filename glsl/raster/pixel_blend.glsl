@@ -1,11 +1,11 @@
 // One front-to-back blending step of one pixel (method-notes §1.5) and the
 // pixel's state in the output planes, shared by the two forward layouts
-// (raster_forward.comp, raster_forward_sg.comp). The caller handles the CH
+// (raster/forward.comp, raster/forward_sg.comp). The caller handles the CH
 // feature channels itself. Expects the buffers `outp`, `fstate` and `ustate`
-// (layouts in raster_forward.comp) to be declared before inclusion.
+// (layouts in raster/forward.comp) to be declared before inclusion.
 #ifndef TGS_RASTER_PIXEL_BLEND_GLSL
 #define TGS_RASTER_PIXEL_BLEND_GLSL
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 // A pixel's blending state: transmittance, depth numerator, normal, the two
 // depth moments and the distortion, median depth and contributor, last

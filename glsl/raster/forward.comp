@@ -12,7 +12,7 @@
 // normal (3), median depth, distortion; fstate = T, M1, M2;
 // ustate = last contributor + 1, median contributor, done flag.
 #include "common.glsl"
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 layout(local_size_x_id = 0) in;  // must be 256 (TILE * TILE)
 
@@ -26,7 +26,7 @@ layout(std430, binding = 6) buffer Out { float outp[]; };
 layout(std430, binding = 7) buffer FState { float fstate[]; };
 layout(std430, binding = 8) buffer UState { uint ustate[]; };
 layout(std430, binding = 9) buffer Stats { uint stats[]; };
-#include "raster_pixel_blend.glsl"
+#include "raster/pixel_blend.glsl"
 
 shared vec3 s_tu[256];
 shared vec3 s_tv[256];

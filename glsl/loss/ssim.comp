@@ -6,7 +6,7 @@
 // and loss_grad), and workgroup partial sums of L1, squared error and SSIM
 // (partials[4 * wg + 0..2]).
 // variant: TEXEL
-#include "loss_common.glsl"
+#include "loss/common.glsl"
 
 // Variant TEXEL (CPU devices): the inputs read as uniform texel buffers,
 // one gather on llvmpipe where a storage load loops over the lanes

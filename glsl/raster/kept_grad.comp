@@ -11,13 +11,13 @@
 // entries; the 15 geometric ones zero, as the colour-only tile backward
 // leaves them), rank g of the reduce's order (ids[g] = g) and its record
 // range [g, g + 1) (offsets), so the per-Gaussian reduce
-// (raster_reduce.comp) then applies the SH chain rule and, fused, Adam,
+// (raster/reduce.comp) then applies the SH chain rule and, fused, Adam,
 // exactly as after the tile backward. Gaussians past the view have
 // no contributions and a zero record. A Gaussian's contributions
 // [span_index span, + span) per pass (the loop budget of CPU drivers),
 // added to the record the pass before wrote.
 #include "common.glsl"
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 layout(binding = 0) uniform samplerBuffer gout_t;
 layout(binding = 1) uniform usamplerBuffer gau_t;
@@ -26,7 +26,7 @@ layout(std430, binding = 3) writeonly buffer Ids { uint ids[]; };
 layout(std430, binding = 4) writeonly buffer Offsets { uint offsets[]; };
 #define RECORDS_BINDING 5
 #define RECORDS_ACCESS
-#include "raster_records.glsl"
+#include "raster/records.glsl"
 
 void main() {
     uint g = wg_linear() * WG + gl_LocalInvocationID.x;

@@ -10,7 +10,7 @@
 // Taps outside the image are not visited, so each sum runs over its valid
 // taps from left to right.
 // variant: TEXEL
-#include "loss_common.glsl"
+#include "loss/common.glsl"
 
 // Variant TEXEL (CPU devices): the inputs read as uniform texel buffers,
 // one gather on llvmpipe where a storage load loops over the lanes

@@ -7,7 +7,7 @@
 //   alpha, depth: normal consistency through the expected depth D / alpha,
 //           gathered from the four neighbours' difference gradients;
 //   median: 0; distortion: lambda_dist / pixels.
-#include "loss_common.glsl"
+#include "loss/common.glsl"
 
 layout(std430, binding = 0) readonly buffer Render { float render[]; };
 layout(std430, binding = 1) readonly buffer Target { float target[]; };

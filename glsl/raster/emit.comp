@@ -4,7 +4,7 @@
 // and in depth order overall): tile key, emission index, Gaussian id.
 // Intersections past the capacity are dropped (the plan records the total).
 #include "common.glsl"
-#include "raster_common.glsl"
+#include "raster/common.glsl"
 
 layout(std430, binding = 0) readonly buffer Ids { uint ids[]; };
 layout(std430, binding = 1) readonly buffer Offsets { uint offsets[]; };

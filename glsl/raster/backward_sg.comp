@@ -18,15 +18,15 @@
 // one subgroupAdd per record entry sums the invocations, and one invocation
 // writes the intersection's own slot: no shared memory, no barriers, no
 // atomics, one writer per slot in a fixed order (bit-identical run to run).
-// The math per pixel is raster_backward.comp's (method-notes §1.7); spans
+// The math per pixel is raster/backward.comp's (method-notes §1.7); spans
 // are processed last to first with (T, S) carried in `bstate`.
 // COLOUR_ONLY: the feature gradients alone (a set whose geometry does not
 // train): per pixel the weight w = alpha T_i and the feature sums, the
 // same operations as the full kernel's, so those records are bit-identical
 // to its; the geometric entries are zero and S is not carried.
 #include "common.glsl"
-#include "raster_common.glsl"
-#include "raster_pixel_grad.glsl"
+#include "raster/common.glsl"
+#include "raster/pixel_grad.glsl"
 
 layout(constant_id = 6) const uint PPT = 32;  // pixels per invocation; WG * PPT = TILE * TILE
 
@@ -51,7 +51,7 @@ layout(std430, binding = 9) readonly buffer GradOut { float gout[]; };
 layout(std430, binding = 10) buffer BState { float bstate[]; };
 #define RECORDS_BINDING 11
 #define RECORDS_ACCESS writeonly
-#include "raster_records.glsl"
+#include "raster/records.glsl"
 
 void main() {
     uint tile = wg_linear();

@@ -1,5 +1,5 @@
 #version 460
-// High-frequency loss, gradient (loss_hf_select.comp): for the pixels with
+// High-frequency loss, gradient (loss/hf_select.comp): for the pixels with
 // e >= tau, grad[c] += weight sign(I_c - I_gt_c) / (3 count); one writer
 // per pixel and plane.
 #include "common.glsl"
