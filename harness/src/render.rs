@@ -4,9 +4,9 @@
 
 use crate::eval::{world_normals, write_outputs};
 use crate::outdir::OutDir;
-use crate::scene::trace::{cross, dot, sub};
 use crate::train::run::open_run;
 use anyhow::{bail, Result};
+use glam::{DVec3, Vec3};
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
@@ -15,13 +15,51 @@ use tgs_pipelines::Camera;
 /// `frames` cameras orbiting the training cameras (intrinsics of the first).
 pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
     let Some(c0) = train.first() else { bail!("no training cameras to orbit") };
-    let centres: Vec<[f64; 3]> = train.iter().map(|c| c.centre().map(f64::from)).collect();
-    let axes: Vec<[f64; 3]> = train.iter().map(|c| [0, 1, 2].map(|j| c.world_to_view[2][j] as f64)).collect();
-    let ups: Vec<[f64; 3]> = train.iter().map(|c| [0, 1, 2].map(|j| -c.world_to_view[1][j] as f64)).collect();
-    // Point nearest all axes: sum (I - d d^T) x = sum (I - d d^T) c.
-    let mut a = [[0f64; 3]; 3];
-    let mut b = [0f64; 3];
-    for (c, d) in centres.iter().zip(&axes) {
+    let centres: Vec<DVec3> = train.iter().map(|c| Vec3::from(c.centre()).as_dvec3()).collect();
+    let axes: Vec<DVec3> = train.iter().map(|c| DVec3::from([0, 1, 2].map(|j| c.world_to_view[2][j] as f64))).collect();
+    let ups: Vec<DVec3> = train.iter().map(|c| DVec3::from([0, 1, 2].map(|j| -c.world_to_view[1][j] as f64))).collect();
+    let n = centres.len() as f64;
+    let mean = centres.iter().fold(DVec3::ZERO, |s, c| s + *c) / n;
+    let target = nearest_to_axes(&centres, &axes).unwrap_or(mean);
+    let up = {
+        let s = ups.iter().fold(DVec3::ZERO, |s, u| s + *u);
+        s / s.length().max(1e-12)
+    };
+    // Orbit in the plane perpendicular to `up` at the cameras' mean height.
+    let rel: Vec<DVec3> = centres.iter().map(|c| *c - target).collect();
+    let height = rel.iter().map(|r| r.dot(up)).sum::<f64>() / n;
+    let radius = rel
+        .iter()
+        .map(|r| {
+            let h = r.dot(up);
+            (r.dot(*r) - h * h).max(0.0).sqrt()
+        })
+        .sum::<f64>()
+        / n;
+    let e0 = {
+        let h = rel[0].dot(up);
+        let p = rel[0] - up * h;
+        p / p.length().max(1e-12)
+    };
+    let e1 = up.cross(e0);
+    let fov_y = 2.0 * ((0.5 * c0.height as f32) / c0.fy).atan();
+    Ok((0..frames.max(1))
+        .map(|i| {
+            let t = i as f64 / frames.max(1) as f64 * std::f64::consts::TAU;
+            let eye = target + up * height + (e0 * t.cos() + e1 * t.sin()) * radius;
+            Camera::look_at(eye.as_vec3().to_array(), target.as_vec3().to_array(), up.as_vec3().to_array(), fov_y, c0.width, c0.height)
+        })
+        .collect())
+}
+
+/// The point nearest all the cameras' optical axes (through `centres`
+/// along `axes`): sum (I - d d^T) x = sum (I - d d^T) c by Cramer's rule;
+/// None when the axes are (nearly) parallel.
+fn nearest_to_axes(centres: &[DVec3], axes: &[DVec3]) -> Option<DVec3> {
+    // The system's rows.
+    let mut a = [DVec3::ZERO; 3];
+    let mut b = DVec3::ZERO;
+    for (c, d) in centres.iter().zip(axes) {
         for i in 0..3 {
             for j in 0..3 {
                 let m = if i == j { 1.0 } else { 0.0 } - d[i] * d[j];
@@ -30,55 +68,18 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
             }
         }
     }
-    let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
+    let det = |m: &[DVec3; 3]| m[0].dot(m[1].cross(m[2]));
     let d = det(&a);
-    let n = centres.len() as f64;
-    let mean = [0, 1, 2].map(|k| centres.iter().map(|c| c[k]).sum::<f64>() / n);
-    let target = if d.abs() > 1e-9 {
-        [0, 1, 2].map(|k| {
-            let mut m = a;
-            for i in 0..3 {
-                m[i][k] = b[i];
-            }
-            det(&m) / d
-        })
-    } else {
-        mean
-    };
-    let up = {
-        let s = [0, 1, 2].map(|k| ups.iter().map(|u| u[k]).sum::<f64>());
-        let l = dot(s, s).sqrt().max(1e-12);
-        s.map(|v| v / l)
-    };
-    // Orbit in the plane perpendicular to `up` at the cameras' mean height.
-    let rel: Vec<[f64; 3]> = centres.iter().map(|c| sub(*c, target)).collect();
-    let height = rel.iter().map(|r| dot(*r, up)).sum::<f64>() / n;
-    let radius = rel
-        .iter()
-        .map(|r| {
-            let h = dot(*r, up);
-            (dot(*r, *r) - h * h).max(0.0).sqrt()
-        })
-        .sum::<f64>()
-        / n;
-    let e0 = {
-        let r = rel[0];
-        let h = dot(r, up);
-        let p = sub(r, up.map(|u| u * h));
-        let l = dot(p, p).sqrt().max(1e-12);
-        p.map(|v| v / l)
-    };
-    let e1 = cross(up, e0);
-    let fov_y = 2.0 * ((0.5 * c0.height as f32) / c0.fy).atan();
-    Ok((0..frames.max(1))
-        .map(|i| {
-            let t = i as f64 / frames.max(1) as f64 * std::f64::consts::TAU;
-            let eye = [0, 1, 2].map(|k| (target[k] + up[k] * height + radius * (t.cos() * e0[k] + t.sin() * e1[k])) as f32);
-            Camera::look_at(eye, target.map(|v| v as f32), up.map(|v| v as f32), fov_y, c0.width, c0.height)
-        })
-        .collect())
+    if !(d.abs() > 1e-9) {
+        return None;
+    }
+    Some(DVec3::from([0, 1, 2].map(|k| {
+        let mut m = a;
+        for i in 0..3 {
+            m[i][k] = b[i];
+        }
+        det(&m) / d
+    })))
 }
 
 /// Render `which` (test, train or orbit) from `run` into `out`.

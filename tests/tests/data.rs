@@ -463,17 +463,17 @@ fn spheres_scene_is_brushs_workload() {
 /// differ from the glass scene only there, and no test pixel is glass.
 #[test]
 fn diffuse_scene_is_the_glass_room_without_glass() {
-    use tgs::scene::trace::{norm, sub, Material, Scene, GLASS_C};
+    use tgs::scene::trace::{Material, Scene, GLASS_C, V3};
     let glass = Scene::new();
     let mut diffuse = Scene::new();
     diffuse.glass = false;
-    let e = [2.7, 0.0, 1.15];
-    let d = norm(sub(GLASS_C, e));
+    let e = V3::new(2.7, 0.0, 1.15);
+    let d = (GLASS_C - e).normalize();
     assert!(glass.intersect(e, d, f64::INFINITY, true).is_some_and(|h| h.mat == Material::Glass));
     assert!(diffuse.intersect(e, d, f64::INFINITY, true).is_some_and(|h| h.mat != Material::Glass));
     assert_ne!(glass.radiance(e, d, 6), diffuse.radiance(e, d, 6));
     // A ray that misses the sphere (the floor beside it) sees the same.
-    let d2 = norm(sub([0.0, 1.6, 0.0], e));
+    let d2 = (V3::new(0.0, 1.6, 0.0) - e).normalize();
     assert_eq!(glass.radiance(e, d2, 6), diffuse.radiance(e, d2, 6));
     let spec = tgs::scene::spec("diffuse").unwrap();
     assert!(!spec.glass && spec.size == tgs::scene::spec("glass").unwrap().size);

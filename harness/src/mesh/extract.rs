@@ -10,6 +10,7 @@
 //! positive distance (outwards, towards the cameras). The result depends
 //! only on the grid: cells are visited in order, vertices numbered as met.
 
+use glam::DVec3;
 use std::collections::HashMap;
 use tgs_pipelines::HostTsdf;
 
@@ -24,14 +25,6 @@ pub struct Mesh {
 /// The six tetrahedra of a cell; corner c is at offset (c & 1, c >> 1 & 1,
 /// c >> 2 & 1). Each contains the diagonal 0-7.
 const TETS: [[usize; 4]; 6] = [[0, 1, 3, 7], [0, 3, 2, 7], [0, 2, 6, 7], [0, 6, 4, 7], [0, 4, 5, 7], [0, 5, 1, 7]];
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
 
 /// Extract the zero level set of `grid` (voxel centres at `origin +
 /// (i + 0.5) voxel`) over the cells whose eight voxels all have a weight
@@ -89,14 +82,14 @@ pub fn extract(grid: &HostTsdf, origin: [f32; 3], voxel: f32, min_weight: f32) -
                         });
                         sum.map(|v| v / s.len() as f64)
                     };
-                    let out_dir = sub(mean(&outs), mean(&ins));
+                    let out_dir = DVec3::from(mean(&outs)) - DVec3::from(mean(&ins));
                     for tri in tris {
                         let [(a0, b0), (a1, b1), (a2, b2)] = tri;
                         let (i0, p0) = vertex(&mut mesh, a0, b0);
                         let (i1, p1) = vertex(&mut mesh, a1, b1);
                         let (i2, p2) = vertex(&mut mesh, a2, b2);
-                        let n = cross(sub(p1, p0), sub(p2, p0));
-                        let d = n[0] * out_dir[0] + n[1] * out_dir[1] + n[2] * out_dir[2];
+                        let (p0, p1, p2) = (DVec3::from(p0), DVec3::from(p1), DVec3::from(p2));
+                        let d = (p1 - p0).cross(p2 - p0).dot(out_dir);
                         if i0 == i1 || i1 == i2 || i0 == i2 || d == 0.0 {
                             continue;
                         }

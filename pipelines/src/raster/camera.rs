@@ -5,6 +5,7 @@
 //! into this one at load time.
 
 use anyhow::{bail, Result};
+use glam::{DVec3, Vec3};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
@@ -18,30 +19,22 @@ pub struct Camera {
     pub world_to_view: [[f32; 4]; 3],
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-fn normalize(a: [f64; 3]) -> [f64; 3] {
-    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    [a[0] / l, a[1] / l, a[2] / l]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+/// `v` over its length (divided, not multiplied by the reciprocal: the
+/// cameras of datasets made before glam keep their bits).
+fn unit(v: DVec3) -> DVec3 {
+    v / v.length()
 }
 
 impl Camera {
     /// A camera at `eye` looking at `target`, `up` pointing up in the image,
     /// vertical field of view `fov_y` (radians), principal point at the image centre.
     pub fn look_at(eye: [f32; 3], target: [f32; 3], up: [f32; 3], fov_y: f32, width: u32, height: u32) -> Camera {
-        let e = eye.map(f64::from);
-        let z = normalize(sub(target.map(f64::from), e));
-        let x = normalize(cross(z, up.map(f64::from)));
-        let y = cross(z, x);
+        let e = Vec3::from(eye).as_dvec3();
+        let z = unit(Vec3::from(target).as_dvec3() - e);
+        let x = unit(z.cross(Vec3::from(up).as_dvec3()));
+        let y = z.cross(x);
         let f = 0.5 * height as f64 / (0.5 * fov_y as f64).tan();
-        let row = |r: [f64; 3]| [r[0] as f32, r[1] as f32, r[2] as f32, -dot(r, e) as f32];
+        let row = |r: DVec3| [r.x as f32, r.y as f32, r.z as f32, -r.dot(e) as f32];
         Camera { width, height, fx: f as f32, fy: f as f32, cx: (width as f32 - 1.0) * 0.5, cy: (height as f32 - 1.0) * 0.5, world_to_view: [row(x), row(y), row(z)] }
     }
 

@@ -12,7 +12,7 @@ use crate::export::ply::write_points;
 use anyhow::{bail, Context as _, Result};
 use serde_json::json;
 use std::path::Path;
-use trace::{add, cross, dot, mul, norm, sub, Material, Scene, V3};
+use trace::{Material, Scene, V3};
 
 /// A named size of the built-in scene.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,21 +42,21 @@ pub fn spec(name: &str) -> Result<SceneSpec> {
 }
 
 const FOV_X: f64 = 0.9;
-const TARGET: V3 = [0.0, 0.0, 0.55];
+const TARGET: V3 = V3::new(0.0, 0.0, 0.55);
 
 /// Camera `i` of `n` on the ring (test views sit between train views).
 fn eye(i: u32, n: u32, test: bool) -> V3 {
     let a = (i as f64 + if test { 0.5 } else { 0.0 }) * std::f64::consts::TAU / n as f64;
     let h = if i.is_multiple_of(2) { 1.15 } else { 1.65 };
     let r = if test { 2.5 } else { 2.7 };
-    [r * a.cos(), r * a.sin(), h]
+    V3::new(r * a.cos(), r * a.sin(), h)
 }
 
 /// Camera basis at `e` looking at TARGET, z up: (forward, right, up).
 fn basis(e: V3) -> (V3, V3, V3) {
-    let f = norm(sub(TARGET, e));
-    let r = norm(cross(f, [0.0, 0.0, 1.0]));
-    (f, r, cross(r, f))
+    let f = (TARGET - e).normalize();
+    let r = f.cross(V3::Z).normalize();
+    (f, r, r.cross(f))
 }
 
 struct View {
@@ -73,18 +73,18 @@ fn render(scene: &Scene, e: V3, size: u32) -> View {
     let (f, r, u) = basis(e);
     let focal = 0.5 * size as f64 / (0.5 * FOV_X).tan();
     let c = 0.5 * size as f64;
-    let dir = |x: f64, y: f64| norm(add(add(mul(r, (x - c) / focal), mul(u, -(y - c) / focal)), f));
+    let dir = |x: f64, y: f64| (r * ((x - c) / focal) + u * (-(y - c) / focal) + f).normalize();
     let mut rgb = ImageF::new(size, size, 3);
     let mut normals = ImageF::new(size, size, 3);
     let mut mask = vec![false; (size * size) as usize];
     for y in 0..size {
         for x in 0..size {
             let i = (y * size + x) as usize;
-            let mut acc = [0.0; 3];
+            let mut acc = V3::ZERO;
             let mut all_glass = true;
             for s in 0..4 {
                 let d = dir(x as f64 + 0.25 + 0.5 * (s % 2) as f64, y as f64 + 0.25 + 0.5 * (s / 2) as f64);
-                acc = add(acc, scene.radiance(e, d, 6));
+                acc += scene.radiance(e, d, 6);
                 all_glass &= scene.intersect(e, d, f64::INFINITY, true).is_some_and(|h| h.mat == Material::Glass);
             }
             for k in 0..3 {
@@ -92,7 +92,7 @@ fn render(scene: &Scene, e: V3, size: u32) -> View {
             }
             let d = dir(x as f64 + 0.5, y as f64 + 0.5);
             if let Some(h) = scene.intersect(e, d, f64::INFINITY, true) {
-                let n = if dot(h.n, d) > 0.0 { mul(h.n, -1.0) } else { h.n };
+                let n = if h.n.dot(d) > 0.0 { -h.n } else { h.n };
                 for k in 0..3 {
                     normals.data[3 * i + k] = n[k] as f32;
                 }
@@ -117,11 +117,11 @@ fn surface_points(scene: &Scene, spec: &SceneSpec) -> Points {
         let e = eye(k % spec.train, spec.train, false);
         let (f, r, u) = basis(e);
         let t = (0.5 * FOV_X).tan();
-        let d = norm(add(add(mul(r, (2.0 * next() - 1.0) * t), mul(u, (2.0 * next() - 1.0) * t)), f));
+        let d = (r * ((2.0 * next() - 1.0) * t) + u * ((2.0 * next() - 1.0) * t) + f).normalize();
         if let Some(h) = scene.intersect(e, d, f64::INFINITY, true) {
             let c = scene.radiance(e, d, 6);
-            pts.positions.push(h.p.map(|v| v as f32));
-            pts.colors.push(c.map(|v| v as f32));
+            pts.positions.push(h.p.as_vec3().to_array());
+            pts.colors.push(c.as_vec3().to_array());
         }
     }
     pts

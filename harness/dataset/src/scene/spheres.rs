@@ -8,7 +8,7 @@
 //! numpy's, so positions differ from the Python script's; the workload
 //! (sizes, counts, coverage) is the same.
 
-use super::trace::{cross, dot, hit_sphere, norm};
+use super::trace::{hit_sphere, V3};
 use crate::data::blender::gl_c2w_to_w2v;
 use crate::data::image_io::{write_png, ImageF};
 use crate::data::{Dataset, Points, View};
@@ -95,35 +95,35 @@ fn positions(n: u32, radius: f64, seed: u64) -> Vec<[f64; 3]> {
 
 /// Blender/OpenGL camera-to-world looking at the origin, z up.
 fn look_at_c2w(pos: [f64; 3]) -> [[f64; 4]; 4] {
-    let z = norm(pos); // the camera looks down -z, at the origin
-    let up = if dot([0.0, 0.0, 1.0], z).abs() > 0.99 { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] };
-    let x = norm(cross(up, z));
-    let y = cross(z, x);
+    let z = V3::from(pos).normalize(); // the camera looks down -z, at the origin
+    let up = if V3::Z.dot(z).abs() > 0.99 { V3::Y } else { V3::Z };
+    let x = up.cross(z).normalize();
+    let y = z.cross(x);
     [[x[0], y[0], z[0], pos[0]], [x[1], y[1], z[1], pos[1]], [x[2], y[2], z[2], pos[2]], [0.0, 0.0, 0.0, 1.0]]
 }
 
 /// Render one view (one ray through each pixel centre, RGB on black).
 fn render(c2w: &[[f64; 4]; 4], width: u32, height: u32, fov_x: f64) -> ImageF {
     let f = 0.5 * width as f64 / (0.5 * fov_x).tan();
-    let light = norm([0.5, 0.8, 0.6]);
-    let o = [c2w[0][3], c2w[1][3], c2w[2][3]];
+    let light = V3::new(0.5, 0.8, 0.6).normalize();
+    let o = V3::new(c2w[0][3], c2w[1][3], c2w[2][3]);
     let mut img = ImageF::new(width, height, 3);
     let (half_w, half_h) = (width as f64 / 2.0, height as f64 / 2.0);
     for i in 0..height {
         for j in 0..width {
-            let dc = [(j as f64 + 0.5 - half_w) / f, -(i as f64 + 0.5 - half_h) / f, -1.0];
-            let d = norm([0, 1, 2].map(|r| dot([c2w[r][0], c2w[r][1], c2w[r][2]], dc)));
+            let dc = V3::new((j as f64 + 0.5 - half_w) / f, -(i as f64 + 0.5 - half_h) / f, -1.0);
+            let d = V3::from([0, 1, 2].map(|r| V3::new(c2w[r][0], c2w[r][1], c2w[r][2]).dot(dc))).normalize();
             let mut best = f64::INFINITY;
             let mut col = [0.0; 3];
             for (c, r, rgb) in SPHERES {
                 // The camera is outside every sphere: the nearer hit is the entry.
-                let Some(&t) = hit_sphere(c, r, o, d).first() else { continue };
+                let Some(&t) = hit_sphere(V3::from(c), r, o, d).first() else { continue };
                 if t >= best {
                     continue;
                 }
                 best = t;
-                let n = [0, 1, 2].map(|k| (o[k] + d[k] * t - c[k]) / r);
-                let shade = 0.25 + 0.75 * dot(n, light).clamp(0.0, 1.0);
+                let n = V3::from([0, 1, 2].map(|k| (o[k] + d[k] * t - c[k]) / r));
+                let shade = 0.25 + 0.75 * n.dot(light).clamp(0.0, 1.0);
                 let stripes = 0.85 + 0.15 * (12.0 * n[2]).sin().signum();
                 col = rgb.map(|v| v * shade * stripes);
             }

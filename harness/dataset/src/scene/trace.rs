@@ -4,34 +4,15 @@
 //! painted wall (near-field surroundings to be reflected), lit by a sun
 //! with shadows and ambient light.
 
-pub type V3 = [f64; 3];
-
-pub fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-pub fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub fn mul(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-pub fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-pub fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-pub fn norm(a: V3) -> V3 {
-    mul(a, 1.0 / dot(a, a).sqrt())
-}
+pub use glam::DVec3 as V3;
 
 /// Glass: centre, radius, Fresnel F0.
-pub const GLASS_C: V3 = [0.0, 0.0, 0.8];
+pub const GLASS_C: V3 = V3::new(0.0, 0.0, 0.8);
 pub const GLASS_R: f64 = 0.75;
 pub const GLASS_F0: f64 = 0.04;
 const WALL_R: f64 = 5.0;
 const WALL_H: f64 = 3.5;
-const SUN: V3 = [0.48, 0.3, 0.82];
+const SUN: V3 = V3::new(0.48, 0.3, 0.82);
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Material {
@@ -72,7 +53,7 @@ fn hue(h: f64) -> V3 {
         let k = (n + h * 6.0) % 6.0;
         0.85 - 0.65 * (k.min(4.0 - k).clamp(0.0, 1.0))
     };
-    [f(5.0), f(3.0), f(1.0)]
+    V3::new(f(5.0), f(3.0), f(1.0))
 }
 
 impl Scene {
@@ -82,9 +63,14 @@ impl Scene {
             let a = i as f64 * std::f64::consts::TAU / 8.0 + 0.2;
             let c = [3.3 * a.cos(), 3.3 * a.sin()];
             let h = 0.7 + 0.35 * ((i * 5) % 3) as f64;
-            blocks.push(Box3 { lo: [c[0] - 0.35, c[1] - 0.35, 0.0], hi: [c[0] + 0.35, c[1] + 0.35, h], color: hue(i as f64 / 8.0) });
+            blocks.push(Box3 { lo: V3::new(c[0] - 0.35, c[1] - 0.35, 0.0), hi: V3::new(c[0] + 0.35, c[1] + 0.35, h), color: hue(i as f64 / 8.0) });
         }
-        Scene { blocks, inner_box: Box3 { lo: [-0.38, -0.3, 0.05], hi: [-0.04, 0.04, 0.39], color: [0.15, 0.6, 0.55] }, ball: ([0.18, 0.15, 0.33], 0.26), glass: true }
+        Scene {
+            blocks,
+            inner_box: Box3 { lo: V3::new(-0.38, -0.3, 0.05), hi: V3::new(-0.04, 0.04, 0.39), color: V3::new(0.15, 0.6, 0.55) },
+            ball: (V3::new(0.18, 0.15, 0.33), 0.26),
+            glass: true,
+        }
     }
 
     /// Nearest hit with t in (eps, tmax).
@@ -99,11 +85,11 @@ impl Scene {
         // Floor disc.
         if d[2].abs() > 1e-12 {
             let t = -o[2] / d[2];
-            let p = add(o, mul(d, t));
+            let p = o + d * t;
             if p[0] * p[0] + p[1] * p[1] < WALL_R * WALL_R {
                 let check = ((p[0] * 2.0).floor() + (p[1] * 2.0).floor()) as i64 & 1;
-                let c = if check == 0 { [0.78, 0.74, 0.66] } else { [0.32, 0.3, 0.34] };
-                take(Hit { t, p, n: [0.0, 0.0, 1.0], mat: Material::Diffuse(c) });
+                let c = if check == 0 { V3::new(0.78, 0.74, 0.66) } else { V3::new(0.32, 0.3, 0.34) };
+                take(Hit { t, p, n: V3::Z, mat: Material::Diffuse(c) });
             }
         }
         // Wall: inside of a vertical cylinder.
@@ -112,34 +98,34 @@ impl Scene {
             let disc = b * b - a * c;
             if disc >= 0.0 {
                 let t = (-b + disc.sqrt()) / a;
-                let p = add(o, mul(d, t));
+                let p = o + d * t;
                 if p[2] >= 0.0 && p[2] <= WALL_H {
                     let ang = p[1].atan2(p[0]);
                     let stripe = ((ang * 12.0 / std::f64::consts::PI).floor() as i64 & 1) as f64;
                     let base = hue((ang / std::f64::consts::TAU + 1.0) % 1.0);
                     let k = 0.55 + 0.3 * stripe + 0.15 * (p[2] / WALL_H);
-                    take(Hit { t, p, n: norm([-p[0], -p[1], 0.0]), mat: Material::Diffuse(mul(base, k)) });
+                    take(Hit { t, p, n: V3::new(-p[0], -p[1], 0.0).normalize(), mat: Material::Diffuse(base * k) });
                 }
             }
         }
         for bx in self.blocks.iter().chain(std::iter::once(&self.inner_box)) {
             if let Some((t, n)) = hit_box(bx, o, d) {
-                let p = add(o, mul(d, t));
+                let p = o + d * t;
                 let stripe = (((p[2] * 6.0).floor() as i64) & 1) as f64;
-                take(Hit { t, p, n, mat: Material::Diffuse(mul(bx.color, 0.75 + 0.25 * stripe)) });
+                take(Hit { t, p, n, mat: Material::Diffuse(bx.color * (0.75 + 0.25 * stripe)) });
             }
         }
         // The ball is opaque: only its nearest hit counts.
         if let Some(&t) = hit_sphere(self.ball.0, self.ball.1, o, d).first() {
-            let p = add(o, mul(d, t));
-            let n = norm(sub(p, self.ball.0));
+            let p = o + d * t;
+            let n = (p - self.ball.0).normalize();
             let band = (((n[2] * 4.0).floor() as i64) & 1) as f64;
-            take(Hit { t, p, n, mat: Material::Diffuse([0.9, 0.45 + 0.25 * band, 0.15]) });
+            take(Hit { t, p, n, mat: Material::Diffuse(V3::new(0.9, 0.45 + 0.25 * band, 0.15)) });
         }
         if glass && self.glass {
             for t in hit_sphere(GLASS_C, GLASS_R, o, d) {
-                let p = add(o, mul(d, t));
-                take(Hit { t, p, n: norm(sub(p, GLASS_C)), mat: Material::Glass });
+                let p = o + d * t;
+                take(Hit { t, p, n: (p - GLASS_C).normalize(), mat: Material::Glass });
             }
         }
         best
@@ -148,7 +134,8 @@ impl Scene {
     /// Distance from `p` to the nearest opaque surface (floor disc, wall,
     /// blocks, the box and ball inside the glass): the truth a scene mesh
     /// is measured against.
-    pub fn surface_distance(&self, p: V3) -> f64 {
+    pub fn surface_distance(&self, p: impl Into<V3>) -> f64 {
+        let p = p.into();
         let box_dist = |b: &Box3| {
             let q: [f64; 3] = std::array::from_fn(|k| (p[k] - 0.5 * (b.lo[k] + b.hi[k])).abs() - 0.5 * (b.hi[k] - b.lo[k]));
             let outside = q.iter().map(|v| v.max(0.0).powi(2)).sum::<f64>().sqrt();
@@ -157,39 +144,39 @@ impl Scene {
         let r = p[0].hypot(p[1]);
         let floor = if r < WALL_R { p[2].abs() } else { (r - WALL_R).hypot(p[2]) };
         let wall = (r - WALL_R).hypot(p[2] - p[2].clamp(0.0, WALL_H));
-        let ball = (dot(sub(p, self.ball.0), sub(p, self.ball.0)).sqrt() - self.ball.1).abs();
+        let ball = ((p - self.ball.0).dot(p - self.ball.0).sqrt() - self.ball.1).abs();
         self.blocks.iter().chain(std::iter::once(&self.inner_box)).map(box_dist).fold(floor.min(wall).min(ball), f64::min)
     }
 
     /// Distance from `p` to the glass sphere's surface.
-    pub fn glass_distance(p: V3) -> f64 {
-        (dot(sub(p, GLASS_C), sub(p, GLASS_C)).sqrt() - GLASS_R).abs()
+    pub fn glass_distance(p: impl Into<V3>) -> f64 {
+        let p = p.into();
+        ((p - GLASS_C).dot(p - GLASS_C).sqrt() - GLASS_R).abs()
     }
 
     /// Radiance along a ray (thin glass: reflect F, transmit 1 - F unbent).
     pub fn radiance(&self, o: V3, d: V3, depth: u32) -> V3 {
         let Some(h) = self.intersect(o, d, f64::INFINITY, true) else {
-            return [0.9, 0.93, 1.0];
+            return V3::new(0.9, 0.93, 1.0);
         };
-        let n = if dot(h.n, d) > 0.0 { mul(h.n, -1.0) } else { h.n };
+        let n = if h.n.dot(d) > 0.0 { -h.n } else { h.n };
         match h.mat {
             Material::Diffuse(albedo) => {
-                let l = norm(SUN);
-                let lit = dot(n, l).max(0.0);
-                let shadow =
-                    if lit > 0.0 && self.intersect(add(h.p, mul(n, 1e-5)), l, f64::INFINITY, false).is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3) { 0.0 } else { 1.0 };
-                mul(albedo, 0.35 + 0.65 * lit * shadow)
+                let l = SUN.normalize();
+                let lit = n.dot(l).max(0.0);
+                let shadow = if lit > 0.0 && self.intersect(h.p + n * (1e-5), l, f64::INFINITY, false).is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3) { 0.0 } else { 1.0 };
+                albedo * (0.35 + 0.65 * lit * shadow)
             }
             Material::Glass => {
                 if depth == 0 {
-                    return [0.5; 3];
+                    return V3::splat(0.5);
                 }
-                let cos = (-dot(n, d)).clamp(0.0, 1.0);
+                let cos = (-n.dot(d)).clamp(0.0, 1.0);
                 let f = GLASS_F0 + (1.0 - GLASS_F0) * (1.0 - cos).powi(5);
-                let r = sub(d, mul(n, 2.0 * dot(n, d)));
-                let refl = self.radiance(add(h.p, mul(n, 1e-6)), r, depth - 1);
-                let trans = self.radiance(add(h.p, mul(d, 1e-6)), d, depth - 1);
-                add(mul(refl, f), mul(trans, 1.0 - f))
+                let r = d - (n * (2.0 * n.dot(d)));
+                let refl = self.radiance(h.p + n * (1e-6), r, depth - 1);
+                let trans = self.radiance(h.p + d * (1e-6), d, depth - 1);
+                refl * f + trans * (1.0 - f)
             }
         }
     }
@@ -197,9 +184,9 @@ impl Scene {
 
 /// Ray parameters t > 0 where the ray meets the sphere, nearest first.
 pub(crate) fn hit_sphere(c: V3, r: f64, o: V3, d: V3) -> Vec<f64> {
-    let oc = sub(o, c);
-    let b = dot(oc, d);
-    let cc = dot(oc, oc) - r * r;
+    let oc = o - c;
+    let b = oc.dot(d);
+    let cc = oc.dot(oc) - r * r;
     let disc = b * b - cc;
     if disc < 0.0 {
         return Vec::new();
@@ -232,7 +219,7 @@ fn hit_box(b: &Box3, o: V3, d: V3) -> Option<(f64, V3)> {
     if t0 > t1 || t0 <= 1e-6 {
         return None;
     }
-    let mut n = [0.0; 3];
+    let mut n = V3::ZERO;
     n[axis] = -d[axis].signum();
     Some((t0, n))
 }

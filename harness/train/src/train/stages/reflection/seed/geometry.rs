@@ -2,20 +2,18 @@
 //! camera in f64, a box blur, and a deterministic split of work over
 //! threads.
 
+use glam::DVec3;
 use tgs_pipelines::Camera;
 
 pub(super) type V3 = [f64; 3];
 
-pub(super) fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub(super) fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
+/// `a` over its length (divided, as the seeds were always made); +z where
+/// it has none (zero, or not finite).
 pub(super) fn normalize(a: V3) -> V3 {
-    let l = dot(a, a).sqrt();
+    let v = DVec3::from(a);
+    let l = v.length();
     if l > 0.0 && l.is_finite() {
-        [a[0] / l, a[1] / l, a[2] / l]
+        (v / l).to_array()
     } else {
         [0.0, 0.0, 1.0]
     }

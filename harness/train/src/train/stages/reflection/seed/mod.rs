@@ -59,7 +59,7 @@ mod rim;
 
 pub use geometry::pixel_of;
 pub(crate) use geometry::unproject_pixel;
-use geometry::{box_blur, dot, image_point, in_parallel, normalize, sub, V3};
+use geometry::{box_blur, image_point, in_parallel, normalize, V3};
 use normals::{gradient_pixels, surfels};
 pub use normals::{jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 pub use rim::fit_plane;

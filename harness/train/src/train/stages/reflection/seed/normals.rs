@@ -5,7 +5,8 @@
 //! why) and its size (the spacing of its nearest seeds), and the
 //! quaternion that turns a surfel's normal axis onto a normal.
 
-use super::{dot, in_parallel, normalize, sub, Prepared, Seed, SeedNormal, V3};
+use super::{in_parallel, normalize, Prepared, Seed, SeedNormal, V3};
+use glam::DVec3;
 
 /// Normals (`normal`, facing the finding camera) and scales (root mean
 /// squared distance to the 3 nearest) of the found points.
@@ -20,7 +21,7 @@ pub(super) fn surfels(found: &[(V3, usize)], fixed: &[Option<V3>], views: &[Prep
 fn surfel(found: &[(V3, usize)], i: usize, fixed: Option<V3>, views: &[Prepared], normal: SeedNormal) -> Seed {
     const K: usize = 16;
     let (x, vi) = found[i];
-    let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (dot(sub(x, y), sub(x, y)), j)).collect();
+    let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (DVec3::from(x).distance_squared(DVec3::from(y)), j)).collect();
     let k = K.min(near.len());
     if k > 0 {
         near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
@@ -28,7 +29,7 @@ fn surfel(found: &[(V3, usize)], i: usize, fixed: Option<V3>, views: &[Prepared]
         near.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
     let cam = views[vi].cam.centre().map(f64::from);
-    let to_cam = normalize(sub(cam, x));
+    let to_cam = normalize((DVec3::from(cam) - DVec3::from(x)).to_array());
     let mut n = if let Some(f) = fixed {
         f
     } else {
@@ -36,13 +37,13 @@ fn surfel(found: &[(V3, usize)], i: usize, fixed: Option<V3>, views: &[Prepared]
             SeedNormal::Plane if k >= 3 => plane_normal(x, near.iter().map(|&(_, j)| found[j].0)),
             SeedNormal::Gradient => field_normal(x, views, &views[vi]).unwrap_or(to_cam),
             SeedNormal::Halfway => field_normal(x, views, &views[vi]).map_or(to_cam, |g| {
-                let g = if dot(g, to_cam) < 0.0 { g.map(|c| -c) } else { g };
-                normalize([g[0] + to_cam[0], g[1] + to_cam[1], g[2] + to_cam[2]])
+                let g = if DVec3::from(g).dot(DVec3::from(to_cam)) < 0.0 { g.map(|c| -c) } else { g };
+                normalize((DVec3::from(g) + DVec3::from(to_cam)).to_array())
             }),
             _ => to_cam,
         }
     };
-    if dot(n, to_cam) < 0.0 {
+    if DVec3::from(n).dot(DVec3::from(to_cam)) < 0.0 {
         n = n.map(|c| -c);
     }
     let m = near.len().min(3);
@@ -81,7 +82,7 @@ fn field_normal(x: V3, views: &[Prepared], finder: &Prepared) -> Option<V3> {
         b[k] -= h;
         (field(a) - field(b)) / (2.0 * h)
     });
-    let len = dot(g, g).sqrt();
+    let len = DVec3::from(g).length();
     (len * h > GRADIENT_MIN).then(|| g.map(|c| -c / len))
 }
 
@@ -93,7 +94,7 @@ fn plane_normal(x: V3, pts: impl Iterator<Item = V3>) -> V3 {
     let mean = [0, 1, 2].map(|k| all.iter().map(|p| p[k]).sum::<f64>() / n);
     let mut c = [[0.0f64; 3]; 3];
     for p in &all {
-        let d = sub(*p, mean);
+        let d = DVec3::from(*p) - DVec3::from(mean);
         for r in 0..3 {
             for s in 0..3 {
                 c[r][s] += d[r] * d[s];

@@ -31,6 +31,7 @@
 //! floor) ring at most 4 of 60 views, moving it by 0.1 degrees.
 
 use super::{image_point, normalize, pixel_of, Prepared, V3};
+use glam::DVec3;
 
 /// The share of the views holding a rim point in their image that must see
 /// it at a mask edge.
@@ -199,9 +200,8 @@ pub fn fit_plane(pts: &[[f64; 3]]) -> Option<[f64; 3]> {
 /// The solution of the 3 x 3 system `a` x = `b` (Cramer's rule), None
 /// where `a` is singular.
 fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
+    // Row 0 against the cross product of rows 1 and 2 (the expansion along row 0).
+    let det = |m: [[f64; 3]; 3]| DVec3::from(m[0]).dot(DVec3::from(m[1]).cross(DVec3::from(m[2])));
     let d = det(a);
     let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
     if !(d.abs() > 1e-12 * scale.powi(3)) {
