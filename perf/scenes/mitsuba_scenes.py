@@ -188,8 +188,12 @@ def checker(mi, c0, c1, scale):
     return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
 
 
-SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse"]
-SUITE = [n for n in SCENES if n != "diffuse"]
+SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near"]
+# The suite of issue 42; `vehicle` (planar windows around an opaque body)
+# and `globe_near` (a glass sphere among nearby objects) are the paper's
+# kinds added for issue 77: `--scene paper` makes them.
+SUITE = [n for n in SCENES if n not in ("diffuse", "vehicle", "globe_near")]
+PAPER = ["vehicle", "globe_near"]
 FRONT_ONLY = {"facade", "windshield"}
 
 
@@ -224,6 +228,27 @@ def room(mi, front_x):
     return prims
 
 
+def vehicle(mi, glass):
+    """A vehicle-like object under the sky: an opaque body on four wheels,
+    a cabin of four planar windows (front, back, sides) under an opaque
+    roof, seats inside: planar glass around an object, whose masks' hull is
+    a box with caps that are not glass."""
+    paint = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.75, 0.12, 0.1]}}
+    dark = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.06, 0.06, 0.07]}}
+    prims = [Prim("cube", translate_scale([0, 0, 0.45], [0.95, 0.45, 0.2]), paint),
+             Prim("rectangle", translate_scale([0, 0, 1.05], [0.52, 0.44, 1]), twosided(paint)),
+             Prim("cube", translate_scale([0, 0, 0.75], [0.3, 0.32, 0.1]), checker(mi, [0.95, 0.85, 0.3], [0.2, 0.3, 0.8], 4))]
+    for sx in (-0.6, 0.6):
+        for sy in (-0.42, 0.42):
+            prims.append(Prim("cube", translate_scale([sx, sy, 0.16], [0.16, 0.05, 0.16]), dark))
+    # The windows: glass only, between the body's top (0.65) and the roof (1.05).
+    prims.append(Prim("rectangle", upright(0.88, 0.4, [0.52, 0.0, 0.85]), glass, glass=True))
+    prims.append(Prim("rectangle", upright(0.88, 0.4, [-0.52, 0.0, 0.85]), glass, glass=True))
+    prims.append(Prim("rectangle", upright(1.04, 0.4, [0.0, 0.44, 0.85], "y"), glass, glass=True))
+    prims.append(Prim("rectangle", upright(1.04, 0.4, [0.0, -0.44, 0.85], "y"), glass, glass=True))
+    return prims
+
+
 def build(mi, name, reflection=True):
     if name not in SCENES:
         raise ValueError(f"unknown scene '{name}'")
@@ -240,6 +265,8 @@ def build(mi, name, reflection=True):
             prims.append(Prim("cube", translate_scale([6.0 * math.cos(a), 6.0 * math.sin(a), h], [0.5, 0.5, h], math.degrees(a)), checker(mi, c0, c1, 3)))
     if name in FRONT_ONLY:
         prims += room(mi, 0.4)
+    elif name == "vehicle":
+        prims += vehicle(mi, glass)
     else:
         centre = [0.2, -0.15, 0.35] if name == "cabinet" else [0.25, -0.15, 0.35]
         prims.append(Prim("sphere", translate_scale(centre, 0.35), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
@@ -256,6 +283,15 @@ def build(mi, name, reflection=True):
             a = math.pi / 4 + k * math.pi / 2
             prims.append(Prim("cube", translate_scale([2.0 * math.cos(a), 2.0 * math.sin(a), 0.7], [0.12, 0.12, 0.7], 30 * k),
                               checker(mi, [0.95, 0.95, 0.9], [0.25, 0.25, 0.3], 4)))
+    elif name == "globe_near":
+        # The globe among nearby objects: the dome's pillars and two boxes.
+        prims.append(Prim("sphere", translate_scale([0, 0, 0.95], 0.95), glass, glass=True))
+        for k in range(4):
+            a = k * math.pi / 2
+            prims.append(Prim("cube", translate_scale([1.7 * math.cos(a), 1.7 * math.sin(a), 0.6], [0.12, 0.12, 0.6], 30 * k),
+                              checker(mi, [0.95, 0.95, 0.9], [0.25, 0.25, 0.3], 4)))
+        prims.append(Prim("cube", translate_scale([1.3, 1.3, 0.25], [0.25, 0.25, 0.25], 15), checker(mi, [0.2, 0.5, 0.9], [0.9, 0.8, 0.2], 3)))
+        prims.append(Prim("cube", translate_scale([-1.3, -1.2, 0.3], [0.3, 0.2, 0.3], 40), checker(mi, [0.9, 0.3, 0.3], [0.95, 0.95, 0.95], 3)))
     elif name == "cabinet":
         prims.append(Prim("cube", translate_scale([0, 0, 0.61], [0.7, 0.7, 0.6], 25), glass, glass=True))
     elif name == "cylinder":
@@ -333,7 +369,7 @@ def write_png(mi, path, image, srgb):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--scene", action="append", choices=SCENES + ["suite"], help="repeatable; suite: every glass scene; default: all")
+    ap.add_argument("--scene", action="append", choices=SCENES + ["suite", "paper"], help="repeatable; suite: issue 42's glass scenes; paper: the paper's kinds added since (vehicle, globe_near); default: all")
     ap.add_argument("--res", type=int, default=200)
     ap.add_argument("--spp", type=int, default=128)
     ap.add_argument("--train", type=int, default=60)
@@ -355,7 +391,7 @@ def main():
     fov = math.pi / 4
     names = []
     for n in a.scene or SCENES:
-        for m in (SUITE if n == "suite" else [n]):
+        for m in (SUITE if n == "suite" else PAPER if n == "paper" else [n]):
             if m not in names:
                 names.append(m)
     for name in names:
