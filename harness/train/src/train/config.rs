@@ -55,22 +55,12 @@ pub struct TrainConfig {
     pub init_points: u32,
     pub init_half_extent: f32,
     /// Random initialisation also places this fraction of `init_points`
-    /// in the far field the cameras see beyond the cube and beyond the
-    /// camera sphere: along random training-view rays, uniform in inverse
-    /// depth out to `init_far_depth` x the scene extent (0: the cube only).
-    /// Without them a sky or a floor that runs to the horizon has no
-    /// Gaussians of its own, the cube's Gaussians paint it view by view,
-    /// and that misfit is what the Stage I residual (and so the reflection
-    /// set's seeding) then sees. None start among the cameras, where they
-    /// would sit in front of a held-out view taken from there. 2.0 (was
-    /// 0.2, then 1.0): with too few, the optimiser paints the distant floor
-    /// and sky on Gaussians among the cameras instead (perf/RESULTS.md,
-    /// twentieth session: on `lantern` Stage I's test PSNR over three seeds
-    /// went 28.08 -> 28.62 dB from 0.2 to 1.0; on a path-traced pane 26.86
-    /// -> 29.62 at 0.5). Twenty-first session, 1.0 -> 2.0, means over three
-    /// seeds: `lantern` 28.62 -> 28.81, `pane` 29.40 -> 30.14 (its worst
-    /// seed 28.53 -> 30.10), `globe` 26.85 -> 27.15; at 4.0 `lantern`
-    /// falls back to 28.70 (one seed) and Stage I starts with 50k.
+    /// in the far field the cameras see beyond the cube and the camera
+    /// sphere (uniform in inverse depth out to `init_far_depth` × the scene
+    /// extent along training rays; 0: the cube only). Without them a sky or
+    /// a distant floor is painted view by view on nearby Gaussians, misfit
+    /// the Stage I residual then mistakes for reflection
+    /// (perf/journal/2026-11-24-twentieth.md, perf/journal/2026-11-24-twenty-first.md).
     pub init_far_fraction: f32,
     pub init_far_depth: f32,
     /// Background colour: "white", "black" or "r,g,b".
@@ -181,12 +171,8 @@ impl TrainConfig {
             test_interval: 1000,
             checkpoint_interval: 500,
             reflection: ReflectionConfig { iterations: 1000, env_res: 16, prune_interval: 100, ..ReflectionConfig::default() },
-            // Stage III 2,000 iterations: on four path-traced scenes, two
-            // seeds, test PSNR III - I +0.415 dB mean, worst +0.291,
-            // against +0.326 / +0.204 at 1,000 (better on all eight
-            // pairs); on three noisy ones +0.181 against +0.145 mean; the
-            // built-in glass (32 views) -0.008 dB; Stage III's time about
-            // doubles (perf/RESULTS.md, fifty-fourth entry).
+            // Stage III 2,000 iterations: better than 1,000 on all eight
+            // path-traced scene-seed pairs (perf/journal/2026-12-03-fifty-fourth.md).
             light_field: LightFieldConfig { iterations: 2000, preset: LightPreset::Small, ..LightFieldConfig::default() },
             ..Self::paper()
         }

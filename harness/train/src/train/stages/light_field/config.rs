@@ -34,18 +34,10 @@ pub struct LightFieldConfig {
     /// `scattering_params` says. On by default, its colour only.
     pub train_scattering: bool,
     /// What of the scattering set trains when `train_scattering` is on:
-    /// "colour" (the SH colour only; positions, scales, rotations and
-    /// opacity keep Stage I's values and Adam moments; the default) or "all".
-    /// Measured (perf/RESULTS.md, quick preset, test PSNR after Stage III):
-    /// colour against frozen +0.06 dB on the built-in glass, +0.17 on
-    /// `lantern`, +0.10 on `pane`, normals unchanged, ~30% more time per
-    /// Stage III iteration; "all" fits the training views' transmitted
-    /// detail and lost 0.15 dB on the built-in glass. On the eight
-    /// path-traced suite scenes with Stage II from their glass masks
-    /// (fifty-first entry) "all" gained 0.03–0.28 dB over "colour" on
-    /// seven and lost 0.44 dB on `facade` (a room front seen from one
-    /// side), its normals beside the glass 0.3–0.9 degrees worse, at 1.8–3.7
-    /// times the Stage III time: by the worst scene, not the default.
+    /// "colour" (the SH colour alone; the default) or "all" (which gains a
+    /// little on most suite scenes but lost 0.44 dB on a room front, at up
+    /// to 3.7× Stage III's time; perf/journal/2026-11-22-tenth.md,
+    /// perf/journal/2026-12-02-fifty-first.md).
     pub scattering_params: ScatteringParams,
     /// High-frequency loss weight and percentile (as in `[reflection]`).
     pub lambda_hf: f32,

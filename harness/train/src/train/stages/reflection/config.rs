@@ -11,173 +11,90 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields, default)]
 pub struct ReflectionConfig {
     pub iterations: u32,
-    /// "off": c = f0 E(w) (the paper's Stage II colour); "schlick": c = E(w)
-    /// and Schlick's F with the blended F0 per pixel.
+    /// "off": c = f0 E(w), the paper's Stage II colour; "schlick": c = E(w)
+    /// with Schlick's F from the blended F0 per pixel.
     pub fresnel: ReflectionFresnel,
-    /// Cube-map face size. The quick preset's 16 (it was 64): a finer map
-    /// memorises each training sample's colour as texel noise and leaves
-    /// test views worse; measured after Stage II, 16 against 64: +0.20 dB
-    /// on `lantern`, +0.04 `pane`, +0.01 built-in glass, +0.004 `globe`,
-    /// and after Stage III within 0.006 dB (perf/RESULTS.md, eighteenth
-    /// session). The paper preset keeps the issue's 128.
+    /// Cube-map face size. A finer map memorises training samples as texel
+    /// noise, so the quick preset keeps 16 (perf/journal/2026-11-24-eighteenth.md).
     pub env_res: u32,
-    /// How the cube map starts: "grey" (every texel sigmoid 0.5,
-    /// method-notes §3.7) or "scene" (the scattering set rendered from the
-    /// reflection set's box, stages/reflection/env_init.rs). Measured (perf/RESULTS.md,
-    /// quick preset): "scene" gains after Stage II on `lantern` (+0.21 dB)
-    /// and moves the normals no more than grey; after Stage III the two
-    /// starts end within 0.002 dB on three scenes: grey stays.
-    /// "scene-depth": "scene" with the distance to the surface each texel
-    /// shows, the lookup's parallax proxy per direction (each surfel's ray
-    /// meets the scene where it would; env_init.rs).
+    /// How the cube map starts: "grey" (sigmoid 0.5, method-notes §3.7),
+    /// "scene" (the scattering set rendered from the reflection set's box)
+    /// or "scene-depth" (with each texel's distance, a parallax proxy);
+    /// grey and scene end alike after Stage III (perf/journal/2026-11-23-thirteenth.md).
     pub env_init: EnvStart,
-    /// Where the cube map's light is: 0, infinitely far (the paper's map);
-    /// r > 0, on a sphere around the reflection set's box centre of radius
-    /// r x the mean distance from that centre to the training cameras, so
-    /// a reflection looks up the direction to where its ray leaves that
-    /// sphere (a parallax-corrected, local cube map; glsl/reflection/
-    /// color_common.glsl `env_dir`). Near-field content then lands where
-    /// each surfel sees it, not where the centre would.
+    /// Where the light is: 0, infinitely far (the paper's map); r > 0, on a
+    /// sphere of r × the mean camera distance around the reflection set's
+    /// centre (a parallax-corrected local cube map, `env_dir` in
+    /// glsl/reflection/color_common.glsl).
     pub env_radius: f32,
     pub lr_env: f32,
     pub lr_f0: f32,
     pub lr_r: f32,
-    /// Opacity of the reflection set. R = sum w r lets opacity and r trade
-    /// off; at Stage I's opacity rate (10x lr_r) opacity would do all of
-    /// it and prune the glass away, so it moves at r's pace.
+    /// Opacity moves at r's pace: R = Σ w r lets the two trade off, and at
+    /// Stage I's rate opacity would do it all and prune the glass away.
     pub lr_opacity: f32,
-    /// Rotation (normal) and log-scales of the reflection set. Measured on
-    /// the built-in glass scene (perf/RESULTS.md): at Stage I's rates
-    /// (1e-3, 5e-3) the colour gradient of a distant cube map fitting
-    /// near-field reflections bends the seeded normals (glass MAE 42 -> 46
-    /// degrees over 1,000 iterations) without a PSNR gain; scales frozen
-    /// and rotations at a tenth keep them.
+    /// Rotation (normal) and log-scale rates: a distant cube map's colour
+    /// gradient bends the seeded normals at Stage I's rates without a PSNR
+    /// gain, so rotations run at a tenth and scales are frozen
+    /// (perf/journal/2026-11-21-first.md; perf/journal/2026-11-27-thirty-seventh.md).
     pub lr_quats: f32,
     pub lr_scales: f32,
-    /// The reflection set's position rate, in multiples of Stage I's final
-    /// one (`lr_means_final` x the scene extent). 1: the converged rate of
-    /// the paper's Stage II start (method-notes §3.7), so the seeds barely
-    /// move; 100: Stage I's starting rate. Measured on `globe`
-    /// (perf/RESULTS.md, forty-third entry), 100 spreads the set beside the
-    /// glass (normal MAE there 32.4 -> 45.3 degrees) and leaves it no nearer
-    /// the glass (22.5 -> 22.9): not the default.
+    /// Position rate in multiples of Stage I's final one (1: the seeds
+    /// barely move, as the paper's Stage II starts converged; 100 spreads
+    /// the set beside the glass, perf/journal/2026-11-28-forty-third.md).
     pub lr_means_scale: f32,
-    /// What turns the surfels ("all" or "reflection": the reflected colour
-    /// alone, the rasterizer's rotation gradient dropped; settings.rs).
+    /// What turns the surfels: "all", or "reflection" (the reflected colour
+    /// alone, the rasterizer's rotation gradient dropped).
     pub rotation_grad: RotationGrad,
-    /// Initial f0 (all channels) and reflectivity r of every reflection
-    /// Gaussian. With the paper's c = f0 E the reflection term is R f0 E:
-    /// at f0 = 0.04, r = 0.01 (method-notes' first guess) it starts at 4e-4
-    /// and r hardly moves in 1,000 iterations; f0 = 0.5, r = 0.1 (its
-    /// fallback) lets Stage II show reflections (PSNR +0.15 dB, measured).
+    /// Initial f0 (every channel) and reflectivity r: 0.5 and 0.1 let Stage
+    /// II show reflections within its iterations (0.04 / 0.01 start the
+    /// term at 4e-4, and r hardly moves).
     pub f0_init: f32,
     pub r_init: f32,
     /// Normal consistency on the reflection set.
     pub lambda_normal: f32,
     /// Prune reflection Gaussians below `prune_opacity` every this many iterations (0: never).
     pub prune_interval: u32,
-    /// Stage II runs only when the Stage I residual's mean magnitude
-    /// (mean over training views and pixels of mean_c |I_gt - I_scat|)
-    /// reaches this.
+    /// Stage II runs only when the Stage I residual's mean magnitude over
+    /// the training views reaches this (scenes Stage I fits outright stop here).
     pub min_residual: f32,
     /// ... and only when the residual changes with the view: the median
-    /// over Stage I surface points of the spread of the signed residual
-    /// across the views that see the point (stages/reflection/view_dependence.rs)
-    /// reaches this.
+    /// spread of the signed residual over the views that see a Stage I
+    /// surface point (view_dependence.rs) reaches this (perf/journal/2026-11-24-twentieth.md).
     pub min_view_dependence: f32,
-    /// How the reflection set starts (method-notes §3.4): "copy" = the whole
-    /// converged Stage I set (the paper's words); "hull" = seeds on the
-    /// residual hull (stages/reflection/seed/) only; "copy+hull" = both. Measured on
-    /// the glass scene: the copy sits behind the glass (normal MAE 70.7
-    /// degrees after Stage II vs Stage I's 63.1); the seeds start at 43.
+    /// How the reflection set starts (method-notes §3.4): "copy" (the
+    /// converged Stage I set, the paper's words; it sits behind the glass),
+    /// "hull" (seeds on the residual's or the masks' hull, seed/) or
+    /// "copy+hull".
     pub init: ReflectionInit,
     /// Residual hull: rays cast (at most one seed each) and the fraction of
     /// the views seeing a point that must see residual there.
     pub seed_rays: u32,
     pub seed_agree: f32,
-    /// Residual hull: a point also needs more agreeing views than masks
-    /// placed at random would give it this often (binomial tail at the
-    /// masks' mean coverage; 1: no test; stages/reflection/seed/ `min_hits`). Where
-    /// path-tracing noise and textures put residual on 60% of the pixels,
-    /// a point near the cameras that ten views see agrees by chance and
-    /// seeds in front of the glass. Measured after Stage II (perf/RESULTS.md,
-    /// twenty-first session), 1 -> 1e-6: share of the reflection set within
-    /// a tenth of the radius of the glass 0.4% -> 10% on `globe` (1e-10:
-    /// 56%, but fewer and worse normals after Stage II), test PSNR +0.01 to
-    /// +0.15 dB on four scenes, glass normal MAE where the set covers the
-    /// glass lower on three (`globe` 39.7 -> 35.1 degrees, `lantern` 45.4
-    /// -> 42.8, `pane` 49.5 -> 48.4; built-in glass 40.1 -> 40.3), with
-    /// less coverage on `lantern` and `pane`. Where no point can pass it
-    /// (masks on nearly every pixel), each ray seeds at the point the most
-    /// views agree on (stages/reflection/seed/ `hull_seeding`): on the
-    /// path-traced room fronts glass normal MAE after Stage II 27.6-32.1
-    /// -> 16.6-20.9 degrees (thirty-third session).
+    /// Residual hull: a point needs more agreeing views than random masks
+    /// of the same coverage would give it this often (binomial tail; 1: no
+    /// test), so that noise near the cameras does not seed in front of the
+    /// glass (perf/journal/2026-11-24-twenty-first.md, perf/journal/2026-11-27-thirty-third.md).
     pub seed_significance: f32,
-    /// A seed's normal: "auto" (the default): "plane" with
-    /// `seed_masks`, "halfway" without. With the suite's exact glass
-    /// masks, glass normal MAE after Stage II, plane against halfway, on
-    /// the eight scenes (seed 0): mean 18.9 against 27.6 degrees, better
-    /// on six, 4.0 against 13.6 on `globe` (seed 1: 4.0 against 13.6),
-    /// 24.7 against 55.9 on `pane` (seed 1: 25.2 against 56.6), worse on
-    /// the one-sided `facade` (37.8 against 31.2; perf/RESULTS.md,
-    /// forty-fourth entry). "halfway": the unit bisector of
-    /// "view" (towards the camera whose ray found it) and "gradient"
-    /// (against the gradient of the views' blurred residual masks summed
-    /// at the seed's projections: the normal of the residual hull's
-    /// silhouette cones; stages/reflection/seed/), or "plane" (the plane
-    /// of its neighbouring seeds). Measured on nine path-traced scenes
-    /// (the eight of `mitsuba_scenes.py --scene suite` and `lantern`, 50²,
-    /// seeds 0 and 1; perf/RESULTS.md, thirty-third entry), glass normal
-    /// MAE after Stage II, mean, view / gradient / halfway: 41.8 / 37.8 /
-    /// 36.8 degrees; worst Stage II / Stage I 0.98 / 1.06 / 1.00 (all
-    /// `lantern`). The hull's normal is right where the residual's hull is
-    /// the glass (the closed `globe`, `globe_far`, `dome`, `cabinet`: 9 to
-    /// 15 degrees better than "view" with either) and wrong where the glass
-    /// is a flat pane or an open tube inside a blob of residual or under
-    /// the hull's lid (`pane` 7 to 10 worse with "gradient", 4 to 7 with
-    /// halfway; `lantern` 1 to 4 and 1); halfway keeps nearly all of the
-    /// first and about halves the second. (Where no hull point beats
-    /// chance, the seeds face their camera whatever this says:
-    /// `SeedNormal::without_outline`.) "plane": built-in glass 45.1
-    /// against view's 40.2 (fifteenth session): a real residual's hull
-    /// places seeds with depth noise that turns their plane nearly random.
+    /// A seed's normal: "auto" ("plane" with masks, "halfway" without),
+    /// "view" (towards its camera), "gradient" (the hull's silhouette
+    /// normal), "halfway" (their bisector) or "plane" (its neighbours'
+    /// plane) (perf/journal/2026-11-27-thirty-third.md, perf/journal/2026-11-28-forty-fourth.md).
     pub seed_normal: SeedNormal,
-    /// A directory of glass masks, one per training view that has one (`DIR/VIEW.png`,
-    /// VIEW the view image's name without its extension; 8-bit, at least
-    /// 128 where the pixel's first hit is glass; at the dataset's image
-    /// size, reduced by `downscale` as the images are): the residual hull
-    /// is then these masks' hull, carved in front of Stage I's surface as
-    /// the residual's is, and Stage II runs whatever the residual measured
-    /// (the masks say where the glass is), and not at all where they mark
-    /// no glass in any view. A view without a mask takes no part in the
-    /// seeding (the hull is the masked views'); a directory that holds no
-    /// view's mask is refused. Empty (the default): the
-    /// dataset's training masks (`dataset_masks`), else the residual's. A relative path is taken from the working
-    /// directory where it is given and saved absolute, so that a resumed
-    /// or continued run finds the masks from anywhere. For masks a user has (or a segmentation gives), and for
-    /// measuring what exact masks are worth: on the path-traced suite
-    /// Stage I reproduces about half of the glass's reflection, so the
-    /// residual does not mark the glass (perf/RESULTS.md, forty-third and
-    /// forty-fourth entries; `mitsuba_scenes.py --train-masks` writes the
-    /// suite's exact masks).
+    /// A directory of glass masks, `DIR/VIEW.png` per training view that
+    /// has one (VIEW without its image extension; 8-bit, ≥ 128 on glass, at
+    /// the dataset's size): the hull is then theirs and Stage II runs
+    /// wherever they mark glass. Empty: the dataset's masks
+    /// (`dataset_masks`), else the residual's. Saved absolute
+    /// (perf/journal/2026-11-28-forty-fourth.md).
     pub seed_masks: String,
-    /// Without `seed_masks`: take the glass masks the dataset gives for its
-    /// training views (`mask_path` in transforms_train.json, the format's
-    /// evaluation key; the built-in scenes write them) as if they were
-    /// given there, from the training views that have one. With the
-    /// hull's seeds only (`init` "hull" or "copy+hull"). On the path-traced suite mask seeds took the glass normal MAE
-    /// after Stage II from 34.2° (residual seeds) to 13.4° on the mean and
-    /// kept the normals beside the glass at Stage I's (perf/RESULTS.md,
-    /// forty-fourth to forty-sixth entries). false: the residual's seeds
-    /// whatever the dataset holds.
+    /// Without `seed_masks`: seed from the glass masks the dataset gives
+    /// for its training views (`mask_path`); false: from the residual
+    /// whatever the dataset holds (perf/journal/2026-11-28-forty-sixth.md).
     pub dataset_masks: bool,
-    /// With glass masks (`seed_masks` or `dataset_masks`): place the seeds of a view whose glass is ringed
-    /// by Stage I surface that every view sees at its masks' edges (a
-    /// window in a wall or frame) on the plane of that rim, where the hull
-    /// holds it (seed/rim.rs). A front captured from one side has a
-    /// wedge for a hull, and its first hull points lie far in front of the
-    /// glass; closed objects and free-standing panes have no such rim and
-    /// are seeded as before (perf/RESULTS.md, forty-fifth entry).
+    /// With masks: seed a view whose glass is ringed by a frame every view
+    /// sees on the plane of that rim (a window captured from one side,
+    /// whose hull is a wedge; seed/rim.rs, perf/journal/2026-11-28-forty-fifth.md).
     pub seed_rim: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
@@ -185,48 +102,30 @@ pub struct ReflectionConfig {
     /// the pixels at or above the `hf_percentile`-th percentile (0: off).
     pub lambda_hf: f32,
     pub hf_percentile: f32,
-    /// Weight of a penalty on the mean of R = sum w r over the pixels
-    /// (0: off), which pulls r down where the reflection term buys little.
-    /// Off by default: the reflection set covers most pixels off the glass,
-    /// where R (I_refl - I_scat) corrects Stage I's misfit; at 1 (both
-    /// stages) the built-in glass lost 0.13 dB after Stage III while Phi's
-    /// share of pixels fell from 94% to 48% (perf/RESULTS.md).
+    /// Weight of a penalty on the mean of R = Σ w r (0: off): pulls r down
+    /// where the reflection term buys little; off because it cost the
+    /// built-in glass 0.13 dB after Stage III.
     pub lambda_r: f32,
-    /// Weight of a cost on the area the reflection set covers: a penalty
-    /// on the mean of its alpha over the pixels (0: off). A reflection
-    /// surfel then stays only where the colour it adds lowers the image
-    /// loss by more than this per pixel it covers; elsewhere its opacity
-    /// falls and the pruning removes it, so that the normals there are
-    /// Stage I's again.
+    /// Weight of a cost on the area the reflection set covers (its mean
+    /// alpha; 0: off): a surfel then stays only where its colour lowers the
+    /// loss by more than this per pixel, elsewhere the normals are Stage I's.
     pub lambda_area: f32,
-    /// The output geometry (normal, depth) of a pixel is the reflection
-    /// set's where it covers the pixel (alpha >= 0.5) and its reflection
-    /// weight R = sum w r there reaches this; elsewhere Stage I's (0: where
-    /// it covers). A pixel where the reflection set adds little colour is
-    /// no evidence of a surface there, so its normals do not replace
-    /// Stage I's (issue 42, "do no harm"); `metrics.json`'s
-    /// `reflection_coverage` is the share of the glass it decides.
+    /// A pixel's output normal and depth are the reflection set's where it
+    /// covers the pixel and R reaches this (0: wherever it covers), else
+    /// Stage I's: little reflected colour is no evidence of a surface.
     pub normal_min_r: f32,
-    /// The highest SH degree of the frozen scattering layer that Stage II
-    /// composites with, trains against and evaluates (at most Stage I's
-    /// `sh_degree`; 3: Stage I's colour as it is). 0 leaves the scattering
-    /// layer its view-independent colour, so the view-dependent light that
-    /// Stage I baked into SH degrees 1-3 (at low resolution most of the
-    /// glass's reflections) is residual the reflection set must explain.
-    /// The decision whether Stage II runs and the residual-hull seeds keep
-    /// Stage I's full colour. Stage III composites with Stage I's degree.
+    /// The frozen scattering layer's SH degree under Stage II (3: Stage I's
+    /// colour as it is; 0 leaves the view-dependent light Stage I baked
+    /// into degrees 1–3 to the reflection set). The run decision and the
+    /// seeds keep Stage I's colour.
     pub scattering_sh: u32,
     /// Train the scattering set's SH colour in Stage II too (its geometry
-    /// and opacity stay Stage I's), against the composite, at Stage I's
-    /// colour rates: the reflection term then takes over the
-    /// view-dependent colour Stage I baked into the scattering set.
+    /// and opacity stay Stage I's), so the reflection term can take over the
+    /// view-dependent colour Stage I baked in.
     pub train_scattering: bool,
     /// After Stage III, run Stages II and III once more ("II.2", "III.2"),
-    /// Stage II seeded afresh from the residual of the scattering set as
-    /// Stage III left it: with its colour trained against the composite
-    /// (light_field.scattering_params = "colour"), that set no longer holds
-    /// the reflections Stage I baked into it, so the residual shows the
-    /// glass more cleanly. Needs Stage III; doubles Stages II and III.
+    /// seeded from the residual of the scattering set Stage III left (which
+    /// no longer holds the reflections Stage I baked into it).
     pub reseed: bool,
 }
 
@@ -250,22 +149,11 @@ impl Default for ReflectionConfig {
             r_init: 0.1,
             lambda_normal: 0.05,
             prune_interval: 100,
-            // Measured (lavapipe, quick preset): converged glass 0.0118,
-            // diffuse spheres-128 0.0041 (0.0094 with the sixth session's
-            // defaults, and 0.0146 / 0.0273 on the path-traced `diffuse`:
-            // this gate only stops scenes Stage I fits outright; the view
-            // dependence below is the test that tells misfit from reflection).
+            // Between spheres-128 (0.0041) and the glass (0.0118): it stops
+            // only scenes Stage I fits outright (perf/journal/2026-11-22-sixth.md).
             min_residual: 0.007,
-            // Measured (lavapipe, quick preset, median spread): diffuse
-            // scenes spheres-128 0.0042, Mitsuba `diffuse` 0.0068 (50²) and
-            // 0.0046 (100²); glass scenes `pane` 0.0108 / 0.0096, built-in
-            // glass 0.0120, `lantern` 0.0142, `globe` 0.0145, glass-tiny
-            // 0.047. With the twentieth session's far-field init (a better
-            // Stage I, so less misfit everywhere) `diffuse` 0.0061 and
-            // `pane` 0.0082 / 0.0085 (two seeds), `lantern` 0.0140, `globe`
-            // 0.0115: the geometric mean of the closest pair, 0.007, leaves
-            // ~1.16x on both sides (the residual mean alone does not separate
-            // them: `diffuse` 0.0146 at 50², 0.0273 at 100²).
+            // The geometric mean of the closest diffuse and glass scenes
+            // (`diffuse` 0.0061, `pane` 0.0082; perf/journal/2026-11-24-twentieth.md).
             min_view_dependence: 0.007,
             init: ReflectionInit::Hull,
             seed_rays: 8192,
