@@ -1,15 +1,67 @@
 //! What Stages II and III share around their deferred composite
-//! I = (1 - R) I_scat + R F Phi: the image loss of the composite (L1 +
-//! D-SSIM, the normal term where the stage has one), the high-frequency
-//! loss, the zeroed geometry planes of the scattering set's gradient (the
-//! composite writes only its colour), and the step's loss value. Each
-//! stage records its own composite and composite backward around these
-//! (its light differs: a cube map, or the light-field network).
+//! I = (1 - R) I_scat + R F Phi: one recording of a step
+//! ([`record_composite_step`]: the forward, the composite, its image loss
+//! (L1 + D-SSIM, the normal term where the stage has one) and
+//! high-frequency loss, the zeroed geometry planes of the scattering set's
+//! gradient (the composite writes only its colour), the composite's
+//! backward and the update), and the step's loss value. What differs is
+//! the [`Light`]: a cube map (Stage II) or the light-field network (Stage
+//! III), with what trains beside it.
 
 use anyhow::Result;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Recorder};
 use tgs_pipelines::{Camera, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights};
+
+/// What a later stage records around the shared composite step: its
+/// reflection layer's forward, the composite with its light, the
+/// composite's backward, and the update of what it trains.
+pub trait Light {
+    /// The scope names of its composite and composite backward (GPU timings).
+    const COMPOSITE: &'static str;
+    const COMPOSITE_BACKWARD: &'static str;
+    /// The reflection layer's forward (and the light's) for this pass.
+    fn record_forward(&mut self, rec: &mut Recorder) -> Result<()>;
+    /// The composite into the loss's input.
+    fn record_composite(&mut self, rec: &mut Recorder) -> Result<()>;
+    /// The composite's backward from the loss gradient.
+    fn record_composite_backward(&mut self, rec: &mut Recorder) -> Result<()>;
+    /// Everything after: read-backs, the light's and the sets' backward, Adam.
+    fn record_update(&mut self, rec: &mut Recorder) -> Result<()>;
+}
+
+/// A step's image loss: the composite (`io.render`) against the target,
+/// its gradient into `io.grad`, the values into `scratch`; and the
+/// scattering set's frame gradient when its colour trains too.
+pub struct StepLoss<'a> {
+    pub loss: &'a CompositeLoss,
+    pub io: LossIo<'a>,
+    pub scratch: &'a mut LossScratch,
+    pub cam: &'a Camera,
+    pub weights: &'a LossWeights,
+    pub hf: HfSetting,
+    pub scat_grad: Option<&'a Buffer<f32>>,
+}
+
+/// One recording of a later stage's step: `light`'s forward, its composite,
+/// the loss, the composite's backward (after zeroing the scattering
+/// gradient's geometry planes) and `light`'s update.
+pub fn record_composite_step<L: Light>(rec: &mut Recorder, light: &mut L, l: StepLoss) -> Result<()> {
+    light.record_forward(rec)?;
+    let sc = rec.begin_scope(L::COMPOSITE);
+    light.record_composite(rec)?;
+    rec.end_scope(sc);
+    l.loss.record(rec, l.io, l.cam, l.weights, l.hf, l.scratch)?;
+    let sc = rec.begin_scope(L::COMPOSITE_BACKWARD);
+    if let Some(g) = l.scat_grad {
+        // The composite writes the colour planes; the scattering geometry
+        // planes get no gradient.
+        CompositeLoss::clear_scattering_geometry(rec, g, (l.cam.width * l.cam.height) as usize)?;
+    }
+    light.record_composite_backward(rec)?;
+    rec.end_scope(sc);
+    light.record_update(rec)
+}
 
 /// A stage's high-frequency loss setting (`lambda_hf`, `hf_percentile` in
 /// its section).

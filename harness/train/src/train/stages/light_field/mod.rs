@@ -2,6 +2,7 @@
 //! II's cube map, over the reflection set with its geometry frozen.
 pub mod checkpoint;
 pub mod config;
+mod light;
 pub mod model;
 pub mod outputs;
 pub mod stage;

@@ -8,20 +8,22 @@
 //! I = (1 - R) S + R F Phi, L1 + D-SSIM, and the backward through all of
 //! it. Never refers to the trainer.
 
+pub use super::light::MlpParams;
+use super::light::{record_forward, NetworkLight, Pass};
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::{CompositeLoss, HfSetting};
+use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, StepLoss};
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
-use crate::train::stages::rendered::{PhiLayers, ReflRendered, R_PLANE};
+use crate::train::stages::rendered::{PhiLayers, ReflRendered};
 use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
-use tgs_pipelines::lightfield::{CompositeGrads, CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
+use tgs_pipelines::lightfield::{CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
-use tgs_pipelines::reflection::{CompositePriors, MATERIAL};
-use tgs_pipelines::{Adam, AdamArrays, AdamGroup, Camera, Features, Frame, KeptWeights, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
+use tgs_pipelines::reflection::MATERIAL;
+use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -53,33 +55,6 @@ struct ViewBuffers {
     r_host: Readback<f32>,
 }
 
-/// The MLP's parameters with their gradient and Adam moments.
-pub struct MlpParams {
-    pub shape: MlpShape,
-    pub params: Buffer<f32>,
-    pub grads: Buffer<f32>,
-    pub m: Buffer<f32>,
-    pub v: Buffer<f32>,
-}
-
-impl MlpParams {
-    pub fn new(ctx: &Arc<Context>, shape: MlpShape, params: &[f32], m: &[f32], v: &[f32]) -> Result<MlpParams> {
-        let n = shape.params() as usize;
-        for (what, a) in [("parameters", params), ("first moments", m), ("second moments", v)] {
-            if a.len() != n {
-                anyhow::bail!("light-field {what}: {} values for a network of {n}", a.len());
-            }
-        }
-        Ok(MlpParams {
-            shape,
-            params: Buffer::from_slice(ctx, "lf.params", params)?,
-            grads: Buffer::new(ctx, "lf.grads", n)?,
-            m: Buffer::from_slice(ctx, "lf.adam_m", m)?,
-            v: Buffer::from_slice(ctx, "lf.adam_v", v)?,
-        })
-    }
-}
-
 pub struct LightFieldModel {
     ctx: Arc<Context>,
     raster: Rasterizer,
@@ -108,23 +83,6 @@ pub struct LightFieldModel {
     /// Training views' blend weights and geometry planes of the reflection
     /// set (its geometry is frozen in Stage III).
     kept: KeptViews,
-}
-
-/// What every recording of one Stage III step shares (see
-/// [`LightFieldModel::step`]).
-struct Pass<'a> {
-    /// The scattering colour composited over, and its gradient when it trains.
-    scat: &'a Buffer<f32>,
-    scat_grad: Option<&'a Buffer<f32>>,
-    /// The sample count the host read (None: the GPU counts in the pass).
-    host_count: Option<u32>,
-    weights: LossWeights,
-    it: u64,
-    net_group: AdamGroup,
-    material_group: AdamGroup,
-    material_len: usize,
-    train_scat: bool,
-    colour_only: bool,
 }
 
 impl LightFieldModel {
@@ -199,7 +157,7 @@ impl LightFieldModel {
         let kept = keep.and_then(|k| self.kept.get(k.view));
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(&mut rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
+            record_forward(&mut rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, (&b.frame, &b.samples), scratch)?;
             timings.extend(rec.submit_and_wait()?);
             if self.raster.fit(&mut b.frame)? {
                 break;
@@ -283,7 +241,8 @@ impl LightFieldModel {
         let material_len = (MATERIAL * self.set.len()) as usize;
         let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
         let kept = self.kept.get(x.keep.view).is_some();
-        let pass = Pass { scat, scat_grad, host_count, weights, it, net_group, material_group, material_len, train_scat, colour_only };
+        let external = train_scat.then_some(ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only });
+        let pass = Pass { scat, scat_grad, host_count, weights, it, net_group, material_group, material_len, external };
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             self.record_pass(&mut rec, cfg, scattering, x, &pass)?;
@@ -311,79 +270,47 @@ impl LightFieldModel {
         Ok(StepOutput { loss, values, densified: None, timings })
     }
 
-    /// One recording of a Stage III step (see [`Self::step`]): the forward
-    /// where it was not run apart, the composite, the losses, the backward
-    /// and Adam, gated on the frame having fitted where the GPU counted.
+    /// One recording of a Stage III step (see [`Self::step`]): the shared
+    /// composite step around the network's [`NetworkLight`].
     fn record_pass(&mut self, rec: &mut Recorder, cfg: &TrainConfig, scattering: &ScatteringModel, x: &LightFieldStepInput, p: &Pass<'_>) -> Result<()> {
-        let Pass { scat, scat_grad, host_count, weights, it, ref net_group, ref material_group, material_len, train_scat, colour_only } = *p;
-        let kept = self.kept.get(x.keep.view);
-        let (cam, lf) = (x.camera, &cfg.light_field);
-        let (pixels, n) = (cam.width * cam.height, (cam.width * cam.height) as usize);
-        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
-        let scratch = self.scratch.as_ref().context("light-field scratch")?;
-        let d_phi = self.d_phi.as_ref().context("light-field gradient buffer")?;
-        match host_count {
-            Some(n) => self.mlp.record_forward(rec, &self.net.params, n, scratch)?,
-            None => {
-                record_forward(rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, b, scratch)?;
-                self.mlp.record_forward_counted(rec, &self.net.params, &b.samples.count, scratch)?;
-            }
-        }
-        let sc = rec.begin_scope("lf.composite");
-        self.shading.record_composite(rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out }, &b.loss_in)?;
-        rec.end_scope(sc);
-        let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
-        self.objective.record(rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
-        let sc = rec.begin_scope("lf.composite_backward");
-        if let Some(g) = scat_grad {
-            // The composite writes the colour planes; the scattering
-            // geometry planes get no gradient in Stage III.
-            CompositeLoss::clear_scattering_geometry(rec, g, n)?;
-        }
-        let r_prior = CompositePriors::of_means(lf.lambda_r, 0.0, pixels).r;
-        let inputs = CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out };
-        let grads = CompositeGrads { loss_grad: &b.loss_grad, d_phi, refl_grad: &b.frame.grad_out, scat_grad };
-        self.shading.record_composite_backward(rec, cam, &self.shade, &inputs, &grads, r_prior)?;
-        rec.end_scope(sc);
-        if lf.lambda_r > 0.0 {
-            rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
-        }
-        match host_count {
-            Some(n) => self.mlp.record_backward(rec, &self.net.params, n, d_phi, &self.net.grads, scratch)?,
-            None => self.mlp.record_backward_counted(rec, &self.net.params, &b.samples.count, d_phi, &self.net.grads, scratch)?,
-        }
-        // The reflection set's geometry is frozen: its material alone
-        // needs gradients (from the view's kept weights, or the
-        // feature-only tile backward).
-        let s = Splats::coloured(&self.set.params, &self.feat);
-        match kept {
-            Some(k) => self.raster.record_backward_colour_weights(rec, s, &self.set.grads, &self.dfeat, &b.frame, k)?,
-            None => self.raster.record_backward_colour_with(rec, s, &self.set.grads, &self.dfeat, &b.frame)?,
-        }
-        let sc = rec.begin_scope("lf.material_backward");
-        self.shading.record_material_backward(rec, &self.set.params.features, self.set.len(), &self.dfeat, &self.set.grads.features)?;
-        rec.end_scope(sc);
-        if train_scat {
-            scattering.record_backward_external(rec, cfg, cam, &ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only })?;
-        }
-        let (n, s) = (&self.net, &self.set);
-        let np = n.shape.params() as usize;
-        let net_arrays = AdamArrays { param: &n.params, grad: &n.grads, m: &n.m, v: &n.v, n: np };
-        let material_arrays = AdamArrays { param: &s.params.features, grad: &s.grads.features, m: &s.m.features, v: &s.v.features, n: material_len };
-        if host_count.is_some() {
-            let sc = rec.begin_scope("adam");
-            self.adam.record(rec, net_arrays, net_group, it)?;
-            self.adam.record(rec, material_arrays, material_group, it)?;
-            rec.end_scope(sc);
-        } else {
-            let args = self.raster.record_fit_gate(rec, &b.frame, &[self.adam.grid(np), self.adam.grid(material_len)])?;
-            let sc = rec.begin_scope("adam");
-            self.adam.record_gated(rec, net_arrays, net_group, it, &args[0])?;
-            self.adam.record_gated(rec, material_arrays, material_group, it, &args[1])?;
-            rec.end_scope(sc);
-            rec.read_back(&b.samples.count, 0, &self.count_host)?;
-        }
-        Ok(())
+        let cam = x.camera;
+        let LightFieldModel { raster, shading, mlp, objective, adam, set, net, shade, feat, dfeat, scratch, d_phi, sizes, count_host, kept, .. } = self;
+        let ViewBuffers { frame, samples, loss, loss_in, loss_grad, r_host } = sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
+        let lf = &cfg.light_field;
+        let step = StepLoss {
+            loss: objective,
+            io: LossIo { render: loss_in, target: x.target, grad: loss_grad },
+            scratch: loss,
+            cam,
+            weights: &p.weights,
+            hf: HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile },
+            scat_grad: p.scat_grad,
+        };
+        let mut light = NetworkLight {
+            cfg,
+            cam,
+            p,
+            scattering,
+            kept: kept.get(x.keep.view),
+            raster,
+            shading,
+            mlp,
+            adam,
+            set,
+            net,
+            shade,
+            feat,
+            dfeat,
+            scratch: scratch.as_ref().context("light-field scratch")?,
+            d_phi: d_phi.as_ref().context("light-field gradient buffer")?,
+            frame,
+            samples,
+            loss_in,
+            loss_grad,
+            r_host,
+            count_host,
+        };
+        record_composite_step(rec, &mut light, step)
     }
 
     /// Render `cam` composited over the scattering colour `scat` (3 planes).
@@ -438,31 +365,4 @@ fn pixel_cos(cam: &Camera, i: usize, refl: &[f32], n: usize) -> f32 {
         return 1.0;
     }
     -(nn[0] * ray[0] + nn[1] * ray[1] + nn[2] * ray[2]) / (nl * l)
-}
-
-/// Record the reflection set's material features (into `s.features`), its
-/// rasterization into `b.frame` and the view's sample list (Phi's inputs,
-/// `b.samples.count`), with the model's shading and raster kernels.
-/// A training view's kept weights, where given, stand for the rasterization.
-fn record_forward(
-    rec: &mut Recorder,
-    (shading, raster, kept): (&LightFieldShading, &Rasterizer, Option<&KeptWeights>),
-    s: Splats,
-    cam: &Camera,
-    shade: &ShadeParams,
-    b: &ViewBuffers,
-    scratch: &MlpScratch,
-) -> Result<()> {
-    let sc = rec.begin_scope("lf.material");
-    shading.record_material(rec, &s.g.features, s.g.n, s.features)?;
-    rec.end_scope(sc);
-    let bg = [0.0; CHANNELS as usize];
-    match kept {
-        Some(k) => raster.record_forward_weights(rec, s, cam, &bg, &b.frame, k)?,
-        None => raster.record_forward_with(rec, s, cam, &bg, &b.frame)?,
-    }
-    let sc = rec.begin_scope("lf.samples");
-    shading.record_samples(rec, cam, shade, &b.frame.out, &b.samples, &scratch.samples)?;
-    rec.end_scope(sc);
-    Ok(())
 }

@@ -5,6 +5,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod decision;
 pub mod env_init;
+mod light;
 pub mod masks;
 pub mod model;
 pub mod outputs;

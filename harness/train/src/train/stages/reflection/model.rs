@@ -8,23 +8,21 @@
 //! prune-only density control. Never refers to the trainer.
 
 use super::config::ReflectionConfig;
+use super::light::{record_forward, CubeMapLight, Pass};
 use super::seed::{quat_for_normal, Seed};
 use crate::train::config::TrainConfig;
 use crate::train::logit;
-use crate::train::settings::RotationGrad;
-use crate::train::stages::composite::{CompositeLoss, HfSetting};
-use crate::train::stages::rendered::{ReflRendered, R_PLANE};
-use crate::train::stages::scattering::ExternalStep;
+use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, StepLoss};
+use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::{ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
-use tgs_pipelines::reflection::{ColorInputs, CompositeGrads, CompositeInputs, TexelScratch, MATERIAL};
-use tgs_pipelines::Splats;
+use tgs_pipelines::reflection::{ColorInputs, CompositeInputs, TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamArrays, AdamGroup, Camera, CompositePriors, Densifier, DensifyParams, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossIo, LossScratch, LossWeights,
-    Plane, Rasterizer, ReflectionShading, TrainableSet,
+    Adam, AdamGroup, Camera, Densifier, DensifyParams, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossIo, LossScratch, LossWeights, Plane, Rasterizer,
+    ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -79,19 +77,6 @@ pub struct ReflectionModel {
     dfeat: Buffer<f32>,
     texels: TexelScratch,
     sizes: HashMap<(u32, u32), ViewBuffers>,
-}
-
-/// What every recording of one Stage II step shares (see
-/// [`ReflectionModel::step`]).
-struct Pass<'a> {
-    /// The scattering colour composited over, and its gradient when it trains.
-    scat: &'a Buffer<f32>,
-    scat_grad: Option<&'a Buffer<f32>>,
-    /// The trained scattering model, its SH degree and Adam step count.
-    scat_model: Option<(&'a ScatteringModel, u32, u32)>,
-    weights: LossWeights,
-    groups: [AdamGroup; 5],
-    it: u64,
 }
 
 impl ReflectionModel {
@@ -222,7 +207,7 @@ impl ReflectionModel {
             AdamGroup::split(rc.lr_f0, rc.lr_r, MATERIAL, 3),
         ];
         let it = x.iteration as u64;
-        let pass = Pass { scat, scat_grad, scat_model, weights, groups, it };
+        let pass = Pass { scat, scat_grad, scat_model, weights, groups, it, lr_means: x.lr_means };
         let (timings, values) = loop {
             self.view_buffers(cam.width, cam.height)?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
@@ -263,58 +248,24 @@ impl ReflectionModel {
         Ok(StepOutput { loss, values, densified, timings })
     }
 
-    /// One recording of a Stage II step (see [`Self::step`]): the forward,
-    /// the composite, the losses, the backward and Adam gated on the frame
-    /// having fitted.
+    /// One recording of a Stage II step (see [`Self::step`]): the shared
+    /// composite step around the cube map's [`CubeMapLight`].
     fn record_pass(&mut self, rec: &mut Recorder, cfg: &TrainConfig, x: &ReflStepInput, p: &Pass<'_>) -> Result<()> {
-        let Pass { scat, scat_grad, scat_model, weights, ref groups, it } = *p;
-        let (cam, rc) = (x.camera, &cfg.reflection);
-        let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-        let pixels = cam.width * cam.height;
-        let n = pixels as usize;
-        record_forward(rec, (&self.shading, &self.raster), &ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel }, &self.feat, &b.frame)?;
-        let sc = rec.begin_scope("refl.composite");
-        self.shading.record_composite(rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
-        rec.end_scope(sc);
-        let hf = HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile };
-        self.objective.record(rec, LossIo { render: &b.loss_in, target: x.target, grad: &b.loss_grad }, cam, &weights, hf, &mut b.loss)?;
-        let sc = rec.begin_scope("refl.composite_backward");
-        if let Some(g) = scat_grad {
-            // The composite writes the colour planes; the scattering
-            // geometry planes get no gradient.
-            CompositeLoss::clear_scattering_geometry(rec, g, n)?;
-        }
-        let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, pixels);
-        let g = CompositeGrads { loss_grad: &b.loss_grad, refl_grad: &b.frame.grad_out, scat_grad };
-        self.shading.record_composite_backward(rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &g, prior)?;
-        rec.end_scope(sc);
-        if rc.lambda_r > 0.0 {
-            rec.read_back(&b.frame.out, R_PLANE * n, &b.r_host)?;
-        }
-        if rc.lambda_area > 0.0 {
-            rec.read_back(&b.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, &b.alpha_host)?;
-        }
-        if let Some((m, sh, it)) = scat_model {
-            m.record_backward_external(rec, cfg, cam, &ExternalStep { sh_degree: sh, lr_means: x.lr_means, iteration: it, colour_only: true })?;
-        }
-        self.raster.record_backward_with(rec, Splats::coloured(&self.set.params, &self.feat), &self.set.grads, &self.dfeat, &b.frame)?;
-        if rc.rotation_grad == RotationGrad::Reflection {
-            // The colour's backward adds the mirror direction's part to zeros.
-            rec.fill(&self.set.grads.quats.binding(), 0)?;
-        }
-        let sc = rec.begin_scope("refl.color_backward");
-        let x = ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel };
-        self.shading.record_color_backward(rec, &x, &self.dfeat, &self.set.grads, &self.texels)?;
-        rec.end_scope(sc);
-        let e = &self.env;
-        let mut grids = self.adam.set_grids(&self.set, groups).to_vec();
-        grids.push(self.adam.grid(e.len()));
-        let args = self.raster.record_fit_gate(rec, &b.frame, &grids)?;
-        let sc = rec.begin_scope("adam");
-        self.adam.record_set_gated(rec, &self.set, groups, it, &args[..5])?;
-        self.adam.record_gated(rec, AdamArrays { param: &e.params, grad: &e.grads, m: &e.m, v: &e.v, n: e.len() }, &AdamGroup::single(rc.lr_env), it, &args[5])?;
-        rec.end_scope(sc);
-        Ok(())
+        let cam = x.camera;
+        let ReflectionModel { raster, shading, objective, adam, fresnel, set, env, feat, dfeat, texels, sizes, .. } = self;
+        let ViewBuffers { frame, loss, loss_in, loss_grad, r_host, alpha_host } = sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
+        let rc = &cfg.reflection;
+        let step = StepLoss {
+            loss: objective,
+            io: LossIo { render: loss_in, target: x.target, grad: loss_grad },
+            scratch: loss,
+            cam,
+            weights: &p.weights,
+            hf: HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile },
+            scat_grad: p.scat_grad,
+        };
+        let mut light = CubeMapLight { cfg, cam, p, raster, shading, adam, fresnel: *fresnel, set, env, feat, dfeat, texels, frame, loss_in, loss_grad, r_host, alpha_host };
+        record_composite_step(rec, &mut light, step)
     }
 
     /// Render `cam` composited over the scattering colour `scat` (3 planes).
@@ -333,17 +284,6 @@ impl ReflectionModel {
     pub fn into_set(self) -> TrainableSet {
         self.set
     }
-}
-
-/// Record the reflection colour of every Gaussian of `x.g` seen from
-/// `x.cam` into `feat` and the rasterization of [colour, r (, f0)] into
-/// `frame`, with the model's colour and raster kernels.
-fn record_forward(rec: &mut Recorder, (shading, raster): (&ReflectionShading, &Rasterizer), x: &ColorInputs, feat: &Buffer<f32>, frame: &Frame) -> Result<()> {
-    let sc = rec.begin_scope("refl.color");
-    shading.record_color(rec, x, feat)?;
-    rec.end_scope(sc);
-    let bg = vec![0.0; x.fresnel.channels() as usize];
-    raster.record_forward_with(rec, Splats::coloured(x.g, feat), x.cam, &bg, frame)
 }
 
 /// The Stage I residual of one view: 4 planes (r (3), mean_c |r_c|).
