@@ -6,7 +6,7 @@
 #   here:   cargo build --release -p tgs; (mkdir -p .gl && cd .gl &&
 #           apt-get download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1
 #           libglx0 libgles2): the Vulkan loader, and libglvnd, without
-#           which NVIDIA's ICD has no vkCreateInstance (perf/scenes/gpu_suite.sh);
+#           which NVIDIA's ICD has no vkCreateInstance (perf/suite/gpu_suite.sh);
 #           the device call carries .gl and target/release/tgs
 #   there:  bash perf/gpu_mlp.sh          (the benches' text in $OUT)
 #

@@ -9,7 +9,7 @@ They are for checking that a setting tuned on the built-in scene and `lantern`
 carries over to other glass shapes; nothing in the tests depends on them.
 
     python3 -m venv /tmp/mv && /tmp/mv/bin/pip install mitsuba numpy
-    /tmp/mv/bin/python perf/scenes/mitsuba_scenes.py --out /tmp/scenes [--scene globe|suite] [--res 200] [--spp 128]
+    /tmp/mv/bin/python perf/suite/mitsuba_scenes.py --out /tmp/scenes [--scene globe|suite] [--res 200] [--spp 128]
 
 Scenes (every one: checkered floor, sun and sky; all but `globe_far` a ring
 of checkered blocks outside the camera orbit for near-field reflections):

@@ -4,7 +4,7 @@
 Issue 11's question is whether Stage II puts its Gaussians on the glass. The
 datasets carry no depth, so this reads the glass from the scene generators:
 the built-in `glass` scene (harness/dataset/src/scene/trace.rs: sphere at
-(0, 0, 0.8), radius 0.75) and every glass of `perf/scenes/mitsuba_scenes.py`
+(0, 0, 0.8), radius 0.75) and every glass of `perf/suite/mitsuba_scenes.py`
 (`globe` and `globe_far`: sphere at (0, 0, 0.95), radius 0.95; `pane`: the
 plane x = 0, |y| <= 1.2, 0 <= z <= 1.4; `dome`: sphere at the origin,
 radius 1.1; `cabinet`: a 1.4 x 1.4 x 1.2 box turned 25 degrees about z;
@@ -12,7 +12,7 @@ radius 1.1; `cabinet`: a 1.4 x 1.4 x 1.2 box turned 25 degrees about z;
 plane x = 0.4; `windshield`: the arc of radius 2 about x = -1.6).
 `lantern` (../shared/data) has no generator here.
 
-    python3 perf/scenes/glass_placement.py RUN/reflection.ply --scene globe
+    python3 perf/journal/scripts/glass_placement.py RUN/reflection.ply --scene globe
 
 Prints the share of splats within a tenth of the glass's size (its radius,
 or 0.1 for the flat ones) of the glass, the signed distance percentiles

@@ -6,7 +6,7 @@ view of a Blender-format dataset with `test/NAME_mask.png`, it compares the
 render `RENDERS/NAME.png` (a run's `renders/stage1`, `renders/stage2` or
 `renders/test`) with the ground truth, both at the run's resolution:
 
-    python3 perf/scenes/psnr_split.py DATASET --downscale 4 RUN/renders/stage1 RUN/renders/test
+    python3 perf/suite/psnr_split.py DATASET --downscale 4 RUN/renders/stage1 RUN/renders/test
 
 With `--train-masks DIR` it compares the training views instead, each with
 the glass mask `DIR/NAME.png` (what `mitsuba_scenes.py --train-masks`

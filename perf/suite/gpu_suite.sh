@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The glass-scene suite on a lent GPU machine, in one call: for every scene
 # and seed, Stage I (quick preset), then each Stage II variant from it, the
-# way perf/scenes/suite.py lays runs out (RUNS/SCENE/sSEED/{I,VARIANT}); the
+# way perf/suite/suite.py lays runs out (RUNS/SCENE/sSEED/{I,VARIANT}); the
 # runs' metrics, configs and logs come back as one archive that suite.py
 # then tabulates here without training anything:
 #
@@ -11,8 +11,8 @@
 #           without which NVIDIA's ICD has no vkCreateInstance; the device
 #           call carries .gl, .suite and target/release/tgs (which links
 #           only the C library)
-#   there:  bash perf/scenes/gpu_suite.sh          (writes $OUT/runs.tgz)
-#   here:   tar xzf runs.tgz -C RUNS && python3 perf/scenes/suite.py \
+#   there:  bash perf/suite/gpu_suite.sh          (writes $OUT/runs.tgz)
+#   here:   tar xzf runs.tgz -C RUNS && python3 perf/suite/suite.py \
 #               --scenes SUITE_DATASETS --runs RUNS --seeds 0,1 --variant ...
 #
 # SCENES (default .suite/s50), SEEDS ("0 1"), PAR (parallel scene-seed

@@ -12,7 +12,7 @@ Stage II's output, and of the rule "the reflection set decides a pixel
 only where the disagreement exceeds tau" (pixel means over the test
 views). perf/RESULTS.md, thirty-fourth entry.
 
-    python3 perf/scenes/stage1_consistency.py DATA RUNS globe,pane [VARIANT [SEED]]
+    python3 perf/journal/scripts/stage1_consistency.py DATA RUNS globe,pane [VARIANT [SEED]]
 
 Needs numpy, pillow and mitsuba (to read the EXR depth).
 """

@@ -8,8 +8,8 @@ caustic paths), each worth more to a 50-pixel image's PSNR than the glass's
 whole reflection. Both are measured against a second rendering of the same
 test views with other sampler seeds:
 
-    /tmp/mv/bin/python perf/scenes/mitsuba_scenes.py --scene dome --res 50 --split test --sampler-seed 1 --out AGAIN
-    /tmp/mv/bin/python perf/scenes/noise_floor.py DATASET AGAIN/dome [RENDERS ...]
+    /tmp/mv/bin/python perf/suite/mitsuba_scenes.py --scene dome --res 50 --split test --sampler-seed 1 --out AGAIN
+    /tmp/mv/bin/python perf/suite/noise_floor.py DATASET AGAIN/dome [RENDERS ...]
 
 (the same --res and --spp as DATASET). For the test views it prints the
 fireflies per view (a pixel whose smallest channel exceeds 0.9 and whose

@@ -24,13 +24,13 @@ brackets. A variant is `NAME` (today's defaults) or `NAME:KEY=VALUE;KEY=VALUE`
 Nothing is written over: run directories that hold a finished run are read,
 not retrained; a half-written one (no metrics.json) is an error naming it.
 
-    python3 perf/scenes/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
+    python3 perf/suite/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
         --variant default --variant 'geom:reflection.lr_quats=1e-2' [--seeds 0,1] [--tgs target/debug/tgs]
 
 `--seed-masks ROOT` gives every Stage II the glass masks in ROOT/SCENE
 (`reflection.seed_masks`; the forty-fourth entry of perf/RESULTS.md):
 
-    python3 perf/scenes/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
+    python3 perf/suite/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
         --seed-masks /tmp/masks --variant masks --variant 'masks-halfway:reflection.seed_normal=halfway'
 
 `--stage3` also trains Stage III from every variant's Stage II

@@ -11,7 +11,7 @@ or both. Continue it with `tgs train --resume --out NEW --set
 reflection.iterations=N` and evaluate; the untouched copy resumed the same
 way is the control (perf/RESULTS.md, forty-second entry).
 
-    python3 perf/scenes/oracle_seeds.py RUN NEW --scene globe --what both
+    python3 perf/journal/scripts/oracle_seeds.py RUN NEW --scene globe --what both
 
 The glass comes from `glass_placement.py` (the generators' geometry):
 spheres (`glass`, `globe`, `globe_far`, `dome`) and vertical cylinders

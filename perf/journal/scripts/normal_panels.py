@@ -14,7 +14,7 @@ PNG, one row per scene given, each row:
 `renders/test/NAME_normal.png`), scaled up by --scale with nearest
 neighbours. Rows of different sizes are padded with black.
 
-    python3 perf/scenes/normal_panels.py --out panels.png --view r_0 \\
+    python3 perf/journal/scripts/normal_panels.py --out panels.png --view r_0 \\
         --row /tmp/suite/globe RUNS/globe/s0/I RUNS/globe/s0/default \\
         --row /tmp/suite/pane RUNS/pane/s0/I RUNS/pane/s0/default
 

@@ -20,7 +20,7 @@ measured there (the residual maps a Stage II run saves). Per pixel:
 and prints each cue's AUC as a detector of the test glass mask (0.5:
 chance), over the pixels at least 4 views see, with how many there are.
 
-    python3 perf/scenes/view_inconsistency.py DATA RUNS SCENE[,SCENE...] [VARIANT [SEED]]
+    python3 perf/suite/view_inconsistency.py DATA RUNS SCENE[,SCENE...] [VARIANT [SEED]]
 
 DATA/SCENE: a dataset with test masks (`mitsuba_scenes.py`); RUNS: a
 `suite.py` run tree (RUNS/SCENE/sSEED/I and RUNS/SCENE/sSEED/VARIANT, whose

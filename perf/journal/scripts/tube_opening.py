@@ -12,7 +12,7 @@ normal (`renders/test/NAME_normal.png`) against the ground truth on the
 test views' glass masks, for the pixels whose ray enters through the
 opening and for the rest.
 
-    python3 perf/scenes/tube_opening.py SUITE/cylinder RUN [RUN ...]
+    python3 perf/journal/scripts/tube_opening.py SUITE/cylinder RUN [RUN ...]
 
 `--lid MASKS` (the training views' glass masks, `mitsuba_scenes.py
 --train-masks`) prints instead what those masks say against the lid: for
@@ -25,7 +25,7 @@ that at least a tenth of the views seeing it leave out
 lid's for comparison (they ignore occlusion by Stage I's surface, which
 the hull's test leaves out).
 
-    python3 perf/scenes/tube_opening.py SUITE/cylinder --lid MASKS/cylinder
+    python3 perf/journal/scripts/tube_opening.py SUITE/cylinder --lid MASKS/cylinder
 
 Needs numpy and Pillow.
 """
@@ -37,7 +37,7 @@ import sys
 import numpy as np
 from PIL import Image
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "suite"))
 from noise_floor import grown  # noqa: E402
 
 R, Z0, Z1 = 0.85, 0.005, 1.305

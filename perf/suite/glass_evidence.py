@@ -19,7 +19,7 @@ that the reflection itself is known:
 - absorbed: 1 - (residual on the glass) / (reflection on the glass), the
   share of the reflection Stage I reproduced with its scattering set.
 
-    /tmp/mv/bin/python perf/scenes/glass_evidence.py --suite /work/suite \
+    /tmp/mv/bin/python perf/suite/glass_evidence.py --suite /work/suite \
         --norefl /tmp/norefl --runs /work/runs-sh3 [--seed 0] globe dome pane
 
 Without --norefl (real data, or no such render) only the residual's

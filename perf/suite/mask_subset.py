@@ -5,7 +5,7 @@ K-th view (`r_N.png` with N a multiple of K, as `mitsuba_scenes.py
 `reflection.seed_masks` (a view without a mask takes no part in the
 seeding). It refuses an OUT that exists, so no masks are overwritten.
 
-    python3 perf/scenes/mask_subset.py MASKS K OUT
+    python3 perf/suite/mask_subset.py MASKS K OUT
     tgs train --from STAGE1_RUN --out RUN --stages II \\
         --set reflection.iterations=1000 --set reflection.seed_masks=OUT
 
