@@ -25,6 +25,8 @@ import numpy as np
 import mitsuba as mi
 
 mi.set_variant("scalar_rgb")
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "suite"))
+from view_inconsistency import auc  # noqa: E402
 
 
 def image(path, linear=False):
@@ -43,19 +45,6 @@ def angle(a, b):
     na = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-9)
     nb = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
     return np.degrees(np.arccos(np.clip((na * nb).sum(-1), -1, 1)))
-
-
-def auc(score, label):
-    pos, neg = score[label], score[~label]
-    if len(pos) == 0 or len(neg) == 0:
-        return float("nan")
-    allv = np.concatenate([pos, neg])
-    _, inv, counts = np.unique(allv, return_inverse=True, return_counts=True)
-    order = np.argsort(allv, kind="mergesort")
-    ranks = np.empty(len(allv))
-    ranks[order] = np.arange(1, len(allv) + 1)
-    ranks = (np.bincount(inv, ranks) / counts)[inv]
-    return (ranks[: len(pos)].sum() - len(pos) * (len(pos) + 1) / 2) / (len(pos) * len(neg))
 
 
 def scene(data, run, tau):
