@@ -144,14 +144,14 @@ impl Scene {
         let r = p[0].hypot(p[1]);
         let floor = if r < WALL_R { p[2].abs() } else { (r - WALL_R).hypot(p[2]) };
         let wall = (r - WALL_R).hypot(p[2] - p[2].clamp(0.0, WALL_H));
-        let ball = ((p - self.ball.0).dot(p - self.ball.0).sqrt() - self.ball.1).abs();
+        let ball = ((p - self.ball.0).length() - self.ball.1).abs();
         self.blocks.iter().chain(std::iter::once(&self.inner_box)).map(box_dist).fold(floor.min(wall).min(ball), f64::min)
     }
 
     /// Distance from `p` to the glass sphere's surface.
     pub fn glass_distance(p: impl Into<V3>) -> f64 {
         let p = p.into();
-        ((p - GLASS_C).dot(p - GLASS_C).sqrt() - GLASS_R).abs()
+        ((p - GLASS_C).length() - GLASS_R).abs()
     }
 
     /// Radiance along a ray (thin glass: reflect F, transmit 1 - F unbent).
@@ -164,7 +164,7 @@ impl Scene {
             Material::Diffuse(albedo) => {
                 let l = SUN.normalize();
                 let lit = n.dot(l).max(0.0);
-                let shadow = if lit > 0.0 && self.intersect(h.p + n * (1e-5), l, f64::INFINITY, false).is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3) { 0.0 } else { 1.0 };
+                let shadow = if lit > 0.0 && self.intersect(h.p + n * 1e-5, l, f64::INFINITY, false).is_some_and(|s| s.p[0].hypot(s.p[1]) < WALL_R - 1e-3) { 0.0 } else { 1.0 };
                 albedo * (0.35 + 0.65 * lit * shadow)
             }
             Material::Glass => {
@@ -173,9 +173,9 @@ impl Scene {
                 }
                 let cos = (-n.dot(d)).clamp(0.0, 1.0);
                 let f = GLASS_F0 + (1.0 - GLASS_F0) * (1.0 - cos).powi(5);
-                let r = d - (n * (2.0 * n.dot(d)));
-                let refl = self.radiance(h.p + n * (1e-6), r, depth - 1);
-                let trans = self.radiance(h.p + d * (1e-6), d, depth - 1);
+                let r = d - n * (2.0 * n.dot(d));
+                let refl = self.radiance(h.p + n * 1e-6, r, depth - 1);
+                let trans = self.radiance(h.p + d * 1e-6, d, depth - 1);
                 refl * f + trans * (1.0 - f)
             }
         }

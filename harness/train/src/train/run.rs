@@ -17,7 +17,7 @@ use super::report::{lpips_text, Reporter};
 pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::signals::{arm, stop_requested};
 pub use super::signals::{install_signal_handler, request_stop, signals_received};
-use super::stages::RunPaths;
+use super::stages::{LaterKind, RunPaths};
 use super::trainer::{StepReport, Trainer};
 use super::validation::{back_to_stage_one, end_here, Validation};
 use crate::data::Dataset;
@@ -143,8 +143,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     }
     while !tr.done() {
         let (entry, label) = tr.next_entry();
-        if tr.next_begins().is_some() {
-            run.between_stages(&mut tr, entry, &label)?;
+        if let Some(kind) = tr.next_begins() {
+            run.between_stages(&mut tr, kind, entry, &label)?;
             continue;
         }
         let r = tr.step(a.profile)?;
@@ -266,11 +266,11 @@ impl Run<'_> {
         self.clocks.save(&self.a.out, tr.iteration)
     }
 
-    /// Between stages: close the last one (or drop it), start the next, say so.
-    fn between_stages(&mut self, tr: &mut Trainer, entry: usize, label: &str) -> Result<()> {
+    /// Between stages: close the last one (or drop it), start the next
+    /// (`kind`, at schedule entry `entry`), say so.
+    fn between_stages(&mut self, tr: &mut Trainer, kind: &dyn LaterKind, entry: usize, label: &str) -> Result<()> {
         let out = &self.a.out;
         let first_round = tr.schedule.round(entry) == 1;
-        let kind = tr.next_begins().context("a stage to begin")?;
         // A resume inside the stage begins it again (to rebuild what is
         // not checkpointed) without closing the stage before.
         let resumed = tr.later.as_ref().map(|m| m.stage()) == Some(kind.stage());

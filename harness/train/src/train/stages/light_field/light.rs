@@ -4,7 +4,7 @@
 //! (`stages/composite.rs`, [`Light`]).
 
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::Light;
+use crate::train::stages::composite::{HfSetting, Light};
 use crate::train::stages::rendered::R_PLANE;
 use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::ScatteringModel;
@@ -132,6 +132,7 @@ pub(super) struct Pass<'a> {
     /// The sample count the host read (None: the GPU counts in the pass).
     pub(super) host_count: Option<u32>,
     pub(super) weights: LossWeights,
+    pub(super) hf: HfSetting,
     pub(super) it: u64,
     pub(super) net_group: AdamGroup,
     pub(super) material_group: AdamGroup,

@@ -242,7 +242,8 @@ impl LightFieldModel {
         let material_group = AdamGroup::split(lf.lr_f0, lf.lr_r, MATERIAL, 3);
         let kept = self.kept.get(x.keep.view).is_some();
         let external = train_scat.then_some(ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only });
-        let pass = Pass { scat, scat_grad, host_count, weights, it, net_group, material_group, material_len, external };
+        let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
+        let pass = Pass { scat, scat_grad, host_count, weights, hf, it, net_group, material_group, material_len, external };
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             self.record_pass(&mut rec, cfg, scattering, x, &pass)?;
@@ -263,7 +264,7 @@ impl LightFieldModel {
         self.evaluated.1 += (cam.width * cam.height) as u64;
         let b = &self.sizes[&(cam.width, cam.height)];
         let values = b.loss.values()?;
-        let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile })?;
+        let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, hf)?;
         if lf.lambda_r > 0.0 {
             loss += lf.lambda_r as f64 * crate::train::mean(&b.r_host.read()?);
         }
@@ -276,14 +277,13 @@ impl LightFieldModel {
         let cam = x.camera;
         let LightFieldModel { raster, shading, mlp, objective, adam, set, net, shade, feat, dfeat, scratch, d_phi, sizes, count_host, kept, .. } = self;
         let ViewBuffers { frame, samples, loss, loss_in, loss_grad, r_host } = sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
-        let lf = &cfg.light_field;
         let step = StepLoss {
             loss: objective,
             io: LossIo { render: loss_in, target: x.target, grad: loss_grad },
             scratch: loss,
             cam,
             weights: &p.weights,
-            hf: HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile },
+            hf: p.hf,
             scat_grad: p.scat_grad,
         };
         let mut light = NetworkLight {

@@ -4,7 +4,7 @@
 
 use crate::train::config::TrainConfig;
 use crate::train::settings::RotationGrad;
-use crate::train::stages::composite::Light;
+use crate::train::stages::composite::{HfSetting, Light};
 use crate::train::stages::rendered::R_PLANE;
 use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::ScatteringModel;
@@ -70,8 +70,8 @@ impl Light for CubeMapLight<'_> {
         if rc.lambda_area > 0.0 {
             rec.read_back(&self.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, self.alpha_host)?;
         }
-        if let Some((m, sh, it)) = p.scat_model {
-            m.record_backward_external(rec, cfg, cam, &ExternalStep { sh_degree: sh, lr_means: p.lr_means, iteration: it, colour_only: true })?;
+        if let Some((m, step)) = &p.external {
+            m.record_backward_external(rec, cfg, cam, step)?;
         }
         self.raster.record_backward_with(rec, Splats::coloured(&self.set.params, self.feat), &self.set.grads, self.dfeat, self.frame)?;
         if rc.rotation_grad == RotationGrad::Reflection {
@@ -100,13 +100,12 @@ pub(super) struct Pass<'a> {
     /// The scattering colour composited over, and its gradient when it trains.
     pub(super) scat: &'a Buffer<f32>,
     pub(super) scat_grad: Option<&'a Buffer<f32>>,
-    /// The trained scattering model, its SH degree and Adam step count.
-    pub(super) scat_model: Option<(&'a ScatteringModel, u32, u32)>,
+    /// The trained scattering model and its colour's step, when it trains.
+    pub(super) external: Option<(&'a ScatteringModel, ExternalStep)>,
     pub(super) weights: LossWeights,
+    pub(super) hf: HfSetting,
     pub(super) groups: [AdamGroup; 5],
     pub(super) it: u64,
-    /// The scattering set's position rate (when its colour trains).
-    pub(super) lr_means: f32,
 }
 
 /// Record the reflection colour of every Gaussian of `x.g` seen from

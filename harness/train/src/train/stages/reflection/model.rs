@@ -14,7 +14,7 @@ use crate::train::config::TrainConfig;
 use crate::train::logit;
 use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, StepLoss};
 use crate::train::stages::rendered::ReflRendered;
-use crate::train::stages::scattering::{ScatteringModel, StepOutput};
+use crate::train::stages::scattering::{ExternalStep, ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -207,7 +207,9 @@ impl ReflectionModel {
             AdamGroup::split(rc.lr_f0, rc.lr_r, MATERIAL, 3),
         ];
         let it = x.iteration as u64;
-        let pass = Pass { scat, scat_grad, scat_model, weights, groups, it, lr_means: x.lr_means };
+        let external = scat_model.map(|(m, sh_degree, iteration)| (m, ExternalStep { sh_degree, lr_means: x.lr_means, iteration, colour_only: true }));
+        let hf = HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile };
+        let pass = Pass { scat, scat_grad, external, weights, hf, groups, it };
         let (timings, values) = loop {
             self.view_buffers(cam.width, cam.height)?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
@@ -222,7 +224,7 @@ impl ReflectionModel {
             }
         };
         let timings = pre.into_iter().chain(timings).collect();
-        let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile })?;
+        let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, hf)?;
         if rc.lambda_r > 0.0 {
             loss += rc.lambda_r as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
         }
@@ -254,14 +256,13 @@ impl ReflectionModel {
         let cam = x.camera;
         let ReflectionModel { raster, shading, objective, adam, fresnel, set, env, feat, dfeat, texels, sizes, .. } = self;
         let ViewBuffers { frame, loss, loss_in, loss_grad, r_host, alpha_host } = sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-        let rc = &cfg.reflection;
         let step = StepLoss {
             loss: objective,
             io: LossIo { render: loss_in, target: x.target, grad: loss_grad },
             scratch: loss,
             cam,
             weights: &p.weights,
-            hf: HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile },
+            hf: p.hf,
             scat_grad: p.scat_grad,
         };
         let mut light = CubeMapLight { cfg, cam, p, raster, shading, adam, fresnel: *fresnel, set, env, feat, dfeat, texels, frame, loss_in, loss_grad, r_host, alpha_host };
