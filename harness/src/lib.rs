@@ -17,3 +17,4 @@ pub mod embed;
 pub mod mesh;
 pub mod render;
 pub mod sweep;
+pub mod view;

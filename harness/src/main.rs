@@ -94,6 +94,28 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Look at a run in a window: orbit (left drag), pan (right drag), zoom
+    /// (wheel), fly (W A S D Q E); N/P step through the dataset's cameras,
+    /// L the layers, C the Stage I/II/III checkpoints, O a screenshot, H the keys.
+    View {
+        run: PathBuf,
+        /// Window size WxH (default: the camera's, scaled up to at least 400 wide).
+        #[arg(long, value_parser = parse_size)]
+        size: Option<(u32, u32)>,
+        /// Start at this dataset camera (0-based).
+        #[arg(long, default_value_t = 0)]
+        camera: usize,
+        /// Start on the training cameras instead of the test cameras.
+        #[arg(long)]
+        train_cameras: bool,
+        /// Replay the actions in FILE (key N, orbit DX DY, pan, zoom, resize W H,
+        /// capture FILE, wait FRAMES, quit), then quit: tests and recordings.
+        #[arg(long)]
+        script: Option<PathBuf>,
+        /// Directory for screenshots (default RUN/screenshots; never written over).
+        #[arg(long)]
+        shots: Option<PathBuf>,
+    },
     /// Meshes of a run by TSDF fusion of rendered median depth over the
     /// training views, extracted by marching tetrahedra: mesh_scene.ply (the
     /// scattering set, vertex colours) and, after Stage II, mesh_glass.ply
@@ -165,6 +187,14 @@ enum SceneCmd {
     List,
 }
 
+/// `WxH` (each 1 to 16384).
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("'{s}' is not a size WxH (e.g. 800x600)");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let p = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (1..=16384).contains(n)).ok_or_else(bad);
+    Ok((p(w)?, p(h)?))
+}
+
 fn context(cli: &Cli) -> Result<std::sync::Arc<Context>> {
     Context::new(&ContextOptions { device: DeviceSelector::from_arg_or_env(cli.device.as_deref()), validation: Some(cli.validate) })
 }
@@ -216,6 +246,15 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+        Cmd::View { run, size, camera, train_cameras, script, shots } => tgs::view::view(&tgs::view::ViewArgs {
+            run: run.clone(),
+            size: *size,
+            camera: *camera,
+            train: *train_cameras,
+            script: script.clone(),
+            shots: shots.clone(),
+            device: DeviceSelector::from_arg_or_env(cli.device.as_deref()),
+        }),
         Cmd::Scene { what } => scene(what),
         Cmd::Sweep { dataset, out, grid, print_grid, quiet } => {
             if *print_grid {

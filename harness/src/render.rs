@@ -15,16 +15,9 @@ use tgs_pipelines::Camera;
 /// `frames` cameras orbiting the training cameras (intrinsics of the first).
 pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
     let Some(c0) = train.first() else { bail!("no training cameras to orbit") };
-    let centres: Vec<DVec3> = train.iter().map(|c| Vec3::from(c.centre()).as_dvec3()).collect();
-    let axes: Vec<DVec3> = train.iter().map(|c| DVec3::from([0, 1, 2].map(|j| c.world_to_view[2][j] as f64))).collect();
-    let ups: Vec<DVec3> = train.iter().map(|c| DVec3::from([0, 1, 2].map(|j| -c.world_to_view[1][j] as f64))).collect();
+    let centres = camera_centres(train);
     let n = centres.len() as f64;
-    let mean = centres.iter().fold(DVec3::ZERO, |s, c| s + *c) / n;
-    let target = nearest_to_axes(&centres, &axes).unwrap_or(mean);
-    let up = {
-        let s = ups.iter().fold(DVec3::ZERO, |s, u| s + *u);
-        s / s.length().max(1e-12)
-    };
+    let (target, up) = look_target(train);
     // Orbit in the plane perpendicular to `up` at the cameras' mean height.
     let rel: Vec<DVec3> = centres.iter().map(|c| *c - target).collect();
     let height = rel.iter().map(|r| r.dot(up)).sum::<f64>() / n;
@@ -50,6 +43,22 @@ pub fn orbit(train: &[Camera], frames: u32) -> Result<Vec<Camera>> {
             Camera::look_at(eye.as_vec3().to_array(), target.as_vec3().to_array(), up.as_vec3().to_array(), fov_y, c0.width, c0.height)
         })
         .collect())
+}
+
+fn camera_centres(cams: &[Camera]) -> Vec<DVec3> {
+    cams.iter().map(|c| Vec3::from(c.centre()).as_dvec3()).collect()
+}
+
+/// The point the cameras look at (nearest all their optical axes; their
+/// mean centre when the axes are parallel) and their mean up direction.
+pub fn look_target(cams: &[Camera]) -> (DVec3, DVec3) {
+    let centres = camera_centres(cams);
+    let axes: Vec<DVec3> = cams.iter().map(|c| DVec3::from([0, 1, 2].map(|j| c.world_to_view[2][j] as f64))).collect();
+    let ups: Vec<DVec3> = cams.iter().map(|c| DVec3::from([0, 1, 2].map(|j| -c.world_to_view[1][j] as f64))).collect();
+    let mean = centres.iter().fold(DVec3::ZERO, |s, c| s + *c) / centres.len().max(1) as f64;
+    let target = nearest_to_axes(&centres, &axes).unwrap_or(mean);
+    let s = ups.iter().fold(DVec3::ZERO, |s, u| s + *u);
+    (target, s / s.length().max(1e-12))
 }
 
 /// The point nearest all the cameras' optical axes (through `centres`

@@ -50,4 +50,6 @@ pub use mlp::{Mlp, MlpScratch, MlpShape};
 pub mod lightfield;
 pub use lightfield::{LightFieldShading, SampleScratch, ShadeParams};
 pub mod mesh;
+pub mod view;
+pub use view::{pack_pixel, Pack, PixelOrder};
 pub use mesh::{HostTsdf, TsdfFusion, TsdfGrid, TsdfVolume, BYTES_PER_VOXEL};

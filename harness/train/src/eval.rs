@@ -359,44 +359,59 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
 /// `NAME_depth.exr` (expected depth, 0 where empty) and `NAME_depth.png`
 /// (normalised to the view's depth range).
 pub fn write_outputs(dir: &mut OutDir, name: &str, r: &Rendered, normals: &[[f32; 3]], cam: &Camera) -> Result<()> {
-    let (w, h) = (r.width, r.height);
-    let n = (w * h) as usize;
-    write_png(&dir.file(&format!("{name}.png"))?, &ImageF::from_planar(w, h, 3, &r.planes[..3 * n]))?;
-    write_png(&dir.file(&format!("{name}_normal.png"))?, &normal_image(w, h, normals))?;
-    let (a, d) = (r.plane(Plane::Alpha), r.plane(Plane::Depth));
-    let depth: Vec<f32> = (0..n).map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 }).collect();
-    write_exr(&dir.file(&format!("{name}_depth.exr"))?, &ImageF { width: w, height: h, channels: 1, data: depth.clone() })?;
-    write_png(&dir.file(&format!("{name}_depth.png"))?, &ImageF { width: w, height: h, channels: 1, data: depth_grey(&depth, f32::INFINITY, 1.0) })?;
-    if let Some(l) = &r.layers {
-        write_layers(dir, name, &l.0, &l.1, cam)?;
+    let depth = expected_depth(r);
+    write_exr(&dir.file(&format!("{name}_depth.exr"))?, &ImageF { width: r.width, height: r.height, channels: 1, data: depth.clone() })?;
+    for (suffix, img) in layer_images(r, normals, &depth, cam) {
+        let file = if suffix.is_empty() { format!("{name}.png") } else { format!("{name}_{suffix}.png") };
+        write_png(&dir.file(&file)?, &img)?;
     }
     Ok(())
 }
 
-/// Stage II / III layers of a test render: `NAME_scat.png` (I_scat),
-/// `NAME_refl.png` (I_refl: Stage II's rasterized reflection colour,
-/// Stage III's F Phi), `NAME_R.png` (reflectivity map), `NAME_F0.png`
-/// (blended F0, when the stage has it), `NAME_phi_mask.png` (Stage III:
-/// where Phi was evaluated), `NAME_normal_scat.png`, `NAME_normal_refl.png`.
-fn write_layers(dir: &mut OutDir, name: &str, scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Result<()> {
+/// Expected depth per pixel (sum w z / alpha; 0 where nothing is hit).
+pub fn expected_depth(r: &Rendered) -> Vec<f32> {
+    let (a, d) = (r.plane(Plane::Alpha), r.plane(Plane::Depth));
+    (0..(r.width * r.height) as usize).map(|i| if a[i] > 1e-6 { d[i] / a[i] } else { 0.0 }).collect()
+}
+
+/// The images of a render that `tgs render` writes as PNGs, by file suffix
+/// ("" for the colour, then "normal", "depth" and, after Stage I, the
+/// layers of [`layer_images_of`]); `tgs view` shows the same pixels.
+pub fn layer_images(r: &Rendered, normals: &[[f32; 3]], depth: &[f32], cam: &Camera) -> Vec<(&'static str, ImageF)> {
+    let (w, h) = (r.width, r.height);
+    let n = (w * h) as usize;
+    let mut out = vec![
+        ("", ImageF::from_planar(w, h, 3, &r.planes[..3 * n])),
+        ("normal", normal_image(w, h, normals)),
+        ("depth", ImageF { width: w, height: h, channels: 1, data: depth_grey(depth, f32::INFINITY, 1.0) }),
+    ];
+    if let Some(l) = &r.layers {
+        out.extend(layer_images_of(&l.0, &l.1, cam));
+    }
+    out
+}
+
+/// Stage II / III layers of a render: `scat` (I_scat), `refl` (I_refl:
+/// Stage II's rasterized reflection colour, Stage III's F Phi), `R`
+/// (reflectivity map), `F0` (blended F0, when the stage has it),
+/// `phi_mask` (Stage III: where Phi was evaluated), `normal_scat`,
+/// `normal_refl`.
+fn layer_images_of(scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Vec<(&'static str, ImageF)> {
     let (w, h) = (scat.width, scat.height);
     let n = (w * h) as usize;
-    let mut png = |suffix: &str, channels: u32, data: &[f32]| write_png(&dir.file(&format!("{name}_{suffix}.png"))?, &ImageF::from_planar(w, h, channels, data));
-    png("scat", 3, &scat.planes[..3 * n])?;
-    png("refl", 3, refl.i_refl())?;
-    png("R", 1, refl.r())?;
+    let mut out = vec![("scat", ImageF::from_planar(w, h, 3, &scat.planes[..3 * n])), ("refl", ImageF::from_planar(w, h, 3, refl.i_refl())), ("R", ImageF::from_planar(w, h, 1, refl.r()))];
     let alpha = refl.refl_plane(Plane::Alpha);
     if let Some(f0s) = refl.f0_sum() {
         let f0: Vec<f32> = (0..3 * n).map(|k| f0s[k] / alpha[k % n].max(1e-6)).collect();
-        png("F0", 3, &f0)?;
+        out.push(("F0", ImageF::from_planar(w, h, 3, &f0)));
     }
     if let Some(p) = &refl.phi {
-        png("phi_mask", 1, &p.mask)?;
+        out.push(("phi_mask", ImageF::from_planar(w, h, 1, &p.mask)));
     }
-    let mut normal_png = |suffix: &str, normals: &[[f32; 3]]| write_png(&dir.file(&format!("{name}_{suffix}.png"))?, &normal_image(w, h, normals));
-    normal_png("normal_scat", &world_normals(scat, cam))?;
+    out.push(("normal_scat", normal_image(w, h, &world_normals(scat, cam))));
     let rn = [0, 1, 2].map(|k| refl.refl_plane(Plane::Normal(k)));
-    normal_png("normal_refl", &world_normals_of(rn, cam))
+    out.push(("normal_refl", normal_image(w, h, &world_normals_of(rn, cam))));
+    out
 }
 
 /// World normals as an image (n * 0.5 + 0.5; black where empty).

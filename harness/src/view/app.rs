@@ -1,0 +1,279 @@
+//! The viewer's window and event loop (winit): input to [`Action`]s, one
+//! frame per redraw, the title as the status line.
+
+use super::controls::Nav;
+use super::gpu::{Gpu, Presented};
+use super::input::{key_action, read_script, Action, HELP};
+use super::scene::Scene;
+use super::{shot, ViewArgs};
+use anyhow::{Context as _, Result};
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::time::Instant;
+use tgs_engine::Buffer;
+use winit::application::ApplicationHandler;
+use winit::dpi::PhysicalSize;
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::keyboard::{ModifiersState, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+/// Everything that lives while the window is open. Fields drop in this
+/// order: tgs's buffers and scene before the device they live on, the
+/// device before the window its surface belongs to.
+struct Open {
+    pixels: Option<Buffer<u32>>,
+    scene: Scene,
+    nav: Nav,
+    gpu: Gpu,
+    window: Window,
+}
+
+struct App<'a> {
+    args: &'a ViewArgs,
+    open: Option<Open>,
+    error: Option<anyhow::Error>,
+    script: Option<VecDeque<Action>>,
+    /// A capture (script) or screenshot waiting for the next whole frame.
+    capture: Option<PathBuf>,
+    wait: u32,
+    dirty: bool,
+    drag: Option<(MouseButton, bool)>,
+    cursor: Option<(f64, f64)>,
+    modifiers: ModifiersState,
+    /// Drawn frames and their seconds, for the summary at exit.
+    frames: (u32, f64),
+    last_ms: f64,
+}
+
+pub fn run(args: &ViewArgs) -> Result<()> {
+    let el = EventLoop::new().context("opening the display for a window (`tgs render` writes the same images headless)")?;
+    let script = args.script.as_deref().map(read_script).transpose()?.map(VecDeque::from);
+    let mut app = App {
+        args,
+        open: None,
+        error: None,
+        script,
+        capture: None,
+        wait: 0,
+        dirty: true,
+        drag: None,
+        cursor: None,
+        modifiers: ModifiersState::empty(),
+        frames: (0, 0.0),
+        last_ms: 0.0,
+    };
+    el.run_app(&mut app).context("the window's event loop")?;
+    drop(app.open.take());
+    if let Some(e) = app.error {
+        return Err(e);
+    }
+    if app.frames.0 > 0 {
+        eprintln!("tgs view: {} frames, {:.1} ms a frame on average", app.frames.0, 1e3 * app.frames.1 / app.frames.0 as f64);
+    }
+    Ok(())
+}
+
+impl App<'_> {
+    fn start(&mut self, el: &ActiveEventLoop) -> Result<()> {
+        let window = el.create_window(Window::default_attributes().with_title("tgs view").with_visible(true)).context("creating the window")?;
+        let gpu = Gpu::new(&window, &self.args.device)?;
+        let mut scene = Scene::open(gpu.ctx(), &self.args.run)?;
+        if self.args.train {
+            scene.switch_set();
+        }
+        let n = scene.cameras().len();
+        if self.args.camera >= n {
+            anyhow::bail!("--camera {}: the run has {n} {} cameras", self.args.camera, if scene.train_set { "training" } else { "test" });
+        }
+        scene.camera = self.args.camera;
+        let cam = scene.dataset_camera().1;
+        let size = self.args.size.unwrap_or_else(|| {
+            let k = 400u32.div_ceil(cam.width).max(1);
+            (cam.width * k, cam.height * k)
+        });
+        let _ = window.request_inner_size(PhysicalSize::new(size.0, size.1));
+        let nav = Nav::at(&cam, scene.target, scene.up);
+        eprintln!("tgs view: {} on {}; press H for the keys", self.args.run.display(), gpu.device_name);
+        self.open = Some(Open { pixels: None, scene, nav, gpu, window });
+        Ok(())
+    }
+
+    fn apply(&mut self, a: Action, el: &ActiveEventLoop) -> Result<()> {
+        let Some(o) = self.open.as_mut() else { return Ok(()) };
+        let reset = |o: &mut Open| o.nav = Nav::at(&o.scene.dataset_camera().1, o.scene.target, o.scene.up);
+        match a {
+            Action::Orbit(dx, dy) => o.nav.orbit(dx, dy),
+            Action::Pan(dx, dy) => o.nav.pan(dx, dy),
+            Action::Zoom(s) => o.nav.zoom(s),
+            Action::Fly(d) => o.nav.fly(d),
+            Action::Camera(by) => {
+                o.scene.step_camera(by);
+                reset(o);
+            }
+            Action::CameraSet => {
+                o.scene.switch_set();
+                reset(o);
+            }
+            Action::Reset => reset(o),
+            Action::Layer(by) => o.scene.step_layer(by),
+            Action::Checkpoint => o.scene.next_checkpoint()?,
+            Action::Screenshot => {
+                let dir = self.args.shots.clone().unwrap_or_else(|| self.args.run.join("screenshots"));
+                let (name, _) = o.scene.dataset_camera();
+                let stem = format!("{}{}_{}_stage{}", name, if o.nav.unmoved().is_some() { "" } else { "_moved" }, o.scene.layer_name(), o.scene.stage());
+                self.capture = Some(shot::fresh_name(&dir, &stem));
+            }
+            Action::Help => println!("{HELP}"),
+            Action::Quit => el.exit(),
+            Action::Resize(w, h) => {
+                let _ = o.window.request_inner_size(PhysicalSize::new(w, h));
+            }
+            Action::Capture(p) => self.capture = Some(p),
+            Action::Wait(n) => self.wait = n,
+        }
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Draw one frame; whether it was whole (else draw again).
+    fn draw(&mut self) -> Result<bool> {
+        let Some(o) = self.open.as_mut() else { return Ok(true) };
+        let size = o.window.inner_size();
+        let Some((w, h)) = o.gpu.extent((size.width, size.height))? else { return Ok(true) };
+        let t0 = Instant::now();
+        let cam = o.nav.camera(w, h);
+        let n = (w * h) as usize;
+        if o.pixels.as_ref().is_none_or(|p| p.len() != n) {
+            // Every pixel is written (by the pack kernel or the upload) before the copy reads it.
+            o.pixels = Some(Buffer::uninit(o.gpu.ctx(), "view.pixels", n)?);
+        }
+        let pixels = o.pixels.as_ref().expect("made above");
+        let order = o.gpu.order;
+        if o.scene.layer != 0 {
+            pixels.upload(&o.scene.host_layer(&cam, o.nav.unmoved(), order)?)?;
+        }
+        let scene = &mut o.scene;
+        let shown = o.gpu.present(pixels, self.capture.is_some(), |rec| scene.record_final(rec, &cam, order, pixels).map(|_| ()))?;
+        let whole = o.scene.complete(&cam)?;
+        let captured = match shown {
+            Presented::Hidden => return Ok(true),
+            Presented::Stale => return Ok(false),
+            Presented::Shown(c) => c,
+        };
+        if !whole {
+            return Ok(false);
+        }
+        let dt = t0.elapsed().as_secs_f64();
+        self.frames = (self.frames.0 + 1, self.frames.1 + dt);
+        self.last_ms = 1e3 * dt;
+        if let (Some(px), Some(path)) = (captured, self.capture.take()) {
+            shot::write_new(&path, &px, (w, h), order)?;
+            eprintln!("tgs view: wrote {}", path.display());
+        }
+        let (name, _) = o.scene.dataset_camera();
+        let set = if o.scene.train_set { "training" } else { "test" };
+        o.window.set_title(&format!(
+            "tgs view · Stage {} · {set} camera {}/{} '{name}'{} · {} · {w}x{h} · {:.1} ms · {} + {} Gaussians",
+            o.scene.stage(),
+            o.scene.camera + 1,
+            o.scene.cameras().len(),
+            if o.nav.unmoved().is_some() { "" } else { " (moved)" },
+            o.scene.layer_name(),
+            self.last_ms,
+            o.scene.counts.0,
+            o.scene.counts.1,
+        ));
+        Ok(true)
+    }
+
+    fn fail(&mut self, e: anyhow::Error, el: &ActiveEventLoop) {
+        self.error.get_or_insert(e);
+        el.exit();
+    }
+}
+
+impl ApplicationHandler for App<'_> {
+    fn resumed(&mut self, el: &ActiveEventLoop) {
+        if self.open.is_none() {
+            if let Err(e) = self.start(el) {
+                self.fail(e, el);
+            }
+        }
+    }
+
+    fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let r = match event {
+            WindowEvent::CloseRequested => {
+                el.exit();
+                Ok(())
+            }
+            WindowEvent::Resized(_) => {
+                self.dirty = true;
+                Ok(())
+            }
+            WindowEvent::RedrawRequested => match self.draw() {
+                Ok(whole) => {
+                    self.dirty = !whole;
+                    Ok(())
+                }
+                Err(e) => Err(e),
+            },
+            WindowEvent::ModifiersChanged(m) => {
+                self.modifiers = m.state();
+                Ok(())
+            }
+            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => match event.physical_key {
+                PhysicalKey::Code(k) => key_action(k).map_or(Ok(()), |a| self.apply(a, el)),
+                _ => Ok(()),
+            },
+            WindowEvent::MouseInput { state, button, .. } => {
+                self.drag = (state == ElementState::Pressed).then_some((button, self.modifiers.shift_key()));
+                Ok(())
+            }
+            WindowEvent::CursorMoved { position, .. } => {
+                let last = self.cursor.replace((position.x, position.y));
+                match (self.drag, last) {
+                    (Some((MouseButton::Left, false)), Some((x, y))) => self.apply(Action::Orbit(position.x - x, position.y - y), el),
+                    (Some((MouseButton::Left, true) | (MouseButton::Right, _)), Some((x, y))) => self.apply(Action::Pan(position.x - x, position.y - y), el),
+                    _ => Ok(()),
+                }
+            }
+            WindowEvent::MouseWheel { delta, .. } => {
+                let steps = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y as f64,
+                    MouseScrollDelta::PixelDelta(p) => p.y / 50.0,
+                };
+                self.apply(Action::Zoom(steps), el)
+            }
+            _ => Ok(()),
+        };
+        if let Err(e) = r {
+            self.fail(e, el);
+        }
+    }
+
+    fn about_to_wait(&mut self, el: &ActiveEventLoop) {
+        // A script moves on only after a whole frame of the last action.
+        if !self.dirty && self.capture.is_none() {
+            if self.wait > 0 {
+                self.wait -= 1;
+                self.dirty = true;
+            } else if let Some(script) = self.script.as_mut() {
+                match script.pop_front() {
+                    Some(a) => {
+                        if let Err(e) = self.apply(a, el) {
+                            self.fail(e, el);
+                        }
+                    }
+                    None => el.exit(),
+                }
+            }
+        }
+        if self.dirty || self.capture.is_some() {
+            if let Some(o) = &self.open {
+                o.window.request_redraw();
+            }
+        }
+    }
+}

@@ -1,0 +1,254 @@
+//! What the viewer shows: a run's checkpoints (Stage I, II, III), the
+//! dataset's cameras, and the layers `tgs render` writes. The final image
+//! is recorded on the GPU through [`SceneRenderer`] into the frame's
+//! command buffer; the other layers come from the trainer's render, as
+//! `tgs render` makes them, so both show the same pixels it writes.
+
+use crate::data::image_io::ImageF;
+use crate::data::Dataset;
+use crate::embed::SceneRenderer;
+use crate::eval::{expected_depth, layer_images, world_normals};
+use crate::train::checkpoint;
+use crate::train::rundir::{stage_checkpoint, CHECKPOINT};
+use crate::train::Trainer;
+use anyhow::{bail, Context as _, Result};
+use glam::DVec3;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context, Recorder};
+use tgs_pipelines::{pack_pixel, Camera, Pack, PixelOrder};
+
+/// The layers in the order L steps through them; "final" is the GPU
+/// composite, "gt" the dataset's photo, the rest `tgs render`'s PNG
+/// suffixes (those a stage lacks are skipped).
+pub const LAYERS: [&str; 11] = ["final", "gt", "normal", "depth", "scat", "refl", "R", "F0", "phi_mask", "normal_scat", "normal_refl"];
+
+pub struct Scene {
+    ctx: Arc<Context>,
+    /// (label, file) of each checkpoint the run has, Stage I first.
+    pub checkpoints: Vec<(String, PathBuf)>,
+    pub checkpoint: usize,
+    renderer: SceneRenderer,
+    /// The trainer of the current checkpoint, for the layers (made when one is first shown).
+    trainer: Option<Trainer>,
+    pub data: Dataset,
+    /// Test cameras (false) or training cameras (true).
+    pub train_set: bool,
+    pub camera: usize,
+    pub layer: usize,
+    pack: Pack,
+    /// The final image's colour planes at the current size.
+    colour: Option<Buffer<f32>>,
+    /// The point the training cameras look at, and their mean up.
+    pub target: DVec3,
+    pub up: DVec3,
+    /// Gaussians of the scattering and the reflection set.
+    pub counts: (usize, usize),
+    /// The layers the current checkpoint's render has, once one was made.
+    known: Option<Vec<&'static str>>,
+}
+
+impl Scene {
+    pub fn open(ctx: &Arc<Context>, run: &Path) -> Result<Scene> {
+        let last = run.join(CHECKPOINT);
+        if !last.is_file() {
+            bail!("{}: no checkpoint.bin: not a tgs run directory (or a run that has not saved yet)", run.display());
+        }
+        let mut checkpoints: Vec<(String, PathBuf)> = (1..=3).map(|n| (roman(n), run.join(stage_checkpoint(n)))).filter(|(_, p)| p.is_file()).collect();
+        let (h, _) = checkpoint::read(&last)?;
+        let data = crate::train::run::load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
+        if data.train.is_empty() {
+            bail!("{}: the run's dataset has no training cameras", data.root.display());
+        }
+        let renderer = SceneRenderer::load(ctx, &last)?;
+        checkpoints.retain(|(l, _)| l != renderer.stage);
+        checkpoints.push((renderer.stage.to_string(), last));
+        let train: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
+        let (target, up) = crate::render::look_target(&train);
+        let counts = counts(&checkpoints[checkpoints.len() - 1].1)?;
+        let train_set = data.test.is_empty();
+        Ok(Scene {
+            ctx: ctx.clone(),
+            checkpoint: checkpoints.len() - 1,
+            checkpoints,
+            renderer,
+            trainer: None,
+            data,
+            train_set,
+            camera: 0,
+            layer: 0,
+            pack: Pack::new(ctx)?,
+            colour: None,
+            target,
+            up,
+            counts,
+            known: None,
+        })
+    }
+
+    /// The current checkpoint's stage ("I", "II" or "III").
+    pub fn stage(&self) -> &str {
+        &self.checkpoints[self.checkpoint].0
+    }
+
+    /// Load the next checkpoint (the layer stays if the stage has it).
+    pub fn next_checkpoint(&mut self) -> Result<()> {
+        let next = (self.checkpoint + 1) % self.checkpoints.len();
+        let path = &self.checkpoints[next].1;
+        self.renderer = SceneRenderer::load(&self.ctx, path)?;
+        self.counts = counts(path)?;
+        self.trainer = None;
+        self.known = None;
+        self.checkpoint = next;
+        Ok(())
+    }
+
+    pub fn cameras(&self) -> &[crate::data::View] {
+        if self.train_set {
+            &self.data.train
+        } else {
+            &self.data.test
+        }
+    }
+
+    /// The current dataset camera and its view's name.
+    pub fn dataset_camera(&self) -> (&str, Camera) {
+        let v = &self.cameras()[self.camera];
+        (&v.name, v.camera)
+    }
+
+    pub fn step_camera(&mut self, by: i64) {
+        let n = self.cameras().len() as i64;
+        self.camera = (self.camera as i64 + by).rem_euclid(n) as usize;
+    }
+
+    pub fn switch_set(&mut self) {
+        if !self.data.test.is_empty() {
+            self.train_set = !self.train_set;
+            self.camera = 0;
+        }
+    }
+
+    pub fn layer_name(&self) -> &'static str {
+        LAYERS[self.layer]
+    }
+
+    /// Step to the next (or previous) layer this stage has.
+    pub fn step_layer(&mut self, by: i64) {
+        let later = self.stage() != "I";
+        let has = |name: &str| match (name, &self.known) {
+            ("final" | "gt", _) => true,
+            (_, Some(k)) => k.contains(&name),
+            ("normal" | "depth", None) => true,
+            ("phi_mask", None) => self.stage() == "III",
+            (_, None) => later,
+        };
+        let n = LAYERS.len() as i64;
+        let mut l = self.layer as i64;
+        for _ in 0..n {
+            l = (l + by).rem_euclid(n);
+            if has(LAYERS[l as usize]) {
+                break;
+            }
+        }
+        self.layer = l as usize;
+    }
+
+    /// Record the final image of `cam` packed into `pixels`; false when the
+    /// layer is not the final image (then [`Scene::host_layer`] fills them).
+    pub fn record_final(&mut self, rec: &mut Recorder, cam: &Camera, order: PixelOrder, pixels: &Buffer<u32>) -> Result<bool> {
+        if self.layer != 0 {
+            return Ok(false);
+        }
+        let n = SceneRenderer::output_len(cam.width, cam.height);
+        if self.colour.as_ref().is_none_or(|c| c.len() != n) {
+            // The renderer's copy writes every float before the pack reads them.
+            self.colour = Some(Buffer::uninit(&self.ctx, "view.colour", n)?);
+        }
+        let colour = self.colour.as_ref().expect("made above");
+        self.renderer.record(rec, cam, &colour.binding())?;
+        self.pack.record(rec, &colour.binding(), cam.width * cam.height, order, &pixels.binding())?;
+        Ok(true)
+    }
+
+    /// After the frame's submission: whether the final image was whole
+    /// (else the renderer grew its buffers: draw again).
+    pub fn complete(&mut self, cam: &Camera) -> Result<bool> {
+        if self.layer != 0 {
+            return Ok(true);
+        }
+        self.renderer.complete(cam)
+    }
+
+    /// The current layer of `cam` (not the final image) as packed pixels;
+    /// `at` is the dataset camera it stands at, for the photo.
+    pub fn host_layer(&mut self, cam: &Camera, at: Option<&Camera>, order: PixelOrder) -> Result<Vec<u32>> {
+        let name = self.layer_name();
+        let img = if name == "gt" {
+            let v = &self.cameras()[self.camera];
+            match at {
+                Some(c) if (c.width, c.height) == (cam.width, cam.height) => v.image.clone(),
+                _ => resample(&v.image, cam.width, cam.height),
+            }
+        } else {
+            if self.trainer.is_none() {
+                let path = &self.checkpoints[self.checkpoint].1;
+                let (h, arrays) = checkpoint::read(path)?;
+                self.trainer = Some(checkpoint::restore(&self.ctx, path, (h, arrays), &self.data)?);
+            }
+            let tr = self.trainer.as_mut().expect("made above");
+            let r = tr.render(cam)?;
+            let depth = expected_depth(&r);
+            let layers = layer_images(&r, &world_normals(&r, cam), &depth, cam);
+            self.known = Some(layers.iter().map(|(s, _)| if s.is_empty() { "final" } else { *s }).collect());
+            layers
+                .into_iter()
+                .find(|(s, _)| *s == name)
+                .map(|(_, i)| i)
+                .with_context(|| format!("Stage {} renders no '{name}' layer", self.stage()))?
+        };
+        Ok(pack_image(&img, order))
+    }
+}
+
+fn roman(n: usize) -> String {
+    ["I", "II", "III"].get(n - 1).map_or_else(|| n.to_string(), |s| s.to_string())
+}
+
+/// Gaussians in the scattering and the reflection set of a checkpoint.
+fn counts(path: &Path) -> Result<(usize, usize)> {
+    let (h, arrays) = checkpoint::read(path)?;
+    let state = checkpoint::render_state(&h, arrays)?;
+    let refl = match &state.layer {
+        checkpoint::RenderLayer::Scattering => 0,
+        checkpoint::RenderLayer::Env { set, .. } | checkpoint::RenderLayer::LightField { set, .. } => set.len(),
+    };
+    Ok((state.scattering.len(), refl))
+}
+
+/// An image (1 or 3 channels, interleaved) as packed 8-bit pixels.
+pub fn pack_image(img: &ImageF, order: PixelOrder) -> Vec<u32> {
+    let c = img.channels as usize;
+    img.data
+        .chunks(c)
+        .map(|p| {
+            let rgb = if c >= 3 { [p[0], p[1], p[2]] } else { [p[0]; 3] };
+            pack_pixel(rgb, order)
+        })
+        .collect()
+}
+
+/// Nearest-neighbour resampling to `w` x `h` (the photo beside a moved camera).
+fn resample(img: &ImageF, w: u32, h: u32) -> ImageF {
+    let c = img.channels as usize;
+    let mut data = Vec::with_capacity(w as usize * h as usize * c);
+    for y in 0..h {
+        let sy = ((y as f64 + 0.5) * img.height as f64 / h as f64) as usize;
+        for x in 0..w {
+            let sx = ((x as f64 + 0.5) * img.width as f64 / w as f64) as usize;
+            let at = (sy.min(img.height as usize - 1) * img.width as usize + sx.min(img.width as usize - 1)) * c;
+            data.extend_from_slice(&img.data[at..at + c]);
+        }
+    }
+    ImageF { width: w, height: h, channels: img.channels, data }
+}
