@@ -51,5 +51,5 @@ pub mod lightfield;
 pub use lightfield::{LightFieldShading, SampleScratch, ShadeParams};
 pub mod mesh;
 pub mod view;
-pub use view::{pack_pixel, Pack, PixelOrder};
 pub use mesh::{HostTsdf, TsdfFusion, TsdfGrid, TsdfVolume, BYTES_PER_VOXEL};
+pub use view::{pack_pixel, Pack, PixelOrder};

@@ -69,7 +69,8 @@ impl Gpu {
         let (physical, family, device_name) = pick(&instance, &surface_fn, surface, sel)?;
         // SAFETY: `physical` was enumerated from `instance`.
         let features = unsafe { enabled_features(&instance, physical) };
-        let mut want13 = vk::PhysicalDeviceVulkan13Features::default().subgroup_size_control(features.subgroup_size_control).compute_full_subgroups(features.compute_full_subgroups);
+        let mut want13 =
+            vk::PhysicalDeviceVulkan13Features::default().subgroup_size_control(features.subgroup_size_control).compute_full_subgroups(features.compute_full_subgroups);
         let prio = [1.0f32];
         let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&prio)];
         let dev_exts = [ash::khr::swapchain::NAME.as_ptr()];
@@ -238,7 +239,8 @@ impl Gpu {
         let swapchains = [chain.swapchain];
         let indices = [index];
         // SAFETY: the image was acquired and its copy signals `copied`, which presentation waits on.
-        let shown = unsafe { self.swapchain_fn.queue_present(self.queue, &vk::PresentInfoKHR::default().wait_semaphores(&signals).swapchains(&swapchains).image_indices(&indices)) };
+        let shown =
+            unsafe { self.swapchain_fn.queue_present(self.queue, &vk::PresentInfoKHR::default().wait_semaphores(&signals).swapchains(&swapchains).image_indices(&indices)) };
         let pixels = readback.map(|b| b.download()).transpose()?;
         match shown {
             Ok(false) => Ok(Presented::Shown(pixels)),

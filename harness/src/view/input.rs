@@ -193,7 +193,7 @@ mod tests {
             a,
             vec![Action::Camera(1), Action::Orbit(10.0, -5.0), Action::Zoom(-2.0), Action::Resize(1, 1), Action::Capture(dir.join("a.png")), Action::Wait(3), Action::Quit]
         );
-        for (bad, what) in [("key Z", "no key 'Z'"), ("orbit 1", "missing"), ("resize 0 4", "not a size"), ("zoom nan", "not a number"), ("jump", "unknown action")] {
+        for (bad, what) in [("key Z", "no key 'Z'"), ("orbit 1", "takes 2 argument"), ("resize 0 4", "not a size"), ("zoom nan", "not a number"), ("jump", "unknown action")] {
             std::fs::write(&p, format!("key N\n{bad}\n")).unwrap();
             let e = format!("{:#}", read_script(&p).unwrap_err());
             assert!(e.contains(":2:") && e.contains(what), "{bad}: {e}");

@@ -33,15 +33,17 @@ pub struct ViewArgs {
 /// Open the window and run until it closes. Without a display this says
 /// so and names `tgs render`, the headless way to the same images.
 pub fn view(a: &ViewArgs) -> Result<()> {
+    // The run first: a missing or corrupt one gets the other commands' errors, display or not.
+    if !a.run.is_dir() {
+        bail!("{}: no such run directory", a.run.display());
+    }
+    crate::train::checkpoint::read(&a.run.join(crate::train::rundir::CHECKPOINT))?;
     let display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
     if !display {
         bail!(
             "no display to open a window on (neither DISPLAY nor WAYLAND_DISPLAY is set); `tgs render {}` writes the same images headless (or run under xvfb-run)",
             a.run.display()
         );
-    }
-    if !a.run.is_dir() {
-        bail!("{}: no such run directory", a.run.display());
     }
     if let Some(s) = &a.script {
         // Read before the window opens, so a bad script fails at once.

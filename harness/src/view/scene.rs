@@ -201,11 +201,7 @@ impl Scene {
             let depth = expected_depth(&r);
             let layers = layer_images(&r, &world_normals(&r, cam), &depth, cam);
             self.known = Some(layers.iter().map(|(s, _)| if s.is_empty() { "final" } else { *s }).collect());
-            layers
-                .into_iter()
-                .find(|(s, _)| *s == name)
-                .map(|(_, i)| i)
-                .with_context(|| format!("Stage {} renders no '{name}' layer", self.stage()))?
+            layers.into_iter().find(|(s, _)| *s == name).map(|(_, i)| i).with_context(|| format!("Stage {} renders no '{name}' layer", self.stage()))?
         };
         Ok(pack_image(&img, order))
     }

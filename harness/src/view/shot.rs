@@ -24,9 +24,7 @@ pub fn write_new(path: &Path, pixels: &[u32], (w, h): (u32, u32), order: PixelOr
         })
         .collect();
     let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(&rgb, w, h, image::ExtendedColorType::Rgb8)
-        .with_context(|| format!("{}: encoding the PNG", path.display()))?;
+    image::codecs::png::PngEncoder::new(&mut png).write_image(&rgb, w, h, image::ExtendedColorType::Rgb8).with_context(|| format!("{}: encoding the PNG", path.display()))?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
     }

@@ -399,7 +399,8 @@ pub fn layer_images(r: &Rendered, normals: &[[f32; 3]], depth: &[f32], cam: &Cam
 fn layer_images_of(scat: &Rendered, refl: &crate::train::trainer::ReflRendered, cam: &Camera) -> Vec<(&'static str, ImageF)> {
     let (w, h) = (scat.width, scat.height);
     let n = (w * h) as usize;
-    let mut out = vec![("scat", ImageF::from_planar(w, h, 3, &scat.planes[..3 * n])), ("refl", ImageF::from_planar(w, h, 3, refl.i_refl())), ("R", ImageF::from_planar(w, h, 1, refl.r()))];
+    let mut out =
+        vec![("scat", ImageF::from_planar(w, h, 3, &scat.planes[..3 * n])), ("refl", ImageF::from_planar(w, h, 3, refl.i_refl())), ("R", ImageF::from_planar(w, h, 1, refl.r()))];
     let alpha = refl.refl_plane(Plane::Alpha);
     if let Some(f0s) = refl.f0_sum() {
         let f0: Vec<f32> = (0..3 * n).map(|k| f0s[k] / alpha[k % n].max(1e-6)).collect();

@@ -1,0 +1,134 @@
+//! `tgs view` under a virtual display (xvfb-run, lavapipe): a scripted
+//! camera path and key presses, frames captured from the swapchain and
+//! compared with `tgs render` for the same cameras; layer and checkpoint
+//! keys change what they should; the window survives a resize to 1x1 and
+//! back; missing or corrupt runs and a missing display get clear errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tgs() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_tgs"));
+    c.env_remove("TGS_DEVICE");
+    c
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn ok(c: &mut Command) -> String {
+    let o = c.output().expect("running tgs");
+    let t = text(&o);
+    assert!(o.status.success(), "{c:?} failed:\n{t}");
+    t
+}
+
+/// `tgs view` with `args` under xvfb-run (scripts/setup.sh installs it).
+fn view(args: &[&str]) -> Output {
+    let mut c = Command::new("xvfb-run");
+    c.args(["-a", "-s", "-screen 0 640x480x24", env!("CARGO_BIN_EXE_tgs"), "view"]).args(args).env_remove("TGS_DEVICE");
+    c.output().expect("xvfb-run is missing: scripts/setup.sh installs it (package xvfb)")
+}
+
+fn rgb(p: &Path) -> image::RgbImage {
+    image::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())).to_rgb8()
+}
+
+/// A Stage I-II-III run of the tiny glass scene, trained briefly.
+fn trained(base: &Path) -> PathBuf {
+    let data = base.join("scene");
+    tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &data, |_, _| {}).unwrap();
+    let run = base.join("run");
+    let sets = ["test_interval=0", "checkpoint_interval=0", "reflection.iterations=40", "light_field.iterations=40"];
+    let mut c = tgs();
+    c.args(["train", data.to_str().unwrap(), "--out", run.to_str().unwrap(), "--preset", "quick", "--iterations", "150", "--quiet"]);
+    for s in sets {
+        c.args(["--set", s]);
+    }
+    ok(&mut c);
+    run
+}
+
+#[test]
+fn the_window_shows_what_tgs_render_writes() {
+    let base = Path::new(env!("CARGO_TARGET_TMPDIR")).join("view");
+    let _ = std::fs::remove_dir_all(&base);
+    std::fs::create_dir_all(&base).unwrap();
+    let run = trained(&base);
+    let renders = base.join("renders");
+    ok(tgs().args(["render", run.to_str().unwrap(), "--out", renders.to_str().unwrap()]));
+    let script = base.join("path.txt");
+    std::fs::write(
+        &script,
+        "capture shots/final0.png\n\
+         key l\ncapture shots/gt0.png\n\
+         key l\ncapture shots/normal0.png\n\
+         key l\nkey l\ncapture shots/scat0.png\n\
+         key k\nkey k\nkey k\nkey k\n\
+         key n\ncapture shots/final1.png\n\
+         orbit 60 15\nzoom 1\ncapture shots/orbit.png\n\
+         key r\ncapture shots/again1.png\n\
+         resize 1 1\nwait 3\ncapture shots/tiny.png\n\
+         resize 48 48\nwait 3\ncapture shots/back1.png\n\
+         key c\ncapture shots/stage1.png\n\
+         key o\n",
+    )
+    .unwrap();
+    let shots = base.join("own-shots");
+    let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", script.to_str().unwrap(), "--shots", shots.to_str().unwrap()]);
+    let t = text(&o);
+    assert!(o.status.success(), "tgs view failed:\n{t}");
+    let shot = |n: &str| rgb(&base.join("shots").join(n));
+    let render = |n: &str| rgb(&renders.join(n));
+    // The swapchain's pixels are tgs render's, byte for byte, for the final image and a layer.
+    assert_eq!(shot("final0.png"), render("r_0.png"), "camera 0, final");
+    assert_eq!(shot("normal0.png"), render("r_0_normal.png"), "camera 0, normals");
+    assert_eq!(shot("scat0.png"), render("r_0_scat.png"), "camera 0, scattering layer");
+    assert_eq!(shot("final1.png"), render("r_1.png"), "camera 1, final");
+    assert_eq!(shot("again1.png"), render("r_1.png"), "camera 1 after moving away and back (R)");
+    assert_eq!(shot("back1.png"), render("r_1.png"), "camera 1 after a resize to 1x1 and back");
+    // The photo layer is the dataset's test image, not a render.
+    let gt = shot("gt0.png");
+    assert_ne!(gt, shot("final0.png"));
+    let photo = image::open(base.join("scene/test/r_0.png")).unwrap().to_rgb8();
+    assert_eq!(gt, photo, "the gt layer shows the test photo");
+    // Moving changes the image; 1x1 is one pixel; Stage I's checkpoint differs from Stage III's.
+    assert_ne!(shot("orbit.png"), shot("final1.png"));
+    assert_eq!(shot("tiny.png").dimensions(), (1, 1));
+    assert_ne!(shot("stage1.png"), shot("back1.png"));
+    // The screenshot key writes a new file, named for camera, layer and stage, into --shots.
+    let own: Vec<_> = std::fs::read_dir(&shots).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    assert_eq!(own, vec!["r_1_final_stageI.png".to_string()], "{t}");
+    assert_eq!(rgb(&shots.join(&own[0])), shot("stage1.png"));
+    // Without a display the message names the headless way.
+    let o = tgs().args(["view", run.to_str().unwrap()]).env_remove("DISPLAY").env_remove("WAYLAND_DISPLAY").output().unwrap();
+    assert!(!o.status.success() && text(&o).contains("no display") && text(&o).contains("tgs render"), "{}", text(&o));
+    // Run again: captures never write over a file.
+    let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", script.to_str().unwrap(), "--shots", shots.to_str().unwrap()]);
+    assert!(!o.status.success() && text(&o).contains("final0.png: exists"), "{}", text(&o));
+    std::fs::remove_dir_all(&base).unwrap();
+}
+
+#[test]
+fn missing_or_corrupt_runs_and_no_display_are_said() {
+    let base = Path::new(env!("CARGO_TARGET_TMPDIR")).join("view-errors");
+    let _ = std::fs::remove_dir_all(&base);
+    std::fs::create_dir_all(&base).unwrap();
+    let missing = base.join("nothing");
+    let o = tgs().args(["view", missing.to_str().unwrap()]).output().unwrap();
+    assert!(!o.status.success() && text(&o).contains("nothing: no such run directory"), "{}", text(&o));
+    let bad = base.join("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    std::fs::write(bad.join("checkpoint.bin"), b"not a checkpoint at all").unwrap();
+    let o = view(&[bad.to_str().unwrap()]);
+    assert!(!o.status.success() && text(&o).contains("checkpoint.bin: not a tgs checkpoint or corrupt"), "{}", text(&o));
+    let o = tgs().args(["view", bad.to_str().unwrap()]).env_remove("DISPLAY").env_remove("WAYLAND_DISPLAY").output().unwrap();
+    assert!(!o.status.success() && text(&o).contains("corrupt"), "{}", text(&o));
+    // A sound run without a display: the message names the headless way.
+    let empty = base.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let o = tgs().args(["view", empty.to_str().unwrap()]).env_remove("DISPLAY").env_remove("WAYLAND_DISPLAY").output().unwrap();
+    assert!(!o.status.success() && text(&o).contains("cannot read the checkpoint"), "{}", text(&o));
+    std::fs::remove_dir_all(&base).unwrap();
+}
