@@ -354,22 +354,36 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let (mut tr, data) = tgs::train::run::open_run(ctx, &deep).unwrap();
     let again = tgs::eval::evaluate(&mut tr, &data.test, None).unwrap();
     assert_eq!(Some(again.psnr), md["test"]["psnr"].as_f64(), "the depth is not restored from the checkpoint");
-    // reflection.normal_min_r: at 1 no pixel's R reaches it, so the output
-    // normals are Stage I's everywhere and the set decides none of the
-    // glass; at 0 the set decides where it covers (the run's own numbers).
+    // Who decides a pixel's normal. This set was seeded from the residual
+    // (no glass masks), so reflection.residual_normal_min_r is its
+    // threshold and normal_min_r (for mask-seeded sets) changes nothing.
+    // At 1 no pixel's R reaches it: the output normals are Stage I's
+    // everywhere; at 0 the set decides wherever it covers, more of the
+    // glass than at the default. Marked as mask-seeded, normal_min_r rules.
     let mae = |m: &tgs::eval::Metrics| (m.normals.normal_mae_deg.unwrap(), m.normals.normal_mae_scattering_deg.unwrap(), m.normals.reflection_coverage.unwrap());
-    tr.cfg.reflection.normal_min_r = 1.0;
-    let (o1, scat, cov) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
-    assert!(o1 == scat && cov == 0.0, "normal_min_r = 1: output MAE {o1}, Stage I's {scat}, coverage {cov}");
-    tr.cfg.reflection.normal_min_r = 0.0;
-    let (out0, scat0, cov0) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    assert_eq!(tr.decision.as_ref().map(|d| d.seed_mask_source.clone()), Some(None), "this run seeds without masks");
+    let (outd, scat, covd) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
     // (metrics.json's number read back bit for bit: serde_json parses
     // floats exactly with its float_roundtrip feature, on in Cargo.toml;
     // without it this missed the last bit of 0.9924012158054712.)
     let run_cov = md["test"]["reflection_coverage"].as_f64().unwrap_or(f64::NAN);
-    assert!(scat0 == scat && out0 != scat && cov0 > 0.1 && cov0 == run_cov, "normal_min_r = 0: {out0} {scat0} {cov0} (run: {run_cov})");
+    assert!(covd == run_cov && covd > 0.1 && outd != scat, "the defaults: {outd} {scat} {covd} (run: {run_cov})");
+    tr.cfg.reflection.normal_min_r = 1.0;
+    assert_eq!(mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap()), (outd, scat, covd));
+    tr.cfg.reflection.residual_normal_min_r = 1.0;
+    let (o1, scat1, cov1) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    assert!(o1 == scat && scat1 == scat && cov1 == 0.0, "residual_normal_min_r = 1: output MAE {o1}, Stage I's {scat}, coverage {cov1}");
+    tr.cfg.reflection.residual_normal_min_r = 0.0;
+    let (o0, scat0, cov0) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    assert!(scat0 == scat && o0 != scat && cov0 >= covd, "residual_normal_min_r = 0: {o0} {scat0} {cov0} (default coverage {covd})");
+    tr.decision.as_mut().unwrap().seed_mask_source = Some("dataset".into());
+    let (om, _, covm) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    assert!(om == scat && covm == 0.0, "mask-seeded with normal_min_r = 1: {om} {covm}");
+    tr.cfg.reflection.normal_min_r = 0.0;
+    assert_eq!(mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap()), (o0, scat0, cov0));
     drop(tr);
     refused(TrainArgs { set: vec!["reflection.normal_min_r=1.5".into()], ..ad.clone() }, &["reflection.normal_min_r", "1.5"]);
+    refused(TrainArgs { set: vec!["reflection.residual_normal_min_r=-0.1".into()], ..ad.clone() }, &["reflection.residual_normal_min_r", "-0.1"]);
     refused(TrainArgs { set: vec!["reflection.env_radius=1.5".into(), "reflection.env_init=\"scene-depth\"".into()], ..ad.clone() }, &["reflection.env_radius", "scene-depth"]);
     let _ = std::fs::remove_dir_all(&deep);
 

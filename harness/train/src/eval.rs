@@ -25,7 +25,7 @@ pub struct NormalMetrics {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal_mae_scattering_deg: Option<f64>,
     /// In Stage II: the fraction of mask pixels the reflection set decides
-    /// (covers with alpha >= 0.5 and R >= `reflection.normal_min_r`:
+    /// (covers with alpha >= 0.5 and R >= `Trainer::normal_min_r`:
     /// `trainer::reflection_decides`), and the normal MAE on those pixels alone.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reflection_coverage: Option<f64>,
@@ -297,7 +297,7 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
         let target = v.image.planar();
         let normals = world_normals(&r, &v.camera);
         let scat_mae = r.layers.as_ref().and_then(|l| normal_mae(&world_normals(&l.0, &v.camera), v));
-        let min_r = tr.cfg.reflection.normal_min_r;
+        let min_r = tr.normal_min_r();
         let covered = |i: usize| r.layers.as_ref().is_some_and(|l| crate::train::stages::reflection::reflection_decides(&l.1, i, min_r));
         let coverage = match (&r.layers, &v.mask) {
             (Some(_), Some(mask)) if mask.iter().any(|&m| m) => {

@@ -275,7 +275,8 @@ impl Trainer {
         let refl = model.render(cam, &colour)?;
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
-        let decides: Vec<usize> = (0..n).filter(|&i| reflection_decides(&refl, i, self.cfg.reflection.normal_min_r)).collect();
+        let min_r = self.normal_min_r();
+        let decides: Vec<usize> = (0..n).filter(|&i| reflection_decides(&refl, i, min_r)).collect();
         for p in [Plane::Alpha, Plane::Depth, Plane::Normal(0), Plane::Normal(1), Plane::Normal(2), Plane::Median, Plane::Distortion] {
             let k = p.index(3) as usize;
             let src = refl.refl_plane(p);
@@ -284,6 +285,17 @@ impl Trainer {
             }
         }
         Ok(Rendered { width: cam.width, height: cam.height, planes, layers: Some(Box::new((scat, refl))) })
+    }
+
+    /// The reflection weight R a pixel of the reflection set needs to decide
+    /// the output geometry: `reflection.normal_min_r` for a set seeded from
+    /// glass masks, `reflection.residual_normal_min_r` for one seeded without.
+    pub fn normal_min_r(&self) -> f32 {
+        let rc = &self.cfg.reflection;
+        match &self.decision {
+            Some(d) if d.seed_mask_source.is_none() => rc.residual_normal_min_r,
+            _ => rc.normal_min_r,
+        }
     }
 
     /// Current Gaussians on the host.

@@ -114,6 +114,11 @@ pub struct ReflectionConfig {
     /// covers the pixel and R reaches this (0: wherever it covers), else
     /// Stage I's: little reflected colour is no evidence of a surface.
     pub normal_min_r: f32,
+    /// The same threshold for a set seeded without glass masks (from the
+    /// residual): there the set spreads over the scene with little R and
+    /// made the normals beside the glass worse on every suite scene
+    /// (perf/journal/2026-12-03-fifty-seventh.md).
+    pub residual_normal_min_r: f32,
     /// The frozen scattering layer's SH degree under Stage II (3: Stage I's
     /// colour as it is; 0 leaves the view-dependent light Stage I baked
     /// into degrees 1–3 to the reflection set). The run decision and the
@@ -169,6 +174,7 @@ impl Default for ReflectionConfig {
             lambda_r: 0.0,
             lambda_area: 0.0,
             normal_min_r: 0.0,
+            residual_normal_min_r: 0.07,
             scattering_sh: 3,
             train_scattering: false,
             reseed: false,
@@ -220,8 +226,10 @@ impl ReflectionConfig {
             }
         }
         check_hf("reflection", self.lambda_hf, self.hf_percentile)?;
-        if !(0.0..=1.0).contains(&self.normal_min_r) {
-            bail!("reflection.normal_min_r must be in [0, 1] (a reflection weight), not {}", self.normal_min_r);
+        for (k, v) in [("normal_min_r", self.normal_min_r), ("residual_normal_min_r", self.residual_normal_min_r)] {
+            if !(0.0..=1.0).contains(&v) {
+                bail!("reflection.{k} must be in [0, 1] (a reflection weight), not {v}");
+            }
         }
         for (k, v) in [
             ("lr_env", self.lr_env),
