@@ -70,8 +70,13 @@ impl SceneRenderer {
     pub fn load(ctx: &Arc<Context>, run: &Path) -> Result<SceneRenderer> {
         let path = if run.is_dir() { run.join(crate::train::run::CHECKPOINT) } else { run.to_path_buf() };
         let (h, arrays) = checkpoint::read(&path)?;
-        let bad = |e: anyhow::Error| e.context(format!("{}: cannot render this checkpoint", path.display()));
-        let state = checkpoint::render_state(&h, arrays).map_err(bad)?;
+        Self::from_checkpoint(ctx, &h, arrays).map_err(|e| e.context(format!("{}: cannot render this checkpoint", path.display())))
+    }
+
+    /// From a checkpoint's header and arrays as [`checkpoint::read`] (or
+    /// [`checkpoint::snapshot`], for a run still training) returns them.
+    pub fn from_checkpoint(ctx: &Arc<Context>, h: &checkpoint::Header, arrays: Vec<Vec<f32>>) -> Result<SceneRenderer> {
+        let state = checkpoint::render_state(h, arrays)?;
         let cfg = &h.config;
         // As the trainer renders a checkpoint (Trainer::render).
         let sh_degree = state.sh_degree;
@@ -115,6 +120,15 @@ impl SceneRenderer {
             layer,
             views: HashMap::new(),
         })
+    }
+
+    /// Gaussians in the scattering set and in the reflection set (0 before Stage II).
+    pub fn counts(&self) -> (u32, u32) {
+        let refl = match &self.layer {
+            None => 0,
+            Some(Layer::Env { set, .. } | Layer::Light { set, .. }) => set.n,
+        };
+        (self.scat.n, refl)
     }
 
     /// Floats [`SceneRenderer::record`] writes for a `width` x `height` view.

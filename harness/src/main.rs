@@ -74,6 +74,16 @@ enum Cmd {
         profile: bool,
         #[arg(long)]
         quiet: bool,
+        /// Show the model in a window while it trains (`tgs view`'s window;
+        /// the training is the same as without it; closing it leaves the training running).
+        #[arg(long)]
+        view: bool,
+        /// With --view: milliseconds between the models the window is sent (at least 50).
+        #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u64).range(50..=3_600_000))]
+        view_every: u64,
+        /// With --view: replay a `tgs view --script` file in the window (tests).
+        #[arg(long, requires = "view")]
+        view_script: Option<PathBuf>,
     },
     /// PSNR, SSIM and normal MAE of a run's checkpoint on its test views.
     Eval {
@@ -202,7 +212,7 @@ fn context(cli: &Cli) -> Result<std::sync::Arc<Context>> {
 fn run(cli: Cli) -> Result<()> {
     match &cli.cmd {
         Cmd::Devices { json } => tgs::devices::run(*json, &DeviceSelector::from_arg_or_env(cli.device.as_deref())),
-        Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, stages, from, profile, quiet } => {
+        Cmd::Train { dataset, out, preset, config, set, iterations, downscale, background, resume, stages, from, profile, quiet, view, view_every, view_script } => {
             let args = TrainArgs {
                 dataset: dataset.clone(),
                 out: out.clone(),
@@ -217,8 +227,16 @@ fn run(cli: Cli) -> Result<()> {
                 from: from.clone(),
                 profile: *profile,
                 quiet: *quiet,
+                live: None,
             };
-            let o = tgs::train::run::train(&context(&cli)?, &args)?;
+            let o = if *view {
+                let sel = DeviceSelector::from_arg_or_env(cli.device.as_deref());
+                let v = tgs::view::ViewArgs { run: out.clone(), size: None, camera: 0, train: false, script: view_script.clone(), shots: None, device: sel.clone() };
+                let validate = cli.validate;
+                tgs::view::train_live(&args, &v, std::time::Duration::from_millis(*view_every), move || Context::new(&ContextOptions { device: sel, validation: Some(validate) }))?
+            } else {
+                tgs::train::run::train(&context(&cli)?, &args)?
+            };
             if o.interrupted {
                 std::process::exit(130);
             }

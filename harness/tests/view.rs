@@ -35,19 +35,29 @@ fn rgb(p: &Path) -> image::RgbImage {
     image::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())).to_rgb8()
 }
 
+/// `tgs train` of a brief Stage I-II-III run of the tiny glass scene in `base/scene` into `run`.
+fn train_args(base: &Path, run: &Path) -> Vec<String> {
+    let mut a: Vec<String> =
+        ["train", base.join("scene").to_str().unwrap(), "--out", run.to_str().unwrap(), "--preset", "quick", "--iterations", "150", "--quiet"].map(String::from).into();
+    for s in ["test_interval=0", "checkpoint_interval=0", "reflection.iterations=40", "light_field.iterations=40"] {
+        a.extend(["--set".to_string(), s.to_string()]);
+    }
+    a
+}
+
 /// A Stage I-II-III run of the tiny glass scene, trained briefly.
 fn trained(base: &Path) -> PathBuf {
-    let data = base.join("scene");
-    tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &data, |_, _| {}).unwrap();
+    tgs::scene::make(&tgs::scene::spec("glass-tiny").unwrap(), &base.join("scene"), |_, _| {}).unwrap();
     let run = base.join("run");
-    let sets = ["test_interval=0", "checkpoint_interval=0", "reflection.iterations=40", "light_field.iterations=40"];
-    let mut c = tgs();
-    c.args(["train", data.to_str().unwrap(), "--out", run.to_str().unwrap(), "--preset", "quick", "--iterations", "150", "--quiet"]);
-    for s in sets {
-        c.args(["--set", s]);
-    }
-    ok(&mut c);
+    ok(tgs().args(train_args(base, &run)));
     run
+}
+
+/// A checkpoint's arrays (everything after its header and the header's checksum).
+fn checkpoint_arrays(run: &Path) -> Vec<u8> {
+    let b = std::fs::read(run.join("checkpoint.bin")).unwrap();
+    let n = u32::from_le_bytes(b[8..12].try_into().unwrap()) as usize;
+    b[12 + n + 4..].to_vec()
 }
 
 #[test]
@@ -107,6 +117,23 @@ fn the_window_shows_what_tgs_render_writes() {
     // Run again: captures never write over a file.
     let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", script.to_str().unwrap(), "--shots", shots.to_str().unwrap()]);
     assert!(!o.status.success() && text(&o).contains("final0.png: exists"), "{}", text(&o));
+
+    // tgs train --view: the same training in a window. Its model arrives
+    // while it trains; once trained the window shows what tgs render
+    // writes of the finished run, and the checkpoint's arrays are those of
+    // the run trained without a window.
+    let live = base.join("live-run");
+    std::fs::write(base.join("live.txt"), "resize 48 48\nwait 3\ncapture shots/live-early.png\ntrained\ncapture shots/live-final.png\n").unwrap();
+    let mut c = Command::new("xvfb-run");
+    c.args(["-a", "-s", "-screen 0 640x480x24", env!("CARGO_BIN_EXE_tgs")]).args(train_args(&base, &live)).args([
+        "--view",
+        "--view-script",
+        base.join("live.txt").to_str().unwrap(),
+    ]);
+    ok(&mut c);
+    assert_eq!(checkpoint_arrays(&live), checkpoint_arrays(&run), "the window changed the training");
+    assert_eq!(shot("live-early.png").dimensions(), (48, 48));
+    assert_eq!(shot("live-final.png"), render("r_0.png"), "the trained model in the window");
     std::fs::remove_dir_all(&base).unwrap();
 }
 

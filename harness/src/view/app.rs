@@ -9,8 +9,10 @@ use super::{shot, ViewArgs};
 use anyhow::{Context as _, Result};
 use std::collections::VecDeque;
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tgs_engine::Buffer;
+use tgs_train::train::live::Snapshot;
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -29,9 +31,25 @@ struct Open {
     window: Window,
 }
 
+/// What the training thread tells the window (`tgs train --view`).
+#[derive(Debug)]
+pub enum LiveEvent {
+    /// A new snapshot waits in the slot.
+    Snapshot,
+    /// Training ended (stopped by a signal: true).
+    Done { interrupted: bool },
+}
+
+/// The latest snapshot of the run, replaced by each newer one.
+pub type Slot = Arc<Mutex<Option<Snapshot>>>;
+
 struct App<'a> {
     args: &'a ViewArgs,
     open: Option<Open>,
+    /// A run still training: where its snapshots arrive; the window (and
+    /// its device) until the first one came.
+    live: Option<Slot>,
+    early: Option<(Gpu, Window)>,
     error: Option<anyhow::Error>,
     script: Option<VecDeque<Action>>,
     /// A capture (script) or screenshot waiting for the next whole frame.
@@ -44,14 +62,30 @@ struct App<'a> {
     /// Drawn frames and their seconds, for the summary at exit.
     frames: (u32, f64),
     last_ms: f64,
+    /// The training thread ended (interrupted or not).
+    done: Option<bool>,
+    /// A script waits for the training to end.
+    until_trained: bool,
+}
+
+/// The window's event loop (with the user events a live view sends).
+pub fn event_loop() -> Result<EventLoop<LiveEvent>> {
+    EventLoop::<LiveEvent>::with_user_event().build().context("opening the display for a window (`tgs render` writes the same images headless)")
 }
 
 pub fn run(args: &ViewArgs) -> Result<()> {
-    let el = EventLoop::new().context("opening the display for a window (`tgs render` writes the same images headless)")?;
+    run_on(event_loop()?, args, None)
+}
+
+/// Run the window on `el` until it closes: on `args.run`, or with `live`
+/// on the snapshots of a run while it trains.
+pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<Slot>) -> Result<()> {
     let script = args.script.as_deref().map(read_script).transpose()?.map(VecDeque::from);
     let mut app = App {
         args,
         open: None,
+        live,
+        early: None,
         error: None,
         script,
         capture: None,
@@ -62,9 +96,12 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         modifiers: ModifiersState::empty(),
         frames: (0, 0.0),
         last_ms: 0.0,
+        done: None,
+        until_trained: false,
     };
     el.run_app(&mut app).context("the window's event loop")?;
     drop(app.open.take());
+    drop(app.early.take());
     if let Some(e) = app.error {
         return Err(e);
     }
@@ -78,7 +115,29 @@ impl App<'_> {
     fn start(&mut self, el: &ActiveEventLoop) -> Result<()> {
         let window = el.create_window(Window::default_attributes().with_title("tgs view").with_visible(true)).context("creating the window")?;
         let gpu = Gpu::new(&window, &self.args.device)?;
-        let mut scene = Scene::open(gpu.ctx(), &self.args.run)?;
+        if self.live.is_some() {
+            window.set_title("tgs view · waiting for the run's first model");
+            self.early = Some((gpu, window));
+            return self.take_snapshot();
+        }
+        let scene = Scene::open(gpu.ctx(), &self.args.run)?;
+        self.show(scene, gpu, window)
+    }
+
+    /// The latest snapshot of a run while it trains, into the scene (the
+    /// first one opens it).
+    fn take_snapshot(&mut self) -> Result<()> {
+        let Some(snap) = self.live.as_ref().and_then(|s| s.lock().ok().and_then(|mut g| g.take())) else { return Ok(()) };
+        self.dirty = true;
+        if let Some(o) = self.open.as_mut() {
+            return o.scene.update(snap);
+        }
+        let Some((gpu, window)) = self.early.take() else { return Ok(()) };
+        let scene = Scene::live(gpu.ctx(), snap)?;
+        self.show(scene, gpu, window)
+    }
+
+    fn show(&mut self, mut scene: Scene, gpu: Gpu, window: Window) -> Result<()> {
         if self.args.train {
             scene.switch_set();
         }
@@ -131,6 +190,7 @@ impl App<'_> {
             }
             Action::Capture(p) => self.capture = Some(p),
             Action::Wait(n) => self.wait = n,
+            Action::Trained => self.until_trained = self.live.is_some(),
         }
         self.dirty = true;
         Ok(())
@@ -173,8 +233,14 @@ impl App<'_> {
         }
         let (name, _) = o.scene.dataset_camera();
         let set = if o.scene.train_set { "training" } else { "test" };
+        let training = match (o.scene.training(), self.done) {
+            (_, Some(true)) => " (training stopped)".to_string(),
+            (Some(("done", ..)), _) | (_, Some(false)) => " (trained)".to_string(),
+            (Some((label, it, total)), None) => format!(" (training {label}: iteration {it} of {total})"),
+            (None, _) => String::new(),
+        };
         o.window.set_title(&format!(
-            "tgs view · Stage {} · {set} camera {}/{} '{name}'{} · {} · {w}x{h} · {:.1} ms · {} + {} Gaussians",
+            "tgs view · Stage {}{training} · {set} camera {}/{} '{name}'{} · {} · {w}x{h} · {:.1} ms · {} + {} Gaussians",
             o.scene.stage(),
             o.scene.camera + 1,
             o.scene.cameras().len(),
@@ -193,7 +259,25 @@ impl App<'_> {
     }
 }
 
-impl ApplicationHandler for App<'_> {
+impl ApplicationHandler<LiveEvent> for App<'_> {
+    fn user_event(&mut self, el: &ActiveEventLoop, event: LiveEvent) {
+        match event {
+            LiveEvent::Snapshot => {
+                if let Err(e) = self.take_snapshot() {
+                    self.fail(e, el);
+                }
+            }
+            LiveEvent::Done { interrupted } => {
+                self.done = Some(interrupted);
+                self.dirty = true;
+                // Stopped (Ctrl-C): the window goes too; trained: it stays until closed.
+                if interrupted {
+                    el.exit();
+                }
+            }
+        }
+    }
+
     fn resumed(&mut self, el: &ActiveEventLoop) {
         if self.open.is_none() {
             if let Err(e) = self.start(el) {
@@ -254,8 +338,11 @@ impl ApplicationHandler for App<'_> {
     }
 
     fn about_to_wait(&mut self, el: &ActiveEventLoop) {
-        // A script moves on only after a whole frame of the last action.
-        if !self.dirty && self.capture.is_none() {
+        // A script moves on only after a whole frame of the last action
+        // (and, live, once the run's first model is shown).
+        let waits = self.open.is_none() || (self.until_trained && self.done.is_none());
+        if !self.dirty && self.capture.is_none() && !waits {
+            self.until_trained = false;
             if self.wait > 0 {
                 self.wait -= 1;
                 self.dirty = true;

@@ -35,6 +35,8 @@ pub enum Action {
     Capture(PathBuf),
     /// Script only: let this many frames pass.
     Wait(u32),
+    /// Script only (`tgs train --view`): wait until the training has ended.
+    Trained,
 }
 
 /// The keys, as `H` prints them.
@@ -110,6 +112,7 @@ fn key_named(name: &str) -> Option<KeyCode> {
 ///     resize W H       # ask the window for W x H
 ///     capture FILE     # write the next whole frame the window shows (PNG)
 ///     wait FRAMES
+///     trained          # (tgs train --view) wait until the training has ended
 ///     quit
 ///
 /// Relative files are relative to the script's directory.
@@ -174,7 +177,11 @@ fn parse_line(line: &str, base: &Path) -> Result<Action> {
             want(1)?;
             Action::Quit
         }
-        w => bail!("unknown action '{w}' (key, orbit, pan, zoom, resize, capture, wait, quit)"),
+        "trained" => {
+            want(1)?;
+            Action::Trained
+        }
+        w => bail!("unknown action '{w}' (key, orbit, pan, zoom, resize, capture, wait, trained, quit)"),
     })
 }
 

@@ -9,6 +9,7 @@ use crate::data::Dataset;
 use crate::embed::SceneRenderer;
 use crate::eval::{expected_depth, layer_images, world_normals};
 use crate::train::checkpoint;
+use crate::train::live::Snapshot;
 use crate::train::rundir::{stage_checkpoint, CHECKPOINT};
 use crate::train::Trainer;
 use anyhow::{bail, Context as _, Result};
@@ -46,6 +47,9 @@ pub struct Scene {
     pub counts: (usize, usize),
     /// The layers the current checkpoint's render has, once one was made.
     known: Option<Vec<&'static str>>,
+    /// A run still training (`tgs train --view`): its latest model, and
+    /// the schedule entry, iteration and last iteration it is at.
+    live: Option<(Arc<(checkpoint::Header, Vec<Vec<f32>>)>, String, u32, u32)>,
 }
 
 impl Scene {
@@ -63,9 +67,30 @@ impl Scene {
         let renderer = SceneRenderer::load(ctx, &last)?;
         checkpoints.retain(|(l, _)| l != renderer.stage);
         checkpoints.push((renderer.stage.to_string(), last));
+        Self::with(ctx, checkpoints, renderer, data, None)
+    }
+
+    /// The model of a run while it trains (the first snapshot).
+    pub fn live(ctx: &Arc<Context>, snap: Snapshot) -> Result<Scene> {
+        let h = &snap.header;
+        let data = crate::train::run::load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
+        let renderer = SceneRenderer::from_checkpoint(ctx, h, snap.arrays.clone())?;
+        let checkpoints = vec![(renderer.stage.to_string(), PathBuf::new())];
+        let iteration = h.iteration;
+        let live = (Arc::new((snap.header, snap.arrays)), snap.label, iteration, snap.total);
+        Self::with(ctx, checkpoints, renderer, data, Some(live))
+    }
+
+    fn with(
+        ctx: &Arc<Context>,
+        checkpoints: Vec<(String, PathBuf)>,
+        renderer: SceneRenderer,
+        data: Dataset,
+        live: Option<(Arc<(checkpoint::Header, Vec<Vec<f32>>)>, String, u32, u32)>,
+    ) -> Result<Scene> {
         let train: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
         let (target, up) = crate::render::look_target(&train);
-        let counts = counts(&checkpoints[checkpoints.len() - 1].1)?;
+        let (a, b) = renderer.counts();
         let train_set = data.test.is_empty();
         Ok(Scene {
             ctx: ctx.clone(),
@@ -81,9 +106,30 @@ impl Scene {
             colour: None,
             target,
             up,
-            counts,
+            counts: (a as usize, b as usize),
             known: None,
+            live,
         })
+    }
+
+    /// A newer snapshot of the training run.
+    pub fn update(&mut self, snap: Snapshot) -> Result<()> {
+        self.renderer = SceneRenderer::from_checkpoint(&self.ctx, &snap.header, snap.arrays.clone())?;
+        let (a, b) = self.renderer.counts();
+        self.counts = (a as usize, b as usize);
+        if self.checkpoints[0].0 != self.renderer.stage {
+            self.checkpoints[0].0 = self.renderer.stage.to_string();
+            self.known = None;
+        }
+        self.trainer = None;
+        let iteration = snap.header.iteration;
+        self.live = Some((Arc::new((snap.header, snap.arrays)), snap.label, iteration, snap.total));
+        Ok(())
+    }
+
+    /// While the run trains: the schedule entry, its iteration and the last.
+    pub fn training(&self) -> Option<(&str, u32, u32)> {
+        self.live.as_ref().map(|(_, l, i, t)| (l.as_str(), *i, *t))
     }
 
     /// The current checkpoint's stage ("I", "II" or "III").
@@ -93,10 +139,15 @@ impl Scene {
 
     /// Load the next checkpoint (the layer stays if the stage has it).
     pub fn next_checkpoint(&mut self) -> Result<()> {
+        if self.live.is_some() {
+            // A run still training has one model: the latest.
+            return Ok(());
+        }
         let next = (self.checkpoint + 1) % self.checkpoints.len();
         let path = &self.checkpoints[next].1;
         self.renderer = SceneRenderer::load(&self.ctx, path)?;
-        self.counts = counts(path)?;
+        let (a, b) = self.renderer.counts();
+        self.counts = (a as usize, b as usize);
         self.trainer = None;
         self.known = None;
         self.checkpoint = next;
@@ -193,7 +244,10 @@ impl Scene {
         } else {
             if self.trainer.is_none() {
                 let path = &self.checkpoints[self.checkpoint].1;
-                let (h, arrays) = checkpoint::read(path)?;
+                let (h, arrays) = match &self.live {
+                    Some((snap, ..)) => (snap.0.clone(), snap.1.clone()),
+                    None => checkpoint::read(path)?,
+                };
                 self.trainer = Some(checkpoint::restore(&self.ctx, path, (h, arrays), &self.data)?);
             }
             let tr = self.trainer.as_mut().expect("made above");
@@ -209,17 +263,6 @@ impl Scene {
 
 fn roman(n: usize) -> String {
     ["I", "II", "III"].get(n - 1).map_or_else(|| n.to_string(), |s| s.to_string())
-}
-
-/// Gaussians in the scattering and the reflection set of a checkpoint.
-fn counts(path: &Path) -> Result<(usize, usize)> {
-    let (h, arrays) = checkpoint::read(path)?;
-    let state = checkpoint::render_state(&h, arrays)?;
-    let refl = match &state.layer {
-        checkpoint::RenderLayer::Scattering => 0,
-        checkpoint::RenderLayer::Env { set, .. } | checkpoint::RenderLayer::LightField { set, .. } => set.len(),
-    };
-    Ok((state.scattering.len(), refl))
 }
 
 /// An image (1 or 3 channels, interleaved) as packed 8-bit pixels.

@@ -32,6 +32,8 @@ pub struct TrainArgs {
     pub profile: bool,
     /// No progress bar or periodic lines.
     pub quiet: bool,
+    /// A live view's receiver of the model while it trains (`tgs train --view`).
+    pub live: Option<super::live::LiveSink>,
 }
 
 /// The dataset directory, writing the built-in scene first when none is given.

@@ -17,7 +17,7 @@ use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::Arc;
-use tgs_engine::Context;
+use tgs_engine::{Buffer, Context};
 use tgs_pipelines::Rng;
 use tgs_pipelines::{HostGaussians, TrainableSet};
 
@@ -134,7 +134,9 @@ impl Header {
     }
 }
 
-pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Result<()> {
+/// The header a checkpoint of `tr` gets, with the buffers and lengths of
+/// its arrays in file order (the scattering set's, then the later stage's).
+fn header_and_buffers<'a>(tr: &'a Trainer, dataset: &str, identity: Option<&Identity>) -> Result<(Header, Vec<(&'a Buffer<f32>, usize)>)> {
     let set = &tr.scattering.set;
     let n = set.len() as usize;
     let arrays = set.arrays();
@@ -149,23 +151,28 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         coeffs: set.params.coeffs,
         extent: tr.views.extent,
         arrays: arrays.iter().map(|(name, _, w)| (name.clone(), w * n)).collect(),
-        identity: Some(identity.clone()),
+        identity: identity.cloned(),
         later: BTreeMap::new(),
         missing_settings: Vec::new(),
     };
-    // (buffer, values) of the later stage's arrays.
-    let mut later_arrays = Vec::new();
+    let mut bufs: Vec<(&Buffer<f32>, usize)> = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).collect();
     if let (Some(m), Some(d)) = (&tr.later, &tr.decision) {
         let kind = by_stage(m.stage()).context("the running stage is not in stages::LATER")?;
+        let mut later_arrays = Vec::new();
         header.later.insert(kind.key().to_string(), m.save_state(d, &mut later_arrays)?);
+        bufs.extend(later_arrays);
     }
+    Ok((header, bufs))
+}
+
+pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Result<()> {
+    let (header, bufs) = header_and_buffers(tr, dataset, Some(identity))?;
     let json = serde_json::to_vec(&header)?;
     crate::export::atomic_write_with(path, |f| {
         f.write_all(MAGIC)?;
         f.write_all(&(json.len() as u32).to_le_bytes())?;
         f.write_all(&json)?;
         f.write_all(&crc32fast::hash(&json).to_le_bytes())?;
-        let bufs = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).chain(later_arrays.iter().map(|(b, l)| (*b, *l)));
         for (buf, len) in bufs {
             let data = buf.download_range(0, len)?;
             let bytes: &[u8] = bytemuck::cast_slice(&data);
@@ -175,6 +182,14 @@ pub fn save(tr: &Trainer, path: &Path, dataset: &str, identity: &Identity) -> Re
         Ok(())
     })
     .context("writing the checkpoint")
+}
+
+/// What [`save`] would write, in memory: the header and the arrays as
+/// [`read`] returns them (for a live view of a run while it trains).
+pub fn snapshot(tr: &Trainer, dataset: &str) -> Result<(Header, Vec<Vec<f32>>)> {
+    let (header, bufs) = header_and_buffers(tr, dataset, None)?;
+    let arrays = bufs.into_iter().map(|(buf, len)| buf.download_range(0, len)).collect::<Result<Vec<_>>>()?;
+    Ok((header, arrays))
 }
 
 /// Read a checkpoint's header and arrays.

@@ -8,6 +8,7 @@ pub mod clock;
 pub mod config;
 pub mod divergence;
 pub mod from;
+pub mod live;
 pub mod records;
 pub mod report;
 pub mod run;

@@ -12,6 +12,7 @@ use super::config::paper_schedule_note;
 use super::divergence::{high_learning_rates, likely_cause, DivergenceGuard, LR_WARN_FACTOR, MEANS_LIMIT};
 pub use super::from::inherited_settings;
 use super::from::start_from;
+use super::live::Live;
 use super::records::{close_stage, read_stage_records, reflection_record, stage_record, truncate_log, write_stage_records, Closing};
 use super::report::{lpips_text, Reporter};
 pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
@@ -90,6 +91,7 @@ struct Run<'a> {
     total: u32,
     /// Set when a dropped or skipped stage closed the last stage for good.
     last_closed: bool,
+    live: Option<Live>,
 }
 
 pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
@@ -136,6 +138,7 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         start_it,
         total,
         last_closed: false,
+        live: a.live.as_ref().map(Live::new),
     };
     // A run whose Stage II was dropped ended there (stages.json says so).
     if a.resume && run.validation.drops_stage_two(&run.stages) && tr.iteration > tr.cfg.iterations && tr.later.is_none() {
@@ -145,11 +148,13 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         let (entry, label) = tr.next_entry();
         if let Some(kind) = tr.next_begins() {
             run.between_stages(&mut tr, kind, entry, &label)?;
+            run.show(&tr, &label, true)?;
             continue;
         }
         let r = tr.step(a.profile)?;
         run.stop_if_diverged(&tr, &guard, &r)?;
         run.after_step(&mut tr, &r, &label)?;
+        run.show(&tr, &label, false)?;
         if stop_requested() {
             return run.interrupted(&tr);
         }
@@ -260,6 +265,14 @@ fn say_start(ctx: &Arc<Context>, a: &TrainArgs, tr: &Trainer, data: &Dataset) {
 }
 
 impl Run<'_> {
+    /// Hand the live view the model (`now`: whatever the time since the last).
+    fn show(&mut self, tr: &Trainer, label: &str, now: bool) -> Result<()> {
+        match self.live.as_mut() {
+            Some(l) => l.offer(tr, &self.dataset, label, self.total, now),
+            None => Ok(()),
+        }
+    }
+
     /// checkpoint.bin and, beside it, the clocks at its iteration.
     fn save(&self, tr: &Trainer) -> Result<()> {
         checkpoint::save(tr, &self.ckpt, &self.dataset, &self.identity)?;
@@ -398,6 +411,9 @@ impl Run<'_> {
             }
         }
         write_splats(&self.a.out.join("point_cloud.ply"), &tr.gaussians()?)?;
+        if let Some(l) = self.live.as_mut() {
+            l.offer(&tr, &self.dataset, "done", self.total, true)?;
+        }
         if let Some(m) = &tr.later {
             m.write_outputs(&self.a.out)?;
         }
