@@ -134,9 +134,12 @@ impl Header {
     }
 }
 
-/// The header a checkpoint of `tr` gets, with the buffers and lengths of
-/// its arrays in file order (the scattering set's, then the later stage's).
-fn header_and_buffers<'a>(tr: &'a Trainer, dataset: &str, identity: Option<&Identity>) -> Result<(Header, Vec<(&'a Buffer<f32>, usize)>)> {
+/// The buffers and lengths of a checkpoint's arrays, in file order.
+type ArrayBuffers<'a> = Vec<(&'a Buffer<f32>, usize)>;
+
+/// The header a checkpoint of `tr` gets, with its arrays' buffers (the
+/// scattering set's, then the later stage's).
+fn header_and_buffers<'a>(tr: &'a Trainer, dataset: &str, identity: Option<&Identity>) -> Result<(Header, ArrayBuffers<'a>)> {
     let set = &tr.scattering.set;
     let n = set.len() as usize;
     let arrays = set.arrays();
@@ -155,7 +158,7 @@ fn header_and_buffers<'a>(tr: &'a Trainer, dataset: &str, identity: Option<&Iden
         later: BTreeMap::new(),
         missing_settings: Vec::new(),
     };
-    let mut bufs: Vec<(&Buffer<f32>, usize)> = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).collect();
+    let mut bufs: ArrayBuffers = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).collect();
     if let (Some(m), Some(d)) = (&tr.later, &tr.decision) {
         let kind = by_stage(m.stage()).context("the running stage is not in stages::LATER")?;
         let mut later_arrays = Vec::new();
