@@ -72,7 +72,7 @@ pub fn train_live(
     args.live = Some(crate::train::live::LiveSink { every, send, open: open.clone() });
     let trainer = std::thread::spawn(move || {
         let r = ctx().and_then(|c| crate::train::run::train(&c, &args));
-        let _ = proxy.send_event(app::LiveEvent::Done { interrupted: r.as_ref().map_or(false, |o| o.interrupted) });
+        let _ = proxy.send_event(app::LiveEvent::Done { interrupted: r.as_ref().is_ok_and(|o| o.interrupted) });
         r
     });
     let shown = app::run_on(el, v, Some(slot));

@@ -49,7 +49,21 @@ pub struct Scene {
     known: Option<Vec<&'static str>>,
     /// A run still training (`tgs train --view`): its latest model, and
     /// the schedule entry, iteration and last iteration it is at.
-    live: Option<(Arc<(checkpoint::Header, Vec<Vec<f32>>)>, String, u32, u32)>,
+    live: Option<LiveModel>,
+}
+
+/// The latest model of a run still training, and where in its schedule it is.
+struct LiveModel {
+    checkpoint: Arc<(checkpoint::Header, Vec<Vec<f32>>)>,
+    label: String,
+    iteration: u32,
+    total: u32,
+}
+
+impl LiveModel {
+    fn of(snap: Snapshot) -> LiveModel {
+        LiveModel { iteration: snap.header.iteration, checkpoint: Arc::new((snap.header, snap.arrays)), label: snap.label, total: snap.total }
+    }
 }
 
 impl Scene {
@@ -76,18 +90,10 @@ impl Scene {
         let data = crate::train::run::load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
         let renderer = SceneRenderer::from_checkpoint(ctx, h, snap.arrays.clone())?;
         let checkpoints = vec![(renderer.stage.to_string(), PathBuf::new())];
-        let iteration = h.iteration;
-        let live = (Arc::new((snap.header, snap.arrays)), snap.label, iteration, snap.total);
-        Self::with(ctx, checkpoints, renderer, data, Some(live))
+        Self::with(ctx, checkpoints, renderer, data, Some(LiveModel::of(snap)))
     }
 
-    fn with(
-        ctx: &Arc<Context>,
-        checkpoints: Vec<(String, PathBuf)>,
-        renderer: SceneRenderer,
-        data: Dataset,
-        live: Option<(Arc<(checkpoint::Header, Vec<Vec<f32>>)>, String, u32, u32)>,
-    ) -> Result<Scene> {
+    fn with(ctx: &Arc<Context>, checkpoints: Vec<(String, PathBuf)>, renderer: SceneRenderer, data: Dataset, live: Option<LiveModel>) -> Result<Scene> {
         let train: Vec<Camera> = data.train.iter().map(|v| v.camera).collect();
         let (target, up) = crate::render::look_target(&train);
         let (a, b) = renderer.counts();
@@ -122,14 +128,13 @@ impl Scene {
             self.known = None;
         }
         self.trainer = None;
-        let iteration = snap.header.iteration;
-        self.live = Some((Arc::new((snap.header, snap.arrays)), snap.label, iteration, snap.total));
+        self.live = Some(LiveModel::of(snap));
         Ok(())
     }
 
     /// While the run trains: the schedule entry, its iteration and the last.
     pub fn training(&self) -> Option<(&str, u32, u32)> {
-        self.live.as_ref().map(|(_, l, i, t)| (l.as_str(), *i, *t))
+        self.live.as_ref().map(|l| (l.label.as_str(), l.iteration, l.total))
     }
 
     /// The current checkpoint's stage ("I", "II" or "III").
@@ -245,7 +250,7 @@ impl Scene {
             if self.trainer.is_none() {
                 let path = &self.checkpoints[self.checkpoint].1;
                 let (h, arrays) = match &self.live {
-                    Some((snap, ..)) => (snap.0.clone(), snap.1.clone()),
+                    Some(l) => (l.checkpoint.0.clone(), l.checkpoint.1.clone()),
                     None => checkpoint::read(path)?,
                 };
                 self.trainer = Some(checkpoint::restore(&self.ctx, path, (h, arrays), &self.data)?);
