@@ -91,6 +91,10 @@ enum Cmd {
         /// Also write the renders here.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// KEY=VALUE: an output-only setting to evaluate with (reflection.normal_min_r,
+        /// reflection.residual_normal_min_r); the run itself is not changed (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
     },
     /// Render a run's checkpoint along test, train or orbit cameras.
     Render {
@@ -242,7 +246,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Cmd::Eval { run, out } => eval(&context(&cli)?, run, out.as_deref()),
+        Cmd::Eval { run, out, set } => eval(&context(&cli)?, run, out.as_deref(), set),
         Cmd::Render { run, cameras, frames, out } => {
             let dir = out.clone().unwrap_or_else(|| run.join("renders").join(cameras));
             let n = tgs::render::render(&context(&cli)?, run, cameras, *frames, &dir)?;
@@ -287,9 +291,10 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// `tgs eval RUN [--out DIR]`: the test metrics as JSON (renders into DIR).
-fn eval(ctx: &std::sync::Arc<Context>, run: &std::path::Path, out: Option<&std::path::Path>) -> Result<()> {
+/// `tgs eval RUN [--out DIR] [--set KEY=VALUE]`: the test metrics as JSON (renders into DIR).
+fn eval(ctx: &std::sync::Arc<Context>, run: &std::path::Path, out: Option<&std::path::Path>, set: &[String]) -> Result<()> {
     let (mut tr, data) = tgs::train::run::open_run(ctx, run)?;
+    tgs::train::run::set_output_settings(&mut tr, set).with_context(|| format!("tgs eval {}", run.display()))?;
     if data.test.is_empty() {
         anyhow::bail!("{}: the dataset has no test views", data.root.display());
     }

@@ -33,6 +33,15 @@ not retrained; a half-written one (no metrics.json) is an error naming it.
     python3 perf/suite/suite.py --scenes /tmp/suite --runs /tmp/suite-runs \
         --seed-masks /tmp/masks --variant masks --variant 'masks-halfway:reflection.seed_normal=halfway'
 
+`--eval-variant NAME@BASE:KEY=VALUE;...` trains nothing: it evaluates variant
+BASE's Stage II with `tgs eval --set` for settings that change only the
+output (`reflection.normal_min_r`, `reflection.residual_normal_min_r`),
+kept as `RUNS/SCENE/sSEED/NAME.eval.json`, and prints its table like a
+variant's (Stage II s is BASE's):
+
+    python3 perf/suite/suite.py --scenes /tmp/suite --runs /tmp/suite-runs --variant default \
+        --eval-variant 'r05@default:reflection.residual_normal_min_r=0.05'
+
 `--stage3` also trains Stage III from every variant's Stage II
 (`RUNS/SCENE/sSEED/VARIANT-III`, with the variant's `light_field.` pairs)
 and prints, per variant, the test PSNR
@@ -71,6 +80,17 @@ def train(tgs, out, args, label):
     s = run([tgs, "train", "--quiet", "--out", out] + args, log)
     print(f" {s:.0f} s", file=sys.stderr, flush=True)
     return json.load(open(metrics))
+
+
+def evaluate(tgs, base, out, kvs, label):
+    """`tgs eval BASE --set ...` as a Stage II record, kept in OUT (read, not rerun, when there)."""
+    if not os.path.exists(out):
+        print(f"{label} ...", end="", flush=True, file=sys.stderr)
+        tmp = out + ".part"
+        s = run([tgs, "eval", base] + [x for kv in kvs for x in ("--set", kv)], tmp)
+        os.replace(tmp, out)
+        print(f" {s:.0f} s", file=sys.stderr, flush=True)
+    return json.load(open(out))
 
 
 def stage(m, name):
@@ -115,6 +135,7 @@ def main():
     ap.add_argument("--scenes", required=True, help="directory of datasets")
     ap.add_argument("--runs", required=True, help="directory for the runs (kept; reruns reuse them)")
     ap.add_argument("--variant", action="append", default=[], help="NAME or NAME:KEY=VALUE;KEY=VALUE (repeatable)")
+    ap.add_argument("--eval-variant", action="append", default=[], help="NAME@BASE:KEY=VALUE;... output-only settings evaluated on variant BASE's Stage II (tgs eval --set; repeatable)")
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--only", action="append", help="scene names to run, in this order (repeatable; default: all, by name)")
     ap.add_argument("--stage1", default="", help="KEY=VALUE;... for Stage I (part of its run directory's identity: use a new --runs when changing it)")
@@ -138,6 +159,13 @@ def main():
             raise SystemExit(f"bad variant name '{name}' (a plain name other than I, not ending in -III)")
         variants.append((name, [kv for kv in sets.split(";") if kv]))
     stage1_sets = [kv for kv in a.stage1.split(";") if kv]
+    evals = []
+    for v in a.eval_variant:
+        head, _, sets_ = v.partition(":")
+        name, _, base = head.partition("@")
+        if not name or "/" in name or name in ("I",) or name in [n for n, _ in variants] or base not in [n for n, _ in variants]:
+            raise SystemExit(f"bad --eval-variant '{v}': NAME@BASE:KEY=VALUE;... with BASE one of the --variant names and NAME a new plain name")
+        evals.append((name, base, [kv for kv in sets_.split(";") if kv]))
 
     def sets(kvs):
         return [x for kv in kvs for x in ("--set", kv)]
@@ -163,8 +191,12 @@ def main():
                     lf = [kv for kv in kvs if kv.startswith("light_field.")]
                     m3 = train(a.tgs, os.path.join(base, name + "-III"), [data, "--from", os.path.join(base, name), "--stages", "III"] + sets(lf), f"{scene} seed {seed} {name} Stage III")
                 res[(scene, seed, name)] = (stage(m1, "I"), stage(m2, "II"), stage(m3, "III") if m3 else None)
+            for name, bname, kvs in evals:
+                test = evaluate(a.tgs, os.path.join(base, bname), os.path.join(base, name + ".eval.json"), kvs, f"{scene} seed {seed} {name} (eval)")
+                r1, r2, _ = res[(scene, seed, bname)]
+                res[(scene, seed, name)] = (r1, {"stage": "II", "test": test, "wall_s": r2.get("wall_s") if r2 else None}, None)
 
-    for name, kvs in variants:
+    for name, kvs in variants + [(n, [f"eval of {b}"] + k) for n, b, k in evals]:
         print(f"\n### {name}" + (f": `{'; '.join(kvs)}`" if kvs else " (today's defaults)"))
         print(f"seeds {a.seeds}; cells are means over seeds, (spread) = max - min\n")
         print("| scene | Stage I MAE | ray-facing | Stage II MAE | II / I | II / ray-facing | coverage | off mask | off-glass MAE I → II | PSNR I → II | gain ×1e3 glass / off | residual contrast (I) | Stage II s |")
@@ -201,7 +233,7 @@ def main():
         if known:
             w = max(known, key=known.get)
             print(f"| **worst** ({w}) | | | | {known[w]:.2f} | | | | | | | | |")
-        if a.stage3:
+        if a.stage3 and name in [n for n, _ in variants]:
             print_stage3(scenes, seeds, name, res)
 
 

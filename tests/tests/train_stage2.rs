@@ -370,7 +370,15 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert!(covd == run_cov && covd > 0.1 && outd != scat, "the defaults: {outd} {scat} {covd} (run: {run_cov})");
     tr.cfg.reflection.normal_min_r = 1.0;
     assert_eq!(mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap()), (outd, scat, covd));
-    tr.cfg.reflection.residual_normal_min_r = 1.0;
+    // (`tgs eval --set` changes these on a finished run, and only these.)
+    let output_set = |tr: &mut tgs::train::trainer::Trainer, kv: &str| tgs::train::run::set_output_settings(tr, &[kv.to_string()]).map_err(|e| format!("{e:#}"));
+    output_set(&mut tr, "reflection.residual_normal_min_r=1").unwrap();
+    assert_eq!(tr.cfg.reflection.residual_normal_min_r, 1.0);
+    let e = output_set(&mut tr, "lambda_ssim=0.1").unwrap_err();
+    assert!(e.contains("lambda_ssim") && e.contains("reflection.residual_normal_min_r"), "{e}");
+    let e = output_set(&mut tr, "reflection.normal_min_r=2").unwrap_err();
+    assert!(e.contains("reflection.normal_min_r") && e.contains('2'), "{e}");
+    assert_eq!(tr.cfg.reflection.normal_min_r, 1.0, "a refused value left in place");
     let (o1, scat1, cov1) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
     assert!(o1 == scat && scat1 == scat && cov1 == 0.0, "residual_normal_min_r = 1: output MAE {o1}, Stage I's {scat}, coverage {cov1}");
     tr.cfg.reflection.residual_normal_min_r = 0.0;

@@ -61,6 +61,11 @@ pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
 /// trained (the schedule is a function of the iteration count).
 pub const RESUMABLE_SETTINGS: [&str; 6] = ["iterations", "reflection.iterations", "light_field.iterations", "reflection.reseed", "test_interval", "checkpoint_interval"];
 
+/// Settings that change only what a trained model outputs (which set
+/// decides a pixel's normal and depth), not what it learned: `tgs eval
+/// --set` may change them on a finished run.
+pub const OUTPUT_SETTINGS: [&str; 2] = ["reflection.normal_min_r", "reflection.residual_normal_min_r"];
+
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
     let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
     apply_args(cfg, a)

@@ -9,6 +9,7 @@ pub mod config;
 pub mod divergence;
 pub mod from;
 pub mod live;
+pub mod open;
 pub mod records;
 pub mod report;
 pub mod run;
