@@ -14,6 +14,7 @@ pub mod bench_stages;
 pub mod bench_train;
 pub mod devices;
 pub mod embed;
+pub mod marks;
 pub mod mesh;
 pub mod render;
 pub mod sweep;

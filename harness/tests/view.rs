@@ -134,7 +134,73 @@ fn the_window_shows_what_tgs_render_writes() {
     assert_eq!(checkpoint_arrays(&live), checkpoint_arrays(&run), "the window changed the training");
     assert_eq!(shot("live-early.png").dimensions(), (48, 48));
     assert_eq!(shot("live-final.png"), render("r_0.png"), "the trained model in the window");
+    marking_the_glass(&base, &run);
     std::fs::remove_dir_all(&base).unwrap();
+}
+
+/// The clicks a user makes around the glass in one view: the mask's
+/// outermost pixel towards each of eight directions, as window
+/// coordinates of their centres (the window is the camera's size).
+fn outline_clicks(mask: &[bool], w: usize) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = (0..8)
+        .map(|k| {
+            let a = k as f64 * std::f64::consts::FRAC_PI_4;
+            let i = (0..mask.len()).filter(|&i| mask[i]).max_by(|&i, &j| {
+                let f = |i: usize| a.cos() * (i % w) as f64 + a.sin() * (i / w) as f64;
+                f(i).total_cmp(&f(j))
+            });
+            let i = i.expect("a view with glass");
+            ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5)
+        })
+        .collect();
+    out.dedup();
+    out
+}
+
+/// Marking the glass: eight clicks around it in two training views (key G,
+/// scripted as a user's clicks), then masks for every training view in a
+/// new directory, near the scene's exact masks; never over a directory.
+fn marking_the_glass(base: &Path, run: &Path) {
+    let opts = tgs::data::LoadOptions::default();
+    let data = tgs::data::Dataset::load(&base.join("scene"), &opts).unwrap();
+    let w = data.train[0].camera.width as usize;
+    let mut script = String::from("key t\nkey g\n");
+    for (k, view) in [0usize, 4].into_iter().enumerate() {
+        if k > 0 {
+            script += &"key n\n".repeat(4);
+        }
+        for (x, y) in outline_clicks(data.train[view].mask.as_ref().unwrap(), w) {
+            script += &format!("click {x} {y}\n");
+        }
+    }
+    script += "marks marked\n";
+    std::fs::write(base.join("marks.txt"), &script).unwrap();
+    let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", base.join("marks.txt").to_str().unwrap()]);
+    let t = text(&o);
+    assert!(o.status.success(), "tgs view failed:\n{t}");
+    assert!(t.contains("reflection.seed_masks="), "{t}");
+    let dir = base.join("marked");
+    assert!(dir.join("marks.json").is_file());
+    let (mut both, mut either, mut truth_n, mut covered) = (0usize, 0usize, 0usize, 0usize);
+    for v in &data.train {
+        let stem = Path::new(&v.name).file_stem().unwrap().to_str().unwrap().to_string();
+        let m = image::open(dir.join(format!("{stem}.png"))).unwrap().to_luma8();
+        let truth = v.mask.as_ref().unwrap();
+        for (p, &t) in m.pixels().zip(truth) {
+            let marked = p.0[0] > 127;
+            both += (marked && t) as usize;
+            either += (marked || t) as usize;
+            truth_n += t as usize;
+            covered += (marked && t) as usize;
+        }
+    }
+    let iou = both as f64 / either as f64;
+    let recall = covered as f64 / truth_n as f64;
+    eprintln!("marked glass against the exact masks, all {} training views: IoU {iou:.3}, recall {recall:.3}", data.train.len());
+    assert!(iou > 0.6 && recall > 0.9, "IoU {iou}, recall {recall}");
+    // Again into the same directory: refused, nothing written over.
+    let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", base.join("marks.txt").to_str().unwrap()]);
+    assert!(!o.status.success() && text(&o).contains("marked: exists"), "{}", text(&o));
 }
 
 #[test]

@@ -66,6 +66,9 @@ struct App<'a> {
     done: Option<bool>,
     /// A script waits for the training to end.
     until_trained: bool,
+    /// Left clicks mark the glass (key G), and the marks so far.
+    marking: bool,
+    marks: crate::marks::Marks,
 }
 
 /// The window's event loop (with the user events a live view sends).
@@ -98,6 +101,8 @@ pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<Slot>) -> 
         last_ms: 0.0,
         done: None,
         until_trained: false,
+        marking: false,
+        marks: Default::default(),
     };
     el.run_app(&mut app).context("the window's event loop")?;
     drop(app.open.take());
@@ -183,6 +188,36 @@ impl App<'_> {
                 let stem = format!("{}{}_{}_stage{}", name, if o.nav.unmoved().is_some() { "" } else { "_moved" }, o.scene.layer_name(), o.scene.stage());
                 self.capture = Some(shot::fresh_name(&dir, &stem));
             }
+            Action::MarkMode => {
+                self.marking = !self.marking;
+                eprintln!(
+                    "tgs view: marking the glass {}",
+                    if self.marking { "on: left clicks around it, in two or more views; U takes one back, M writes the masks" } else { "off" }
+                );
+            }
+            Action::Click(x, y) => {
+                let size = o.window.inner_size();
+                if let (true, Some((w, h))) = (self.marking, o.gpu.extent((size.width, size.height))?) {
+                    // Window pixels span [x, x + 1): their centres are the camera's integers.
+                    self.marks.click(&o.nav.camera(w, h), x - 0.5, y - 0.5);
+                }
+            }
+            Action::Unmark => self.marks.undo(),
+            Action::WriteMarks(dir) => {
+                let dir = dir.unwrap_or_else(|| fresh_dir(&self.args.run, "glass-marks"));
+                match self.marks.write(&o.scene.data.train, &dir) {
+                    Ok(n) => eprintln!(
+                        "tgs view: {} training views' glass masks in {} ({n} with glass); train on them with\n  tgs train --from {} --stages II,III --set reflection.seed_masks={} --out NEW_RUN",
+                        o.scene.data.train.len(),
+                        dir.display(),
+                        self.args.run.display(),
+                        dir.display()
+                    ),
+                    // A script stops on it; a user reads it and marks on.
+                    Err(e) if self.script.is_some() => return Err(e),
+                    Err(e) => eprintln!("tgs view: {e:#}"),
+                }
+            }
             Action::Help => println!("{HELP}"),
             Action::Quit => el.exit(),
             Action::Resize(w, h) => {
@@ -239,7 +274,7 @@ impl App<'_> {
             (Some((label, it, total)), None) => format!(" (training {label}: iteration {it} of {total})"),
             (None, _) => String::new(),
         };
-        o.window.set_title(&format!(
+        let title = format!(
             "tgs view · Stage {}{training} · {set} camera {}/{} '{name}'{} · {} · {w}x{h} · {:.1} ms · {} + {} Gaussians",
             o.scene.stage(),
             o.scene.camera + 1,
@@ -249,7 +284,8 @@ impl App<'_> {
             self.last_ms,
             o.scene.counts.0,
             o.scene.counts.1,
-        ));
+        ) + &marking_status(self.marking, &self.marks, &cam);
+        o.window.set_title(&title);
         Ok(true)
     }
 
@@ -311,10 +347,18 @@ impl ApplicationHandler<LiveEvent> for App<'_> {
                 PhysicalKey::Code(k) => key_action(k).map_or(Ok(()), |a| self.apply(a, el)),
                 _ => Ok(()),
             },
-            WindowEvent::MouseInput { state, button, .. } => {
-                self.drag = (state == ElementState::Pressed).then_some((button, self.modifiers.shift_key()));
-                Ok(())
-            }
+            WindowEvent::MouseInput { state, button, .. } => match (self.marking, state, button, self.cursor) {
+                // Marking: a left click marks (no orbit); the right button still pans.
+                (true, ElementState::Pressed, MouseButton::Left, Some((x, y))) => {
+                    self.drag = None;
+                    self.apply(Action::Click(x, y), el)
+                }
+                (true, _, MouseButton::Left, _) => Ok(()),
+                _ => {
+                    self.drag = (state == ElementState::Pressed).then_some((button, self.modifiers.shift_key()));
+                    Ok(())
+                }
+            },
             WindowEvent::CursorMoved { position, .. } => {
                 let last = self.cursor.replace((position.x, position.y));
                 match (self.drag, last) {
@@ -363,4 +407,23 @@ impl ApplicationHandler<LiveEvent> for App<'_> {
             }
         }
     }
+}
+
+/// The title's marking part: the clicks so far and how much of this view they mark.
+fn marking_status(on: bool, marks: &crate::marks::Marks, cam: &tgs_pipelines::Camera) -> String {
+    if !on && marks.clicks() == 0 {
+        return String::new();
+    }
+    let share = if marks.is_ready() {
+        let m = marks.mask(cam);
+        format!(", {:.0}% of this view", 100.0 * m.iter().filter(|&&b| b).count() as f64 / m.len().max(1) as f64)
+    } else {
+        String::new()
+    };
+    format!(" · marking{}: {} clicks in {} views{share}", if on { "" } else { " (off)" }, marks.clicks(), marks.outlines.len())
+}
+
+/// `run/STEM`, else `run/STEM-2`, ...: a directory name not yet taken.
+fn fresh_dir(run: &std::path::Path, stem: &str) -> PathBuf {
+    (1..).map(|k| run.join(if k == 1 { stem.to_string() } else { format!("{stem}-{k}") })).find(|p| !p.exists()).expect("an unused name")
 }

@@ -26,6 +26,15 @@ pub enum Action {
     Checkpoint,
     /// Write what the window shows as a PNG (a new file in the shots directory).
     Screenshot,
+    /// Marking the glass on or off (left clicks then outline it).
+    MarkMode,
+    /// A left click at window pixel coordinates (a mark while marking).
+    Click(f64, f64),
+    /// Take back the last mark.
+    Unmark,
+    /// Write every training view's glass mask from the marks: into this
+    /// new directory (script), else a new one in the run directory.
+    WriteMarks(Option<PathBuf>),
     /// Print the keys.
     Help,
     Quit,
@@ -46,7 +55,9 @@ tgs view keys:
   W A S D: fly forward, left, back, right   Q E: down, up
   N / P (or -> / <-): next / previous dataset camera   T: test or training cameras   R: back to the camera
   L / K: next / previous layer (final, normals, depth; after Stage I: scattering, reflection, R, F0, ...; gt: the photo)
-  C: next checkpoint (Stage I, II, III)   F12 or O: screenshot   H: this help   Esc: quit";
+  C: next checkpoint (Stage I, II, III)   F12 or O: screenshot   H: this help   Esc: quit
+  G: mark the glass: left clicks around it (a pane's corners, a dome's outline) in two or more views
+     U: take back a click   M: write every training view's glass mask (reflection.seed_masks)";
 
 /// The action of a key press (with shift held or not).
 pub fn key_action(key: KeyCode) -> Option<Action> {
@@ -67,6 +78,9 @@ pub fn key_action(key: KeyCode) -> Option<Action> {
         KeyCode::KeyC => Some(Action::Checkpoint),
         KeyCode::F12 | KeyCode::KeyO => Some(Action::Screenshot),
         KeyCode::KeyH => Some(Action::Help),
+        KeyCode::KeyG => Some(Action::MarkMode),
+        KeyCode::KeyU => Some(Action::Unmark),
+        KeyCode::KeyM => Some(Action::WriteMarks(None)),
         KeyCode::Escape => Some(Action::Quit),
         _ => None,
     }
@@ -96,6 +110,9 @@ fn key_named(name: &str) -> Option<KeyCode> {
             b'c' => KeyCode::KeyC,
             b'o' => KeyCode::KeyO,
             b'h' => KeyCode::KeyH,
+            b'g' => KeyCode::KeyG,
+            b'u' => KeyCode::KeyU,
+            b'm' => KeyCode::KeyM,
             _ => return None,
         },
         _ => return None,
@@ -111,6 +128,8 @@ fn key_named(name: &str) -> Option<KeyCode> {
 ///     zoom STEPS       # wheel steps (negative: out)
 ///     resize W H       # ask the window for W x H
 ///     capture FILE     # write the next whole frame the window shows (PNG)
+///     click X Y        # a left click at window pixel (X, Y) (a mark after key G)
+///     marks DIR        # write the glass masks of the marks into the new directory DIR
 ///     wait FRAMES
 ///     trained          # (tgs train --view) wait until the training has ended
 ///     quit
@@ -169,6 +188,14 @@ fn parse_line(line: &str, base: &Path) -> Result<Action> {
             want(2)?;
             Action::Capture(base.join(words[1]))
         }
+        "click" => {
+            want(3)?;
+            Action::Click(num(1)?, num(2)?)
+        }
+        "marks" => {
+            want(2)?;
+            Action::WriteMarks(Some(base.join(words[1])))
+        }
         "wait" => {
             want(2)?;
             Action::Wait(size(1)?)
@@ -181,7 +208,7 @@ fn parse_line(line: &str, base: &Path) -> Result<Action> {
             want(1)?;
             Action::Trained
         }
-        w => bail!("unknown action '{w}' (key, orbit, pan, zoom, resize, capture, wait, trained, quit)"),
+        w => bail!("unknown action '{w}' (key, orbit, pan, zoom, resize, capture, click, marks, wait, trained, quit)"),
     })
 }
 
@@ -194,11 +221,22 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("tgs-view-script-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("s.txt");
-        std::fs::write(&p, "# a path\nkey N\norbit 10 -5\n\nzoom -2 # out\nresize 1 1\ncapture a.png\nwait 3\nkey escape\n").unwrap();
+        std::fs::write(&p, "# a path\nkey N\norbit 10 -5\n\nzoom -2 # out\nresize 1 1\ncapture a.png\nwait 3\nkey g\nclick 3 4.5\nmarks m\nkey escape\n").unwrap();
         let a = read_script(&p).unwrap();
         assert_eq!(
             a,
-            vec![Action::Camera(1), Action::Orbit(10.0, -5.0), Action::Zoom(-2.0), Action::Resize(1, 1), Action::Capture(dir.join("a.png")), Action::Wait(3), Action::Quit]
+            vec![
+                Action::Camera(1),
+                Action::Orbit(10.0, -5.0),
+                Action::Zoom(-2.0),
+                Action::Resize(1, 1),
+                Action::Capture(dir.join("a.png")),
+                Action::Wait(3),
+                Action::MarkMode,
+                Action::Click(3.0, 4.5),
+                Action::WriteMarks(Some(dir.join("m"))),
+                Action::Quit
+            ]
         );
         for (bad, what) in [("key Z", "no key 'Z'"), ("orbit 1", "takes 2 argument"), ("resize 0 4", "not a size"), ("zoom nan", "not a number"), ("jump", "unknown action")] {
             std::fs::write(&p, format!("key N\n{bad}\n")).unwrap();

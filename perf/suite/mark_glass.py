@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""Mark the glass of suite scenes in `tgs view` as a user would, scripted.
+
+For each scene: the clicks a user makes around the glass (the exact mask's
+outermost pixel towards each of 8 directions: the glass's outline, which
+the user sees in the photo) in VIEWS training views (the view with the
+most glass, then each next the one farthest in angle from those chosen),
+replayed in `tgs view RUN --train-cameras` under xvfb-run (key G, `click`
+lines, `marks DIR`). The masks land in OUT/SCENE, ready for
+`suite.py --seed-masks OUT`; the script prints each scene's clicks and
+the marked masks' IoU and recall against the exact ones.
+
+    python3 perf/suite/mark_glass.py --scenes /tmp/suite --runs /tmp/suite-runs \\
+        --exact /tmp/exact-masks --out /tmp/marked [--views 2] [--tgs target/release/tgs]
+
+RUNS/SCENE/s0/I is the Stage I run `suite.py` trains (any run of the
+scene will do: only its dataset and cameras are used); EXACT/SCENE holds
+the exact training masks (`mitsuba_scenes.py --train-masks`). Needs numpy
+and Pillow (or imageio) to read the masks.
+"""
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+from PIL import Image
+
+
+def frames(scene_dir):
+    t = json.load(open(os.path.join(scene_dir, "transforms_train.json")))
+    return t["frames"]
+
+
+def stem(path):
+    b = os.path.basename(path)
+    return os.path.splitext(b)[0] if b.endswith((".png", ".jpg", ".jpeg", ".exr")) else b
+
+
+def clicks(mask):
+    """Eight clicks around the glass: its outermost pixel towards each direction (window coordinates of pixel centres)."""
+    ys, xs = np.nonzero(mask)
+    out = []
+    for k in range(8):
+        a = k * math.pi / 4
+        i = int(np.argmax(math.cos(a) * xs + math.sin(a) * ys))
+        p = (xs[i] + 0.5, ys[i] + 0.5)
+        if p not in out:
+            out.append(p)
+    return out
+
+
+def choose(masks, dirs, n):
+    """The view with the most glass, then each next the one whose camera direction is farthest from those chosen."""
+    area = [m.sum() for m in masks]
+    have = [i for i in range(len(masks)) if area[i] >= 9]
+    if not have:
+        return []
+    chosen = [max(have, key=lambda i: area[i])]
+    while len(chosen) < n and len(chosen) < len(have):
+        def gap(i):
+            return min(math.acos(max(-1.0, min(1.0, float(np.dot(dirs[i], dirs[j]))))) for j in chosen)
+        chosen.append(max((i for i in have if i not in chosen), key=gap))
+    return chosen
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", required=True)
+    ap.add_argument("--runs", required=True)
+    ap.add_argument("--exact", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--views", type=int, default=2)
+    ap.add_argument("--only", action="append")
+    ap.add_argument("--tgs", default="target/release/tgs")
+    a = ap.parse_args()
+    scenes = a.only or sorted(d for d in os.listdir(a.exact) if os.path.isdir(os.path.join(a.exact, d)))
+    print("| scene | views marked | clicks | IoU against exact masks | recall | marked share of the image |")
+    print("|---|---|---|---|---|---|")
+    for scene in scenes:
+        fr = frames(os.path.join(a.scenes, scene))
+        names = [stem(f["file_path"]) for f in fr]
+        masks = [np.array(Image.open(os.path.join(a.exact, scene, n + ".png")).convert("L")) > 127 for n in names]
+        # Camera viewing directions (NeRF c2w: the camera looks down -z).
+        dirs = [-np.array(f["transform_matrix"])[:3, 2] for f in fr]
+        dirs = [d / np.linalg.norm(d) for d in dirs]
+        chosen = choose(masks, dirs, a.views)
+        out = os.path.abspath(os.path.join(a.out, scene))
+        if os.path.exists(out):
+            raise SystemExit(f"{out} exists: choose another --out (nothing is written over)")
+        h, w = masks[0].shape
+        lines = ["key t", "key g"]
+        at, n_clicks = 0, 0
+        for i in chosen:
+            lines += ["key n"] * (i - at)
+            at = i
+            for x, y in clicks(masks[i]):
+                lines.append(f"click {x} {y}")
+                n_clicks += 1
+        lines.append(f"marks {out}")
+        os.makedirs(a.out, exist_ok=True)
+        script = os.path.join(a.out, scene + ".view.txt")
+        open(script, "w").write("\n".join(lines) + "\n")
+        run = os.path.join(a.runs, scene, "s0", "I")
+        p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", a.tgs, "view", run, "--size", f"{w}x{h}", "--script", script], capture_output=True, text=True)
+        if p.returncode != 0:
+            raise SystemExit(f"{scene}: tgs view failed:\n{p.stdout}{p.stderr}")
+        both = either = truth = covered = marked = 0
+        for n, m in zip(names, masks):
+            k = np.array(Image.open(os.path.join(out, n + ".png")).convert("L")) > 127
+            both += int((k & m).sum())
+            either += int((k | m).sum())
+            truth += int(m.sum())
+            marked += int(k.sum())
+        print(f"| {scene} | {', '.join(str(i) for i in chosen)} | {n_clicks} | {both / max(either, 1):.3f} | {both / max(truth, 1):.3f} | {marked / (len(masks) * w * h):.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
