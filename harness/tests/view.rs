@@ -173,7 +173,7 @@ fn marking_the_glass(base: &Path, run: &Path) {
             script += &format!("click {x} {y}\n");
         }
     }
-    script += "marks marked\n";
+    script += "capture marked-view.png\nmarks marked\n";
     std::fs::write(base.join("marks.txt"), &script).unwrap();
     let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", base.join("marks.txt").to_str().unwrap()]);
     let t = text(&o);
@@ -194,11 +194,25 @@ fn marking_the_glass(base: &Path, run: &Path) {
             covered += (marked && t) as usize;
         }
     }
+    // Marking shows the photo, the marked region tinted and the rest as it is.
+    let shown = rgb(&base.join("marked-view.png"));
+    let photo = image::open(base.join("scene/train/r_4.png")).unwrap().to_rgb8();
+    let marked4 = image::open(dir.join("r_4.png")).unwrap().to_luma8();
+    let (mut tinted, mut same) = (0, true);
+    for ((s, p), m) in shown.pixels().zip(photo.pixels()).zip(marked4.pixels()) {
+        if m.0[0] > 127 {
+            tinted += (s != p) as usize;
+        } else {
+            same &= s == p;
+        }
+    }
+    assert!(same && tinted > 20, "tinted {tinted}, unmarked pixels as the photo: {same}");
     let iou = both as f64 / either as f64;
     let recall = covered as f64 / truth_n as f64;
     eprintln!("marked glass against the exact masks, all {} training views: IoU {iou:.3}, recall {recall:.3}", data.train.len());
     assert!(iou > 0.6 && recall > 0.9, "IoU {iou}, recall {recall}");
     // Again into the same directory: refused, nothing written over.
+    std::fs::remove_file(base.join("marked-view.png")).unwrap();
     let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", base.join("marks.txt").to_str().unwrap()]);
     assert!(!o.status.success() && text(&o).contains("marked: exists"), "{}", text(&o));
 }

@@ -11,7 +11,7 @@ lines, `marks DIR`). The masks land in OUT/SCENE, ready for
 the marked masks' IoU and recall against the exact ones.
 
     python3 perf/suite/mark_glass.py --scenes /tmp/suite --runs /tmp/suite-runs \\
-        --exact /tmp/exact-masks --out /tmp/marked [--views 2] [--tgs target/release/tgs]
+        --exact /tmp/exact-masks --out /tmp/marked [--views 2] [--clicks 8] [--tgs target/release/tgs]
 
 RUNS/SCENE/s0/I is the Stage I run `suite.py` trains (any run of the
 scene will do: only its dataset and cameras are used); EXACT/SCENE holds
@@ -39,12 +39,12 @@ def stem(path):
     return os.path.splitext(b)[0] if b.endswith((".png", ".jpg", ".jpeg", ".exr")) else b
 
 
-def clicks(mask):
-    """Eight clicks around the glass: its outermost pixel towards each direction (window coordinates of pixel centres)."""
+def clicks(mask, n):
+    """N clicks around the glass: its outermost pixel towards each of N directions (window coordinates of pixel centres)."""
     ys, xs = np.nonzero(mask)
     out = []
-    for k in range(8):
-        a = k * math.pi / 4
+    for k in range(n):
+        a = k * 2 * math.pi / n
         i = int(np.argmax(math.cos(a) * xs + math.sin(a) * ys))
         p = (xs[i] + 0.5, ys[i] + 0.5)
         if p not in out:
@@ -73,6 +73,7 @@ def main():
     ap.add_argument("--exact", required=True)
     ap.add_argument("--out", required=True)
     ap.add_argument("--views", type=int, default=2)
+    ap.add_argument("--clicks", type=int, default=8, help="directions clicked around the glass in each view")
     ap.add_argument("--only", action="append")
     ap.add_argument("--tgs", default="target/release/tgs")
     a = ap.parse_args()
@@ -94,9 +95,9 @@ def main():
         lines = ["key t", "key g"]
         at, n_clicks = 0, 0
         for i in chosen:
-            lines += ["key n"] * (i - at)
+            lines += ["key n"] * (i - at) if i >= at else ["key p"] * (at - i)
             at = i
-            for x, y in clicks(masks[i]):
+            for x, y in clicks(masks[i], a.clicks):
                 lines.append(f"click {x} {y}")
                 n_clicks += 1
         lines.append(f"marks {out}")

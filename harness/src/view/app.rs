@@ -190,6 +190,10 @@ impl App<'_> {
             }
             Action::MarkMode => {
                 self.marking = !self.marking;
+                // One marks what the photo shows; the marked region is tinted on it.
+                if self.marking {
+                    o.scene.show_layer("gt");
+                }
                 eprintln!(
                     "tgs view: marking the glass {}",
                     if self.marking { "on: left clicks around it, in two or more views; U takes one back, M writes the masks" } else { "off" }
@@ -246,7 +250,11 @@ impl App<'_> {
         let pixels = o.pixels.as_ref().expect("made above");
         let order = o.gpu.order;
         if o.scene.layer != 0 {
-            pixels.upload(&o.scene.host_layer(&cam, o.nav.unmoved(), order)?)?;
+            let mut px = o.scene.host_layer(&cam, o.nav.unmoved(), order)?;
+            if self.marking && o.scene.layer_name() == "gt" && self.marks.is_ready() {
+                tint(&mut px, &self.marks.mask(&cam));
+            }
+            pixels.upload(&px)?;
         }
         let scene = &mut o.scene;
         let shown = o.gpu.present(pixels, self.capture.is_some(), |rec| scene.record_final(rec, &cam, order, pixels).map(|_| ()))?;
@@ -426,4 +434,12 @@ fn marking_status(on: bool, marks: &crate::marks::Marks, cam: &tgs_pipelines::Ca
 /// `run/STEM`, else `run/STEM-2`, ...: a directory name not yet taken.
 fn fresh_dir(run: &std::path::Path, stem: &str) -> PathBuf {
     (1..).map(|k| run.join(if k == 1 { stem.to_string() } else { format!("{stem}-{k}") })).find(|p| !p.exists()).expect("an unused name")
+}
+
+/// Tint the marked pixels magenta (half way), in either byte order.
+fn tint(px: &mut [u32], mask: &[bool]) {
+    for (p, _) in px.iter_mut().zip(mask).filter(|(_, &m)| m) {
+        let [a, g, b, x] = p.to_le_bytes();
+        *p = u32::from_le_bytes([a / 2 + 128, g / 2, b / 2 + 128, x]);
+    }
 }

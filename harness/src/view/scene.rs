@@ -190,6 +190,13 @@ impl Scene {
     }
 
     /// Step to the next (or previous) layer this stage has.
+    /// Show the layer called `name` (one of [`LAYERS`]).
+    pub fn show_layer(&mut self, name: &str) {
+        if let Some(i) = LAYERS.iter().position(|&l| l == name) {
+            self.layer = i;
+        }
+    }
+
     pub fn step_layer(&mut self, by: i64) {
         let later = self.stage() != "I";
         let has = |name: &str| match (name, &self.known) {
