@@ -3,8 +3,10 @@
 
 For each scene: the clicks a user makes around the glass (the exact mask's
 outermost pixel towards each of 8 directions: the glass's outline, which
-the user sees in the photo) in VIEWS training views (the view with the
-most glass, then each next the one farthest in angle from those chosen),
+the user sees in the photo) in VIEWS training views where its outline
+is clear (the mask whole, not cut by an occluder or the border: a user
+marks the views that show the glass plainly; the view with the most glass,
+then each next the one farthest in angle from those chosen),
 replayed in `tgs view RUN --train-cameras` under xvfb-run (key G, `click`
 lines, `marks DIR`). The masks land in OUT/SCENE, ready for
 `suite.py --seed-masks OUT`; the script prints each scene's clicks and
@@ -52,10 +54,35 @@ def clicks(mask, n):
     return out
 
 
-def choose(masks, dirs, n):
-    """The view with the most glass, then each next the one whose camera direction is farthest from those chosen."""
+def hull_area(mask):
+    """Area of the convex hull of the mask's pixels (their corners), by the shoelace formula."""
+    ys, xs = np.nonzero(mask)
+    pts = sorted({(x + dx, y + dy) for x, y in zip(xs.tolist(), ys.tolist()) for dx in (0, 1) for dy in (0, 1)})
+    if len(pts) < 3:
+        return 0.0
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    hull = []
+    for seq in (pts, pts[::-1]):
+        start = len(hull)
+        for p in seq:
+            while len(hull) >= start + 2 and cross(hull[-2], hull[-1], p) <= 0:
+                hull.pop()
+            hull.append(p)
+        hull.pop()
+    return 0.5 * abs(sum(hull[i][0] * hull[(i + 1) % len(hull)][1] - hull[(i + 1) % len(hull)][0] * hull[i][1] for i in range(len(hull))))
+
+
+def choose(masks, dirs, n, solidity):
+    """Views where the glass's outline is clear (its mask fills at least SOLIDITY of its convex hull: not cut by
+    an occluder or the image border), the one with the most glass first, then each next the one whose camera
+    direction is farthest from those chosen."""
     area = [m.sum() for m in masks]
-    have = [i for i in range(len(masks)) if area[i] >= 9]
+    clear = [i for i in range(len(masks)) if area[i] >= 9 and not (masks[i][0].any() or masks[i][-1].any() or masks[i][:, 0].any() or masks[i][:, -1].any())]
+    clear = [i for i in clear if area[i] >= solidity * hull_area(masks[i])]
+    have = clear or [i for i in range(len(masks)) if area[i] >= 9]
     if not have:
         return []
     chosen = [max(have, key=lambda i: area[i])]
@@ -74,6 +101,7 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--views", type=int, default=2)
     ap.add_argument("--clicks", type=int, default=8, help="directions clicked around the glass in each view")
+    ap.add_argument("--solidity", type=float, default=0.9, help="a view is marked only where the glass's mask fills this share of its convex hull (its outline clear)")
     ap.add_argument("--only", action="append")
     ap.add_argument("--tgs", default="target/release/tgs")
     a = ap.parse_args()
@@ -87,7 +115,7 @@ def main():
         # Camera viewing directions (NeRF c2w: the camera looks down -z).
         dirs = [-np.array(f["transform_matrix"])[:3, 2] for f in fr]
         dirs = [d / np.linalg.norm(d) for d in dirs]
-        chosen = choose(masks, dirs, a.views)
+        chosen = choose(masks, dirs, a.views, a.solidity)
         out = os.path.abspath(os.path.join(a.out, scene))
         if os.path.exists(out):
             raise SystemExit(f"{out} exists: choose another --out (nothing is written over)")
