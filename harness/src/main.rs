@@ -129,6 +129,11 @@ enum Cmd {
         /// Directory for screenshots (default RUN/screenshots; never written over).
         #[arg(long)]
         shots: Option<PathBuf>,
+        /// Marking the glass: how many outlined views may leave a point out
+        /// and it still counts as glass (0: all must hold it; 1 forgives a
+        /// view whose outline an occluder cut short).
+        #[arg(long, default_value_t = 0)]
+        mark_tolerance: usize,
     },
     /// Meshes of a run by TSDF fusion of rendered median depth over the
     /// training views, extracted by marching tetrahedra: mesh_scene.ply (the
@@ -235,7 +240,8 @@ fn run(cli: Cli) -> Result<()> {
             };
             let o = if *view {
                 let sel = DeviceSelector::from_arg_or_env(cli.device.as_deref());
-                let v = tgs::view::ViewArgs { run: out.clone(), size: None, camera: 0, train: false, script: view_script.clone(), shots: None, device: sel.clone() };
+                let v =
+                    tgs::view::ViewArgs { run: out.clone(), size: None, camera: 0, train: false, script: view_script.clone(), shots: None, mark_tolerance: 0, device: sel.clone() };
                 let validate = cli.validate;
                 tgs::view::train_live(&args, &v, std::time::Duration::from_millis(*view_every), move || Context::new(&ContextOptions { device: sel, validation: Some(validate) }))?
             } else {
@@ -268,13 +274,14 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Cmd::View { run, size, camera, train_cameras, script, shots } => tgs::view::view(&tgs::view::ViewArgs {
+        Cmd::View { run, size, camera, train_cameras, script, shots, mark_tolerance } => tgs::view::view(&tgs::view::ViewArgs {
             run: run.clone(),
             size: *size,
             camera: *camera,
             train: *train_cameras,
             script: script.clone(),
             shots: shots.clone(),
+            mark_tolerance: *mark_tolerance,
             device: DeviceSelector::from_arg_or_env(cli.device.as_deref()),
         }),
         Cmd::Scene { what } => scene(what),

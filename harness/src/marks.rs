@@ -85,6 +85,10 @@ impl Outline {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Marks {
     pub outlines: Vec<Outline>,
+    /// How many outlined views may leave a point out and it still counts
+    /// as glass (0: every one must hold it): forgives a view whose outline
+    /// an occluder cut short, at the cost of a looser region.
+    pub tolerance: usize,
 }
 
 impl Marks {
@@ -122,9 +126,11 @@ impl Marks {
     }
 
     /// `cam`'s glass mask (row-major): its pixels whose ray meets every
-    /// marked view's cone at one point in front of all of them.
+    /// marked view's cone (all but `tolerance`, and at least two) at one
+    /// point in front of them.
     pub fn mask(&self, cam: &Camera) -> Vec<bool> {
         let cones = self.cones();
+        let need = cones.len().saturating_sub(self.tolerance).max(2);
         let rays = Rays::of(cam);
         let (w, h) = (cam.width as usize, cam.height as usize);
         let mut out = vec![false; w * h];
@@ -133,7 +139,7 @@ impl Marks {
         }
         for (i, m) in out.iter_mut().enumerate() {
             let d = rays.dir((i % w) as f64, (i / w) as f64);
-            *m = through_all(rays.centre, d, &cones);
+            *m = through_enough(rays.centre, d, &cones, need);
         }
         out
     }
@@ -164,7 +170,8 @@ impl Marks {
             write_mask(&dir.join(format!("{stem}.png")), v.camera.width, v.camera.height, &m)?;
         }
         let record = serde_json::json!({
-            "what": "glass marked in tgs view: each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet every outline's cone",
+            "what": "glass marked in tgs view: each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet every outline's cone but `tolerance`",
+            "tolerance": self.tolerance,
             "outlines": self.outlines.iter().map(|o| serde_json::json!({
                 "width": o.camera.width, "height": o.camera.height, "fx": o.camera.fx, "fy": o.camera.fy, "cx": o.camera.cx, "cy": o.camera.cy,
                 "world_to_view": o.camera.world_to_view, "points": o.points,
@@ -188,30 +195,37 @@ fn stems(views: &[View]) -> Result<Vec<String>> {
     Ok(stems)
 }
 
-/// Whether the ray `o + t d` (t > 0) has a point inside every cone, each in
-/// front of its camera: the intersection of one interval of t per plane.
-fn through_all(o: DVec3, d: DVec3, cones: &[(Rays, Vec<DVec3>)]) -> bool {
-    let (mut lo, mut hi) = (1e-9f64, f64::INFINITY);
-    let mut keep = |n: DVec3, c: DVec3| {
-        // n . (o + t d - c) >= 0
-        let (a, b) = (n.dot(o - c), n.dot(d));
-        if b.abs() < 1e-15 {
-            if a < 0.0 {
-                hi = -1.0;
-            }
-        } else if b > 0.0 {
-            lo = lo.max(-a / b);
-        } else {
-            hi = hi.min(-a / b);
-        }
-    };
+/// Whether the ray `o + t d` (t > 0) has a point inside `need` of the
+/// cones, each in front of its camera: per cone one interval of t (the
+/// intersection of its planes' half-lines), then a sweep over their ends.
+fn through_enough(o: DVec3, d: DVec3, cones: &[(Rays, Vec<DVec3>)], need: usize) -> bool {
+    let mut ends: Vec<(f64, i32)> = Vec::with_capacity(2 * cones.len());
     for (rays, planes) in cones {
-        keep(rays.forward(), rays.centre);
-        for &n in planes {
-            keep(n, rays.centre);
+        let (mut lo, mut hi) = (1e-9f64, f64::INFINITY);
+        for n in std::iter::once(rays.forward()).chain(planes.iter().copied()) {
+            // n . (o + t d - c) >= 0
+            let (a, b) = (n.dot(o - rays.centre), n.dot(d));
+            if b.abs() < 1e-15 {
+                if a < 0.0 {
+                    hi = -1.0;
+                }
+            } else if b > 0.0 {
+                lo = lo.max(-a / b);
+            } else {
+                hi = hi.min(-a / b);
+            }
+        }
+        if lo < hi {
+            ends.extend([(lo, 1), (hi, -1)]);
         }
     }
-    lo < hi
+    // Ends before starts at the same t: intervals that only touch do not overlap.
+    ends.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let mut inside = 0i32;
+    ends.iter().any(|&(_, e)| {
+        inside += e;
+        inside >= need as i32
+    })
 }
 
 /// The convex hull of `p` (Andrew's monotone chain), counter-clockwise in
@@ -308,6 +322,19 @@ mod tests {
         assert!(truth.iter().filter(|&&t| t).count() > 100);
         assert_eq!(missed, 0, "the hull holds the pane");
         assert!(both as f64 / either as f64 > 0.7, "IoU {}", both as f64 / either as f64);
+        // A third outline cut short (an occluder hid half the pane there):
+        // every view must hold a point, so the pane's far half is lost;
+        // forgiving one view brings it back.
+        let mut cut = marks.clone();
+        let cut_cam = cam([0.0, -3.4, -0.6]);
+        for x in [corners[0], (corners[0] + corners[1]) / 2.0, (corners[2] + corners[3]) / 2.0, corners[3]] {
+            let (u, v) = project(&cut_cam, x);
+            cut.click(&cut_cam, u, v);
+        }
+        let lost = |m: &[bool]| truth.iter().zip(m).filter(|(t, m)| **t && !**m).count();
+        assert!(lost(&cut.mask(&third)) > 50, "{}", lost(&cut.mask(&third)));
+        cut.tolerance = 1;
+        assert_eq!(lost(&cut.mask(&third)), 0);
         // One outline is no region; undo takes clicks back one by one.
         let mut one = marks.clone();
         for _ in 0..4 {

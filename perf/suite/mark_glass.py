@@ -103,6 +103,7 @@ def main():
     ap.add_argument("--clicks", type=int, default=8, help="directions clicked around the glass in each view")
     ap.add_argument("--solidity", type=float, default=0.9, help="a view is marked only where the glass's mask fills this share of its convex hull (its outline clear)")
     ap.add_argument("--only", action="append")
+    ap.add_argument("--tolerance", type=int, default=0, help="tgs view --mark-tolerance: outlined views that may leave a point out")
     ap.add_argument("--tgs", default="target/release/tgs")
     a = ap.parse_args()
     scenes = a.only or sorted(d for d in os.listdir(a.exact) if os.path.isdir(os.path.join(a.exact, d)))
@@ -133,7 +134,7 @@ def main():
         script = os.path.join(a.out, scene + ".view.txt")
         open(script, "w").write("\n".join(lines) + "\n")
         run = os.path.join(a.runs, scene, "s0", "I")
-        p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", a.tgs, "view", run, "--size", f"{w}x{h}", "--script", script], capture_output=True, text=True)
+        p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", a.tgs, "view", run, "--size", f"{w}x{h}", "--mark-tolerance", str(a.tolerance), "--script", script], capture_output=True, text=True)
         if p.returncode != 0:
             raise SystemExit(f"{scene}: tgs view failed:\n{p.stdout}{p.stderr}")
         both = either = truth = covered = marked = 0

@@ -102,7 +102,7 @@ pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<Slot>) -> 
         done: None,
         until_trained: false,
         marking: false,
-        marks: Default::default(),
+        marks: crate::marks::Marks { tolerance: args.mark_tolerance, ..Default::default() },
     };
     el.run_app(&mut app).context("the window's event loop")?;
     drop(app.open.take());

@@ -27,6 +27,8 @@ pub struct ViewArgs {
     pub script: Option<PathBuf>,
     /// Where screenshots go (default RUN/screenshots).
     pub shots: Option<PathBuf>,
+    /// Marking the glass: outlined views that may leave a point out ([`crate::marks::Marks::tolerance`]).
+    pub mark_tolerance: usize,
     pub device: DeviceSelector,
 }
 
