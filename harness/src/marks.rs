@@ -163,12 +163,26 @@ impl Marks {
                 format!("{}: cannot create the directory", dir.display())
             }
         })?;
-        let mut glass = 0;
-        for (v, stem) in views.iter().zip(&stems) {
-            let m = self.mask(&v.camera);
-            glass += m.iter().any(|&b| b) as usize;
-            write_mask(&dir.join(format!("{stem}.png")), v.camera.width, v.camera.height, &m)?;
-        }
+        // The views in parallel (a real capture has hundreds of megapixels).
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(views.len().max(1));
+        let glass: Result<Vec<usize>> = std::thread::scope(|scope| {
+            let jobs: Vec<_> = (0..threads)
+                .map(|t| {
+                    let (dir, stems) = (&dir, &stems);
+                    scope.spawn(move || -> Result<usize> {
+                        let mut glass = 0;
+                        for (v, stem) in views.iter().zip(stems).skip(t).step_by(threads) {
+                            let m = self.mask(&v.camera);
+                            glass += m.iter().any(|&b| b) as usize;
+                            write_mask(&dir.join(format!("{stem}.png")), v.camera.width, v.camera.height, &m)?;
+                        }
+                        Ok(glass)
+                    })
+                })
+                .collect();
+            jobs.into_iter().map(|j| j.join().unwrap_or_else(|_| Err(anyhow::anyhow!("a mask thread panicked")))).collect()
+        });
+        let glass: usize = glass?.into_iter().sum();
         let record = serde_json::json!({
             "what": "glass marked in tgs view: each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet every outline's cone but `tolerance`",
             "tolerance": self.tolerance,
@@ -200,6 +214,7 @@ fn stems(views: &[View]) -> Result<Vec<String>> {
 /// intersection of its planes' half-lines), then a sweep over their ends.
 fn through_enough(o: DVec3, d: DVec3, cones: &[(Rays, Vec<DVec3>)], need: usize) -> bool {
     let mut ends: Vec<(f64, i32)> = Vec::with_capacity(2 * cones.len());
+    let mut missed = 0;
     for (rays, planes) in cones {
         let (mut lo, mut hi) = (1e-9f64, f64::INFINITY);
         for n in std::iter::once(rays.forward()).chain(planes.iter().copied()) {
@@ -217,6 +232,12 @@ fn through_enough(o: DVec3, d: DVec3, cones: &[(Rays, Vec<DVec3>)], need: usize)
         }
         if lo < hi {
             ends.extend([(lo, 1), (hi, -1)]);
+        } else {
+            // Most rays miss the glass: stop once too few cones are left.
+            missed += 1;
+            if cones.len() - missed < need {
+                return false;
+            }
         }
     }
     // Ends before starts at the same t: intervals that only touch do not overlap.

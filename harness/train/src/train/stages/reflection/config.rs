@@ -115,9 +115,9 @@ pub struct ReflectionConfig {
     /// Stage I's: little reflected colour is no evidence of a surface.
     pub normal_min_r: f32,
     /// The same threshold for a set seeded without glass masks (from the
-    /// residual): there the set spreads over the scene with little R and
-    /// made the normals beside the glass worse on every suite scene
-    /// (perf/journal/2026-12-03-fifty-seventh.md).
+    /// residual): there the set spreads over the scene with little R; at
+    /// 0.07 the normals beside the glass stay within 1° of Stage I's on the
+    /// suite (perf/journal/2026-12-04-fifty-seventh.md).
     pub residual_normal_min_r: f32,
     /// The frozen scattering layer's SH degree under Stage II (3: Stage I's
     /// colour as it is; 0 leaves the view-dependent light Stage I baked
