@@ -24,9 +24,9 @@ pub(crate) fn write_residual(maps: &mut OutDir, name: &str, cam: &Camera, r: &[f
 
 /// Appended to the message of a Stage II seeded from the residual (not
 /// the paper's copy start, which seeds from nothing): what
-/// glass masks would change (perf/RESULTS.md, the forty-third and
-/// forty-sixth entries).
-const RESIDUAL_NOTE: &str = ". Seeded without glass masks: the residual marks thin glass poorly; masks for a quarter of the training views (mask_path on the training frames, or reflection.seed_masks) place the seeds on it (docs/stage2.md)";
+/// glass masks would change, and the quickest way to them (the
+/// forty-third, forty-sixth and fifty-seventh entries of perf/journal).
+const RESIDUAL_NOTE: &str = ". Seeded without glass masks: the residual marks thin glass poorly, so the output keeps Stage I's normals wherever this set reflects little; glass masks place the seeds on it: mark the glass in `tgs view RUN` (key G, a few clicks in a few views) and train `--from RUN --set reflection.seed_masks=DIR`, or give mask_path on the training frames (docs/view.md, docs/stage2.md)";
 
 impl ReflDecision {
     /// What was measured and decided, for the progress output (`reseed`:
