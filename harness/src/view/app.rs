@@ -49,6 +49,8 @@ struct App<'a> {
     /// A run still training: where its snapshots arrive; the window (and
     /// its device) until the first one came.
     live: Option<Slot>,
+    /// Live: the snapshot pace the window asks of the training (ms).
+    pace: Option<Arc<std::sync::atomic::AtomicU64>>,
     early: Option<(Gpu, Window)>,
     error: Option<anyhow::Error>,
     script: Option<VecDeque<Action>>,
@@ -82,12 +84,14 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 
 /// Run the window on `el` until it closes: on `args.run`, or with `live`
 /// on the snapshots of a run while it trains.
-pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<Slot>) -> Result<()> {
+pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<(Slot, Arc<std::sync::atomic::AtomicU64>)>) -> Result<()> {
+    let (live, pace) = live.unzip();
     let script = args.script.as_deref().map(read_script).transpose()?.map(VecDeque::from);
     let mut app = App {
         args,
         open: None,
         live,
+        pace,
         early: None,
         error: None,
         script,
@@ -270,6 +274,11 @@ impl App<'_> {
         let dt = t0.elapsed().as_secs_f64();
         self.frames = (self.frames.0 + 1, self.frames.1 + dt);
         self.last_ms = 1e3 * dt;
+        // Live: a new model no sooner than nine frame times from now, so
+        // drawing takes at most a tenth of the machine the training shares.
+        if let Some(p) = &self.pace {
+            p.store((9.0 * self.last_ms) as u64, std::sync::atomic::Ordering::Relaxed);
+        }
         if let (Some(px), Some(path)) = (captured, self.capture.take()) {
             shot::write_new(&path, &px, (w, h), order)?;
             eprintln!("tgs view: wrote {}", path.display());

@@ -59,6 +59,7 @@ pub fn train_live(
     let proxy = el.create_proxy();
     let slot: app::Slot = Default::default();
     let open = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let pace = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
     let send = {
         let (slot, proxy, open) = (slot.clone(), proxy.clone(), open.clone());
         std::sync::Arc::new(move |s: crate::train::live::Snapshot| {
@@ -71,13 +72,13 @@ pub fn train_live(
         })
     };
     let mut args = t.clone();
-    args.live = Some(crate::train::live::LiveSink { every, send, open: open.clone() });
+    args.live = Some(crate::train::live::LiveSink { every, send, open: open.clone(), pace_ms: pace.clone() });
     let trainer = std::thread::spawn(move || {
         let r = ctx().and_then(|c| crate::train::run::train(&c, &args));
         let _ = proxy.send_event(app::LiveEvent::Done { interrupted: r.as_ref().is_ok_and(|o| o.interrupted) });
         r
     });
-    let shown = app::run_on(el, v, Some(slot));
+    let shown = app::run_on(el, v, Some((slot, pace)));
     open.store(false, std::sync::atomic::Ordering::Relaxed);
     if let Err(e) = &shown {
         eprintln!("tgs: the view failed ({e:#}); training goes on without it");

@@ -7,7 +7,7 @@
 use super::checkpoint::{self, Header};
 use super::trainer::Trainer;
 use anyhow::Result;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -27,6 +27,10 @@ pub struct LiveSink {
     pub send: Arc<dyn Fn(Snapshot) + Send + Sync>,
     /// False once nobody looks (the window closed): no more snapshots are taken.
     pub open: Arc<AtomicBool>,
+    /// The receiver's pace in milliseconds: no snapshot sooner than this
+    /// after the last, when longer than `every` (the viewer asks for nine
+    /// times its frame time, so that drawing takes at most a tenth).
+    pub pace_ms: Arc<AtomicU64>,
 }
 
 impl std::fmt::Debug for LiveSink {
@@ -48,7 +52,8 @@ impl Live {
 
     /// Send a snapshot of `tr` if `every` has passed since the last (or `now`).
     pub(crate) fn offer(&mut self, tr: &Trainer, dataset: &str, label: &str, total: u32, now: bool) -> Result<()> {
-        if !self.sink.open.load(Ordering::Relaxed) || (!now && self.last.is_some_and(|t| t.elapsed() < self.sink.every)) {
+        let gap = self.sink.every.max(Duration::from_millis(self.sink.pace_ms.load(Ordering::Relaxed)));
+        if !self.sink.open.load(Ordering::Relaxed) || (!now && self.last.is_some_and(|t| t.elapsed() < gap)) {
             return Ok(());
         }
         let (header, arrays) = checkpoint::snapshot(tr, dataset)?;
