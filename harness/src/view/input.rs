@@ -122,17 +122,19 @@ fn key_named(name: &str) -> Option<KeyCode> {
 
 /// A `--script` file: one action a line, `#` comments.
 ///
-///     key N            # a key press, as the keyboard's (N, Right, L, C, O, Escape, ...)
-///     orbit DX DY      # a left drag of DX, DY pixels
-///     pan DX DY        # a right drag
-///     zoom STEPS       # wheel steps (negative: out)
-///     resize W H       # ask the window for W x H
-///     capture FILE     # write the next whole frame the window shows (PNG)
-///     click X Y        # a left click at window pixel (X, Y) (a mark after key G)
-///     marks DIR        # write the glass masks of the marks into the new directory DIR
-///     wait FRAMES
-///     trained          # (tgs train --view) wait until the training has ended
-///     quit
+/// ```text
+/// key N            # a key press, as the keyboard's (N, Right, L, C, O, Escape, ...)
+/// orbit DX DY      # a left drag of DX, DY pixels
+/// pan DX DY        # a right drag
+/// zoom STEPS       # wheel steps (negative: out)
+/// resize W H       # ask the window for W x H
+/// capture FILE     # write the next whole frame the window shows (PNG)
+/// click X Y        # a left click at window pixel (X, Y) (a mark after key G)
+/// marks DIR        # write the glass masks of the marks into the new directory DIR
+/// wait FRAMES
+/// trained          # (tgs train --view) wait until the training has ended
+/// quit
+/// ```
 ///
 /// Relative files are relative to the script's directory.
 pub fn read_script(path: &Path) -> Result<Vec<Action>> {
