@@ -9,6 +9,7 @@
 
 use crate::data::image_io::write_mask;
 use crate::data::View;
+use crate::train::stages::reflection::masks::mask_stem;
 use anyhow::{bail, Context as _, Result};
 use glam::{DMat3, DVec3};
 use std::path::Path;
@@ -199,7 +200,7 @@ impl Marks {
 
 /// Each view's mask file stem (its name without extension), refused where two views would share one.
 fn stems(views: &[View]) -> Result<Vec<String>> {
-    let stems: Vec<String> = views.iter().map(|v| Path::new(&v.name).file_stem().map_or_else(|| v.name.clone(), |s| s.to_string_lossy().into_owned())).collect();
+    let stems: Vec<String> = views.iter().map(|v| mask_stem(&v.name)).collect();
     let mut seen = std::collections::HashSet::new();
     for (s, v) in stems.iter().zip(views) {
         if !seen.insert(s) {

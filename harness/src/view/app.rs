@@ -212,7 +212,7 @@ impl App<'_> {
             }
             Action::Unmark => self.marks.undo(),
             Action::WriteMarks(dir) => {
-                let dir = dir.unwrap_or_else(|| fresh_dir(&self.args.run, "glass-marks"));
+                let dir = dir.unwrap_or_else(|| shot::unused_path(&self.args.run, "glass-marks", ""));
                 match self.marks.write(&o.scene.data.train, &dir) {
                     Ok(n) => eprintln!(
                         "tgs view: {} training views' glass masks in {} ({n} with glass); train on them with\n  tgs train --from {} --stages II,III --set reflection.seed_masks={} --out NEW_RUN",
@@ -253,10 +253,12 @@ impl App<'_> {
         }
         let pixels = o.pixels.as_ref().expect("made above");
         let order = o.gpu.order;
+        // What the marks cover in this view (tinted on the photo, counted in the title).
+        let marked = ((self.marking || self.marks.clicks() > 0) && self.marks.is_ready()).then(|| self.marks.mask(&cam));
         if o.scene.layer != 0 {
             let mut px = o.scene.host_layer(&cam, o.nav.unmoved(), order)?;
-            if self.marking && o.scene.layer_name() == "gt" && self.marks.is_ready() {
-                tint(&mut px, &self.marks.mask(&cam));
+            if let Some(m) = marked.as_ref().filter(|_| self.marking && o.scene.layer_name() == "gt") {
+                tint(&mut px, m);
             }
             pixels.upload(&px)?;
         }
@@ -301,7 +303,7 @@ impl App<'_> {
             self.last_ms,
             o.scene.counts.0,
             o.scene.counts.1,
-        ) + &marking_status(self.marking, &self.marks, &cam);
+        ) + &marking_status(self.marking, &self.marks, marked.as_deref());
         o.window.set_title(&title);
         Ok(true)
     }
@@ -426,23 +428,14 @@ impl ApplicationHandler<LiveEvent> for App<'_> {
     }
 }
 
-/// The title's marking part: the clicks so far and how much of this view they mark.
-fn marking_status(on: bool, marks: &crate::marks::Marks, cam: &tgs_pipelines::Camera) -> String {
+/// The title's marking part: the clicks so far and how much of this view
+/// they mark (`marked`, once they describe a region).
+fn marking_status(on: bool, marks: &crate::marks::Marks, marked: Option<&[bool]>) -> String {
     if !on && marks.clicks() == 0 {
         return String::new();
     }
-    let share = if marks.is_ready() {
-        let m = marks.mask(cam);
-        format!(", {:.0}% of this view", 100.0 * m.iter().filter(|&&b| b).count() as f64 / m.len().max(1) as f64)
-    } else {
-        String::new()
-    };
+    let share = marked.map_or_else(String::new, |m| format!(", {:.0}% of this view", 100.0 * m.iter().filter(|&&b| b).count() as f64 / m.len().max(1) as f64));
     format!(" · marking{}: {} clicks in {} views{share}", if on { "" } else { " (off)" }, marks.clicks(), marks.outlines.len())
-}
-
-/// `run/STEM`, else `run/STEM-2`, ...: a directory name not yet taken.
-fn fresh_dir(run: &std::path::Path, stem: &str) -> PathBuf {
-    (1..).map(|k| run.join(if k == 1 { stem.to_string() } else { format!("{stem}-{k}") })).find(|p| !p.exists()).expect("an unused name")
 }
 
 /// Tint the marked pixels magenta (half way), in either byte order.

@@ -41,7 +41,12 @@ pub fn write_new(path: &Path, pixels: &[u32], (w, h): (u32, u32), order: PixelOr
 /// A new file in `dir` for a screenshot: `STEM.png`, else `STEM-2.png`, ...
 pub fn fresh_name(dir: &Path, stem: &str) -> PathBuf {
     let clean: String = stem.chars().map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect();
-    (1..).map(|k| dir.join(if k == 1 { format!("{clean}.png") } else { format!("{clean}-{k}.png") })).find(|p| !p.exists()).expect("an unused name")
+    unused_path(dir, &clean, ".png")
+}
+
+/// `dir/STEMSUFFIX`, else `dir/STEM-2SUFFIX`, ...: the first that does not exist.
+pub fn unused_path(dir: &Path, stem: &str, suffix: &str) -> PathBuf {
+    (1..).map(|k| dir.join(if k == 1 { format!("{stem}{suffix}") } else { format!("{stem}-{k}{suffix}") })).find(|p| !p.exists()).expect("an unused name")
 }
 
 use image::ImageEncoder as _;

@@ -72,6 +72,12 @@ pub(super) fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(
     Ok((Some(Cow::Borrowed(&v.masks[..])), MaskSource::Dataset))
 }
 
+/// The file stem of training view `name`'s glass mask in a
+/// `reflection.seed_masks` directory: the name without its extension.
+pub fn mask_stem(name: &str) -> String {
+    Path::new(name).file_stem().map_or_else(|| name.to_string(), |s| s.to_string_lossy().into_owned())
+}
+
 /// `reflection.seed_masks`: each training view's glass mask from
 /// `dir/NAME.png` (NAME the view's name without its extension), at the
 /// view's size or `downscale` times it (then reduced as the dataset's
@@ -85,7 +91,7 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
         .iter()
         .zip(cameras)
         .map(|(name, cam)| {
-            let stem = Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| name.clone());
+            let stem = mask_stem(name);
             // NAME without its extension; NAME.png (`0000.jpg.png`, as renders were once named) too.
             let Some(path) = [format!("{stem}.png"), format!("{name}.png")].into_iter().map(|f| dir.join(f)).find(|p| p.is_file()) else {
                 return Ok(None);
@@ -113,7 +119,7 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
                     "reflection.seed_masks: {} holds no glass mask of any of the {} training views (VIEW.png, e.g. {}.png)",
                     dir.display(),
                     names.len(),
-                    names.first().and_then(|n| Path::new(n).file_stem()).map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+                    names.first().map(|n| mask_stem(n)).unwrap_or_default()
                 );
             }
             Ok(m)
