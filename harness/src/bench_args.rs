@@ -153,6 +153,20 @@ pub(crate) enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// The viewer's frame without a window: a run's final image on an
+    /// orbit, rendered and packed as `tgs view` draws it (for machines with
+    /// no display; `perf/view/bench.sh` times the window).
+    View {
+        /// A `tgs train` run directory.
+        run: PathBuf,
+        /// Frame size WIDTHxHEIGHT.
+        #[arg(long, default_value = "800x600", value_parser = crate::parse_size)]
+        size: (u32, u32),
+        #[arg(long, default_value_t = 120)]
+        frames: u32,
+        #[arg(long)]
+        json: bool,
+    },
     /// Exclusive prefix sum of N u32.
     Scan {
         #[arg(long, default_value_t = 1 << 20)]
@@ -224,6 +238,7 @@ impl Bench {
                 };
                 show(&tgs::bench_stages::stages(ctx, &spec)?, *json, tgs::bench_stages::print_stages)
             }
+            Bench::View { run, size, frames, json } => show(&tgs::bench_view::view(ctx, run, size.0, size.1, *frames)?, *json, tgs::bench_view::print_view),
             Bench::Lpips { size, reps, json } => tgs::bench::lpips(*size, *reps, *json),
             Bench::Scan { n, reps, json } => show(&tgs::bench::scan(ctx, *n, *reps)?, *json, |b| {
                 println!("device: {}", b.device);

@@ -12,6 +12,7 @@ pub mod bench_mlp;
 pub mod bench_raster;
 pub mod bench_stages;
 pub mod bench_train;
+pub mod bench_view;
 pub mod devices;
 pub mod embed;
 pub mod marks;

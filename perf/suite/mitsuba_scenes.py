@@ -378,6 +378,7 @@ def main():
     ap.add_argument("--sampler-seed", type=int, default=0, help="0: the default seeds; N >= 1 other ones (the same images up to Monte Carlo noise)")
     ap.add_argument("--split", choices=["both", "train", "test"], default="both", help="which views to render")
     ap.add_argument("--median-of", type=int, default=1, metavar="K", help="each image the per-pixel median of K renderings of --spp samples (no fireflies; biased: drops the sun's caustics through the glass)")
+    ap.add_argument("--compact", action="store_true", help="JPEG images (quality 95) and half-float EXR normals: ~10x smaller, for datasets that travel (perf/suite/gpu_paper.sh)")
     ap.add_argument("--train-masks", metavar="DATASET", help="only write DATASET's training views' glass masks into --out (one --scene)")
     a = ap.parse_args()
     if not 0 <= a.sampler_seed <= 1000:
@@ -422,19 +423,27 @@ def main():
                 # The per-pixel median of --median-of renderings (the first is the plain one).
                 img = np.median([np.array(mi.render(scene, sensor=sensor, seed=i + 100_000 * a.sampler_seed + 10_000 * k))[:, :, :3] for k in range(a.median_of)], axis=0)
                 stem = f"{split}/r_{i}"
-                write_png(mi, os.path.join(root, stem + ".png"), img, True)
-                frame = {"file_path": "./" + stem, "transform_matrix": c2w.tolist()}
+                if a.compact:
+                    mi.Bitmap(np.ascontiguousarray(img, dtype=np.float32)).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(os.path.join(root, stem + ".jpg"), quality=95)
+                else:
+                    write_png(mi, os.path.join(root, stem + ".png"), img, True)
+                frame = {"file_path": "./" + stem + (".jpg" if a.compact else ""), "transform_matrix": c2w.tolist()}
                 if split == "test":
                     ro, rd = rays(c2w, a.res, fov, 1)
                     t, nrm, _ = first_hit(prims, ro, rd)
                     nrm = np.where((nrm * rd).sum(1, keepdims=True) > 0, -nrm, nrm)
                     nrm[~np.isfinite(t)] = 0
-                    np.save(os.path.join(root, stem + "_normal.npy"), nrm.reshape(a.res, a.res, 3).astype(np.float32))
+                    nrm = nrm.reshape(a.res, a.res, 3).astype(np.float32)
+                    npath = stem + ("_normal.exr" if a.compact else "_normal.npy")
+                    if a.compact:
+                        mi.Bitmap(nrm, mi.Bitmap.PixelFormat.RGB).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float16, srgb_gamma=False).write(os.path.join(root, npath))
+                    else:
+                        np.save(os.path.join(root, npath), nrm)
                     ro, rd = rays(c2w, a.res, fov, 4)
                     _, _, g = first_hit(prims, ro, rd)
                     mask = g.reshape(a.res, a.res, 16).all(2)
                     write_png(mi, os.path.join(root, stem + "_mask.png"), mask.astype(np.float32)[:, :, None], False)
-                    frame["normal_path"] = "./" + stem + "_normal.npy"
+                    frame["normal_path"] = "./" + npath
                     frame["mask_path"] = "./" + stem + "_mask.png"
                 frames.append(frame)
                 print(f"{os.path.basename(root)} {stem}: {time.time() - t0:.1f} s", flush=True)
@@ -456,11 +465,11 @@ def train_masks(mi, a):
     os.makedirs(a.out, exist_ok=True)
     for f in t["frames"]:
         stem = os.path.basename(f["file_path"])
-        stem = os.path.splitext(stem)[0] if stem.endswith(".png") else stem
+        stem = os.path.splitext(stem)[0] if stem.endswith((".png", ".jpg")) else stem
         out = os.path.join(a.out, stem + ".png")
         if os.path.exists(out):
             raise SystemExit(f"{out} exists; this script never writes over a file (remove it or pick another --out)")
-        img = os.path.join(a.train_masks, f["file_path"] + ("" if f["file_path"].endswith(".png") else ".png"))
+        img = os.path.join(a.train_masks, f["file_path"] + ("" if f["file_path"].endswith((".png", ".jpg")) else ".png"))
         w, h = mi.Bitmap(img).size()
         if w != h:
             raise SystemExit(f"{img}: {w}x{h}; this script's cameras make square images")
