@@ -26,13 +26,11 @@ fn config(stages: &str, reseed: bool) -> TrainConfig {
 
 #[test]
 fn the_stages_are_i_ii_iii_in_order() {
-    let all: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+    let all: Vec<&str> = Stage::all().map(|s| s.name()).collect();
     assert_eq!(all, ["I", "II", "III"]);
     assert_eq!(Stage::default(), Stage::SCATTERING);
     assert_eq!(LATER.iter().map(|k| k.key()).collect::<Vec<_>>(), ["reflection", "light_field"]);
-    // The later stages' kinds follow the names' order.
-    assert_eq!(LATER.iter().map(|k| k.stage()).collect::<Vec<_>>(), Stage::ALL[1..]);
-    for (i, s) in Stage::ALL.into_iter().enumerate() {
+    for (i, s) in Stage::all().enumerate() {
         assert_eq!(s.number(), i + 1);
         assert_eq!(Stage::named(s.name()), Some(s));
     }
@@ -149,4 +147,27 @@ fn the_header_holds_at_most_one_known_stage() {
     assert!(back.get("light_field").is_none() && back.get("reflection").is_none(), "{back}");
     let kept = serde_json::to_value(header(serde_json::json!({"light_field": {"arrays": []}})).unwrap()).unwrap();
     assert_eq!(kept["light_field"], serde_json::json!({"arrays": []}));
+}
+
+/// The settings `--resume` and `tgs eval --set` may change are gathered
+/// from the stages' kinds: each lies in its stage's section and is a
+/// setting the configuration has.
+#[test]
+fn the_settings_lists_are_built_from_the_list() {
+    use tgs::train::args::{output_settings, resumable_settings};
+    use tgs::train::config::flatten;
+    use tgs::train::stages::kind::in_section;
+    assert_eq!(resumable_settings(), ["iterations", "reflection.iterations", "reflection.reseed", "light_field.iterations", "test_interval", "checkpoint_interval"]);
+    assert_eq!(output_settings(), ["reflection.normal_min_r", "reflection.residual_normal_min_r"]);
+    let known: Vec<String> = flatten(&toml::Table::try_from(TrainConfig::quick()).unwrap()).into_iter().map(|(k, _)| k).collect();
+    for k in LATER {
+        for key in k.resumable().iter().chain(k.output_settings()) {
+            assert!(in_section(k, key), "{key} is not in the {} section", k.key());
+            assert!(known.iter().any(|n| n == key), "{key} is not a setting");
+        }
+        for key in k.from_here_settings() {
+            assert!(known.iter().any(|n| n == key) && !in_section(k, key), "{key}: a setting of an earlier stage");
+        }
+    }
+    assert!(!in_section(LATER[0], "reflectionx.iterations") && !in_section(LATER[0], "reflection"));
 }

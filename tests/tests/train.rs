@@ -470,7 +470,7 @@ fn resume_refuses_conflicting_options_and_damaged_checkpoints() {
 fn from_names_inherited_settings_that_differ_from_the_defaults() {
     use tgs::train::run::inherited_settings;
     let mut saved = TrainConfig::preset("quick").unwrap();
-    assert!(inherited_settings(&saved, &saved, false).unwrap().is_empty(), "a run with today's defaults inherits nothing to report");
+    assert!(inherited_settings(&saved, &saved, 0).unwrap().is_empty(), "a run with today's defaults inherits nothing to report");
     saved.light_field.train_scattering = false;
     saved.reflection.env_init = tgs::train::settings::EnvStart::Scene;
     saved.reflection.lr_r = 0.25;
@@ -478,16 +478,16 @@ fn from_names_inherited_settings_that_differ_from_the_defaults() {
     saved.lr_opacity = 0.5;
     let mut cfg = saved.clone();
     cfg.light_field.lr_f0 = 0.0075;
-    let got = inherited_settings(&saved, &cfg, false).unwrap();
+    let got = inherited_settings(&saved, &cfg, 0).unwrap();
     assert_eq!(got, ["light_field.train_scattering = false (default true)", "reflection.env_init = \"scene\" (default \"grey\")", "reflection.lr_r = 0.25 (default 0.005)"]);
-    let got = inherited_settings(&saved, &cfg, true).unwrap();
+    let got = inherited_settings(&saved, &cfg, 1).unwrap();
     assert_eq!(got, ["light_field.train_scattering = false (default true)"]);
     // Stage III's settings only when Stage III runs.
     cfg.stages = "I,II".into();
-    let got = inherited_settings(&saved, &cfg, false).unwrap();
+    let got = inherited_settings(&saved, &cfg, 0).unwrap();
     assert_eq!(got, ["reflection.env_init = \"scene\" (default \"grey\")", "reflection.lr_r = 0.25 (default 0.005)"]);
     // A setting whose presets differ is named with both.
     saved.light_field.iterations = 77;
-    let got = inherited_settings(&saved, &saved, true).unwrap();
+    let got = inherited_settings(&saved, &saved, 1).unwrap();
     assert!(got.contains(&"light_field.iterations = 77 (default 2000 quick, 20000 paper)".to_string()), "{got:?}");
 }

@@ -3,6 +3,7 @@
 
 use super::config::{flatten, TrainConfig};
 use super::rundir::DEFAULT_SCENE;
+use super::stages::LATER;
 use crate::data::{Dataset, LoadOptions};
 use anyhow::{bail, Context as _, Result};
 use std::collections::BTreeMap;
@@ -57,14 +58,20 @@ pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
     Dataset::load(dir, &opts)
 }
 
-/// Settings a resumed run may change: they do not alter what was already
-/// trained (the schedule is a function of the iteration count).
-pub const RESUMABLE_SETTINGS: [&str; 6] = ["iterations", "reflection.iterations", "light_field.iterations", "reflection.reseed", "test_interval", "checkpoint_interval"];
+/// Settings `--resume` may change: the schedule's length and reporting,
+/// and each later stage's own ([`super::stages::LaterKind::resumable`]); changing any
+/// other would train another model than the one checkpointed.
+pub fn resumable_settings() -> Vec<&'static str> {
+    let stages = LATER.iter().flat_map(|k| k.resumable().iter().copied());
+    std::iter::once("iterations").chain(stages).chain(["test_interval", "checkpoint_interval"]).collect()
+}
 
 /// Settings that change only what a trained model outputs (which set
 /// decides a pixel's normal and depth), not what it learned: `tgs eval
-/// --set` may change them on a finished run.
-pub const OUTPUT_SETTINGS: [&str; 2] = ["reflection.normal_min_r", "reflection.residual_normal_min_r"];
+/// --set` may change them on a finished run ([`super::stages::LaterKind::output_settings`]).
+pub fn output_settings() -> Vec<&'static str> {
+    LATER.iter().flat_map(|k| k.output_settings().iter().copied()).collect()
+}
 
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
     let cfg = TrainConfig::preset(a.preset.as_deref().unwrap_or("quick"))?;
@@ -147,7 +154,7 @@ pub(crate) fn show(v: &toml::Value) -> String {
 
 /// The settings of a resumed run: the checkpoint's, with the options given
 /// now applied on top (a `--preset` replaces them all). Any difference
-/// outside [`RESUMABLE_SETTINGS`] would silently train another model than
+/// outside [`resumable_settings`] would silently train another model than
 /// the one checkpointed, so it is refused with the key and both values.
 pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> {
     let base = match &a.preset {
@@ -155,12 +162,13 @@ pub fn resume_config(a: &TrainArgs, saved: &TrainConfig) -> Result<TrainConfig> 
         None => saved.clone(),
     };
     let cfg = apply_args(base, a)?;
-    let conflicts = changed_settings(saved, &cfg, |k| RESUMABLE_SETTINGS.contains(&k))?;
+    let free = resumable_settings();
+    let conflicts = changed_settings(saved, &cfg, |k| free.contains(&k))?;
     if !conflicts.is_empty() {
         bail!(
             "--resume continues a run with the settings it was started with; these options change them:\n  {}\nonly {} may change when resuming (start a new run with another --out to train with other settings)",
             conflicts.join("\n  "),
-            RESUMABLE_SETTINGS.join(", ")
+            free.join(", ")
         );
     }
     Ok(cfg)

@@ -2,7 +2,6 @@
 //! `paper` preset), a `quick` preset for minutes on a CPU driver, a TOML
 //! file, and `--set key=value` overrides, applied in that order.
 
-use super::settings::LightPreset;
 use super::stage::Stage;
 pub use super::stages::light_field::config::LightFieldConfig;
 pub use super::stages::reflection::config::ReflectionConfig;
@@ -170,10 +169,8 @@ impl TrainConfig {
             max_gaussians: 200_000,
             test_interval: 1000,
             checkpoint_interval: 500,
-            reflection: ReflectionConfig { iterations: 1000, env_res: 16, prune_interval: 100, ..ReflectionConfig::default() },
-            // Stage III 2,000 iterations: better than 1,000 on all eight
-            // path-traced scene-seed pairs (perf/journal/2026-12-03-fifty-fourth.md).
-            light_field: LightFieldConfig { iterations: 2000, preset: LightPreset::Small, ..LightFieldConfig::default() },
+            reflection: ReflectionConfig::quick(),
+            light_field: LightFieldConfig::quick(),
             ..Self::paper()
         }
     }
@@ -230,7 +227,7 @@ impl TrainConfig {
     /// The stages to run, parsed from `stages`: Stage I and the later
     /// stages after it in order, each starting from the one before.
     pub fn stage_list(&self) -> Result<Vec<&'static str>> {
-        let all: Vec<&'static str> = Stage::ALL.iter().map(|s| s.name()).collect();
+        let all: Vec<&'static str> = Stage::all().map(|s| s.name()).collect();
         let mut out = Vec::new();
         for s in self.stages.split(',').map(str::trim) {
             match Stage::named(s) {
@@ -250,16 +247,6 @@ impl TrainConfig {
     /// Whether the stage named `name` ("II", ...) is scheduled.
     pub fn wants(&self, name: &str) -> bool {
         self.stage_list().map(|s| s.contains(&name)).unwrap_or(false)
-    }
-
-    /// Whether Stage II is scheduled.
-    pub fn wants_reflection(&self) -> bool {
-        self.wants("II")
-    }
-
-    /// Whether Stage III is scheduled.
-    pub fn wants_light_field(&self) -> bool {
-        self.wants("III")
     }
 
     /// Whether the opacity reset follows iteration `it` (2DGS: every

@@ -6,8 +6,10 @@ use super::args::{apply_args, changed_settings, settings, show};
 use super::args::{load_dataset, TrainArgs};
 use super::checkpoint;
 use super::config::TrainConfig;
-use super::rundir::{CHECKPOINT, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
-use super::stages::{light_field, reflection};
+use super::rundir::{stage_checkpoint, CHECKPOINT};
+use super::stage::Stage;
+use super::stages::kind::in_section;
+use super::stages::LATER;
 use super::trainer::Trainer;
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
@@ -16,36 +18,63 @@ use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
 
-/// Settings that only shape the stages after Stage I: `--from RUN` may
-/// change them (everything else trained RUN's Stage I and must stay).
-fn later_stage_setting(k: &str) -> bool {
-    k.starts_with("reflection.") || k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval" | "validation_every" | "validation_margin_db")
+/// Settings of the whole run that any `--from` may change.
+const FROM_RUN_SETTINGS: [&str; 3] = ["stages", "test_interval", "checkpoint_interval"];
+/// And those a `--from` that keeps only RUN's Stage I may change (the
+/// validation slice is held out of the later stages).
+const FROM_STAGE_ONE_SETTINGS: [&str; 2] = ["validation_every", "validation_margin_db"];
+
+/// The first later stage a `--from` run trains (its index in [`LATER`]):
+/// the first of `--stages` (RUN's stages before it are kept), else the
+/// first after Stage I.
+fn start_index(a: &TrainArgs) -> usize {
+    let first = a.stages.as_deref().and_then(|s| s.split(',').next()).map(str::trim).unwrap_or("");
+    LATER.iter().position(|k| k.stage().name() == first).unwrap_or(0)
 }
 
-/// `--from RUN --stages III`: Stage III starts from RUN's finished Stage II.
-fn from_stage_two(a: &TrainArgs) -> bool {
-    a.from.is_some() && a.stages.as_deref().is_some_and(|s| s.split(',').next().unwrap_or("").trim() == "III")
+/// Whether a `--from` run that trains from `LATER[start]` on may change
+/// the setting `k`: the sections of the stages it trains, what the first
+/// of them frees ([`LaterKind::from_here_settings`]) and the run's own.
+fn from_setting(start: usize, k: &str) -> bool {
+    FROM_RUN_SETTINGS.contains(&k)
+        || (start == 0 && FROM_STAGE_ONE_SETTINGS.contains(&k))
+        || LATER[start..].iter().any(|s| in_section(*s, k))
+        || LATER[start].from_here_settings().contains(&k)
 }
 
-/// Settings `--from RUN --stages III` may change: only Stage III's.
-fn stage_three_setting(k: &str) -> bool {
-    k.starts_with("light_field.") || matches!(k, "stages" | "test_interval" | "checkpoint_interval" | "reflection.reseed")
+/// [`from_setting`]'s list for people ("light_field.*, reflection.reseed,
+/// stages, test_interval and checkpoint_interval").
+fn from_settings_text(start: usize) -> String {
+    let mut v: Vec<String> = LATER[start..].iter().map(|s| format!("{}.*", s.key())).collect();
+    v.extend(LATER[start].from_here_settings().iter().chain(&FROM_RUN_SETTINGS).map(|k| k.to_string()));
+    let last = v.pop().unwrap_or_default();
+    format!("{} and {last}", v.join(", "))
+}
+
+/// The stages a `--from` run starting at `LATER[start]` keeps from RUN
+/// (Stage I and the later stages before it), by name.
+fn kept_stages(start: usize) -> Vec<&'static str> {
+    std::iter::once(Stage::SCATTERING).chain(LATER[..start].iter().map(|k| k.stage())).map(|s| s.name()).collect()
+}
+
+/// The iteration at which RUN's kept stages end under `cfg`.
+fn kept_end(cfg: &TrainConfig, start: usize) -> u32 {
+    cfg.iterations + LATER[..start].iter().map(|k| k.iterations(cfg)).sum::<u32>()
 }
 
 /// The later-stage settings a `--from` run takes from RUN unchanged
 /// (`saved` RUN's, `cfg` the new run's) where they differ from this
 /// version's defaults in both presets, as "key = value (default ...)"
 /// lines: a run written before a default changed keeps its old value, and
-/// the user should see that rather than assume today's default. With
-/// `stage_three` (`--stages III`) only those that may still change are
-/// listed (Stage III's and `reflection.reseed`), and Stage III's only when
-/// it runs.
-pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, stage_three: bool) -> Result<Vec<String>> {
+/// the user should see that rather than assume today's default. Only
+/// those the run starting at `LATER[start]` may still change are listed
+/// (with `--stages III`, Stage III's and `reflection.reseed`), and a
+/// stage's own only when it runs.
+pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, start: usize) -> Result<Vec<String>> {
     let (old, new) = (settings(saved)?, settings(cfg)?);
     let presets = [settings(&TrainConfig::preset("quick")?)?, settings(&TrainConfig::preset("paper")?)?];
     // What this `--from` may change (the refusals' own lists), of the stages' settings.
-    let may_change: fn(&str) -> bool = if stage_three { stage_three_setting } else { later_stage_setting };
-    let later = |k: &str| may_change(k) && (k.starts_with("reflection.") || (cfg.wants_light_field() && k.starts_with("light_field.")));
+    let later = |k: &str| from_setting(start, k) && LATER.iter().any(|s| in_section(*s, k) && cfg.wants(s.stage().name()));
     Ok(new
         .iter()
         .filter(|(k, v)| later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
@@ -63,15 +92,15 @@ pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, stage_three: b
 /// of the stages kept, for metrics.json. RUN's settings are the base;
 /// options may change only the later stages' settings.
 pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Result<(Trainer, Dataset, String, Vec<serde_json::Value>)> {
-    let keep_two = from_stage_two(a);
-    // The state at the end of the stage kept, where the run went past it.
-    let snapshot = run.join(if keep_two { STAGE_TWO_CHECKPOINT } else { STAGE_ONE_CHECKPOINT });
+    let start = start_index(a);
+    // The state at the end of the last stage kept, where the run went past it.
+    let snapshot = run.join(stage_checkpoint(start + 1));
     let ckpt = if snapshot.is_file() { snapshot } else { run.join(CHECKPOINT) };
     if !ckpt.is_file() {
         bail!("--from {}: no {CHECKPOINT} there (a finished `tgs train` run directory is expected)", run.display());
     }
     let (mut h, mut arrays) = checkpoint::read(&ckpt)?;
-    check_stage_one(run, &h, keep_two)?;
+    check_kept(run, &h, start)?;
     if a.preset.is_some() {
         bail!("--from {}: the run's own settings are used (--preset would change how its Stage I was trained); change Stage II with --set reflection.KEY=VALUE", run.display());
     }
@@ -81,9 +110,9 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
         base.stages = TrainConfig::default().stages;
     }
     let cfg = apply_args(base, a).with_context(|| format!("--from {}", run.display()))?;
-    check_settings(run, &h, &cfg, keep_two)?;
+    check_settings(run, &h, &cfg, start)?;
     checkpoint::warn_missing_settings(&ckpt, &h, &cfg, a.quiet)?;
-    let inherited = inherited_settings(&h.config, &cfg, keep_two)?;
+    let inherited = inherited_settings(&h.config, &cfg, start)?;
     if !a.quiet && !inherited.is_empty() {
         eprintln!("--from {}: these settings are that run's, not today's defaults (change them with --set KEY=VALUE):\n  {}", run.display(), inherited.join("\n  "));
     }
@@ -94,29 +123,33 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
         }
     }
     let data = load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("--from {}: loading its dataset {}", run.display(), h.dataset))?;
-    if !keep_two {
+    if start == 0 {
         h.drop_later(&mut arrays).with_context(|| format!("--from {}", ckpt.display()))?;
     }
     let dataset = h.dataset.clone();
     let mut tr = checkpoint::restore(ctx, &ckpt, (h, arrays), &data)?;
-    tr.iteration = if keep_two { cfg.iterations + cfg.reflection.iterations } else { cfg.iterations };
+    tr.iteration = kept_end(&cfg, start);
     tr.cfg = cfg;
     tr.schedule = super::schedule::Schedule::from_config(&tr.cfg);
-    let recs = kept_records(run, keep_two);
+    let recs = kept_records(run, start);
     Ok((tr, data, dataset, recs))
 }
 
-/// RUN's Stage I state is there to start from: finished, and not changed
-/// by a later stage that trained the scattering set (unless Stage II is kept).
-fn check_stage_one(run: &Path, h: &checkpoint::Header, keep_two: bool) -> Result<()> {
-    // Past Stage I, a stage that trained the scattering set changed it.
-    let stage_two_trained = h.iteration > h.config.iterations && h.config.reflection.train_scattering;
-    let stage_three_trained = h.holds(light_field::stage::STAGE) && h.config.light_field.train_scattering;
-    if !keep_two && (stage_two_trained || stage_three_trained) {
+/// RUN's state at the end of the stages kept is there to start from: its
+/// Stage I finished, and the scattering set not changed since by a stage
+/// that trained it (RUN went past the stages kept and has no snapshot of
+/// their end).
+fn check_kept(run: &Path, h: &checkpoint::Header, start: usize) -> Result<()> {
+    // A stage that ran (the run went past its start) and trained the scattering set changed it.
+    let ran = |i: usize| h.iteration > kept_end(&h.config, i);
+    if let Some(k) = (start..LATER.len()).find(|&i| ran(i) && LATER[i].trains_scattering(&h.config)).map(|i| LATER[i]) {
         bail!(
-            "--from {}: its Stage {} trained the scattering set, and the run has no {STAGE_ONE_CHECKPOINT} (Stage I's own state; runs from before it was written lack it): train Stage I again",
+            "--from {}: its Stage {} trained the scattering set, and the run has no {} (the state at the end of its Stage {}; runs from before it was written lack it): train {} again",
             run.display(),
-            if stage_two_trained { "II" } else { "III" }
+            k.stage().name(),
+            stage_checkpoint(start + 1),
+            kept_stages(start).last().copied().unwrap_or("I"),
+            if start == 0 { "Stage I".to_string() } else { format!("Stages {}", kept_stages(start).join(", ")) }
         );
     }
     if h.iteration < h.config.iterations {
@@ -131,38 +164,53 @@ fn check_stage_one(run: &Path, h: &checkpoint::Header, keep_two: bool) -> Result
     Ok(())
 }
 
-/// The settings may change only the stages that train again: with
-/// `--stages III`, RUN's Stage II must be finished and stay as trained.
-fn check_settings(run: &Path, h: &checkpoint::Header, cfg: &TrainConfig, keep_two: bool) -> Result<()> {
-    if keep_two {
-        let end = h.config.iterations + h.config.reflection.iterations;
-        if !h.holds(reflection::stage::STAGE) || h.iteration != end {
+/// The settings may change only the stages that train again: starting at
+/// a later stage (`--stages III`), RUN's stages before it must be finished
+/// and stay as trained.
+fn check_settings(run: &Path, h: &checkpoint::Header, cfg: &TrainConfig, start: usize) -> Result<()> {
+    if start > 0 {
+        let (end, before, first) = (kept_end(&h.config, start), LATER[start - 1].stage(), LATER[start].stage().name());
+        if !h.holds(before) || h.iteration != end {
             bail!(
-                "--from {} --stages III starts from that run's finished Stage II; it is at iteration {} (Stage II ends at {end}{}) and has no {STAGE_TWO_CHECKPOINT}",
+                "--from {} --stages {first} starts from that run's finished Stage {}; it is at iteration {} (Stage {} ends at {end}{}) and has no {}",
                 run.display(),
+                before.name(),
                 h.iteration,
-                if !h.holds(reflection::stage::STAGE) { ", and it holds no Stage II state" } else { "" }
+                before.name(),
+                if !h.holds(before) { format!(", and it holds no Stage {} state", before.name()) } else { String::new() },
+                stage_checkpoint(start + 1)
             );
         }
-        let conflicts = changed_settings(&h.config, cfg, stage_three_setting)?;
+        let conflicts = changed_settings(&h.config, cfg, |k| from_setting(start, k))?;
         if !conflicts.is_empty() {
-            bail!("--from {} --stages III reuses that run's Stages I and II; these options would change how they were trained:\n  {}\nonly light_field.*, reflection.reseed, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+            bail!(
+                "--from {} --stages {first} reuses that run's Stages {}; these options would change how they were trained:\n  {}\nonly {} may differ",
+                run.display(),
+                kept_stages(start).join(" and "),
+                conflicts.join("\n  "),
+                from_settings_text(start)
+            );
         }
     }
-    let conflicts = changed_settings(&h.config, cfg, later_stage_setting)?;
+    let conflicts = changed_settings(&h.config, cfg, |k| from_setting(0, k))?;
     if !conflicts.is_empty() {
-        bail!("--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly reflection.*, light_field.*, stages, test_interval and checkpoint_interval may differ", run.display(), conflicts.join("\n  "));
+        bail!(
+            "--from {} reuses that run's Stage I; these options would change how it was trained:\n  {}\nonly {} may differ",
+            run.display(),
+            conflicts.join("\n  "),
+            from_settings_text(0)
+        );
     }
-    if !cfg.wants_reflection() {
+    if !cfg.wants(LATER[0].stage().name()) {
         bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
     }
     Ok(())
 }
 
 /// RUN's records of the stages kept, each marked with where it came from.
-fn kept_records(run: &Path, keep_two: bool) -> Vec<serde_json::Value> {
+fn kept_records(run: &Path, start: usize) -> Vec<serde_json::Value> {
     let abs = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
-    let kept: &[&str] = if keep_two { &["I", "II"] } else { &["I"] };
+    let kept = kept_stages(start);
     let records = stage_records_of(run);
     kept.iter()
         .map(|st| {

@@ -2,7 +2,7 @@
 //! from another run's Stage I (`--from`), or a finished one for `tgs eval`,
 //! `render` and `view`.
 
-use super::args::{config_from_args, dataset_dir, load_dataset, resume_config, TrainArgs, OUTPUT_SETTINGS};
+use super::args::{config_from_args, dataset_dir, load_dataset, output_settings, resume_config, TrainArgs};
 use super::checkpoint;
 use super::from::start_from;
 use super::records::truncate_log;
@@ -139,15 +139,16 @@ pub fn open_run(ctx: &Arc<Context>, run: &Path) -> Result<(Trainer, Dataset)> {
     Ok((tr, data))
 }
 
-/// Overlay `KEY=VALUE` pairs of [`OUTPUT_SETTINGS`] on an opened run's
+/// Overlay `KEY=VALUE` pairs of [`output_settings`] on an opened run's
 /// settings (in memory: the run is not changed); any other key is refused.
 pub fn set_output_settings(tr: &mut Trainer, set: &[String]) -> Result<()> {
     // On a copy: a refused value leaves the run's settings as they were.
     let mut cfg = tr.cfg.clone();
     for kv in set {
         let key = kv.split_once('=').map_or(kv.as_str(), |(k, _)| k.trim());
-        if !OUTPUT_SETTINGS.contains(&key) {
-            bail!("--set '{kv}': only settings that change a trained model's output, not its training, can be given here ({})", OUTPUT_SETTINGS.join(", "));
+        let allowed = output_settings();
+        if !allowed.contains(&key) {
+            bail!("--set '{kv}': only settings that change a trained model's output, not its training, can be given here ({})", allowed.join(", "));
         }
         cfg.set(kv)?;
     }

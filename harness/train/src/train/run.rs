@@ -4,7 +4,7 @@
 //! handling, and the outputs (point_cloud.ply, test renders, metrics.json).
 //! The settings are [`super::args`]'s; `--from RUN` is [`super::from`].
 
-pub use super::args::{config_from_args, dataset_dir, load_dataset, TrainArgs, RESUMABLE_SETTINGS};
+pub use super::args::{config_from_args, dataset_dir, load_dataset, TrainArgs};
 use super::checkpoint;
 use super::clock::{Before, Clocks};
 use super::config::paper_schedule_note;
@@ -29,7 +29,7 @@ use crate::outdir::OutDir;
 use anyhow::{bail, Context as _, Result};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 use tgs_engine::Context;
@@ -373,19 +373,21 @@ impl Run<'_> {
 
 /// What can be checked before any training: learning rates far above the
 /// presets' (warned; above the limit they were refused with the settings)
-/// and the paths the later stages will read (`reflection.seed_masks`),
-/// read now rather than after Stage I has trained.
+/// and the inputs the later stages will read ([`super::stages::LaterKind::preflight`]:
+/// `reflection.seed_masks`), read now rather than after Stage I has trained.
 fn preflight(tr: &Trainer, data: &Dataset, validation: &Validation, quiet: bool) -> Result<()> {
     if !quiet {
         for w in high_learning_rates(&tr.cfg)? {
             eprintln!("tgs: warning: {w}: {LR_WARN_FACTOR}x or more the presets'; training may diverge");
         }
     }
-    let rc = &tr.cfg.reflection;
-    if tr.cfg.wants_reflection() && !rc.seed_masks.is_empty() && tr.later.is_none() {
-        // The names of the views the trainer holds (without the validation views once held out).
-        let names: Vec<String> = if tr.held_out { validation.later_view_names(data) } else { data.train.iter().map(|v| v.name.clone()).collect() };
-        super::stages::reflection::stage::seed_masks(Path::new(&rc.seed_masks), &names, &tr.views.cameras, tr.cfg.downscale).context("checked before training")?;
+    if tr.later.is_some() {
+        return Ok(());
+    }
+    // The names of the views the trainer holds (without the validation views once held out).
+    let names: Vec<String> = if tr.held_out { validation.later_view_names(data) } else { data.train.iter().map(|v| v.name.clone()).collect() };
+    for k in super::stages::LATER.iter().filter(|k| tr.cfg.wants(k.stage().name())) {
+        k.preflight(&tr.cfg, &names, &tr.views.cameras).context("checked before training")?;
     }
     Ok(())
 }

@@ -1,11 +1,11 @@
 //! A stage after Stage I as the run knows it before the stage exists: its
 //! place in the schedule, its transition from the stage before it, and its
-//! part of a checkpoint. Each later stage has one [`LaterKind`] (a unit
-//! struct in its `stage.rs`), listed in run order in [`super::LATER`]; the
-//! schedule, the trainer, the checkpoint and the `tgs train` driver go
-//! through that list, so a new stage is its folder, its kind there and
-//! its name in `Stage::ALL` (the settings check `stages` against the names
-//! without depending on the stages; a test holds the two lists together).
+//! part of a checkpoint, the settings `--resume`, `--from` and `tgs eval`
+//! may change. Each later stage has one [`LaterKind`] (a unit struct in
+//! its `stage.rs`), listed in run order in [`super::LATER`]; the stage
+//! names (`Stage::all`), the schedule, the trainer, the checkpoint, the
+//! settings checks and the `tgs train` driver go through that list, so a
+//! new stage is its folder, its kind there and its settings section.
 
 use super::shared::{LaterStage, Shared};
 use crate::train::config::TrainConfig;
@@ -76,6 +76,30 @@ pub trait LaterKind: Sync {
     fn key(&self) -> &'static str;
     /// Its iteration count when the settings run it.
     fn iterations(&self, cfg: &TrainConfig) -> u32;
+    /// The settings of its section (`[key]` in TOML, `--set key.NAME=V`;
+    /// the section is named by [`LaterKind::key`]) that `--resume` may
+    /// change, as dotted keys.
+    fn resumable(&self) -> &'static [&'static str];
+    /// The settings of its section that change only what a trained model
+    /// outputs, not what it learns (`tgs eval --set` may change them).
+    fn output_settings(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// Settings of the stages before it that a `--from RUN` starting at
+    /// this stage (RUN's earlier stages kept) may still change.
+    fn from_here_settings(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// Whether it trains the scattering set under `cfg` (then a run that
+    /// went through it no longer holds Stage I's scattering set).
+    fn trains_scattering(&self, cfg: &TrainConfig) -> bool;
+    /// Check, before Stage I trains, the inputs it will read (files its
+    /// settings name), for the training views `view_names` seen by
+    /// `cameras`: a bad one fails now rather than after Stage I.
+    fn preflight(&self, cfg: &TrainConfig, view_names: &[String], cameras: &[tgs_pipelines::Camera]) -> Result<()> {
+        let _ = (cfg, view_names, cameras);
+        Ok(())
+    }
     /// Whether the next iteration, which belongs to this stage, needs
     /// [`LaterKind::begin`] first, given the later stage that is running
     /// and whether the frozen scattering colours are cached.
@@ -111,6 +135,11 @@ pub trait LaterKind: Sync {
 /// The later stage whose checkpoint key is `key`.
 pub fn by_key(key: &str) -> Option<&'static dyn LaterKind> {
     super::LATER.iter().copied().find(|k| k.key() == key)
+}
+
+/// Whether the dotted setting `k` lies in `kind`'s settings section.
+pub fn in_section(kind: &dyn LaterKind, k: &str) -> bool {
+    k.strip_prefix(kind.key()).is_some_and(|rest| rest.starts_with('.'))
 }
 
 /// The later stage named `stage`.

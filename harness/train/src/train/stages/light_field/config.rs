@@ -81,6 +81,13 @@ impl Default for LightFieldConfig {
 }
 
 impl LightFieldConfig {
+    /// The quick preset's Stage III: 2,000 iterations (better than 1,000 on
+    /// all eight path-traced scene-seed pairs, perf/journal/2026-12-03-fifty-fourth.md)
+    /// of the small network.
+    pub fn quick() -> LightFieldConfig {
+        LightFieldConfig { iterations: 2000, preset: LightPreset::Small, ..LightFieldConfig::default() }
+    }
+
     pub fn shape(&self) -> Result<tgs_pipelines::MlpShape> {
         let mut shape = self.preset.shape();
         if self.levels_x > 0 {

@@ -41,6 +41,19 @@ impl LaterKind for Kind {
         cfg.light_field.iterations
     }
 
+    fn resumable(&self) -> &'static [&'static str] {
+        &["light_field.iterations"]
+    }
+
+    /// Stage III runs again after a reseeded Stage II (`reflection.reseed`).
+    fn from_here_settings(&self) -> &'static [&'static str] {
+        &["reflection.reseed"]
+    }
+
+    fn trains_scattering(&self, cfg: &TrainConfig) -> bool {
+        cfg.light_field.train_scattering
+    }
+
     /// From Stage II's model ([`begin`]); the frozen scattering colours
     /// are cached again when Stage II or III trains the scattering set.
     fn begin(&self, t: Transition<'_>) -> Result<Begun> {

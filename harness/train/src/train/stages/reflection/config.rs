@@ -183,6 +183,11 @@ impl Default for ReflectionConfig {
 }
 
 impl ReflectionConfig {
+    /// The quick preset's Stage II: 1,000 iterations, a 16² cube map.
+    pub fn quick() -> ReflectionConfig {
+        ReflectionConfig { iterations: 1000, env_res: 16, prune_interval: 100, ..ReflectionConfig::default() }
+    }
+
     /// The SH degree Stage II renders the frozen scattering set at, for a
     /// Stage I trained up to `stage1` (`scattering_sh`).
     pub fn scattering_degree(&self, stage1: u32) -> u32 {

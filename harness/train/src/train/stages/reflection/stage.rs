@@ -48,6 +48,27 @@ impl LaterKind for Kind {
         cfg.reflection.iterations
     }
 
+    fn resumable(&self) -> &'static [&'static str] {
+        &["reflection.iterations", "reflection.reseed"]
+    }
+
+    fn output_settings(&self) -> &'static [&'static str] {
+        &["reflection.normal_min_r", "reflection.residual_normal_min_r"]
+    }
+
+    fn trains_scattering(&self, cfg: &TrainConfig) -> bool {
+        cfg.reflection.train_scattering
+    }
+
+    /// The glass masks of `reflection.seed_masks`, read and matched to the views.
+    fn preflight(&self, cfg: &TrainConfig, view_names: &[String], cameras: &[Camera]) -> Result<()> {
+        let dir = &cfg.reflection.seed_masks;
+        if !dir.is_empty() {
+            seed_masks(Path::new(dir), view_names, cameras, cfg.downscale)?;
+        }
+        Ok(())
+    }
+
     /// Also on a resume inside Stage II (its set exists, the frozen
     /// scattering colours are not cached yet), and as Stage II begins
     /// again after Stage III (`reflection.reseed`).
