@@ -259,7 +259,7 @@ impl Bench {
             Workload { views: *views, ..Workload::square(*res, points.unwrap_or(10_000)) }
         };
         if let Some(net) = light_field {
-            let net = tgs::train::settings::LightPreset::parse(net).map_err(|e| anyhow::anyhow!("--light-field: {e}"))?;
+            let net = tgs::train::stages::light_field::settings::LightPreset::parse(net).map_err(|e| anyhow::anyhow!("--light-field: {e}"))?;
             return show(&tgs::bench_light_field::light_field(ctx, w, *warmup, *iterations, net)?, *json, tgs::bench_light_field::print_light_field);
         }
         let fuse = if *separate_adam {

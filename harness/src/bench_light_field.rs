@@ -12,9 +12,9 @@
 use crate::bench::{average, nested_scope, KernelTime};
 use crate::bench_train::Workload;
 use crate::scene::spheres::{self, SpheresSpec};
-use crate::train::settings::LightPreset;
 use crate::train::stages::light_field;
 use crate::train::stages::light_field::model::LightFieldStepInput;
+use crate::train::stages::light_field::settings::LightPreset;
 use crate::train::{TrainConfig, Trainer};
 use anyhow::{ensure, Result};
 use serde::Serialize;

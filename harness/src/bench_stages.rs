@@ -168,7 +168,7 @@ fn bench_config(spec: &StagesSpec) -> Result<(TrainConfig, u32)> {
     cfg.stages = "I,II,III".into();
     cfg.reflection.iterations = per_stage;
     cfg.light_field.iterations = spec.train_light_field + timed;
-    cfg.light_field.preset = crate::train::settings::LightPreset::parse(&spec.mlp).map_err(anyhow::Error::msg)?;
+    cfg.light_field.preset = crate::train::stages::light_field::settings::LightPreset::parse(&spec.mlp).map_err(anyhow::Error::msg)?;
     Ok((cfg, profiled))
 }
 

@@ -35,7 +35,7 @@ fn main() -> anyhow::Result<()> {
     // --light-field small`).
     let mut light = Vec::new();
     if real {
-        let b = tgs::bench_light_field::light_field(&ctx, Workload::REAL_SCALE, 1, if cpu { 1 } else { 20 }, tgs::train::settings::LightPreset::Small)?;
+        let b = tgs::bench_light_field::light_field(&ctx, Workload::REAL_SCALE, 1, if cpu { 1 } else { 20 }, tgs::train::stages::light_field::settings::LightPreset::Small)?;
         tgs::bench_light_field::print_light_field(&b);
         light.push(b);
     }

@@ -149,7 +149,7 @@ fn stages_bench_reports_each_stage() {
 fn light_field_bench_times_stage_three() {
     let ctx = ctx_shared();
     let w = tgs::bench_train::Workload { width: 40, height: 24, points: 300, views: 2 };
-    let b = tgs::bench_light_field::light_field(ctx, w, 0, 2, tgs::train::settings::LightPreset::Small).unwrap();
+    let b = tgs::bench_light_field::light_field(ctx, w, 0, 2, tgs::train::stages::light_field::settings::LightPreset::Small).unwrap();
     assert_eq!((b.width, b.height, b.scattering_gaussians, b.reflection_gaussians, b.iterations), (40, 24, 300, 30, 2));
     assert_eq!(b.network, "small");
     assert!(b.wall_ms.is_finite() && b.wall_ms > 0.0 && b.wall_ms_best <= b.wall_ms);
@@ -168,6 +168,6 @@ fn light_field_bench_times_stage_three() {
         assert!(b.gpu_ms > 0.0);
     }
     assert_eq!(b.warmup, 2, "the warm-up visits every view");
-    assert!(tgs::bench_light_field::light_field(ctx, w, 0, 0, tgs::train::settings::LightPreset::Small).is_err(), "no timed iterations must be refused");
+    assert!(tgs::bench_light_field::light_field(ctx, w, 0, 0, tgs::train::stages::light_field::settings::LightPreset::Small).is_err(), "no timed iterations must be refused");
     check_validation(ctx);
 }

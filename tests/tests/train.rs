@@ -256,7 +256,8 @@ fn paper_preset_notes_small_datasets() {
 
 #[test]
 fn named_settings_read_and_write_as_their_names() {
-    use tgs::train::settings::{EnvStart, LightFresnel, LightPreset, ReflectionFresnel, ReflectionInit, RotationGrad, ScatteringParams};
+    use tgs::train::stages::light_field::settings::{LightFresnel, LightPreset, ScatteringParams};
+    use tgs::train::stages::reflection::settings::{EnvStart, ReflectionFresnel, ReflectionInit, RotationGrad};
     assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::Auto);
     assert_eq!(
         (SeedNormal::Auto.for_source(true), SeedNormal::Auto.for_source(false), SeedNormal::View.for_source(true)),
@@ -472,7 +473,7 @@ fn from_names_inherited_settings_that_differ_from_the_defaults() {
     let mut saved = TrainConfig::preset("quick").unwrap();
     assert!(inherited_settings(&saved, &saved, 0).unwrap().is_empty(), "a run with today's defaults inherits nothing to report");
     saved.light_field.train_scattering = false;
-    saved.reflection.env_init = tgs::train::settings::EnvStart::Scene;
+    saved.reflection.env_init = tgs::train::stages::reflection::settings::EnvStart::Scene;
     saved.reflection.lr_r = 0.25;
     saved.light_field.lr_f0 = 0.5;
     saved.lr_opacity = 0.5;

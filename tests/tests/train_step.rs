@@ -206,7 +206,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     let g = big_splats(3000);
     let mut cfg = TrainConfig::default();
     // Schlick adds the F0 channels to the rasterized features.
-    cfg.reflection.fresnel = tgs::train::settings::ReflectionFresnel::Schlick;
+    cfg.reflection.fresnel = tgs::train::stages::reflection::settings::ReflectionFresnel::Schlick;
     // The penalty on R rides the same submission.
     cfg.reflection.lambda_r = 0.5;
     let cam = camera();

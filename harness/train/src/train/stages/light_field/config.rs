@@ -1,7 +1,7 @@
 //! Stage III's settings (`[light_field]` in TOML, `--set light_field.KEY=V`).
 
+use super::settings::{LightFresnel, LightPreset, ScatteringParams};
 use crate::train::settings::check_hf;
-use crate::train::settings::{LightFresnel, LightPreset, ScatteringParams};
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
 

@@ -5,6 +5,7 @@ pub mod config;
 mod light;
 pub mod model;
 pub mod outputs;
+pub mod settings;
 pub mod stage;
 
 pub use crate::train::stages::kept_views::KeepAs;

@@ -1,8 +1,8 @@
 //! Stage II's settings (`[reflection]` in TOML, `--set reflection.KEY=V`).
 
 use super::seed::SeedNormal;
+use super::settings::{EnvStart, ReflectionFresnel, ReflectionInit, RotationGrad};
 use crate::train::settings::check_hf;
-use crate::train::settings::{EnvStart, ReflectionFresnel, ReflectionInit, RotationGrad};
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 

@@ -2,8 +2,8 @@
 //! the reflection layer's forward, and its part of the composite step
 //! Stages II and III share (`stages/composite.rs`, [`Light`]).
 
+use super::settings::RotationGrad;
 use crate::train::config::TrainConfig;
-use crate::train::settings::RotationGrad;
 use crate::train::stages::composite::{HfSetting, Light};
 use crate::train::stages::rendered::R_PLANE;
 use crate::train::stages::scattering::ExternalStep;

@@ -10,6 +10,7 @@ pub mod masks;
 pub mod model;
 pub mod outputs;
 pub mod seed;
+pub mod settings;
 pub mod stage;
 pub mod view_dependence;
 

@@ -349,7 +349,7 @@ fn seed_model(
 /// scene seen from the set's points, with its depth), with the proxy
 /// sphere of `reflection.env_radius`; recorded in `d`.
 fn initial_light(s: &Shared<'_>, d: &mut ReflDecision, means: &[f32], sh: u32) -> Result<HostEnvMap> {
-    use crate::train::settings::EnvStart;
+    use crate::train::stages::reflection::settings::EnvStart;
     let (cfg, v) = (s.cfg, s.views);
     let rc = &cfg.reflection;
     let mut env = if matches!(rc.env_init, EnvStart::Scene | EnvStart::SceneDepth) {
