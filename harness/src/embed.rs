@@ -19,29 +19,19 @@
 //! after Stage I, the composite with the environment map after Stage II, the
 //! composite with the light field after Stage III.
 
-use crate::train::checkpoint;
+use crate::train::checkpoint::{self, RenderLayer};
+use crate::train::stages::layer::frame_for;
 use anyhow::{bail, Context as _, Result};
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::{Buffer, BufferBinding, Context, Recorder};
-use tgs_pipelines::{
-    Camera, EnvMap, Features, Frame, Fresnel, Gaussians, LightFieldShading, Mlp, MlpScratch, MlpShape, Plane, Rasterizer, ReflectionShading, SampleScratch, ShadeParams, Splats,
-};
+use tgs_pipelines::{Camera, Features, Frame, Gaussians, Plane, Rasterizer};
 
-/// The reflection layer of a run past Stage I.
-enum Layer {
-    /// Stage II: reflection set coloured by the environment map.
-    Env { set: Gaussians, env: EnvMap, fresnel: Fresnel, shading: ReflectionShading, raster: Rasterizer, feat: Buffer<f32> },
-    /// Stage III: reflection set's material, Φ on the reflecting pixels.
-    Light { set: Gaussians, params: Buffer<f32>, shape: MlpShape, shade: ShadeParams, shading: LightFieldShading, mlp: Mlp, raster: Rasterizer, feat: Buffer<f32> },
-}
-
-/// Per image size: both sets' frames, the sample list, the composite.
+/// Per image size: the scattering set's frame, and the composite of a run
+/// past Stage I (its reflection layer keeps its own buffers).
 struct View {
     scat: Frame,
-    refl: Option<Frame>,
-    samples: Option<(SampleScratch, MlpScratch)>,
     composite: Option<Buffer<f32>>,
 }
 
@@ -51,17 +41,13 @@ pub struct SceneRenderer {
     sh_degree: u32,
     background: [f32; 3],
     raster: Rasterizer,
-    layer: Option<Layer>,
+    /// The later stage's reflection layer (its stage's `render.rs`), after Stage I.
+    layer: Option<Box<dyn RenderLayer>>,
     views: HashMap<(u32, u32), View>,
     /// The stage the run finished ("I", "II" or "III").
     pub stage: &'static str,
     /// Pixels the light field was evaluated on in the last completed view (Stage III).
     pub last_samples: Option<u32>,
-}
-
-fn frame_for(raster: &Rasterizer, n: u32, w: u32, h: u32) -> Result<Frame> {
-    let max_g = n + 1024;
-    raster.frame(w, h, max_g, raster.initial_capacity(max_g))
 }
 
 impl SceneRenderer {
@@ -76,39 +62,11 @@ impl SceneRenderer {
     /// From a checkpoint's header and arrays as [`checkpoint::read`] (or
     /// [`checkpoint::snapshot`], for a run still training) returns them.
     pub fn from_checkpoint(ctx: &Arc<Context>, h: &checkpoint::Header, arrays: Vec<Vec<f32>>) -> Result<SceneRenderer> {
-        let state = checkpoint::render_state(h, arrays)?;
+        let state = checkpoint::render_state(h, arrays, ctx)?;
         let cfg = &h.config;
         // As the trainer renders a checkpoint (Trainer::render).
         let sh_degree = state.sh_degree;
-        let layer = match state.layer {
-            checkpoint::RenderLayer::Scattering => None,
-            checkpoint::RenderLayer::Env { set, env, fresnel } => {
-                let n = set.len().max(1);
-                Some(Layer::Env {
-                    set: Gaussians::upload(ctx, &set)?,
-                    env: EnvMap::upload(ctx, &env)?,
-                    shading: ReflectionShading::new(ctx)?,
-                    raster: Rasterizer::new(ctx, fresnel.channels(), Features::Plain)?,
-                    // The colour kernel writes every Gaussian's features before the rasterizer reads them.
-                    feat: Buffer::uninit(ctx, "embed.refl_features", fresnel.channels() as usize * n)?,
-                    fresnel,
-                })
-            }
-            checkpoint::RenderLayer::LightField { set, shape, params, shade } => {
-                let n = set.len().max(1);
-                Some(Layer::Light {
-                    set: Gaussians::upload(ctx, &set)?,
-                    params: Buffer::from_slice(ctx, "embed.mlp_params", &params)?,
-                    shape,
-                    shade,
-                    shading: LightFieldShading::new(ctx)?,
-                    mlp: Mlp::new(ctx)?,
-                    raster: Rasterizer::new(ctx, tgs_pipelines::lightfield::CHANNELS, Features::Plain)?,
-                    // The material kernel writes every Gaussian's features first.
-                    feat: Buffer::uninit(ctx, "embed.lf_features", tgs_pipelines::lightfield::CHANNELS as usize * n)?,
-                })
-            }
-        };
+        let layer = state.layer;
         Ok(SceneRenderer {
             ctx: ctx.clone(),
             scat: Gaussians::upload(ctx, &state.scattering)?,
@@ -124,11 +82,7 @@ impl SceneRenderer {
 
     /// Gaussians in the scattering set and in the reflection set (0 before Stage II).
     pub fn counts(&self) -> (u32, u32) {
-        let refl = match &self.layer {
-            None => 0,
-            Some(Layer::Env { set, .. } | Layer::Light { set, .. }) => set.n,
-        };
-        (self.scat.n, refl)
+        (self.scat.n, self.layer.as_ref().map_or(0, |l| l.len()))
     }
 
     /// Floats [`SceneRenderer::record`] writes for a `width` x `height` view.
@@ -140,17 +94,9 @@ impl SceneRenderer {
         if !self.views.contains_key(&(w, h)) {
             let scat = frame_for(&self.raster, self.scat.n, w, h)?;
             let planes = (Plane::count(3) * w * h) as usize;
-            let (refl, samples) = match &self.layer {
-                None => (None, None),
-                Some(Layer::Env { set, raster, .. }) => (Some(frame_for(raster, set.n, w, h)?), None),
-                Some(Layer::Light { set, raster, shading, mlp, shape, .. }) => {
-                    let cap = (w * h).min(mlp.max_capacity(shape));
-                    (Some(frame_for(raster, set.n, w, h)?), Some((shading.sample_scratch(w, h)?, mlp.scratch(*shape, cap)?)))
-                }
-            };
             // The composite kernel writes every plane of every pixel.
             let composite = if self.layer.is_some() { Some(Buffer::uninit(&self.ctx, "embed.composite", planes)?) } else { None };
-            self.views.insert((w, h), View { scat, refl, samples, composite });
+            self.views.insert((w, h), View { scat, composite });
         }
         Ok(self.views.get_mut(&(w, h)).expect("view buffers"))
     }
@@ -169,24 +115,13 @@ impl SceneRenderer {
         self.view(cam.width, cam.height)?;
         let v = &self.views[&(cam.width, cam.height)];
         self.raster.record_forward(rec, &self.scat, cam, &bg, sh, &v.scat)?;
-        let colour = match (&self.layer, v.refl.as_ref(), v.composite.as_ref()) {
-            (None, _, _) => &v.scat.out,
-            (Some(Layer::Env { set, env, fresnel, shading, raster, feat }), Some(frame), Some(comp)) => {
-                shading.record_color(rec, &tgs_pipelines::ColorInputs { g: set, env, cam, fresnel: *fresnel }, feat)?;
-                raster.record_forward_with(rec, Splats::coloured(set, feat), cam, &vec![0.0; fresnel.channels() as usize], frame)?;
-                shading.record_composite(rec, cam, *fresnel, &tgs_pipelines::reflection::CompositeInputs { scat: &v.scat.out, refl: &frame.out }, comp)?;
+        let colour = match (self.layer.as_mut(), v.composite.as_ref()) {
+            (None, _) => &v.scat.out,
+            (Some(layer), Some(comp)) => {
+                layer.record(rec, cam, &v.scat.out, comp)?;
                 comp
             }
-            (Some(Layer::Light { set, params, shade, shading, mlp, raster, feat, .. }), Some(frame), Some(comp)) => {
-                let (samples, scratch) = v.samples.as_ref().context("light-field sample buffers")?;
-                shading.record_material(rec, &set.features, set.n, feat)?;
-                raster.record_forward_with(rec, Splats::coloured(set, feat), cam, &[0.0; tgs_pipelines::lightfield::CHANNELS as usize], frame)?;
-                shading.record_samples(rec, cam, shade, &frame.out, samples, &scratch.samples)?;
-                mlp.record_forward_counted(rec, params, &samples.count, scratch)?;
-                shading.record_composite(rec, cam, shade, &tgs_pipelines::lightfield::CompositeInputs { scat: &v.scat.out, refl: &frame.out, samples, phi: &scratch.out }, comp)?;
-                comp
-            }
-            _ => bail!("view buffers missing for the reflection layer"),
+            (Some(_), None) => bail!("view buffers missing for the reflection layer"),
         };
         rec.copy(&colour.binding(), out, need)?;
         Ok(())
@@ -198,26 +133,9 @@ impl SceneRenderer {
     pub fn complete(&mut self, cam: &Camera) -> Result<bool> {
         let v = self.views.get_mut(&(cam.width, cam.height)).context("this view size was never recorded")?;
         let mut whole = self.raster.fit(&mut v.scat)?;
-        match (&self.layer, v.refl.as_mut()) {
-            (Some(Layer::Env { raster, .. }), Some(f)) => whole &= raster.fit(f)?,
-            (Some(Layer::Light { raster, shade, .. }), Some(f)) => {
-                whole &= raster.fit(f)?;
-                if let Some((samples, scratch)) = v.samples.as_ref() {
-                    let count = samples.count.download()?[0];
-                    self.last_samples = Some(count);
-                    if whole && count > scratch.capacity() {
-                        bail!(
-                            "{count} pixels of this {}x{} view reflect (R > {}); the light field evaluates at most {} on this device, so {} pixels show the scattering colour alone",
-                            cam.width,
-                            cam.height,
-                            shade.threshold,
-                            scratch.capacity(),
-                            count - scratch.capacity()
-                        );
-                    }
-                }
-            }
-            _ => {}
+        if let Some(layer) = self.layer.as_mut() {
+            whole = layer.complete(cam, whole)?;
+            self.last_samples = layer.last_samples();
         }
         Ok(whole)
     }

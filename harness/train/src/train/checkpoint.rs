@@ -371,20 +371,21 @@ pub fn restore(ctx: &Arc<Context>, path: &Path, (h, arrays): (Header, Vec<Vec<f3
     Ok(tr)
 }
 
-pub use super::stages::kind::RenderLayer;
+pub use super::stages::layer::RenderLayer;
 
 /// What rendering a checkpoint needs: the parameters only (no Adam moments,
-/// no dataset), checked as [`restore`] checks them.
+/// no dataset), checked as [`restore`] checks them; the later stage's
+/// reflection layer already on the device (None after Stage I).
 pub struct RenderState {
     pub stage: &'static str,
     /// The SH degree the scattering layer is rendered at, as the trainer
     /// renders this checkpoint (`LaterKind::scattering_sh`).
     pub sh_degree: u32,
     pub scattering: HostGaussians,
-    pub layer: RenderLayer,
+    pub layer: Option<Box<dyn RenderLayer>>,
 }
 
-pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState> {
+pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>, ctx: &Arc<Context>) -> Result<RenderState> {
     h.config.validate().context("settings")?;
     let layout = TrainableSet::layout((h.channels * h.coeffs) as usize);
     if arrays.len() < layout.len() {
@@ -397,11 +398,11 @@ pub fn render_state(h: &Header, mut arrays: Vec<Vec<f32>>) -> Result<RenderState
     let scattering = gaussians(h, &arrays)?;
     let stage1 = h.config.sh_degree_at(h.iteration.min(h.config.iterations));
     let (stage, sh_degree, layer) = match h.later_state()? {
-        None if refl.is_empty() => (Stage::SCATTERING.name(), stage1, RenderLayer::Scattering),
+        None if refl.is_empty() => (Stage::SCATTERING.name(), stage1, None),
         None => bail!("{} arrays after the scattering set without a later stage's header", refl.len()),
         Some((kind, v)) => {
             let name = kind.stage().name();
-            (name, kind.scattering_sh(&h.config, stage1), kind.render_layer(v, &h.config, refl).with_context(|| format!("Stage {name} state"))?)
+            (name, kind.scattering_sh(&h.config, stage1), Some(kind.render_layer(v, &h.config, refl, ctx).with_context(|| format!("Stage {name} state"))?))
         }
     };
     Ok(RenderState { stage, sh_degree, scattering, layer })

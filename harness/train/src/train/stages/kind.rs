@@ -7,6 +7,7 @@
 //! settings checks and the `tgs train` driver go through that list, so a
 //! new stage is its folder, its kind there and its settings section.
 
+use super::layer::RenderLayer;
 use super::shared::{LaterStage, Shared};
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
@@ -15,17 +16,6 @@ use anyhow::{Context as _, Result};
 use std::path::Path;
 use std::sync::Arc;
 use tgs_engine::Context;
-use tgs_pipelines::HostGaussians;
-
-/// The reflection layer a renderer needs from a checkpoint.
-pub enum RenderLayer {
-    /// A Stage I run: the scattering set alone.
-    Scattering,
-    /// Stage II: the reflection set and the environment map.
-    Env { set: HostGaussians, env: tgs_pipelines::HostEnvMap, fresnel: tgs_pipelines::Fresnel },
-    /// Stage III: the reflection set, the network and its shading.
-    LightField { set: HostGaussians, shape: tgs_pipelines::MlpShape, params: Vec<f32>, shade: tgs_pipelines::ShadeParams },
-}
 
 /// Where a transition may write what it measured (the run directory); none
 /// in benchmarks and tests that only train.
@@ -113,8 +103,9 @@ pub trait LaterKind: Sync {
     /// object) and the arrays after the scattering set's; also the
     /// decision the header kept.
     fn restore(&self, header: &serde_json::Value, ctx: &Arc<Context>, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<(Box<dyn LaterStage>, ReflDecision)>;
-    /// What a renderer needs from the same part (parameters only).
-    fn render_layer(&self, header: &serde_json::Value, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<RenderLayer>;
+    /// Its reflection layer for a renderer, from the same part (the
+    /// parameters only) onto `ctx`.
+    fn render_layer(&self, header: &serde_json::Value, cfg: &TrainConfig, arrays: Vec<Vec<f32>>, ctx: &Arc<Context>) -> Result<Box<dyn RenderLayer>>;
     /// The names and lengths of the arrays its checkpoint part holds, in
     /// file order (every later stage's header keeps them as `arrays`).
     fn arrays(&self, header: &serde_json::Value) -> Result<Vec<(String, usize)>> {

@@ -4,7 +4,8 @@
 //! Each folder holds the stage's model (`model.rs`), its settings
 //! (`config.rs`, Stages II and III; Stage I's are the top-level ones), its
 //! part of the checkpoint (`checkpoint.rs`), what it writes
-//! (`outputs.rs`) and `stage.rs`: the transition from the previous stage
+//! (`outputs.rs`), its reflection layer as a renderer draws it
+//! (`render.rs`, behind `layer.rs`'s trait) and `stage.rs`: the transition from the previous stage
 //! and one iteration as the trainer calls it. The later stages implement
 //! [`LaterStage`] (`shared.rs`), which the trainer drives them through,
 //! and are begun, scheduled and checkpointed through their [`LaterKind`]
@@ -17,6 +18,7 @@
 pub mod composite;
 pub mod kept_views;
 pub mod kind;
+pub mod layer;
 pub mod light_field;
 pub mod reflection;
 pub mod rendered;

@@ -5,6 +5,7 @@ pub mod config;
 mod light;
 pub mod model;
 pub mod outputs;
+pub mod render;
 pub mod settings;
 pub mod stage;
 

@@ -7,8 +7,8 @@ use super::model::{LightFieldModel, LightFieldStepInput};
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
 use crate::train::stages::kept_views::KeepAs;
-use crate::train::stages::kind::RenderLayer;
 use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
+use crate::train::stages::layer::RenderLayer;
 use crate::train::stages::reflection::bounds::normalization_box;
 use crate::train::stages::reflection::checkpoint::host_reflection_set;
 use crate::train::stages::reflection::ReflDecision;
@@ -77,13 +77,13 @@ impl LaterKind for Kind {
         Ok((Box::new(h.restore(ctx, cfg, arrays)?), h.decision))
     }
 
-    fn render_layer(&self, header: &serde_json::Value, _cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<RenderLayer> {
+    fn render_layer(&self, header: &serde_json::Value, _cfg: &TrainConfig, arrays: Vec<Vec<f32>>, ctx: &Arc<Context>) -> Result<Box<dyn RenderLayer>> {
         let h: LightFieldHeader = parse(self, header)?;
         let shape = h.shape()?;
         h.check(&shape, &arrays)?;
         let set = host_reflection_set(&arrays)?;
-        let params = arrays[arrays.len() - 3].clone();
-        Ok(RenderLayer::LightField { set, shape, params, shade: h.shade() })
+        let params = &arrays[arrays.len() - 3];
+        Ok(Box::new(super::render::LightFieldLayer::upload(ctx, &set, shape, params, h.shade())?))
     }
 
     fn files(&self) -> &'static [&'static str] {

@@ -9,6 +9,7 @@ mod light;
 pub mod masks;
 pub mod model;
 pub mod outputs;
+pub mod render;
 pub mod seed;
 pub mod settings;
 pub mod stage;

@@ -12,8 +12,8 @@ use super::view_dependence::{view_dependence, VdMap};
 use crate::outdir::OutDir;
 use crate::train::config::TrainConfig;
 use crate::train::stage::Stage;
-use crate::train::stages::kind::RenderLayer;
 use crate::train::stages::kind::{parse, Begun, LaterKind, Transition};
+use crate::train::stages::layer::RenderLayer;
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::StepOutput;
 use crate::train::stages::shared::{Iteration, LaterStage, Shared};
@@ -120,12 +120,12 @@ impl LaterKind for Kind {
         Ok((Box::new(h.restore(ctx, cfg, arrays)?), h.decision))
     }
 
-    fn render_layer(&self, header: &serde_json::Value, cfg: &TrainConfig, arrays: Vec<Vec<f32>>) -> Result<RenderLayer> {
+    fn render_layer(&self, header: &serde_json::Value, cfg: &TrainConfig, arrays: Vec<Vec<f32>>, ctx: &Arc<Context>) -> Result<Box<dyn RenderLayer>> {
         let h: ReflHeader = parse(self, header)?;
         let k = h.check(&arrays)?;
         let set = host_reflection_set(&arrays)?;
         let env = h.env(&arrays, k);
-        Ok(RenderLayer::Env { set, env, fresnel: cfg.reflection.fresnel.pipeline() })
+        Ok(Box::new(super::render::EnvLayer::upload(ctx, &set, &env, cfg.reflection.fresnel.pipeline())?))
     }
 
     fn files(&self) -> &'static [&'static str] {
