@@ -71,9 +71,9 @@ echo "gpu_paper: suite phase done at $(( $(date +%s) - start )) s"
 # Alone on the device: the viewer's frame and Stage I's iteration.
 first=$(echo "$scenes" | head -n1)
 for run in "$R/$first/s0/default-III" "$R/$first/s0/masks-III"; do
-  [ -f "$run/metrics.json" ] && timeout 60 "$T" bench view "$run" --size "${VIEW_SIZE:-800x600}" --frames 120 2>&1 | tee -a "$OUT/bench.txt"
+  [ -f "$run/metrics.json" ] && timeout 30 "$T" bench view "$run" --size "${VIEW_SIZE:-800x600}" --frames 120 2>&1 | tee -a "$OUT/bench.txt"
 done
-[ -f "$R/$first/s0/I/metrics.json" ] && timeout 60 "$T" bench train --from "$R/$first/s0/I" --iterations 50 2>&1 | tee -a "$OUT/bench.txt"
+[ -f "$R/$first/s0/I/metrics.json" ] && timeout 30 "$T" bench train --from "$R/$first/s0/I" --iterations 50 2>&1 | tee -a "$OUT/bench.txt"
 echo "gpu_paper: benches done at $(( $(date +%s) - start )) s"
 # The paper preset with what is left (seed 0, no masks), both scenes side by side.
 if [ "$(left)" -gt 30 ]; then
