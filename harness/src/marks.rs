@@ -82,65 +82,103 @@ impl Outline {
     }
 }
 
-/// The clicks of a marking, one outline per view they were made on.
+/// One piece of glass (a pane, a dome): an outline per view it was
+/// clicked around in; it is where those outlines' cones meet.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Region {
+    pub outlines: Vec<Outline>,
+}
+
+impl Region {
+    /// The outlines that span a polygon (three clicks or more, not on a line).
+    fn cones(&self) -> Vec<(Rays, Vec<DVec3>)> {
+        self.outlines.iter().filter_map(Outline::cone).collect()
+    }
+}
+
+/// The clicks of a marking: one region per piece of glass (several panes
+/// are several regions; each is the meeting of its own outlines' cones,
+/// the glass their union), one outline per view in each.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Marks {
-    pub outlines: Vec<Outline>,
-    /// How many outlined views may leave a point out and it still counts
-    /// as glass (0: every one must hold it): forgives a view whose outline
-    /// an occluder cut short, at the cost of a looser region.
+    pub regions: Vec<Region>,
+    /// How many outlined views of a region may leave a point out and it
+    /// still counts as glass (0: every one must hold it): forgives a view
+    /// whose outline an occluder cut short, at the cost of a looser region.
     pub tolerance: usize,
 }
 
 impl Marks {
-    /// Add a click at pixel coordinates (u, v) of `cam`: to the last
-    /// outline when it was made on the same camera, else to a new one.
+    /// Add a click at pixel coordinates (u, v) of `cam` to the current
+    /// region: to its last outline when that was made on the same camera,
+    /// else to a new one.
     pub fn click(&mut self, cam: &Camera, u: f64, v: f64) {
-        match self.outlines.last_mut() {
+        if self.regions.is_empty() {
+            self.regions.push(Region::default());
+        }
+        let region = self.regions.last_mut().expect("one was pushed");
+        match region.outlines.last_mut() {
             Some(o) if o.camera == *cam => o.points.push((u, v)),
-            _ => self.outlines.push(Outline { camera: *cam, points: vec![(u, v)] }),
+            _ => region.outlines.push(Outline { camera: *cam, points: vec![(u, v)] }),
         }
     }
 
-    /// Take back the last click.
+    /// Start another region (the next clicks outline another piece of
+    /// glass); nothing when the current one has no clicks yet.
+    pub fn new_region(&mut self) {
+        if self.regions.last().is_some_and(|r| !r.outlines.is_empty()) {
+            self.regions.push(Region::default());
+        }
+    }
+
+    /// Take back the last click (an emptied outline and region go with it).
     pub fn undo(&mut self) {
-        if let Some(o) = self.outlines.last_mut() {
-            o.points.pop();
-            if o.points.is_empty() {
-                self.outlines.pop();
+        while self.regions.last().is_some_and(|r| r.outlines.is_empty()) {
+            self.regions.pop();
+        }
+        if let Some(r) = self.regions.last_mut() {
+            if let Some(o) = r.outlines.last_mut() {
+                o.points.pop();
+                if o.points.is_empty() {
+                    r.outlines.pop();
+                }
+            }
+            if r.outlines.is_empty() {
+                self.regions.pop();
             }
         }
     }
 
     pub fn clicks(&self) -> usize {
-        self.outlines.iter().map(|o| o.points.len()).sum()
+        self.regions.iter().flat_map(|r| &r.outlines).map(|o| o.points.len()).sum()
     }
 
-    /// The outlines that span a polygon (three clicks or more, not on a line).
-    fn cones(&self) -> Vec<(Rays, Vec<DVec3>)> {
-        self.outlines.iter().filter_map(Outline::cone).collect()
+    /// Outlines over all regions (a view outlined for two panes counts twice).
+    pub fn outlines(&self) -> usize {
+        self.regions.iter().map(|r| r.outlines.len()).sum()
     }
 
-    /// Whether the marking describes a region: two views with a polygon each.
+    /// Each region that describes glass (a polygon in two views or more), as its cones.
+    fn ready_regions(&self) -> Vec<Vec<(Rays, Vec<DVec3>)>> {
+        self.regions.iter().map(Region::cones).filter(|c| c.len() >= 2).collect()
+    }
+
+    /// Whether the marking describes glass: a region with a polygon in two views.
     pub fn is_ready(&self) -> bool {
-        self.cones().len() >= 2
+        !self.ready_regions().is_empty()
     }
 
-    /// `cam`'s glass mask (row-major): its pixels whose ray meets every
-    /// marked view's cone (all but `tolerance`, and at least two) at one
-    /// point in front of them.
+    /// `cam`'s glass mask (row-major): its pixels whose ray meets, in one
+    /// of the regions, every outlined view's cone (all but `tolerance`,
+    /// and at least two) at one point in front of them.
     pub fn mask(&self, cam: &Camera) -> Vec<bool> {
-        let cones = self.cones();
-        let need = cones.len().saturating_sub(self.tolerance).max(2);
+        let regions: Vec<(usize, Vec<(Rays, Vec<DVec3>)>)> = self.ready_regions().into_iter().map(|c| (c.len().saturating_sub(self.tolerance).max(2), c)).collect();
         let rays = Rays::of(cam);
         let (w, h) = (cam.width as usize, cam.height as usize);
         let mut out = vec![false; w * h];
-        if cones.len() < 2 {
-            return out;
-        }
         for (i, m) in out.iter_mut().enumerate() {
             let d = rays.dir((i % w) as f64, (i / w) as f64);
-            *m = through_enough(rays.centre, d, &cones, need);
+            *m = regions.iter().any(|(need, cones)| through_enough(rays.centre, d, cones, *need));
         }
         out
     }
@@ -151,7 +189,8 @@ impl Marks {
     /// `marks.json`; how many masks hold glass.
     pub fn write(&self, views: &[View], dir: &Path) -> Result<usize> {
         if !self.is_ready() {
-            bail!("the glass is marked in {} view(s); outline it (three clicks or more) in at least two views", self.cones().len());
+            let most = self.regions.iter().map(|r| r.cones().len()).max().unwrap_or(0);
+            bail!("the glass is marked in {most} view(s); outline it (three clicks or more) in at least two views");
         }
         let stems = stems(views)?;
         if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -185,12 +224,12 @@ impl Marks {
         });
         let glass: usize = glass?.into_iter().sum();
         let record = serde_json::json!({
-            "what": "glass marked in tgs view: each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet every outline's cone but `tolerance`",
+            "what": "glass marked in tgs view: per region (a piece of glass) each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet, in one region, every outline's cone but `tolerance`",
             "tolerance": self.tolerance,
-            "outlines": self.outlines.iter().map(|o| serde_json::json!({
+            "regions": self.regions.iter().filter(|r| !r.outlines.is_empty()).map(|r| serde_json::json!({"outlines": r.outlines.iter().map(|o| serde_json::json!({
                 "width": o.camera.width, "height": o.camera.height, "fx": o.camera.fx, "fy": o.camera.fy, "cx": o.camera.cx, "cy": o.camera.cy,
                 "world_to_view": o.camera.world_to_view, "points": o.points,
-            })).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>()})).collect::<Vec<_>>(),
         });
         let path = dir.join("marks.json");
         std::fs::write(&path, serde_json::to_vec_pretty(&record)?).with_context(|| format!("{}: cannot write", path.display()))?;
@@ -323,7 +362,7 @@ mod tests {
                 marks.click(c, u, v);
             }
         }
-        assert_eq!((marks.outlines.len(), marks.clicks()), (2, 8));
+        assert_eq!((marks.outlines(), marks.clicks()), (2, 8));
         let m = marks.mask(&third);
         // The pane's own projection in the third view, by point-in-quad.
         let q: Vec<(f64, f64)> = corners.iter().map(|&x| project(&third, x)).collect();
@@ -362,11 +401,55 @@ mod tests {
         for _ in 0..4 {
             one.undo();
         }
-        assert_eq!(one.outlines.len(), 1);
+        assert_eq!(one.outlines(), 1);
         assert!(!one.is_ready() && one.mask(&third).iter().all(|&b| !b));
         // Behind every camera nothing is marked: a view looking away.
         let away = Camera::look_at([0.0, -3.0, 0.0], [0.0, -6.0, 0.0], [0.0, 0.0, 1.0], 0.8, 16, 12);
         assert!(marks.mask(&away).iter().all(|&b| !b));
+    }
+
+    /// Two panes side by side with a gap: outlined as one region the
+    /// views' convex outlines span the gap too; as two regions (B between
+    /// them) the gap stays unmarked and both panes are held.
+    #[test]
+    fn two_panes_are_two_regions() {
+        let pane = |x0: f64| [[x0, 0.0, -0.3], [x0 + 0.4, 0.0, -0.3], [x0 + 0.4, 0.0, 0.3], [x0, 0.0, 0.3]].map(DVec3::from_array);
+        let (left, right) = (pane(-0.8), pane(0.4));
+        let (a, b, third) = (cam([1.5, -3.0, 0.5]), cam([-1.5, -3.0, 0.2]), cam([0.3, -3.2, 1.0]));
+        let (mut one, mut two) = (Marks::default(), Marks::default());
+        // One region: each view's clicks go around both panes.
+        for c in [&a, &b] {
+            for &x in left.iter().chain(&right) {
+                let (u, v) = project(c, x);
+                one.click(c, u, v);
+            }
+        }
+        // Two regions: a pane outlined in both views, then B, then the other.
+        for corners in [left, right] {
+            for c in [&a, &b] {
+                for &x in &corners {
+                    let (u, v) = project(c, x);
+                    two.click(c, u, v);
+                }
+            }
+            two.new_region();
+            two.new_region(); // a second press on an empty region adds none
+        }
+        assert_eq!((one.regions.len(), two.regions.len(), two.outlines(), two.clicks()), (1, 3, 4, 16));
+        let gap = project(&third, DVec3::new(0.0, 0.0, 0.0));
+        let at = |m: &[bool], p: (f64, f64)| m[p.1.round() as usize * third.width as usize + p.0.round() as usize];
+        let (m1, m2) = (one.mask(&third), two.mask(&third));
+        assert!(at(&m1, gap) && !at(&m2, gap), "the gap between the panes");
+        for x in [DVec3::new(-0.6, 0.0, 0.0), DVec3::new(0.6, 0.0, 0.0)] {
+            assert!(at(&m2, project(&third, x)), "a pane's centre");
+        }
+        // Undo empties the second region and then takes clicks from the first.
+        let mut u = two.clone();
+        for _ in 0..8 {
+            u.undo();
+        }
+        assert_eq!((u.regions.len(), u.clicks()), (1, 8));
+        assert!(u.is_ready() && !at(&u.mask(&third), project(&third, DVec3::new(0.6, 0.0, 0.0))));
     }
 
     #[test]

@@ -32,6 +32,8 @@ pub enum Action {
     Click(f64, f64),
     /// Take back the last mark.
     Unmark,
+    /// The next clicks outline another piece of glass (another pane).
+    NewRegion,
     /// Write every training view's glass mask from the marks: into this
     /// new directory (script), else a new one in the run directory.
     WriteMarks(Option<PathBuf>),
@@ -57,6 +59,7 @@ tgs view keys:
   L / K: next / previous layer (final, normals, depth; after Stage I: scattering, reflection, R, F0, ...; gt: the photo)
   C: next checkpoint (Stage I, II, III)   F12 or O: screenshot   H: this help   Esc: quit
   G: mark the glass: left clicks around it (a pane's corners, a dome's outline) in two or more views
+     B: the next clicks outline another piece of glass (each pane its own region)
      U: take back a click   M: write every training view's glass mask (reflection.seed_masks)";
 
 /// The action of a key press (with shift held or not).
@@ -80,6 +83,7 @@ pub fn key_action(key: KeyCode) -> Option<Action> {
         KeyCode::KeyH => Some(Action::Help),
         KeyCode::KeyG => Some(Action::MarkMode),
         KeyCode::KeyU => Some(Action::Unmark),
+        KeyCode::KeyB => Some(Action::NewRegion),
         KeyCode::KeyM => Some(Action::WriteMarks(None)),
         KeyCode::Escape => Some(Action::Quit),
         _ => None,
@@ -112,6 +116,7 @@ fn key_named(name: &str) -> Option<KeyCode> {
             b'h' => KeyCode::KeyH,
             b'g' => KeyCode::KeyG,
             b'u' => KeyCode::KeyU,
+            b'b' => KeyCode::KeyB,
             b'm' => KeyCode::KeyM,
             _ => return None,
         },
