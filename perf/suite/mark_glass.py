@@ -17,8 +17,12 @@ the marked masks' IoU and recall against the exact ones.
 
 RUNS/SCENE/s0/I is the Stage I run `suite.py` trains (any run of the
 scene will do: only its dataset and cameras are used); EXACT/SCENE holds
-the exact training masks (`mitsuba_scenes.py --train-masks`). Needs numpy
-and Pillow (or imageio) to read the masks.
+the exact training masks (`mitsuba_scenes.py --train-masks`). With
+`--pieces ROOT`, a scene with ROOT/SCENE/K (the masks of its K-th piece of
+glass alone, `mitsuba_scenes.py --train-masks --piece K`) is marked piece
+by piece, as a user marks a vehicle's windows: each piece outlined in its
+own views, key B between them. Needs numpy and Pillow (or imageio) to
+read the masks.
 """
 import argparse
 import json
@@ -104,6 +108,7 @@ def main():
     ap.add_argument("--solidity", type=float, default=0.9, help="a view is marked only where the glass's mask fills this share of its convex hull (its outline clear)")
     ap.add_argument("--only", action="append")
     ap.add_argument("--tolerance", type=int, default=0, help="tgs view --mark-tolerance: outlined views that may leave a point out")
+    ap.add_argument("--pieces", metavar="ROOT", help="mark the glass of ROOT/SCENE/K piece by piece (one region each)")
     ap.add_argument("--tgs", default="target/release/tgs")
     a = ap.parse_args()
     scenes = a.only or sorted(d for d in os.listdir(a.exact) if os.path.isdir(os.path.join(a.exact, d)))
@@ -116,19 +121,29 @@ def main():
         # Camera viewing directions (NeRF c2w: the camera looks down -z).
         dirs = [-np.array(f["transform_matrix"])[:3, 2] for f in fr]
         dirs = [d / np.linalg.norm(d) for d in dirs]
-        chosen = choose(masks, dirs, a.views, a.solidity)
+        pdir = os.path.join(a.pieces, scene) if a.pieces else None
+        if pdir and os.path.isdir(pdir):
+            keys = sorted(os.listdir(pdir), key=lambda k: int(k) if k.isdigit() else k)
+            pieces = [[np.array(Image.open(os.path.join(pdir, k, n + ".png")).convert("L")) > 127 for n in names] for k in keys]
+        else:
+            pieces = [masks]
         out = os.path.abspath(os.path.join(a.out, scene))
         if os.path.exists(out):
             raise SystemExit(f"{out} exists: choose another --out (nothing is written over)")
         h, w = masks[0].shape
         lines = ["key t", "key g"]
-        at, n_clicks = 0, 0
-        for i in chosen:
-            lines += ["key n"] * (i - at) if i >= at else ["key p"] * (at - i)
-            at = i
-            for x, y in clicks(masks[i], a.clicks):
-                lines.append(f"click {x} {y}")
-                n_clicks += 1
+        at, n_clicks, chosen = 0, 0, []
+        for k, piece in enumerate(pieces):
+            if k > 0:
+                lines.append("key b")
+            views = choose(piece, dirs, a.views, a.solidity)
+            chosen.append(views)
+            for i in views:
+                lines += ["key n"] * (i - at) if i >= at else ["key p"] * (at - i)
+                at = i
+                for x, y in clicks(piece[i], a.clicks):
+                    lines.append(f"click {x} {y}")
+                    n_clicks += 1
         lines.append(f"marks {out}")
         os.makedirs(a.out, exist_ok=True)
         script = os.path.join(a.out, scene + ".view.txt")
@@ -144,7 +159,7 @@ def main():
             either += int((k | m).sum())
             truth += int(m.sum())
             marked += int(k.sum())
-        print(f"| {scene} | {', '.join(str(i) for i in chosen)} | {n_clicks} | {both / max(either, 1):.3f} | {both / max(truth, 1):.3f} | {marked / (len(masks) * w * h):.3f} |", flush=True)
+        print(f"| {scene} | {' / '.join(', '.join(str(i) for i in c) for c in chosen)} | {n_clicks} | {both / max(either, 1):.3f} | {both / max(truth, 1):.3f} | {marked / (len(masks) * w * h):.3f} |", flush=True)
 
 
 if __name__ == "__main__":

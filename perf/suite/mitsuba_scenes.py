@@ -360,6 +360,18 @@ def first_hit(prims, o, d):
     return t, n, g
 
 
+def first_hit_index(prims, o, d):
+    """The index in `prims` of each ray's first hit (-1: none)."""
+    t = np.full(len(o), np.inf)
+    k = np.full(len(o), -1)
+    for i, p in enumerate(prims):
+        tp, _ = p.intersect(o, d)
+        closer = tp < t
+        t = np.where(closer, tp, t)
+        k = np.where(closer, i, k)
+    return k
+
+
 def write_png(mi, path, image, srgb):
     """8-bit PNG of a float image (sRGB-encoded when `srgb`), by Mitsuba's Bitmap."""
     fmt = mi.Bitmap.PixelFormat.RGB if image.shape[2] == 3 else mi.Bitmap.PixelFormat.Y
@@ -379,6 +391,7 @@ def main():
     ap.add_argument("--split", choices=["both", "train", "test"], default="both", help="which views to render")
     ap.add_argument("--median-of", type=int, default=1, metavar="K", help="each image the per-pixel median of K renderings of --spp samples (no fireflies; biased: drops the sun's caustics through the glass)")
     ap.add_argument("--compact", action="store_true", help="JPEG images (quality 95) and half-float EXR normals: ~10x smaller, for datasets that travel (perf/suite/gpu_paper.sh)")
+    ap.add_argument("--piece", type=int, metavar="K", help="with --train-masks: the masks of the scene's K-th glass primitive alone (a pane of `vehicle`), for marking each piece of glass as its own region")
     ap.add_argument("--train-masks", metavar="DATASET", help="only write DATASET's training views' glass masks into --out (one --scene)")
     a = ap.parse_args()
     if not 0 <= a.sampler_seed <= 1000:
@@ -462,6 +475,9 @@ def train_masks(mi, a):
     except (OSError, ValueError) as e:
         raise SystemExit(f"{path}: {e}")
     prims = build(mi, name)
+    glass = [i for i, p in enumerate(prims) if p.glass]
+    if a.piece is not None and not 0 <= a.piece < len(glass):
+        raise SystemExit(f"--piece {a.piece}: {name} has {len(glass)} glass primitives (0..{len(glass) - 1})")
     os.makedirs(a.out, exist_ok=True)
     for f in t["frames"]:
         stem = os.path.basename(f["file_path"])
@@ -474,7 +490,11 @@ def train_masks(mi, a):
         if w != h:
             raise SystemExit(f"{img}: {w}x{h}; this script's cameras make square images")
         ro, rd = rays(np.array(f["transform_matrix"], float), w, t["camera_angle_x"], 4)
-        _, _, g = first_hit(prims, ro, rd)
+        if a.piece is None:
+            _, _, g = first_hit(prims, ro, rd)
+        else:
+            # The piece alone: rays whose first hit is its primitive.
+            g = first_hit_index(prims, ro, rd) == glass[a.piece]
         write_png(mi, out, g.reshape(w, w, 16).all(2).astype(np.float32)[:, :, None], False)
     print(f"{len(t['frames'])} masks of {name} in {a.out}")
 
