@@ -68,12 +68,21 @@ scenes=$(for d in "$S"/*/; do [ -f "$d/transforms_train.json" ] && basename "$d"
 list=""; for s in ${SEEDS:-0 1}; do for sc in $scenes; do list+="$sc $s"$'\n'; done; done
 printf '%s' "$list" | xargs -P 8 -L 1 bash -c 'chain $0 $1' 2>&1
 echo "gpu_paper: suite phase done at $(( $(date +%s) - start )) s"
-# Alone on the device: the viewer's frame and Stage I's iteration.
-first=$(echo "$scenes" | head -n1)
-for run in "$R/$first/s0/default-III" "$R/$first/s0/masks-III"; do
-  [ -f "$run/metrics.json" ] && timeout 30 "$T" bench view "$run" --size "${VIEW_SIZE:-800x600}" --frames 120 2>&1 | tee -a "$OUT/bench.txt"
+# Alone on the device: the viewer's frame (the first finished Stage III
+# and II runs), Stage I's iteration on a trained model, and a profiled
+# Stage III (GPU time per kernel in its metrics.json: at 400² Stage III ran
+# ~10x slower an iteration than Stage II on the H200, fifty-eighth entry).
+for v in masks-III default-III masks default; do
+  run=$(ls -d "$R"/*/s0/"$v" 2>/dev/null | while read -r d; do [ -f "$d/metrics.json" ] && echo "$d"; done | head -n1)
+  [ -n "$run" ] && timeout 30 "$T" bench view "$run" --size "${VIEW_SIZE:-800x600}" --frames 120 2>&1 | tee -a "$OUT/bench.txt"
 done
-[ -f "$R/$first/s0/I/metrics.json" ] && timeout 30 "$T" bench train --from "$R/$first/s0/I" --iterations 50 2>&1 | tee -a "$OUT/bench.txt"
+first=$(ls -d "$R"/*/s0/I 2>/dev/null | while read -r d; do [ -f "$d/metrics.json" ] && echo "$d"; done | head -n1)
+[ -n "$first" ] && timeout 30 "$T" bench train --from "$first" --iterations 50 2>&1 | tee -a "$OUT/bench.txt"
+two=$(ls -d "$R"/*/s0/masks "$R"/*/s0/default 2>/dev/null | while read -r d; do [ -f "$d/metrics.json" ] && echo "$d"; done | head -n1)
+if [ -n "$two" ] && [ "$(left)" -gt 40 ]; then
+  timeout 40 "$T" train --quiet --out "$R/profile-III" --from "$two" --stages III --set light_field.iterations=30 --set test_interval=0 --profile > "$R/profile-III.log" 2>&1 &&
+    python3 -c "import json,sys; m=json.load(open(sys.argv[1])); print(json.dumps(m.get('gpu_ms_per_iteration'), indent=1)[:4000])" "$R/profile-III/metrics.json" | tee -a "$OUT/bench.txt"
+fi
 echo "gpu_paper: benches done at $(( $(date +%s) - start )) s"
 # The paper preset with what is left (seed 0, no masks), both scenes side by side.
 if [ "$(left)" -gt 30 ]; then
