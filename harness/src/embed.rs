@@ -82,7 +82,7 @@ impl SceneRenderer {
 
     /// Gaussians in the scattering set and in the reflection set (0 before Stage II).
     pub fn counts(&self) -> (u32, u32) {
-        (self.scat.n, self.layer.as_ref().map_or(0, |l| l.len()))
+        (self.scat.n, self.layer.as_ref().map_or(0, |l| l.gaussians()))
     }
 
     /// Floats [`SceneRenderer::record`] writes for a `width` x `height` view.

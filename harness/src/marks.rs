@@ -82,6 +82,9 @@ impl Outline {
     }
 }
 
+/// A view's cone: its camera's rays and the planes bounding the outline.
+type Cone = (Rays, Vec<DVec3>);
+
 /// One piece of glass (a pane, a dome): an outline per view it was
 /// clicked around in; it is where those outlines' cones meet.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -159,7 +162,7 @@ impl Marks {
     }
 
     /// Each region that describes glass (a polygon in two views or more), as its cones.
-    fn ready_regions(&self) -> Vec<Vec<(Rays, Vec<DVec3>)>> {
+    fn ready_regions(&self) -> Vec<Vec<Cone>> {
         self.regions.iter().map(Region::cones).filter(|c| c.len() >= 2).collect()
     }
 
@@ -172,7 +175,7 @@ impl Marks {
     /// of the regions, every outlined view's cone (all but `tolerance`,
     /// and at least two) at one point in front of them.
     pub fn mask(&self, cam: &Camera) -> Vec<bool> {
-        let regions: Vec<(usize, Vec<(Rays, Vec<DVec3>)>)> = self.ready_regions().into_iter().map(|c| (c.len().saturating_sub(self.tolerance).max(2), c)).collect();
+        let regions: Vec<(usize, Vec<Cone>)> = self.ready_regions().into_iter().map(|c| (c.len().saturating_sub(self.tolerance).max(2), c)).collect();
         let rays = Rays::of(cam);
         let (w, h) = (cam.width as usize, cam.height as usize);
         let mut out = vec![false; w * h];

@@ -165,7 +165,7 @@ fn the_settings_lists_are_built_from_the_list() {
             assert!(in_section(k, key), "{key} is not in the {} section", k.key());
             assert!(known.iter().any(|n| n == key), "{key} is not a setting");
         }
-        for key in k.from_here_settings() {
+        for key in k.frees_earlier_settings() {
             assert!(known.iter().any(|n| n == key) && !in_section(k, key), "{key}: a setting of an earlier stage");
         }
     }

@@ -34,19 +34,19 @@ fn start_index(a: &TrainArgs) -> usize {
 
 /// Whether a `--from` run that trains from `LATER[start]` on may change
 /// the setting `k`: the sections of the stages it trains, what the first
-/// of them frees ([`LaterKind::from_here_settings`]) and the run's own.
+/// of them frees ([`LaterKind::frees_earlier_settings`]) and the run's own.
 fn from_setting(start: usize, k: &str) -> bool {
     FROM_RUN_SETTINGS.contains(&k)
         || (start == 0 && FROM_STAGE_ONE_SETTINGS.contains(&k))
         || LATER[start..].iter().any(|s| in_section(*s, k))
-        || LATER[start].from_here_settings().contains(&k)
+        || LATER[start].frees_earlier_settings().contains(&k)
 }
 
 /// [`from_setting`]'s list for people ("light_field.*, reflection.reseed,
 /// stages, test_interval and checkpoint_interval").
 fn from_settings_text(start: usize) -> String {
     let mut v: Vec<String> = LATER[start..].iter().map(|s| format!("{}.*", s.key())).collect();
-    v.extend(LATER[start].from_here_settings().iter().chain(&FROM_RUN_SETTINGS).map(|k| k.to_string()));
+    v.extend(LATER[start].frees_earlier_settings().iter().chain(&FROM_RUN_SETTINGS).map(|k| k.to_string()));
     let last = v.pop().unwrap_or_default();
     format!("{} and {last}", v.join(", "))
 }

@@ -77,7 +77,7 @@ pub trait LaterKind: Sync {
     }
     /// Settings of the stages before it that a `--from RUN` starting at
     /// this stage (RUN's earlier stages kept) may still change.
-    fn from_here_settings(&self) -> &'static [&'static str] {
+    fn frees_earlier_settings(&self) -> &'static [&'static str] {
         &[]
     }
     /// Whether it trains the scattering set under `cfg` (then a run that

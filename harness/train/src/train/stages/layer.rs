@@ -11,7 +11,7 @@ use tgs_pipelines::{Camera, Frame, Rasterizer};
 /// A stage's reflection layer on a device.
 pub trait RenderLayer: Send {
     /// Gaussians in its reflection set.
-    fn len(&self) -> u32;
+    fn gaussians(&self) -> u32;
     /// Record the composite of `cam` over the scattering layer's colour
     /// `scat` (planes) into `out` (planes, every pixel written).
     fn record(&mut self, rec: &mut Recorder, cam: &Camera, scat: &Buffer<f32>, out: &Buffer<f32>) -> Result<()>;

@@ -50,7 +50,7 @@ impl LightFieldLayer {
 }
 
 impl RenderLayer for LightFieldLayer {
-    fn len(&self) -> u32 {
+    fn gaussians(&self) -> u32 {
         self.set.n
     }
 

@@ -46,7 +46,7 @@ impl LaterKind for Kind {
     }
 
     /// Stage III runs again after a reseeded Stage II (`reflection.reseed`).
-    fn from_here_settings(&self) -> &'static [&'static str] {
+    fn frees_earlier_settings(&self) -> &'static [&'static str] {
         &["reflection.reseed"]
     }
 

@@ -35,7 +35,7 @@ impl EnvLayer {
 }
 
 impl RenderLayer for EnvLayer {
-    fn len(&self) -> u32 {
+    fn gaussians(&self) -> u32 {
         self.set.n
     }
 
