@@ -45,12 +45,12 @@ def stem(path):
     return os.path.splitext(b)[0] if b.endswith((".png", ".jpg", ".jpeg", ".exr")) else b
 
 
-def clicks(mask, n):
-    """N clicks around the glass: its outermost pixel towards each of N directions (window coordinates of pixel centres)."""
+def clicks(mask, n, offset=0.0):
+    """N clicks around the glass: its outermost pixel towards each of N directions from OFFSET radians (window coordinates of pixel centres)."""
     ys, xs = np.nonzero(mask)
     out = []
     for k in range(n):
-        a = k * 2 * math.pi / n
+        a = offset + k * 2 * math.pi / n
         i = int(np.argmax(math.cos(a) * xs + math.sin(a) * ys))
         p = (xs[i] + 0.5, ys[i] + 0.5)
         if p not in out:
@@ -109,6 +109,7 @@ def main():
     ap.add_argument("--only", action="append")
     ap.add_argument("--tolerance", type=int, default=0, help="tgs view --mark-tolerance: outlined views that may leave a point out")
     ap.add_argument("--pieces", metavar="ROOT", help="mark the glass of ROOT/SCENE/K piece by piece (one region each)")
+    ap.add_argument("--flat", action="store_true", help="with --pieces: each piece a flat pane (key F), clicked at its four corners (its outermost pixels along the image diagonals, in the same order in every view)")
     ap.add_argument("--tgs", default="target/release/tgs")
     a = ap.parse_args()
     scenes = a.only or sorted(d for d in os.listdir(a.exact) if os.path.isdir(os.path.join(a.exact, d)))
@@ -136,12 +137,14 @@ def main():
         for k, piece in enumerate(pieces):
             if k > 0:
                 lines.append("key b")
+            if a.flat:
+                lines.append("key f")
             views = choose(piece, dirs, a.views, a.solidity)
             chosen.append(views)
             for i in views:
                 lines += ["key n"] * (i - at) if i >= at else ["key p"] * (at - i)
                 at = i
-                for x, y in clicks(piece[i], a.clicks):
+                for x, y in (clicks(piece[i], 4, math.pi / 4) if a.flat else clicks(piece[i], a.clicks)):
                     lines.append(f"click {x} {y}")
                     n_clicks += 1
         lines.append(f"marks {out}")

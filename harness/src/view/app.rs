@@ -212,6 +212,7 @@ impl App<'_> {
             }
             Action::Unmark => self.marks.undo(),
             Action::NewRegion => self.marks.new_region(),
+            Action::FlatPane => self.marks.flat(),
             Action::WriteMarks(dir) => {
                 let dir = dir.unwrap_or_else(|| shot::unused_path(&self.args.run, "glass-marks", ""));
                 match self.marks.write(&o.scene.data.train, &dir) {
@@ -438,7 +439,8 @@ fn marking_status(on: bool, marks: &crate::marks::Marks, marked: Option<&[bool]>
     let share = marked.map_or_else(String::new, |m| format!(", {:.0}% of this view", 100.0 * m.iter().filter(|&&b| b).count() as f64 / m.len().max(1) as f64));
     let pieces = marks.regions.iter().filter(|r| !r.outlines.is_empty()).count();
     let regions = if pieces > 1 { format!(" ({pieces} pieces of glass)") } else { String::new() };
-    format!(" · marking{}: {} clicks in {} views{regions}{share}", if on { "" } else { " (off)" }, marks.clicks(), marks.outlines())
+    let pending = marks.pending().map(|p| format!(" · this piece: {p}")).unwrap_or_default();
+    format!(" · marking{}: {} clicks in {} views{regions}{share}{pending}", if on { "" } else { " (off)" }, marks.clicks(), marks.outlines())
 }
 
 /// Tint the marked pixels magenta (half way), in either byte order.

@@ -34,6 +34,8 @@ pub enum Action {
     Unmark,
     /// The next clicks outline another piece of glass (another pane).
     NewRegion,
+    /// The current piece of glass is a flat pane: its clicks are its corners.
+    FlatPane,
     /// Write every training view's glass mask from the marks: into this
     /// new directory (script), else a new one in the run directory.
     WriteMarks(Option<PathBuf>),
@@ -60,6 +62,7 @@ tgs view keys:
   C: next checkpoint (Stage I, II, III)   F12 or O: screenshot   H: this help   Esc: quit
   G: mark the glass: left clicks around it (a pane's corners, a dome's outline) in two or more views
      B: the next clicks outline another piece of glass (each pane its own region)
+     F: this piece is a flat pane: click its corners, in the same order, in two or more views
      U: take back a click   M: write every training view's glass mask (reflection.seed_masks)";
 
 /// The action of a key press (with shift held or not).
@@ -84,6 +87,7 @@ pub fn key_action(key: KeyCode) -> Option<Action> {
         KeyCode::KeyG => Some(Action::MarkMode),
         KeyCode::KeyU => Some(Action::Unmark),
         KeyCode::KeyB => Some(Action::NewRegion),
+        KeyCode::KeyF => Some(Action::FlatPane),
         KeyCode::KeyM => Some(Action::WriteMarks(None)),
         KeyCode::Escape => Some(Action::Quit),
         _ => None,
@@ -117,6 +121,7 @@ fn key_named(name: &str) -> Option<KeyCode> {
             b'g' => KeyCode::KeyG,
             b'u' => KeyCode::KeyU,
             b'b' => KeyCode::KeyB,
+            b'f' => KeyCode::KeyF,
             b'm' => KeyCode::KeyM,
             _ => return None,
         },

@@ -1,9 +1,11 @@
 //! Marking the glass (`tgs view`, key G): the user clicks around the glass
 //! (a pane's corners, a dome's outline) in two or more views. Each view's
-//! clicks span a convex polygon, and with the camera a cone; the glass is
-//! where every marked view's cone holds it (their visual hull). A training
-//! view's glass mask is the set of its pixels whose ray passes through
-//! that hull: exact, no sampling along the ray. The masks go into a new
+//! clicks span a convex polygon, and with the camera a cone; a piece of
+//! glass is where every marked view's cone holds it (their visual hull),
+//! or for a flat pane (key F) the polygon of its corners triangulated from
+//! the clicks (`pane.rs`); several pieces (key B) are their union. A
+//! training view's glass mask is the set of its pixels whose ray meets
+//! one: exact, no sampling along the ray. The masks go into a new
 //! directory (never the dataset's) for `reflection.seed_masks`.
 //! Occlusion is not modelled: glass behind an opaque object is marked too.
 
@@ -14,6 +16,8 @@ use anyhow::{bail, Context as _, Result};
 use glam::{DMat3, DVec3};
 use std::path::Path;
 use tgs_pipelines::Camera;
+
+mod pane;
 
 /// A camera's centre and the world directions of its pixels, in f64.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,6 +49,12 @@ impl Rays {
     /// The camera's viewing axis in world space.
     fn forward(&self) -> DVec3 {
         self.axes.z_axis
+    }
+
+    /// The pixel coordinates of world point `x`; None behind the camera.
+    pub fn project(&self, x: DVec3) -> Option<(f64, f64)> {
+        let p = self.axes.transpose() * (x - self.centre);
+        (p.z > 1e-9).then(|| (self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy))
     }
 }
 
@@ -86,16 +96,38 @@ impl Outline {
 type Cone = (Rays, Vec<DVec3>);
 
 /// One piece of glass (a pane, a dome): an outline per view it was
-/// clicked around in; it is where those outlines' cones meet.
+/// clicked around in; it is where those outlines' cones meet, or, for a
+/// flat pane (key F), the polygon of its corners triangulated from them.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Region {
     pub outlines: Vec<Outline>,
+    /// A flat pane: each outline is its corners, in the same order.
+    pub flat: bool,
+}
+
+/// What a region marks: a visual hull (the views a point may miss, the
+/// cones) or a pane.
+enum Shape {
+    Hull(usize, Vec<Cone>),
+    Pane(pane::Pane),
 }
 
 impl Region {
     /// The outlines that span a polygon (three clicks or more, not on a line).
     fn cones(&self) -> Vec<(Rays, Vec<DVec3>)> {
         self.outlines.iter().filter_map(Outline::cone).collect()
+    }
+
+    /// What the region marks once it describes glass, or why it does not yet.
+    fn shape(&self, tolerance: usize) -> Result<Shape, String> {
+        if self.flat {
+            return pane::Pane::triangulate(&self.outlines).map(Shape::Pane);
+        }
+        let cones = self.cones();
+        if cones.len() < 2 {
+            return Err(format!("outlined in {} view(s); outline it (three clicks or more) in at least two views", cones.len()));
+        }
+        Ok(Shape::Hull(cones.len().saturating_sub(tolerance).max(2), cones))
     }
 }
 
@@ -161,27 +193,44 @@ impl Marks {
         self.regions.iter().map(|r| r.outlines.len()).sum()
     }
 
-    /// Each region that describes glass (a polygon in two views or more), as its cones.
-    fn ready_regions(&self) -> Vec<Vec<Cone>> {
-        self.regions.iter().map(Region::cones).filter(|c| c.len() >= 2).collect()
+    /// The current region is a flat pane: its outlines are its corners,
+    /// clicked in the same order in each view.
+    pub fn flat(&mut self) {
+        if self.regions.is_empty() {
+            self.regions.push(Region::default());
+        }
+        self.regions.last_mut().expect("one was pushed").flat = true;
+    }
+
+    /// The shape of each region that describes glass.
+    fn shapes(&self) -> Vec<Shape> {
+        self.regions.iter().filter_map(|r| r.shape(self.tolerance).ok()).collect()
+    }
+
+    /// Why the current region does not describe glass yet (None: it does, or it has no clicks).
+    pub fn pending(&self) -> Option<String> {
+        self.regions.last().filter(|r| !r.outlines.is_empty()).and_then(|r| r.shape(self.tolerance).err())
     }
 
     /// Whether the marking describes glass: a region with a polygon in two views.
     pub fn is_ready(&self) -> bool {
-        !self.ready_regions().is_empty()
+        !self.shapes().is_empty()
     }
 
     /// `cam`'s glass mask (row-major): its pixels whose ray meets, in one
     /// of the regions, every outlined view's cone (all but `tolerance`,
     /// and at least two) at one point in front of them.
     pub fn mask(&self, cam: &Camera) -> Vec<bool> {
-        let regions: Vec<(usize, Vec<Cone>)> = self.ready_regions().into_iter().map(|c| (c.len().saturating_sub(self.tolerance).max(2), c)).collect();
+        let shapes = self.shapes();
         let rays = Rays::of(cam);
         let (w, h) = (cam.width as usize, cam.height as usize);
         let mut out = vec![false; w * h];
         for (i, m) in out.iter_mut().enumerate() {
             let d = rays.dir((i % w) as f64, (i / w) as f64);
-            *m = regions.iter().any(|(need, cones)| through_enough(rays.centre, d, cones, *need));
+            *m = shapes.iter().any(|s| match s {
+                Shape::Hull(need, cones) => through_enough(rays.centre, d, cones, *need),
+                Shape::Pane(p) => p.hit(rays.centre, d),
+            });
         }
         out
     }
@@ -192,8 +241,13 @@ impl Marks {
     /// `marks.json`; how many masks hold glass.
     pub fn write(&self, views: &[View], dir: &Path) -> Result<usize> {
         if !self.is_ready() {
-            let most = self.regions.iter().map(|r| r.cones().len()).max().unwrap_or(0);
-            bail!("the glass is marked in {most} view(s); outline it (three clicks or more) in at least two views");
+            let why = self
+                .regions
+                .iter()
+                .filter_map(|r| r.shape(self.tolerance).err())
+                .next_back()
+                .unwrap_or_else(|| "outlined in 0 view(s); outline it (three clicks or more) in at least two views".into());
+            bail!("no piece of glass is marked yet: {why}");
         }
         let stems = stems(views)?;
         if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -229,7 +283,7 @@ impl Marks {
         let record = serde_json::json!({
             "what": "glass marked in tgs view: per region (a piece of glass) each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet, in one region, every outline's cone but `tolerance`",
             "tolerance": self.tolerance,
-            "regions": self.regions.iter().filter(|r| !r.outlines.is_empty()).map(|r| serde_json::json!({"outlines": r.outlines.iter().map(|o| serde_json::json!({
+            "regions": self.regions.iter().filter(|r| !r.outlines.is_empty()).map(|r| serde_json::json!({"flat": r.flat, "outlines": r.outlines.iter().map(|o| serde_json::json!({
                 "width": o.camera.width, "height": o.camera.height, "fx": o.camera.fx, "fy": o.camera.fy, "cx": o.camera.cx, "cy": o.camera.cy,
                 "world_to_view": o.camera.world_to_view, "points": o.points,
             })).collect::<Vec<_>>()})).collect::<Vec<_>>(),
@@ -318,173 +372,4 @@ fn convex_hull(p: &[(f64, f64)]) -> Vec<(f64, f64)> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn cam(eye: [f32; 3]) -> Camera {
-        Camera::look_at(eye, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.8, 64, 48)
-    }
-
-    /// The pixel coordinates of world point `x` in `c`.
-    fn project(c: &Camera, x: DVec3) -> (f64, f64) {
-        let r = Rays::of(c);
-        let p = r.axes.transpose() * (x - r.centre);
-        (r.fx * p.x / p.z + r.cx, r.fy * p.y / p.z + r.cy)
-    }
-
-    #[test]
-    fn hull_drops_inner_and_collinear_points() {
-        let h = convex_hull(&[(0.0, 0.0), (2.0, 0.0), (1.0, 0.0), (2.0, 2.0), (0.0, 2.0), (1.0, 1.0), (0.0, 2.0)]);
-        assert_eq!(h.len(), 4, "{h:?}");
-        assert!(convex_hull(&[(0.0, 0.0), (1.0, 1.0), (2.0, 2.0)]).len() < 3);
-    }
-
-    #[test]
-    fn rays_invert_the_projection() {
-        let c = cam([3.0, -2.0, 1.5]);
-        let x = DVec3::new(0.2, -0.1, 0.3);
-        let (u, v) = project(&c, x);
-        let r = Rays::of(&c);
-        let d = r.dir(u, v);
-        let t = (x - r.centre).dot(d) / d.length_squared();
-        assert!((r.centre + t * d - x).length() < 1e-6);
-        let [ex, ey, ez] = c.centre();
-        assert!((r.centre - DVec3::new(ex as f64, ey as f64, ez as f64)).length() < 1e-5);
-    }
-
-    /// A square pane outlined by its corners in two views: a third view's
-    /// mask holds the pane's projection and little else; one view is not enough.
-    #[test]
-    fn a_pane_outlined_in_two_views_masks_a_third() {
-        let corners = [[-0.5, 0.0, -0.4], [0.5, 0.0, -0.4], [0.5, 0.0, 0.4], [-0.5, 0.0, 0.4]].map(DVec3::from_array);
-        let (a, b, third) = (cam([1.5, -3.0, 0.5]), cam([-1.5, -3.0, 0.2]), cam([0.3, -3.2, 1.0]));
-        let mut marks = Marks::default();
-        for c in [&a, &b] {
-            for &x in &corners {
-                let (u, v) = project(c, x);
-                marks.click(c, u, v);
-            }
-        }
-        assert_eq!((marks.outlines(), marks.clicks()), (2, 8));
-        let m = marks.mask(&third);
-        // The pane's own projection in the third view, by point-in-quad.
-        let q: Vec<(f64, f64)> = corners.iter().map(|&x| project(&third, x)).collect();
-        let inside = |u: f64, v: f64| {
-            (0..4).all(|i| {
-                let (p0, p1) = (q[i], q[(i + 1) % 4]);
-                (p1.0 - p0.0) * (v - p0.1) - (p1.1 - p0.1) * (u - p0.0) >= 0.0
-            }) || (0..4).all(|i| {
-                let (p0, p1) = (q[i], q[(i + 1) % 4]);
-                (p1.0 - p0.0) * (v - p0.1) - (p1.1 - p0.1) * (u - p0.0) <= 0.0
-            })
-        };
-        let w = third.width as usize;
-        let truth: Vec<bool> = (0..m.len()).map(|i| inside((i % w) as f64, (i / w) as f64)).collect();
-        let both = m.iter().zip(&truth).filter(|(a, b)| **a && **b).count();
-        let either = m.iter().zip(&truth).filter(|(a, b)| **a || **b).count();
-        let missed = truth.iter().zip(&m).filter(|(t, m)| **t && !**m).count();
-        assert!(truth.iter().filter(|&&t| t).count() > 100);
-        assert_eq!(missed, 0, "the hull holds the pane");
-        assert!(both as f64 / either as f64 > 0.7, "IoU {}", both as f64 / either as f64);
-        // A third outline cut short (an occluder hid half the pane there):
-        // every view must hold a point, so the pane's far half is lost;
-        // forgiving one view brings it back.
-        let mut cut = marks.clone();
-        let cut_cam = cam([0.0, -3.4, -0.6]);
-        for x in [corners[0], (corners[0] + corners[1]) / 2.0, (corners[2] + corners[3]) / 2.0, corners[3]] {
-            let (u, v) = project(&cut_cam, x);
-            cut.click(&cut_cam, u, v);
-        }
-        let lost = |m: &[bool]| truth.iter().zip(m).filter(|(t, m)| **t && !**m).count();
-        assert!(lost(&cut.mask(&third)) > 50, "{}", lost(&cut.mask(&third)));
-        cut.tolerance = 1;
-        assert_eq!(lost(&cut.mask(&third)), 0);
-        // One outline is no region; undo takes clicks back one by one.
-        let mut one = marks.clone();
-        for _ in 0..4 {
-            one.undo();
-        }
-        assert_eq!(one.outlines(), 1);
-        assert!(!one.is_ready() && one.mask(&third).iter().all(|&b| !b));
-        // Behind every camera nothing is marked: a view looking away.
-        let away = Camera::look_at([0.0, -3.0, 0.0], [0.0, -6.0, 0.0], [0.0, 0.0, 1.0], 0.8, 16, 12);
-        assert!(marks.mask(&away).iter().all(|&b| !b));
-    }
-
-    /// Two panes side by side with a gap: outlined as one region the
-    /// views' convex outlines span the gap too; as two regions (B between
-    /// them) the gap stays unmarked and both panes are held.
-    #[test]
-    fn two_panes_are_two_regions() {
-        let pane = |x0: f64| [[x0, 0.0, -0.3], [x0 + 0.4, 0.0, -0.3], [x0 + 0.4, 0.0, 0.3], [x0, 0.0, 0.3]].map(DVec3::from_array);
-        let (left, right) = (pane(-0.8), pane(0.4));
-        let (a, b, third) = (cam([1.5, -3.0, 0.5]), cam([-1.5, -3.0, 0.2]), cam([0.3, -3.2, 1.0]));
-        let (mut one, mut two) = (Marks::default(), Marks::default());
-        // One region: each view's clicks go around both panes.
-        for c in [&a, &b] {
-            for &x in left.iter().chain(&right) {
-                let (u, v) = project(c, x);
-                one.click(c, u, v);
-            }
-        }
-        // Two regions: a pane outlined in both views, then B, then the other.
-        for corners in [left, right] {
-            for c in [&a, &b] {
-                for &x in &corners {
-                    let (u, v) = project(c, x);
-                    two.click(c, u, v);
-                }
-            }
-            two.new_region();
-            two.new_region(); // a second press on an empty region adds none
-        }
-        assert_eq!((one.regions.len(), two.regions.len(), two.outlines(), two.clicks()), (1, 3, 4, 16));
-        let gap = project(&third, DVec3::new(0.0, 0.0, 0.0));
-        let at = |m: &[bool], p: (f64, f64)| m[p.1.round() as usize * third.width as usize + p.0.round() as usize];
-        let (m1, m2) = (one.mask(&third), two.mask(&third));
-        assert!(at(&m1, gap) && !at(&m2, gap), "the gap between the panes");
-        for x in [DVec3::new(-0.6, 0.0, 0.0), DVec3::new(0.6, 0.0, 0.0)] {
-            assert!(at(&m2, project(&third, x)), "a pane's centre");
-        }
-        // Undo empties the second region and then takes clicks from the first.
-        let mut u = two.clone();
-        for _ in 0..8 {
-            u.undo();
-        }
-        assert_eq!((u.regions.len(), u.clicks()), (1, 8));
-        assert!(u.is_ready() && !at(&u.mask(&third), project(&third, DVec3::new(0.6, 0.0, 0.0))));
-    }
-
-    #[test]
-    fn masks_go_into_a_new_directory_only() {
-        let view = |name: &str, c: Camera| View {
-            name: name.into(),
-            camera: c,
-            image: crate::data::image_io::ImageF { width: c.width, height: c.height, channels: 3, data: vec![0.0; 3 * (c.width * c.height) as usize] },
-            normals: None,
-            mask: None,
-        };
-        let (a, b) = (cam([1.5, -3.0, 0.5]), cam([-1.5, -3.0, 0.2]));
-        let views = [view("train/r_0.png", a), view("train/r_1", b)];
-        let dir = std::env::temp_dir().join(format!("tgs-marks-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut marks = Marks::default();
-        let e = format!("{:#}", marks.write(&views, &dir.join("m")).unwrap_err());
-        assert!(e.contains("in 0 view(s)") && !dir.join("m").exists(), "{e}");
-        for c in [&a, &b] {
-            for x in [[-0.3, 0.0, -0.3], [0.3, 0.0, -0.3], [0.0, 0.0, 0.3]] {
-                let (u, v) = project(c, DVec3::from_array(x));
-                marks.click(c, u, v);
-            }
-        }
-        assert_eq!(marks.write(&views, &dir.join("m")).unwrap(), 2);
-        let m = crate::data::image_io::read_grey_mask(&dir.join("m/r_0.png")).unwrap();
-        assert_eq!(m.2, marks.mask(&a));
-        assert!(dir.join("m/r_1.png").is_file() && dir.join("m/marks.json").is_file());
-        let e = format!("{:#}", marks.write(&views, &dir.join("m")).unwrap_err());
-        assert!(e.contains("exists"), "{e}");
-        let e = format!("{:#}", marks.write(&[view("a/r_0", a), view("b/r_0.jpg", b)], &dir.join("n")).unwrap_err());
-        assert!(e.contains("r_0.png") && !dir.join("n").exists(), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-}
+mod tests;
