@@ -227,7 +227,7 @@ impl TrainConfig {
     /// The stages to run, parsed from `stages`: Stage I and the later
     /// stages after it in order, each starting from the one before.
     pub fn stage_list(&self) -> Result<Vec<&'static str>> {
-        let all: Vec<&'static str> = Stage::all().map(|s| s.name()).collect();
+        let all: Vec<&'static str> = Stage::ALL.iter().map(|s| s.name()).collect();
         let mut out = Vec::new();
         for s in self.stages.split(',').map(str::trim) {
             match Stage::named(s) {

@@ -140,9 +140,12 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
 /// that trained it (RUN went past the stages kept and has no snapshot of
 /// their end).
 fn check_kept(run: &Path, h: &checkpoint::Header, start: usize) -> Result<()> {
-    // A stage that ran (the run went past its start) and trained the scattering set changed it.
+    // A stage that ran (the run went past its start) and trained the
+    // scattering set changed it. Starting at a later stage, RUN must stand
+    // at the end of the stages kept instead (check_settings says so).
     let ran = |i: usize| h.iteration > kept_end(&h.config, i);
-    if let Some(k) = (start..LATER.len()).find(|&i| ran(i) && LATER[i].trains_scattering(&h.config)).map(|i| LATER[i]) {
+    let changed = if start == 0 { LATER.iter().enumerate().find(|(i, k)| ran(*i) && k.trains_scattering(&h.config)).map(|(_, k)| *k) } else { None };
+    if let Some(k) = changed {
         bail!(
             "--from {}: its Stage {} trained the scattering set, and the run has no {} (the state at the end of its Stage {}; runs from before it was written lack it): train {} again",
             run.display(),

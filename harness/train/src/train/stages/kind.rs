@@ -2,10 +2,11 @@
 //! place in the schedule, its transition from the stage before it, and its
 //! part of a checkpoint, the settings `--resume`, `--from` and `tgs eval`
 //! may change. Each later stage has one [`LaterKind`] (a unit struct in
-//! its `stage.rs`), listed in run order in [`super::LATER`]; the stage
-//! names (`Stage::all`), the schedule, the trainer, the checkpoint, the
-//! settings checks and the `tgs train` driver go through that list, so a
-//! new stage is its folder, its kind there and its settings section.
+//! its `stage.rs`), listed in run order in [`super::LATER`]; the schedule,
+//! the trainer, the checkpoint, the settings checks and the `tgs train`
+//! driver go through that list, so a new stage is its folder, its kind
+//! there, its settings section and its name in `Stage::ALL` (stage.rs is a
+//! leaf of the module graph; a test holds the two lists together).
 
 use super::layer::RenderLayer;
 use super::shared::{LaterStage, Shared};

@@ -10,8 +10,9 @@
 //! [`LaterStage`] (`shared.rs`), which the trainer drives them through,
 //! and are begun, scheduled and checkpointed through their [`LaterKind`]
 //! (`kind.rs`), listed in run order in [`LATER`]: a new stage is a folder,
-//! an entry in that list and its settings section (a field of
-//! `TrainConfig`; presets and validation in its `config.rs`). `composite.rs` is the deferred composite's step they share (each stage's
+//! an entry in that list, its name in `Stage::ALL` and its settings
+//! section (a field of `TrainConfig`; presets and validation in its
+//! `config.rs`). `composite.rs` is the deferred composite's step they share (each stage's
 //! `light.rs` holds what differs: a cube map or the light-field network); `views.rs`
 //! and `rendered.rs` what every stage reads and returns; `kept_views.rs`
 //! the training views' binnings kept for a set whose geometry is frozen.
