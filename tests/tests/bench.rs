@@ -87,6 +87,15 @@ fn train_bench_from_a_trained_run() {
     let e = format!("{:#}", tgs::bench_train::train_from(ctx, &empty, 0, 1, None).unwrap_err());
     assert!(e.contains("checkpoint.bin") && e.contains(&*empty.to_string_lossy()), "{e}");
     assert!(tgs::bench_train::train_from(ctx, &run, 0, 0, None).is_err());
+    // `tgs bench view` on the same run: its frame at another size, the
+    // stage and counts of its checkpoint; nothing written into the run.
+    let v = tgs::bench_view::view(ctx, &run, 20, 14, 3).unwrap();
+    assert_eq!((v.stage.as_str(), v.gaussians, v.width, v.height, v.frames), ("I", (h.n as usize, 0), 20, 14, 3));
+    assert!(v.mean_ms.is_finite() && v.mean_ms > 0.0 && v.best_ms <= v.mean_ms && v.fps > 0.0);
+    assert_eq!(std::fs::read_dir(&run).unwrap().count(), files, "the view bench wrote into the run directory");
+    let e = format!("{:#}", tgs::bench_view::view(ctx, &empty, 20, 14, 3).unwrap_err());
+    assert!(e.contains("checkpoint.bin"), "{e}");
+    assert!(tgs::bench_view::view(ctx, &run, 0, 14, 3).is_err() && tgs::bench_view::view(ctx, &run, 20, 14, 0).is_err());
     check_validation(ctx);
 }
 
