@@ -136,24 +136,22 @@ pub(crate) fn start_from(ctx: &Arc<Context>, a: &TrainArgs, run: &Path) -> Resul
 }
 
 /// RUN's state at the end of the stages kept is there to start from: its
-/// Stage I finished, and the scattering set not changed since by a stage
-/// that trained it (RUN went past the stages kept and has no snapshot of
-/// their end).
+/// Stage I finished and, when only Stage I is kept, its scattering set not
+/// changed since by a later stage that trained it (RUN went past Stage I
+/// and has no snapshot of its end). Starting at a later stage, RUN must
+/// stand at the end of the stages kept instead ([`check_settings`]).
 fn check_kept(run: &Path, h: &checkpoint::Header, start: usize) -> Result<()> {
-    // A stage that ran (the run went past its start) and trained the
-    // scattering set changed it. Starting at a later stage, RUN must stand
-    // at the end of the stages kept instead (check_settings says so).
+    // A stage that ran (the run went past its start) and trained the scattering set changed it.
     let ran = |i: usize| h.iteration > kept_end(&h.config, i);
-    let changed = if start == 0 { LATER.iter().enumerate().find(|(i, k)| ran(*i) && k.trains_scattering(&h.config)).map(|(_, k)| *k) } else { None };
-    if let Some(k) = changed {
-        bail!(
-            "--from {}: its Stage {} trained the scattering set, and the run has no {} (the state at the end of its Stage {}; runs from before it was written lack it): train {} again",
-            run.display(),
-            k.stage().name(),
-            stage_checkpoint(start + 1),
-            kept_stages(start).last().copied().unwrap_or("I"),
-            if start == 0 { "Stage I".to_string() } else { format!("Stages {}", kept_stages(start).join(", ")) }
-        );
+    if start == 0 {
+        if let Some((_, k)) = LATER.iter().enumerate().find(|(i, k)| ran(*i) && k.trains_scattering(&h.config)) {
+            bail!(
+                "--from {}: its Stage {} trained the scattering set, and the run has no {} (Stage I's own state; runs from before it was written lack it): train Stage I again",
+                run.display(),
+                k.stage().name(),
+                stage_checkpoint(1)
+            );
+        }
     }
     if h.iteration < h.config.iterations {
         bail!(
