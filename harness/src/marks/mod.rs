@@ -69,7 +69,7 @@ impl Outline {
     /// The half-spaces (normal, through the camera centre) whose
     /// intersection, in front of the camera, is the cone of the convex
     /// hull of the clicks; None with fewer than three points not on a line.
-    fn cone(&self) -> Option<(Rays, Vec<DVec3>)> {
+    fn cone(&self) -> Option<Cone> {
         let hull = convex_hull(&self.points);
         if hull.len() < 3 {
             return None;
@@ -114,7 +114,7 @@ enum Shape {
 
 impl Region {
     /// The outlines that span a polygon (three clicks or more, not on a line).
-    fn cones(&self) -> Vec<(Rays, Vec<DVec3>)> {
+    fn cones(&self) -> Vec<Cone> {
         self.outlines.iter().filter_map(Outline::cone).collect()
     }
 
@@ -148,14 +148,19 @@ impl Marks {
     /// region: to its last outline when that was made on the same camera,
     /// else to a new one.
     pub fn click(&mut self, cam: &Camera, u: f64, v: f64) {
-        if self.regions.is_empty() {
-            self.regions.push(Region::default());
-        }
-        let region = self.regions.last_mut().expect("one was pushed");
+        let region = self.current();
         match region.outlines.last_mut() {
             Some(o) if o.camera == *cam => o.points.push((u, v)),
             _ => region.outlines.push(Outline { camera: *cam, points: vec![(u, v)] }),
         }
+    }
+
+    /// The region the next click goes to (a new one when there is none).
+    fn current(&mut self) -> &mut Region {
+        if self.regions.is_empty() {
+            self.regions.push(Region::default());
+        }
+        self.regions.last_mut().expect("one was pushed")
     }
 
     /// Start another region (the next clicks outline another piece of
@@ -196,10 +201,7 @@ impl Marks {
     /// The current region is a flat pane: its outlines are its corners,
     /// clicked in the same order in each view.
     pub fn flat(&mut self) {
-        if self.regions.is_empty() {
-            self.regions.push(Region::default());
-        }
-        self.regions.last_mut().expect("one was pushed").flat = true;
+        self.current().flat = true;
     }
 
     /// The shape of each region that describes glass.
@@ -212,27 +214,25 @@ impl Marks {
         self.regions.last().filter(|r| !r.outlines.is_empty()).and_then(|r| r.shape(self.tolerance).err())
     }
 
-    /// Whether the marking describes glass: a region with a polygon in two views.
+    /// Whether the marking describes glass: a region with a polygon in two
+    /// views, or a flat pane whose corners meet.
     pub fn is_ready(&self) -> bool {
         !self.shapes().is_empty()
     }
 
-    /// `cam`'s glass mask (row-major): its pixels whose ray meets, in one
-    /// of the regions, every outlined view's cone (all but `tolerance`,
-    /// and at least two) at one point in front of them.
+    /// `cam`'s glass mask (row-major): its pixels whose ray meets one of
+    /// the regions: every outlined view's cone of a hull region (all but
+    /// `tolerance`, and at least two) at one point in front of them, or a
+    /// flat pane's polygon.
     pub fn mask(&self, cam: &Camera) -> Vec<bool> {
+        mask_of(&self.shapes(), cam)
+    }
+
+    /// [`Marks::mask`] once the marking describes glass, else None (the
+    /// regions' shapes made once for both).
+    pub fn mask_if_ready(&self, cam: &Camera) -> Option<Vec<bool>> {
         let shapes = self.shapes();
-        let rays = Rays::of(cam);
-        let (w, h) = (cam.width as usize, cam.height as usize);
-        let mut out = vec![false; w * h];
-        for (i, m) in out.iter_mut().enumerate() {
-            let d = rays.dir((i % w) as f64, (i / w) as f64);
-            *m = shapes.iter().any(|s| match s {
-                Shape::Hull(need, cones) => through_enough(rays.centre, d, cones, *need),
-                Shape::Pane(p) => p.hit(rays.centre, d),
-            });
-        }
-        out
+        (!shapes.is_empty()).then(|| mask_of(&shapes, cam))
     }
 
     /// Every training view's mask into `dir`, a directory that must not
@@ -240,7 +240,8 @@ impl Marks {
     /// as `reflection.seed_masks` reads them), and the clicks as
     /// `marks.json`; how many masks hold glass.
     pub fn write(&self, views: &[View], dir: &Path) -> Result<usize> {
-        if !self.is_ready() {
+        let shapes = self.shapes();
+        if shapes.is_empty() {
             let why = self
                 .regions
                 .iter()
@@ -265,11 +266,11 @@ impl Marks {
         let glass: Result<Vec<usize>> = std::thread::scope(|scope| {
             let jobs: Vec<_> = (0..threads)
                 .map(|t| {
-                    let (dir, stems) = (&dir, &stems);
+                    let (dir, stems, shapes) = (&dir, &stems, &shapes);
                     scope.spawn(move || -> Result<usize> {
                         let mut glass = 0;
                         for (v, stem) in views.iter().zip(stems).skip(t).step_by(threads) {
-                            let m = self.mask(&v.camera);
+                            let m = mask_of(shapes, &v.camera);
                             glass += m.iter().any(|&b| b) as usize;
                             write_mask(&dir.join(format!("{stem}.png")), v.camera.width, v.camera.height, &m)?;
                         }
@@ -281,7 +282,7 @@ impl Marks {
         });
         let glass: usize = glass?.into_iter().sum();
         let record = serde_json::json!({
-            "what": "glass marked in tgs view: per region (a piece of glass) each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet, in one region, every outline's cone but `tolerance`",
+            "what": "glass marked in tgs view: per region (a piece of glass) each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet, in one region, every outline's cone but `tolerance`, or for a flat region the polygon of its corners (the i-th click of every outline), triangulated",
             "tolerance": self.tolerance,
             "regions": self.regions.iter().filter(|r| !r.outlines.is_empty()).map(|r| serde_json::json!({"flat": r.flat, "outlines": r.outlines.iter().map(|o| serde_json::json!({
                 "width": o.camera.width, "height": o.camera.height, "fx": o.camera.fx, "fy": o.camera.fy, "cx": o.camera.cx, "cy": o.camera.cy,
@@ -292,6 +293,21 @@ impl Marks {
         std::fs::write(&path, serde_json::to_vec_pretty(&record)?).with_context(|| format!("{}: cannot write", path.display()))?;
         Ok(glass)
     }
+}
+
+/// `cam`'s mask of the regions' `shapes` (see [`Marks::mask`]).
+fn mask_of(shapes: &[Shape], cam: &Camera) -> Vec<bool> {
+    let rays = Rays::of(cam);
+    let w = cam.width as usize;
+    (0..w * cam.height as usize)
+        .map(|i| {
+            let d = rays.dir((i % w) as f64, (i / w) as f64);
+            shapes.iter().any(|s| match s {
+                Shape::Hull(need, cones) => through_enough(rays.centre, d, cones, *need),
+                Shape::Pane(p) => p.hit(rays.centre, d),
+            })
+        })
+        .collect()
 }
 
 /// Each view's mask file stem (its name without extension), refused where two views would share one.

@@ -256,7 +256,7 @@ impl App<'_> {
         let pixels = o.pixels.as_ref().expect("made above");
         let order = o.gpu.order;
         // What the marks cover in this view (tinted on the photo, counted in the title).
-        let marked = ((self.marking || self.marks.clicks() > 0) && self.marks.is_ready()).then(|| self.marks.mask(&cam));
+        let marked = if self.marking || self.marks.clicks() > 0 { self.marks.mask_if_ready(&cam) } else { None };
         if o.scene.layer != 0 {
             let mut px = o.scene.host_layer(&cam, o.nav.unmoved(), order)?;
             if let Some(m) = marked.as_ref().filter(|_| self.marking && o.scene.layer_name() == "gt") {
