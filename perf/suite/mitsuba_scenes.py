@@ -348,34 +348,26 @@ def rays(c2w, res, fov, sub):
 
 
 def first_hit(prims, o, d):
+    """Each ray's first hit: its distance (inf: none), normal, whether it is
+    glass, and the index in `prims` of what it hit (-1: nothing)."""
     t = np.full(len(o), np.inf)
     n = np.zeros_like(d)
     g = np.zeros(len(o), bool)
-    for p in prims:
+    k = np.full(len(o), -1)
+    for i, p in enumerate(prims):
         tp, np_ = p.intersect(o, d)
         closer = tp < t
         t = np.where(closer, tp, t)
         n = np.where(closer[:, None], np_, n)
         g = np.where(closer, p.glass, g)
-    return t, n, g
-
-
-def first_hit_index(prims, o, d):
-    """The index in `prims` of each ray's first hit (-1: none)."""
-    t = np.full(len(o), np.inf)
-    k = np.full(len(o), -1)
-    for i, p in enumerate(prims):
-        tp, _ = p.intersect(o, d)
-        closer = tp < t
-        t = np.where(closer, tp, t)
         k = np.where(closer, i, k)
-    return k
+    return t, n, g, k
 
 
-def write_png(mi, path, image, srgb):
-    """8-bit PNG of a float image (sRGB-encoded when `srgb`), by Mitsuba's Bitmap."""
+def write_8bit(mi, path, image, srgb, quality=-1):
+    """8-bit PNG or JPEG (by `path`'s extension; JPEG `quality`) of a float image (sRGB-encoded when `srgb`), by Mitsuba's Bitmap."""
     fmt = mi.Bitmap.PixelFormat.RGB if image.shape[2] == 3 else mi.Bitmap.PixelFormat.Y
-    mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)).convert(fmt, mi.Struct.Type.UInt8, srgb_gamma=srgb).write(path)
+    mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)).convert(fmt, mi.Struct.Type.UInt8, srgb_gamma=srgb).write(path, quality=quality)
 
 
 def main():
@@ -436,14 +428,11 @@ def main():
                 # The per-pixel median of --median-of renderings (the first is the plain one).
                 img = np.median([np.array(mi.render(scene, sensor=sensor, seed=i + 100_000 * a.sampler_seed + 10_000 * k))[:, :, :3] for k in range(a.median_of)], axis=0)
                 stem = f"{split}/r_{i}"
-                if a.compact:
-                    mi.Bitmap(np.ascontiguousarray(img, dtype=np.float32)).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(os.path.join(root, stem + ".jpg"), quality=95)
-                else:
-                    write_png(mi, os.path.join(root, stem + ".png"), img, True)
+                write_8bit(mi, os.path.join(root, stem + (".jpg" if a.compact else ".png")), img, True, quality=95 if a.compact else -1)
                 frame = {"file_path": "./" + stem + (".jpg" if a.compact else ""), "transform_matrix": c2w.tolist()}
                 if split == "test":
                     ro, rd = rays(c2w, a.res, fov, 1)
-                    t, nrm, _ = first_hit(prims, ro, rd)
+                    t, nrm, _, _ = first_hit(prims, ro, rd)
                     nrm = np.where((nrm * rd).sum(1, keepdims=True) > 0, -nrm, nrm)
                     nrm[~np.isfinite(t)] = 0
                     nrm = nrm.reshape(a.res, a.res, 3).astype(np.float32)
@@ -453,9 +442,9 @@ def main():
                     else:
                         np.save(os.path.join(root, npath), nrm)
                     ro, rd = rays(c2w, a.res, fov, 4)
-                    _, _, g = first_hit(prims, ro, rd)
+                    _, _, g, _ = first_hit(prims, ro, rd)
                     mask = g.reshape(a.res, a.res, 16).all(2)
-                    write_png(mi, os.path.join(root, stem + "_mask.png"), mask.astype(np.float32)[:, :, None], False)
+                    write_8bit(mi, os.path.join(root, stem + "_mask.png"), mask.astype(np.float32)[:, :, None], False)
                     frame["normal_path"] = "./" + npath
                     frame["mask_path"] = "./" + stem + "_mask.png"
                 frames.append(frame)
@@ -490,12 +479,11 @@ def train_masks(mi, a):
         if w != h:
             raise SystemExit(f"{img}: {w}x{h}; this script's cameras make square images")
         ro, rd = rays(np.array(f["transform_matrix"], float), w, t["camera_angle_x"], 4)
-        if a.piece is None:
-            _, _, g = first_hit(prims, ro, rd)
-        else:
+        _, _, g, k = first_hit(prims, ro, rd)
+        if a.piece is not None:
             # The piece alone: rays whose first hit is its primitive.
-            g = first_hit_index(prims, ro, rd) == glass[a.piece]
-        write_png(mi, out, g.reshape(w, w, 16).all(2).astype(np.float32)[:, :, None], False)
+            g = k == glass[a.piece]
+        write_8bit(mi, out, g.reshape(w, w, 16).all(2).astype(np.float32)[:, :, None], False)
     print(f"{len(t['frames'])} masks of {name} in {a.out}")
 
 
