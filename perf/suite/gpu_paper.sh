@@ -22,13 +22,7 @@
 # ';'-separated, for a dry run on a CPU device), VIEW_SIZE (800x600).
 set -u
 here=$(pwd)
-export TGS_DEVICE=${TGS_DEVICE:-nvidia}
-if [ "$TGS_DEVICE" = nvidia ]; then
-  # The Vulkan loader (and libglvnd, which NVIDIA's ICD needs) from .gl.
-  for f in .gl/lib{vulkan1,egl1,glvnd0,opengl0,gl1,glx0,gles2}_*.deb; do [ -f "$f" ] && dpkg -x "$f" /; done
-  ldconfig
-fi
-[ -f /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json ] && export VK_DRIVER_FILES=${VK_DRIVER_FILES:-/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json}
+. "$(dirname "$0")/gpu_env.sh"
 T=$here/target/release/tgs; S=${SCENES:-$here/.suite/p400}; M=${MASKS:-$here/.suite/p400-masks}
 R=${RUNS_DIR:-/tmp/gpu-paper-runs}; OUT=${OUT:-/tmp/gpu-paper-out}
 mkdir -p "$R" "$OUT"
@@ -72,13 +66,15 @@ echo "gpu_paper: suite phase done at $(( $(date +%s) - start )) s"
 # and II runs), Stage I's iteration on a trained model, and a profiled
 # Stage III (GPU time per kernel in its metrics.json: at 400² Stage III ran
 # ~10x slower an iteration than Stage II on the H200, fifty-eighth entry).
+# The first of its arguments that holds a finished run (metrics.json).
+finished() { local d; for d in "$@"; do [ -f "$d/metrics.json" ] && { echo "$d"; return; }; done; }
 for v in masks-III default-III masks default; do
-  run=$(ls -d "$R"/*/s0/"$v" 2>/dev/null | while read -r d; do [ -f "$d/metrics.json" ] && echo "$d"; done | head -n1)
+  run=$(finished "$R"/*/s0/"$v")
   [ -n "$run" ] && timeout 30 "$T" bench view "$run" --size "${VIEW_SIZE:-800x600}" --frames 120 2>&1 | tee -a "$OUT/bench.txt"
 done
-first=$(ls -d "$R"/*/s0/I 2>/dev/null | while read -r d; do [ -f "$d/metrics.json" ] && echo "$d"; done | head -n1)
+first=$(finished "$R"/*/s0/I)
 [ -n "$first" ] && timeout 30 "$T" bench train --from "$first" --iterations 50 2>&1 | tee -a "$OUT/bench.txt"
-two=$(ls -d "$R"/*/s0/masks "$R"/*/s0/default 2>/dev/null | while read -r d; do [ -f "$d/metrics.json" ] && echo "$d"; done | head -n1)
+two=$(finished "$R"/*/s0/masks "$R"/*/s0/default)
 if [ -n "$two" ] && [ "$(left)" -gt 40 ]; then
   timeout 40 "$T" train --quiet --out "$R/profile-III" --from "$two" --stages III --set light_field.iterations=30 --set test_interval=0 --profile > "$R/profile-III.log" 2>&1 &&
     python3 -c "import json,sys; m=json.load(open(sys.argv[1])); print(json.dumps(m.get('gpu_ms_per_iteration'), indent=1)[:4000])" "$R/profile-III/metrics.json" | tee -a "$OUT/bench.txt"

@@ -22,11 +22,7 @@
 # GPU serves the processes in turn, so more chains do not finish sooner.
 set -u
 here=$(pwd)
-# The Vulkan loader (and libglvnd, which NVIDIA's ICD needs) from .gl.
-for f in .gl/lib{vulkan1,egl1,glvnd0,opengl0,gl1,glx0,gles2}_*.deb; do [ -f "$f" ] && dpkg -x "$f" /; done
-ldconfig
-export TGS_DEVICE=${TGS_DEVICE:-nvidia}
-[ -f /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json ] && export VK_DRIVER_FILES=${VK_DRIVER_FILES:-/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json}
+. "$(dirname "$0")/gpu_env.sh"
 T=$here/target/release/tgs; R=/tmp/gpu-suite-runs; S=${SCENES:-$here/.suite/s50}
 mkdir -p "$R" "$OUT"
 "$T" devices > "$OUT/devices.txt" 2>&1; cat "$OUT/devices.txt"
