@@ -164,6 +164,9 @@ pub(crate) enum Bench {
         size: (u32, u32),
         #[arg(long, default_value_t = 120)]
         frames: u32,
+        /// GPU time per kernel scope, ms a frame (timestamp queries).
+        #[arg(long)]
+        profile: bool,
         #[arg(long)]
         json: bool,
     },
@@ -238,7 +241,7 @@ impl Bench {
                 };
                 show(&tgs::bench_stages::stages(ctx, &spec)?, *json, tgs::bench_stages::print_stages)
             }
-            Bench::View { run, size, frames, json } => show(&tgs::bench_view::view(ctx, run, size.0, size.1, *frames)?, *json, tgs::bench_view::print_view),
+            Bench::View { run, size, frames, profile, json } => show(&tgs::bench_view::view(ctx, run, (size.0, size.1), *frames, *profile)?, *json, tgs::bench_view::print_view),
             Bench::Lpips { size, reps, json } => tgs::bench::lpips(*size, *reps, *json),
             Bench::Scan { n, reps, json } => show(&tgs::bench::scan(ctx, *n, *reps)?, *json, |b| {
                 println!("device: {}", b.device);

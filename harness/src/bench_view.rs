@@ -11,7 +11,7 @@ use serde::Serialize;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
-use tgs_engine::{Buffer, Context, Recorder};
+use tgs_engine::{summarize, Buffer, Context, Recorder};
 use tgs_pipelines::PixelOrder;
 
 #[derive(Clone, Debug, Serialize)]
@@ -28,16 +28,24 @@ pub struct ViewBench {
     pub mean_ms: f64,
     pub best_ms: f64,
     pub fps: f64,
+    /// Stage III: the pixels Φ ran on in the last frame.
+    pub phi_pixels: Option<u32>,
+    /// With `--profile`: GPU ms a frame per kernel scope (nested scopes
+    /// overlap: `view.reflection` holds the `view.lf.*` below it).
+    pub scopes: Vec<(String, f64)>,
 }
 
 /// Orbit `frames` frames (3 pixels of drag each, as `perf/view/bench.sh`)
-/// from the run's first test camera at `width` x `height`.
-pub fn view(ctx: &Arc<Context>, run: &Path, width: u32, height: u32, frames: u32) -> Result<ViewBench> {
+/// from the run's first test camera at `size`; `profile` times each
+/// kernel scope with timestamp queries (the frame times then include them).
+pub fn view(ctx: &Arc<Context>, run: &Path, size: (u32, u32), frames: u32, profile: bool) -> Result<ViewBench> {
+    let (width, height) = size;
     ensure!(width >= 1 && height >= 1 && frames >= 1, "bench view: the size and the frame count must be at least 1");
     let mut scene = Scene::open(ctx, run).with_context(|| format!("opening {}", run.display()))?;
     let mut nav = Nav::at(&scene.dataset_camera().1, scene.target, scene.up);
     let pixels = Buffer::<u32>::uninit(ctx, "bench.view.pixels", (width * height) as usize)?;
     let mut times = Vec::with_capacity(frames as usize);
+    let mut timings = Vec::new();
     for f in 0..=frames {
         nav.orbit(3.0, 0.0);
         let cam = nav.camera(width, height);
@@ -45,10 +53,15 @@ pub fn view(ctx: &Arc<Context>, run: &Path, width: u32, height: u32, frames: u32
         // A frame that grew the renderer's buffers is drawn again, as the window does.
         for tries in 0.. {
             ensure!(tries < 4, "bench view: frame {f} never fitted the renderer's buffers");
-            let mut rec = Recorder::new(ctx)?;
+            let mut rec = Recorder::profiled_if(ctx, profile)?;
+            let sc = rec.begin_scope("view.frame");
             scene.record_final(&mut rec, &cam, PixelOrder::Rgba, &pixels)?;
-            rec.submit_and_wait()?;
+            rec.end_scope(sc);
+            let t = rec.submit_and_wait()?;
             if scene.complete(&cam)? {
+                if f > 0 {
+                    timings.extend(t);
+                }
                 break;
             }
         }
@@ -68,6 +81,8 @@ pub fn view(ctx: &Arc<Context>, run: &Path, width: u32, height: u32, frames: u32
         mean_ms,
         best_ms: times.iter().copied().fold(f64::INFINITY, f64::min),
         fps: 1e3 / mean_ms,
+        phi_pixels: scene.phi_pixels(),
+        scopes: summarize(&timings).into_iter().map(|s| (s.name, s.total_ms / frames as f64)).collect(),
     })
 }
 
@@ -77,4 +92,10 @@ pub fn print_view(b: &ViewBench) {
         "view {} (Stage {}, {} + {} Gaussians) at {}x{}: {:.2} ms/frame mean, {:.2} best, {:.1} frames/s over {} frames (no window: render and pack, submitted and waited for)",
         b.run, b.stage, b.gaussians.0, b.gaussians.1, b.width, b.height, b.mean_ms, b.best_ms, b.fps, b.frames
     );
+    if let Some(n) = b.phi_pixels {
+        println!("  the light field ran on {n} of {} pixels in the last frame", b.width * b.height);
+    }
+    for (name, ms) in &b.scopes {
+        println!("  {name:<24} {ms:8.3} ms/frame");
+    }
 }

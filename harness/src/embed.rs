@@ -114,11 +114,15 @@ impl SceneRenderer {
         let (sh, bg) = (self.sh_degree, self.background);
         self.view(cam.width, cam.height)?;
         let v = &self.views[&(cam.width, cam.height)];
+        let sc = rec.begin_scope("view.scattering");
         self.raster.record_forward(rec, &self.scat, cam, &bg, sh, &v.scat)?;
+        rec.end_scope(sc);
         let colour = match (self.layer.as_mut(), v.composite.as_ref()) {
             (None, _) => &v.scat.out,
             (Some(layer), Some(comp)) => {
+                let sc = rec.begin_scope("view.reflection");
                 layer.record(rec, cam, &v.scat.out, comp)?;
+                rec.end_scope(sc);
                 comp
             }
             (Some(_), None) => bail!("view buffers missing for the reflection layer"),

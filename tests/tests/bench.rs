@@ -89,13 +89,20 @@ fn train_bench_from_a_trained_run() {
     assert!(tgs::bench_train::train_from(ctx, &run, 0, 0, None).is_err());
     // `tgs bench view` on the same run: its frame at another size, the
     // stage and counts of its checkpoint; nothing written into the run.
-    let v = tgs::bench_view::view(ctx, &run, 20, 14, 3).unwrap();
+    let v = tgs::bench_view::view(ctx, &run, (20, 14), 3, false).unwrap();
     assert_eq!((v.stage.as_str(), v.gaussians, v.width, v.height, v.frames), ("I", (h.n as usize, 0), 20, 14, 3));
     assert!(v.mean_ms.is_finite() && v.mean_ms > 0.0 && v.best_ms <= v.mean_ms && v.fps > 0.0);
+    assert!(v.scopes.is_empty(), "scopes without --profile: {:?}", v.scopes);
+    // With --profile: the frame's scope and the scattering set's inside it.
+    let p = tgs::bench_view::view(ctx, &run, (20, 14), 2, true).unwrap();
+    if ctx.caps().timestamp_valid_bits > 0 {
+        let ms = |n: &str| p.scopes.iter().find(|s| s.0 == n).map(|s| s.1).unwrap_or_else(|| panic!("no scope {n}: {:?}", p.scopes));
+        assert!(ms("view.frame") > 0.0 && ms("view.scattering") <= ms("view.frame"), "{:?}", p.scopes);
+    }
     assert_eq!(std::fs::read_dir(&run).unwrap().count(), files, "the view bench wrote into the run directory");
-    let e = format!("{:#}", tgs::bench_view::view(ctx, &empty, 20, 14, 3).unwrap_err());
+    let e = format!("{:#}", tgs::bench_view::view(ctx, &empty, (20, 14), 3, false).unwrap_err());
     assert!(e.contains("checkpoint.bin"), "{e}");
-    assert!(tgs::bench_view::view(ctx, &run, 0, 14, 3).is_err() && tgs::bench_view::view(ctx, &run, 20, 14, 0).is_err());
+    assert!(tgs::bench_view::view(ctx, &run, (0, 14), 3, false).is_err() && tgs::bench_view::view(ctx, &run, (20, 14), 0, false).is_err());
     check_validation(ctx);
 }
 

@@ -234,6 +234,11 @@ impl Scene {
         Ok(true)
     }
 
+    /// Pixels the light field ran on in the last final image (Stage III).
+    pub fn phi_pixels(&self) -> Option<u32> {
+        self.renderer.last_samples
+    }
+
     /// After the frame's submission: whether the final image was whole
     /// (else the renderer grew its buffers: draw again).
     pub fn complete(&mut self, cam: &Camera) -> Result<bool> {

@@ -63,11 +63,22 @@ impl RenderLayer for LightFieldLayer {
         }
         let LightFieldLayer { set, params, shade, shading, mlp, raster, feat, views, .. } = self;
         let ViewBuffers { frame, samples, scratch } = &views[&(w, h)];
+        let sc = rec.begin_scope("view.lf.material");
         shading.record_material(rec, &set.features, set.n, feat)?;
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("view.lf.raster");
         raster.record_forward_with(rec, Splats::coloured(set, feat), cam, &[0.0; CHANNELS as usize], frame)?;
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("view.lf.samples");
         shading.record_samples(rec, cam, shade, &frame.out, samples, &scratch.samples)?;
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("view.lf.mlp");
         mlp.record_forward_counted(rec, params, &samples.count, scratch)?;
-        shading.record_composite(rec, cam, shade, &CompositeInputs { scat, refl: &frame.out, samples, phi: &scratch.out }, out)
+        rec.end_scope(sc);
+        let sc = rec.begin_scope("view.lf.composite");
+        let done = shading.record_composite(rec, cam, shade, &CompositeInputs { scat, refl: &frame.out, samples, phi: &scratch.out }, out);
+        rec.end_scope(sc);
+        done
     }
 
     fn complete(&mut self, cam: &Camera, whole: bool) -> Result<bool> {
