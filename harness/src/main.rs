@@ -134,6 +134,11 @@ enum Cmd {
         /// view whose outline an occluder cut short).
         #[arg(long, default_value_t = 0)]
         mark_tolerance: usize,
+        /// While the camera moves, draw frames smaller (and enlarged) where a
+        /// full-size frame would fall below this rate; the full frame follows
+        /// once it rests (0: always full size).
+        #[arg(long, default_value_t = 10.0)]
+        motion_fps: f32,
     },
     /// Meshes of a run by TSDF fusion of rendered median depth over the
     /// training views, extracted by marching tetrahedra: mesh_scene.ply (the
@@ -240,8 +245,17 @@ fn run(cli: Cli) -> Result<()> {
             };
             let o = if *view {
                 let sel = DeviceSelector::from_arg_or_env(cli.device.as_deref());
-                let v =
-                    tgs::view::ViewArgs { run: out.clone(), size: None, camera: 0, train: false, script: view_script.clone(), shots: None, mark_tolerance: 0, device: sel.clone() };
+                let v = tgs::view::ViewArgs {
+                    run: out.clone(),
+                    size: None,
+                    camera: 0,
+                    train: false,
+                    script: view_script.clone(),
+                    shots: None,
+                    mark_tolerance: 0,
+                    motion_fps: 10.0,
+                    device: sel.clone(),
+                };
                 let validate = cli.validate;
                 tgs::view::train_live(&args, &v, std::time::Duration::from_millis(*view_every), move || Context::new(&ContextOptions { device: sel, validation: Some(validate) }))?
             } else {
@@ -274,7 +288,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Cmd::View { run, size, camera, train_cameras, script, shots, mark_tolerance } => tgs::view::view(&tgs::view::ViewArgs {
+        Cmd::View { run, size, camera, train_cameras, script, shots, mark_tolerance, motion_fps } => tgs::view::view(&tgs::view::ViewArgs {
             run: run.clone(),
             size: *size,
             camera: *camera,
@@ -282,6 +296,7 @@ fn run(cli: Cli) -> Result<()> {
             script: script.clone(),
             shots: shots.clone(),
             mark_tolerance: *mark_tolerance,
+            motion_fps: *motion_fps,
             device: DeviceSelector::from_arg_or_env(cli.device.as_deref()),
         }),
         Cmd::Scene { what } => scene(what),

@@ -111,6 +111,14 @@ fn the_window_shows_what_tgs_render_writes() {
     let own: Vec<_> = std::fs::read_dir(&shots).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     assert_eq!(own, vec!["r_1_final_stageI.png".to_string()], "{t}");
     assert_eq!(rgb(&shots.join(&own[0])), shot("stage1.png"));
+    // A moving camera's frames drawn smaller (--motion-fps far above what
+    // any frame makes: 1/4 while it moves); the capture after the motion is
+    // full size, the same pixels as without.
+    let moving = base.join("moving.txt");
+    std::fs::write(&moving, "key n\norbit 60 15\nzoom 1\ncapture shots/orbit-small.png\n").unwrap();
+    let o = view(&[run.to_str().unwrap(), "--size", "48x48", "--script", moving.to_str().unwrap(), "--motion-fps", "100000"]);
+    assert!(o.status.success() && text(&o).contains("2 of them drawn at up to 1/4 size while moving"), "{}", text(&o));
+    assert_eq!(shot("orbit-small.png"), shot("orbit.png"), "a capture after smaller frames");
     // Without a display the message names the headless way.
     let o = tgs().args(["view", run.to_str().unwrap()]).env_remove("DISPLAY").env_remove("WAYLAND_DISPLAY").output().unwrap();
     assert!(!o.status.success() && text(&o).contains("no display") && text(&o).contains("tgs render"), "{}", text(&o));

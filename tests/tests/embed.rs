@@ -139,3 +139,39 @@ fn host_renders_each_stage_like_tgs_render() {
     drop(ctx);
     host.destroy();
 }
+
+/// The viewer's pack kernel: each pixel quantised as the host's
+/// `pack_pixel` (PNG) does, in both byte orders; and a moving camera's
+/// smaller frame enlarged: pixel (x, y) of a 5x4 window shows pixel
+/// (x / 2, y / 2) of its 3x2 frame, at 1/3 pixel (x / 3, y / 3) of 2x2.
+#[test]
+fn the_pack_kernel_enlarges_a_smaller_frame_pixel_for_pixel() {
+    use tgs_engine::Buffer;
+    use tgs_pipelines::{pack_pixel, Pack, PixelOrder};
+    let ctx = ctx_shared();
+    let pack = Pack::new(ctx).unwrap();
+    let (w, h) = (5u32, 4u32);
+    for (scale, order) in [(1, PixelOrder::Rgba), (2, PixelOrder::Bgra), (3, PixelOrder::Rgba)] {
+        let (sw, sh) = (w.div_ceil(scale), h.div_ceil(scale));
+        let n = (sw * sh) as usize;
+        // Distinct colours, some out of [0, 1] and not finite.
+        let planes: Vec<f32> = (0..3 * n).map(|i| if i == 4 { f32::NAN } else { i as f32 / n as f32 - 0.3 }).collect();
+        let src = Buffer::from_slice(ctx, "test.planes", &planes).unwrap();
+        let out = Buffer::<u32>::new(ctx, "test.packed", (w * h) as usize).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        pack.record_scaled(&mut rec, &src.binding(), (w, h), scale, order, &out.binding()).unwrap();
+        rec.submit_and_wait().unwrap();
+        let got = out.download().unwrap();
+        for y in 0..h {
+            for x in 0..w {
+                let j = ((y / scale) * sw + x / scale) as usize;
+                let want = pack_pixel([planes[j], planes[n + j], planes[2 * n + j]], order);
+                assert_eq!(got[(y * w + x) as usize], want, "scale {scale}: pixel ({x}, {y})");
+            }
+        }
+        // Planes too small for the frame are refused, not read past.
+        let small = Buffer::<f32>::new(ctx, "test.small", 3 * n - 1).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        assert!(pack.record_scaled(&mut rec, &small.binding(), (w, h), scale, order, &out.binding()).is_err());
+    }
+}

@@ -4,6 +4,7 @@
 use super::controls::Nav;
 use super::gpu::{Gpu, Presented};
 use super::input::{key_action, read_script, Action, HELP};
+use super::motion::Motion;
 use super::scene::Scene;
 use super::{shot, ViewArgs};
 use anyhow::{Context as _, Result};
@@ -16,7 +17,7 @@ use tgs_train::train::live::Snapshot;
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
-use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{ModifiersState, PhysicalKey};
 use winit::window::{Window, WindowId};
 
@@ -71,6 +72,8 @@ struct App<'a> {
     /// Left clicks mark the glass (key G), and the marks so far.
     marking: bool,
     marks: crate::marks::Marks,
+    /// Smaller frames while the camera moves.
+    motion: Motion,
 }
 
 /// The window's event loop (with the user events a live view sends).
@@ -107,6 +110,7 @@ pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<(Slot, Arc
         until_trained: false,
         marking: false,
         marks: crate::marks::Marks { tolerance: args.mark_tolerance, ..Default::default() },
+        motion: Motion::new(args.motion_fps),
     };
     el.run_app(&mut app).context("the window's event loop")?;
     drop(app.open.take());
@@ -115,7 +119,9 @@ pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<(Slot, Arc
         return Err(e);
     }
     if app.frames.0 > 0 {
-        eprintln!("tgs view: {} frames, {:.1} ms a frame on average", app.frames.0, 1e3 * app.frames.1 / app.frames.0 as f64);
+        let (n, s, scale) = app.motion.small;
+        let small = if n > 0 { format!(" ({n} of them drawn at up to 1/{scale} size while moving, {:.1} ms on average)", 1e3 * s / n as f64) } else { String::new() };
+        eprintln!("tgs view: {} frames, {:.1} ms a frame on average{small}", app.frames.0, 1e3 * app.frames.1 / app.frames.0 as f64);
     }
     Ok(())
 }
@@ -171,10 +177,22 @@ impl App<'_> {
         let Some(o) = self.open.as_mut() else { return Ok(()) };
         let reset = |o: &mut Open| o.nav = Nav::at(&o.scene.dataset_camera().1, o.scene.target, o.scene.up);
         match a {
-            Action::Orbit(dx, dy) => o.nav.orbit(dx, dy),
-            Action::Pan(dx, dy) => o.nav.pan(dx, dy),
-            Action::Zoom(s) => o.nav.zoom(s),
-            Action::Fly(d) => o.nav.fly(d),
+            Action::Orbit(dx, dy) => {
+                o.nav.orbit(dx, dy);
+                self.motion.moved(Instant::now());
+            }
+            Action::Pan(dx, dy) => {
+                o.nav.pan(dx, dy);
+                self.motion.moved(Instant::now());
+            }
+            Action::Zoom(s) => {
+                o.nav.zoom(s);
+                self.motion.moved(Instant::now());
+            }
+            Action::Fly(d) => {
+                o.nav.fly(d);
+                self.motion.moved(Instant::now());
+            }
             Action::Camera(by) => {
                 o.scene.step_camera(by);
                 reset(o);
@@ -264,9 +282,12 @@ impl App<'_> {
             }
             pixels.upload(&px)?;
         }
+        // A moving camera's frame may be drawn smaller (a capture or another layer never is).
+        let scale = self.motion.scale(self.capture.is_some() || o.scene.layer != 0);
+        let drawn = if scale > 1 { o.nav.camera(w.div_ceil(scale), h.div_ceil(scale)) } else { cam };
         let scene = &mut o.scene;
-        let shown = o.gpu.present(pixels, self.capture.is_some(), |rec| scene.record_final(rec, &cam, order, pixels).map(|_| ()))?;
-        let whole = o.scene.complete(&cam)?;
+        let shown = o.gpu.present(pixels, self.capture.is_some(), |rec| scene.record_final_scaled(rec, &drawn, (w, h, scale), order, pixels).map(|_| ()))?;
+        let whole = o.scene.complete(&drawn)?;
         let captured = match shown {
             Presented::Hidden => return Ok(true),
             Presented::Stale => return Ok(false),
@@ -278,6 +299,7 @@ impl App<'_> {
         let dt = t0.elapsed().as_secs_f64();
         self.frames = (self.frames.0 + 1, self.frames.1 + dt);
         self.last_ms = 1e3 * dt;
+        self.motion.drawn(scale, self.last_ms);
         // Live: a new model no sooner than nine frame times from now, so
         // drawing takes at most a tenth of the machine the training shares.
         if let Some(p) = &self.pace {
@@ -296,12 +318,13 @@ impl App<'_> {
             (None, _) => String::new(),
         };
         let title = format!(
-            "tgs view · Stage {}{training} · {set} camera {}/{} '{name}'{} · {} · {w}x{h} · {:.1} ms · {} + {} Gaussians",
+            "tgs view · Stage {}{training} · {set} camera {}/{} '{name}'{} · {} · {w}x{h}{} · {:.1} ms · {} + {} Gaussians",
             o.scene.stage(),
             o.scene.camera + 1,
             o.scene.cameras().len(),
             if o.nav.unmoved().is_some() { "" } else { " (moved)" },
             o.scene.layer_name(),
+            if scale > 1 { format!(" (1/{scale} while moving)") } else { String::new() },
             self.last_ms,
             o.scene.counts.0,
             o.scene.counts.1,
@@ -406,6 +429,15 @@ impl ApplicationHandler<LiveEvent> for App<'_> {
         // A script moves on only after a whole frame of the last action
         // (and, live, once the run's first model is shown).
         let waits = self.open.is_none() || (self.until_trained && self.done.is_none());
+        // A smaller frame on screen: full size once the camera rests.
+        el.set_control_flow(ControlFlow::Wait);
+        if let (false, Some(at)) = (self.dirty, self.motion.refine_at()) {
+            if Instant::now() >= at {
+                self.dirty = true;
+            } else {
+                el.set_control_flow(ControlFlow::WaitUntil(at));
+            }
+        }
         if !self.dirty && self.capture.is_none() && !waits {
             self.until_trained = false;
             if self.wait > 0 {

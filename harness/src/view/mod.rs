@@ -8,6 +8,7 @@ mod app;
 pub mod controls;
 mod gpu;
 pub mod input;
+pub mod motion;
 pub mod scene;
 mod shot;
 
@@ -29,6 +30,8 @@ pub struct ViewArgs {
     pub shots: Option<PathBuf>,
     /// Marking the glass: outlined views that may leave a point out ([`crate::marks::Marks::tolerance`]).
     pub mark_tolerance: usize,
+    /// Frames a second to keep while the camera moves ([`motion::Motion`]; 0: always full size).
+    pub motion_fps: f32,
     pub device: DeviceSelector,
 }
 

@@ -12,7 +12,7 @@ use crate::train::checkpoint;
 use crate::train::live::Snapshot;
 use crate::train::rundir::{stage_checkpoint, CHECKPOINT};
 use crate::train::Trainer;
-use anyhow::{bail, Context as _, Result};
+use anyhow::{bail, ensure, Context as _, Result};
 use glam::DVec3;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -220,17 +220,33 @@ impl Scene {
     /// Record the final image of `cam` packed into `pixels`; false when the
     /// layer is not the final image (then [`Scene::host_layer`] fills them).
     pub fn record_final(&mut self, rec: &mut Recorder, cam: &Camera, order: PixelOrder, pixels: &Buffer<u32>) -> Result<bool> {
+        self.record_final_scaled(rec, cam, (cam.width, cam.height, 1), order, pixels)
+    }
+
+    /// As [`Scene::record_final`] for a `shown` = (width, height, scale)
+    /// image drawn from `cam`, a frame `scale` times smaller on each side
+    /// (a moving camera's): each of its pixels fills scale x scale of them.
+    pub fn record_final_scaled(&mut self, rec: &mut Recorder, cam: &Camera, shown: (u32, u32, u32), order: PixelOrder, pixels: &Buffer<u32>) -> Result<bool> {
         if self.layer != 0 {
             return Ok(false);
         }
+        let (w, h, scale) = shown;
+        ensure!(
+            (w.div_ceil(scale), h.div_ceil(scale)) == (cam.width, cam.height),
+            "a {w}x{h} image at 1/{scale} needs a {}x{} camera, not {}x{}",
+            w.div_ceil(scale),
+            h.div_ceil(scale),
+            cam.width,
+            cam.height
+        );
         let n = SceneRenderer::output_len(cam.width, cam.height);
-        if self.colour.as_ref().is_none_or(|c| c.len() != n) {
+        if self.colour.as_ref().is_none_or(|c| c.len() < n) {
             // The renderer's copy writes every float before the pack reads them.
             self.colour = Some(Buffer::uninit(&self.ctx, "view.colour", n)?);
         }
-        let colour = self.colour.as_ref().expect("made above");
-        self.renderer.record(rec, cam, &colour.binding())?;
-        self.pack.record(rec, &colour.binding(), cam.width * cam.height, order, &pixels.binding())?;
+        let colour = self.colour.as_ref().expect("made above").slice(0, n);
+        self.renderer.record(rec, cam, &colour)?;
+        self.pack.record_scaled(rec, &colour, (w, h), scale, order, &pixels.binding())?;
         Ok(true)
     }
 

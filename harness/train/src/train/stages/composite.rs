@@ -30,17 +30,24 @@ pub trait Light {
     fn record_update(&mut self, rec: &mut Recorder) -> Result<()>;
 }
 
+/// A pass's loss terms: the image loss's weights, the high-frequency
+/// setting, and the scattering set's frame gradient when its colour trains.
+#[derive(Clone, Copy)]
+pub struct LossTerms<'a> {
+    pub weights: LossWeights,
+    pub hf: HfSetting,
+    pub scat_grad: Option<&'a Buffer<f32>>,
+}
+
 /// A step's image loss: the composite (`io.render`) against the target,
-/// its gradient into `io.grad`, the values into `scratch`; and the
-/// scattering set's frame gradient when its colour trains too.
+/// its gradient into `io.grad`, the values into `scratch`, with the pass's
+/// terms.
 pub struct StepLoss<'a> {
     pub loss: &'a CompositeLoss,
     pub io: LossIo<'a>,
     pub scratch: &'a mut LossScratch,
     pub cam: &'a Camera,
-    pub weights: &'a LossWeights,
-    pub hf: HfSetting,
-    pub scat_grad: Option<&'a Buffer<f32>>,
+    pub terms: LossTerms<'a>,
 }
 
 /// One recording of a later stage's step: `light`'s forward, its composite,
@@ -51,9 +58,9 @@ pub fn record_composite_step<L: Light>(rec: &mut Recorder, light: &mut L, l: Ste
     let sc = rec.begin_scope(L::COMPOSITE);
     light.record_composite(rec)?;
     rec.end_scope(sc);
-    l.loss.record(rec, l.io, l.cam, l.weights, l.hf, l.scratch)?;
+    l.loss.record(rec, l.io, l.cam, &l.terms.weights, l.terms.hf, l.scratch)?;
     let sc = rec.begin_scope(L::COMPOSITE_BACKWARD);
-    if let Some(g) = l.scat_grad {
+    if let Some(g) = l.terms.scat_grad {
         // The composite writes the colour planes; the scattering geometry
         // planes get no gradient.
         CompositeLoss::clear_scattering_geometry(rec, g, (l.cam.width * l.cam.height) as usize)?;

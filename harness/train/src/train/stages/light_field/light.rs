@@ -4,7 +4,7 @@
 //! (`stages/composite.rs`, [`Light`]).
 
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::{HfSetting, Light};
+use crate::train::stages::composite::{Light, LossTerms};
 use crate::train::stages::rendered::R_PLANE;
 use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::ScatteringModel;
@@ -16,7 +16,7 @@ use tgs_pipelines::lightfield::{CompositeInputs, LightFieldShading, SampleScratc
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape};
 use tgs_pipelines::reflection::CompositePriors;
 use tgs_pipelines::AdamArrays;
-use tgs_pipelines::{Adam, AdamGroup, Camera, Frame, KeptWeights, LossWeights, Rasterizer, Splats, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, Frame, KeptWeights, Rasterizer, Splats, TrainableSet};
 
 /// Stage III's light: the light-field network, with the reflection set's
 /// material (its geometry frozen) and, when it trains, the scattering
@@ -75,7 +75,7 @@ impl Light for NetworkLight<'_> {
     fn record_composite_backward(&mut self, rec: &mut Recorder) -> Result<()> {
         let cam = self.cam;
         let r_prior = CompositePriors::of_means(self.cfg.light_field.lambda_r, 0.0, cam.width * cam.height).r;
-        let grads = CompositeGrads { loss_grad: self.loss_grad, d_phi: self.d_phi, refl_grad: &self.frame.grad_out, scat_grad: self.p.scat_grad };
+        let grads = CompositeGrads { loss_grad: self.loss_grad, d_phi: self.d_phi, refl_grad: &self.frame.grad_out, scat_grad: self.p.terms.scat_grad };
         self.shading.record_composite_backward(rec, cam, self.shade, &self.inputs(), &grads, r_prior)
     }
 
@@ -126,13 +126,12 @@ impl Light for NetworkLight<'_> {
 /// What every recording of one Stage III step shares (see
 /// [`LightFieldModel::step`]).
 pub(super) struct Pass<'a> {
-    /// The scattering colour composited over, and its gradient when it trains.
+    /// The scattering colour composited over.
     pub(super) scat: &'a Buffer<f32>,
-    pub(super) scat_grad: Option<&'a Buffer<f32>>,
     /// The sample count the host read (None: the GPU counts in the pass).
     pub(super) host_count: Option<u32>,
-    pub(super) weights: LossWeights,
-    pub(super) hf: HfSetting,
+    /// The loss's terms (the scattering gradient among them).
+    pub(super) terms: LossTerms<'a>,
     pub(super) it: u64,
     pub(super) net_group: AdamGroup,
     pub(super) material_group: AdamGroup,

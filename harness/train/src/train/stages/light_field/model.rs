@@ -11,7 +11,7 @@
 pub use super::light::MlpParams;
 use super::light::{record_forward, NetworkLight, Pass};
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, StepLoss};
+use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, LossTerms, StepLoss};
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
 use crate::train::stages::rendered::{PhiLayers, ReflRendered};
 use crate::train::stages::scattering::ExternalStep;
@@ -243,7 +243,7 @@ impl LightFieldModel {
         let kept = self.kept.get(x.keep.view).is_some();
         let external = train_scat.then_some(ExternalStep { sh_degree: x.sh_degree, lr_means: x.lr_means, iteration: x.global_iteration, colour_only });
         let hf = HfSetting { lambda: lf.lambda_hf, percentile: lf.hf_percentile };
-        let pass = Pass { scat, scat_grad, host_count, weights, hf, it, net_group, material_group, material_len, external };
+        let pass = Pass { scat, terms: LossTerms { weights, hf, scat_grad }, host_count, it, net_group, material_group, material_len, external };
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
             self.record_pass(&mut rec, cfg, scattering, x, &pass)?;
@@ -277,15 +277,7 @@ impl LightFieldModel {
         let cam = x.camera;
         let LightFieldModel { raster, shading, mlp, objective, adam, set, net, shade, feat, dfeat, scratch, d_phi, sizes, count_host, kept, .. } = self;
         let ViewBuffers { frame, samples, loss, loss_in, loss_grad, r_host } = sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
-        let step = StepLoss {
-            loss: objective,
-            io: LossIo { render: loss_in, target: x.target, grad: loss_grad },
-            scratch: loss,
-            cam,
-            weights: &p.weights,
-            hf: p.hf,
-            scat_grad: p.scat_grad,
-        };
+        let step = StepLoss { loss: objective, io: LossIo { render: loss_in, target: x.target, grad: loss_grad }, scratch: loss, cam, terms: p.terms };
         let mut light = NetworkLight {
             cfg,
             cam,

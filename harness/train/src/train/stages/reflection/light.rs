@@ -4,7 +4,7 @@
 
 use super::settings::RotationGrad;
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::{HfSetting, Light};
+use crate::train::stages::composite::{Light, LossTerms};
 use crate::train::stages::rendered::R_PLANE;
 use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::ScatteringModel;
@@ -15,7 +15,7 @@ use tgs_pipelines::reflection::CompositePriors;
 use tgs_pipelines::reflection::{ColorInputs, CompositeInputs, TexelScratch};
 use tgs_pipelines::AdamArrays;
 use tgs_pipelines::Splats;
-use tgs_pipelines::{Adam, AdamGroup, Camera, EnvMap, Frame, Fresnel, LossWeights, Plane, Rasterizer, ReflectionShading, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, EnvMap, Frame, Fresnel, Plane, Rasterizer, ReflectionShading, TrainableSet};
 
 /// Stage II's light: the cube map, with the reflection set's geometry,
 /// material and the map itself training (see [`Light`]).
@@ -56,7 +56,7 @@ impl Light for CubeMapLight<'_> {
         let rc = &self.cfg.reflection;
         let cam = self.cam;
         let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, cam.width * cam.height);
-        let g = CompositeGrads { loss_grad: self.loss_grad, refl_grad: &self.frame.grad_out, scat_grad: self.p.scat_grad };
+        let g = CompositeGrads { loss_grad: self.loss_grad, refl_grad: &self.frame.grad_out, scat_grad: self.p.terms.scat_grad };
         self.shading.record_composite_backward(rec, cam, self.fresnel, &CompositeInputs { scat: self.p.scat, refl: &self.frame.out }, &g, prior)
     }
 
@@ -97,13 +97,12 @@ impl Light for CubeMapLight<'_> {
 /// What every recording of one Stage II step shares (see
 /// [`ReflectionModel::step`]).
 pub(super) struct Pass<'a> {
-    /// The scattering colour composited over, and its gradient when it trains.
+    /// The scattering colour composited over.
     pub(super) scat: &'a Buffer<f32>,
-    pub(super) scat_grad: Option<&'a Buffer<f32>>,
     /// The trained scattering model and its colour's step, when it trains.
     pub(super) external: Option<(&'a ScatteringModel, ExternalStep)>,
-    pub(super) weights: LossWeights,
-    pub(super) hf: HfSetting,
+    /// The loss's terms (the scattering gradient among them).
+    pub(super) terms: LossTerms<'a>,
     pub(super) groups: [AdamGroup; 5],
     pub(super) it: u64,
 }

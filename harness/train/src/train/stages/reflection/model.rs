@@ -12,7 +12,7 @@ use super::light::{record_forward, CubeMapLight, Pass};
 use super::seed::{quat_for_normal, Seed};
 use crate::train::config::TrainConfig;
 use crate::train::logit;
-use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, StepLoss};
+use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, LossTerms, StepLoss};
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::{ExternalStep, ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
@@ -209,7 +209,7 @@ impl ReflectionModel {
         let it = x.iteration as u64;
         let external = scat_model.map(|(m, sh_degree, iteration)| (m, ExternalStep { sh_degree, lr_means: x.lr_means, iteration, colour_only: true }));
         let hf = HfSetting { lambda: rc.lambda_hf, percentile: rc.hf_percentile };
-        let pass = Pass { scat, scat_grad, external, weights, hf, groups, it };
+        let pass = Pass { scat, terms: LossTerms { weights, hf, scat_grad }, external, groups, it };
         let (timings, values) = loop {
             self.view_buffers(cam.width, cam.height)?;
             let mut rec = Recorder::profiled_if(&self.ctx, x.profile)?;
@@ -256,15 +256,7 @@ impl ReflectionModel {
         let cam = x.camera;
         let ReflectionModel { raster, shading, objective, adam, fresnel, set, env, feat, dfeat, texels, sizes, .. } = self;
         let ViewBuffers { frame, loss, loss_in, loss_grad, r_host, alpha_host } = sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-        let step = StepLoss {
-            loss: objective,
-            io: LossIo { render: loss_in, target: x.target, grad: loss_grad },
-            scratch: loss,
-            cam,
-            weights: &p.weights,
-            hf: p.hf,
-            scat_grad: p.scat_grad,
-        };
+        let step = StepLoss { loss: objective, io: LossIo { render: loss_in, target: x.target, grad: loss_grad }, scratch: loss, cam, terms: p.terms };
         let mut light = CubeMapLight { cfg, cam, p, raster, shading, adam, fresnel: *fresnel, set, env, feat, dfeat, texels, frame, loss_in, loss_grad, r_host, alpha_host };
         record_composite_step(rec, &mut light, step)
     }
