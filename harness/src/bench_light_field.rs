@@ -60,16 +60,7 @@ pub fn light_field(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32
     let warmup = warmup.max(w.views);
     let spec = SpheresSpec { width: w.width, height: w.height, points: w.points, train: w.views, ..SpheresSpec::NAMED[0].1 };
     let data = spheres::dataset(&spec)?;
-    let mut cfg = TrainConfig {
-        background: "black".into(),
-        densify_until: 0,
-        max_gaussians: w.points,
-        init_points: w.points.max(1),
-        test_interval: 0,
-        checkpoint_interval: 0,
-        stages: "I".into(),
-        ..TrainConfig::quick()
-    };
+    let mut cfg = crate::bench_train::bench_config(w.points);
     cfg.light_field.preset = network;
     let profiled = iterations.clamp(1, 3);
     cfg.light_field.iterations = warmup.saturating_add(iterations).saturating_add(profiled);

@@ -123,22 +123,7 @@ pub fn train(ctx: &Arc<Context>, w: Workload, warmup: u32, iterations: u32, fuse
     let profiled = profiled(iterations);
     // SH degree 3 is active from iteration 3 on (sh_interval 1).
     let warmup = warmup.max(3);
-    let cfg = TrainConfig {
-        iterations: warmup.saturating_add(iterations).saturating_add(profiled),
-        background: "black".into(),
-        sh_degree: SH_DEGREE,
-        sh_interval: 1,
-        // Densification off: the count stays fixed, as in Brush's timing.
-        densify_until: 0,
-        max_gaussians: w.points,
-        // The spheres' points are the initial Gaussians; init_points (random
-        // initialisation) is unused but may not exceed max_gaussians.
-        init_points: w.points.max(1),
-        test_interval: 0,
-        checkpoint_interval: 0,
-        stages: "I".into(),
-        ..TrainConfig::quick()
-    };
+    let cfg = TrainConfig { iterations: warmup.saturating_add(iterations).saturating_add(profiled), sh_degree: SH_DEGREE, sh_interval: 1, ..bench_config(w.points) };
     ctx.reset_peak_memory();
     let tr = Trainer::new(ctx, cfg, &data)?;
     let brush_lavapipe_s = BRUSH_LAVAPIPE_S.iter().find(|(k, _)| w.width == w.height && *k == (w.width, w.points) && w.views == 20).map(|(_, s)| *s);
@@ -280,5 +265,23 @@ pub fn print_train(b: &TrainBench) {
     }
     for k in &b.kernels {
         println!("  {:24} {:9.3} ms  ({} calls)", k.name, k.ms, k.calls);
+    }
+}
+
+/// A timed run's settings on `points` fixed Gaussians: the quick preset,
+/// Stage I only, black background, no tests or checkpoints, densification
+/// off (the count stays fixed, as in Brush's timing). `init_points` (random
+/// initialisation) is unused where the points are given, but may not
+/// exceed `max_gaussians`.
+pub fn bench_config(points: u32) -> TrainConfig {
+    TrainConfig {
+        background: "black".into(),
+        densify_until: 0,
+        max_gaussians: points,
+        init_points: points.max(1),
+        test_interval: 0,
+        checkpoint_interval: 0,
+        stages: "I".into(),
+        ..TrainConfig::quick()
     }
 }

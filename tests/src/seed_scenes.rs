@@ -127,3 +127,44 @@ pub fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>)
     }
     (cams, masks, depth)
 }
+
+/// Two windows in a stepped front, seen together from `count` cameras in
+/// front of it: window A in the wall x = 0 (y < 0), window B in the wall
+/// x = 0.6 (y >= 0), the step y = 0 between them opaque; each window 1
+/// wide and 1 high, a room's back wall at x = -2 behind both. As
+/// [`window_views`], masks of the glass and depths of the first opaque
+/// surface; a single plane through both windows' rims fits neither.
+pub fn stepped_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    let pane = |y: f64, z: f64, lo: f64| (lo..=lo + 1.0).contains(&y) && (0.2..=1.2).contains(&z);
+    for i in 0..count {
+        let a = (-45.0 + 90.0 * i as f64 / (count - 1) as f64).to_radians();
+        let h = if i % 2 == 0 { 0.5 } else { 1.6 };
+        let e = [3.5 * a.cos(), 3.5 * a.sin(), h];
+        let (cam, r, z) = cast(e, [0.3, 0.0, 0.7], 1.0, |d, len| {
+            if d[0] >= -1e-9 {
+                return (0.0, 0.0);
+            }
+            let at = |x: f64| {
+                let t = (x - e[0]) / d[0];
+                (t, e[1] + t * d[1], e[2] + t * d[2])
+            };
+            let (tb, yb, zb) = at(0.6);
+            let (ta, ya, za) = at(0.0);
+            let (t, glass) = if yb >= 0.0 {
+                (tb, pane(yb, zb, 0.2))
+            } else if ya >= 0.0 {
+                // Crosses y = 0 between the walls: the step.
+                (-e[1] / d[1], false)
+            } else {
+                (ta, pane(ya, za, -1.2))
+            };
+            let t = if glass { at(-2.0).0 } else { t };
+            (glass as u8 as f32, (t / len) as f32)
+        });
+        cams.push(cam);
+        masks.push(r);
+        depth.push(z);
+    }
+    (cams, masks, depth)
+}

@@ -429,6 +429,27 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
     assert_eq!(with.seeds, hull_seeding(&sv, &p).seeds);
 }
 
+/// Two windows in a stepped front (0.6 apart in depth), seen together in
+/// every view: each piece of a view's mask gets the plane of its own rim,
+/// so the seeds of each window lie on its wall (one plane through both
+/// rims, as one membrane a view had, fits neither).
+#[test]
+fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
+    let (cams, masks, depth) = stepped_window_views(24);
+    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, ..SeedParams::default() };
+    let rim = hull_seeding(&sv, &p);
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
+    let off = |side: f64, wall: f64| median(rim.seeds.iter().filter(|s| (s.position[1] as f64) * side > 0.0).map(|s| (s.position[0] as f64 - wall).abs()).collect());
+    let (a, b) = (rim.seeds.iter().filter(|s| s.position[1] < 0.0).count(), rim.seeds.iter().filter(|s| s.position[1] > 0.0).count());
+    eprintln!("stepped front: {} seeds ({a} at window A, {b} at B; {} on the planes of {} views), a median {:.4} / {:.4} off their walls", rim.seeds.len(), rim.rim_seeds, rim.rim_views, off(-1.0, 0.0), off(1.0, 0.6));
+    assert_eq!(rim.rim_views, cams.len(), "every view's windows are ringed by wall");
+    assert!(a > 100 && b > 100, "seeds at both windows: {a} / {b}");
+    assert!(rim.rim_seeds as f64 > 0.9 * rim.seeds.len() as f64, "{} of {} seeds on a rim plane", rim.rim_seeds, rim.seeds.len());
+    assert!(off(-1.0, 0.0) < 0.01 && off(1.0, 0.6) < 0.01, "seeds a median {} / {} off their windows' walls", off(-1.0, 0.0), off(1.0, 0.6));
+    assert_eq!(hull_seeding(&sv, &SeedParams { threads: 1, ..p }), rim, "the same at one thread");
+}
+
 /// The rim's plane fit (1 / z affine in the image coordinates) against the
 /// plane the points were drawn from: exact without noise, unmoved by a
 /// fifth of the points thrown far off, and none for collinear points.

@@ -389,12 +389,12 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     HullSeeding { seeds: surfels(chosen, fixed, &prepared, normal, p.threads), rim_views: found.rim_views, rim_seeds, significance_dropped: dropped, significance_relaxed: relaxed }
 }
 
-/// Each view's membrane where [`SeedParams::rim`] asks for them.
-fn membranes(prepared: &[Prepared], p: &SeedParams) -> Vec<Option<rim::Membrane>> {
+/// Each view's membranes where [`SeedParams::rim`] asks for them.
+fn membranes(prepared: &[Prepared], p: &SeedParams) -> Vec<rim::ViewMembranes> {
     if p.rim {
         rim::membranes(prepared)
     } else {
-        vec![None; prepared.len()]
+        vec![rim::ViewMembranes::default(); prepared.len()]
     }
 }
 
@@ -410,7 +410,7 @@ struct Found {
     rim_views: usize,
 }
 
-fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[Option<rim::Membrane>]) -> Found {
+fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]) -> Found {
     let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     // The far end of a ray with no Stage I surface: the largest finite depth seen.
     let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
@@ -424,7 +424,7 @@ fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[Option<rim::Membran
     let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
     let rays: Vec<(usize, usize)> =
         prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
-    found.rim_views = membranes.iter().filter(|m| m.is_some()).count();
+    found.rim_views = membranes.iter().filter(|m| m.any()).count();
     for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, membranes)) {
         found.significant.extend(part.significant);
         found.rim_normals.extend(part.rim_normals);
@@ -434,7 +434,7 @@ fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[Option<rim::Membran
 }
 
 /// [`march`] along `rays` (view, pixel), in order.
-fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32], membranes: &[Option<rim::Membrane>]) -> Found {
+fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32], membranes: &[rim::ViewMembranes]) -> Found {
     let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     for &(vi, i) in rays {
         let v = &prepared[vi];
@@ -450,7 +450,8 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         // away from the rim's plane (`windshield`'s sides, where these
         // seeds lie a median 0.02 from the glass). perf/RESULTS.md,
         // forty-fifth entry.
-        let z_rim = membranes[vi].and_then(|m| m.depth(v, i));
+        let membrane = membranes[vi].at(i);
+        let z_rim = membrane.and_then(|m| m.depth(v, i));
         let on_rim = z_rim.filter(|&z| z > z_near && z < z_far * 0.98).map(|z| v.unproject(i, z));
         let on_rim = on_rim.filter(|&x| matches!(hull_test(prepared, x, p.agree, min_hits), Verdict::Agrees { significant: true, .. }));
         // A ray that starts inside the hull has no evidence of where
@@ -472,7 +473,7 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
                         best = Some((hits, x));
                     }
                     if significant {
-                        let keep = membranes[vi].is_none() || (on_rim.is_none() && z_rim.is_none_or(|zm| z >= zm * (1.0 - rim::RIM_FRONT)));
+                        let keep = membrane.is_none() || (on_rim.is_none() && z_rim.is_none_or(|zm| z >= zm * (1.0 - rim::RIM_FRONT)));
                         if carved && keep {
                             found.significant.push((x, vi));
                             found.rim_normals.push(None);
@@ -484,7 +485,7 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
                 Verdict::Unseen => {}
             }
         }
-        if let (Some(x), Some(m)) = (on_rim, membranes[vi]) {
+        if let (Some(x), Some(m)) = (on_rim, membrane) {
             found.significant.push((x, vi));
             found.rim_normals.push(Some(m.normal(v)));
         }

@@ -128,43 +128,122 @@ fn rim_points(views: &[Prepared], edges: &[Edge]) -> Vec<V3> {
     out
 }
 
-/// Each view's membrane, where its mask has rim points all around it.
-pub(super) fn membranes(views: &[Prepared]) -> Vec<Option<Membrane>> {
-    let edges: Vec<Edge> = views.iter().map(|v| Edge::new(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
-    let rim = rim_points(views, &edges);
-    views.iter().zip(&edges).map(|(v, e)| membrane(v, &e.near, &rim)).collect()
+/// A view's membranes: one for each piece of its mask (8-connected: a
+/// vehicle's windows, seen two or three at a time, are pieces apart) whose
+/// rim points ring it.
+#[derive(Clone, Debug, Default)]
+pub(super) struct ViewMembranes {
+    /// Per pixel: its piece of the mask ([`NO_PIECE`] off it); empty without membranes.
+    piece: Vec<u32>,
+    planes: Vec<Option<Membrane>>,
 }
 
-/// [`membranes`] for one view.
-fn membrane(v: &Prepared, edge: &[bool], rim: &[V3]) -> Option<Membrane> {
-    let w = v.cam.width as usize;
-    let (mut n, mut cu, mut cv) = (0usize, 0.0f64, 0.0f64);
-    for (i, _) in v.mask.iter().enumerate().filter(|(_, &m)| m) {
+/// A pixel off the mask.
+const NO_PIECE: u32 = u32::MAX;
+
+impl ViewMembranes {
+    /// The membrane of the mask piece pixel `i` lies in, if it has one.
+    pub(super) fn at(&self, i: usize) -> Option<Membrane> {
+        self.piece.get(i).and_then(|&k| self.planes.get(k as usize)).copied().flatten()
+    }
+    /// Whether any piece has a membrane.
+    pub(super) fn any(&self) -> bool {
+        self.planes.iter().any(Option::is_some)
+    }
+}
+
+/// Each view's membranes, one per piece of its mask that rim points ring.
+pub(super) fn membranes(views: &[Prepared]) -> Vec<ViewMembranes> {
+    let edges: Vec<Edge> = views.iter().map(|v| Edge::new(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
+    let rim = rim_points(views, &edges);
+    views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim)).collect()
+}
+
+/// `mask`'s 8-connected pieces, numbered in pixel order: each pixel's piece
+/// ([`NO_PIECE`] off the mask) and their count.
+fn pieces(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, u32) {
+    let mut piece = vec![NO_PIECE; mask.len()];
+    let mut n = 0u32;
+    let mut stack = Vec::new();
+    for start in 0..mask.len() {
+        if !mask[start] || piece[start] != NO_PIECE {
+            continue;
+        }
+        piece[start] = n;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            for (dx, dy) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))) {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
+                    let j = ny as usize * w + nx as usize;
+                    if mask[j] && piece[j] == NO_PIECE {
+                        piece[j] = n;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
         n += 1;
-        cu += (i % w) as f64;
-        cv += (i / w) as f64;
     }
-    if n == 0 {
-        return None;
+    (piece, n)
+}
+
+/// [`membranes`] for one view: the rim points at its mask edge (`edge`),
+/// each given to the pieces within two pixels of it (a pillar between two
+/// windows rims both), and a membrane for each piece they ring.
+fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3]) -> ViewMembranes {
+    let (w, h) = (v.cam.width as usize, v.cam.height as usize);
+    let (piece, n) = pieces(&v.mask, w, h);
+    let mut centre = vec![(0usize, 0.0f64, 0.0f64); n as usize];
+    for (i, &k) in piece.iter().enumerate().filter(|(_, &k)| k != NO_PIECE) {
+        let c = &mut centre[k as usize];
+        *c = (c.0 + 1, c.1 + (i % w) as f64, c.2 + (i / w) as f64);
     }
-    let (cu, cv) = (cu / n as f64, cv / n as f64);
-    // (x, y, 1 / z) of the rim points at this view's mask edge.
-    let mut pts: Vec<[f64; 3]> = Vec::new();
-    let mut sectors = [false; 12];
+    // Per piece: (u, v) and (x, y, 1 / z) of its rim points, in rim order.
+    let mut pts: Vec<Vec<([f64; 2], [f64; 3])>> = vec![Vec::new(); n as usize];
+    let mut near = Vec::new();
     for &p in rim {
         let Some((i, _)) = pixel_of(&v.cam, p) else { continue };
         let Some((u, vv, z)) = image_point(&v.cam, p) else { continue };
         if !edge[i] {
             continue;
         }
-        let a = (vv - cv).atan2(u - cu);
+        near.clear();
+        let (x, y) = ((i % w) as i64, (i / w) as i64);
+        for (dx, dy) in (-2..=2).flat_map(|dy| (-2..=2).map(move |dx| (dx, dy))) {
+            let (nx, ny) = (x + dx, y + dy);
+            if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
+                let k = piece[ny as usize * w + nx as usize];
+                if k != NO_PIECE && !near.contains(&k) {
+                    near.push(k);
+                }
+            }
+        }
+        for &k in &near {
+            pts[k as usize].push(([u, vv], [(u - v.cam.cx as f64) / v.cam.fx as f64, (vv - v.cam.cy as f64) / v.cam.fy as f64, 1.0 / z]));
+        }
+    }
+    let planes: Vec<Option<Membrane>> = centre.iter().zip(&pts).map(|(&(m, su, sv), p)| membrane(p, [su / m as f64, sv / m as f64])).collect();
+    if planes.iter().all(Option::is_none) {
+        return ViewMembranes::default();
+    }
+    ViewMembranes { piece, planes }
+}
+
+/// A piece's membrane from its rim points (image position, plane
+/// coordinates), where they lie all around its centre `c`.
+fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2]) -> Option<Membrane> {
+    let mut sectors = [false; 12];
+    for (uv, _) in pts {
+        let a = (uv[1] - c[1]).atan2(uv[0] - c[0]);
         sectors[(((a + std::f64::consts::PI) / std::f64::consts::TAU * 12.0) as usize).min(11)] = true;
-        pts.push([(u - v.cam.cx as f64) / v.cam.fx as f64, (vv - v.cam.cy as f64) / v.cam.fy as f64, 1.0 / z]);
     }
     if pts.len() < RIM_MIN_POINTS || sectors.iter().filter(|&&s| s).count() < RIM_SECTORS {
         return None;
     }
-    fit_plane(&pts).map(|coef| Membrane { coef })
+    let plane: Vec<[f64; 3]> = pts.iter().map(|p| p.1).collect();
+    fit_plane(&plane).map(|coef| Membrane { coef })
 }
 
 /// 1 / z = a x + b y + c through `pts` ([x, y, 1 / z]) by iteratively
