@@ -28,6 +28,8 @@ of checkered blocks outside the camera orbit for near-field reflections):
   windshield a curved glass front (a section of a vertical cylinder) of the
              same kind of room; cameras in front only
   diffuse    no glass at all (Stage II should skip it)
+  bookshelf  two glass doors side by side in a wooden case's front frame (a
+             lamp, books, a ball inside); cameras in front only
 The suite the Stage II defaults are chosen on: every scene but `diffuse`
 (`--scene suite`).
 
@@ -188,13 +190,14 @@ def checker(mi, c0, c1, scale):
     return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
 
 
-SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near"]
-# The suite of issue 42; `vehicle` (planar windows around an opaque body)
-# and `globe_near` (a glass sphere among nearby objects) are the paper's
-# kinds added for issue 77: `--scene paper` makes them.
-SUITE = [n for n in SCENES if n not in ("diffuse", "vehicle", "globe_near")]
-PAPER = ["vehicle", "globe_near"]
-FRONT_ONLY = {"facade", "windshield"}
+SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near", "bookshelf"]
+# The suite of issue 42; `vehicle` (planar windows around an opaque body),
+# `globe_near` (a glass sphere among nearby objects) and `bookshelf` (two
+# glass doors in one frame, pieces of glass apart) are the paper's kinds
+# added for issue 77: `--scene paper` makes them.
+SUITE = [n for n in SCENES if n not in ("diffuse", "vehicle", "globe_near", "bookshelf")]
+PAPER = ["vehicle", "globe_near", "bookshelf"]
+FRONT_ONLY = {"facade", "windshield", "bookshelf"}
 
 
 def upright(width, height, centre, normal_axis="x"):
@@ -249,6 +252,40 @@ def vehicle(mi, glass):
     return prims
 
 
+def bookshelf(mi, glass):
+    """A glass-fronted bookshelf under the sky: a wooden case (front at
+    x = 0.4, 2 wide, 1.3 high, 0.8 deep) with a shelf, a lamp under its top,
+    books, a ball and a box inside, and two glass doors side by side in its
+    front frame, a mullion 0.16 wide between them: planar glass in two
+    pieces apart, each ringed by wood flush with it."""
+    wood = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.45, 0.28, 0.15]}})
+    inner = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.75, 0.65]}})
+    prims = [Prim("rectangle", upright(0.12, 1.3, [0.4, -0.94, 0.75]), wood),
+             Prim("rectangle", upright(0.12, 1.3, [0.4, 0.94, 0.75]), wood),
+             Prim("rectangle", upright(0.16, 1.3, [0.4, 0.0, 0.75]), wood),
+             Prim("rectangle", upright(1.76, 0.12, [0.4, 0.0, 1.34]), wood),
+             Prim("rectangle", upright(1.76, 0.12, [0.4, 0.0, 0.16]), wood),
+             Prim("rectangle", upright(2.0, 1.3, [-0.4, 0.0, 0.75]), inner),
+             Prim("rectangle", upright(0.8, 1.3, [0.0, -1.0, 0.75], "y"), wood),
+             Prim("rectangle", upright(0.8, 1.3, [0.0, 1.0, 0.75], "y"), wood),
+             Prim("rectangle", translate_scale([0, 0, 1.4], [0.4, 1.0, 1]), wood),
+             Prim("rectangle", translate_scale([0, 0, 0.1], [0.4, 1.0, 1]), inner),
+             Prim("rectangle", translate_scale([0, 0, 0.75], [0.4, 1.0, 1]), inner),
+             Prim("cube", translate_scale([0, 0, 0.05], [0.4, 1.0, 0.05]), wood)]
+    lamp = translate_scale([0.0, 0, 1.39], [0.3, 0.8, 1]) @ np.diag([1.0, -1.0, -1.0, 1.0])
+    prims.append(Prim("rectangle", lamp, {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.9, 0.9]}},
+                      emitter={"type": "area", "radiance": {"type": "rgb", "value": [4.0, 3.8, 3.4]}}))
+    prims.append(Prim("sphere", translate_scale([-0.05, -0.5, 0.32], 0.22), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
+    prims.append(Prim("cube", translate_scale([0.0, 0.5, 0.28], [0.15, 0.2, 0.18], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
+    for k, c in enumerate([[0.7, 0.1, 0.1], [0.1, 0.3, 0.7], [0.1, 0.55, 0.2], [0.85, 0.75, 0.2], [0.5, 0.2, 0.6]]):
+        prims.append(Prim("cube", translate_scale([-0.1, -0.8 + 0.1 * k, 0.93], [0.22, 0.04, 0.18]), {"type": "diffuse", "reflectance": {"type": "rgb", "value": c}}))
+    prims.append(Prim("cube", translate_scale([-0.05, 0.5, 0.93], [0.18, 0.25, 0.18], 15), checker(mi, [0.2, 0.5, 0.9], [0.9, 0.8, 0.2], 3)))
+    # The doors: glass only, each in its opening of the frame.
+    prims.append(Prim("rectangle", upright(0.8, 1.06, [0.4, -0.48, 0.75]), glass, glass=True))
+    prims.append(Prim("rectangle", upright(0.8, 1.06, [0.4, 0.48, 0.75]), glass, glass=True))
+    return prims
+
+
 def build(mi, name, reflection=True):
     if name not in SCENES:
         raise ValueError(f"unknown scene '{name}'")
@@ -263,7 +300,9 @@ def build(mi, name, reflection=True):
             a = 2 * math.pi * (k + 0.25) / len(palette)
             h = 0.6 + 0.3 * (k % 3)
             prims.append(Prim("cube", translate_scale([6.0 * math.cos(a), 6.0 * math.sin(a), h], [0.5, 0.5, h], math.degrees(a)), checker(mi, c0, c1, 3)))
-    if name in FRONT_ONLY:
+    if name == "bookshelf":
+        prims += bookshelf(mi, glass)
+    elif name in FRONT_ONLY:
         prims += room(mi, 0.4)
     elif name == "vehicle":
         prims += vehicle(mi, glass)
@@ -373,7 +412,7 @@ def write_8bit(mi, path, image, srgb, quality=-1):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--scene", action="append", choices=SCENES + ["suite", "paper"], help="repeatable; suite: issue 42's glass scenes; paper: the paper's kinds added since (vehicle, globe_near); default: all")
+    ap.add_argument("--scene", action="append", choices=SCENES + ["suite", "paper"], help="repeatable; suite: issue 42's glass scenes; paper: the paper's kinds added since (vehicle, globe_near, bookshelf); default: all")
     ap.add_argument("--res", type=int, default=200)
     ap.add_argument("--spp", type=int, default=128)
     ap.add_argument("--train", type=int, default=60)
