@@ -30,6 +30,8 @@ of checkered blocks outside the camera orbit for near-field reflections):
   diffuse    no glass at all (Stage II should skip it)
   bookshelf  two glass doors side by side in a wooden case's front frame (a
              lamp, books, a ball inside); cameras in front only
+  house      a house with a window in each of two walls at a right angle (a
+             lamp, a ball and a box inside)
 The suite the Stage II defaults are chosen on: every scene but `diffuse`
 (`--scene suite`).
 
@@ -190,13 +192,14 @@ def checker(mi, c0, c1, scale):
     return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
 
 
-SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near", "bookshelf"]
+SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near", "bookshelf", "house"]
 # The suite of issue 42; `vehicle` (planar windows around an opaque body),
-# `globe_near` (a glass sphere among nearby objects) and `bookshelf` (two
-# glass doors in one frame, pieces of glass apart) are the paper's kinds
+# `globe_near` (a glass sphere among nearby objects), `bookshelf` (two
+# glass doors in one frame, pieces of glass apart in one plane) and `house`
+# (a window in each of two walls at a right angle) are the paper's kinds
 # added for issue 77: `--scene paper` makes them.
-SUITE = [n for n in SCENES if n not in ("diffuse", "vehicle", "globe_near", "bookshelf")]
-PAPER = ["vehicle", "globe_near", "bookshelf"]
+PAPER = ["vehicle", "globe_near", "bookshelf", "house"]
+SUITE = [n for n in SCENES if n != "diffuse" and n not in PAPER]
 FRONT_ONLY = {"facade", "windshield", "bookshelf"}
 
 
@@ -286,6 +289,36 @@ def bookshelf(mi, glass):
     return prims
 
 
+def house(mi, glass):
+    """A house under the sky: walls 1.2 high around a 1.6 x 1.2 floor, a flat
+    roof, a lamp under it, a ball and a box inside; one window in the front
+    wall (x = 0.8) and one in the side wall (y = 0.6), each 0.5 high and set
+    in its wall: two pieces of planar glass at a right angle, seen together
+    from the corner between them."""
+    wall = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.82, 0.78, 0.68]}})
+    roof = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.15, 0.12]}})
+    prims = [Prim("rectangle", upright(0.3, 1.2, [0.8, -0.45, 0.6]), wall),
+             Prim("rectangle", upright(0.3, 1.2, [0.8, 0.45, 0.6]), wall),
+             Prim("rectangle", upright(0.6, 0.4, [0.8, 0.0, 0.2]), wall),
+             Prim("rectangle", upright(0.6, 0.3, [0.8, 0.0, 1.05]), wall),
+             Prim("rectangle", upright(0.45, 1.2, [-0.575, 0.6, 0.6], "y"), wall),
+             Prim("rectangle", upright(0.45, 1.2, [0.575, 0.6, 0.6], "y"), wall),
+             Prim("rectangle", upright(0.7, 0.4, [0.0, 0.6, 0.2], "y"), wall),
+             Prim("rectangle", upright(0.7, 0.3, [0.0, 0.6, 1.05], "y"), wall),
+             Prim("rectangle", upright(1.2, 1.2, [-0.8, 0.0, 0.6]), wall),
+             Prim("rectangle", upright(1.6, 1.2, [0.0, -0.6, 0.6], "y"), wall),
+             Prim("rectangle", translate_scale([0, 0, 1.2], [0.8, 0.6, 1]), roof)]
+    lamp = translate_scale([0.0, 0, 1.19], [0.25, 0.2, 1]) @ np.diag([1.0, -1.0, -1.0, 1.0])
+    prims.append(Prim("rectangle", lamp, {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.9, 0.9]}},
+                      emitter={"type": "area", "radiance": {"type": "rgb", "value": [5.0, 4.7, 4.2]}}))
+    prims.append(Prim("sphere", translate_scale([0.2, 0.05, 0.25], 0.25), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
+    prims.append(Prim("cube", translate_scale([-0.35, 0.2, 0.3], [0.15, 0.15, 0.3], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
+    # The windows: glass only, each in its opening.
+    prims.append(Prim("rectangle", upright(0.6, 0.5, [0.8, 0.0, 0.65]), glass, glass=True))
+    prims.append(Prim("rectangle", upright(0.7, 0.5, [0.0, 0.6, 0.65], "y"), glass, glass=True))
+    return prims
+
+
 def build(mi, name, reflection=True):
     if name not in SCENES:
         raise ValueError(f"unknown scene '{name}'")
@@ -302,6 +335,8 @@ def build(mi, name, reflection=True):
             prims.append(Prim("cube", translate_scale([6.0 * math.cos(a), 6.0 * math.sin(a), h], [0.5, 0.5, h], math.degrees(a)), checker(mi, c0, c1, 3)))
     if name == "bookshelf":
         prims += bookshelf(mi, glass)
+    elif name == "house":
+        prims += house(mi, glass)
     elif name in FRONT_ONLY:
         prims += room(mi, 0.4)
     elif name == "vehicle":
@@ -412,7 +447,7 @@ def write_8bit(mi, path, image, srgb, quality=-1):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--scene", action="append", choices=SCENES + ["suite", "paper"], help="repeatable; suite: issue 42's glass scenes; paper: the paper's kinds added since (vehicle, globe_near, bookshelf); default: all")
+    ap.add_argument("--scene", action="append", choices=SCENES + ["suite", "paper"], help="repeatable; suite: issue 42's glass scenes; paper: the paper's kinds added since (vehicle, globe_near, bookshelf, house); default: all")
     ap.add_argument("--res", type=int, default=200)
     ap.add_argument("--spp", type=int, default=128)
     ap.add_argument("--train", type=int, default=60)
