@@ -168,3 +168,40 @@ pub fn stepped_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Ve
     }
     (cams, masks, depth)
 }
+
+/// A closed box (x, y in [-0.5, 0.5], z in [0, 1]) with a window in its
+/// face x = 0.5 (y in [-0.3, 0.3], z in [0.3, 0.7]), seen from `count`
+/// cameras all around it: the window and its rim are hidden from the
+/// cameras behind the box. Masks of the glass, depths of the first opaque
+/// surface (inside the box through the window: its far wall).
+pub fn window_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..count {
+        let a = i as f64 * std::f64::consts::TAU / count as f64;
+        let h = if i % 2 == 0 { 0.6 } else { 1.5 };
+        let e = [3.0 * a.cos(), 3.0 * a.sin(), h];
+        let (cam, r, z) = cast(e, [0.0, 0.0, 0.5], 0.8, |d, len| {
+            // The box's slabs: entry and exit distances, and the entry axis.
+            let (lo, hi) = ([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0]);
+            let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
+            for k in 0..3 {
+                let (a, b) = ((lo[k] - e[k]) / d[k], (hi[k] - e[k]) / d[k]);
+                let (near, far) = (a.min(b), a.max(b));
+                if near > t0 {
+                    (t0, axis) = (near, k);
+                }
+                t1 = t1.min(far);
+            }
+            if !(t0 <= t1 && t0 > 0.0) {
+                return (0.0, 0.0);
+            }
+            let p = [0, 1, 2].map(|k| e[k] + t0 * d[k]);
+            let glass = axis == 0 && p[0] > 0.0 && p[1].abs() <= 0.3 && (0.3..=0.7).contains(&p[2]);
+            (glass as u8 as f32, ((if glass { t1 } else { t0 }) / len) as f32)
+        });
+        cams.push(cam);
+        masks.push(r);
+        depth.push(z);
+    }
+    (cams, masks, depth)
+}

@@ -450,6 +450,24 @@ fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
     assert_eq!(hull_seeding(&sv, &SeedParams { threads: 1, ..p }), rim, "the same at one thread");
 }
 
+/// A window in a closed box seen from all around: the views behind the
+/// box do not see its rim, so they do not count against it; the views
+/// that see the window get its plane, and the seeds lie on it.
+#[test]
+fn a_window_in_a_box_seen_all_around_is_seeded_on_its_rim_plane() {
+    let (cams, masks, depth) = window_box_views(24);
+    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, ..SeedParams::default() };
+    let rim = hull_seeding(&sv, &p);
+    let showing = masks.iter().filter(|m| m.iter().any(|&v| v > 0.5)).count();
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
+    let off = median(rim.seeds.iter().map(|s| (s.position[0] as f64 - 0.5).abs()).collect());
+    eprintln!("window in a box: {} of 24 views show it; {} seeds, {} on the planes of {} views, a median {off:.4} off the glass", showing, rim.seeds.len(), rim.rim_seeds, rim.rim_views);
+    assert!(showing < 20, "the views behind the box do not see the window ({showing} do)");
+    assert!(rim.rim_views * 2 >= showing, "{} of the {showing} views that show the window got its plane", rim.rim_views);
+    assert!(rim.rim_seeds as f64 > 0.5 * rim.seeds.len() as f64 && off < 0.01, "{} of {} seeds on a rim plane, a median {off} off", rim.rim_seeds, rim.seeds.len());
+}
+
 /// The rim's plane fit (1 / z affine in the image coordinates) against the
 /// plane the points were drawn from: exact without noise, unmoved by a
 /// fifth of the points thrown far off, and none for collinear points.

@@ -47,6 +47,9 @@ pub const RIM_SECTORS: usize = 9;
 /// (0.09 in front of the glass, a tenth of them 0.96), on `windshield` a
 /// median 3.5% behind it (0.02 from the glass).
 pub const RIM_FRONT: f64 = 0.02;
+/// How far behind a view's own Stage I surface a rim point may lie and
+/// still count as seen by it (a share of that depth).
+pub const RIM_VISIBLE: f64 = 0.05;
 /// The fewest rim points a membrane is fitted to.
 const RIM_MIN_POINTS: usize = 12;
 
@@ -115,7 +118,10 @@ fn rim_points(views: &[Prepared], edges: &[Edge]) -> Vec<V3> {
             let p = v.unproject(i, v.depth[i] as f64);
             let (mut seen, mut hit) = (0u32, 0u32);
             for (u, f) in views.iter().zip(edges) {
-                if let Some((j, _)) = pixel_of(&u.cam, p) {
+                // A view counts where it sees the point: not behind its own
+                // Stage I surface there (an object seen all around hides
+                // its front's rim from the views behind it).
+                if let Some((j, _)) = pixel_of(&u.cam, p).filter(|&(j, z)| z <= u.depth[j] as f64 * (1.0 + RIM_VISIBLE)) {
                     seen += 1;
                     hit += f.near[j] as u32;
                 }
