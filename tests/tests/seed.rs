@@ -450,15 +450,20 @@ fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
     assert_eq!(hull_seeding(&sv, &SeedParams { threads: 1, ..p }), rim, "the same at one thread");
 }
 
-/// A window in a closed box seen from all around: the views behind the
-/// box do not see its rim, so they do not count against it; the views
-/// that see the window get its plane, and the seeds lie on it.
+/// A window in a closed box seen from all around
+/// (`reflection.seed_rim_all_around`): the views behind the box do not see
+/// its rim, so they do not count against it; the views that see the window
+/// get its plane, and the seeds lie on it.
 #[test]
 fn a_window_in_a_box_seen_all_around_is_seeded_on_its_rim_plane() {
     let (cams, masks, depth) = window_box_views(24);
     let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
-    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, ..SeedParams::default() };
+    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, rim_all_around: true, ..SeedParams::default() };
     let rim = hull_seeding(&sv, &p);
+    // Counting every view that the point projects into, the views behind
+    // the box veto every rim point: no plane.
+    let front_only = hull_seeding(&sv, &SeedParams { rim_all_around: false, ..p });
+    assert_eq!((front_only.rim_views, front_only.rim_seeds), (0, 0));
     let showing = masks.iter().filter(|m| m.iter().any(|&v| v > 0.5)).count();
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
     let off = median(rim.seeds.iter().map(|s| (s.position[0] as f64 - 0.5).abs()).collect());

@@ -96,6 +96,13 @@ pub struct ReflectionConfig {
     /// sees on the plane of that rim (a window captured from one side,
     /// whose hull is a wedge; seed/rim.rs, perf/journal/2026-11-28-forty-fifth.md).
     pub seed_rim: bool,
+    /// With `seed_rim`, for glass in an object seen from every side (a
+    /// house's windows): a view counts for or against a rim point only
+    /// where it sees it, and a plane must be ringed by the points on it.
+    /// Off by default: it helps a house (18.4° → 8.6°) and harms a cabin
+    /// whose windows meet at its corners (21.3° → 25.4°;
+    /// perf/journal/2026-12-04-fifty-ninth.md).
+    pub seed_rim_all_around: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
     /// High-frequency loss (method-notes §3.6): weight of the mean error of
@@ -168,6 +175,7 @@ impl Default for ReflectionConfig {
             seed_masks: String::new(),
             dataset_masks: true,
             seed_rim: true,
+            seed_rim_all_around: false,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,

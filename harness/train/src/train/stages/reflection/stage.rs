@@ -322,7 +322,7 @@ fn seed_model(
         significance: rc.seed_significance as f64,
         ..SeedParams::default()
     };
-    let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, relax: &MASK_SIGNIFICANCE, ..p } } else { p };
+    let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, rim_all_around: rc.seed_rim_all_around, relax: &MASK_SIGNIFICANCE, ..p } } else { p };
     let seeds = if hull {
         let h = hull_seeding(&views, &p);
         d.seed_significance = h.significance_relaxed;

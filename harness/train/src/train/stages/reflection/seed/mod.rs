@@ -107,6 +107,11 @@ pub struct SeedParams {
     /// outline on the path-traced suite (perf/RESULTS.md, forty-third
     /// entry), so their edges do not trace a rim.
     pub rim: bool,
+    /// With `rim`: glass in an object seen from every side (a house's
+    /// windows): the rim counts only the views that see it, and a piece's
+    /// plane must be ringed by the points on it
+    /// (`reflection.seed_rim_all_around`; rim::membranes).
+    pub rim_all_around: bool,
     /// Threads for the march and the normals (0: every core the process
     /// may use). The seeds are the same, bit for bit, at any count: the
     /// rays and seeds are split into contiguous runs whose results are
@@ -188,7 +193,7 @@ impl SeedNormal {
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, relax: &[], rim: false, threads: 0 }
+        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, relax: &[], rim: false, rim_all_around: false, threads: 0 }
     }
 }
 
@@ -392,7 +397,7 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
 /// Each view's membranes where [`SeedParams::rim`] asks for them.
 fn membranes(prepared: &[Prepared], p: &SeedParams) -> Vec<rim::ViewMembranes> {
     if p.rim {
-        rim::membranes(prepared)
+        rim::membranes(prepared, p.rim_all_around)
     } else {
         vec![rim::ViewMembranes::default(); prepared.len()]
     }

@@ -47,9 +47,13 @@ pub const RIM_SECTORS: usize = 9;
 /// (0.09 in front of the glass, a tenth of them 0.96), on `windshield` a
 /// median 3.5% behind it (0.02 from the glass).
 pub const RIM_FRONT: f64 = 0.02;
-/// How far behind a view's own Stage I surface a rim point may lie and
-/// still count as seen by it (a share of that depth).
+/// With `all_around` ([`membranes`]): how far behind a view's own Stage I
+/// surface a rim point may lie and still count as seen by it (a share of
+/// that depth).
 pub const RIM_VISIBLE: f64 = 0.05;
+/// With `all_around`: how far from a piece's fitted plane (a share of the
+/// depth) its rim points may lie and count as on it.
+pub const RIM_PLANAR: f64 = 0.05;
 /// The fewest rim points a membrane is fitted to.
 const RIM_MIN_POINTS: usize = 12;
 
@@ -111,17 +115,17 @@ impl Edge {
 
 /// The rim points of all views, in view and pixel order: Stage I surface
 /// points on a mask's ring that enough views see at a mask edge.
-fn rim_points(views: &[Prepared], edges: &[Edge]) -> Vec<V3> {
+fn rim_points(views: &[Prepared], edges: &[Edge], all_around: bool) -> Vec<V3> {
     let mut out = Vec::new();
     for (v, e) in views.iter().zip(edges) {
         for i in (0..e.ring.len()).filter(|&i| e.ring[i] && v.depth[i].is_finite()) {
             let p = v.unproject(i, v.depth[i] as f64);
             let (mut seen, mut hit) = (0u32, 0u32);
             for (u, f) in views.iter().zip(edges) {
-                // A view counts where it sees the point: not behind its own
-                // Stage I surface there (an object seen all around hides
-                // its front's rim from the views behind it).
-                if let Some((j, _)) = pixel_of(&u.cam, p).filter(|&(j, z)| z <= u.depth[j] as f64 * (1.0 + RIM_VISIBLE)) {
+                // All around: a view counts where it sees the point, not
+                // behind its own Stage I surface there (an object seen all
+                // around hides its front's rim from the views behind it).
+                if let Some((j, _)) = pixel_of(&u.cam, p).filter(|&(j, z)| !all_around || z <= u.depth[j] as f64 * (1.0 + RIM_VISIBLE)) {
                     seen += 1;
                     hit += f.near[j] as u32;
                 }
@@ -159,10 +163,14 @@ impl ViewMembranes {
 }
 
 /// Each view's membranes, one per piece of its mask that rim points ring.
-pub(super) fn membranes(views: &[Prepared]) -> Vec<ViewMembranes> {
+/// `all_around` (`reflection.seed_rim_all_around`, for glass in an object
+/// seen from every side): only the views that see a rim point count for or
+/// against it, and a piece's membrane needs the points on its plane to
+/// ring it too.
+pub(super) fn membranes(views: &[Prepared], all_around: bool) -> Vec<ViewMembranes> {
     let edges: Vec<Edge> = views.iter().map(|v| Edge::new(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
-    let rim = rim_points(views, &edges);
-    views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim)).collect()
+    let rim = rim_points(views, &edges, all_around);
+    views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim, all_around)).collect()
 }
 
 /// `mask`'s 8-connected pieces, numbered in pixel order: each pixel's piece
@@ -198,7 +206,7 @@ fn pieces(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, u32) {
 /// [`membranes`] for one view: the rim points at its mask edge (`edge`),
 /// each given to the pieces within two pixels of it (a pillar between two
 /// windows rims both), and a membrane for each piece they ring.
-fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3]) -> ViewMembranes {
+fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], all_around: bool) -> ViewMembranes {
     let (w, h) = (v.cam.width as usize, v.cam.height as usize);
     let (piece, n) = pieces(&v.mask, w, h);
     let mut centre = vec![(0usize, 0.0f64, 0.0f64); n as usize];
@@ -230,7 +238,7 @@ fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3]) -> ViewMembranes {
             pts[k as usize].push(([u, vv], [(u - v.cam.cx as f64) / v.cam.fx as f64, (vv - v.cam.cy as f64) / v.cam.fy as f64, 1.0 / z]));
         }
     }
-    let planes: Vec<Option<Membrane>> = centre.iter().zip(&pts).map(|(&(m, su, sv), p)| membrane(p, [su / m as f64, sv / m as f64])).collect();
+    let planes: Vec<Option<Membrane>> = centre.iter().zip(&pts).map(|(&(m, su, sv), p)| membrane(p, [su / m as f64, sv / m as f64], all_around)).collect();
     if planes.iter().all(Option::is_none) {
         return ViewMembranes::default();
     }
@@ -238,18 +246,29 @@ fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3]) -> ViewMembranes {
 }
 
 /// A piece's membrane from its rim points (image position, plane
-/// coordinates), where they lie all around its centre `c`.
-fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2]) -> Option<Membrane> {
-    let mut sectors = [false; 12];
-    for (uv, _) in pts {
-        let a = (uv[1] - c[1]).atan2(uv[0] - c[0]);
-        sectors[(((a + std::f64::consts::PI) / std::f64::consts::TAU * 12.0) as usize).min(11)] = true;
-    }
-    if pts.len() < RIM_MIN_POINTS || sectors.iter().filter(|&&s| s).count() < RIM_SECTORS {
+/// coordinates), where they lie all around its centre `c` (with
+/// `planar`, those on the fitted plane too).
+fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], planar: bool) -> Option<Membrane> {
+    let rings = |pts: &mut dyn Iterator<Item = [f64; 2]>| {
+        let mut sectors = [false; 12];
+        let mut n = 0;
+        for uv in pts {
+            let a = (uv[1] - c[1]).atan2(uv[0] - c[0]);
+            sectors[(((a + std::f64::consts::PI) / std::f64::consts::TAU * 12.0) as usize).min(11)] = true;
+            n += 1;
+        }
+        n >= RIM_MIN_POINTS && sectors.iter().filter(|&&s| s).count() >= RIM_SECTORS
+    };
+    if !rings(&mut pts.iter().map(|p| p.0)) {
         return None;
     }
     let plane: Vec<[f64; 3]> = pts.iter().map(|p| p.1).collect();
-    fit_plane(&plane).map(|coef| Membrane { coef })
+    let coef = fit_plane(&plane)?;
+    // The points on the plane (within RIM_PLANAR of their depth) must ring
+    // the piece too: a piece that turns a corner (two windows of a cabin
+    // seen at once) has rim points on two planes, and one fits half.
+    let on = |p: &[f64; 3]| (1.0 - (coef[0] * p[0] + coef[1] * p[1] + coef[2]) / p[2]).abs() <= RIM_PLANAR;
+    (!planar || rings(&mut pts.iter().filter(|p| on(&p.1)).map(|p| p.0))).then_some(Membrane { coef })
 }
 
 /// 1 / z = a x + b y + c through `pts` ([x, y, 1 / z]) by iteratively
