@@ -442,7 +442,14 @@ fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
     let off = |side: f64, wall: f64| median(rim.seeds.iter().filter(|s| (s.position[1] as f64) * side > 0.0).map(|s| (s.position[0] as f64 - wall).abs()).collect());
     let (a, b) = (rim.seeds.iter().filter(|s| s.position[1] < 0.0).count(), rim.seeds.iter().filter(|s| s.position[1] > 0.0).count());
-    eprintln!("stepped front: {} seeds ({a} at window A, {b} at B; {} on the planes of {} views), a median {:.4} / {:.4} off their walls", rim.seeds.len(), rim.rim_seeds, rim.rim_views, off(-1.0, 0.0), off(1.0, 0.6));
+    eprintln!(
+        "stepped front: {} seeds ({a} at window A, {b} at B; {} on the planes of {} views), a median {:.4} / {:.4} off their walls",
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views,
+        off(-1.0, 0.0),
+        off(1.0, 0.6)
+    );
     assert_eq!(rim.rim_views, cams.len(), "every view's windows are ringed by wall");
     assert!(a > 100 && b > 100, "seeds at both windows: {a} / {b}");
     assert!(rim.rim_seeds as f64 > 0.9 * rim.seeds.len() as f64, "{} of {} seeds on a rim plane", rim.rim_seeds, rim.seeds.len());
@@ -467,7 +474,13 @@ fn a_window_in_a_box_seen_all_around_is_seeded_on_its_rim_plane() {
     let showing = masks.iter().filter(|m| m.iter().any(|&v| v > 0.5)).count();
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
     let off = median(rim.seeds.iter().map(|s| (s.position[0] as f64 - 0.5).abs()).collect());
-    eprintln!("window in a box: {} of 24 views show it; {} seeds, {} on the planes of {} views, a median {off:.4} off the glass", showing, rim.seeds.len(), rim.rim_seeds, rim.rim_views);
+    eprintln!(
+        "window in a box: {} of 24 views show it; {} seeds, {} on the planes of {} views, a median {off:.4} off the glass",
+        showing,
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views
+    );
     assert!(showing < 20, "the views behind the box do not see the window ({showing} do)");
     assert!(rim.rim_views * 2 >= showing, "{} of the {showing} views that show the window got its plane", rim.rim_views);
     assert!(rim.rim_seeds as f64 > 0.5 * rim.seeds.len() as f64 && off < 0.01, "{} of {} seeds on a rim plane, a median {off} off", rim.rim_seeds, rim.seeds.len());

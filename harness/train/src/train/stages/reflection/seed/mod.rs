@@ -193,7 +193,19 @@ impl SeedNormal {
 
 impl Default for SeedParams {
     fn default() -> Self {
-        SeedParams { threshold: 0.007, blur: 2, agree: 0.9, max_rays: 8192, steps: 128, normal: SeedNormal::Halfway, significance: 1e-6, relax: &[], rim: false, rim_all_around: false, threads: 0 }
+        SeedParams {
+            threshold: 0.007,
+            blur: 2,
+            agree: 0.9,
+            max_rays: 8192,
+            steps: 128,
+            normal: SeedNormal::Halfway,
+            significance: 1e-6,
+            relax: &[],
+            rim: false,
+            rim_all_around: false,
+            threads: 0,
+        }
     }
 }
 
