@@ -255,14 +255,20 @@ def vehicle(mi, glass):
     return prims
 
 
+def matte(rgb, two=True):
+    """A diffuse material of colour `rgb`, two-sided unless `two` is false."""
+    m = {"type": "diffuse", "reflectance": {"type": "rgb", "value": rgb}}
+    return twosided(m) if two else m
+
+
 def bookshelf(mi, glass):
     """A glass-fronted bookshelf under the sky: a wooden case (front at
     x = 0.4, 2 wide, 1.3 high, 0.8 deep) with a shelf, a lamp under its top,
     books, a ball and a box inside, and two glass doors side by side in its
     front frame, a mullion 0.16 wide between them: planar glass in two
     pieces apart, each ringed by wood flush with it."""
-    wood = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.45, 0.28, 0.15]}})
-    inner = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.75, 0.65]}})
+    wood = matte([0.45, 0.28, 0.15])
+    inner = matte([0.8, 0.75, 0.65])
     prims = [Prim("rectangle", upright(0.12, 1.3, [0.4, -0.94, 0.75]), wood),
              Prim("rectangle", upright(0.12, 1.3, [0.4, 0.94, 0.75]), wood),
              Prim("rectangle", upright(0.16, 1.3, [0.4, 0.0, 0.75]), wood),
@@ -295,8 +301,8 @@ def house(mi, glass):
     wall (x = 0.8) and one in the side wall (y = 0.6), each 0.5 high and set
     in its wall: two pieces of planar glass at a right angle, seen together
     from the corner between them."""
-    wall = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.82, 0.78, 0.68]}})
-    roof = twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.15, 0.12]}})
+    wall = matte([0.82, 0.78, 0.68])
+    roof = matte([0.5, 0.15, 0.12])
     prims = [Prim("rectangle", upright(0.3, 1.2, [0.8, -0.45, 0.6]), wall),
              Prim("rectangle", upright(0.3, 1.2, [0.8, 0.45, 0.6]), wall),
              Prim("rectangle", upright(0.6, 0.4, [0.8, 0.0, 0.2]), wall),

@@ -66,6 +66,27 @@ pub fn cast(eye: V3, target: [f32; 3], fov: f32, mut pixel: impl FnMut(V3, f64) 
     (cam, r, z)
 }
 
+/// Camera `i` of `count` in front of a window facing +x: 3.5 away, within
+/// `half` degrees of its normal, at heights 0.5 and 1.6 in turn.
+fn front_eye(i: usize, count: usize, half: f64) -> V3 {
+    let a = (-half + 2.0 * half * i as f64 / (count - 1) as f64).to_radians();
+    [3.5 * a.cos(), 3.5 * a.sin(), if i.is_multiple_of(2) { 0.5 } else { 1.6 }]
+}
+
+/// `count` views cast from `eye(i)` towards `target` (see [`cast`]):
+/// `pixel(eye, direction, length)` gives each pixel's mask and depth.
+fn views_from(count: usize, eye: impl Fn(usize) -> V3, target: [f32; 3], fov: f32, pixel: impl Fn(V3, V3, f64) -> (f32, f32)) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..count {
+        let e = eye(i);
+        let (cam, r, z) = cast(e, target, fov, |d, len| pixel(e, d, len));
+        cams.push(cam);
+        masks.push(r);
+        depth.push(z);
+    }
+    (cams, masks, depth)
+}
+
 /// [`views`] from `count` cameras.
 pub fn ring(count: usize, noise: f64, glass: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
     let mut rng = Rng(7);
@@ -106,12 +127,12 @@ pub fn radial_error(set: &[Seed]) -> Vec<f64> {
 /// side within 50 degrees of the window's normal. Each view's mask is the
 /// window and its Stage I depth the wall, or the back wall through the window.
 pub fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..count {
-        let a = (-50.0 + 100.0 * i as f64 / (count - 1) as f64).to_radians();
-        let h = if i % 2 == 0 { 0.5 } else { 1.6 };
-        let e = [3.5 * a.cos(), 3.5 * a.sin(), h];
-        let (cam, r, z) = cast(e, [0.0, 0.0, 0.7], 0.8, |d, len| {
+    views_from(
+        count,
+        |i| front_eye(i, count, 50.0),
+        [0.0, 0.0, 0.7],
+        0.8,
+        |e, d, len| {
             if d[0] >= -1e-9 {
                 return (0.0, 0.0);
             }
@@ -120,12 +141,8 @@ pub fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>)
             let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
             let t = if glass { (-2.0 - e[0]) / d[0] } else { t };
             (glass as u8 as f32, (t / len) as f32)
-        });
-        cams.push(cam);
-        masks.push(r);
-        depth.push(z);
-    }
-    (cams, masks, depth)
+        },
+    )
 }
 
 /// Two windows in a stepped front, seen together from `count` cameras in
@@ -135,13 +152,13 @@ pub fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>)
 /// [`window_views`], masks of the glass and depths of the first opaque
 /// surface; a single plane through both windows' rims fits neither.
 pub fn stepped_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
     let pane = |y: f64, z: f64, lo: f64| (lo..=lo + 1.0).contains(&y) && (0.2..=1.2).contains(&z);
-    for i in 0..count {
-        let a = (-45.0 + 90.0 * i as f64 / (count - 1) as f64).to_radians();
-        let h = if i % 2 == 0 { 0.5 } else { 1.6 };
-        let e = [3.5 * a.cos(), 3.5 * a.sin(), h];
-        let (cam, r, z) = cast(e, [0.3, 0.0, 0.7], 1.0, |d, len| {
+    views_from(
+        count,
+        |i| front_eye(i, count, 45.0),
+        [0.3, 0.0, 0.7],
+        1.0,
+        |e, d, len| {
             if d[0] >= -1e-9 {
                 return (0.0, 0.0);
             }
@@ -161,12 +178,8 @@ pub fn stepped_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Ve
             };
             let t = if glass { at(-2.0).0 } else { t };
             (glass as u8 as f32, (t / len) as f32)
-        });
-        cams.push(cam);
-        masks.push(r);
-        depth.push(z);
-    }
-    (cams, masks, depth)
+        },
+    )
 }
 
 /// A closed box (x, y in [-0.5, 0.5], z in [0, 1]) with a window in its
@@ -175,33 +188,27 @@ pub fn stepped_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Ve
 /// cameras behind the box. Masks of the glass, depths of the first opaque
 /// surface (inside the box through the window: its far wall).
 pub fn window_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let (mut cams, mut masks, mut depth) = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..count {
+    let eye = |i: usize| {
         let a = i as f64 * std::f64::consts::TAU / count as f64;
-        let h = if i % 2 == 0 { 0.6 } else { 1.5 };
-        let e = [3.0 * a.cos(), 3.0 * a.sin(), h];
-        let (cam, r, z) = cast(e, [0.0, 0.0, 0.5], 0.8, |d, len| {
-            // The box's slabs: entry and exit distances, and the entry axis.
-            let (lo, hi) = ([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0]);
-            let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
-            for k in 0..3 {
-                let (a, b) = ((lo[k] - e[k]) / d[k], (hi[k] - e[k]) / d[k]);
-                let (near, far) = (a.min(b), a.max(b));
-                if near > t0 {
-                    (t0, axis) = (near, k);
-                }
-                t1 = t1.min(far);
+        [3.0 * a.cos(), 3.0 * a.sin(), if i.is_multiple_of(2) { 0.6 } else { 1.5 }]
+    };
+    views_from(count, eye, [0.0, 0.0, 0.5], 0.8, |e, d, len| {
+        // The box's slabs: entry and exit distances, and the entry axis.
+        let (lo, hi) = ([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0]);
+        let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
+        for k in 0..3 {
+            let (a, b) = ((lo[k] - e[k]) / d[k], (hi[k] - e[k]) / d[k]);
+            let (near, far) = (a.min(b), a.max(b));
+            if near > t0 {
+                (t0, axis) = (near, k);
             }
-            if !(t0 <= t1 && t0 > 0.0) {
-                return (0.0, 0.0);
-            }
-            let p = [0, 1, 2].map(|k| e[k] + t0 * d[k]);
-            let glass = axis == 0 && p[0] > 0.0 && p[1].abs() <= 0.3 && (0.3..=0.7).contains(&p[2]);
-            (glass as u8 as f32, ((if glass { t1 } else { t0 }) / len) as f32)
-        });
-        cams.push(cam);
-        masks.push(r);
-        depth.push(z);
-    }
-    (cams, masks, depth)
+            t1 = t1.min(far);
+        }
+        if !(t0 <= t1 && t0 > 0.0) {
+            return (0.0, 0.0);
+        }
+        let p = [0, 1, 2].map(|k| e[k] + t0 * d[k]);
+        let glass = axis == 0 && p[0] > 0.0 && p[1].abs() <= 0.3 && (0.3..=0.7).contains(&p[2]);
+        (glass as u8 as f32, ((if glass { t1 } else { t0 }) / len) as f32)
+    })
 }

@@ -1,0 +1,176 @@
+//! The rim of the glass masks (harness/train/src/train/stages/reflection/seed/rim.rs),
+//! on the CPU: a window seen from one side, two windows in a stepped
+//! front, a window in a box seen all around, and the rim's plane fit.
+
+use tgs::train::stages::reflection::seed::{fit_plane, hull_seeding, HullSeeding, SeedNormal, SeedParams, SeedView};
+use tgs_tests::seed_scenes::*;
+use tgs_tests::{seed, Rng};
+
+/// The window's masks make a wedge for a hull (no view sees the glass
+/// from the side), and its first points lie in front of the glass; the
+/// rim (the wall, at the masks' edges in every view) gives each view the
+/// window's plane: the seeds on it, with its normal. A closed object's
+/// rim is its silhouette (what lies behind it differs from view to view),
+/// so no view gets a plane there and its seeds are unchanged.
+#[test]
+fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
+    let (cams, masks, depth) = window_views(24);
+    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    // As Stage II takes given masks: 0/1, no blur, threshold 0.5.
+    let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
+    let hull = hull_seeding(&sv, &base);
+    let rim = hull_seeding(&sv, &SeedParams { rim: true, ..base });
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
+    let off = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.position[0] as f64).abs()).collect());
+    let tilt = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.normal[0] as f64).clamp(-1.0, 1.0).acos().to_degrees()).collect());
+    eprintln!(
+        "window: {} hull seeds a median {:.3} off the glass, normals {:.1} degrees; with the rim {} seeds ({} on the planes of {} views) {:.4} off, {:.2} degrees",
+        hull.seeds.len(),
+        off(&hull),
+        tilt(&hull),
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views,
+        off(&rim),
+        tilt(&rim)
+    );
+    assert_eq!((hull.rim_views, hull.rim_seeds), (0, 0));
+    assert!(hull.seeds.len() > 500 && off(&hull) > 0.1, "the wedge: {} seeds a median {} in front", hull.seeds.len(), off(&hull));
+    assert_eq!(rim.rim_views, cams.len(), "every view's window is ringed by wall");
+    assert!(rim.rim_seeds as f64 > 0.9 * rim.seeds.len() as f64, "{} of {} seeds on a rim plane", rim.rim_seeds, rim.seeds.len());
+    assert!(off(&rim) < 0.01 && tilt(&rim) < 1.0, "rim seeds {} off the glass, normals {} degrees", off(&rim), tilt(&rim));
+    for s in &rim.seeds {
+        assert!(s.position.iter().chain(&s.normal).all(|v| v.is_finite()) && s.scale > 0.0, "{s:?}");
+        // Nothing kept from the wedge (a hull point in front of the plane).
+        assert!(s.position[0] < 0.1, "a seed {} in front of the window", s.position[0]);
+    }
+    assert_eq!(hull_seeding(&sv, &SeedParams { rim: true, threads: 1, ..base }), rim, "the same at one thread");
+    // Masks a pixel too large (as users are told to err): the rays of the
+    // extra ring meet the plane on the wall, behind Stage I's surface, and
+    // their first hull points lie in the wedge in front of the plane: they
+    // are dropped, not seeded there.
+    let grown: Vec<Vec<f32>> = masks
+        .iter()
+        .map(|m| {
+            let n = SIZE as i64;
+            (0..m.len() as i64)
+                .map(|i| {
+                    let (x, y) = (i % n, i / n);
+                    let near = (-1..=1).any(|dy: i64| {
+                        (-1..=1).any(|dx: i64| {
+                            let (a, b) = (x + dx, y + dy);
+                            a >= 0 && b >= 0 && a < n && b < n && m[(b * n + a) as usize] > 0.5
+                        })
+                    });
+                    near as u8 as f32
+                })
+                .collect()
+        })
+        .collect();
+    let sv: Vec<SeedView> = cams.iter().zip(grown.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let hull = hull_seeding(&sv, &base);
+    let rim = hull_seeding(&sv, &SeedParams { rim: true, ..base });
+    let front = |h: &HullSeeding| h.seeds.iter().filter(|s| s.position[0] > 0.1).count();
+    eprintln!(
+        "grown masks: {} of {} hull seeds more than 0.1 in front; with the rim {} of {} ({} on the planes of {} views)",
+        front(&hull),
+        hull.seeds.len(),
+        front(&rim),
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views
+    );
+    assert_eq!(rim.rim_views, cams.len());
+    assert!(front(&hull) > hull.seeds.len() / 4, "the grown masks' wedge");
+    assert!(front(&rim) == 0 && off(&rim) < 0.01, "{} seeds in the wedge, median {} off", front(&rim), off(&rim));
+    // The glass sphere (ringed by whatever lies behind it): no plane.
+    let (cams, res, depth) = views(0.0, true);
+    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let p = SeedParams { max_rays: 1500, normal: SeedNormal::Plane, ..SeedParams::default() };
+    let with = hull_seeding(&sv, &SeedParams { rim: true, ..p });
+    assert_eq!((with.rim_views, with.rim_seeds), (0, 0));
+    assert_eq!(with.seeds, hull_seeding(&sv, &p).seeds);
+}
+
+/// Two windows in a stepped front (0.6 apart in depth), seen together in
+/// every view: each piece of a view's mask gets the plane of its own rim,
+/// so the seeds of each window lie on its wall (one plane through both
+/// rims, as one membrane a view had, fits neither).
+#[test]
+fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
+    let (cams, masks, depth) = stepped_window_views(24);
+    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, ..SeedParams::default() };
+    let rim = hull_seeding(&sv, &p);
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
+    let off = |side: f64, wall: f64| median(rim.seeds.iter().filter(|s| (s.position[1] as f64) * side > 0.0).map(|s| (s.position[0] as f64 - wall).abs()).collect());
+    let (a, b) = (rim.seeds.iter().filter(|s| s.position[1] < 0.0).count(), rim.seeds.iter().filter(|s| s.position[1] > 0.0).count());
+    eprintln!(
+        "stepped front: {} seeds ({a} at window A, {b} at B; {} on the planes of {} views), a median {:.4} / {:.4} off their walls",
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views,
+        off(-1.0, 0.0),
+        off(1.0, 0.6)
+    );
+    assert_eq!(rim.rim_views, cams.len(), "every view's windows are ringed by wall");
+    assert!(a > 100 && b > 100, "seeds at both windows: {a} / {b}");
+    assert!(rim.rim_seeds as f64 > 0.9 * rim.seeds.len() as f64, "{} of {} seeds on a rim plane", rim.rim_seeds, rim.seeds.len());
+    assert!(off(-1.0, 0.0) < 0.01 && off(1.0, 0.6) < 0.01, "seeds a median {} / {} off their windows' walls", off(-1.0, 0.0), off(1.0, 0.6));
+    assert_eq!(hull_seeding(&sv, &SeedParams { threads: 1, ..p }), rim, "the same at one thread");
+}
+
+/// A window in a closed box seen from all around
+/// (`reflection.seed_rim_all_around`): the views behind the box do not see
+/// its rim, so they do not count against it; the views that see the window
+/// get its plane, and the seeds lie on it.
+#[test]
+fn a_window_in_a_box_seen_all_around_is_seeded_on_its_rim_plane() {
+    let (cams, masks, depth) = window_box_views(24);
+    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, rim_all_around: true, ..SeedParams::default() };
+    let rim = hull_seeding(&sv, &p);
+    // Counting every view that the point projects into, the views behind
+    // the box veto every rim point: no plane.
+    let front_only = hull_seeding(&sv, &SeedParams { rim_all_around: false, ..p });
+    assert_eq!((front_only.rim_views, front_only.rim_seeds), (0, 0));
+    let showing = masks.iter().filter(|m| m.iter().any(|&v| v > 0.5)).count();
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
+    let off = median(rim.seeds.iter().map(|s| (s.position[0] as f64 - 0.5).abs()).collect());
+    eprintln!(
+        "window in a box: {} of 24 views show it; {} seeds, {} on the planes of {} views, a median {off:.4} off the glass",
+        showing,
+        rim.seeds.len(),
+        rim.rim_seeds,
+        rim.rim_views
+    );
+    assert!(showing < 20, "the views behind the box do not see the window ({showing} do)");
+    assert!(rim.rim_views * 2 >= showing, "{} of the {showing} views that show the window got its plane", rim.rim_views);
+    assert!(rim.rim_seeds as f64 > 0.5 * rim.seeds.len() as f64 && off < 0.01, "{} of {} seeds on a rim plane, a median {off} off", rim.rim_seeds, rim.seeds.len());
+}
+
+/// The rim's plane fit (1 / z affine in the image coordinates) against the
+/// plane the points were drawn from: exact without noise, unmoved by a
+/// fifth of the points thrown far off, and none for collinear points.
+#[test]
+fn rim_plane_fit_recovers_the_plane_through_outliers() {
+    let mut rng = Rng(seed("rim_plane_fit_recovers_the_plane_through_outliers"));
+    let want = [0.12, -0.05, 0.31];
+    let mut pts: Vec<[f64; 3]> = (0..200)
+        .map(|_| {
+            let (x, y) = (uniform(&mut rng) - 0.5, uniform(&mut rng) - 0.5);
+            [x, y, want[0] * x + want[1] * y + want[2]]
+        })
+        .collect();
+    let got = fit_plane(&pts).expect("a plane");
+    assert!((0..3).all(|k| (got[k] - want[k]).abs() < 1e-9), "{got:?}");
+    for (i, p) in pts.iter_mut().enumerate() {
+        if i % 5 == 0 {
+            p[2] += 0.2 + uniform(&mut rng);
+        }
+    }
+    let got = fit_plane(&pts).expect("a plane");
+    assert!((0..3).all(|k| (got[k] - want[k]).abs() < 1e-3), "with outliers: {got:?}");
+    assert_eq!(fit_plane(&(0..20).map(|i| [i as f64 * 0.1, i as f64 * 0.2, 0.3]).collect::<Vec<_>>()), None);
+    assert_eq!(fit_plane(&[]), None);
+}
