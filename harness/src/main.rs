@@ -137,7 +137,7 @@ enum Cmd {
         /// While the camera moves, draw frames smaller (and enlarged) where a
         /// full-size frame would fall below this rate; the full frame follows
         /// once it rests (0: always full size).
-        #[arg(long, default_value_t = 10.0)]
+        #[arg(long, default_value_t = tgs::view::motion::DEFAULT_FPS)]
         motion_fps: f32,
     },
     /// Meshes of a run by TSDF fusion of rendered median depth over the
@@ -253,7 +253,7 @@ fn run(cli: Cli) -> Result<()> {
                     script: view_script.clone(),
                     shots: None,
                     mark_tolerance: 0,
-                    motion_fps: 10.0,
+                    motion_fps: tgs::view::motion::DEFAULT_FPS,
                     device: sel.clone(),
                 };
                 let validate = cli.validate;

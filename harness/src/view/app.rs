@@ -176,23 +176,14 @@ impl App<'_> {
     fn apply(&mut self, a: Action, el: &ActiveEventLoop) -> Result<()> {
         let Some(o) = self.open.as_mut() else { return Ok(()) };
         let reset = |o: &mut Open| o.nav = Nav::at(&o.scene.dataset_camera().1, o.scene.target, o.scene.up);
+        if matches!(a, Action::Orbit(..) | Action::Pan(..) | Action::Zoom(_) | Action::Fly(_)) {
+            self.motion.moved(Instant::now());
+        }
         match a {
-            Action::Orbit(dx, dy) => {
-                o.nav.orbit(dx, dy);
-                self.motion.moved(Instant::now());
-            }
-            Action::Pan(dx, dy) => {
-                o.nav.pan(dx, dy);
-                self.motion.moved(Instant::now());
-            }
-            Action::Zoom(s) => {
-                o.nav.zoom(s);
-                self.motion.moved(Instant::now());
-            }
-            Action::Fly(d) => {
-                o.nav.fly(d);
-                self.motion.moved(Instant::now());
-            }
+            Action::Orbit(dx, dy) => o.nav.orbit(dx, dy),
+            Action::Pan(dx, dy) => o.nav.pan(dx, dy),
+            Action::Zoom(s) => o.nav.zoom(s),
+            Action::Fly(d) => o.nav.fly(d),
             Action::Camera(by) => {
                 o.scene.step_camera(by);
                 reset(o);

@@ -8,6 +8,8 @@
 
 use std::time::{Duration, Instant};
 
+/// The frame rate kept while moving unless `--motion-fps` says otherwise.
+pub const DEFAULT_FPS: f32 = 10.0;
 /// How long the camera rests before a smaller frame is drawn again at full size.
 pub const REST: Duration = Duration::from_millis(150);
 /// The smallest frame: 1/4 of the window on each side.

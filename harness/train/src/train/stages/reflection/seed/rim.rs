@@ -82,15 +82,20 @@ impl Membrane {
     }
 }
 
+/// The pixels of a `w` x `h` image within `r` of pixel `i` (the
+/// (2r + 1)² square around it, row by row; `i` included, nothing beyond
+/// the image).
+fn square(i: usize, w: usize, h: usize, r: i64) -> impl Iterator<Item = usize> {
+    let (x, y) = ((i % w) as i64, (i / w) as i64);
+    (-r..=r)
+        .flat_map(move |dy| (-r..=r).map(move |dx| (x + dx, y + dy)))
+        .filter(move |&(a, b)| a >= 0 && b >= 0 && (a as usize) < w && (b as usize) < h)
+        .map(move |(a, b)| b as usize * w + a as usize)
+}
+
 /// `img` grown by one pixel (3 x 3; nothing beyond the image).
 fn dilate(img: &[bool], w: usize, h: usize) -> Vec<bool> {
-    let at = |x: i64, y: i64| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h && img[y as usize * w + x as usize];
-    (0..w * h)
-        .map(|i| {
-            let (x, y) = ((i % w) as i64, (i / w) as i64);
-            (-1..=1).any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy)))
-        })
-        .collect()
+    (0..w * h).map(|i| square(i, w, h, 1).any(|j| img[j])).collect()
 }
 
 /// A view's mask edge as the rim reads it.
@@ -186,15 +191,10 @@ fn pieces(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, u32) {
         piece[start] = n;
         stack.push(start);
         while let Some(i) = stack.pop() {
-            let (x, y) = ((i % w) as i64, (i / w) as i64);
-            for (dx, dy) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))) {
-                let (nx, ny) = (x + dx, y + dy);
-                if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
-                    let j = ny as usize * w + nx as usize;
-                    if mask[j] && piece[j] == NO_PIECE {
-                        piece[j] = n;
-                        stack.push(j);
-                    }
+            for j in square(i, w, h, 1) {
+                if mask[j] && piece[j] == NO_PIECE {
+                    piece[j] = n;
+                    stack.push(j);
                 }
             }
         }
@@ -224,14 +224,9 @@ fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], all_around: bool) -> 
             continue;
         }
         near.clear();
-        let (x, y) = ((i % w) as i64, (i / w) as i64);
-        for (dx, dy) in (-2..=2).flat_map(|dy| (-2..=2).map(move |dx| (dx, dy))) {
-            let (nx, ny) = (x + dx, y + dy);
-            if nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h {
-                let k = piece[ny as usize * w + nx as usize];
-                if k != NO_PIECE && !near.contains(&k) {
-                    near.push(k);
-                }
+        for k in square(i, w, h, 2).map(|j| piece[j]) {
+            if k != NO_PIECE && !near.contains(&k) {
+                near.push(k);
             }
         }
         for &k in &near {
