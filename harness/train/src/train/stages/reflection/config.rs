@@ -100,7 +100,7 @@ pub struct ReflectionConfig {
     /// house's windows): a view counts for or against a rim point only
     /// where it sees it, and a plane must be ringed by the points on it.
     /// Off by default: it helps a house (18.4° → 8.6°) and harms a cabin
-    /// whose windows meet at its corners (21.3° → 25.4°;
+    /// whose windows meet at its corners (21.1° → 25.4°;
     /// perf/journal/2026-12-04-fifty-ninth.md).
     pub seed_rim_all_around: bool,
     /// Initial opacity of a seed.
