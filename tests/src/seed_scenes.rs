@@ -212,3 +212,51 @@ pub fn window_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f3
         (glass as u8 as f32, ((if glass { t1 } else { t0 }) / len) as f32)
     })
 }
+
+/// A cabin (x in [-0.5, 0.5], y in [-0.4, 0.4], z in [0, 1]) whose four
+/// side faces are glass between heights 0.4 and 0.8 (a vehicle's windows
+/// meeting edge to edge at its corners), seen from `count` cameras all
+/// around it: most views see two windows as one piece of mask that turns a
+/// corner. Masks of the glass, depths of the first opaque surface (through
+/// the glass: the cabin's far side).
+pub fn cabin_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let eye = |i: usize| {
+        let a = (i as f64 + 0.3) * std::f64::consts::TAU / count as f64;
+        [3.0 * a.cos(), 3.0 * a.sin(), if i.is_multiple_of(2) { 1.4 } else { 2.0 }]
+    };
+    views_from(count, eye, [0.0, 0.0, 0.5], 0.8, |e, d, len| {
+        let (lo, hi) = ([-0.5, -0.4, 0.0], [0.5, 0.4, 1.0]);
+        let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
+        for k in 0..3 {
+            let (a, b) = ((lo[k] - e[k]) / d[k], (hi[k] - e[k]) / d[k]);
+            let (near, far) = (a.min(b), a.max(b));
+            if near > t0 {
+                (t0, axis) = (near, k);
+            }
+            t1 = t1.min(far);
+        }
+        if !(t0 <= t1 && t0 > 0.0) {
+            return (0.0, 0.0);
+        }
+        let glass = axis < 2 && (0.4..=0.8).contains(&(e[2] + t0 * d[2]));
+        (glass as u8 as f32, ((if glass { t1 } else { t0 }) / len) as f32)
+    })
+}
+
+/// The distance of `x` from the cabin's glass band ([`cabin_views`]) and
+/// the normal of its nearest window.
+pub fn cabin_glass(x: V3) -> (f64, V3) {
+    let faces: [(usize, f64); 4] = [(0, 0.5), (0, -0.5), (1, 0.4), (1, -0.4)];
+    let mut best = (f64::INFINITY, [0.0; 3]);
+    for (k, at) in faces {
+        let (lo, hi) = ([-0.5, -0.4, 0.4], [0.5, 0.4, 0.8]);
+        let q: V3 = std::array::from_fn(|j| if j == k { at } else { x[j].clamp(lo[j], hi[j]) });
+        let dist = dot(sub(x, q), sub(x, q)).sqrt();
+        if dist < best.0 {
+            let mut n = [0.0; 3];
+            n[k] = 1.0;
+            best = (dist, n);
+        }
+    }
+    best
+}

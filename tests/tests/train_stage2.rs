@@ -205,6 +205,9 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     // The rim (reflection.seed_rim) is recorded; a glass ball has none.
     assert_eq!(dm["seed_rim"], serde_json::json!([0, 0]), "{dm}");
     assert!(d.get("seed_rim").is_none(), "the residual's seeds have no rim: {d}");
+    // So are the planes (reflection.seed_planes); a ball's pieces are not flat.
+    assert_eq!(dm["seed_planes"], serde_json::json!([0, 0]), "{dm}");
+    assert!(d.get("seed_planes").is_none(), "the residual's seeds take no planes: {d}");
     let (dd, default_ply) = seeding("1e-6");
     eprintln!(
         "mean distance of the seeds to the glass: {:.3} from the glass masks ({} seeds), {:.3} from the residual ({} seeds)",

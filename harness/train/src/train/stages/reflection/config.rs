@@ -103,6 +103,10 @@ pub struct ReflectionConfig {
     /// whose windows meet at its corners (21.1° → 25.4°;
     /// perf/journal/2026-12-04-fifty-ninth.md).
     pub seed_rim_all_around: bool,
+    /// With masks: where a view's hull points over one piece of its mask
+    /// lie on a plane (or two meeting at a corner), move that piece's seeds
+    /// onto it with its normal (flat windows; seed/planes.rs).
+    pub seed_planes: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
     /// High-frequency loss (method-notes §3.6): weight of the mean error of
@@ -176,6 +180,7 @@ impl Default for ReflectionConfig {
             dataset_masks: true,
             seed_rim: true,
             seed_rim_all_around: false,
+            seed_planes: true,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,

@@ -203,6 +203,7 @@ pub fn begin(
         env_proxy: None,
         seed_mask_coverage: None,
         seed_rim: None,
+        seed_planes: None,
         seed_mask_source: None,
         seed_mask_views: None,
         seed_significance: None,
@@ -322,12 +323,17 @@ fn seed_model(
         significance: rc.seed_significance as f64,
         ..SeedParams::default()
     };
-    let p = if masks.is_some() { SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, rim_all_around: rc.seed_rim_all_around, relax: &MASK_SIGNIFICANCE, ..p } } else { p };
+    let p = if masks.is_some() {
+        SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, rim_all_around: rc.seed_rim_all_around, planes: rc.seed_planes, relax: &MASK_SIGNIFICANCE, ..p }
+    } else {
+        p
+    };
     let seeds = if hull {
         let h = hull_seeding(&views, &p);
         d.seed_significance = h.significance_relaxed;
         d.significance_dropped = h.significance_dropped;
         d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
+        d.seed_planes = p.planes.then_some([h.plane_pieces as u32, h.plane_seeds as u32]);
         h.seeds
     } else {
         Vec::new()

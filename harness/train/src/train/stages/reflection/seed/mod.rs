@@ -51,11 +51,15 @@
 //! side: its hull is a wedge in front of it. With given glass masks
 //! ([`SeedParams::rim`]), a view whose glass is ringed by a frame or wall
 //! that Stage I reconstructed seeds its rays on the plane of that rim
-//! instead (the `rim` module).
+//! instead (the `rim` module). And where a view's hull points over one
+//! piece of its mask lie on a plane, or on two meeting at a corner (a
+//! cabin's windows), those seeds move onto it and take its normal
+//! ([`SeedParams::planes`], the `planes` module).
 
 mod chance;
 mod geometry;
 mod normals;
+mod planes;
 mod rim;
 
 pub use chance::min_hits;
@@ -115,6 +119,9 @@ pub struct SeedParams {
     /// plane must be ringed by the points on it
     /// (`reflection.seed_rim_all_around`; rim::membranes).
     pub rim_all_around: bool,
+    /// With given glass masks: each view's mask pieces whose hull points lie
+    /// on a plane, or two at a corner, seeded on it (the `planes` module).
+    pub planes: bool,
     /// Threads for the march and the normals (0: every core the process
     /// may use). The seeds are the same, bit for bit, at any count: the
     /// rays and seeds are split into contiguous runs whose results are
@@ -207,6 +214,7 @@ impl Default for SeedParams {
             relax: &[],
             rim: false,
             rim_all_around: false,
+            planes: false,
             threads: 0,
         }
     }
@@ -326,6 +334,10 @@ pub struct HullSeeding {
     pub rim_views: usize,
     /// Seeds placed on a membrane.
     pub rim_seeds: usize,
+    /// Mask pieces whose hull points gave a plane ([`SeedParams::planes`]).
+    pub plane_pieces: usize,
+    /// Seeds moved onto those planes.
+    pub plane_seeds: usize,
     /// No hull point beat chance, so the seeds are the hull's without the
     /// significance test.
     pub significance_dropped: bool,
@@ -362,9 +374,13 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
         }
     }
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
+    let fixed = |f: &Found| if dropped { 0 } else { f.rim_normals.iter().filter(|n| n.is_some()).count() };
+    let rim_seeds = fixed(&found);
+    let plane_pieces = if p.planes && !dropped { planes::snap(&mut found, &prepared) } else { 0 };
+    let plane_seeds = fixed(&found) - rim_seeds;
     let (chosen, fixed, normal) = if dropped { (&found.agreeing, &[][..], p.normal.without_outline()) } else { (&found.significant, &found.rim_normals[..], p.normal) };
-    let rim_seeds = fixed.iter().filter(|n| n.is_some()).count();
-    HullSeeding { seeds: surfels(chosen, fixed, &prepared, normal, p.threads), rim_views: found.rim_views, rim_seeds, significance_dropped: dropped, significance_relaxed: relaxed }
+    let seeds = surfels(chosen, fixed, &prepared, normal, p.threads);
+    HullSeeding { seeds, rim_views: found.rim_views, rim_seeds, plane_pieces, plane_seeds, significance_dropped: dropped, significance_relaxed: relaxed }
 }
 
 /// Each view's membranes where [`SeedParams::rim`] asks for them.
@@ -465,7 +481,7 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         }
         if let (Some(x), Some(m)) = (on_rim, membrane) {
             found.significant.push((x, vi));
-            found.rim_normals.push(Some(m.normal(v)));
+            found.rim_normals.push(Some(m.normal(v, i)));
         }
         if let Some((_, x)) = best {
             found.agreeing.push((x, vi));

@@ -54,31 +54,83 @@ pub const RIM_VISIBLE: f64 = 0.05;
 /// With `all_around`: how far from a piece's fitted plane (a share of the
 /// depth) its rim points may lie and count as on it.
 pub const RIM_PLANAR: f64 = 0.05;
+/// The share of a piece's rim points a corner's two planes
+/// ([`Membrane`]) must hold, each within [`RIM_PLANAR`].
+pub const RIM_CORNER: f64 = 0.8;
 /// The fewest rim points a membrane is fitted to.
 const RIM_MIN_POINTS: usize = 12;
 
 /// A view's membrane: 1 / z = a x + b y + c at normalised image
-/// coordinates x = (u - cx) / fx, y = (v - cy) / fy.
+/// coordinates x = (u - cx) / fx, y = (v - cy) / fy; or, where a mask
+/// piece turns a corner (two windows of a cabin meeting edge to edge), two
+/// such planes, the surface at each pixel the farther of the two (a convex
+/// corner) or the nearer (a concave one).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Membrane {
+    pub(super) coef: [f64; 3],
+    pub(super) corner: Option<Corner>,
+}
+
+/// A membrane's second plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Corner {
     coef: [f64; 3],
+    /// The surface is the farther plane (a corner seen from outside).
+    convex: bool,
+}
+
+/// 1 / z of plane `c` at normalised image point (x, y).
+fn inv_at(c: &[f64; 3], x: f64, y: f64) -> f64 {
+    c[0] * x + c[1] * y + c[2]
 }
 
 impl Membrane {
+    /// The plane that holds normalised image point (x, y): the first, or at
+    /// a corner the farther (convex) or nearer of the two there.
+    fn plane(&self, x: f64, y: f64) -> &[f64; 3] {
+        match &self.corner {
+            Some(k) if (inv_at(&k.coef, x, y) < inv_at(&self.coef, x, y)) == k.convex => &k.coef,
+            _ => &self.coef,
+        }
+    }
+
+    /// Normalised image coordinates of pixel `i` of `v`'s image.
+    fn xy(v: &Prepared, i: usize) -> (f64, f64) {
+        let w = v.cam.width as usize;
+        (((i % w) as f64 - v.cam.cx as f64) / v.cam.fx as f64, ((i / w) as f64 - v.cam.cy as f64) / v.cam.fy as f64)
+    }
+
     /// The membrane's view depth at pixel `i` of `cam`'s image, if it is in
     /// front of the camera.
     pub(super) fn depth(&self, v: &Prepared, i: usize) -> Option<f64> {
-        let w = v.cam.width as usize;
-        let (x, y) = (((i % w) as f64 - v.cam.cx as f64) / v.cam.fx as f64, ((i / w) as f64 - v.cam.cy as f64) / v.cam.fy as f64);
-        let inv = self.coef[0] * x + self.coef[1] * y + self.coef[2];
+        let (x, y) = Self::xy(v, i);
+        self.depth_at(x, y)
+    }
+
+    /// The membrane's view depth at normalised image point (x, y), if it is
+    /// in front of the camera.
+    pub(super) fn depth_at(&self, x: f64, y: f64) -> Option<f64> {
+        let inv = inv_at(self.plane(x, y), x, y);
         (inv > 1e-9 && inv.is_finite()).then(|| 1.0 / inv)
     }
 
-    /// The membrane's unit normal in world space: in view space the plane
-    /// is a X + b Y + c Z = 1.
-    pub(super) fn normal(&self, v: &Prepared) -> V3 {
+    /// The membrane's unit normal in world space at pixel `i`.
+    pub(super) fn normal(&self, v: &Prepared, i: usize) -> V3 {
+        let (x, y) = Self::xy(v, i);
+        self.normal_at(v, x, y)
+    }
+
+    /// The membrane's unit normal in world space at normalised image point
+    /// (x, y): in view space the plane there is a X + b Y + c Z = 1.
+    pub(super) fn normal_at(&self, v: &Prepared, x: f64, y: f64) -> V3 {
+        let c = self.plane(x, y);
         let m = &v.cam.world_to_view;
-        normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * self.coef[r]).sum()))
+        normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * c[r]).sum()))
+    }
+
+    /// How far `p` ([x, y, 1 / z]) lies from the membrane, as a share of its depth.
+    pub(super) fn off(&self, p: &[f64; 3]) -> f64 {
+        (1.0 - inv_at(self.plane(p[0], p[1]), p[0], p[1]) / p[2]).abs()
     }
 }
 
@@ -154,7 +206,7 @@ pub(super) struct ViewMembranes {
 }
 
 /// A pixel off the mask.
-const NO_PIECE: u32 = u32::MAX;
+pub(super) const NO_PIECE: u32 = u32::MAX;
 
 impl ViewMembranes {
     /// The membrane of the mask piece pixel `i` lies in, if it has one.
@@ -180,7 +232,7 @@ pub(super) fn membranes(views: &[Prepared], all_around: bool) -> Vec<ViewMembran
 
 /// `mask`'s 8-connected pieces, numbered in pixel order: each pixel's piece
 /// ([`NO_PIECE`] off the mask) and their count.
-fn pieces(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, u32) {
+pub(super) fn pieces(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, u32) {
     let mut piece = vec![NO_PIECE; mask.len()];
     let mut n = 0u32;
     let mut stack = Vec::new();
@@ -258,13 +310,77 @@ fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], planar: bool) -> Option<M
         return None;
     }
     let plane: Vec<[f64; 3]> = pts.iter().map(|p| p.1).collect();
-    let coef = fit_plane(&plane)?;
-    // The points on the plane (within RIM_PLANAR of their depth) must ring
-    // the piece too: a piece that turns a corner (two windows of a cabin
-    // seen at once) has rim points on two planes, and one fits half.
-    let on = |p: &[f64; 3]| (1.0 - (coef[0] * p[0] + coef[1] * p[1] + coef[2]) / p[2]).abs() <= RIM_PLANAR;
-    (!planar || rings(&mut pts.iter().filter(|p| on(&p.1)).map(|p| p.0))).then_some(Membrane { coef })
+    let one = Membrane { coef: fit_plane(&plane)?, corner: None };
+    let m = corner(&plane, one, RIM_PLANAR).unwrap_or(one);
+    // The points on the membrane (within RIM_PLANAR of their depth) must
+    // ring the piece too: where a piece's rim lies on planes the fit does
+    // not explain, it fits none of them.
+    (!planar || rings(&mut pts.iter().filter(|p| m.off(&p.1) <= RIM_PLANAR).map(|p| p.0))).then_some(m)
 }
+
+/// Two planes for rim points ([x, y, 1 / z]) that `one` plane leaves off
+/// (a piece of mask across two windows that meet at a corner: the rim
+/// points of each lie on its own plane): a second plane fitted to the
+/// points off the first, both refitted to the points nearer each, and the
+/// corner convex or concave as more points lie on it (within `tol` of their
+/// depth). None unless [`RIM_CORNER`] of the points lie on it and at most
+/// half as many as on `one` lie off it.
+pub(super) fn corner(pts: &[[f64; 3]], one: Membrane, tol: f64) -> Option<Membrane> {
+    let within = |m: &Membrane| pts.iter().filter(|p| m.off(p) <= tol).count();
+    let on_one = within(&one);
+    if pts.len() - on_one < RIM_MIN_POINTS {
+        return None;
+    }
+    let off = |c: &[f64; 3], p: &[f64; 3]| (1.0 - inv_at(c, p[0], p[1]) / p[2]).abs();
+    let mut a = consensus(pts, tol)?;
+    let rest: Vec<[f64; 3]> = pts.iter().filter(|p| off(&a, p) > tol).copied().collect();
+    let mut b = consensus(&rest, tol)?;
+    for _ in 0..3 {
+        let (sa, sb): (Vec<[f64; 3]>, Vec<[f64; 3]>) = pts.iter().filter(|p| off(&a, p).min(off(&b, p)) <= tol).partition(|p| off(&a, p) <= off(&b, p));
+        if sa.len() < RIM_MIN_POINTS || sb.len() < RIM_MIN_POINTS {
+            return None;
+        }
+        (a, b) = (fit_plane(&sa)?, fit_plane(&sb)?);
+    }
+    let two = [false, true].map(|convex| Membrane { coef: a, corner: Some(Corner { coef: b, convex }) });
+    let (n, m) = two.iter().map(|m| (within(m), *m)).max_by_key(|&(n, _)| n)?;
+    (n as f64 >= RIM_CORNER * pts.len() as f64 && 2 * (pts.len() - n) <= pts.len() - on_one).then_some(m)
+}
+
+/// The plane through three of `pts` ([x, y, 1 / z]) that the most of them
+/// lie on within `tol` of their depth (of [`CONSENSUS_TRIES`] triples
+/// drawn by a fixed sequence: the same every run), refitted to those.
+/// None with fewer than [`RIM_MIN_POINTS`] on it.
+pub(super) fn consensus(pts: &[[f64; 3]], tol: f64) -> Option<[f64; 3]> {
+    if pts.len() < RIM_MIN_POINTS {
+        return None;
+    }
+    let on = |c: &[f64; 3], p: &&[f64; 3]| (1.0 - inv_at(c, p[0], p[1]) / p[2]).abs() <= tol;
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % pts.len() as u64) as usize
+    };
+    let mut best: Option<(usize, [f64; 3])> = None;
+    for _ in 0..CONSENSUS_TRIES {
+        let t = [next(), next(), next()].map(|k| pts[k]);
+        let Some(c) = solve3(t.map(|p| [p[0], p[1], 1.0]), t.map(|p| p[2])) else { continue };
+        let n = pts.iter().filter(|p| on(&c, p)).count();
+        if best.is_none_or(|(m, _)| n > m) {
+            best = Some((n, c));
+        }
+    }
+    let (n, c) = best?;
+    if n < RIM_MIN_POINTS {
+        return None;
+    }
+    fit_plane(&pts.iter().filter(|p| on(&c, p)).copied().collect::<Vec<_>>())
+}
+
+/// Triples [`consensus`] tries.
+const CONSENSUS_TRIES: usize = 256;
 
 /// 1 / z = a x + b y + c through `pts` ([x, y, 1 / z]) by iteratively
 /// reweighted least squares (rows weighted 1 within twice the residuals'
