@@ -105,7 +105,8 @@ pub struct ReflectionConfig {
     pub seed_rim_all_around: bool,
     /// With masks: where a view's hull points over one piece of its mask
     /// lie on a plane (or two meeting at a corner), move that piece's seeds
-    /// onto it with its normal (flat windows; seed/planes.rs).
+    /// onto it with its normal (flat windows; seed/planes.rs;
+    /// perf/journal/2026-12-05-sixtieth.md).
     pub seed_planes: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
