@@ -54,8 +54,8 @@ pub const RIM_VISIBLE: f64 = 0.05;
 /// With `all_around`: how far from a piece's fitted plane (a share of the
 /// depth) its rim points may lie and count as on it.
 pub const RIM_PLANAR: f64 = 0.05;
-/// The share of a piece's rim points a corner's two planes
-/// ([`Membrane`]) must hold, each within [`RIM_PLANAR`].
+/// The share of a piece's points a corner's two planes ([`Membrane`])
+/// must hold, within the fit's tolerance ([`RIM_PLANAR`] for the rim).
 pub const RIM_CORNER: f64 = 0.8;
 /// The fewest rim points a membrane is fitted to.
 const RIM_MIN_POINTS: usize = 12;
@@ -318,10 +318,10 @@ fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], planar: bool) -> Option<M
     (!planar || rings(&mut pts.iter().filter(|p| m.off(&p.1) <= RIM_PLANAR).map(|p| p.0))).then_some(m)
 }
 
-/// Two planes for rim points ([x, y, 1 / z]) that `one` plane leaves off
-/// (a piece of mask across two windows that meet at a corner: the rim
-/// points of each lie on its own plane): a second plane fitted to the
-/// points off the first, both refitted to the points nearer each, and the
+/// Two planes for points ([x, y, 1 / z]) that `one` plane leaves off (a
+/// piece of mask across two windows that meet at a corner: the points of
+/// each lie on its own plane): the [`consensus`] plane of all of them, then
+/// of those it leaves, both refitted to the points nearer each, and the
 /// corner convex or concave as more points lie on it (within `tol` of their
 /// depth). None unless [`RIM_CORNER`] of the points lie on it and at most
 /// half as many as on `one` lie off it.
