@@ -182,6 +182,22 @@ pub fn stepped_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Ve
     )
 }
 
+/// The ray e + t d through the box [lo, hi]: its entry and exit distances
+/// and the axis of the face it enters by; None where it misses the box or
+/// starts inside it.
+fn slabs(e: V3, d: V3, lo: V3, hi: V3) -> Option<(f64, f64, usize)> {
+    let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
+    for k in 0..3 {
+        let (a, b) = ((lo[k] - e[k]) / d[k], (hi[k] - e[k]) / d[k]);
+        let (near, far) = (a.min(b), a.max(b));
+        if near > t0 {
+            (t0, axis) = (near, k);
+        }
+        t1 = t1.min(far);
+    }
+    (t0 <= t1 && t0 > 0.0).then_some((t0, t1, axis))
+}
+
 /// A closed box (x, y in [-0.5, 0.5], z in [0, 1]) with a window in its
 /// face x = 0.5 (y in [-0.3, 0.3], z in [0.3, 0.7]), seen from `count`
 /// cameras all around it: the window and its rim are hidden from the
@@ -193,20 +209,7 @@ pub fn window_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f3
         [3.0 * a.cos(), 3.0 * a.sin(), if i.is_multiple_of(2) { 0.6 } else { 1.5 }]
     };
     views_from(count, eye, [0.0, 0.0, 0.5], 0.8, |e, d, len| {
-        // The box's slabs: entry and exit distances, and the entry axis.
-        let (lo, hi) = ([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0]);
-        let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
-        for k in 0..3 {
-            let (a, b) = ((lo[k] - e[k]) / d[k], (hi[k] - e[k]) / d[k]);
-            let (near, far) = (a.min(b), a.max(b));
-            if near > t0 {
-                (t0, axis) = (near, k);
-            }
-            t1 = t1.min(far);
-        }
-        if !(t0 <= t1 && t0 > 0.0) {
-            return (0.0, 0.0);
-        }
+        let Some((t0, t1, axis)) = slabs(e, d, [-0.5, -0.5, 0.0], [0.5, 0.5, 1.0]) else { return (0.0, 0.0) };
         let p = [0, 1, 2].map(|k| e[k] + t0 * d[k]);
         let glass = axis == 0 && p[0] > 0.0 && p[1].abs() <= 0.3 && (0.3..=0.7).contains(&p[2]);
         (glass as u8 as f32, ((if glass { t1 } else { t0 }) / len) as f32)
@@ -225,19 +228,7 @@ pub fn cabin_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) 
         [3.0 * a.cos(), 3.0 * a.sin(), if i.is_multiple_of(2) { 1.4 } else { 2.0 }]
     };
     views_from(count, eye, [0.0, 0.0, 0.5], 0.8, |e, d, len| {
-        let (lo, hi) = ([-0.5, -0.4, 0.0], [0.5, 0.4, 1.0]);
-        let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
-        for k in 0..3 {
-            let (a, b) = ((lo[k] - e[k]) / d[k], (hi[k] - e[k]) / d[k]);
-            let (near, far) = (a.min(b), a.max(b));
-            if near > t0 {
-                (t0, axis) = (near, k);
-            }
-            t1 = t1.min(far);
-        }
-        if !(t0 <= t1 && t0 > 0.0) {
-            return (0.0, 0.0);
-        }
+        let Some((t0, t1, axis)) = slabs(e, d, [-0.5, -0.4, 0.0], [0.5, 0.4, 1.0]) else { return (0.0, 0.0) };
         let glass = axis < 2 && (0.4..=0.8).contains(&(e[2] + t0 * d[2]));
         (glass as u8 as f32, ((if glass { t1 } else { t0 }) / len) as f32)
     })
