@@ -4,7 +4,7 @@
 //! with the f64 vector helpers they use.
 
 use crate::Rng;
-use tgs::train::stages::reflection::seed::Seed;
+use tgs::train::stages::reflection::seed::{Seed, SeedView};
 use tgs_pipelines::Camera;
 
 pub type V3 = [f64; 3];
@@ -250,4 +250,10 @@ pub fn cabin_glass(x: V3) -> (f64, V3) {
         }
     }
     best
+}
+
+/// The seeding's views from per-view cameras, residuals (or masks) and
+/// Stage I depths, as the scenes above return them.
+pub fn seed_views<'a>(cams: &[Camera], res: &'a [Vec<f32>], depth: &'a [Vec<f32>]) -> Vec<SeedView<'a>> {
+    cams.iter().zip(res.iter().zip(depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect()
 }

@@ -60,7 +60,7 @@ fn jacobi_eigenpairs_of_symmetric_matrices() {
 #[test]
 fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
     let (cams, res, depth) = views(0.05, true);
-    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &res, &depth);
     // On this ideal hull the seeds' plane is the sphere's tangent plane.
     let p = SeedParams { max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
     let seeds = residual_hull_seeds(&sv, &p);
@@ -163,7 +163,7 @@ fn residual_hull_seeds_lie_on_the_glass_with_radial_normals() {
 #[test]
 fn no_residual_no_seeds() {
     let (cams, res, depth) = views(0.05, false);
-    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &res, &depth);
     // Only scattered noise: blurred below the threshold everywhere.
     assert!(residual_hull_seeds(&sv, &SeedParams::default()).is_empty());
     // Nothing at all, one view, empty and 1-pixel images: no seeds, no panic.
@@ -199,7 +199,7 @@ fn residual_over_every_view_seeds_nothing() {
     assert!(residual_hull_seeds(&sv, &p).is_empty());
     // The silhouette case still seeds (its rays cross carved air first).
     let (cams, res, depth) = views(0.0, true);
-    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &res, &depth);
     assert!(residual_hull_seeds(&sv, &p).len() > 500);
 }
 
@@ -251,7 +251,7 @@ fn min_hits_is_the_binomial_tail_quantile() {
 #[test]
 fn seeds_on_the_glass_through_dense_residual_noise() {
     let (cams, res, depth) = ring(48, 0.3, true);
-    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &res, &depth);
     let near = |set: &[Seed]| {
         set.iter()
             .filter(|s| {
@@ -338,7 +338,7 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
 #[test]
 fn seeds_are_the_same_at_any_thread_count() {
     let (cams, res, depth) = ring(24, 0.1, true);
-    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &res, &depth);
     for normal in [SeedNormal::View, SeedNormal::Plane, SeedNormal::Gradient, SeedNormal::Halfway] {
         let at = |threads: usize| hull_seeding(&sv, &SeedParams { max_rays: 1500, normal, threads, ..SeedParams::default() });
         let one = at(1);

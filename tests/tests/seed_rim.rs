@@ -2,7 +2,7 @@
 //! on the CPU: a window seen from one side, two windows in a stepped
 //! front, a window in a box seen all around, and the rim's plane fit.
 
-use tgs::train::stages::reflection::seed::{fit_plane, hull_seeding, HullSeeding, SeedNormal, SeedParams, SeedView};
+use tgs::train::stages::reflection::seed::{fit_plane, hull_seeding, HullSeeding, SeedNormal, SeedParams};
 use tgs_tests::seed_scenes::*;
 use tgs_tests::{seed, Rng};
 
@@ -15,7 +15,7 @@ use tgs_tests::{seed, Rng};
 #[test]
 fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
     let (cams, masks, depth) = window_views(24);
-    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &masks, &depth);
     // As Stage II takes given masks: 0/1, no blur, threshold 0.5.
     let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
     let hull = hull_seeding(&sv, &base);
@@ -67,7 +67,7 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
                 .collect()
         })
         .collect();
-    let sv: Vec<SeedView> = cams.iter().zip(grown.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &grown, &depth);
     let hull = hull_seeding(&sv, &base);
     let rim = hull_seeding(&sv, &SeedParams { rim: true, ..base });
     let front = |h: &HullSeeding| h.seeds.iter().filter(|s| s.position[0] > 0.1).count();
@@ -85,7 +85,7 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
     assert!(front(&rim) == 0 && off(&rim) < 0.01, "{} seeds in the wedge, median {} off", front(&rim), off(&rim));
     // The glass sphere (ringed by whatever lies behind it): no plane.
     let (cams, res, depth) = views(0.0, true);
-    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &res, &depth);
     let p = SeedParams { max_rays: 1500, normal: SeedNormal::Plane, ..SeedParams::default() };
     let with = hull_seeding(&sv, &SeedParams { rim: true, ..p });
     assert_eq!((with.rim_views, with.rim_seeds), (0, 0));
@@ -99,7 +99,7 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
 #[test]
 fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
     let (cams, masks, depth) = stepped_window_views(24);
-    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &masks, &depth);
     let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, ..SeedParams::default() };
     let rim = hull_seeding(&sv, &p);
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
@@ -127,7 +127,7 @@ fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
 #[test]
 fn a_window_in_a_box_seen_all_around_is_seeded_on_its_rim_plane() {
     let (cams, masks, depth) = window_box_views(24);
-    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &masks, &depth);
     let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, rim_all_around: true, ..SeedParams::default() };
     let rim = hull_seeding(&sv, &p);
     // Counting every view that the point projects into, the views behind
@@ -184,7 +184,7 @@ fn rim_plane_fit_recovers_the_plane_through_outliers() {
 #[test]
 fn windows_meeting_at_a_corner_are_seeded_on_their_planes() {
     let (cams, masks, depth) = cabin_views(24);
-    let sv: Vec<SeedView> = cams.iter().zip(masks.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &masks, &depth);
     let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
     let hull = hull_seeding(&sv, &base);
     let planes = hull_seeding(&sv, &SeedParams { planes: true, ..base });
@@ -217,7 +217,7 @@ fn windows_meeting_at_a_corner_are_seeded_on_their_planes() {
     assert_eq!(hull_seeding(&sv, &SeedParams { planes: true, threads: 1, ..base }), planes, "the same at one thread");
     // The glass sphere: no piece is flat.
     let (cams, res, depth) = views(0.0, true);
-    let sv: Vec<SeedView> = cams.iter().zip(res.iter().zip(&depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect();
+    let sv = seed_views(&cams, &res, &depth);
     let p = SeedParams { threshold: 0.01, blur: 0, max_rays: 1500, normal: SeedNormal::Plane, ..SeedParams::default() };
     let with = hull_seeding(&sv, &SeedParams { planes: true, ..p });
     assert_eq!((with.plane_pieces, with.plane_seeds), (0, 0));

@@ -44,10 +44,21 @@ pub(super) fn image_point(cam: &Camera, x: V3) -> Option<(f64, f64, f64)> {
 /// The world point at pixel `i` (row-major) of `cam`, view depth `z`:
 /// R^T (p_view - t), in f64.
 pub(crate) fn unproject_pixel(cam: &Camera, i: usize, z: f64) -> V3 {
-    let (u, v) = ((i % cam.width as usize) as f64, (i / cam.width as usize) as f64);
-    let pv = [(u - cam.cx as f64) / cam.fx as f64 * z, (v - cam.cy as f64) / cam.fy as f64 * z, z];
+    let (x, y) = image_xy(cam, (i % cam.width as usize) as f64, (i / cam.width as usize) as f64);
+    unproject_xy(cam, x, y, z)
+}
+
+/// The normalised image coordinates ((u - cx) / fx, (v - cy) / fy) of
+/// pixel position (u, v) in `cam`.
+pub(super) fn image_xy(cam: &Camera, u: f64, v: f64) -> (f64, f64) {
+    ((u - cam.cx as f64) / cam.fx as f64, (v - cam.cy as f64) / cam.fy as f64)
+}
+
+/// The world point at normalised image point (x, y) of `cam`, view depth
+/// `z`: R^T (p_view - t), in f64.
+pub(super) fn unproject_xy(cam: &Camera, x: f64, y: f64, z: f64) -> V3 {
     let m = &cam.world_to_view;
-    let d = [pv[0] - m[0][3] as f64, pv[1] - m[1][3] as f64, pv[2] - m[2][3] as f64];
+    let d = [x * z - m[0][3] as f64, y * z - m[1][3] as f64, z - m[2][3] as f64];
     [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
 }
 

@@ -66,7 +66,7 @@ pub use chance::min_hits;
 
 pub use geometry::pixel_of;
 pub(crate) use geometry::unproject_pixel;
-use geometry::{box_blur, image_point, in_parallel, normalize, V3};
+use geometry::{box_blur, image_point, image_xy, in_parallel, normalize, unproject_xy, V3};
 use normals::{gradient_pixels, surfels};
 pub use normals::{jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 pub use rim::fit_plane;

@@ -9,7 +9,7 @@
 //! a curved piece (a sphere's silhouette) fits no plane and keeps its seeds.
 
 use super::rim::{consensus, corner, pieces, Membrane, NO_PIECE};
-use super::{image_point, pixel_of, Found, Prepared, V3};
+use super::{image_point, image_xy, pixel_of, unproject_xy, Found, Prepared};
 
 /// How far from a piece's plane (a share of the depth) its hull points may
 /// lie and count as on it.
@@ -35,7 +35,8 @@ pub(super) fn snap(found: &mut Found, views: &[Prepared]) -> usize {
             }
             let (Some((i, _)), Some((u, vv, z))) = (pixel_of(&v.cam, x), image_point(&v.cam, x)) else { continue };
             if piece[i] != NO_PIECE {
-                groups[piece[i] as usize].push((j, [(u - v.cam.cx as f64) / v.cam.fx as f64, (vv - v.cam.cy as f64) / v.cam.fy as f64, 1.0 / z]));
+                let (x, y) = image_xy(&v.cam, u, vv);
+                groups[piece[i] as usize].push((j, [x, y, 1.0 / z]));
             }
         }
         for g in groups.iter().filter(|g| g.len() >= PLANE_MIN_POINTS) {
@@ -46,7 +47,7 @@ pub(super) fn snap(found: &mut Found, views: &[Prepared]) -> usize {
             // (`windshield`) others stay where the hull put them.
             for &(j, [x, y, _]) in g.iter().filter(|p| m.off(&p.1) <= PLANE_TOL) {
                 if let Some(z) = m.depth_at(x, y) {
-                    found.significant[j].0 = unproject_at(v, x, y, z);
+                    found.significant[j].0 = unproject_xy(&v.cam, x, y, z);
                     found.rim_normals[j] = Some(m.normal_at(v, x, y));
                 }
             }
@@ -62,11 +63,4 @@ fn piece_plane(pts: &[[f64; 3]]) -> Option<Membrane> {
     let m = corner(pts, one, PLANE_TOL).unwrap_or(one);
     let on = pts.iter().filter(|p| m.off(p) <= PLANE_TOL).count();
     (on as f64 >= PLANE_SHARE * pts.len() as f64).then_some(m)
-}
-
-/// The world point at normalised image point (x, y) of `v`, view depth `z`.
-fn unproject_at(v: &Prepared, x: f64, y: f64, z: f64) -> V3 {
-    let m = &v.cam.world_to_view;
-    let d = [x * z - m[0][3] as f64, y * z - m[1][3] as f64, z - m[2][3] as f64];
-    [0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * d[r]).sum())
 }

@@ -30,7 +30,7 @@
 //! silhouettes) and the seeds are unchanged, and `pane`'s (its foot on the
 //! floor) ring at most 4 of 60 views, moving it by 0.1 degrees.
 
-use super::{image_point, normalize, pixel_of, Prepared, V3};
+use super::{image_point, image_xy, normalize, pixel_of, Prepared, V3};
 use glam::DVec3;
 
 /// The share of the views holding a rim point in their image that must see
@@ -84,6 +84,11 @@ fn inv_at(c: &[f64; 3], x: f64, y: f64) -> f64 {
     c[0] * x + c[1] * y + c[2]
 }
 
+/// How far `p` ([x, y, 1 / z]) lies from plane `c`, as a share of its depth.
+fn off_plane(c: &[f64; 3], p: &[f64; 3]) -> f64 {
+    (1.0 - inv_at(c, p[0], p[1]) / p[2]).abs()
+}
+
 impl Membrane {
     /// The plane that holds normalised image point (x, y): the first, or at
     /// a corner the farther (convex) or nearer of the two there.
@@ -97,7 +102,7 @@ impl Membrane {
     /// Normalised image coordinates of pixel `i` of `v`'s image.
     fn xy(v: &Prepared, i: usize) -> (f64, f64) {
         let w = v.cam.width as usize;
-        (((i % w) as f64 - v.cam.cx as f64) / v.cam.fx as f64, ((i / w) as f64 - v.cam.cy as f64) / v.cam.fy as f64)
+        image_xy(&v.cam, (i % w) as f64, (i / w) as f64)
     }
 
     /// The membrane's view depth at pixel `i` of `cam`'s image, if it is in
@@ -130,7 +135,7 @@ impl Membrane {
 
     /// How far `p` ([x, y, 1 / z]) lies from the membrane, as a share of its depth.
     pub(super) fn off(&self, p: &[f64; 3]) -> f64 {
-        (1.0 - inv_at(self.plane(p[0], p[1]), p[0], p[1]) / p[2]).abs()
+        off_plane(self.plane(p[0], p[1]), p)
     }
 }
 
@@ -282,7 +287,8 @@ fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], all_around: bool) -> 
             }
         }
         for &k in &near {
-            pts[k as usize].push(([u, vv], [(u - v.cam.cx as f64) / v.cam.fx as f64, (vv - v.cam.cy as f64) / v.cam.fy as f64, 1.0 / z]));
+            let (x, y) = image_xy(&v.cam, u, vv);
+            pts[k as usize].push(([u, vv], [x, y, 1.0 / z]));
         }
     }
     let planes: Vec<Option<Membrane>> = centre.iter().zip(&pts).map(|(&(m, su, sv), p)| membrane(p, [su / m as f64, sv / m as f64], all_around)).collect();
@@ -331,12 +337,11 @@ pub(super) fn corner(pts: &[[f64; 3]], one: Membrane, tol: f64) -> Option<Membra
     if pts.len() - on_one < RIM_MIN_POINTS {
         return None;
     }
-    let off = |c: &[f64; 3], p: &[f64; 3]| (1.0 - inv_at(c, p[0], p[1]) / p[2]).abs();
     let mut a = consensus(pts, tol)?;
-    let rest: Vec<[f64; 3]> = pts.iter().filter(|p| off(&a, p) > tol).copied().collect();
+    let rest: Vec<[f64; 3]> = pts.iter().filter(|p| off_plane(&a, p) > tol).copied().collect();
     let mut b = consensus(&rest, tol)?;
     for _ in 0..3 {
-        let (sa, sb): (Vec<[f64; 3]>, Vec<[f64; 3]>) = pts.iter().filter(|p| off(&a, p).min(off(&b, p)) <= tol).partition(|p| off(&a, p) <= off(&b, p));
+        let (sa, sb): (Vec<[f64; 3]>, Vec<[f64; 3]>) = pts.iter().filter(|p| off_plane(&a, p).min(off_plane(&b, p)) <= tol).partition(|p| off_plane(&a, p) <= off_plane(&b, p));
         if sa.len() < RIM_MIN_POINTS || sb.len() < RIM_MIN_POINTS {
             return None;
         }
@@ -355,7 +360,7 @@ pub(super) fn consensus(pts: &[[f64; 3]], tol: f64) -> Option<[f64; 3]> {
     if pts.len() < RIM_MIN_POINTS {
         return None;
     }
-    let on = |c: &[f64; 3], p: &&[f64; 3]| (1.0 - inv_at(c, p[0], p[1]) / p[2]).abs() <= tol;
+    let on = |c: &[f64; 3], p: &&[f64; 3]| off_plane(c, p) <= tol;
     let mut state = 0x9e37_79b9_7f4a_7c15u64;
     let mut next = || {
         state ^= state << 13;
