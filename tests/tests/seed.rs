@@ -7,7 +7,7 @@
 //! over every view (glass that fills the frame: nothing is carved).
 
 use tgs::train::stages::reflection::seed::{
-    hull_seeding, jacobi_eigen, min_hits, pixel_of, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView,
+    consensus_normal, hull_seeding, jacobi_eigen, min_hits, pixel_of, quat_for_normal, residual_hull_seeds, HullSeeding, Seed, SeedNormal, SeedParams, SeedView,
 };
 use tgs_pipelines::Camera;
 use tgs_tests::raster_util::splat_normal;
@@ -339,7 +339,7 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
 fn seeds_are_the_same_at_any_thread_count() {
     let (cams, res, depth) = ring(24, 0.1, true);
     let sv = seed_views(&cams, &res, &depth);
-    for normal in [SeedNormal::View, SeedNormal::Plane, SeedNormal::Gradient, SeedNormal::Halfway] {
+    for normal in [SeedNormal::View, SeedNormal::Plane, SeedNormal::Consensus, SeedNormal::Gradient, SeedNormal::Halfway] {
         let at = |threads: usize| hull_seeding(&sv, &SeedParams { max_rays: 1500, normal, threads, ..SeedParams::default() });
         let one = at(1);
         assert!(one.seeds.len() > 200, "{normal:?}: {} seeds", one.seeds.len());
@@ -347,4 +347,75 @@ fn seeds_are_the_same_at_any_thread_count() {
             assert_eq!(at(threads), one, "{normal:?}: {threads} threads against 1");
         }
     }
+}
+
+/// A uniform draw in [-1, 1).
+fn signed(r: &mut Rng) -> f64 {
+    r.next_u32() as f64 / 2f64.powi(31) - 1.0
+}
+
+/// The angle in degrees between `n` and the line along `want` (sign free).
+fn off_axis(n: [f64; 3], want: [f64; 3]) -> f64 {
+    dot(n, want).abs().min(1.0).acos().to_degrees()
+}
+
+/// The smallest-eigenvalue direction of the points' covariance: the
+/// 16-neighbour plane [`SeedNormal::Plane`] takes, computed here anew.
+fn pca_normal(pts: &[[f64; 3]]) -> [f64; 3] {
+    let n = pts.len() as f64;
+    let m = [0, 1, 2].map(|k| pts.iter().map(|p| p[k]).sum::<f64>() / n);
+    let c = [0, 1, 2].map(|r| [0, 1, 2].map(|s| pts.iter().map(|p| (p[r] - m[r]) * (p[s] - m[s])).sum::<f64>()));
+    let (vals, vecs) = jacobi_eigen(c);
+    let k = (0..3).min_by(|&a, &b| vals[a].total_cmp(&vals[b])).unwrap();
+    [vecs[0][k], vecs[1][k], vecs[2][k]]
+}
+
+/// The `k` points of `cloud` nearest `x` (itself excluded), nearest first.
+fn nearest(cloud: &[[f64; 3]], x: [f64; 3], k: usize) -> Vec<[f64; 3]> {
+    let mut d: Vec<(f64, [f64; 3])> = cloud.iter().filter(|p| **p != x).map(|p| (dot(sub(*p, x), sub(*p, x)), *p)).collect();
+    d.sort_by(|a, b| a.0.total_cmp(&b.0));
+    d.into_iter().take(k).map(|a| a.1).collect()
+}
+
+/// A mask hull's points scatter about a pane by as much as their spacing
+/// (`pane` at 50²): the plane of 16 neighbours is then tilted far off, the
+/// plane most of 128 lie on is not. Where two panes meet, a point on one
+/// takes that one's normal rather than a blend of the two.
+#[test]
+fn consensus_normal_finds_a_scattered_pane_and_one_side_of_a_corner() {
+    let mut r = Rng(seed("consensus_normal"));
+    // A 2 x 2 pane z = 0, 1,600 points, spacing 0.05, scattered +-0.05.
+    let pane: Vec<[f64; 3]> = (0..1600).map(|_| [signed(&mut r), signed(&mut r), 0.05 * signed(&mut r)]).collect();
+    let (mut ours, mut sixteen) = (0.0, 0.0);
+    let inner: Vec<[f64; 3]> = pane.iter().filter(|p| p[0].abs() < 0.6 && p[1].abs() < 0.6).copied().collect();
+    for (i, &x) in inner.iter().enumerate() {
+        let n = consensus_normal(x, &nearest(&pane, x, 128), 0.08, i as u64).expect("a plane");
+        ours += off_axis(n, [0.0, 0.0, 1.0]) / inner.len() as f64;
+        let mut local = nearest(&pane, x, 16);
+        local.push(x);
+        sixteen += off_axis(pca_normal(&local), [0.0, 0.0, 1.0]) / inner.len() as f64;
+    }
+    eprintln!("pane: mean normal error {ours:.1} deg (the 16 nearest's plane: {sixteen:.1})");
+    assert!(ours < 4.0 && sixteen > 2.0 * ours, "consensus {ours:.1} deg, 16-point plane {sixteen:.1}");
+    // The same seed and points give the same normal.
+    let x = inner[0];
+    assert_eq!(consensus_normal(x, &nearest(&pane, x, 128), 0.08, 7), consensus_normal(x, &nearest(&pane, x, 128), 0.08, 7));
+    // A corner: the pane z = 0 (x < 0) meets the pane x = 0 (z < 0);
+    // points on the first, 0.05 to 0.2 from the edge, keep its normal.
+    let mut corner: Vec<[f64; 3]> = pane.iter().map(|p| [-0.5 * (p[0] + 1.0), p[1], 0.3 * p[2]]).collect();
+    corner.extend(pane.iter().map(|p| [0.3 * p[2], p[1], -0.5 * (p[0] + 1.0)]));
+    let near_edge: Vec<[f64; 3]> = corner.iter().filter(|p| (-0.2..-0.05).contains(&p[0]) && p[1].abs() < 0.5 && p[2].abs() < 0.05).copied().collect();
+    assert!(near_edge.len() > 20, "{} points near the edge", near_edge.len());
+    let (mut blend, mut mean, mut worst) = (0.0, 0.0, 0.0f64);
+    for (i, &x) in near_edge.iter().enumerate() {
+        let n = consensus_normal(x, &nearest(&corner, x, 128), 0.02, i as u64).expect("a plane");
+        let e = off_axis(n, [0.0, 0.0, 1.0]);
+        (mean, worst) = (mean + e / near_edge.len() as f64, worst.max(e));
+        blend += off_axis(pca_normal(&nearest(&corner, x, 128)), [0.0, 0.0, 1.0]) / near_edge.len() as f64;
+    }
+    eprintln!("corner: mean normal error {mean:.1} deg, worst {worst:.1} (the 128 nearest's plane: {blend:.1})");
+    assert!(mean < 4.0 && worst < 10.0 && blend > 10.0, "consensus {mean:.1} / {worst:.1} deg, 128-point plane {blend:.1}");
+    // Too few points, or all on one line: no plane.
+    assert_eq!(consensus_normal([0.0; 3], &[[1.0, 0.0, 0.0], [2.0, 0.0, 0.0]], 0.1, 0), None);
+    assert_eq!(consensus_normal([0.0; 3], &[[1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], 0.1, 0), None);
 }

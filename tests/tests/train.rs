@@ -261,9 +261,16 @@ fn named_settings_read_and_write_as_their_names() {
     assert_eq!(ReflectionConfig::default().seed_normal, SeedNormal::Auto);
     assert_eq!(
         (SeedNormal::Auto.for_source(true), SeedNormal::Auto.for_source(false), SeedNormal::View.for_source(true)),
-        (SeedNormal::Plane, SeedNormal::Halfway, SeedNormal::View)
+        (SeedNormal::Consensus, SeedNormal::Halfway, SeedNormal::View)
     );
-    for (n, want) in [("view", SeedNormal::View), ("plane", SeedNormal::Plane), ("gradient", SeedNormal::Gradient), ("halfway", SeedNormal::Halfway), ("auto", SeedNormal::Auto)] {
+    for (n, want) in [
+        ("view", SeedNormal::View),
+        ("plane", SeedNormal::Plane),
+        ("consensus", SeedNormal::Consensus),
+        ("gradient", SeedNormal::Gradient),
+        ("halfway", SeedNormal::Halfway),
+        ("auto", SeedNormal::Auto),
+    ] {
         assert_eq!(SeedNormal::parse(n), Ok(want));
     }
     assert_eq!(ReflectionInit::parse("copy+hull").map(ReflectionInit::parts), Ok((true, true)));

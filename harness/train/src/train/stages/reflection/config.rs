@@ -76,10 +76,11 @@ pub struct ReflectionConfig {
     /// test), so that noise near the cameras does not seed in front of the
     /// glass (perf/journal/2026-11-24-twenty-first.md, perf/journal/2026-11-27-thirty-third.md).
     pub seed_significance: f32,
-    /// A seed's normal: "auto" ("plane" with masks, "halfway" without),
+    /// A seed's normal: "auto" ("consensus" with masks, "halfway" without),
     /// "view" (towards its camera), "gradient" (the hull's silhouette
-    /// normal), "halfway" (their bisector) or "plane" (its neighbours'
-    /// plane) (perf/journal/2026-11-27-thirty-third.md, perf/journal/2026-11-28-forty-fourth.md).
+    /// normal), "halfway" (their bisector), "plane" (its 16 neighbours'
+    /// plane) or "consensus" (the plane most of its 128 neighbours lie on)
+    /// (perf/journal/2026-11-27-thirty-third.md, perf/journal/2026-11-28-forty-fourth.md, perf/journal/2026-12-05-sixty-first.md).
     pub seed_normal: SeedNormal,
     /// A directory of glass masks, `DIR/VIEW.png` per training view that
     /// has one (VIEW without its image extension; 8-bit, ≥ 128 on glass, at

@@ -25,7 +25,9 @@
 //! direction to the camera that found them ([`SeedNormal::View`]) and the
 //! silhouette cones' normal from the gradient of the views' blurred masks
 //! ([`SeedNormal::Gradient`]); or, with [`SeedNormal::Plane`], the local
-//! plane of neighbouring seeds (PCA); all turned to that camera. Their
+//! plane of neighbouring seeds (PCA), or with [`SeedNormal::Consensus`]
+//! (masks' default) the plane most of its wider neighbourhood lies on;
+//! all turned to that camera. Their
 //! size is the seed spacing. Stage II then refines them by the reflection
 //! it has to explain.
 //!
@@ -67,8 +69,8 @@ pub use chance::min_hits;
 pub use geometry::pixel_of;
 pub(crate) use geometry::unproject_pixel;
 use geometry::{box_blur, image_point, image_xy, in_parallel, normalize, unproject_xy, V3};
+pub use normals::{consensus_normal, jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 use normals::{gradient_pixels, surfels};
-pub use normals::{jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 pub use rim::fit_plane;
 use tgs_pipelines::Camera;
 
@@ -139,6 +141,12 @@ crate::train::settings::name_enum!(
         /// turned to face that camera (the camera direction with fewer than 3
         /// neighbours).
         Plane = "plane",
+        /// The plane through the seed that most of its 128 nearest seeds lie
+        /// on within 2% of its depth (the best of 128 through the seed and two
+        /// of them, a fixed sequence), refitted by least squares to those:
+        /// a mask's hull points scatter about the glass by as much as their
+        /// spacing, which tilts `Plane`'s 16-point fit (docs/stage2.md).
+        Consensus = "consensus",
         /// Against the gradient of the hull's agreement field: the sum, over
         /// the views that see the seed, of their residual masks blurred by a
         /// tenth of the image width and sampled at its projections,
@@ -156,11 +164,12 @@ crate::train::settings::name_enum!(
         /// and most of the camera direction on the second (perf/RESULTS.md,
         /// thirty-third session).
         Halfway = "halfway",
-        /// `Plane` when the hull comes from given glass masks
+        /// `Consensus` when the hull comes from given glass masks
         /// (`reflection.seed_masks`), `Halfway` when it comes from the
         /// residual ([`SeedNormal::for_source`]): an exact mask's hull puts
         /// the seeds on the glass, and their neighbours' plane is then its
-        /// tangent plane (perf/RESULTS.md, forty-fourth entry).
+        /// tangent plane (perf/RESULTS.md, forty-fourth entry; the consensus
+        /// over `Plane`: perf/journal/2026-12-05-sixty-first.md).
         Auto = "auto",
     }
 );
@@ -170,7 +179,7 @@ impl SeedNormal {
     /// (`masks`) or from the residual; any other choice as it is.
     pub fn for_source(self, masks: bool) -> SeedNormal {
         match self {
-            SeedNormal::Auto if masks => SeedNormal::Plane,
+            SeedNormal::Auto if masks => SeedNormal::Consensus,
             SeedNormal::Auto => SeedNormal::Halfway,
             n => n,
         }
