@@ -263,14 +263,8 @@ fn named_settings_read_and_write_as_their_names() {
         (SeedNormal::Auto.for_source(true), SeedNormal::Auto.for_source(false), SeedNormal::View.for_source(true)),
         (SeedNormal::Consensus, SeedNormal::Halfway, SeedNormal::View)
     );
-    for (n, want) in [
-        ("view", SeedNormal::View),
-        ("plane", SeedNormal::Plane),
-        ("consensus", SeedNormal::Consensus),
-        ("gradient", SeedNormal::Gradient),
-        ("halfway", SeedNormal::Halfway),
-        ("auto", SeedNormal::Auto),
-    ] {
+    use SeedNormal::*;
+    for (n, want) in [("view", View), ("plane", Plane), ("consensus", Consensus), ("gradient", Gradient), ("halfway", Halfway), ("auto", Auto)] {
         assert_eq!(SeedNormal::parse(n), Ok(want));
     }
     assert_eq!(ReflectionInit::parse("copy+hull").map(ReflectionInit::parts), Ok((true, true)));
