@@ -127,7 +127,7 @@ fn run(ctx: &Arc<Context>, spec: &StagesSpec, dir: &std::path::Path) -> Result<S
         stages: Vec::new(),
         skipped: Vec::new(),
     };
-    let all = Stage::ALL;
+    let all = Stage::all();
     for (i, &stage) in all.iter().enumerate() {
         ctx.reset_peak_memory();
         let t = Instant::now();

@@ -1,4 +1,4 @@
-//! The list of stages (`stages::LATER`) and what is built from it: the
+//! The list of stages (`stages::later()`) and what is built from it: the
 //! schedule, the `stages` setting, the run directory's file names and the
 //! checkpoint header's later-stage part. No device: these are the pieces a
 //! new stage plugs into, checked against what they were when each was
@@ -7,7 +7,7 @@
 use tgs::train::checkpoint::Header;
 use tgs::train::rundir::{run_files, stage_checkpoint, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use tgs::train::stages::kind::{by_key, by_stage};
-use tgs::train::stages::LATER;
+use tgs::train::stages::{later, BUILT_IN};
 use tgs::train::{Schedule, Stage, TrainConfig};
 
 fn names(s: &Schedule) -> Vec<(String, u32)> {
@@ -26,19 +26,23 @@ fn config(stages: &str, reseed: bool) -> TrainConfig {
 
 #[test]
 fn the_stages_are_i_ii_iii_in_order() {
-    let all: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+    let all: Vec<&str> = Stage::all().iter().map(|s| s.name()).collect();
     assert_eq!(all, ["I", "II", "III"]);
     assert_eq!(Stage::default(), Stage::SCATTERING);
-    assert_eq!(LATER.iter().map(|k| k.key()).collect::<Vec<_>>(), ["reflection", "light_field"]);
+    // Nothing registered in this test binary: the list is the built-in one.
+    assert_eq!(later().iter().map(|k| k.key()).collect::<Vec<_>>(), ["reflection", "light_field"]);
+    assert_eq!(BUILT_IN.len(), 2);
     // The later stages' kinds follow the names' order (stage.rs is a leaf
     // of the module graph, so it keeps the names; this holds the two lists together).
-    assert_eq!(LATER.iter().map(|k| k.stage()).collect::<Vec<_>>(), Stage::ALL[1..]);
-    for (i, s) in Stage::ALL.into_iter().enumerate() {
+    assert_eq!(later().iter().map(|k| k.stage()).collect::<Vec<_>>(), Stage::all()[1..]);
+    assert_eq!(Stage::all(), Stage::BUILT_IN);
+    assert!(TrainConfig::quick().sections.is_empty() && TrainConfig::paper().sections.is_empty());
+    for (i, s) in Stage::all().into_iter().enumerate() {
         assert_eq!(s.number(), i + 1);
         assert_eq!(Stage::named(s.name()), Some(s));
     }
     assert_eq!(Stage::named("IV"), None);
-    for k in LATER {
+    for k in later() {
         assert_eq!(by_key(k.key()).map(|b| b.stage()), Some(k.stage()));
         assert_eq!(by_stage(k.stage()).map(|b| b.key()), Some(k.key()));
     }
@@ -163,7 +167,7 @@ fn the_settings_lists_are_built_from_the_list() {
     assert_eq!(resumable_settings(), ["iterations", "reflection.iterations", "reflection.reseed", "light_field.iterations", "test_interval", "checkpoint_interval"]);
     assert_eq!(output_settings(), ["reflection.normal_min_r", "reflection.residual_normal_min_r"]);
     let known: Vec<String> = flatten(&toml::Table::try_from(TrainConfig::quick()).unwrap()).into_iter().map(|(k, _)| k).collect();
-    for k in LATER {
+    for k in later() {
         for key in k.resumable().iter().chain(k.output_settings()) {
             assert!(in_section(k, key), "{key} is not in the {} section", k.key());
             assert!(known.iter().any(|n| n == key), "{key} is not a setting");
@@ -172,5 +176,5 @@ fn the_settings_lists_are_built_from_the_list() {
             assert!(known.iter().any(|n| n == key) && !in_section(k, key), "{key}: a setting of an earlier stage");
         }
     }
-    assert!(!in_section(LATER[0], "reflectionx.iterations") && !in_section(LATER[0], "reflection"));
+    assert!(!in_section(BUILT_IN[0], "reflectionx.iterations") && !in_section(BUILT_IN[0], "reflection"));
 }

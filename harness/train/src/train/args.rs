@@ -3,7 +3,7 @@
 
 use super::config::{flatten, TrainConfig};
 use super::rundir::DEFAULT_SCENE;
-use super::stages::LATER;
+use super::stages::later;
 use crate::data::{Dataset, LoadOptions};
 use anyhow::{bail, Context as _, Result};
 use std::collections::BTreeMap;
@@ -62,7 +62,7 @@ pub fn load_dataset(dir: &Path, cfg: &TrainConfig) -> Result<Dataset> {
 /// and each later stage's own ([`super::stages::LaterKind::resumable`]); changing any
 /// other would train another model than the one checkpointed.
 pub fn resumable_settings() -> Vec<&'static str> {
-    let stages = LATER.iter().flat_map(|k| k.resumable().iter().copied());
+    let stages = later().into_iter().flat_map(|k| k.resumable().iter().copied());
     std::iter::once("iterations").chain(stages).chain(["test_interval", "checkpoint_interval"]).collect()
 }
 
@@ -70,7 +70,7 @@ pub fn resumable_settings() -> Vec<&'static str> {
 /// decides a pixel's normal and depth), not what it learned: `tgs eval
 /// --set` may change them on a finished run ([`super::stages::LaterKind::output_settings`]).
 pub fn output_settings() -> Vec<&'static str> {
-    LATER.iter().flat_map(|k| k.output_settings().iter().copied()).collect()
+    later().into_iter().flat_map(|k| k.output_settings().iter().copied()).collect()
 }
 
 pub fn config_from_args(a: &TrainArgs) -> Result<TrainConfig> {
@@ -105,13 +105,14 @@ pub(crate) fn apply_args(mut cfg: TrainConfig, a: &TrainArgs) -> Result<TrainCon
         cfg.reflection.seed_masks = absolute_setting("reflection.seed_masks", &cfg.reflection.seed_masks)?;
     }
     if let Some(st) = &a.stages {
-        // With --from, Stage I comes from the other run: "II" means "I,II".
-        // "III" means "I,II,III" with RUN's Stage II kept (from_stage_two).
+        // With --from, RUN's stages before the first named are kept: "II"
+        // means "I,II", "III" "I,II,III" (RUN's Stage II kept).
         let first = st.split(',').next().unwrap_or("").trim();
-        cfg.stages = match (a.from.is_some(), first) {
-            (true, "III") => "I,II,III".into(),
-            (true, f) if f != "I" => format!("I,{}", st.trim()),
-            _ => st.clone(),
+        let all = super::stage::Stage::all();
+        let before = all.iter().position(|s| s.name() == first).unwrap_or(1).max(1);
+        cfg.stages = match a.from.is_some() && first != "I" {
+            true => all[..before].iter().map(|s| s.name()).chain(st.split(',').map(str::trim)).collect::<Vec<_>>().join(","),
+            false => st.clone(),
         };
         cfg.validate().with_context(|| format!("--stages '{st}'"))?;
     }

@@ -70,7 +70,7 @@ pub struct Header {
     #[serde(default)]
     pub identity: Option<Identity>,
     /// The running later stage's state, under its key (`"reflection"`
-    /// for Stage II, `"light_field"` for Stage III; `stages::LATER`): its
+    /// for Stage II, `"light_field"` for Stage III; `stages::later()`): its
     /// arrays follow the scattering set's (the reflection set in
     /// `TrainableSet::layout` order with the prefix `refl.`, then the
     /// stage's own: the cube map's, the network's). Files from before
@@ -160,7 +160,7 @@ fn header_and_buffers<'a>(tr: &'a Trainer, dataset: &str, identity: Option<&Iden
     };
     let mut bufs: ArrayBuffers = arrays.iter().map(|(_, buf, w)| (*buf, w * n)).collect();
     if let (Some(m), Some(d)) = (&tr.later, &tr.decision) {
-        let kind = by_stage(m.stage()).context("the running stage is not in stages::LATER")?;
+        let kind = by_stage(m.stage()).context("the running stage is not in stages::later()")?;
         let mut later_arrays = Vec::new();
         header.later.insert(kind.key().to_string(), m.save_state(d, &mut later_arrays)?);
         bufs.extend(later_arrays);

@@ -2,15 +2,16 @@
 //! `paper` preset), a `quick` preset for minutes on a CPU driver, a TOML
 //! file, and `--set key=value` overrides, applied in that order.
 
-use super::stage::Stage;
+use super::stage::{added_settings, Stage};
 pub use super::stages::light_field::config::LightFieldConfig;
 pub use super::stages::reflection::config::ReflectionConfig;
 use anyhow::{bail, Context as _, Result};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct TrainConfig {
     /// Stage I iterations.
     pub iterations: u32,
@@ -90,6 +91,11 @@ pub struct TrainConfig {
     pub reflection: ReflectionConfig,
     /// Stage III settings (`[light_field]`, `--set light_field.KEY=V`).
     pub light_field: LightFieldConfig,
+    /// The settings sections of stages added by `stages::register`, as
+    /// TOML under each stage's key (none without them); any other key is
+    /// refused by [`TrainConfig::validate`].
+    #[serde(flatten)]
+    pub sections: BTreeMap<String, toml::Value>,
 }
 
 impl Default for TrainConfig {
@@ -150,6 +156,7 @@ impl TrainConfig {
             validation_all_stages: false,
             reflection: ReflectionConfig::default(),
             light_field: LightFieldConfig::default(),
+            sections: registered_sections("paper"),
         }
     }
 
@@ -171,6 +178,7 @@ impl TrainConfig {
             checkpoint_interval: 500,
             reflection: ReflectionConfig::quick(),
             light_field: LightFieldConfig::quick(),
+            sections: registered_sections("quick"),
             ..Self::paper()
         }
     }
@@ -227,7 +235,7 @@ impl TrainConfig {
     /// The stages to run, parsed from `stages`: Stage I and the later
     /// stages after it in order, each starting from the one before.
     pub fn stage_list(&self) -> Result<Vec<&'static str>> {
-        let all: Vec<&'static str> = Stage::ALL.iter().map(|s| s.name()).collect();
+        let all: Vec<&'static str> = Stage::all().iter().map(|s| s.name()).collect();
         let mut out = Vec::new();
         for s in self.stages.split(',').map(str::trim) {
             match Stage::named(s) {
@@ -349,7 +357,22 @@ impl TrainConfig {
         self.stage_list()?;
         self.reflection.validate()?;
         self.light_field.validate()?;
+        let added = added_settings();
+        for (key, v) in &self.sections {
+            let s = added.iter().find(|s| s.key == key).with_context(|| format!("unknown setting '{key}'"))?;
+            let toml::Value::Table(t) = v else { bail!("'{key}' is a section; set its keys ({key}.KEY)") };
+            (s.check)(t)?;
+        }
         Ok(())
+    }
+
+    /// The settings section `key` of a stage added by `stages::register`,
+    /// as `T` (`T`'s defaults where the section, or a key of it, is missing).
+    pub fn section<T: serde::de::DeserializeOwned + Default>(&self, key: &str) -> Result<T> {
+        match self.sections.get(key) {
+            Some(v) => v.clone().try_into().with_context(|| format!("settings section '{key}'")),
+            None => Ok(T::default()),
+        }
     }
 
     pub fn background_rgb(&self) -> Result<[f32; 3]> {
@@ -371,6 +394,11 @@ impl TrainConfig {
 /// Training pixels the paper preset's schedule was made for: the 2DGS
 /// schedule (30,000 Stage I iterations) on ~100 views at 800x800.
 pub const PAPER_SCHEDULE_PIXELS: u64 = 100 * 800 * 800;
+
+/// The registered stages' settings sections under `preset`.
+fn registered_sections(preset: &str) -> BTreeMap<String, toml::Value> {
+    added_settings().iter().map(|s| (s.key.to_string(), toml::Value::Table((s.defaults)(preset)))).collect()
+}
 
 /// A note for `--preset paper` on a dataset with less than an eighth of
 /// [`PAPER_SCHEDULE_PIXELS`] (`sizes`: the training views' width and

@@ -9,7 +9,7 @@ use super::config::TrainConfig;
 use super::rundir::{stage_checkpoint, CHECKPOINT};
 use super::stage::Stage;
 use super::stages::kind::in_section;
-use super::stages::LATER;
+use super::stages::later;
 use super::trainer::Trainer;
 use crate::data::Dataset;
 use anyhow::{bail, Context as _, Result};
@@ -24,42 +24,43 @@ const FROM_RUN_SETTINGS: [&str; 3] = ["stages", "test_interval", "checkpoint_int
 /// validation slice is held out of the later stages).
 const FROM_STAGE_ONE_SETTINGS: [&str; 2] = ["validation_every", "validation_margin_db"];
 
-/// The first later stage a `--from` run trains (its index in [`LATER`]):
+/// The first later stage a `--from` run trains (its index in [`later`]):
 /// the first of `--stages` (RUN's stages before it are kept), else the
 /// first after Stage I.
 fn start_index(a: &TrainArgs) -> usize {
     let first = a.stages.as_deref().and_then(|s| s.split(',').next()).map(str::trim).unwrap_or("");
-    LATER.iter().position(|k| k.stage().name() == first).unwrap_or(0)
+    later().iter().position(|k| k.stage().name() == first).unwrap_or(0)
 }
 
-/// Whether a `--from` run that trains from `LATER[start]` on may change
+/// Whether a `--from` run that trains from `later()[start]` on may change
 /// the setting `k`: the sections of the stages it trains, what the first
 /// of them frees ([`LaterKind::frees_earlier_settings`]) and the run's own.
 fn from_setting(start: usize, k: &str) -> bool {
     FROM_RUN_SETTINGS.contains(&k)
         || (start == 0 && FROM_STAGE_ONE_SETTINGS.contains(&k))
-        || LATER[start..].iter().any(|s| in_section(*s, k))
-        || LATER[start].frees_earlier_settings().contains(&k)
+        || later()[start..].iter().any(|s| in_section(*s, k))
+        || later()[start].frees_earlier_settings().contains(&k)
 }
 
 /// [`from_setting`]'s list for people ("light_field.*, reflection.reseed,
 /// stages, test_interval and checkpoint_interval").
 fn from_settings_text(start: usize) -> String {
-    let mut v: Vec<String> = LATER[start..].iter().map(|s| format!("{}.*", s.key())).collect();
-    v.extend(LATER[start].frees_earlier_settings().iter().chain(&FROM_RUN_SETTINGS).map(|k| k.to_string()));
+    let stages = later();
+    let mut v: Vec<String> = stages[start..].iter().map(|s| format!("{}.*", s.key())).collect();
+    v.extend(stages[start].frees_earlier_settings().iter().chain(&FROM_RUN_SETTINGS).map(|k| k.to_string()));
     let last = v.pop().unwrap_or_default();
     format!("{} and {last}", v.join(", "))
 }
 
-/// The stages a `--from` run starting at `LATER[start]` keeps from RUN
+/// The stages a `--from` run starting at `later()[start]` keeps from RUN
 /// (Stage I and the later stages before it), by name.
 fn kept_stages(start: usize) -> Vec<&'static str> {
-    std::iter::once(Stage::SCATTERING).chain(LATER[..start].iter().map(|k| k.stage())).map(|s| s.name()).collect()
+    std::iter::once(Stage::SCATTERING).chain(later()[..start].iter().map(|k| k.stage())).map(|s| s.name()).collect()
 }
 
 /// The iteration at which RUN's kept stages end under `cfg`.
 fn kept_end(cfg: &TrainConfig, start: usize) -> u32 {
-    cfg.iterations + LATER[..start].iter().map(|k| k.iterations(cfg)).sum::<u32>()
+    cfg.iterations + later()[..start].iter().map(|k| k.iterations(cfg)).sum::<u32>()
 }
 
 /// The later-stage settings a `--from` run takes from RUN unchanged
@@ -67,14 +68,14 @@ fn kept_end(cfg: &TrainConfig, start: usize) -> u32 {
 /// version's defaults in both presets, as "key = value (default ...)"
 /// lines: a run written before a default changed keeps its old value, and
 /// the user should see that rather than assume today's default. Only
-/// those the run starting at `LATER[start]` may still change are listed
+/// those the run starting at `later()[start]` may still change are listed
 /// (with `--stages III`, Stage III's and `reflection.reseed`), and a
 /// stage's own only when it runs.
 pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, start: usize) -> Result<Vec<String>> {
     let (old, new) = (settings(saved)?, settings(cfg)?);
     let presets = [settings(&TrainConfig::preset("quick")?)?, settings(&TrainConfig::preset("paper")?)?];
     // What this `--from` may change (the refusals' own lists), of the stages' settings.
-    let later = |k: &str| from_setting(start, k) && LATER.iter().any(|s| in_section(*s, k) && cfg.wants(s.stage().name()));
+    let later = |k: &str| from_setting(start, k) && later().iter().any(|s| in_section(*s, k) && cfg.wants(s.stage().name()));
     Ok(new
         .iter()
         .filter(|(k, v)| later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
@@ -144,7 +145,7 @@ fn check_kept(run: &Path, h: &checkpoint::Header, start: usize) -> Result<()> {
     // A stage that ran (the run went past its start) and trained the scattering set changed it.
     let ran = |i: usize| h.iteration > kept_end(&h.config, i);
     if start == 0 {
-        if let Some((_, k)) = LATER.iter().enumerate().find(|(i, k)| ran(*i) && k.trains_scattering(&h.config)) {
+        if let Some((_, k)) = later().into_iter().enumerate().find(|(i, k)| ran(*i) && k.trains_scattering(&h.config)) {
             bail!(
                 "--from {}: its Stage {} trained the scattering set, and the run has no {} (Stage I's own state; runs from before it was written lack it): train Stage I again",
                 run.display(),
@@ -170,7 +171,7 @@ fn check_kept(run: &Path, h: &checkpoint::Header, start: usize) -> Result<()> {
 /// and stay as trained.
 fn check_settings(run: &Path, h: &checkpoint::Header, cfg: &TrainConfig, start: usize) -> Result<()> {
     if start > 0 {
-        let (end, before, first) = (kept_end(&h.config, start), LATER[start - 1].stage(), LATER[start].stage().name());
+        let (end, before, first) = (kept_end(&h.config, start), later()[start - 1].stage(), later()[start].stage().name());
         if !h.holds(before) || h.iteration != end {
             bail!(
                 "--from {} --stages {first} starts from that run's finished Stage {}; it is at iteration {} (Stage {} ends at {end}{}) and has no {}",
@@ -202,7 +203,7 @@ fn check_settings(run: &Path, h: &checkpoint::Header, cfg: &TrainConfig, start: 
             from_settings_text(0)
         );
     }
-    if !cfg.wants(LATER[0].stage().name()) {
+    if !cfg.wants(later()[0].stage().name()) {
         bail!("--from {}: stages = \"{}\" leaves nothing to run after its Stage I", run.display(), cfg.stages);
     }
     Ok(())

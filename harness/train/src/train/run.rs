@@ -386,7 +386,7 @@ fn preflight(tr: &Trainer, data: &Dataset, validation: &Validation, quiet: bool)
     }
     // The names of the views the trainer holds (without the validation views once held out).
     let names: Vec<String> = if tr.held_out { validation.later_view_names(data) } else { data.train.iter().map(|v| v.name.clone()).collect() };
-    for k in super::stages::LATER.iter().filter(|k| tr.cfg.wants(k.stage().name())) {
+    for k in super::stages::later().into_iter().filter(|k| tr.cfg.wants(k.stage().name())) {
         k.preflight(&tr.cfg, &names, &tr.views.cameras).context("checked before training")?;
     }
     Ok(())

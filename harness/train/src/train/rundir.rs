@@ -2,7 +2,7 @@
 //! claims before it starts (tgs never writes over a file it did not
 //! create; `outdir`).
 
-use super::stages::LATER;
+use super::stages::later;
 
 pub const CHECKPOINT: &str = "checkpoint.bin";
 /// The run's state at the end of Stage I and of Stage II, written as the
@@ -30,8 +30,9 @@ pub fn stage_checkpoint(n: usize) -> String {
 /// file of these names that tgs did not write is refused.
 pub fn run_files() -> Vec<String> {
     let mut files: Vec<String> = RUN_FILES.iter().map(|f| f.to_string()).collect();
-    files.extend((1..=LATER.len()).map(stage_checkpoint));
-    for f in LATER.iter().flat_map(|k| k.files()) {
+    let stages = later();
+    files.extend((1..=stages.len()).map(stage_checkpoint));
+    for f in stages.iter().flat_map(|k| k.files()) {
         if !files.iter().any(|g| g == f) {
             files.push(f.to_string());
         }

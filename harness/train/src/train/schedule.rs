@@ -4,7 +4,7 @@
 
 use super::config::TrainConfig;
 pub use super::stage::Stage;
-use super::stages::LATER;
+use super::stages::later;
 
 /// The stage schedule: each stage with its iteration count, run in order.
 #[derive(Clone, Debug, PartialEq)]
@@ -14,14 +14,14 @@ pub struct Schedule {
 
 impl Schedule {
     /// Stage I, then each later stage the settings name (`stages`), in
-    /// order; with `reflection.reseed` and every later stage named, the
-    /// later stages run once more (Stage II seeded again after Stage III).
+    /// order; with `reflection.reseed` and more than one later stage named,
+    /// those run once more (Stage II seeded again after Stage III).
     pub fn from_config(cfg: &TrainConfig) -> Schedule {
         let mut stages = vec![(Stage::SCATTERING, cfg.iterations)];
         let named = cfg.stage_list().unwrap_or_default();
-        let later: Vec<(Stage, u32)> = LATER.iter().filter(|k| named.contains(&k.stage().name())).map(|k| (k.stage(), k.iterations(cfg))).collect();
+        let later: Vec<(Stage, u32)> = later().into_iter().filter(|k| named.contains(&k.stage().name())).map(|k| (k.stage(), k.iterations(cfg))).collect();
         stages.extend(&later);
-        if cfg.reflection.reseed && later.len() == LATER.len() && later.len() > 1 {
+        if cfg.reflection.reseed && later.len() > 1 {
             stages.extend(&later);
         }
         Schedule { stages }

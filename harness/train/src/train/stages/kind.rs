@@ -2,16 +2,15 @@
 //! place in the schedule, its transition from the stage before it, and its
 //! part of a checkpoint, the settings `--resume`, `--from` and `tgs eval`
 //! may change. Each later stage has one [`LaterKind`] (a unit struct in
-//! its `stage.rs`), listed in run order in [`super::LATER`]; the schedule,
+//! its `stage.rs`), listed in run order by [`super::later`]; the schedule,
 //! the trainer, the checkpoint, the settings checks and the `tgs train`
 //! driver go through that list, so a new stage is its folder, its kind
-//! there, its settings section and its name in `Stage::ALL` (stage.rs is a
-//! leaf of the module graph; a test holds the two lists together).
+//! there and its settings section.
 
 use super::layer::RenderLayer;
 use super::shared::{LaterStage, Shared};
 use crate::train::config::TrainConfig;
-use crate::train::stage::Stage;
+use crate::train::stage::{Stage, StageSettings};
 use crate::train::stages::reflection::decision::ReflDecision;
 use anyhow::{Context as _, Result};
 use std::path::Path;
@@ -67,6 +66,11 @@ pub trait LaterKind: Sync {
     fn key(&self) -> &'static str;
     /// Its iteration count when the settings run it.
     fn iterations(&self, cfg: &TrainConfig) -> u32;
+    /// Its settings section when `TrainConfig` has no field for it (a
+    /// stage added by [`super::register`]); None for the built-in stages.
+    fn settings(&self) -> Option<StageSettings> {
+        None
+    }
     /// The settings of its section (`[key]` in TOML, `--set key.NAME=V`;
     /// the section is named by [`LaterKind::key`]) that `--resume` may
     /// change, as dotted keys.
@@ -126,7 +130,7 @@ pub trait LaterKind: Sync {
 
 /// The later stage whose checkpoint key is `key`.
 pub fn by_key(key: &str) -> Option<&'static dyn LaterKind> {
-    super::LATER.iter().copied().find(|k| k.key() == key)
+    super::later().into_iter().find(|k| k.key() == key)
 }
 
 /// Whether the dotted setting `k` lies in `kind`'s settings section.
@@ -136,7 +140,7 @@ pub fn in_section(kind: &dyn LaterKind, k: &str) -> bool {
 
 /// The later stage named `stage`.
 pub fn by_stage(stage: Stage) -> Option<&'static dyn LaterKind> {
-    super::LATER.iter().copied().find(|k| k.stage() == stage)
+    super::later().into_iter().find(|k| k.stage() == stage)
 }
 
 /// A header's JSON part as `T`, the error naming the stage.
