@@ -197,7 +197,10 @@ pub struct Row {
     pub lpips: f64,
 }
 
-const STAGES: [&str; 3] = ["I", "II", "III"];
+/// The stages' names, in run order: the CSV's per-stage column groups.
+fn stage_names() -> Vec<&'static str> {
+    crate::train::stage::Stage::all().into_iter().map(|s| s.name()).collect()
+}
 
 impl Row {
     fn from_metrics(name: &str, key: &str, settings: BTreeMap<String, String>, m: &serde_json::Value) -> Result<Row> {
@@ -229,7 +232,7 @@ fn header(keys: &[String]) -> Vec<String> {
     let mut h = vec!["run".to_string(), "key".to_string()];
     h.extend(keys.iter().cloned());
     h.extend(["wall_s", "gpu_ms_per_iteration", "total_iterations", "psnr", "ssim", "normal_mae_deg", "lpips"].map(String::from));
-    for s in STAGES {
+    for s in stage_names() {
         h.extend([format!("{s}_psnr"), format!("{s}_ssim"), format!("{s}_normal_mae_deg"), format!("{s}_lpips"), format!("{s}_wall_s")]);
     }
     h
@@ -257,7 +260,7 @@ fn csv_line(r: &Row, keys: &[String]) -> String {
     let mut v = vec![field(&r.name), field(&r.key)];
     v.extend(keys.iter().map(|k| field(r.settings.get(k).map(String::as_str).unwrap_or(""))));
     v.extend([num(r.wall_s), num(r.gpu_ms_per_iteration), r.iterations.to_string(), num(r.psnr), num(r.ssim), num(r.normal_mae_deg), num(r.lpips)]);
-    for s in STAGES {
+    for s in stage_names() {
         match r.stages.get(s) {
             Some((t, w)) => v.extend([num(t[0]), num(t[1]), num(t[2]), num(t[3]), num(*w)]),
             None => v.extend(["", "", "", "", ""].map(String::from)),
@@ -309,9 +312,9 @@ fn read_csv(path: &Path, keys: &[String]) -> Result<Vec<Row>> {
         (r.wall_s, r.gpu_ms_per_iteration) = (p(&v[k + 1]), p(&v[k + 2]));
         r.iterations = v[k + 3].parse().unwrap_or(0);
         (r.psnr, r.ssim, r.normal_mae_deg, r.lpips) = (p(&v[k + 4]), p(&v[k + 5]), p(&v[k + 6]), p(&v[k + 7]));
-        for (j, s) in STAGES.iter().enumerate() {
+        for (j, s) in stage_names().iter().enumerate() {
             let b = k + 8 + 5 * j;
-            if !v[b].is_empty() {
+            if v.len() > b + 4 && !v[b].is_empty() {
                 r.stages.insert(s.to_string(), ([p(&v[b]), p(&v[b + 1]), p(&v[b + 2]), p(&v[b + 3])], p(&v[b + 4])));
             }
         }

@@ -11,6 +11,7 @@ use crate::eval::{expected_depth, layer_images, world_normals};
 use crate::train::checkpoint;
 use crate::train::live::Snapshot;
 use crate::train::rundir::{stage_checkpoint, CHECKPOINT};
+use crate::train::stage::Stage;
 use crate::train::Trainer;
 use anyhow::{bail, ensure, Context as _, Result};
 use glam::DVec3;
@@ -72,7 +73,8 @@ impl Scene {
         if !last.is_file() {
             bail!("{}: no checkpoint.bin: not a tgs run directory (or a run that has not saved yet)", run.display());
         }
-        let mut checkpoints: Vec<(String, PathBuf)> = (1..=3).map(|n| (roman(n), run.join(stage_checkpoint(n)))).filter(|(_, p)| p.is_file()).collect();
+        let mut checkpoints: Vec<(String, PathBuf)> =
+            Stage::all().into_iter().map(|s| (s.name().to_string(), run.join(stage_checkpoint(s.number())))).filter(|(_, p)| p.is_file()).collect();
         let (h, _) = checkpoint::read(&last)?;
         let data = crate::train::run::load_dataset(Path::new(&h.dataset), &h.config).with_context(|| format!("loading the run's dataset {}", h.dataset))?;
         if data.train.is_empty() {
@@ -198,11 +200,12 @@ impl Scene {
     }
 
     pub fn step_layer(&mut self, by: i64) {
-        let later = self.stage() != "I";
+        let later = self.stage() != Stage::SCATTERING.name();
         let has = |name: &str| match (name, &self.known) {
             ("final" | "gt", _) => true,
             (_, Some(k)) => k.contains(&name),
             ("normal" | "depth", None) => true,
+            // Before the stage has rendered: only Stage III evaluates Phi.
             ("phi_mask", None) => self.stage() == "III",
             (_, None) => later,
         };
@@ -292,10 +295,6 @@ impl Scene {
         };
         Ok(pack_image(&img, order))
     }
-}
-
-fn roman(n: usize) -> String {
-    ["I", "II", "III"].get(n - 1).map_or_else(|| n.to_string(), |s| s.to_string())
 }
 
 /// An image (1 or 3 channels, interleaved) as packed 8-bit pixels.

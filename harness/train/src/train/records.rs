@@ -20,7 +20,7 @@ pub fn reflection_record(tr: &Trainer, validation: &Validation, stages: &[Value]
     let mut r = json!(tr.decision);
     let ran = tr.decision.as_ref().is_some_and(|d| d.run);
     if let (true, true, Some(o)) = (validation.is_on(), ran, r.as_object_mut()) {
-        o.insert("kept".into(), json!(!validation.drops_stage_two(stages)));
+        o.insert("kept".into(), json!(validation.dropped(stages).is_none()));
     }
     r
 }

@@ -18,9 +18,11 @@ use super::report::{lpips_text, Reporter};
 pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::signals::{arm, stop_requested};
 pub use super::signals::{install_signal_handler, request_stop, signals_received};
+use super::stage::Stage;
+use super::stages::kind::by_stage;
 use super::stages::{LaterKind, RunPaths};
 use super::trainer::{StepReport, Trainer};
-use super::validation::{back_to_stage_one, end_here, Validation};
+use super::validation::{back_to_before, before, end_here, Validation};
 use crate::data::Dataset;
 use crate::eval::{evaluate, Metrics};
 use crate::export::atomic_write;
@@ -129,8 +131,8 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         last_closed: false,
         live: a.live.as_ref().map(Live::new),
     };
-    // A run whose Stage II was dropped ended there (stages.json says so).
-    if a.resume && run.validation.drops_stage_two(&run.stages) && tr.iteration > tr.cfg.iterations && tr.later.is_none() {
+    // A run whose later stage was dropped ended there (stages.json says so).
+    if a.resume && run.validation.dropped(&run.stages).is_some() && tr.iteration > tr.cfg.iterations && tr.later.is_none() {
         end_here(&mut tr);
     }
     while !tr.done() {
@@ -206,8 +208,8 @@ impl Run<'_> {
             if !self.a.quiet {
                 eprintln!("Stage {prev} done");
             }
-            if prev == "II" && self.validation.drops_stage_two(&self.stages) {
-                *tr = self.drop_stage_two(tr)?;
+            if self.validation.drops(&self.stages, &prev) {
+                *tr = self.drop_stage(tr, &prev)?;
                 self.last_closed = true;
                 return write_stage_records(out, &self.stages);
             }
@@ -223,13 +225,17 @@ impl Run<'_> {
         write_stage_records(out, &self.stages)
     }
 
-    /// Stage II's set did not raise the validation views' PSNR: the run goes
-    /// back to Stage I's model ([`back_to_stage_one`]), says so and logs it.
-    fn drop_stage_two(&mut self, tr: &Trainer) -> Result<Trainer> {
-        let t = back_to_stage_one(self.ctx, &self.a.out, &self.data, tr)?;
-        let msg = "Stage II dropped: its reflection set did not raise the validation views' PSNR over Stage I's (validation_margin_db); Stage I's model is the result";
-        let event = json!({"iteration": t.iteration, "stage": "II", "event": "dropped", "validation": self.validation.verdicts(&self.stages)});
-        self.report.stage_event(msg, Some(&event), t.schedule.total())?;
+    /// The stage `label` (Stage II's set) did not raise the validation
+    /// views' PSNR: the run goes back to the model before it
+    /// ([`back_to_before`]), says so and logs it.
+    fn drop_stage(&mut self, tr: &Trainer, label: &str) -> Result<Trainer> {
+        let stage = Stage::named(label).with_context(|| format!("no stage named {label} to drop"))?;
+        let what = by_stage(stage).and_then(|k| k.dropped_unless_kept()).unwrap_or("set");
+        let t = back_to_before(self.ctx, &self.a.out, &self.data, tr, stage)?;
+        let b = before(stage).name();
+        let msg = format!("Stage {label} dropped: its {what} did not raise the validation views' PSNR over Stage {b}'s (validation_margin_db); Stage {b}'s model is the result");
+        let event = json!({"iteration": t.iteration, "stage": label, "event": "dropped", "validation": self.validation.verdicts(&self.stages)});
+        self.report.stage_event(&msg, Some(&event), t.schedule.total())?;
         Ok(t)
     }
 
@@ -311,8 +317,8 @@ impl Run<'_> {
             let mut rec = stage_record(&last_stage, &tr, self.clocks.stage_s(), metrics.as_ref());
             rec["validation"] = json!(self.validation.measure(&mut tr)?);
             self.stages.push(rec);
-            if last_stage == "II" && self.validation.drops_stage_two(&self.stages) {
-                tr = self.drop_stage_two(&tr)?;
+            if self.validation.drops(&self.stages, &last_stage) {
+                tr = self.drop_stage(&tr, &last_stage)?;
                 self.save(&tr)?;
                 metrics = self.test_metrics(&mut tr)?;
             }

@@ -2,13 +2,15 @@
 //! trains on but the later stages never see (not in their seeding, cache
 //! or gradients), measured after every stage. A later stage that cannot
 //! raise their PSNR by `validation_margin_db` has shown no evidence that
-//! what it changed is right: Stage II's reflection set is then dropped and
-//! Stage I's model is the run's result; Stage III's verdict is reported.
+//! what it changed is right: a stage that says so (Stage II's reflection
+//! set) is then dropped and the model before it is the run's result; the
+//! others' verdicts (Stage III's) are reported.
 
 use super::checkpoint;
 use super::config::TrainConfig;
 use super::rundir::stage_checkpoint;
-use super::stages::Views;
+use super::stage::Stage;
+use super::stages::{later, Views};
 use super::trainer::Trainer;
 use crate::data::{Dataset, View};
 use crate::eval::evaluate;
@@ -66,9 +68,21 @@ impl Validation {
         out
     }
 
-    /// Whether the records say Stage II's set is to be dropped.
-    pub fn drops_stage_two(&self, stages: &[Value]) -> bool {
-        self.is_on() && self.verdicts(stages).iter().any(|v| v["stage"] == "II" && v["kept"] == false)
+    /// The stage the records say is to be dropped: one whose kind falls
+    /// back when not kept (`LaterKind::dropped_unless_kept`) and whose
+    /// first round's verdict is "not kept".
+    pub fn dropped(&self, stages: &[Value]) -> Option<Stage> {
+        if !self.is_on() {
+            return None;
+        }
+        let verdicts = self.verdicts(stages);
+        let not_kept = |s: Stage| verdicts.iter().any(|v| v["stage"] == s.name() && v["kept"] == false);
+        later().into_iter().filter(|k| k.dropped_unless_kept().is_some()).map(|k| k.stage()).find(|&s| not_kept(s))
+    }
+
+    /// Whether the schedule entry `label` ("II", "II.2", ...) is the stage to drop.
+    pub fn drops(&self, stages: &[Value], label: &str) -> bool {
+        self.dropped(stages).is_some_and(|s| s.name() == label)
     }
 
     /// metrics.json's `validation`.
@@ -76,19 +90,31 @@ impl Validation {
         if !self.is_on() {
             return Value::Null;
         }
-        json!({"every": self.every, "views": self.views.len(), "margin_db": self.margin_db, "stages": self.verdicts(stages),
-               "acted_on": "Stage II: a set not kept is dropped (Stage I's model is the result); Stage III: reported only"})
+        let acted_on: Vec<String> = later()
+            .into_iter()
+            .map(|k| match k.dropped_unless_kept() {
+                Some(_) => format!("Stage {}: a set not kept is dropped (Stage {}'s model is the result)", k.stage().name(), before(k.stage()).name()),
+                None => format!("Stage {}: reported only", k.stage().name()),
+            })
+            .collect();
+        json!({"every": self.every, "views": self.views.len(), "margin_db": self.margin_db, "stages": self.verdicts(stages), "acted_on": acted_on.join("; ")})
     }
 }
 
-/// The trainer as Stage I left it (`OUT/checkpoint-stage1.bin`), at
-/// `tr`'s iteration with the schedule ended there: what a run whose
-/// Stage II was dropped keeps.
-pub fn back_to_stage_one(ctx: &Arc<Context>, out: &Path, data: &Dataset, tr: &Trainer) -> Result<Trainer> {
-    let path = out.join(stage_checkpoint(1));
-    let mut t = checkpoint::restore(ctx, &path, checkpoint::read(&path)?, data).with_context(|| format!("{}: Stage I's model, kept over Stage II's", path.display()))?;
+/// The stage that runs before `stage` (Stage I before the first later one).
+pub fn before(stage: Stage) -> Stage {
+    Stage::all().get(stage.number().saturating_sub(2)).copied().unwrap_or(Stage::SCATTERING)
+}
+
+/// The trainer as the stage before `stage` left it
+/// (`OUT/checkpoint-stageN.bin`), at `tr`'s iteration with the schedule
+/// ended there: what a run whose `stage` was dropped keeps.
+pub fn back_to_before(ctx: &Arc<Context>, out: &Path, data: &Dataset, tr: &Trainer, stage: Stage) -> Result<Trainer> {
+    let path = out.join(stage_checkpoint(stage.number() - 1));
+    let mut t = checkpoint::restore(ctx, &path, checkpoint::read(&path)?, data)
+        .with_context(|| format!("{}: Stage {}'s model, kept over Stage {}'s", path.display(), before(stage).name(), stage.name()))?;
     t.iteration = tr.iteration;
-    // What Stage II measured and decided stays on record.
+    // What the dropped stage measured and decided stays on record.
     t.decision = tr.decision.clone();
     end_here(&mut t);
     Ok(t)

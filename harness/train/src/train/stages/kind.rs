@@ -116,6 +116,13 @@ pub trait LaterKind: Sync {
     fn arrays(&self, header: &serde_json::Value) -> Result<Vec<(String, usize)>> {
         serde_json::from_value(header.get("arrays").cloned().unwrap_or_default()).with_context(|| format!("the {} state's array list", self.key()))
     }
+    /// What it adds, named for the log ("reflection set"), when a
+    /// validation slice it does not raise sends the run back to the stage
+    /// before (whose model is then the result); None: its verdict is only
+    /// reported.
+    fn dropped_unless_kept(&self) -> Option<&'static str> {
+        None
+    }
     /// The files it writes directly into the run directory.
     fn files(&self) -> &'static [&'static str] {
         &[]

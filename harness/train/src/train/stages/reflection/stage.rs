@@ -128,6 +128,9 @@ impl LaterKind for Kind {
         Ok(Box::new(super::render::EnvLayer::upload(ctx, &set, &env, cfg.reflection.fresnel.pipeline())?))
     }
 
+    fn dropped_unless_kept(&self) -> Option<&'static str> {
+        Some("reflection set")
+    }
     fn files(&self) -> &'static [&'static str] {
         &["reflection.ply", "envmap.exr", "envmap.png", "envmap_depth.exr", "envmap_depth.png"]
     }
