@@ -24,24 +24,19 @@ fn blur(src: &[f64], w: usize, h: usize) -> Vec<f64> {
     let raw: Vec<f64> = (-5i64..=5).map(|t| (-((t * t) as f64) / (2.0 * 1.5 * 1.5)).exp()).collect();
     let s: f64 = raw.iter().sum();
     let g: Vec<f64> = raw.iter().map(|v| v / s).collect();
-    let mut tmp = vec![0.0; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            for t in -5i64..=5 {
-                let xx = x as i64 + t;
-                if xx >= 0 && xx < w as i64 {
-                    tmp[y * w + x] += g[(t + 5) as usize] * src[y * w + xx as usize];
-                }
-            }
-        }
-    }
+    blur_pass(&blur_pass(src, w, h, &g, true), w, h, &g, false)
+}
+
+/// One 11-tap pass of the separable blur `g`, along x (`along_x`) or y;
+/// taps past the image's edge are left out.
+fn blur_pass(src: &[f64], w: usize, h: usize, g: &[f64], along_x: bool) -> Vec<f64> {
     let mut out = vec![0.0; w * h];
     for y in 0..h {
         for x in 0..w {
             for t in -5i64..=5 {
-                let yy = y as i64 + t;
-                if yy >= 0 && yy < h as i64 {
-                    out[y * w + x] += g[(t + 5) as usize] * tmp[yy as usize * w + x];
+                let (xx, yy) = if along_x { (x as i64 + t, y as i64) } else { (x as i64, y as i64 + t) };
+                if xx >= 0 && xx < w as i64 && yy >= 0 && yy < h as i64 {
+                    out[y * w + x] += g[(t + 5) as usize] * src[yy as usize * w + xx as usize];
                 }
             }
         }

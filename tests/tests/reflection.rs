@@ -47,6 +47,16 @@ fn gaussian_reflecting(p: V3, w: V3, material: [f64; 4]) -> ReflGaussian {
     ReflGaussian { p, q: quat_to(n), material }
 }
 
+/// `n` random Gaussians, each facing a random direction.
+fn random_gaussians(rng: &mut Rng, n: usize) -> Vec<ReflGaussian> {
+    (0..n)
+        .map(|_| {
+            let w = random_dir(rng);
+            random_gaussian(rng, w)
+        })
+        .collect()
+}
+
 fn random_gaussian(rng: &mut Rng, w: V3) -> ReflGaussian {
     let p = [uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0), uni(rng, -1.0, 1.0)];
     let material = [uni(rng, -3.0, 3.0), uni(rng, -3.0, 3.0), uni(rng, -3.0, 3.0), uni(rng, -3.0, 3.0)];
@@ -574,12 +584,7 @@ fn color_backward_matches_finite_differences() {
     for proxy in [None, Some(PROXY)] {
         for fresnel in [Fresnel::Off, Fresnel::Schlick] {
             let env = random_env(&mut rng, 3);
-            let gs: Vec<_> = (0..24)
-                .map(|_| {
-                    let w = random_dir(&mut rng);
-                    random_gaussian(&mut rng, w)
-                })
-                .collect();
+            let gs = random_gaussians(&mut rng, 24);
             check_backward(&gs, &env, 3, fresnel, &mut rng, "random directions", proxy);
         }
     }
@@ -592,12 +597,7 @@ fn texel_gradients_sum_many_gaussians_per_texel_deterministically() {
     // texel's slots span several reduction chunks.
     let mut rng = Rng(seed("texel_sum"));
     let env = random_env(&mut rng, 1);
-    let gs: Vec<_> = (0..300)
-        .map(|_| {
-            let w = random_dir(&mut rng);
-            random_gaussian(&mut rng, w)
-        })
-        .collect();
+    let gs = random_gaussians(&mut rng, 300);
     let ch = Fresnel::Off.channels() as usize;
     let dfeat: Vec<f64> = (0..ch * gs.len()).map(|_| uni(&mut rng, -1.0, 1.0) as f32 as f64).collect();
     let a = gpu_backward(&gs, &env, 1, Fresnel::Off, &dfeat, None);

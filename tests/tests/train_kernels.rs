@@ -223,6 +223,44 @@ fn record_accesses(ctx: &tgs_engine::Context) -> Vec<tgs_pipelines::RecordAccess
     access
 }
 
+/// Every array of `set`, as bits.
+fn bits_of(set: &TrainableSet) -> Vec<(String, Vec<u32>)> {
+    set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect()
+}
+
+/// Two steps of `rast` on a fresh set from `c`: the reduce with Adam fused
+/// (`features_only` as given), or the backward (the colour backward when
+/// `features_only`) then Adam's own pass. The arrays' bits after, preceded
+/// by each step's densification gradients unless `features_only`.
+fn two_steps(rast: &tgs_pipelines::Rasterizer, c: &FusedCase, fused: bool, features_only: bool) -> Vec<(String, Vec<u32>)> {
+    let ctx = ctx_shared();
+    let set = TrainableSet::new(ctx, &c.host).unwrap();
+    let mut frame = rast.frame(c.cam.width, c.cam.height, set.len(), 1024).unwrap();
+    let mut out = Vec::new();
+    for t in 1..=2u64 {
+        rast.forward(&set.params, &c.cam, &[0.1, 0.5, 0.9], 1, &mut frame, false).unwrap();
+        frame.grad_out.upload(&c.grad_out).unwrap();
+        let mut rec = Recorder::new(ctx).unwrap();
+        if fused {
+            let k = c.adam.reduce_constants(&set, &c.groups, t).unwrap();
+            rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &k, features_only }, 1, &frame, None).unwrap();
+        } else if features_only {
+            rast.record_backward_colour(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
+            c.adam.record_set_features(&mut rec, &set, &c.groups[4], t).unwrap();
+        } else {
+            rast.record_backward(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
+            c.adam.record_set(&mut rec, &set, &c.groups, t).unwrap();
+        }
+        rec.submit_and_wait().unwrap();
+        if !features_only {
+            let densify = frame.densify.download_range(0, 2 * set.len() as usize).unwrap();
+            out.push((format!("step {t}: densify"), densify.iter().map(|v| v.to_bits()).collect()));
+        }
+    }
+    out.extend(bits_of(&set));
+    out
+}
+
 /// The per-Gaussian reduce with Adam fused (`Rasterizer::record_backward_adam`)
 /// leaves bit for bit the parameters, moments and densification gradients
 /// of the backward followed by Adam's own pass: two steps at SH degree 1 of
@@ -242,35 +280,14 @@ fn the_reduce_with_adam_fused_matches_the_backward_then_adam() {
             eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
             return;
         }
-        let run = |fused: bool| -> Vec<(String, Vec<u32>)> {
-            let set = TrainableSet::new(ctx, &host).unwrap();
-            let mut frame = rast.frame(cam.width, cam.height, set.len(), 1024).unwrap();
-            let mut out = Vec::new();
-            for t in 1..=2u64 {
-                rast.forward(&set.params, &cam, &[0.1, 0.5, 0.9], 1, &mut frame, false).unwrap();
-                frame.grad_out.upload(&grad_out).unwrap();
-                let mut rec = Recorder::new(ctx).unwrap();
-                if fused {
-                    let c = adam.reduce_constants(&set, &groups, t).unwrap();
-                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c, features_only: false }, 1, &frame, None).unwrap();
-                } else {
-                    rast.record_backward(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
-                    adam.record_set(&mut rec, &set, &groups, t).unwrap();
-                }
-                rec.submit_and_wait().unwrap();
-                let densify = frame.densify.download_range(0, 2 * set.len() as usize).unwrap();
-                out.push((format!("step {t}: densify"), densify.iter().map(|v| v.to_bits()).collect()));
-            }
-            out.extend(set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())));
-            out
-        };
+        let case = FusedCase { host, cam, grad_out, adam, groups };
+        let run = |fused: bool| two_steps(&rast, &case, fused, false);
         let (fused, separate) = (run(true), run(false));
         for ((name, a), (_, b)) in fused.iter().zip(&separate) {
             assert!(a == b, "{records:?}, SH degree {degree}: {name} differs between the fused and the separate step");
         }
-        let before = TrainableSet::new(ctx, &host).unwrap();
         let params = |s: &[(String, Vec<u32>)], k: &str| s.iter().find(|a| a.0 == k).unwrap().1.clone();
-        let initial: Vec<(String, Vec<u32>)> = before.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect();
+        let initial = bits_of(&TrainableSet::new(ctx, &case.host).unwrap());
         for k in ["param.means", "param.log_scales", "param.quats", "param.opacity", "param.features"] {
             assert_ne!(params(&fused, k), params(&initial, k), "{records:?}: {k} did not move");
         }
@@ -289,35 +306,15 @@ fn the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam() {
     use tgs_pipelines::{Features, RasterKernels, Rasterizer};
     let ctx = ctx_shared();
     let sh3 = Features::Sh { degree: 3 };
-    let FusedCase { host, cam, grad_out, adam, groups } = fused_case("the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam");
-    let bits_of = |set: &TrainableSet| -> Vec<(String, Vec<u32>)> {
-        set.arrays().into_iter().map(|(name, b, _)| (name, b.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect()
-    };
-    let initial = bits_of(&TrainableSet::new(ctx, &host).unwrap());
+    let case = fused_case("the_feature_only_reduce_with_adam_matches_the_colour_backward_then_adam");
+    let initial = bits_of(&TrainableSet::new(ctx, &case.host).unwrap());
     for records in record_accesses(ctx) {
         let rast = Rasterizer::with_records(ctx, 3, sh3, None, RasterKernels::for_device(ctx.caps()), records).unwrap();
         if !rast.can_fuse_adam() {
             eprintln!("{} cannot run the fused reduce: skipped", ctx.caps().device_name);
             return;
         }
-        let run = |fused: bool| -> Vec<(String, Vec<u32>)> {
-            let set = TrainableSet::new(ctx, &host).unwrap();
-            let mut frame = rast.frame(cam.width, cam.height, set.len(), 1024).unwrap();
-            for t in 1..=2u64 {
-                rast.forward(&set.params, &cam, &[0.1, 0.5, 0.9], 1, &mut frame, false).unwrap();
-                frame.grad_out.upload(&grad_out).unwrap();
-                let mut rec = Recorder::new(ctx).unwrap();
-                if fused {
-                    let c = adam.reduce_constants(&set, &groups, t).unwrap();
-                    rast.record_backward_adam(&mut rec, &set.params, tgs_pipelines::Moments { m: &set.m, v: &set.v, adam: &c, features_only: true }, 1, &frame, None).unwrap();
-                } else {
-                    rast.record_backward_colour(&mut rec, &set.params, &set.grads, 1, &frame).unwrap();
-                    adam.record_set_features(&mut rec, &set, &groups[4], t).unwrap();
-                }
-                rec.submit_and_wait().unwrap();
-            }
-            bits_of(&set)
-        };
+        let run = |fused: bool| two_steps(&rast, &case, fused, true);
         let (fused, separate) = (run(true), run(false));
         for (((name, a), (_, b)), (_, init)) in fused.iter().zip(&separate).zip(&initial) {
             if name.starts_with("grad.") {
