@@ -28,6 +28,13 @@ impl SceneSpec {
     }
 }
 
+/// A rasterizer test's start: the shared device, a rasterizer of three
+/// channels at SH degree 3, and the random stream named for the test.
+pub fn sh3_case(name: &str) -> (&'static std::sync::Arc<tgs_engine::Context>, Rasterizer, Rng) {
+    let ctx = ctx_shared();
+    (ctx, Rasterizer::new(ctx, 3, Features::Sh { degree: 3 }).unwrap(), Rng(crate::seed(name)))
+}
+
 /// A splat's normal t_w: the third column of the rotation of its
 /// quaternion (r, x, y, z), normalised first.
 pub fn splat_normal(q: [f32; 4]) -> [f64; 3] {

@@ -11,9 +11,7 @@ const SH3: Features = Features::Sh { degree: 3 };
 
 #[test]
 fn forward_matches_cpu_random_scenes() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("forward_matches_cpu_random_scenes"));
+    let (ctx, rast, mut rng) = sh3_case("forward_matches_cpu_random_scenes");
     for (w, h, n) in [(70, 45, 300), (16, 16, 50), (33, 17, 120)] {
         let scene = random_scene(&mut rng, &SceneSpec::new(n, 3, SH3));
         let cam = default_camera(w, h);
@@ -29,9 +27,7 @@ fn forward_matches_cpu_random_scenes() {
 /// the tile. And the boxes bin fewer tiles than 3-sigma squares.
 #[test]
 fn binning_drops_no_pixel_a_splat_reaches() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("binning_drops_no_pixel_a_splat_reaches"));
+    let (ctx, rast, mut rng) = sh3_case("binning_drops_no_pixel_a_splat_reaches");
     for (w, h, n) in [(70, 45, 300), (33, 17, 150), (100, 64, 400)] {
         let mut spec = SceneSpec::new(n, 3, SH3);
         spec.opacity = (-6.5, 4.6);
@@ -95,9 +91,7 @@ fn records_by_binding_and_by_address_agree() {
 
 #[test]
 fn gradients_match_finite_differences_sh3() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("gradients_match_finite_differences_sh3"));
+    let (ctx, rast, mut rng) = sh3_case("gradients_match_finite_differences_sh3");
     let mut spec = SceneSpec::new(12, 3, SH3);
     spec.log_scale = (-2.2, -1.0);
     let scene = random_scene(&mut rng, &spec);
@@ -172,9 +166,7 @@ fn sh_degree_zero_and_partial_activation() {
 
 #[test]
 fn backward_is_bit_identical_run_to_run() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("backward_is_bit_identical_run_to_run"));
+    let (ctx, rast, mut rng) = sh3_case("backward_is_bit_identical_run_to_run");
     let mut spec = SceneSpec::new(2000, 3, SH3);
     spec.log_scale = (-3.0, -1.5);
     let scene = random_scene(&mut rng, &spec);

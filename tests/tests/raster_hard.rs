@@ -42,9 +42,7 @@ fn check_finite_backward(rast: &Rasterizer, scene: &HostGaussians, cam: &Camera,
 
 #[test]
 fn edge_on_splats() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("edge_on_splats"));
+    let (ctx, rast, mut rng) = sh3_case("edge_on_splats");
     let cam = axis_camera(40, 30, 30.0);
     let mut s = HostGaussians::new(3, 16);
     for i in 0..40 {
@@ -77,9 +75,7 @@ fn edge_on_splats() {
 
 #[test]
 fn tiny_and_huge_scales() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("tiny_and_huge_scales"));
+    let (ctx, rast, mut rng) = sh3_case("tiny_and_huge_scales");
     let cam = axis_camera(37, 29, 30.0);
     let mut s = HostGaussians::new(3, 16);
     for i in 0..30 {
@@ -103,9 +99,7 @@ fn tiny_and_huge_scales() {
 
 #[test]
 fn behind_camera_and_near_plane() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("behind_camera_and_near_plane"));
+    let (ctx, rast, mut rng) = sh3_case("behind_camera_and_near_plane");
     let cam = axis_camera(32, 24, 25.0);
     let mut s = HostGaussians::new(3, 16);
     let q = [1.0, 0.1, -0.1, 0.05];
@@ -130,9 +124,7 @@ fn behind_camera_and_near_plane() {
 
 #[test]
 fn saturated_opacity_clamps_alpha() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("saturated_opacity_clamps_alpha"));
+    let (ctx, rast, mut rng) = sh3_case("saturated_opacity_clamps_alpha");
     let cam = default_camera(36, 20);
     let mut spec = SceneSpec::new(12, 3, SH3);
     spec.log_scale = (-2.0, -1.0);
@@ -182,9 +174,7 @@ fn equal_depths_keep_a_stable_order() {
 
 #[test]
 fn empty_scene_and_one_pixel_image() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("empty_scene_and_one_pixel_image"));
+    let (ctx, rast, mut rng) = sh3_case("empty_scene_and_one_pixel_image");
     let empty = HostGaussians::new(3, 16);
     let cam = default_camera(20, 10);
     let run = check_finite_backward(&rast, &empty, &cam, &[0.25, 0.5, 0.75], 3, &mut rng, "empty");
@@ -373,9 +363,7 @@ fn reach_scene(rng: &mut Rng) -> HostGaussians {
 
 #[test]
 fn pixel_boxes_hold_every_reached_pixel() {
-    let ctx = ctx_shared();
-    let rast = Rasterizer::new(ctx, 3, SH3).unwrap();
-    let mut rng = Rng(seed("pixel_boxes_hold_every_reached_pixel"));
+    let (ctx, rast, mut rng) = sh3_case("pixel_boxes_hold_every_reached_pixel");
     let cam = axis_camera(48, 40, 36.0);
     let s = reach_scene(&mut rng);
     let g = Gaussians::upload(ctx, &s).unwrap();
