@@ -392,6 +392,14 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     assert!(om == scat && covm == 0.0, "mask-seeded with normal_min_r = 1: {om} {covm}");
     tr.cfg.reflection.normal_min_r = 0.0;
     assert_eq!(mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap()), (o0, scat0, cov0));
+    // The alpha the set needs to decide a pixel: lower covers at least as
+    // much of the glass, 1 (beyond any pixel's alpha) less; 0 is refused.
+    output_set(&mut tr, "reflection.normal_min_alpha=0.05").unwrap();
+    let (_, _, cov_lo) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    output_set(&mut tr, "reflection.normal_min_alpha=1").unwrap();
+    let (_, _, cov_hi) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
+    assert!(cov_lo >= cov0 && cov_hi < cov0, "normal_min_alpha 0.05 / 0.5 / 1: coverage {cov_lo} / {cov0} / {cov_hi}");
+    assert!(output_set(&mut tr, "reflection.normal_min_alpha=0").unwrap_err().contains("reflection.normal_min_alpha"));
     drop(tr);
     refused(TrainArgs { set: vec!["reflection.normal_min_r=1.5".into()], ..ad.clone() }, &["reflection.normal_min_r", "1.5"]);
     refused(TrainArgs { set: vec!["reflection.residual_normal_min_r=-0.1".into()], ..ad.clone() }, &["reflection.residual_normal_min_r", "-0.1"]);

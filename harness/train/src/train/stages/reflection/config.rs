@@ -132,6 +132,10 @@ pub struct ReflectionConfig {
     /// 0.07 the normals beside the glass stay within 1° of Stage I's on the
     /// suite (perf/journal/2026-12-04-fifty-seventh.md).
     pub residual_normal_min_r: f32,
+    /// The reflection set's alpha a pixel needs for the set to decide its
+    /// normal and depth (with the R threshold above). 0.5 leaves the glass's
+    /// edge pixels, which exact masks' hulls cover only in part, Stage I's.
+    pub normal_min_alpha: f32,
     /// The frozen scattering layer's SH degree under Stage II (3: Stage I's
     /// colour as it is; 0 leaves the view-dependent light Stage I baked
     /// into degrees 1–3 to the reflection set). The run decision and the
@@ -190,6 +194,7 @@ impl Default for ReflectionConfig {
             lambda_area: 0.0,
             normal_min_r: 0.0,
             residual_normal_min_r: 0.07,
+            normal_min_alpha: 0.5,
             scattering_sh: 3,
             train_scattering: false,
             reseed: false,
@@ -250,6 +255,9 @@ impl ReflectionConfig {
             if !(0.0..=1.0).contains(&v) {
                 bail!("reflection.{k} must be in [0, 1] (a reflection weight), not {v}");
             }
+        }
+        if !(self.normal_min_alpha > 0.0 && self.normal_min_alpha <= 1.0) {
+            bail!("reflection.normal_min_alpha must be in (0, 1] (an alpha), not {}", self.normal_min_alpha);
         }
         for (k, v) in [
             ("lr_env", self.lr_env),

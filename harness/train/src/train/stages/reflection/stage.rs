@@ -53,7 +53,7 @@ impl LaterKind for Kind {
     }
 
     fn output_settings(&self) -> &'static [&'static str] {
-        &["reflection.normal_min_r", "reflection.residual_normal_min_r"]
+        &["reflection.normal_min_r", "reflection.residual_normal_min_r", "reflection.normal_min_alpha"]
     }
 
     fn trains_scattering(&self, cfg: &TrainConfig) -> bool {
@@ -432,10 +432,11 @@ impl LaterStage for ReflectionModel {
 }
 
 /// Whether the reflection set decides the geometry of pixel `i` of a Stage
-/// II/III render: it covers the pixel (alpha >= 0.5) and its reflection
-/// weight R there reaches `min_r` (`reflection.normal_min_r`).
-pub fn reflection_decides(refl: &ReflRendered, i: usize, min_r: f32) -> bool {
-    refl.refl_plane(Plane::Alpha)[i] >= 0.5 && refl.r()[i] >= min_r
+/// II/III render: its alpha there reaches `min_alpha`
+/// (`reflection.normal_min_alpha`) and its reflection weight R `min_r`
+/// (`reflection.normal_min_r`).
+pub fn reflection_decides(refl: &ReflRendered, i: usize, (min_alpha, min_r): (f32, f32)) -> bool {
+    refl.refl_plane(Plane::Alpha)[i] >= min_alpha && refl.r()[i] >= min_r
 }
 
 /// The cube map's parallax proxy for `reflection.env_radius` = `radius`:
