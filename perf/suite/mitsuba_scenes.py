@@ -64,7 +64,9 @@ made of scene NAME; its poses and image size are read from it) as
 `DIR/VIEW.png`, the layout `tgs train --set reflection.seed_masks=DIR`
 reads (Stage II's seeds from known glass masks instead of the residual;
 issue 42's measure of what exact masks are worth). DATASET is only read;
-DIR must not hold masks already.
+DIR must not hold masks already. A pixel is glass where all of its 16 rays
+hit glass; `--mask-share 0.5` makes it where half of them do (the outline
+a segmentation model draws).
 """
 import argparse
 import json
@@ -464,6 +466,7 @@ def main():
     ap.add_argument("--median-of", type=int, default=1, metavar="K", help="each image the per-pixel median of K renderings of --spp samples (no fireflies; biased: drops the sun's caustics through the glass)")
     ap.add_argument("--compact", action="store_true", help="JPEG images (quality 95) and half-float EXR normals: ~10x smaller, for datasets that travel (perf/suite/gpu_paper.sh)")
     ap.add_argument("--piece", type=int, metavar="K", help="with --train-masks: the masks of the scene's K-th glass primitive alone (a pane of `vehicle`), for marking each piece of glass as its own region")
+    ap.add_argument("--mask-share", type=float, default=1.0, metavar="F", help="with --train-masks: the share of a pixel's 16 rays that must hit glass (default 1: all)")
     ap.add_argument("--train-masks", metavar="DATASET", help="only write DATASET's training views' glass masks into --out (one --scene)")
     a = ap.parse_args()
     if not 0 <= a.sampler_seed <= 1000:
@@ -538,6 +541,8 @@ def train_masks(mi, a):
     if not a.scene or len(a.scene) != 1 or a.scene[0] == "suite":
         raise SystemExit("--train-masks needs exactly one --scene NAME (the scene DATASET was made of)")
     name = a.scene[0]
+    if not 0.0 < a.mask_share <= 1.0:
+        raise SystemExit(f"--mask-share {a.mask_share}: a share of a pixel's rays, in (0, 1]")
     path = os.path.join(a.train_masks, "transforms_train.json")
     try:
         t = json.load(open(path))
@@ -563,7 +568,7 @@ def train_masks(mi, a):
         if a.piece is not None:
             # The piece alone: rays whose first hit is its primitive.
             g = k == glass[a.piece]
-        write_8bit(mi, out, g.reshape(w, w, 16).all(2).astype(np.float32)[:, :, None], False)
+        write_8bit(mi, out, (g.reshape(w, w, 16).mean(2) >= a.mask_share - 1e-9).astype(np.float32)[:, :, None], False)
     print(f"{len(t['frames'])} masks of {name} in {a.out}")
 
 
