@@ -75,10 +75,10 @@ pub fn inherited_settings(saved: &TrainConfig, cfg: &TrainConfig, start: usize) 
     let (old, new) = (settings(saved)?, settings(cfg)?);
     let presets = [settings(&TrainConfig::preset("quick")?)?, settings(&TrainConfig::preset("paper")?)?];
     // What this `--from` may change (the refusals' own lists), of the stages' settings.
-    let later = |k: &str| from_setting(start, k) && later().iter().any(|s| in_section(*s, k) && cfg.wants(s.stage().name()));
+    let may_change = |k: &str| from_setting(start, k) && later().iter().any(|s| in_section(*s, k) && cfg.wants(s.stage().name()));
     Ok(new
         .iter()
-        .filter(|(k, v)| later(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
+        .filter(|(k, v)| may_change(k) && old.get(*k) == Some(*v) && presets.iter().all(|p| p.get(*k) != Some(*v)))
         .map(|(k, v)| {
             let d: Vec<String> = presets.iter().map(|p| p.get(k).map(show).unwrap_or_else(|| "none".into())).collect();
             let d = if d[0] == d[1] { d[0].clone() } else { format!("{} quick, {} paper", d[0], d[1]) };
