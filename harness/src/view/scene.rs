@@ -205,8 +205,8 @@ impl Scene {
             ("final" | "gt", _) => true,
             (_, Some(k)) => k.contains(&name),
             ("normal" | "depth", None) => true,
-            // Before the stage has rendered: only Stage III evaluates Phi.
-            ("phi_mask", None) => self.stage() == "III",
+            // Before the stage has rendered once, a guess: a later stage's
+            // layers (one it lacks is stepped over when drawn: host_layer).
             (_, None) => later,
         };
         let n = LAYERS.len() as i64;
@@ -289,9 +289,18 @@ impl Scene {
             let tr = self.trainer.as_mut().expect("made above");
             let r = tr.render(cam)?;
             let depth = expected_depth(&r);
-            let layers = layer_images(&r, &world_normals(&r, cam), &depth, cam);
+            let mut layers = layer_images(&r, &world_normals(&r, cam), &depth, cam);
             self.known = Some(layers.iter().map(|(s, _)| if s.is_empty() { "final" } else { *s }).collect());
-            layers.into_iter().find(|(s, _)| *s == name).map(|(_, i)| i).with_context(|| format!("Stage {} renders no '{name}' layer", self.stage()))?
+            let mut take = |name: &str| layers.iter().position(|(s, _)| *s == name).map(|i| layers.swap_remove(i).1);
+            match take(name) {
+                Some(img) => img,
+                None => {
+                    // A layer guessed before the stage rendered that it lacks: the next it has.
+                    self.step_layer(1);
+                    let next = self.layer_name();
+                    take(next).with_context(|| format!("Stage {} renders no '{name}' layer", self.stage()))?
+                }
+            }
         };
         Ok(pack_image(&img, order))
     }
