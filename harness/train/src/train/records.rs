@@ -20,7 +20,9 @@ pub fn reflection_record(tr: &Trainer, validation: &Validation, stages: &[Value]
     let mut r = json!(tr.decision);
     let ran = tr.decision.as_ref().is_some_and(|d| d.run);
     if let (true, true, Some(o)) = (validation.is_on(), ran, r.as_object_mut()) {
-        o.insert("kept".into(), json!(validation.dropped(stages).is_none()));
+        // Stage II's own verdict (a stage after it may be dropped instead).
+        let stage_two = crate::train::stages::reflection::stage::STAGE.name();
+        o.insert("kept".into(), json!(validation.drops(stages, stage_two).is_none()));
     }
     r
 }

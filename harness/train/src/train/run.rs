@@ -18,8 +18,6 @@ use super::report::{lpips_text, Reporter};
 pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
 use super::signals::{arm, stop_requested};
 pub use super::signals::{install_signal_handler, request_stop, signals_received};
-use super::stage::Stage;
-use super::stages::kind::by_stage;
 use super::stages::{LaterKind, RunPaths};
 use super::trainer::{StepReport, Trainer};
 use super::validation::{back_to_before, before, end_here, Validation};
@@ -131,9 +129,13 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
         last_closed: false,
         live: a.live.as_ref().map(Live::new),
     };
-    // A run whose later stage was dropped ended there (stages.json says so).
-    if a.resume && run.validation.dropped(&run.stages).is_some() && tr.iteration > tr.cfg.iterations && tr.later.is_none() {
-        end_here(&mut tr);
+    // A run whose later stage was dropped ended there (stages.json says
+    // so): past that stage's start, its checkpoint holds the model before it.
+    if let Some((kind, _)) = run.validation.dropped(&run.stages).filter(|_| a.resume) {
+        let holds_it = tr.later.as_ref().is_some_and(|m| m.stage() == kind.stage());
+        if tr.iteration > tr.schedule.start_of(kind.stage()) && !holds_it {
+            end_here(&mut tr);
+        }
     }
     while !tr.done() {
         let (entry, label) = tr.next_entry();
@@ -208,8 +210,8 @@ impl Run<'_> {
             if !self.a.quiet {
                 eprintln!("Stage {prev} done");
             }
-            if self.validation.drops(&self.stages, &prev) {
-                *tr = self.drop_stage(tr, &prev)?;
+            if let Some(dropped) = self.validation.drops(&self.stages, &prev) {
+                *tr = self.drop_stage(tr, dropped)?;
                 self.last_closed = true;
                 return write_stage_records(out, &self.stages);
             }
@@ -225,12 +227,11 @@ impl Run<'_> {
         write_stage_records(out, &self.stages)
     }
 
-    /// The stage `label` (Stage II's set) did not raise the validation
-    /// views' PSNR: the run goes back to the model before it
-    /// ([`back_to_before`]), says so and logs it.
-    fn drop_stage(&mut self, tr: &Trainer, label: &str) -> Result<Trainer> {
-        let stage = Stage::named(label).with_context(|| format!("no stage named {label} to drop"))?;
-        let what = by_stage(stage).and_then(|k| k.dropped_unless_kept()).unwrap_or("set");
+    /// The stage of `kind`, adding `what` (Stage II's reflection set), did
+    /// not raise the validation views' PSNR: the run goes back to the model
+    /// before it ([`back_to_before`]), says so and logs it.
+    fn drop_stage(&mut self, tr: &Trainer, (kind, what): (&dyn LaterKind, &str)) -> Result<Trainer> {
+        let (stage, label) = (kind.stage(), kind.stage().name());
         let t = back_to_before(self.ctx, &self.a.out, &self.data, tr, stage)?;
         let b = before(stage).name();
         let msg = format!("Stage {label} dropped: its {what} did not raise the validation views' PSNR over Stage {b}'s (validation_margin_db); Stage {b}'s model is the result");
@@ -317,8 +318,8 @@ impl Run<'_> {
             let mut rec = stage_record(&last_stage, &tr, self.clocks.stage_s(), metrics.as_ref());
             rec["validation"] = json!(self.validation.measure(&mut tr)?);
             self.stages.push(rec);
-            if self.validation.drops(&self.stages, &last_stage) {
-                tr = self.drop_stage(&tr, &last_stage)?;
+            if let Some(dropped) = self.validation.drops(&self.stages, &last_stage) {
+                tr = self.drop_stage(&tr, dropped)?;
                 self.save(&tr)?;
                 metrics = self.test_metrics(&mut tr)?;
             }

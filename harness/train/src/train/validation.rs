@@ -10,7 +10,7 @@ use super::checkpoint;
 use super::config::TrainConfig;
 use super::rundir::stage_checkpoint;
 use super::stage::Stage;
-use super::stages::{later, Views};
+use super::stages::{later, LaterKind, Views};
 use super::trainer::Trainer;
 use crate::data::{Dataset, View};
 use crate::eval::evaluate;
@@ -68,21 +68,21 @@ impl Validation {
         out
     }
 
-    /// The stage the records say is to be dropped: one whose kind falls
-    /// back when not kept (`LaterKind::dropped_unless_kept`) and whose
-    /// first round's verdict is "not kept".
-    pub fn dropped(&self, stages: &[Value]) -> Option<Stage> {
+    /// The stage the records say is to be dropped, with what it adds (its
+    /// `LaterKind::dropped_unless_kept`): one whose kind falls back when not
+    /// kept and whose first round's verdict is "not kept".
+    pub fn dropped(&self, stages: &[Value]) -> Option<(&'static dyn LaterKind, &'static str)> {
         if !self.is_on() {
             return None;
         }
         let verdicts = self.verdicts(stages);
         let not_kept = |s: Stage| verdicts.iter().any(|v| v["stage"] == s.name() && v["kept"] == false);
-        later().into_iter().filter(|k| k.dropped_unless_kept().is_some()).map(|k| k.stage()).find(|&s| not_kept(s))
+        later().into_iter().find_map(|k| k.dropped_unless_kept().filter(|_| not_kept(k.stage())).map(|what| (k, what)))
     }
 
-    /// Whether the schedule entry `label` ("II", "II.2", ...) is the stage to drop.
-    pub fn drops(&self, stages: &[Value], label: &str) -> bool {
-        self.dropped(stages).is_some_and(|s| s.name() == label)
+    /// [`Validation::dropped`] when it is the schedule entry `label` ("II", "II.2", ...).
+    pub fn drops(&self, stages: &[Value], label: &str) -> Option<(&'static dyn LaterKind, &'static str)> {
+        self.dropped(stages).filter(|(k, _)| k.stage().name() == label)
     }
 
     /// metrics.json's `validation`.

@@ -55,8 +55,8 @@ pub fn later() -> Vec<&'static dyn LaterKind> {
 pub fn register(kind: &'static dyn LaterKind) -> Result<()> {
     let settings = toml::Table::try_from(crate::train::TrainConfig::default()).map_err(anyhow::Error::from)?;
     let mut extra = REGISTERED.write().unwrap_or_else(|e| e.into_inner());
-    let taken = |k: &&dyn LaterKind| k.stage() == kind.stage() || k.key() == kind.key();
-    if Stage::all().contains(&kind.stage()) || settings.contains_key(kind.key()) || BUILT_IN.iter().chain(extra.iter()).any(taken) {
+    let key_taken = BUILT_IN.iter().chain(extra.iter()).any(|k| k.key() == kind.key()) || settings.contains_key(kind.key());
+    if Stage::all().contains(&kind.stage()) || key_taken {
         bail!("stage {} ({}): its name or settings key is taken", kind.stage().name(), kind.key());
     }
     if let Some(s) = kind.settings().filter(|s| s.key != kind.key()) {

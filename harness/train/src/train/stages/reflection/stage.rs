@@ -131,6 +131,7 @@ impl LaterKind for Kind {
     fn dropped_unless_kept(&self) -> Option<&'static str> {
         Some("reflection set")
     }
+
     fn files(&self) -> &'static [&'static str] {
         &["reflection.ply", "envmap.exr", "envmap.png", "envmap_depth.exr", "envmap_depth.png"]
     }
