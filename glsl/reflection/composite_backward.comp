@@ -4,12 +4,15 @@
 // reflection render's planes (all written) and, with scat_grad, to the
 // scattering render's colour. pc.r_prior is added to dL/dR and
 // pc.alpha_prior to dL/dalpha everywhere (penalties on the means of R and of
-// the reflection set's alpha, the area it covers).
+// the reflection set's alpha, the area it covers); with pc.mask_weight != 0
+// also (alpha - mask) pc.mask_weight, the gradient of
+// mask_weight / 2 sum (alpha - mask)^2 (the set drawn to a glass mask).
 #include "reflection/composite_common.glsl"
 
 layout(std430, binding = 2) readonly buffer LossGrad { float g_in[]; };
 layout(std430, binding = 3) writeonly buffer ReflGrad { float g_refl[]; };
 layout(std430, binding = 4) buffer ScatGrad { float g_scat[]; };
+layout(std430, binding = 5) readonly buffer Mask { float mask[]; };
 
 void main() {
     uint pix = wg_linear() * WG + gl_LocalInvocationID.x;
@@ -56,6 +59,9 @@ void main() {
         g_refl[4u * n + pix] = dF0s.x;
         g_refl[5u * n + pix] = dF0s.y;
         g_refl[6u * n + pix] = dF0s.z;
+    }
+    if (pc.mask_weight != 0.0) {
+        d_alpha += pc.mask_weight * (refl[ch * n + pix] - mask[pix]);
     }
     g_refl[ch * n + pix] = d_alpha + pc.alpha_prior;
     g_refl[(ch + 1u) * n + pix] = g_in[4u * n + pix];

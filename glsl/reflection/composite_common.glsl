@@ -28,7 +28,7 @@ layout(push_constant) uniform Push {
     uint scat_grad;  // backward: 1 also writes dL/dI_scat
     float r_prior;   // backward: added to dL/dR at every pixel
     float alpha_prior; // backward: added to dL/dalpha at every pixel
-    uint pad;
+    float mask_weight; // backward: (alpha - mask) times this added to dL/dalpha
 } pc;
 
 const float F0_EPS = 1e-6;

@@ -738,7 +738,7 @@ fn planes(px: &[CompositePixel], fresnel: Fresnel, extra: &mut Rng) -> (Vec<f32>
     (scat, refl)
 }
 
-fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_in: &[f32], prior: CompositePriors) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_in: &[f32], (prior, mask): (CompositePriors, Option<&[f32]>)) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let ctx = ctx_shared();
     let shading = ReflectionShading::new(ctx).unwrap();
     let n = (cam.width * cam.height) as usize;
@@ -748,12 +748,12 @@ fn gpu_composite(cam: &Camera, fresnel: Fresnel, scat: &[f32], refl: &[f32], g_i
     let gi = Buffer::from_slice(ctx, "test.loss_grad", g_in).unwrap();
     let gr = Buffer::<f32>::new(ctx, "test.refl_grad", refl.len()).unwrap();
     let gs = Buffer::<f32>::new(ctx, "test.scat_grad", 3 * n).unwrap();
+    let m = mask.map(|m| Buffer::from_slice(ctx, "test.mask", m).unwrap());
     let mut rec = Recorder::new(ctx).unwrap();
     let inputs = tgs_pipelines::reflection::CompositeInputs { scat: &s, refl: &r };
     shading.record_composite(&mut rec, cam, fresnel, &inputs, &li).unwrap();
-    shading
-        .record_composite_backward(&mut rec, cam, fresnel, &inputs, &tgs_pipelines::reflection::CompositeGrads { loss_grad: &gi, refl_grad: &gr, scat_grad: Some(&gs) }, prior)
-        .unwrap();
+    let grads = tgs_pipelines::reflection::CompositeGrads { loss_grad: &gi, refl_grad: &gr, scat_grad: Some(&gs), mask: m.as_ref() };
+    shading.record_composite_backward(&mut rec, cam, fresnel, &inputs, &grads, prior).unwrap();
     rec.submit_and_wait().unwrap();
     (li.download().unwrap(), gr.download().unwrap(), gs.download().unwrap())
 }
@@ -786,9 +786,14 @@ fn composite_matches_reference_and_finite_differences() {
                 .collect();
             let g_in: Vec<f32> = (0..10 * n).map(|_| uni(&mut rng, -1.0, 1.0) as f32).collect();
             // The loss also holds r * R + alpha * alpha per pixel (penalties
-            // on the means of R and of the reflection set's alpha).
-            let prior = CompositePriors { r: uni(&mut rng, 0.1, 0.5) as f32, alpha: uni(&mut rng, 0.1, 0.5) as f32 };
-            let (li, gr, gs) = gpu_composite(&cam, fresnel, &scat, &refl, &g_in, prior);
+            // on the means of R and of the reflection set's alpha), and with
+            // a glass mask m mask / 2 (alpha - m)^2 (a weight without a mask
+            // is ignored).
+            let prior = CompositePriors { r: uni(&mut rng, 0.1, 0.5) as f32, alpha: uni(&mut rng, 0.1, 0.5) as f32, mask: uni(&mut rng, 0.1, 0.5) as f32 };
+            let glass: Vec<f32> = (0..n).map(|_| if uni(&mut rng, 0.0, 1.0) < 0.5 { 1.0 } else { 0.0 }).collect();
+            let with_mask = w > 1 && fresnel == Fresnel::Schlick;
+            let mask = with_mask.then_some(&glass[..]);
+            let (li, gr, gs) = gpu_composite(&cam, fresnel, &scat, &refl, &g_in, (prior, mask));
             for (name, v) in [("composite", &li), ("reflection gradient", &gr), ("scattering gradient", &gs)] {
                 assert!(v.iter().all(|x| x.is_finite()), "{fresnel:?} {w}x{h}: non-finite {name}");
             }
@@ -804,7 +809,8 @@ fn composite_matches_reference_and_finite_differences() {
                 // Gradients: d(sum_c g_c I_c)/d(input) by central differences.
                 let loss = |p: &CompositePixel| {
                     let v = rr::composite(p, schlick);
-                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>() + prior.r as f64 * p.r + prior.alpha as f64 * p.alpha
+                    let to_mask = mask.map_or(0.0, |m| 0.5 * prior.mask as f64 * (p.alpha - m[i] as f64).powi(2));
+                    (0..3).map(|c| v[c] * g_in[c * n + i] as f64).sum::<f64>() + prior.r as f64 * p.r + prior.alpha as f64 * p.alpha + to_mask
                 };
                 let step = 1e-7;
                 let fd = |f: &dyn Fn(&mut CompositePixel, f64)| {

@@ -208,7 +208,7 @@ fn run(ctx: &Arc<Context>, x: &Setup) -> Outcome {
     }
     for it in 1..=iterations {
         let v = (it as usize * 7) % s.cams.len();
-        let x = ReflStepInput { iteration: it, camera: &s.cams[v], target: &targets[v], scat: Some(&scat), lr_means: 0.0, profile: false };
+        let x = ReflStepInput { iteration: it, camera: &s.cams[v], target: &targets[v], scat: Some(&scat), lr_means: 0.0, profile: false, mask: None };
         model.step(&cfg, &x, None).unwrap();
     }
     let after = mae(&model.set.params.download().unwrap(), &s);
@@ -285,7 +285,7 @@ fn a_penalty_on_r_joins_the_loss_and_lowers_r() {
         let mut first_loss = f64::NAN;
         for it in 1..=300u32 {
             let v = view_of(it);
-            let x = ReflStepInput { iteration: it, camera: &s.cams[v], target: &targets[v], scat: Some(&scat), lr_means: 0.0, profile: false };
+            let x = ReflStepInput { iteration: it, camera: &s.cams[v], target: &targets[v], scat: Some(&scat), lr_means: 0.0, profile: false, mask: None };
             let out = model.step(&cfg, &x, None).unwrap();
             assert!(out.loss.is_finite(), "lambda_r {lambda_r}: loss {} at step {it}", out.loss);
             if it == 1 {

@@ -211,7 +211,7 @@ fn an_overflowed_reflection_step_updates_nothing_before_it_is_run_again() {
     cfg.reflection.lambda_r = 0.5;
     let cam = camera();
     let (target, scat) = target_and_scat(ctx);
-    let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: Some(&scat), lr_means: 1e-3, profile: false };
+    let input = ReflStepInput { iteration: 1, camera: &cam, target: &target, scat: Some(&scat), lr_means: 1e-3, profile: false, mask: None };
     let model = || ReflectionModel::from_scattering(ctx, Some(&g), &[], HostEnvMap::constant(cfg.reflection.env_res, 0.0).unwrap(), &cfg.reflection, 1e-15).unwrap();
 
     // A: the first frame overflows (more than one submission), nothing is

@@ -101,7 +101,8 @@ struct CompositePush {
     r_prior: f32,
     /// Backward: added to dL/dalpha (the reflection set's) at every pixel.
     alpha_prior: f32,
-    pad: u32,
+    /// Backward: the weight of the reflection set's alpha against a glass mask.
+    mask_weight: f32,
 }
 
 /// Penalties on the means of the reflection render's R and alpha planes,
@@ -113,13 +114,21 @@ pub struct CompositePriors {
     pub r: f32,
     /// Added to dL/dalpha: a cost on the area the reflection set covers.
     pub alpha: f32,
+    /// With a glass mask m ([`CompositeGrads::mask`]): (alpha - m) times this
+    /// added to dL/dalpha, the gradient of mask / 2 * sum (alpha - m)^2.
+    pub mask: f32,
 }
 
 impl CompositePriors {
     /// The per-pixel gradients of `lambda_r * mean(R) + lambda_alpha * mean(alpha)` over `pixels`.
     pub fn of_means(lambda_r: f32, lambda_alpha: f32, pixels: u32) -> CompositePriors {
         let n = pixels.max(1) as f32;
-        CompositePriors { r: lambda_r / n, alpha: lambda_alpha / n }
+        CompositePriors { r: lambda_r / n, alpha: lambda_alpha / n, mask: 0.0 }
+    }
+
+    /// With the gradient of `lambda_mask * mean((alpha - m)^2) / 2` against a glass mask m.
+    pub fn with_mask(self, lambda_mask: f32, pixels: u32) -> CompositePriors {
+        CompositePriors { mask: lambda_mask / pixels.max(1) as f32, ..self }
     }
 }
 
@@ -315,7 +324,7 @@ impl ReflectionShading {
             scat_grad: scat_grad as u32,
             r_prior: prior.r,
             alpha_prior: prior.alpha,
-            pad: 0,
+            mask_weight: prior.mask,
         }
     }
 
@@ -344,13 +353,21 @@ impl ReflectionShading {
         if let Some(s) = g.scat_grad {
             check_planes(cam, &[(s, 3)])?;
         }
-        let p = Self::composite_push(cam, fresnel, g.scat_grad.is_some(), prior);
-        // Without a scattering gradient the binding is never written; bind
-        // the reflection gradient in its place.
+        if let Some(m) = g.mask {
+            check_planes(cam, &[(m, 1)])?;
+        }
+        let mut p = Self::composite_push(cam, fresnel, g.scat_grad.is_some(), prior);
+        if g.mask.is_none() {
+            p.mask_weight = 0.0;
+        }
+        // Without a scattering gradient (a mask) the binding is never
+        // written (read); bind the reflection gradient (the loss gradient)
+        // in its place.
         let sg = g.scat_grad.unwrap_or(g.refl_grad);
+        let mask = g.mask.unwrap_or(g.loss_grad);
         rec.dispatch(
             &self.composite_backward,
-            &[scat.binding(), refl.binding(), g.loss_grad.binding(), g.refl_grad.binding(), sg.binding()],
+            &[scat.binding(), refl.binding(), g.loss_grad.binding(), g.refl_grad.binding(), sg.binding(), mask.binding()],
             bytemuck::bytes_of(&p),
             grid(&self.ctx, cam.width * cam.height),
         )
@@ -387,4 +404,7 @@ pub struct CompositeGrads<'a> {
     pub refl_grad: &'a Buffer<f32>,
     /// dL/d(scattering colour), 3 planes, when the scattering set trains.
     pub scat_grad: Option<&'a Buffer<f32>>,
+    /// The glass mask the reflection set's alpha is drawn to (one plane, 0
+    /// or 1) with a [`CompositePriors::mask`] weight.
+    pub mask: Option<&'a Buffer<f32>>,
 }

@@ -12,7 +12,7 @@ use super::config::TrainConfig;
 use super::schedule::{Schedule, Stage};
 use super::stages::kind::by_stage;
 use super::stages::light_field::LightFieldModel;
-use super::stages::reflection::{reflection_decides, ReflDecision, ReflectionModel};
+use super::stages::reflection::{reflection_decides, NormalGate, ReflDecision, ReflectionModel};
 use super::stages::scattering::init::{check_budget, far_points, gaussians_from_points, random_points};
 use super::stages::scattering::ScatteringModel;
 use super::stages::{scattering, Begun, Iteration, LaterKind, LaterStage, RunPaths, ScatCache, Shared, Transition, Views};
@@ -275,8 +275,8 @@ impl Trainer {
         let refl = model.render(cam, &colour)?;
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
-        let gate = self.normal_gate();
-        let decides: Vec<usize> = (0..n).filter(|&i| reflection_decides(&refl, i, gate)).collect();
+        let decides = reflection_decides(&refl, self.normal_gate());
+        let decides: Vec<usize> = (0..n).filter(|&i| decides[i]).collect();
         for p in [Plane::Alpha, Plane::Depth, Plane::Normal(0), Plane::Normal(1), Plane::Normal(2), Plane::Median, Plane::Distortion] {
             let k = p.index(3) as usize;
             let src = refl.refl_plane(p);
@@ -300,8 +300,9 @@ impl Trainer {
 
     /// The alpha and R ([`Trainer::normal_min_r`]) a pixel of the
     /// reflection set needs to decide the output geometry.
-    pub fn normal_gate(&self) -> (f32, f32) {
-        (self.cfg.reflection.normal_min_alpha, self.normal_min_r())
+    pub fn normal_gate(&self) -> NormalGate {
+        let rc = &self.cfg.reflection;
+        NormalGate { min_alpha: rc.normal_min_alpha, edge_alpha: rc.normal_edge_alpha, min_r: self.normal_min_r() }
     }
 
     /// Current Gaussians on the host.

@@ -114,4 +114,8 @@ pub trait LaterStage: Any {
     /// For the trainer's typed views of the running stage
     /// (`Trainer::reflection`, `Trainer::light_field`).
     fn as_any(&self) -> &dyn Any;
+    /// The same, to change: for a stage that sets up its own model when it begins again.
+    fn as_any_mut(&mut self) -> Option<&mut dyn Any> {
+        None
+    }
 }

@@ -123,6 +123,11 @@ pub struct ReflectionConfig {
     /// alpha; 0: off): a surfel then stays only where its colour lowers the
     /// loss by more than this per pixel, elsewhere the normals are Stage I's.
     pub lambda_area: f32,
+    /// Weight of a loss drawing the set's alpha to the glass masks it was
+    /// seeded from, mean (alpha - mask)^2 / 2 a view (0: off; no effect
+    /// without masks): the glass's edge covered, the set's skirt beside it
+    /// thinned.
+    pub lambda_mask: f32,
     /// A pixel's output normal and depth are the reflection set's where it
     /// covers the pixel and R reaches this (0: wherever it covers), else
     /// Stage I's: little reflected colour is no evidence of a surface.
@@ -136,6 +141,10 @@ pub struct ReflectionConfig {
     /// normal and depth (with the R threshold above). 0.5 leaves the glass's
     /// edge pixels, which exact masks' hulls cover only in part, Stage I's.
     pub normal_min_alpha: f32,
+    /// The alpha enough for the set to decide a pixel next to one it
+    /// decides by the thresholds above (at or above `normal_min_alpha`:
+    /// none), to take the glass's outline without its skirt elsewhere.
+    pub normal_edge_alpha: f32,
     /// The frozen scattering layer's SH degree under Stage II (3: Stage I's
     /// colour as it is; 0 leaves the view-dependent light Stage I baked
     /// into degrees 1–3 to the reflection set). The run decision and the
@@ -192,9 +201,11 @@ impl Default for ReflectionConfig {
             hf_percentile: 90.0,
             lambda_r: 0.0,
             lambda_area: 0.0,
+            lambda_mask: 0.0,
             normal_min_r: 0.0,
             residual_normal_min_r: 0.07,
             normal_min_alpha: 0.5,
+            normal_edge_alpha: 0.5,
             scattering_sh: 3,
             train_scattering: false,
             reseed: false,
@@ -256,8 +267,10 @@ impl ReflectionConfig {
                 bail!("reflection.{k} must be in [0, 1] (a reflection weight), not {v}");
             }
         }
-        if !(self.normal_min_alpha > 0.0 && self.normal_min_alpha <= 1.0) {
-            bail!("reflection.normal_min_alpha must be in (0, 1] (an alpha), not {}", self.normal_min_alpha);
+        for (k, v) in [("normal_min_alpha", self.normal_min_alpha), ("normal_edge_alpha", self.normal_edge_alpha)] {
+            if !(v > 0.0 && v <= 1.0) {
+                bail!("reflection.{k} must be in (0, 1] (an alpha), not {v}");
+            }
         }
         for (k, v) in [
             ("lr_env", self.lr_env),
@@ -270,6 +283,7 @@ impl ReflectionConfig {
             ("lambda_normal", self.lambda_normal),
             ("lambda_r", self.lambda_r),
             ("lambda_area", self.lambda_area),
+            ("lambda_mask", self.lambda_mask),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
                 bail!("reflection.{k} must be non-negative and finite, not {v}");

@@ -2,6 +2,7 @@
 //! the reflection layer's forward, and its part of the composite step
 //! Stages II and III share (`stages/composite.rs`, [`Light`]).
 
+use super::masks::GlassMask;
 use super::settings::RotationGrad;
 use crate::train::config::TrainConfig;
 use crate::train::stages::composite::{Light, LossTerms};
@@ -37,6 +38,7 @@ pub(super) struct CubeMapLight<'a> {
     pub(super) loss_grad: &'a Buffer<f32>,
     pub(super) r_host: &'a Readback<f32>,
     pub(super) alpha_host: &'a Readback<f32>,
+    pub(super) mask: Option<&'a GlassMask>,
 }
 
 impl Light for CubeMapLight<'_> {
@@ -55,8 +57,9 @@ impl Light for CubeMapLight<'_> {
     fn record_composite_backward(&mut self, rec: &mut Recorder) -> Result<()> {
         let rc = &self.cfg.reflection;
         let cam = self.cam;
-        let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, cam.width * cam.height);
-        let g = CompositeGrads { loss_grad: self.loss_grad, refl_grad: &self.frame.grad_out, scat_grad: self.p.terms.scat_grad };
+        let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, cam.width * cam.height).with_mask(rc.lambda_mask, cam.width * cam.height);
+        let mask = self.mask.filter(|_| rc.lambda_mask > 0.0).map(|m| &m.gpu);
+        let g = CompositeGrads { loss_grad: self.loss_grad, refl_grad: &self.frame.grad_out, scat_grad: self.p.terms.scat_grad, mask };
         self.shading.record_composite_backward(rec, cam, self.fresnel, &CompositeInputs { scat: self.p.scat, refl: &self.frame.out }, &g, prior)
     }
 
@@ -67,7 +70,7 @@ impl Light for CubeMapLight<'_> {
         if rc.lambda_r > 0.0 {
             rec.read_back(&self.frame.out, R_PLANE * n, self.r_host)?;
         }
-        if rc.lambda_area > 0.0 {
+        if rc.lambda_area > 0.0 || (rc.lambda_mask > 0.0 && self.mask.is_some()) {
             rec.read_back(&self.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, self.alpha_host)?;
         }
         if let Some((m, step)) = &p.external {

@@ -8,6 +8,8 @@ use crate::train::stages::shared::Shared;
 use anyhow::{bail, Context as _, Result};
 use std::borrow::Cow;
 use std::path::Path;
+use std::sync::Arc;
+use tgs_engine::{Buffer, Context};
 use tgs_pipelines::Camera;
 
 /// Where the hull's glass masks came from (metrics.json's
@@ -124,4 +126,18 @@ pub fn seed_masks(dir: &Path, names: &[String], cameras: &[Camera], downscale: u
             }
             Ok(m)
         })
+}
+
+/// A training view's glass mask for `reflection.lambda_mask`: on the device
+/// (1 glass, 0 not, a float a pixel) and on the host (the loss's value).
+pub struct GlassMask {
+    pub gpu: Buffer<f32>,
+    pub host: Vec<bool>,
+}
+
+impl GlassMask {
+    pub fn upload(ctx: &Arc<Context>, mask: &[bool]) -> Result<GlassMask> {
+        let m: Vec<f32> = mask.iter().map(|&g| if g { 1.0 } else { 0.0 }).collect();
+        Ok(GlassMask { gpu: Buffer::from_slice(ctx, "refl.glass_mask", &m)?, host: mask.to_vec() })
+    }
 }

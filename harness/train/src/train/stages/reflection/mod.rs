@@ -8,6 +8,7 @@ pub mod env_init;
 mod light;
 pub mod masks;
 pub mod model;
+pub mod normal_gate;
 pub mod outputs;
 pub mod render;
 pub mod seed;
@@ -17,4 +18,5 @@ pub mod view_dependence;
 
 pub use crate::train::stages::rendered::{PhiLayers, ReflRendered};
 pub use model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
-pub use stage::{env_proxy, reflection_decides, EnvInit, ReflDecision};
+pub use normal_gate::{reflection_decides, NormalGate};
+pub use stage::{env_proxy, EnvInit, ReflDecision};

@@ -9,6 +9,7 @@
 
 use super::config::ReflectionConfig;
 use super::light::{record_forward, CubeMapLight, Pass};
+use super::masks::GlassMask;
 use super::seed::{quat_for_normal, Seed};
 use crate::train::config::TrainConfig;
 use crate::train::logit;
@@ -37,6 +38,8 @@ pub struct ReflStepInput<'a> {
     /// Position learning rate (already scaled by the extent).
     pub lr_means: f32,
     pub profile: bool,
+    /// The view's glass mask the set's alpha is drawn to (`reflection.lambda_mask`).
+    pub mask: Option<&'a GlassMask>,
 }
 
 /// Stage II training the scattering set's SH colour too
@@ -77,6 +80,8 @@ pub struct ReflectionModel {
     dfeat: Buffer<f32>,
     texels: TexelScratch,
     sizes: HashMap<(u32, u32), ViewBuffers>,
+    /// Per training view, its glass mask when `reflection.lambda_mask` draws the set to it.
+    pub masks: Vec<Option<GlassMask>>,
 }
 
 impl ReflectionModel {
@@ -126,6 +131,7 @@ impl ReflectionModel {
             feat: Buffer::uninit(ctx, "refl.features", ch * n)?,
             dfeat: Buffer::uninit(ctx, "refl.d_features", ch * n)?,
             sizes: HashMap::new(),
+            masks: Vec::new(),
             ctx: ctx.clone(),
         })
     }
@@ -228,8 +234,13 @@ impl ReflectionModel {
         if rc.lambda_r > 0.0 {
             loss += rc.lambda_r as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
         }
-        if rc.lambda_area > 0.0 {
-            loss += rc.lambda_area as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].alpha_host.read()?);
+        if rc.lambda_area > 0.0 || (rc.lambda_mask > 0.0 && x.mask.is_some()) {
+            let alpha = self.sizes[&(cam.width, cam.height)].alpha_host.read()?;
+            loss += rc.lambda_area as f64 * crate::train::mean(&alpha);
+            if let Some(m) = x.mask.filter(|_| rc.lambda_mask > 0.0) {
+                let sq: f64 = alpha.iter().zip(&m.host).map(|(&a, &g)| (a as f64 - g as u8 as f64).powi(2)).sum();
+                loss += 0.5 * rc.lambda_mask as f64 * sq / alpha.len().max(1) as f64;
+            }
         }
 
         let mut densified = None;
@@ -257,7 +268,8 @@ impl ReflectionModel {
         let ReflectionModel { raster, shading, objective, adam, fresnel, set, env, feat, dfeat, texels, sizes, .. } = self;
         let ViewBuffers { frame, loss, loss_in, loss_grad, r_host, alpha_host } = sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
         let step = StepLoss { loss: objective, io: LossIo { render: loss_in, target: x.target, grad: loss_grad }, scratch: loss, cam, terms: p.terms };
-        let mut light = CubeMapLight { cfg, cam, p, raster, shading, adam, fresnel: *fresnel, set, env, feat, dfeat, texels, frame, loss_in, loss_grad, r_host, alpha_host };
+        let mut light =
+            CubeMapLight { cfg, cam, p, raster, shading, adam, fresnel: *fresnel, set, env, feat, dfeat, texels, frame, loss_in, loss_grad, r_host, alpha_host, mask: x.mask };
         record_composite_step(rec, &mut light, step)
     }
 

@@ -27,7 +27,7 @@ use tgs_pipelines::{Camera, EnvProxy, HostEnvMap, Plane, ReflectionShading, Trai
 pub use super::decision::ReflDecision;
 pub use super::env_init::EnvInit;
 pub use super::masks::seed_masks;
-use super::masks::{glass_masks, MaskSource};
+use super::masks::{glass_masks, GlassMask, MaskSource};
 
 /// Stage II.
 pub const STAGE: Stage = Stage("II");
@@ -53,7 +53,7 @@ impl LaterKind for Kind {
     }
 
     fn output_settings(&self) -> &'static [&'static str] {
-        &["reflection.normal_min_r", "reflection.residual_normal_min_r", "reflection.normal_min_alpha"]
+        &["reflection.normal_min_r", "reflection.residual_normal_min_r", "reflection.normal_min_alpha", "reflection.normal_edge_alpha"]
     }
 
     fn trains_scattering(&self, cfg: &TrainConfig) -> bool {
@@ -96,7 +96,9 @@ impl LaterKind for Kind {
         let names = files.as_ref().map(|f| f.view_names).unwrap_or_default();
         let iterations = shared.cfg.reflection.iterations;
         let kept = decision.clone();
-        let (masks, source) = if existing.is_some() { (None, MaskSource::None) } else { glass_masks(&shared, names)? };
+        let lambda_mask = shared.cfg.reflection.lambda_mask > 0.0;
+        let (masks, source) = if existing.is_some() && !lambda_mask { (None, MaskSource::None) } else { glass_masks(&shared, names)? };
+        let ctx = shared.views.ctx.clone();
         let stems = crate::data::file_stems(names.iter().map(String::as_str));
         let (mut d, model) = begin(shared, existing, kept.as_ref(), reseed, round, masks.as_deref(), |i, cam, r| match (&mut maps, stems.get(i)) {
             (Some(maps), Some(name)) if existing.is_none() => write_residual(maps, name, cam, r),
@@ -106,10 +108,14 @@ impl LaterKind for Kind {
             d.seed_mask_source = source.recorded();
         }
         *decision = Some(d.clone());
-        let model: Option<Box<dyn LaterStage>> = match model {
+        let mut model: Option<Box<dyn LaterStage>> = match model {
             Some(m) => Some(Box::new(m)),
             None => previous,
         };
+        // reflection.lambda_mask: the masks stay on the device for the losses.
+        if let (true, Some(masks), Some(m)) = (lambda_mask, masks.as_deref(), model.as_mut().and_then(|m| m.as_any_mut()).and_then(|a| a.downcast_mut::<ReflectionModel>())) {
+            m.masks = masks.iter().map(|mask| mask.as_deref().map(|g| GlassMask::upload(&ctx, g)).transpose()).collect::<Result<_>>()?;
+        }
         let mut event = serde_json::Map::new();
         event.insert("reflection".into(), serde_json::to_value(&d)?);
         Ok(Begun { model, runs: d.run, message: d.message(reseed, iterations), event })
@@ -393,6 +399,7 @@ impl LaterStage for ReflectionModel {
         let scat = if train { None } else { Some(s.cache.get(x.view as usize).context("the scattering colour cache is missing")?) };
         let sh_degree = cfg.reflection.scattering_degree(cfg.sh_degree_at(cfg.iterations));
         let scat_train = train.then_some(ScatTrain { model: s.scattering, sh_degree, background: v.background, global_iteration: x.global });
+        let masks = std::mem::take(&mut self.masks);
         let input = ReflStepInput {
             iteration: x.stage,
             camera: &cam,
@@ -403,8 +410,11 @@ impl LaterStage for ReflectionModel {
             // `lr_means_scale`.
             lr_means: cfg.lr_means_final * cfg.reflection.lr_means_scale * v.extent,
             profile: x.profile,
+            mask: masks.get(x.view as usize).and_then(Option::as_ref),
         };
-        self.step(cfg, &input, scat_train)
+        let out = self.step(cfg, &input, scat_train);
+        self.masks = masks;
+        out
     }
 
     fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
@@ -430,14 +440,10 @@ impl LaterStage for ReflectionModel {
     fn as_any(&self) -> &dyn Any {
         self
     }
-}
 
-/// Whether the reflection set decides the geometry of pixel `i` of a Stage
-/// II/III render: its alpha there reaches `min_alpha`
-/// (`reflection.normal_min_alpha`) and its reflection weight R `min_r`
-/// (`reflection.normal_min_r`).
-pub fn reflection_decides(refl: &ReflRendered, i: usize, (min_alpha, min_r): (f32, f32)) -> bool {
-    refl.refl_plane(Plane::Alpha)[i] >= min_alpha && refl.r()[i] >= min_r
+    fn as_any_mut(&mut self) -> Option<&mut dyn Any> {
+        Some(self)
+    }
 }
 
 /// The cube map's parallax proxy for `reflection.env_radius` = `radius`:
