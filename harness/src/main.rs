@@ -92,7 +92,7 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
         /// KEY=VALUE: an output-only setting to evaluate with (reflection.normal_min_r,
-        /// reflection.residual_normal_min_r, reflection.normal_min_alpha, reflection.normal_edge_alpha); the run itself is not changed (repeatable).
+        /// reflection.residual_normal_min_r, reflection.normal_min_alpha); the run itself is not changed (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
     },

@@ -161,33 +161,3 @@ fn residual_contrast_is_the_error_on_the_mask_over_the_error_off_it() {
     assert_eq!(residual_contrast(&scat, &gt, &[false; 4]), None);
     assert_eq!(residual_contrast(&gt, &gt, &mask), None);
 }
-
-/// Which pixels the reflection set decides: its alpha and R reach the
-/// gate's thresholds; with a lower edge alpha also the thin pixels next to
-/// such a pixel (the glass's outline), never a thin pixel elsewhere or one
-/// whose R is below the threshold.
-#[test]
-fn the_edge_alpha_takes_thin_pixels_only_beside_decided_ones() {
-    use tgs::train::stages::reflection::{reflection_decides, NormalGate};
-    use tgs::train::stages::rendered::{ReflRendered, R_PLANE};
-    use tgs_pipelines::Plane;
-    let (w, h, channels) = (6u32, 3u32, 7u32);
-    let n = (w * h) as usize;
-    let mut refl = vec![0.0f32; Plane::count(channels) as usize * n];
-    let a = Plane::Alpha.index(channels) as usize * n;
-    // (1, 1) opaque; (2, 1) and (0, 0) thin beside it; (4, 1) thin and alone; (2, 2) thin beside it without R.
-    for (x, y, alpha) in [(1, 1, 0.9), (2, 1, 0.2), (0, 0, 0.2), (4, 1, 0.2), (2, 2, 0.2)] {
-        refl[a + y * w as usize + x] = alpha;
-    }
-    refl[R_PLANE * n..(R_PLANE + 1) * n].fill(0.5);
-    refl[R_PLANE * n + 2 * w as usize + 2] = 0.01;
-    let r = ReflRendered { width: w, height: h, composite: vec![0.0; Plane::count(3) as usize * n], refl, channels, phi: None };
-    let taken = |edge_alpha: f32| -> Vec<(usize, usize)> {
-        let d = reflection_decides(&r, NormalGate { min_alpha: 0.5, edge_alpha, min_r: 0.1 });
-        (0..n).filter(|&i| d[i]).map(|i| (i % w as usize, i / w as usize)).collect()
-    };
-    assert_eq!(taken(0.5), [(1, 1)]);
-    assert_eq!(taken(0.9), [(1, 1)], "an edge alpha above the core's takes nothing more");
-    assert_eq!(taken(0.1), [(0, 0), (1, 1), (2, 1)]);
-    assert_eq!(taken(0.3), [(1, 1)], "the thin pixels' alpha is below 0.3");
-}

@@ -165,7 +165,7 @@ fn the_settings_lists_are_built_from_the_list() {
     use tgs::train::config::flatten;
     use tgs::train::stages::kind::in_section;
     assert_eq!(resumable_settings(), ["iterations", "reflection.iterations", "reflection.reseed", "light_field.iterations", "test_interval", "checkpoint_interval"]);
-    assert_eq!(output_settings(), ["reflection.normal_min_r", "reflection.residual_normal_min_r", "reflection.normal_min_alpha", "reflection.normal_edge_alpha"]);
+    assert_eq!(output_settings(), ["reflection.normal_min_r", "reflection.residual_normal_min_r", "reflection.normal_min_alpha"]);
     let known: Vec<String> = flatten(&toml::Table::try_from(TrainConfig::quick()).unwrap()).into_iter().map(|(k, _)| k).collect();
     for k in later() {
         for key in k.resumable().iter().chain(k.output_settings()) {

@@ -400,7 +400,6 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     let (_, _, cov_hi) = mae(&tgs::eval::evaluate(&mut tr, &data.test, None).unwrap());
     assert!(cov_lo >= cov0 && cov_hi < cov0, "normal_min_alpha 0.05 / 0.5 / 1: coverage {cov_lo} / {cov0} / {cov_hi}");
     assert!(output_set(&mut tr, "reflection.normal_min_alpha=0").unwrap_err().contains("reflection.normal_min_alpha"));
-    assert!(output_set(&mut tr, "reflection.normal_edge_alpha=1.5").unwrap_err().contains("reflection.normal_edge_alpha"));
     drop(tr);
     refused(TrainArgs { set: vec!["reflection.normal_min_r=1.5".into()], ..ad.clone() }, &["reflection.normal_min_r", "1.5"]);
     refused(TrainArgs { set: vec!["reflection.residual_normal_min_r=-0.1".into()], ..ad.clone() }, &["reflection.residual_normal_min_r", "-0.1"]);

@@ -297,8 +297,8 @@ pub fn evaluate(tr: &mut Trainer, views: &[View], mut out: Option<&mut OutDir>) 
         let target = v.image.planar();
         let normals = world_normals(&r, &v.camera);
         let scat_mae = r.layers.as_ref().and_then(|l| normal_mae(&world_normals(&l.0, &v.camera), v));
-        let decides = r.layers.as_ref().map(|l| crate::train::stages::reflection::reflection_decides(&l.1, tr.normal_gate()));
-        let covered = |i: usize| decides.as_ref().is_some_and(|d| d[i]);
+        let gate = tr.normal_gate();
+        let covered = |i: usize| r.layers.as_ref().is_some_and(|l| crate::train::stages::reflection::reflection_decides(&l.1, i, gate));
         let coverage = match (&r.layers, &v.mask) {
             (Some(_), Some(mask)) if mask.iter().any(|&m| m) => {
                 Some((0..mask.len()).filter(|&i| mask[i] && covered(i)).count() as f64 / mask.iter().filter(|&&m| m).count() as f64)

@@ -275,8 +275,8 @@ impl Trainer {
         let refl = model.render(cam, &colour)?;
         let mut planes = scat.planes.clone();
         planes[..3 * n].copy_from_slice(&refl.composite[..3 * n]);
-        let decides = reflection_decides(&refl, self.normal_gate());
-        let decides: Vec<usize> = (0..n).filter(|&i| decides[i]).collect();
+        let gate = self.normal_gate();
+        let decides: Vec<usize> = (0..n).filter(|&i| reflection_decides(&refl, i, gate)).collect();
         for p in [Plane::Alpha, Plane::Depth, Plane::Normal(0), Plane::Normal(1), Plane::Normal(2), Plane::Median, Plane::Distortion] {
             let k = p.index(3) as usize;
             let src = refl.refl_plane(p);
@@ -301,8 +301,7 @@ impl Trainer {
     /// The alpha and R ([`Trainer::normal_min_r`]) a pixel of the
     /// reflection set needs to decide the output geometry.
     pub fn normal_gate(&self) -> NormalGate {
-        let rc = &self.cfg.reflection;
-        NormalGate { min_alpha: rc.normal_min_alpha, edge_alpha: rc.normal_edge_alpha, min_r: self.normal_min_r() }
+        NormalGate { min_alpha: self.cfg.reflection.normal_min_alpha, min_r: self.normal_min_r() }
     }
 
     /// Current Gaussians on the host.

@@ -141,10 +141,6 @@ pub struct ReflectionConfig {
     /// normal and depth (with the R threshold above). 0.5 leaves the glass's
     /// edge pixels, which exact masks' hulls cover only in part, Stage I's.
     pub normal_min_alpha: f32,
-    /// The alpha enough for the set to decide a pixel next to one it
-    /// decides by the thresholds above (at or above `normal_min_alpha`:
-    /// none), to take the glass's outline without its skirt elsewhere.
-    pub normal_edge_alpha: f32,
     /// The frozen scattering layer's SH degree under Stage II (3: Stage I's
     /// colour as it is; 0 leaves the view-dependent light Stage I baked
     /// into degrees 1–3 to the reflection set). The run decision and the
@@ -205,7 +201,6 @@ impl Default for ReflectionConfig {
             normal_min_r: 0.0,
             residual_normal_min_r: 0.07,
             normal_min_alpha: 0.5,
-            normal_edge_alpha: 0.5,
             scattering_sh: 3,
             train_scattering: false,
             reseed: false,
@@ -267,10 +262,8 @@ impl ReflectionConfig {
                 bail!("reflection.{k} must be in [0, 1] (a reflection weight), not {v}");
             }
         }
-        for (k, v) in [("normal_min_alpha", self.normal_min_alpha), ("normal_edge_alpha", self.normal_edge_alpha)] {
-            if !(v > 0.0 && v <= 1.0) {
-                bail!("reflection.{k} must be in (0, 1] (an alpha), not {v}");
-            }
+        if !(self.normal_min_alpha > 0.0 && self.normal_min_alpha <= 1.0) {
+            bail!("reflection.normal_min_alpha must be in (0, 1] (an alpha), not {}", self.normal_min_alpha);
         }
         for (k, v) in [
             ("lr_env", self.lr_env),

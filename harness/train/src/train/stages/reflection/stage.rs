@@ -53,7 +53,7 @@ impl LaterKind for Kind {
     }
 
     fn output_settings(&self) -> &'static [&'static str] {
-        &["reflection.normal_min_r", "reflection.residual_normal_min_r", "reflection.normal_min_alpha", "reflection.normal_edge_alpha"]
+        &["reflection.normal_min_r", "reflection.residual_normal_min_r", "reflection.normal_min_alpha"]
     }
 
     fn trains_scattering(&self, cfg: &TrainConfig) -> bool {
