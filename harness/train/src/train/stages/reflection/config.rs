@@ -125,8 +125,8 @@ pub struct ReflectionConfig {
     pub lambda_area: f32,
     /// Weight of a loss drawing the set's alpha to the glass masks it was
     /// seeded from, mean (alpha - mask)^2 / 2 a view (0: off; no effect
-    /// without masks): the glass's edge covered, the set's skirt beside it
-    /// thinned.
+    /// without masks): keeps the set inside the masks, but uncovers the
+    /// glass's outline (perf/journal/2026-12-06-sixty-third.md).
     pub lambda_mask: f32,
     /// A pixel's output normal and depth are the reflection set's where it
     /// covers the pixel and R reaches this (0: wherever it covers), else
