@@ -88,6 +88,30 @@ pub fn tiny_glass_scene(dir: &std::path::Path) -> std::path::PathBuf {
     dir.to_path_buf()
 }
 
+/// Stage I alone on the `glass-tiny` scene ([`tiny_glass_scene`] in
+/// `base/scene`), `iterations` long with the quick preset, into
+/// `base/stage1` (no test renders, no checkpoints between): the start of
+/// a test's `--from RUN --stages II` runs. Returns the run directory.
+pub fn tiny_stage1(ctx: &Arc<Context>, base: &std::path::Path, iterations: u32) -> std::path::PathBuf {
+    let out = base.join("stage1");
+    let set = [format!("iterations={iterations}"), "stages=\"I\"".into(), "test_interval=0".into(), "checkpoint_interval=0".into()];
+    let a = tgs::train::run::TrainArgs {
+        dataset: Some(tiny_glass_scene(&base.join("scene"))),
+        out: out.clone(),
+        preset: Some("quick".into()),
+        set: set.to_vec(),
+        quiet: true,
+        ..Default::default()
+    };
+    assert_eq!(tgs::train::run::train(ctx, &a).unwrap().iteration, iterations);
+    out
+}
+
+/// A JSON file a run wrote (metrics.json, stages.json), parsed; a missing file panics naming it.
+pub fn read_json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
 /// Copy the directory tree `from` to `to` (made if missing).
 pub fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
     std::fs::create_dir_all(to).unwrap();

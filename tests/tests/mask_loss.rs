@@ -8,32 +8,14 @@
 
 use std::path::{Path, PathBuf};
 use tgs::train::run::{train, TrainArgs};
-use tgs_tests::{check_validation, ctx_shared, TempDir};
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
-}
-
-fn sets(s: &[&str]) -> Vec<String> {
-    s.iter().map(|s| s.to_string()).collect()
-}
+use tgs_tests::{check_validation, ctx_shared, read_json, TempDir};
 
 #[test]
 fn the_mask_loss_draws_the_set_to_the_glass_and_resumes_bit_identically() {
     let ctx = ctx_shared();
     let base = TempDir::new("mask-loss");
     let _ = std::fs::remove_dir_all(&base);
-    let scene = tgs_tests::tiny_glass_scene(&base.join("scene"));
-    let stage1 = base.join("stage1");
-    let a1 = TrainArgs {
-        dataset: Some(scene),
-        out: stage1.clone(),
-        preset: Some("quick".into()),
-        set: sets(&["stages=\"I\"", "iterations=200", "test_interval=0", "checkpoint_interval=0"]),
-        quiet: true,
-        ..Default::default()
-    };
-    assert_eq!(train(ctx, &a1).unwrap().iteration, 200);
+    let stage1 = tgs_tests::tiny_stage1(ctx, &base, 200);
     // Stage II from that Stage I, `iterations` long, with the settings `extra`.
     let stage2 = |tag: &str, iterations: u32, extra: &[&str]| -> PathBuf {
         let out = base.join(tag);
@@ -44,7 +26,7 @@ fn the_mask_loss_draws_the_set_to_the_glass_and_resumes_bit_identically() {
         out
     };
     let outside = |run: &Path| -> f64 {
-        let t = json(&run.join("metrics.json"))["test"].clone();
+        let t = read_json(&run.join("metrics.json"))["test"].clone();
         t["reflection_outside_mask"].as_f64().unwrap_or_else(|| panic!("no reflection_outside_mask in {t}"))
     };
     let off = stage2("off", 40, &[]);
@@ -67,7 +49,7 @@ fn the_mask_loss_draws_the_set_to_the_glass_and_resumes_bit_identically() {
 
     let a = TrainArgs {
         out: base.join("refused"),
-        set: sets(&["reflection.lambda_mask=-1"]),
+        set: vec!["reflection.lambda_mask=-1".into()],
         quiet: true,
         from: Some(stage1.clone()),
         stages: Some("II".into()),

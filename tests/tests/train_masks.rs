@@ -6,13 +6,9 @@
 //! no part in the seeding; turned off, the seeds come from the residual;
 //! masks that mark no glass anywhere skip Stage II.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use tgs::train::run::{train, TrainArgs};
-use tgs_tests::{check_validation, ctx_shared, TempDir};
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
-}
+use tgs_tests::{check_validation, ctx_shared, read_json as json, TempDir};
 
 fn sets(s: &[&str]) -> Vec<String> {
     s.iter().map(|s| s.to_string()).collect()
@@ -23,17 +19,8 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     let ctx = ctx_shared();
     let base = TempDir::new("train-masks");
     let _ = std::fs::remove_dir_all(&base);
-    let scene = tgs_tests::tiny_glass_scene(&base.join("scene"));
-    let stage1 = base.join("stage1");
-    let a1 = TrainArgs {
-        dataset: Some(scene.clone()),
-        out: stage1.clone(),
-        preset: Some("quick".into()),
-        set: sets(&["stages=\"I\"", "iterations=200", "test_interval=0", "checkpoint_interval=0"]),
-        quiet: true,
-        ..Default::default()
-    };
-    assert_eq!(train(ctx, &a1).unwrap().iteration, 200);
+    let stage1 = tgs_tests::tiny_stage1(ctx, &base, 200);
+    let scene = base.join("scene");
     // One Stage II step from that Stage I with the settings `extra`: the
     // decision metrics.json records and reflection.ply's bytes.
     let step = |tag: &str, extra: Vec<String>| -> (serde_json::Value, Vec<u8>) {
