@@ -38,6 +38,7 @@ pub(super) struct CubeMapLight<'a> {
     pub(super) loss_grad: &'a Buffer<f32>,
     pub(super) r_host: &'a Readback<f32>,
     pub(super) alpha_host: &'a Readback<f32>,
+    /// The view's glass mask when `reflection.lambda_mask` weighs it (ReflectionModel::step).
     pub(super) mask: Option<&'a GlassMask>,
 }
 
@@ -58,7 +59,7 @@ impl Light for CubeMapLight<'_> {
         let rc = &self.cfg.reflection;
         let cam = self.cam;
         let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, cam.width * cam.height).with_mask(rc.lambda_mask, cam.width * cam.height);
-        let mask = self.mask.filter(|_| rc.lambda_mask > 0.0).map(|m| &m.gpu);
+        let mask = self.mask.map(|m| &m.gpu);
         let g = CompositeGrads { loss_grad: self.loss_grad, refl_grad: &self.frame.grad_out, scat_grad: self.p.terms.scat_grad, mask };
         self.shading.record_composite_backward(rec, cam, self.fresnel, &CompositeInputs { scat: self.p.scat, refl: &self.frame.out }, &g, prior)
     }
@@ -70,7 +71,7 @@ impl Light for CubeMapLight<'_> {
         if rc.lambda_r > 0.0 {
             rec.read_back(&self.frame.out, R_PLANE * n, self.r_host)?;
         }
-        if rc.lambda_area > 0.0 || (rc.lambda_mask > 0.0 && self.mask.is_some()) {
+        if rc.lambda_area > 0.0 || self.mask.is_some() {
             rec.read_back(&self.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, self.alpha_host)?;
         }
         if let Some((m, step)) = &p.external {

@@ -185,6 +185,8 @@ impl ReflectionModel {
     /// colour flows back through its rasterizer to its SH coefficients.
     pub fn step(&mut self, cfg: &TrainConfig, x: &ReflStepInput, train: Option<ScatTrain>) -> Result<StepOutput> {
         let rc = &cfg.reflection;
+        // The mask loss acts only with a weight: the mask is dropped here once for the whole step.
+        let x = &ReflStepInput { mask: x.mask.filter(|_| rc.lambda_mask > 0.0), ..*x };
         let cam = x.camera;
         let mut pre = Vec::new();
         // The trained scattering model, its SH degree and Adam step count.
@@ -234,10 +236,10 @@ impl ReflectionModel {
         if rc.lambda_r > 0.0 {
             loss += rc.lambda_r as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
         }
-        if rc.lambda_area > 0.0 || (rc.lambda_mask > 0.0 && x.mask.is_some()) {
+        if rc.lambda_area > 0.0 || x.mask.is_some() {
             let alpha = self.sizes[&(cam.width, cam.height)].alpha_host.read()?;
             loss += rc.lambda_area as f64 * crate::train::mean(&alpha);
-            if let Some(m) = x.mask.filter(|_| rc.lambda_mask > 0.0) {
+            if let Some(m) = x.mask {
                 let sq: f64 = alpha.iter().zip(&m.host).map(|(&a, &g)| (a as f64 - g as u8 as f64).powi(2)).sum();
                 loss += 0.5 * rc.lambda_mask as f64 * sq / alpha.len().max(1) as f64;
             }
