@@ -122,3 +122,63 @@ fn stage_two_is_kept_only_on_validation_evidence() {
     assert!(kept.join("reflection.ply").is_file() && kept.join("light_field.safetensors").is_file());
     check_validation(ctx);
 }
+
+/// The vertex count of a PLY file's header.
+fn ply_vertices(path: &Path) -> u64 {
+    let bytes = std::fs::read(path).unwrap();
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(4096)]).to_string();
+    head.lines().find_map(|l| l.strip_prefix("element vertex ")).and_then(|n| n.trim().parse().ok()).unwrap()
+}
+
+#[test]
+fn stage_two_pieces_are_judged_and_those_not_kept_removed() {
+    let _guard = DRIVER.lock().unwrap_or_else(|e| e.into_inner());
+    let ctx = ctx_shared();
+    let base = tgs_tests::TempDir::created("validation-pieces");
+    let with = |out: &Path, z: f32, stages: &str| {
+        let mut a = args(out, 0.0);
+        // Long enough for Stage II to raise the validation PSNR as a whole.
+        let longer = ["iterations=400".to_string(), "reflection.iterations=200".into()];
+        a.set.extend(longer.into_iter().chain([format!("reflection.validation_z={z}"), "reflection.validation_cells=4".into(), format!("stages=\"{stages}\"")]));
+        a
+    };
+    // Some benefit of the doubt (z = -1): the pieces whose removal changes
+    // no validation pixel, or makes it better by a standard error, go.
+    let run = base.join("doubt");
+    train(ctx, &with(&run, -1.0, "I,II")).unwrap();
+    let m = metrics(&run);
+    let pieces = m["reflection"]["pieces"].as_array().unwrap_or_else(|| panic!("no pieces: {}", m["reflection"]));
+    assert!(pieces.len() > 1, "{pieces:?}");
+    let kept: Vec<&serde_json::Value> = pieces.iter().filter(|p| p["kept"] == true).collect();
+    assert!(!kept.is_empty() && kept.len() < pieces.len(), "the tiny glass keeps some pieces and drops others: {pieces:?}");
+    for p in pieces {
+        let (gain, z, pixels) = (p["gain_db"].as_f64().unwrap(), p["z"].as_f64().unwrap(), p["pixels"].as_u64().unwrap());
+        assert!(gain.is_finite() && z.is_finite());
+        if pixels == 0 {
+            assert_eq!(p["kept"], false, "a piece that changes nothing stays: {p}");
+        }
+    }
+    let kept_gaussians: u64 = kept.iter().map(|p| p["gaussians"].as_u64().unwrap()).sum();
+    assert_eq!(ply_vertices(&run.join("reflection.ply")), kept_gaussians, "the set written is not the kept pieces");
+    let stage_two = m["validation"]["stages"].as_array().unwrap().iter().find(|s| s["stage"] == "II").unwrap().clone();
+    assert_eq!(m["reflection"]["kept"], true, "{stage_two}");
+    let rec = m["stages"].as_array().unwrap().iter().find(|s| s["stage"] == "II").unwrap();
+    assert_eq!(rec["validation"]["pieces_kept"].as_u64(), Some(kept.len() as u64));
+    assert!(std::fs::read_to_string(run.join("log.jsonl")).unwrap().contains("\"event\":\"pieces\""));
+    // Rerun: the same verdicts and the same set, bit for bit.
+    let again = base.join("again");
+    train(ctx, &with(&again, -1.0, "I,II")).unwrap();
+    assert_eq!(metrics(&again)["reflection"]["pieces"], m["reflection"]["pieces"]);
+    assert_eq!(std::fs::read(again.join("reflection.ply")).unwrap(), std::fs::read(run.join("reflection.ply")).unwrap());
+    // Sure of every gain (z = 10): no piece is, so Stage II is dropped
+    // whatever its whole-image PSNR, and Stage III does not run.
+    let sure = base.join("sure");
+    train(ctx, &with(&sure, 10.0, "I,II,III")).unwrap();
+    let m = metrics(&sure);
+    assert!(m["reflection"]["pieces"].as_array().unwrap().iter().all(|p| p["kept"] == false), "{}", m["reflection"]);
+    assert_eq!(m["reflection"]["kept"], false);
+    let stages: Vec<&str> = m["validation"]["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
+    assert_eq!(stages, ["I", "II"]);
+    assert!(!sure.join("reflection.ply").exists());
+    check_validation(ctx);
+}

@@ -10,6 +10,7 @@ pub mod divergence;
 pub mod from;
 pub mod live;
 pub mod open;
+pub mod piece_verdict;
 pub mod records;
 pub mod report;
 pub mod run;

@@ -13,6 +13,7 @@ pub use super::from::inherited_settings;
 use super::live::Live;
 pub use super::open::{open_run, set_output_settings};
 use super::open::{open_trainer, Opened};
+use super::piece_verdict::judge;
 use super::records::{close_stage, read_stage_records, reflection_record, stage_record, write_stage_records, Closing};
 use super::report::{lpips_text, Reporter};
 pub use super::rundir::{run_files, stage_checkpoint, CHECKPOINT, DEFAULT_SCENE, RUN_RECORD, STAGE_ONE_CHECKPOINT, STAGE_TWO_CHECKPOINT};
@@ -155,6 +156,15 @@ pub fn train(ctx: &Arc<Context>, a: &TrainArgs) -> Result<Outcome> {
     run.finish(tr)
 }
 
+/// A stage's validation record with the number of its pieces kept, when judged.
+fn with_pieces(validation: Option<Value>, kept: Option<usize>) -> Option<Value> {
+    let mut v = validation?;
+    if let Some(k) = kept {
+        v["pieces_kept"] = json!(k);
+    }
+    Some(v)
+}
+
 /// The paper schedule's note for a preset and what the run trains on, on stderr.
 fn say_start(ctx: &Arc<Context>, a: &TrainArgs, tr: &Trainer, data: &Dataset) {
     if a.quiet {
@@ -199,13 +209,14 @@ impl Run<'_> {
         // not checkpointed) without closing the stage before.
         let resumed = tr.later.as_ref().map(|m| m.stage()) == Some(kind.stage());
         if !resumed {
+            let prev = tr.schedule.label(entry.saturating_sub(1));
+            let pieces_kept = self.judge_pieces(tr, &prev)?;
             // The state at the end of the stage before (checkpoint-stage1.bin,
             // ...), for --from; not as a stage begins again (reflection.reseed).
             if first_round {
                 checkpoint::save(tr, &out.join(stage_checkpoint(entry)), &self.dataset, &self.identity)?;
             }
-            let prev = tr.schedule.label(entry.saturating_sub(1));
-            let validation = self.validation.measure(tr)?;
+            let validation = with_pieces(self.validation.measure(tr)?, pieces_kept);
             close_stage(tr, &self.data, out, &mut self.stages, Closing { stage: &prev, clock: &self.clocks, validation })?;
             if !self.a.quiet {
                 eprintln!("Stage {prev} done");
@@ -225,6 +236,20 @@ impl Run<'_> {
         self.clocks.next_stage();
         self.last_closed = tr.done();
         write_stage_records(out, &self.stages)
+    }
+
+    /// Before a Stage II round closes: its pieces judged on the validation
+    /// views and those not kept removed ([`judge`]), said, logged and kept
+    /// in the decision. The number kept, when judged.
+    fn judge_pieces(&mut self, tr: &mut Trainer, label: &str) -> Result<Option<usize>> {
+        let Some(o) = judge(tr, &self.validation)? else { return Ok(None) };
+        let event = json!({"iteration": tr.iteration, "stage": label, "event": "pieces", "kept": o.kept(), "gaussians": [o.before, o.after], "pieces": o.verdicts});
+        self.report.stage_event(&o.message(label), Some(&event), tr.schedule.total())?;
+        let kept = o.kept();
+        if let Some(d) = tr.decision.as_mut() {
+            d.pieces = Some(o.verdicts);
+        }
+        Ok(Some(kept))
     }
 
     /// The stage of `kind`, adding `what` (Stage II's reflection set), did
@@ -308,15 +333,16 @@ impl Run<'_> {
     /// The end of training: the last stage closed (or dropped), the outputs
     /// and metrics.json written, the summary said.
     fn finish(mut self, mut tr: Trainer) -> Result<Outcome> {
+        let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
+        let pieces_kept = if self.last_closed { None } else { self.judge_pieces(&mut tr, &last_stage)? };
         self.report.finish();
         self.save(&tr)?;
         let train_s = self.clocks.train_s();
         let mut metrics = self.test_metrics(&mut tr)?;
         if !self.last_closed {
-            let last_stage = tr.schedule.label(tr.schedule.stages.len().saturating_sub(1));
             self.stages.retain(|s| s["stage"] != last_stage.as_str());
             let mut rec = stage_record(&last_stage, &tr, self.clocks.stage_s(), metrics.as_ref());
-            rec["validation"] = json!(self.validation.measure(&mut tr)?);
+            rec["validation"] = json!(with_pieces(self.validation.measure(&mut tr)?, pieces_kept));
             self.stages.push(rec);
             if let Some(dropped) = self.validation.drops(&self.stages, &last_stage) {
                 tr = self.drop_stage(&tr, dropped)?;

@@ -138,6 +138,11 @@ impl Trainer {
         self.later.as_ref()?.as_any().downcast_ref()
     }
 
+    /// Stage II's model to change, while Stage II runs.
+    pub fn reflection_mut(&mut self) -> Option<&mut ReflectionModel> {
+        self.later.as_mut()?.as_any_mut()?.downcast_mut()
+    }
+
     /// Stage III's model, while Stage III runs.
     pub fn light_field(&self) -> Option<&LightFieldModel> {
         self.later.as_ref()?.as_any().downcast_ref()

@@ -59,7 +59,8 @@ impl Validation {
         for s in stages {
             let Some(psnr) = s["validation"]["psnr"].as_f64() else { continue };
             let gain = best.map(|b| psnr - b);
-            let kept = gain.is_none_or(|g| g > self.margin_db);
+            // A stage none of whose pieces was kept is not kept either (piece_verdict.rs).
+            let kept = gain.is_none_or(|g| g > self.margin_db) && s["validation"]["pieces_kept"].as_u64() != Some(0);
             if kept {
                 best = Some(psnr);
             }

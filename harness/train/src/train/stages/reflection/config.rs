@@ -141,6 +141,17 @@ pub struct ReflectionConfig {
     /// normal and depth (with the R threshold above). 0.5 leaves the glass's
     /// edge pixels, which exact masks' hulls cover only in part, Stage I's.
     pub normal_min_alpha: f32,
+    /// With a validation slice (`validation_every`): the set is cut into
+    /// spatially separate pieces, a grid of this many cells along its
+    /// longest side, and each piece stays only where it lowers the
+    /// validation views' error on the pixels it changes by more than
+    /// `validation_margin_db` (0: the whole set judged as one).
+    pub validation_cells: u32,
+    /// How sure the validation views must be of a piece's gain: it stays
+    /// when its gain, less this many standard errors of its spread over
+    /// image tiles, clears `validation_margin_db` (negative: when the gain
+    /// plus as many could; perf/journal/2026-12-06-sixty-fourth.md).
+    pub validation_z: f32,
     /// The frozen scattering layer's SH degree under Stage II (3: Stage I's
     /// colour as it is; 0 leaves the view-dependent light Stage I baked
     /// into degrees 1–3 to the reflection set). The run decision and the
@@ -201,6 +212,8 @@ impl Default for ReflectionConfig {
             normal_min_r: 0.0,
             residual_normal_min_r: 0.07,
             normal_min_alpha: 0.5,
+            validation_cells: 1,
+            validation_z: -2.0,
             scattering_sh: 3,
             train_scattering: false,
             reseed: false,
@@ -261,6 +274,12 @@ impl ReflectionConfig {
             if !(0.0..=1.0).contains(&v) {
                 bail!("reflection.{k} must be in [0, 1] (a reflection weight), not {v}");
             }
+        }
+        if !(self.validation_z.abs() <= 10.0) {
+            bail!("reflection.validation_z must be in [-10, 10] (standard errors), not {}", self.validation_z);
+        }
+        if self.validation_cells > 64 {
+            bail!("reflection.validation_cells must be 0 (the whole set judged as one) to 64, not {}", self.validation_cells);
         }
         if !(self.normal_min_alpha > 0.0 && self.normal_min_alpha <= 1.0) {
             bail!("reflection.normal_min_alpha must be in (0, 1] (an alpha), not {}", self.normal_min_alpha);

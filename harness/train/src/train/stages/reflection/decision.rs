@@ -77,6 +77,11 @@ pub struct ReflDecision {
     /// moved onto it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_planes: Option<[u32; 2]>,
+    /// With a validation slice and `reflection.validation_cells`: the set's
+    /// pieces as the validation views judged them (the ones not kept were
+    /// removed before the stage closed; stages/reflection/pieces.rs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pieces: Option<Vec<super::pieces::PieceVerdict>>,
 }
 
 impl ReflDecision {

@@ -10,6 +10,7 @@ pub mod masks;
 pub mod model;
 pub mod normal_gate;
 pub mod outputs;
+pub mod pieces;
 pub mod render;
 pub mod seed;
 pub mod settings;

@@ -286,7 +286,46 @@ impl ReflectionModel {
     }
 }
 
+/// A raw opacity no Gaussian renders with (sigmoid 0 in f32).
+const DEAD: f32 = -200.0;
+
 impl ReflectionModel {
+    /// The set's raw opacities, for [`Self::render_without`].
+    pub fn opacities(&self) -> Result<Vec<f32>> {
+        self.set.params.opacity.download()
+    }
+
+    /// Render `cam` over `scat` as [`Self::render`] with the Gaussians
+    /// `hidden` marks left out (`opacity` is the set's own, put back after).
+    pub fn render_without(&mut self, cam: &Camera, scat: &Buffer<f32>, opacity: &[f32], hidden: &[bool]) -> Result<ReflRendered> {
+        let masked: Vec<f32> = opacity.iter().zip(hidden).map(|(&o, &h)| if h { DEAD } else { o }).collect();
+        self.set.params.opacity.upload(&masked)?;
+        let r = self.render(cam, scat);
+        self.set.params.opacity.upload(opacity)?;
+        r
+    }
+
+    /// Remove the Gaussians `drop` marks (with their Adam moments): the
+    /// number before and after.
+    pub fn remove(&mut self, drop: &[bool]) -> Result<(u32, u32)> {
+        let opacity = self.opacities()?;
+        let masked: Vec<f32> = opacity.iter().zip(drop).map(|(&o, &d)| if d { DEAD } else { o }).collect();
+        self.set.params.opacity.upload(&masked)?;
+        let p = DensifyParams {
+            grad_threshold: f32::INFINITY,
+            dense_scale: 0.0,
+            // Only what renders nothing at all goes.
+            opacity_min: f32::MIN_POSITIVE,
+            prune_big: false,
+            big_screen: f32::INFINITY,
+            big_world: f32::INFINITY,
+            grow: false,
+            seed: 0,
+        };
+        let r = self.densifier.densify(&mut self.set, &p)?;
+        Ok((r.before, r.after))
+    }
+
     /// The reflection set (Stage III keeps it, with its Adam moments).
     pub fn into_set(self) -> TrainableSet {
         self.set

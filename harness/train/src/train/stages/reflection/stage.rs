@@ -217,6 +217,7 @@ pub fn begin(
         seed_mask_source: None,
         seed_mask_views: None,
         seed_significance: None,
+        pieces: None,
         round,
     };
     if let Some(m) = masks {
