@@ -92,8 +92,11 @@ fn partition_matches_a_brute_force_reference() {
     assert_eq!(partition(&[f32::NAN, 0.0, 0.0, 1.0, 1.0, 1.0], 2).len(), 2);
 }
 
-/// f64 reference of a piece's errors over views (w, h, with, without, target).
-fn reference_errors(views: &[(usize, usize, Vec<f32>, Vec<f32>, Vec<f32>)]) -> (u64, f64, f64, f64) {
+/// One view of a piece: width, height, the render with it, without it, the target.
+type PieceView = (usize, usize, Vec<f32>, Vec<f32>, Vec<f32>);
+
+/// f64 reference of a piece's errors over views: pixels, the two error sums, z.
+fn reference_errors(views: &[PieceView]) -> (u64, f64, f64, f64) {
     let (mut pixels, mut sw, mut swo) = (0u64, 0.0, 0.0);
     let mut tiles: Vec<f64> = Vec::new();
     for (w, h, with, without, target) in views {
