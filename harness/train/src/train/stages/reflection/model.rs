@@ -247,17 +247,7 @@ impl ReflectionModel {
 
         let mut densified = None;
         if rc.prune_interval > 0 && x.iteration.is_multiple_of(rc.prune_interval) && x.iteration > 0 {
-            let p = DensifyParams {
-                grad_threshold: f32::INFINITY,
-                dense_scale: 0.0,
-                opacity_min: cfg.prune_opacity,
-                prune_big: false,
-                big_screen: f32::INFINITY,
-                big_world: f32::INFINITY,
-                grow: false,
-                seed: 0,
-            };
-            let r = self.densifier.densify(&mut self.set, &p)?;
+            let r = self.densifier.densify(&mut self.set, &prune_below(cfg.prune_opacity))?;
             densified = Some((r.before, r.after));
         }
         Ok(StepOutput { loss, values, densified, timings })
@@ -286,6 +276,11 @@ impl ReflectionModel {
     }
 }
 
+/// Density control that only prunes: the Gaussians whose opacity is under `opacity_min`.
+fn prune_below(opacity_min: f32) -> DensifyParams {
+    DensifyParams { grad_threshold: f32::INFINITY, dense_scale: 0.0, opacity_min, prune_big: false, big_screen: f32::INFINITY, big_world: f32::INFINITY, grow: false, seed: 0 }
+}
+
 /// A raw opacity no Gaussian renders with (sigmoid 0 in f32).
 const DEAD: f32 = -200.0;
 
@@ -311,18 +306,8 @@ impl ReflectionModel {
         let opacity = self.opacities()?;
         let masked: Vec<f32> = opacity.iter().zip(drop).map(|(&o, &d)| if d { DEAD } else { o }).collect();
         self.set.params.opacity.upload(&masked)?;
-        let p = DensifyParams {
-            grad_threshold: f32::INFINITY,
-            dense_scale: 0.0,
-            // Only what renders nothing at all goes.
-            opacity_min: f32::MIN_POSITIVE,
-            prune_big: false,
-            big_screen: f32::INFINITY,
-            big_world: f32::INFINITY,
-            grow: false,
-            seed: 0,
-        };
-        let r = self.densifier.densify(&mut self.set, &p)?;
+        // Only what renders nothing at all goes.
+        let r = self.densifier.densify(&mut self.set, &prune_below(f32::MIN_POSITIVE))?;
         Ok((r.before, r.after))
     }
 
