@@ -284,6 +284,11 @@ fn prune_below(opacity_min: f32) -> DensifyParams {
 /// A raw opacity no Gaussian renders with (sigmoid 0 in f32).
 const DEAD: f32 = -200.0;
 
+/// `opacity` with the Gaussians `marked` set to [`DEAD`].
+fn dead_where(opacity: &[f32], marked: &[bool]) -> Vec<f32> {
+    opacity.iter().zip(marked).map(|(&o, &m)| if m { DEAD } else { o }).collect()
+}
+
 impl ReflectionModel {
     /// The set's raw opacities, for [`Self::render_without`].
     pub fn opacities(&self) -> Result<Vec<f32>> {
@@ -293,8 +298,7 @@ impl ReflectionModel {
     /// Render `cam` over `scat` as [`Self::render`] with the Gaussians
     /// `hidden` marks left out (`opacity` is the set's own, put back after).
     pub fn render_without(&mut self, cam: &Camera, scat: &Buffer<f32>, opacity: &[f32], hidden: &[bool]) -> Result<ReflRendered> {
-        let masked: Vec<f32> = opacity.iter().zip(hidden).map(|(&o, &h)| if h { DEAD } else { o }).collect();
-        self.set.params.opacity.upload(&masked)?;
+        self.set.params.opacity.upload(&dead_where(opacity, hidden))?;
         let r = self.render(cam, scat);
         self.set.params.opacity.upload(opacity)?;
         r
@@ -303,9 +307,7 @@ impl ReflectionModel {
     /// Remove the Gaussians `drop` marks (with their Adam moments): the
     /// number before and after.
     pub fn remove(&mut self, drop: &[bool]) -> Result<(u32, u32)> {
-        let opacity = self.opacities()?;
-        let masked: Vec<f32> = opacity.iter().zip(drop).map(|(&o, &d)| if d { DEAD } else { o }).collect();
-        self.set.params.opacity.upload(&masked)?;
+        self.set.params.opacity.upload(&dead_where(&self.opacities()?, drop))?;
         // Only what renders nothing at all goes.
         let r = self.densifier.densify(&mut self.set, &prune_below(f32::MIN_POSITIVE))?;
         Ok((r.before, r.after))

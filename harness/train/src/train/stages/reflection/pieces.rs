@@ -148,37 +148,37 @@ impl PieceErrors {
     /// The piece's PSNR gain on its pixels (dB): how much worse they are
     /// without it. 0 where it changes no pixel (no evidence either way).
     pub fn gain_db(&self) -> f64 {
-        if self.pixels == 0 {
-            return 0.0;
-        }
-        let (w, wo) = (self.sse_with.max(1e-12), self.sse_without.max(1e-12));
-        10.0 * (wo / w).log10()
+        self.gain_db_at(0.0)
     }
 
-    /// The piece's gain (dB) with `z` standard errors of the error it
-    /// removes added ([`Self::z`]; negative `z`: taken off); 0 where it
+    /// The piece's gain (dB) with the error it removes taken `z` standard
+    /// errors ([`Self::se`]) lower (negative `z`: higher); 0 where it
     /// changes no pixel.
     pub fn gain_db_at(&self, z: f64) -> f64 {
         if self.pixels == 0 {
             return 0.0;
         }
-        let d = self.sse_without - self.sse_with;
-        let se = if self.z() != 0.0 { d / self.z() } else { 0.0 };
         let w = self.sse_with.max(1e-12);
-        10.0 * ((w + d - z * se).max(1e-12) / w).log10()
+        10.0 * ((self.sse_without - z * self.se()).max(1e-12) / w).log10()
     }
 
-    /// The error the piece removes (`sse_without − sse_with`) in standard
-    /// errors of its tile-to-tile spread: how far from chance its gain is
-    /// (0 with fewer than two tiles).
-    pub fn z(&self) -> f64 {
+    /// The standard error of the error the piece removes
+    /// (`sse_without − sse_with`), from its spread over tiles (0 with fewer
+    /// than two tiles).
+    pub fn se(&self) -> f64 {
         let b = self.blocks.len();
         if b < 2 {
             return 0.0;
         }
         let mean = self.blocks.iter().sum::<f64>() / b as f64;
         let var = self.blocks.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (b - 1) as f64;
-        let se = (var * b as f64).sqrt();
+        (var * b as f64).sqrt()
+    }
+
+    /// The error the piece removes in standard errors ([`Self::se`]): how
+    /// far from chance its gain is (0 without a spread).
+    pub fn z(&self) -> f64 {
+        let se = self.se();
         if se > 0.0 {
             (self.sse_without - self.sse_with) / se
         } else {
