@@ -10,8 +10,8 @@
 
 use anyhow::Result;
 use std::sync::Arc;
-use tgs_engine::{Buffer, Context, Recorder};
-use tgs_pipelines::{Camera, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights};
+use tgs_engine::{Buffer, Context, Readback, Recorder};
+use tgs_pipelines::{Camera, Frame, HfLoss, HfStats, ImageLoss, LossIo, LossScratch, LossValues, LossWeights, Plane};
 
 /// What a later stage records around the shared composite step: its
 /// reflection layer's forward, the composite with its light, the
@@ -48,6 +48,59 @@ pub struct StepLoss<'a> {
     pub scratch: &'a mut LossScratch,
     pub cam: &'a Camera,
     pub terms: LossTerms<'a>,
+}
+
+/// A view size's buffers of a later stage's step: the reflection layer's
+/// frame, the image loss's scratch, the composite (the loss's input), its
+/// gradient, and the R plane brought back when the stage's `lambda_r` > 0.
+pub struct StepBuffers {
+    pub frame: Frame,
+    pub loss: LossScratch,
+    pub loss_in: Buffer<f32>,
+    pub loss_grad: Buffer<f32>,
+    pub r_host: Readback<f32>,
+}
+
+/// What the light reads and writes of a step's buffers: the reflection
+/// set's rasterized features and their gradient, the frame, the
+/// composite, its gradient and the R plane's read-back.
+pub struct LayerIo<'a> {
+    pub feat: &'a Buffer<f32>,
+    pub dfeat: &'a Buffer<f32>,
+    pub frame: &'a Frame,
+    pub loss_in: &'a Buffer<f32>,
+    pub loss_grad: &'a Buffer<f32>,
+    pub r_host: &'a Readback<f32>,
+}
+
+impl StepBuffers {
+    /// Buffers for `frame`'s size, named `{stage}.loss_in` and so on.
+    pub fn new(ctx: &Arc<Context>, objective: &CompositeLoss, frame: Frame, stage: &str) -> Result<StepBuffers> {
+        let (w, h) = (frame.width, frame.height);
+        let planes = (Plane::count(3) * w * h) as usize;
+        Ok(StepBuffers {
+            frame,
+            loss: objective.scratch(w, h)?,
+            loss_in: Buffer::new(ctx, &format!("{stage}.loss_in"), planes)?,
+            loss_grad: Buffer::new(ctx, &format!("{stage}.loss_grad"), planes)?,
+            r_host: Readback::new(ctx, &format!("{stage}.r_host"), (w * h) as usize)?,
+        })
+    }
+
+    /// The step's loss (the composite `loss_in` against `target`, with the
+    /// pass's `terms`) and what the light uses, `feat` and `dfeat` with it.
+    pub fn split<'a>(
+        &'a mut self,
+        objective: &'a CompositeLoss,
+        target: &'a Buffer<f32>,
+        cam: &'a Camera,
+        terms: LossTerms<'a>,
+        (feat, dfeat): (&'a Buffer<f32>, &'a Buffer<f32>),
+    ) -> (StepLoss<'a>, LayerIo<'a>) {
+        let StepBuffers { frame, loss, loss_in, loss_grad, r_host } = self;
+        let step = StepLoss { loss: objective, io: LossIo { render: loss_in, target, grad: loss_grad }, scratch: loss, cam, terms };
+        (step, LayerIo { feat, dfeat, frame, loss_in, loss_grad, r_host })
+    }
 }
 
 /// One recording of a later stage's step: `light`'s forward, its composite,

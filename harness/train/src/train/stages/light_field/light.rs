@@ -4,7 +4,7 @@
 //! (`stages/composite.rs`, [`Light`]).
 
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::{Light, LossTerms};
+use crate::train::stages::composite::{LayerIo, Light, LossTerms};
 use crate::train::stages::rendered::R_PLANE;
 use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::ScatteringModel;
@@ -35,21 +35,16 @@ pub(super) struct NetworkLight<'a> {
     pub(super) set: &'a TrainableSet,
     pub(super) net: &'a MlpParams,
     pub(super) shade: &'a ShadeParams,
-    pub(super) feat: &'a Buffer<f32>,
-    pub(super) dfeat: &'a Buffer<f32>,
+    pub(super) io: LayerIo<'a>,
     pub(super) scratch: &'a MlpScratch,
     pub(super) d_phi: &'a Buffer<f32>,
-    pub(super) frame: &'a Frame,
     pub(super) samples: &'a SampleScratch,
-    pub(super) loss_in: &'a Buffer<f32>,
-    pub(super) loss_grad: &'a Buffer<f32>,
-    pub(super) r_host: &'a Readback<f32>,
     pub(super) count_host: &'a Readback<u32>,
 }
 
 impl NetworkLight<'_> {
     fn inputs(&self) -> CompositeInputs<'_> {
-        CompositeInputs { scat: self.p.scat, refl: &self.frame.out, samples: self.samples, phi: &self.scratch.out }
+        CompositeInputs { scat: self.p.scat, refl: &self.io.frame.out, samples: self.samples, phi: &self.scratch.out }
     }
 }
 
@@ -61,28 +56,28 @@ impl Light for NetworkLight<'_> {
         match self.p.host_count {
             Some(n) => self.mlp.record_forward(rec, &self.net.params, n, self.scratch),
             None => {
-                let s = Splats::coloured(&self.set.params, self.feat);
-                record_forward(rec, (self.shading, self.raster, self.kept), s, self.cam, self.shade, (self.frame, self.samples), self.scratch)?;
+                let s = Splats::coloured(&self.set.params, self.io.feat);
+                record_forward(rec, (self.shading, self.raster, self.kept), s, self.cam, self.shade, (self.io.frame, self.samples), self.scratch)?;
                 self.mlp.record_forward_counted(rec, &self.net.params, &self.samples.count, self.scratch)
             }
         }
     }
 
     fn record_composite(&mut self, rec: &mut Recorder) -> Result<()> {
-        self.shading.record_composite(rec, self.cam, self.shade, &self.inputs(), self.loss_in)
+        self.shading.record_composite(rec, self.cam, self.shade, &self.inputs(), self.io.loss_in)
     }
 
     fn record_composite_backward(&mut self, rec: &mut Recorder) -> Result<()> {
         let cam = self.cam;
         let r_prior = CompositePriors::of_means(self.cfg.light_field.lambda_r, 0.0, cam.width * cam.height).r;
-        let grads = CompositeGrads { loss_grad: self.loss_grad, d_phi: self.d_phi, refl_grad: &self.frame.grad_out, scat_grad: self.p.terms.scat_grad };
+        let grads = CompositeGrads { loss_grad: self.io.loss_grad, d_phi: self.d_phi, refl_grad: &self.io.frame.grad_out, scat_grad: self.p.terms.scat_grad };
         self.shading.record_composite_backward(rec, cam, self.shade, &self.inputs(), &grads, r_prior)
     }
 
     fn record_update(&mut self, rec: &mut Recorder) -> Result<()> {
         let (cfg, p, cam) = (self.cfg, self.p, self.cam);
         if cfg.light_field.lambda_r > 0.0 {
-            rec.read_back(&self.frame.out, R_PLANE * (cam.width * cam.height) as usize, self.r_host)?;
+            rec.read_back(&self.io.frame.out, R_PLANE * (cam.width * cam.height) as usize, self.io.r_host)?;
         }
         match p.host_count {
             Some(n) => self.mlp.record_backward(rec, &self.net.params, n, self.d_phi, &self.net.grads, self.scratch)?,
@@ -91,13 +86,13 @@ impl Light for NetworkLight<'_> {
         // The reflection set's geometry is frozen: its material alone
         // needs gradients (from the view's kept weights, or the
         // feature-only tile backward).
-        let s = Splats::coloured(&self.set.params, self.feat);
+        let s = Splats::coloured(&self.set.params, self.io.feat);
         match self.kept {
-            Some(k) => self.raster.record_backward_colour_weights(rec, s, &self.set.grads, self.dfeat, self.frame, k)?,
-            None => self.raster.record_backward_colour_with(rec, s, &self.set.grads, self.dfeat, self.frame)?,
+            Some(k) => self.raster.record_backward_colour_weights(rec, s, &self.set.grads, self.io.dfeat, self.io.frame, k)?,
+            None => self.raster.record_backward_colour_with(rec, s, &self.set.grads, self.io.dfeat, self.io.frame)?,
         }
         let sc = rec.begin_scope("lf.material_backward");
-        self.shading.record_material_backward(rec, &self.set.params.features, self.set.len(), self.dfeat, &self.set.grads.features)?;
+        self.shading.record_material_backward(rec, &self.set.params.features, self.set.len(), self.io.dfeat, &self.set.grads.features)?;
         rec.end_scope(sc);
         if let Some(step) = &p.external {
             self.scattering.record_backward_external(rec, cfg, cam, step)?;
@@ -112,7 +107,7 @@ impl Light for NetworkLight<'_> {
             self.adam.record(rec, material_arrays, &p.material_group, p.it)?;
             rec.end_scope(sc);
         } else {
-            let args = self.raster.record_fit_gate(rec, self.frame, &[self.adam.grid(np), self.adam.grid(p.material_len)])?;
+            let args = self.raster.record_fit_gate(rec, self.io.frame, &[self.adam.grid(np), self.adam.grid(p.material_len)])?;
             let sc = rec.begin_scope("adam");
             self.adam.record_gated(rec, net_arrays, &p.net_group, p.it, &args[0])?;
             self.adam.record_gated(rec, material_arrays, &p.material_group, p.it, &args[1])?;

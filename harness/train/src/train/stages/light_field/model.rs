@@ -11,7 +11,7 @@
 pub use super::light::MlpParams;
 use super::light::{record_forward, NetworkLight, Pass};
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, LossTerms, StepLoss};
+use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, LossTerms, StepBuffers};
 use crate::train::stages::kept_views::{KeepAs, KeptViews};
 use crate::train::stages::rendered::{PhiLayers, ReflRendered};
 use crate::train::stages::scattering::ExternalStep;
@@ -23,7 +23,7 @@ use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::lightfield::{CompositeInputs, LightFieldShading, SampleScratch, ShadeParams, CHANNELS};
 use tgs_pipelines::mlp::{Mlp, MlpScratch, MlpShape, OUT};
 use tgs_pipelines::reflection::MATERIAL;
-use tgs_pipelines::{Adam, AdamGroup, Camera, Features, Frame, LossIo, LossScratch, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
+use tgs_pipelines::{Adam, AdamGroup, Camera, Features, LossWeights, Plane, Rasterizer, Splats, TrainableSet};
 
 /// What the trainer passes for one Stage III step.
 pub struct LightFieldStepInput<'a> {
@@ -46,13 +46,8 @@ pub struct LightFieldStepInput<'a> {
 }
 
 struct ViewBuffers {
-    frame: Frame,
     samples: SampleScratch,
-    loss: LossScratch,
-    loss_in: Buffer<f32>,
-    loss_grad: Buffer<f32>,
-    /// The R plane, brought back with the step when `lambda_r` > 0.
-    r_host: Readback<f32>,
+    step: StepBuffers,
 }
 
 pub struct LightFieldModel {
@@ -133,15 +128,8 @@ impl LightFieldModel {
             let n = self.set.len();
             let max_g = n + 1024;
             let frame = self.raster.frame(w, h, max_g, self.raster.initial_capacity(max_g))?;
-            let planes = (Plane::count(3) * pixels) as usize;
-            let vb = ViewBuffers {
-                frame,
-                samples: self.shading.sample_scratch(w, h)?,
-                loss: self.objective.scratch(w, h)?,
-                loss_in: Buffer::new(&self.ctx, "lf.loss_in", planes)?,
-                loss_grad: Buffer::new(&self.ctx, "lf.loss_grad", planes)?,
-                r_host: Readback::new(&self.ctx, "lf.r_host", (w * h) as usize)?,
-            };
+            let samples = self.shading.sample_scratch(w, h)?;
+            let vb = ViewBuffers { samples, step: StepBuffers::new(&self.ctx, &self.objective, frame, "lf")? };
             self.sizes.insert((w, h), vb);
         }
         Ok(())
@@ -157,9 +145,9 @@ impl LightFieldModel {
         let kept = keep.and_then(|k| self.kept.get(k.view));
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(&mut rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, (&b.frame, &b.samples), scratch)?;
+            record_forward(&mut rec, (&self.shading, &self.raster, kept), Splats::coloured(&self.set.params, &self.feat), cam, &self.shade, (&b.step.frame, &b.samples), scratch)?;
             timings.extend(rec.submit_and_wait()?);
-            if self.raster.fit(&mut b.frame)? {
+            if self.raster.fit(&mut b.step.frame)? {
                 break;
             }
             if kept.is_some() {
@@ -168,7 +156,7 @@ impl LightFieldModel {
         }
         if let (Some(at), None) = (keep, kept) {
             let (raster, set) = (&self.raster, &self.set);
-            self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.frame, budget, true));
+            self.kept.capture(at, |budget| raster.keep_weights(&set.params, &b.step.frame, budget, true));
         }
         let count = b.samples.count.download()?[0];
         if count > scratch.capacity() {
@@ -249,7 +237,7 @@ impl LightFieldModel {
             self.record_pass(&mut rec, cfg, scattering, x, &pass)?;
             timings.extend(rec.submit_and_wait()?);
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
-            if host_count.is_some() || self.raster.fit(&mut b.frame)? {
+            if host_count.is_some() || self.raster.fit(&mut b.step.frame)? {
                 break;
             }
             if kept {
@@ -262,7 +250,7 @@ impl LightFieldModel {
         };
         self.evaluated.0 += count as u64;
         self.evaluated.1 += (cam.width * cam.height) as u64;
-        let b = &self.sizes[&(cam.width, cam.height)];
+        let b = &self.sizes[&(cam.width, cam.height)].step;
         let values = b.loss.values()?;
         let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, hf)?;
         if lf.lambda_r > 0.0 {
@@ -276,8 +264,8 @@ impl LightFieldModel {
     fn record_pass(&mut self, rec: &mut Recorder, cfg: &TrainConfig, scattering: &ScatteringModel, x: &LightFieldStepInput, p: &Pass<'_>) -> Result<()> {
         let cam = x.camera;
         let LightFieldModel { raster, shading, mlp, objective, adam, set, net, shade, feat, dfeat, scratch, d_phi, sizes, count_host, kept, .. } = self;
-        let ViewBuffers { frame, samples, loss, loss_in, loss_grad, r_host } = sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
-        let step = StepLoss { loss: objective, io: LossIo { render: loss_in, target: x.target, grad: loss_grad }, scratch: loss, cam, terms: p.terms };
+        let ViewBuffers { samples, step } = sizes.get_mut(&(cam.width, cam.height)).context("light-field view buffers")?;
+        let (step, io) = step.split(objective, x.target, cam, p.terms, (feat, dfeat));
         let mut light = NetworkLight {
             cfg,
             cam,
@@ -291,15 +279,10 @@ impl LightFieldModel {
             set,
             net,
             shade,
-            feat,
-            dfeat,
+            io,
             scratch: scratch.as_ref().context("light-field scratch")?,
             d_phi: d_phi.as_ref().context("light-field gradient buffer")?,
-            frame,
             samples,
-            loss_in,
-            loss_grad,
-            r_host,
             count_host,
         };
         record_composite_step(rec, &mut light, step)
@@ -313,12 +296,13 @@ impl LightFieldModel {
         let scratch = self.scratch.as_ref().context("light-field scratch")?;
         let mut rec = Recorder::new(&self.ctx)?;
         self.mlp.record_forward(&mut rec, &self.net.params, count, scratch)?;
-        self.shading.record_composite(&mut rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples: &b.samples, phi: &scratch.out }, &b.loss_in)?;
+        let (samples, b) = (&b.samples, &b.step);
+        self.shading.record_composite(&mut rec, cam, &self.shade, &CompositeInputs { scat, refl: &b.frame.out, samples, phi: &scratch.out }, &b.loss_in)?;
         rec.submit_and_wait()?;
         let n = (cam.width * cam.height) as usize;
         let composite = b.loss_in.download()?;
         let refl = b.frame.out.download()?;
-        let sample_of = b.samples.sample_of.download()?;
+        let sample_of = samples.sample_of.download()?;
         let phi = if count > 0 { scratch.out.download_range(0, (OUT * count) as usize)? } else { Vec::new() };
         // F Phi per pixel (the composite kernel's F, recomputed on the host).
         let mut reflected = vec![0.0; 3 * n];

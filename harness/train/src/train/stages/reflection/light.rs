@@ -5,7 +5,7 @@
 use super::masks::GlassMask;
 use super::settings::RotationGrad;
 use crate::train::config::TrainConfig;
-use crate::train::stages::composite::{Light, LossTerms};
+use crate::train::stages::composite::{LayerIo, Light, LossTerms};
 use crate::train::stages::rendered::R_PLANE;
 use crate::train::stages::scattering::ExternalStep;
 use crate::train::stages::scattering::ScatteringModel;
@@ -30,13 +30,8 @@ pub(super) struct CubeMapLight<'a> {
     pub(super) fresnel: Fresnel,
     pub(super) set: &'a TrainableSet,
     pub(super) env: &'a EnvMap,
-    pub(super) feat: &'a Buffer<f32>,
-    pub(super) dfeat: &'a Buffer<f32>,
+    pub(super) io: LayerIo<'a>,
     pub(super) texels: &'a TexelScratch,
-    pub(super) frame: &'a Frame,
-    pub(super) loss_in: &'a Buffer<f32>,
-    pub(super) loss_grad: &'a Buffer<f32>,
-    pub(super) r_host: &'a Readback<f32>,
     pub(super) alpha_host: &'a Readback<f32>,
     /// The view's glass mask when `reflection.lambda_mask` weighs it (ReflectionModel::step).
     pub(super) mask: Option<&'a GlassMask>,
@@ -48,11 +43,11 @@ impl Light for CubeMapLight<'_> {
 
     fn record_forward(&mut self, rec: &mut Recorder) -> Result<()> {
         let cam = self.cam;
-        record_forward(rec, (self.shading, self.raster), &ColorInputs { g: &self.set.params, env: self.env, cam, fresnel: self.fresnel }, self.feat, self.frame)
+        record_forward(rec, (self.shading, self.raster), &ColorInputs { g: &self.set.params, env: self.env, cam, fresnel: self.fresnel }, self.io.feat, self.io.frame)
     }
 
     fn record_composite(&mut self, rec: &mut Recorder) -> Result<()> {
-        self.shading.record_composite(rec, self.cam, self.fresnel, &CompositeInputs { scat: self.p.scat, refl: &self.frame.out }, self.loss_in)
+        self.shading.record_composite(rec, self.cam, self.fresnel, &CompositeInputs { scat: self.p.scat, refl: &self.io.frame.out }, self.io.loss_in)
     }
 
     fn record_composite_backward(&mut self, rec: &mut Recorder) -> Result<()> {
@@ -60,8 +55,8 @@ impl Light for CubeMapLight<'_> {
         let cam = self.cam;
         let prior = CompositePriors::of_means(rc.lambda_r, rc.lambda_area, cam.width * cam.height).with_mask(rc.lambda_mask, cam.width * cam.height);
         let mask = self.mask.map(|m| &m.gpu);
-        let g = CompositeGrads { loss_grad: self.loss_grad, refl_grad: &self.frame.grad_out, scat_grad: self.p.terms.scat_grad, mask };
-        self.shading.record_composite_backward(rec, cam, self.fresnel, &CompositeInputs { scat: self.p.scat, refl: &self.frame.out }, &g, prior)
+        let g = CompositeGrads { loss_grad: self.io.loss_grad, refl_grad: &self.io.frame.grad_out, scat_grad: self.p.terms.scat_grad, mask };
+        self.shading.record_composite_backward(rec, cam, self.fresnel, &CompositeInputs { scat: self.p.scat, refl: &self.io.frame.out }, &g, prior)
     }
 
     fn record_update(&mut self, rec: &mut Recorder) -> Result<()> {
@@ -69,27 +64,27 @@ impl Light for CubeMapLight<'_> {
         let rc = &cfg.reflection;
         let n = (cam.width * cam.height) as usize;
         if rc.lambda_r > 0.0 {
-            rec.read_back(&self.frame.out, R_PLANE * n, self.r_host)?;
+            rec.read_back(&self.io.frame.out, R_PLANE * n, self.io.r_host)?;
         }
         if rc.lambda_area > 0.0 || self.mask.is_some() {
-            rec.read_back(&self.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, self.alpha_host)?;
+            rec.read_back(&self.io.frame.out, Plane::Alpha.index(self.fresnel.channels()) as usize * n, self.alpha_host)?;
         }
         if let Some((m, step)) = &p.external {
             m.record_backward_external(rec, cfg, cam, step)?;
         }
-        self.raster.record_backward_with(rec, Splats::coloured(&self.set.params, self.feat), &self.set.grads, self.dfeat, self.frame)?;
+        self.raster.record_backward_with(rec, Splats::coloured(&self.set.params, self.io.feat), &self.set.grads, self.io.dfeat, self.io.frame)?;
         if rc.rotation_grad == RotationGrad::Reflection {
             // The colour's backward adds the mirror direction's part to zeros.
             rec.fill(&self.set.grads.quats.binding(), 0)?;
         }
         let sc = rec.begin_scope("refl.color_backward");
         let inputs = ColorInputs { g: &self.set.params, env: self.env, cam, fresnel: self.fresnel };
-        self.shading.record_color_backward(rec, &inputs, self.dfeat, &self.set.grads, self.texels)?;
+        self.shading.record_color_backward(rec, &inputs, self.io.dfeat, &self.set.grads, self.texels)?;
         rec.end_scope(sc);
         let e = self.env;
         let mut grids = self.adam.set_grids(self.set, &p.groups).to_vec();
         grids.push(self.adam.grid(e.len()));
-        let args = self.raster.record_fit_gate(rec, self.frame, &grids)?;
+        let args = self.raster.record_fit_gate(rec, self.io.frame, &grids)?;
         let sc = rec.begin_scope("adam");
         self.adam.record_set_gated(rec, self.set, &p.groups, p.it, &args[..5])?;
         self.adam.record_gated(rec, AdamArrays { param: &e.params, grad: &e.grads, m: &e.m, v: &e.v, n: e.len() }, &AdamGroup::single(rc.lr_env), p.it, &args[5])?;

@@ -13,7 +13,7 @@ use super::masks::GlassMask;
 use super::seed::{quat_for_normal, Seed};
 use crate::train::config::TrainConfig;
 use crate::train::logit;
-use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, LossTerms, StepLoss};
+use crate::train::stages::composite::{record_composite_step, CompositeLoss, HfSetting, LossTerms, StepBuffers};
 use crate::train::stages::rendered::ReflRendered;
 use crate::train::stages::scattering::{ExternalStep, ScatteringModel, StepOutput};
 use anyhow::{bail, Context as _, Result};
@@ -22,8 +22,7 @@ use std::sync::Arc;
 use tgs_engine::{Buffer, Context, Readback, Recorder, Timing};
 use tgs_pipelines::reflection::{ColorInputs, CompositeInputs, TexelScratch, MATERIAL};
 use tgs_pipelines::{
-    Adam, AdamGroup, Camera, Densifier, DensifyParams, EnvMap, Features, Frame, Fresnel, HostEnvMap, HostGaussians, LossIo, LossScratch, LossWeights, Plane, Rasterizer,
-    ReflectionShading, TrainableSet,
+    Adam, AdamGroup, Camera, Densifier, DensifyParams, EnvMap, Features, Fresnel, HostEnvMap, HostGaussians, LossWeights, Rasterizer, ReflectionShading, TrainableSet,
 };
 
 /// What the trainer passes for one Stage II step.
@@ -55,12 +54,7 @@ pub struct ScatTrain<'a> {
 }
 
 struct ViewBuffers {
-    frame: Frame,
-    loss: LossScratch,
-    loss_in: Buffer<f32>,
-    loss_grad: Buffer<f32>,
-    /// The R plane, brought back with the step when `lambda_r` > 0.
-    r_host: Readback<f32>,
+    step: StepBuffers,
     /// The alpha plane, brought back with the step when `lambda_area` > 0.
     alpha_host: Readback<f32>,
 }
@@ -138,20 +132,12 @@ impl ReflectionModel {
 
     fn view_buffers(&mut self, w: u32, h: u32) -> Result<()> {
         let n = self.set.len();
-        let old = self.sizes.get(&(w, h)).map(|b| (b.frame.max_gaussians, b.frame.capacity));
+        let old = self.sizes.get(&(w, h)).map(|b| (b.step.frame.max_gaussians, b.step.frame.capacity));
         if old.is_none_or(|(max_g, _)| max_g < n) {
             let max_g = n + 1024;
             let cap = old.map(|o| o.1).unwrap_or(0).max(self.raster.initial_capacity(max_g));
             let frame = self.raster.frame(w, h, max_g, cap)?;
-            let planes = (Plane::count(3) * w * h) as usize;
-            let vb = ViewBuffers {
-                frame,
-                loss: self.objective.scratch(w, h)?,
-                loss_in: Buffer::new(&self.ctx, "refl.loss_in", planes)?,
-                loss_grad: Buffer::new(&self.ctx, "refl.loss_grad", planes)?,
-                r_host: Readback::new(&self.ctx, "refl.r_host", (w * h) as usize)?,
-                alpha_host: Readback::new(&self.ctx, "refl.alpha_host", (w * h) as usize)?,
-            };
+            let vb = ViewBuffers { step: StepBuffers::new(&self.ctx, &self.objective, frame, "refl")?, alpha_host: Readback::new(&self.ctx, "refl.alpha_host", (w * h) as usize)? };
             self.sizes.insert((w, h), vb);
         }
         Ok(())
@@ -163,9 +149,9 @@ impl ReflectionModel {
         let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
         loop {
             let mut rec = Recorder::profiled_if(&self.ctx, profile)?;
-            record_forward(&mut rec, (&self.shading, &self.raster), &ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel }, &self.feat, &b.frame)?;
+            record_forward(&mut rec, (&self.shading, &self.raster), &ColorInputs { g: &self.set.params, env: &self.env, cam, fresnel: self.fresnel }, &self.feat, &b.step.frame)?;
             let t = rec.submit_and_wait()?;
-            if self.raster.fit(&mut b.frame)? {
+            if self.raster.fit(&mut b.step.frame)? {
                 return Ok(t);
             }
         }
@@ -224,8 +210,8 @@ impl ReflectionModel {
             self.record_pass(&mut rec, cfg, x, &pass)?;
             let t = rec.submit_and_wait()?;
             let b = self.sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-            if self.raster.fit(&mut b.frame)? {
-                break (t, b.loss.values()?);
+            if self.raster.fit(&mut b.step.frame)? {
+                break (t, b.step.loss.values()?);
             }
             if scat_model.is_some() {
                 bail!("a Stage II step that trains the scattering colour overflowed the frame its own forward had just fitted");
@@ -234,7 +220,7 @@ impl ReflectionModel {
         let timings = pre.into_iter().chain(timings).collect();
         let mut loss = self.objective.value(&values, cfg.lambda_ssim, &weights, hf)?;
         if rc.lambda_r > 0.0 {
-            loss += rc.lambda_r as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].r_host.read()?);
+            loss += rc.lambda_r as f64 * crate::train::mean(&self.sizes[&(cam.width, cam.height)].step.r_host.read()?);
         }
         if rc.lambda_area > 0.0 || x.mask.is_some() {
             let alpha = self.sizes[&(cam.width, cam.height)].alpha_host.read()?;
@@ -258,10 +244,9 @@ impl ReflectionModel {
     fn record_pass(&mut self, rec: &mut Recorder, cfg: &TrainConfig, x: &ReflStepInput, p: &Pass<'_>) -> Result<()> {
         let cam = x.camera;
         let ReflectionModel { raster, shading, objective, adam, fresnel, set, env, feat, dfeat, texels, sizes, .. } = self;
-        let ViewBuffers { frame, loss, loss_in, loss_grad, r_host, alpha_host } = sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
-        let step = StepLoss { loss: objective, io: LossIo { render: loss_in, target: x.target, grad: loss_grad }, scratch: loss, cam, terms: p.terms };
-        let mut light =
-            CubeMapLight { cfg, cam, p, raster, shading, adam, fresnel: *fresnel, set, env, feat, dfeat, texels, frame, loss_in, loss_grad, r_host, alpha_host, mask: x.mask };
+        let ViewBuffers { step, alpha_host } = sizes.get_mut(&(cam.width, cam.height)).context("reflection view buffers")?;
+        let (step, io) = step.split(objective, x.target, cam, p.terms, (feat, dfeat));
+        let mut light = CubeMapLight { cfg, cam, p, raster, shading, adam, fresnel: *fresnel, set, env, io, texels, alpha_host, mask: x.mask };
         record_composite_step(rec, &mut light, step)
     }
 
@@ -270,6 +255,7 @@ impl ReflectionModel {
         self.forward(cam, false)?;
         let b = &self.sizes[&(cam.width, cam.height)];
         let mut rec = Recorder::new(&self.ctx)?;
+        let b = &b.step;
         self.shading.record_composite(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
         rec.submit_and_wait()?;
         Ok(ReflRendered { width: cam.width, height: cam.height, composite: b.loss_in.download()?, refl: b.frame.out.download()?, channels: self.fresnel.channels(), phi: None })
