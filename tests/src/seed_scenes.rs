@@ -257,3 +257,39 @@ pub fn cabin_glass(x: V3) -> (f64, V3) {
 pub fn seed_views<'a>(cams: &[Camera], res: &'a [Vec<f32>], depth: &'a [Vec<f32>]) -> Vec<SeedView<'a>> {
     cams.iter().zip(res.iter().zip(depth)).map(|(c, (r, z))| SeedView { camera: *c, residual: r, depth: z }).collect()
 }
+
+/// A glass box (x, y in [-0.5, 0.5], z in [0, 0.8]: its top and four
+/// sides glass, as the suite's `cabinet`) standing on the floor z = 0,
+/// seen from `count` cameras all around it from 20 to 50 degrees above
+/// (no view sees a face edge on). Masks of the glass, depths of the floor
+/// (inside the box through the glass, or around it).
+pub fn glass_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let eye = |i: usize| {
+        let a = (i as f64 * 0.618_034).fract() * std::f64::consts::TAU;
+        let el = (20.0 + 30.0 * (i as f64 * 0.377).fract()).to_radians();
+        [3.5 * el.cos() * a.cos(), 3.5 * el.cos() * a.sin(), 3.5 * el.sin()]
+    };
+    views_from(count, eye, [0.0, 0.0, 0.4], 0.8, |e, d, len| {
+        let floor = if d[2] < 0.0 { (-e[2] / d[2] / len) as f32 } else { 0.0 };
+        let glass = slabs(e, d, [-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]).is_some();
+        (glass as u8 as f32, floor)
+    })
+}
+
+/// The distance of `x` from the glass box's nearest glass face
+/// ([`glass_box_views`]) and that face's normal.
+pub fn glass_box_face(x: V3) -> (f64, V3) {
+    let faces: [(usize, f64); 5] = [(0, 0.5), (0, -0.5), (1, 0.5), (1, -0.5), (2, 0.8)];
+    let mut best = (f64::INFINITY, [0.0; 3]);
+    for (k, at) in faces {
+        let (lo, hi) = ([-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]);
+        let q: V3 = std::array::from_fn(|j| if j == k { at } else { x[j].clamp(lo[j], hi[j]) });
+        let dist = dot(sub(x, q), sub(x, q)).sqrt();
+        if dist < best.0 {
+            let mut n = [0.0; 3];
+            n[k] = 1.0;
+            best = (dist, n);
+        }
+    }
+    best
+}

@@ -335,7 +335,17 @@ fn seed_model(
         ..SeedParams::default()
     };
     let p = if masks.is_some() {
-        SeedParams { threshold: 0.5, blur: 0, rim: rc.seed_rim, rim_all_around: rc.seed_rim_all_around, planes: rc.seed_planes, relax: &MASK_SIGNIFICANCE, ..p }
+        SeedParams {
+            threshold: 0.5,
+            blur: 0,
+            rim: rc.seed_rim,
+            rim_all_around: rc.seed_rim_all_around,
+            planes: rc.seed_planes,
+            planes_most: rc.seed_planes_most,
+            smooth: rc.seed_smooth,
+            relax: &MASK_SIGNIFICANCE,
+            ..p
+        }
     } else {
         p
     };

@@ -63,6 +63,7 @@ mod geometry;
 mod normals;
 mod planes;
 mod rim;
+mod smooth;
 
 pub use chance::min_hits;
 
@@ -72,6 +73,7 @@ use geometry::{box_blur, image_point, image_xy, in_parallel, normalize, unprojec
 pub use normals::{consensus_normal, jacobi_eigen, quat_for_normal, GRADIENT_MIN};
 use normals::{gradient_pixels, surfels};
 pub use rim::fit_plane;
+pub use smooth::{smooth_normals, SMOOTH_DEGREES, SMOOTH_SHARE};
 use tgs_pipelines::Camera;
 
 /// One training view as the seeding sees it.
@@ -124,6 +126,11 @@ pub struct SeedParams {
     /// With given glass masks: each view's mask pieces whose hull points lie
     /// on a plane, or two at a corner, seeded on it (the `planes` module).
     pub planes: bool,
+    /// With `planes`: the most planes one piece is seeded on, 2 (a corner
+    /// of two) or 3 (a convex corner of three: a box).
+    pub planes_most: u32,
+    /// Bilateral smoothing of the seeds' normals (the `smooth` module).
+    pub smooth: bool,
     /// Threads for the march and the normals (0: every core the process
     /// may use). The seeds are the same, bit for bit, at any count: the
     /// rays and seeds are split into contiguous runs whose results are
@@ -224,6 +231,8 @@ impl Default for SeedParams {
             rim: false,
             rim_all_around: false,
             planes: false,
+            planes_most: 2,
+            smooth: false,
             threads: 0,
         }
     }
@@ -385,10 +394,13 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
     let fixed = |f: &Found| if dropped { 0 } else { f.rim_normals.iter().filter(|n| n.is_some()).count() };
     let rim_seeds = fixed(&found);
-    let plane_pieces = if p.planes && !dropped { planes::snap(&mut found, &prepared) } else { 0 };
+    let plane_pieces = if p.planes && !dropped { planes::snap(&mut found, &prepared, p.planes_most) } else { 0 };
     let plane_seeds = fixed(&found) - rim_seeds;
     let (chosen, fixed, normal) = if dropped { (&found.agreeing, &[][..], p.normal.without_outline()) } else { (&found.significant, &found.rim_normals[..], p.normal) };
-    let seeds = surfels(chosen, fixed, &prepared, normal, p.threads);
+    let mut seeds = surfels(chosen, fixed, &prepared, normal, p.threads);
+    if p.smooth && !dropped {
+        smooth::smooth_normals(&mut seeds, p.threads);
+    }
     HullSeeding { seeds, rim_views: found.rim_views, rim_seeds, plane_pieces, plane_seeds, significance_dropped: dropped, significance_relaxed: relaxed }
 }
 

@@ -1,0 +1,125 @@
+//! A glass box seen from above all around (the suite's `cabinet`), on the
+//! CPU: its views' pieces of mask seeded on three planes at a corner
+//! (`reflection.seed_planes_most` 3), and the seeds' normals smoothed
+//! (`reflection.seed_smooth`; harness/train/src/train/stages/reflection/seed/smooth.rs)
+//! on a bulging face, across an edge and on a sphere.
+
+use tgs::train::stages::reflection::seed::{hull_seeding, smooth_normals, HullSeeding, Seed, SeedNormal, SeedParams};
+use tgs_tests::seed_scenes::*;
+use tgs_tests::{seed, Rng};
+
+/// Mean angle (degrees) between each seed's normal and its nearest glass
+/// face's, either way round.
+fn box_tilt(h: &HullSeeding) -> f64 {
+    let t: f64 = h.seeds.iter().map(|s| dot(s.normal.map(f64::from), glass_box_face(s.position.map(f64::from)).1).abs().clamp(0.0, 1.0).acos().to_degrees()).sum();
+    t / h.seeds.len() as f64
+}
+
+#[test]
+fn a_glass_box_is_seeded_on_three_planes_and_smoothed() {
+    let (cams, masks, depth) = glass_box_views(40);
+    let sv = seed_views(&cams, &masks, &depth);
+    let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Consensus, planes: true, ..SeedParams::default() };
+    let two = hull_seeding(&sv, &base);
+    let three = hull_seeding(&sv, &SeedParams { planes_most: 3, ..base });
+    let smoothed = hull_seeding(&sv, &SeedParams { planes_most: 3, smooth: true, ..base });
+    let off = |h: &HullSeeding| h.seeds.iter().map(|s| glass_box_face(s.position.map(f64::from)).0).sum::<f64>() / h.seeds.len() as f64;
+    eprintln!(
+        "glass box: {} seeds; two planes: {} pieces, normals {:.2} deg, {:.4} off; three: {} pieces, {:.2} deg, {:.4} off; smoothed {:.2} deg",
+        two.seeds.len(),
+        two.plane_pieces,
+        box_tilt(&two),
+        off(&two),
+        three.plane_pieces,
+        box_tilt(&three),
+        off(&three),
+        box_tilt(&smoothed)
+    );
+    assert_eq!(three.seeds.len(), two.seeds.len(), "planes move seeds, never add or drop them");
+    assert!(three.plane_pieces > two.plane_pieces, "{} pieces on three planes, {} on two", three.plane_pieces, two.plane_pieces);
+    assert!(box_tilt(&three) < box_tilt(&two), "normals {} deg on three planes, {} on two", box_tilt(&three), box_tilt(&two));
+    assert!(box_tilt(&smoothed) < 0.9 * box_tilt(&three), "smoothed {} deg, {} before", box_tilt(&smoothed), box_tilt(&three));
+    for s in &smoothed.seeds {
+        assert!(s.position.iter().chain(&s.normal).all(|v| v.is_finite()) && s.scale > 0.0, "{s:?}");
+    }
+    assert_eq!(hull_seeding(&sv, &SeedParams { planes_most: 3, smooth: true, threads: 1, ..base }), smoothed, "the same at one thread");
+    // Smoothing moves no seed and keeps each normal on its side.
+    for (a, b) in smoothed.seeds.iter().zip(&three.seeds) {
+        assert_eq!((a.position, a.scale), (b.position, b.scale));
+        assert!(dot(a.normal.map(f64::from), b.normal.map(f64::from)) > 0.0);
+    }
+}
+
+/// Seeds on the faces z = 0 (x < 0) and x = 0 (z > 0) of a box's edge, each
+/// face a pillow (raised 0.1 at its middle) whose normals lean with its
+/// slope, plus noise.
+fn pillow_edge(rng: &mut Rng) -> (Vec<Seed>, Vec<[f64; 3]>) {
+    let (mut seeds, mut truth) = (Vec::new(), Vec::new());
+    for k in 0..3000 {
+        let (u, v) = (uniform(rng), 2.0 * uniform(rng) - 1.0);
+        let h = 0.1 * (1.0 - (2.0 * u - 1.0).powi(2)) * (1.0 - v * v);
+        let (dh_du, dh_dv) = (0.1 * (-4.0 * (2.0 * u - 1.0)) * (1.0 - v * v), 0.1 * (1.0 - (2.0 * u - 1.0).powi(2)) * (-2.0 * v));
+        let jitter = [0.05 * (uniform(rng) - 0.5), 0.05 * (uniform(rng) - 0.5)];
+        // Face z = 0 spans x in [-1, 0]; face x = 0 spans z in [0, 1].
+        let (p, n, t) = if k % 2 == 0 {
+            ([-u, v, h], [dh_du + jitter[0], -dh_dv + jitter[1], 1.0], [0.0, 0.0, 1.0])
+        } else {
+            ([h, v, u], [1.0, -dh_dv + jitter[1], -dh_du + jitter[0]], [1.0, 0.0, 0.0])
+        };
+        let n = norm(n);
+        seeds.push(Seed { position: p.map(|c| c as f32), normal: n.map(|c| c as f32), scale: 0.01 });
+        truth.push(t);
+    }
+    (seeds, truth)
+}
+
+fn mean_angle(seeds: &[Seed], truth: &[[f64; 3]]) -> f64 {
+    seeds.iter().zip(truth).map(|(s, t)| dot(s.normal.map(f64::from), *t).abs().clamp(0.0, 1.0).acos().to_degrees()).sum::<f64>() / seeds.len() as f64
+}
+
+#[test]
+fn smoothing_averages_a_pillow_flat_without_crossing_the_edge() {
+    let mut rng = Rng(seed("seed-smooth"));
+    let (seeds, truth) = pillow_edge(&mut rng);
+    let before = mean_angle(&seeds, &truth);
+    let mut s = seeds.clone();
+    smooth_normals(&mut s, 0);
+    let after = mean_angle(&s, &truth);
+    eprintln!("pillow edge: normals {before:.2} deg off their face, smoothed {after:.2}");
+    assert!(after < 0.6 * before && after < 6.0, "smoothed {after} deg, {before} before");
+    // Near the edge, no normal takes the other face's.
+    for ((a, p), t) in s.iter().zip(&seeds).zip(&truth) {
+        if p.position[0].abs() < 0.1 && p.position[2].abs() < 0.1 {
+            assert!(dot(a.normal.map(f64::from), *t) > 0.7, "a seed at the edge leans to the other face: {a:?}");
+        }
+    }
+    let mut one = seeds.clone();
+    smooth_normals(&mut one, 1);
+    assert_eq!(one, s, "the same at one thread");
+    let mut tiny = seeds[..1].to_vec();
+    smooth_normals(&mut tiny, 0);
+    assert_eq!(tiny, seeds[..1], "one seed stays as it is");
+}
+
+#[test]
+fn smoothing_keeps_a_spheres_normals_radial() {
+    let mut rng = Rng(seed("seed-smooth-sphere"));
+    let seeds: Vec<Seed> = (0..3000)
+        .map(|_| {
+            let (z, a) = (2.0 * uniform(&mut rng) - 1.0, std::f64::consts::TAU * uniform(&mut rng));
+            let r = (1.0 - z * z).sqrt();
+            let n = [r * a.cos(), r * a.sin(), z];
+            Seed { position: n.map(|c| c as f32), normal: n.map(|c| c as f32), scale: 0.01 }
+        })
+        .collect();
+    let mut s = seeds.clone();
+    smooth_normals(&mut s, 0);
+    let err = radial_error(&s);
+    let mean = err.iter().sum::<f64>() / err.len() as f64;
+    eprintln!("unit sphere of 3000 seeds: smoothed normals {mean:.3} deg off radial (worst {:.3})", err[err.len() - 1]);
+    assert!(mean < 2.0 && err[err.len() - 1] < 5.0, "mean {mean}, worst {}", err[err.len() - 1]);
+    // Inward normals stay inward.
+    let mut inward: Vec<Seed> = seeds.iter().map(|x| Seed { normal: x.normal.map(|c| -c), ..*x }).collect();
+    smooth_normals(&mut inward, 0);
+    assert!(inward.iter().all(|x| dot(x.normal.map(f64::from), x.position.map(f64::from)) < 0.0));
+}
