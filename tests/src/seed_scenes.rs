@@ -237,10 +237,15 @@ pub fn cabin_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) 
 /// The distance of `x` from the cabin's glass band ([`cabin_views`]) and
 /// the normal of its nearest window.
 pub fn cabin_glass(x: V3) -> (f64, V3) {
-    let faces: [(usize, f64); 4] = [(0, 0.5), (0, -0.5), (1, 0.4), (1, -0.4)];
+    nearest_face(x, &[(0, 0.5), (0, -0.5), (1, 0.4), (1, -0.4)], ([-0.5, -0.4, 0.4], [0.5, 0.4, 0.8]))
+}
+
+/// The distance of `x` from the nearest of a box's `faces` ((axis, at):
+/// the face where coordinate `axis` is `at`, within the box `lo`..`hi`
+/// on the other axes) and that face's normal along +axis.
+fn nearest_face(x: V3, faces: &[(usize, f64)], (lo, hi): (V3, V3)) -> (f64, V3) {
     let mut best = (f64::INFINITY, [0.0; 3]);
-    for (k, at) in faces {
-        let (lo, hi) = ([-0.5, -0.4, 0.4], [0.5, 0.4, 0.8]);
+    for &(k, at) in faces {
         let q: V3 = std::array::from_fn(|j| if j == k { at } else { x[j].clamp(lo[j], hi[j]) });
         let dist = dot(sub(x, q), sub(x, q)).sqrt();
         if dist < best.0 {
@@ -279,17 +284,5 @@ pub fn glass_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32
 /// The distance of `x` from the glass box's nearest glass face
 /// ([`glass_box_views`]) and that face's normal.
 pub fn glass_box_face(x: V3) -> (f64, V3) {
-    let faces: [(usize, f64); 5] = [(0, 0.5), (0, -0.5), (1, 0.5), (1, -0.5), (2, 0.8)];
-    let mut best = (f64::INFINITY, [0.0; 3]);
-    for (k, at) in faces {
-        let (lo, hi) = ([-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]);
-        let q: V3 = std::array::from_fn(|j| if j == k { at } else { x[j].clamp(lo[j], hi[j]) });
-        let dist = dot(sub(x, q), sub(x, q)).sqrt();
-        if dist < best.0 {
-            let mut n = [0.0; 3];
-            n[k] = 1.0;
-            best = (dist, n);
-        }
-    }
-    best
+    nearest_face(x, &[(0, 0.5), (0, -0.5), (1, 0.5), (1, -0.5), (2, 0.8)], ([-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]))
 }
