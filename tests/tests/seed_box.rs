@@ -43,6 +43,12 @@ fn a_glass_box_is_seeded_on_three_planes_and_smoothed() {
         assert!(s.position.iter().chain(&s.normal).all(|v| v.is_finite()) && s.scale > 0.0, "{s:?}");
     }
     assert_eq!(hull_seeding(&sv, &SeedParams { planes_most: 3, smooth: true, threads: 1, ..base }), smoothed, "the same at one thread");
+    // The glass sphere: three planes explain no piece of it either.
+    let (cams, res, depth) = views(0.0, true);
+    let sv = seed_views(&cams, &res, &depth);
+    let p = SeedParams { threshold: 0.01, blur: 0, max_rays: 1500, normal: SeedNormal::Plane, planes: true, planes_most: 3, ..SeedParams::default() };
+    let ball = hull_seeding(&sv, &p);
+    assert_eq!((ball.plane_pieces, ball.plane_seeds), (0, 0));
     // Smoothing moves no seed and keeps each normal on its side.
     for (a, b) in smoothed.seeds.iter().zip(&three.seeds) {
         assert_eq!((a.position, a.scale), (b.position, b.scale));
@@ -117,7 +123,7 @@ fn smoothing_keeps_a_spheres_normals_radial() {
     let err = radial_error(&s);
     let mean = err.iter().sum::<f64>() / err.len() as f64;
     eprintln!("unit sphere of 3000 seeds: smoothed normals {mean:.3} deg off radial (worst {:.3})", err[err.len() - 1]);
-    assert!(mean < 2.0 && err[err.len() - 1] < 5.0, "mean {mean}, worst {}", err[err.len() - 1]);
+    assert!(mean < 2.0 && err[err.len() - 1] < 8.0, "mean {mean}, worst {}", err[err.len() - 1]);
     // Inward normals stay inward.
     let mut inward: Vec<Seed> = seeds.iter().map(|x| Seed { normal: x.normal.map(|c| -c), ..*x }).collect();
     smooth_normals(&mut inward, 0);

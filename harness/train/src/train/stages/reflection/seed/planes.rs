@@ -13,6 +13,7 @@
 
 use super::rim::{consensus, corner, fit_plane, inv_at, off_plane, pieces, world_normal, Membrane, NO_PIECE};
 use super::{image_point, image_xy, pixel_of, unproject_xy, Found, Prepared, V3};
+use glam::DVec3;
 
 /// How far from a piece's plane (a share of the depth) its hull points may
 /// lie and count as on it.
@@ -69,7 +70,7 @@ fn piece_surface(pts: &[[f64; 3]], most: u32) -> Option<Surface> {
         return Some(Surface::Membrane(m));
     }
     let c = if most >= 3 { corner3(pts, PLANE_TOL)? } else { return None };
-    holds(&|p| c.off(p)).then_some(Surface::Corner3(c))
+    (c.distinct() && holds(&|p| c.off(p))).then_some(Surface::Corner3(c))
 }
 
 /// What a piece's seeds are moved onto: a [`Membrane`] (one plane or a
@@ -129,7 +130,21 @@ impl Corner3 {
     fn off(&self, p: &[f64; 3]) -> f64 {
         off_plane(self.plane(p), p)
     }
+
+    /// Whether every two of the planes meet at [`CORNER3_DEGREES`] or
+    /// more (a box's faces; a curved piece's three planes lie closer).
+    fn distinct(&self) -> bool {
+        let n = self.planes.map(|c| DVec3::from(c).normalize_or_zero());
+        let cos_max = CORNER3_DEGREES.to_radians().cos();
+        [(0, 1), (0, 2), (1, 2)].iter().all(|&(i, j)| n[i].dot(n[j]).abs() <= cos_max)
+    }
 }
+
+/// The least angle between two planes of a [`Corner3`]: measured on the
+/// suite's `dome` at 50², three-plane fits that hold 80% of a piece's
+/// points meet at 0–32°, `cabinet`'s box corners at 76–84°
+/// (perf/journal/2026-12-06-sixty-fifth.md).
+pub const CORNER3_DEGREES: f64 = 45.0;
 
 /// Three planes through `pts` ([x, y, 1 / z]): each a consensus of the
 /// points the ones before leave, then each refitted (three rounds) to the
