@@ -1,8 +1,7 @@
 //! A glass box seen from above all around (the suite's `cabinet`), on the
-//! CPU: its views' pieces of mask seeded on three planes at a corner
-//! (`reflection.seed_planes_most` 3), and the seeds' normals smoothed
-//! (`reflection.seed_smooth`; harness/train/src/train/stages/reflection/seed/smooth.rs)
-//! on a bulging face, across an edge and on a sphere.
+//! CPU: its seeds' normals smoothed (`reflection.seed_smooth`;
+//! harness/train/src/train/stages/reflection/seed/smooth.rs), and the
+//! smoothing on a bulging face, across an edge and on a sphere.
 
 use tgs::train::stages::reflection::seed::{hull_seeding, smooth_normals, HullSeeding, Seed, SeedNormal, SeedParams};
 use tgs_tests::seed_scenes::*;
@@ -16,44 +15,34 @@ fn box_tilt(h: &HullSeeding) -> f64 {
 }
 
 #[test]
-fn a_glass_box_is_seeded_on_three_planes_and_smoothed() {
+fn a_glass_box_seeds_normals_are_smoothed_onto_its_faces() {
     let (cams, masks, depth) = glass_box_views(40);
     let sv = seed_views(&cams, &masks, &depth);
     let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Consensus, planes: true, ..SeedParams::default() };
-    let two = hull_seeding(&sv, &base);
-    let three = hull_seeding(&sv, &SeedParams { planes_most: 3, ..base });
-    let smoothed = hull_seeding(&sv, &SeedParams { planes_most: 3, smooth: true, ..base });
-    let off = |h: &HullSeeding| h.seeds.iter().map(|s| glass_box_face(s.position.map(f64::from)).0).sum::<f64>() / h.seeds.len() as f64;
-    eprintln!(
-        "glass box: {} seeds; two planes: {} pieces, normals {:.2} deg, {:.4} off; three: {} pieces, {:.2} deg, {:.4} off; smoothed {:.2} deg",
-        two.seeds.len(),
-        two.plane_pieces,
-        box_tilt(&two),
-        off(&two),
-        three.plane_pieces,
-        box_tilt(&three),
-        off(&three),
-        box_tilt(&smoothed)
-    );
-    assert_eq!(three.seeds.len(), two.seeds.len(), "planes move seeds, never add or drop them");
-    assert!(three.plane_pieces > two.plane_pieces, "{} pieces on three planes, {} on two", three.plane_pieces, two.plane_pieces);
-    assert!(box_tilt(&three) < box_tilt(&two), "normals {} deg on three planes, {} on two", box_tilt(&three), box_tilt(&two));
-    assert!(box_tilt(&smoothed) < 0.9 * box_tilt(&three), "smoothed {} deg, {} before", box_tilt(&smoothed), box_tilt(&three));
+    let plain = hull_seeding(&sv, &base);
+    let smoothed = hull_seeding(&sv, &SeedParams { smooth: true, ..base });
+    eprintln!("glass box: {} seeds, normals {:.2} deg off its faces, smoothed {:.2}", plain.seeds.len(), box_tilt(&plain), box_tilt(&smoothed));
+    assert_eq!(smoothed.seeds.len(), plain.seeds.len());
+    assert!(box_tilt(&smoothed) < 0.85 * box_tilt(&plain), "smoothed {} deg, {} before", box_tilt(&smoothed), box_tilt(&plain));
     for s in &smoothed.seeds {
         assert!(s.position.iter().chain(&s.normal).all(|v| v.is_finite()) && s.scale > 0.0, "{s:?}");
     }
-    assert_eq!(hull_seeding(&sv, &SeedParams { planes_most: 3, smooth: true, threads: 1, ..base }), smoothed, "the same at one thread");
-    // The glass sphere: three planes explain no piece of it either.
-    let (cams, res, depth) = views(0.0, true);
-    let sv = seed_views(&cams, &res, &depth);
-    let p = SeedParams { threshold: 0.01, blur: 0, max_rays: 1500, normal: SeedNormal::Plane, planes: true, planes_most: 3, ..SeedParams::default() };
-    let ball = hull_seeding(&sv, &p);
-    assert_eq!((ball.plane_pieces, ball.plane_seeds), (0, 0));
+    assert_eq!(hull_seeding(&sv, &SeedParams { smooth: true, threads: 1, ..base }), smoothed, "the same at one thread");
     // Smoothing moves no seed and keeps each normal on its side.
-    for (a, b) in smoothed.seeds.iter().zip(&three.seeds) {
+    for (a, b) in smoothed.seeds.iter().zip(&plain.seeds) {
         assert_eq!((a.position, a.scale), (b.position, b.scale));
         assert!(dot(a.normal.map(f64::from), b.normal.map(f64::from)) > 0.0);
     }
+    // The glass sphere's hull seeds: the smoothing's cost on curved glass
+    // (their neighbourhoods are not symmetric about them), bounded: 8.2 ->
+    // 12.0 degrees off radial when measured.
+    let (cams, res, depth) = views(0.0, true);
+    let sv = seed_views(&cams, &res, &depth);
+    let p = SeedParams { threshold: 0.01, blur: 0, max_rays: 1500, normal: SeedNormal::Consensus, ..SeedParams::default() };
+    let mean = |h: &HullSeeding| radial_error(&h.seeds).iter().sum::<f64>() / h.seeds.len() as f64;
+    let (ball, ball_smoothed) = (hull_seeding(&sv, &p), hull_seeding(&sv, &SeedParams { smooth: true, ..p }));
+    eprintln!("glass sphere: normals {:.2} deg off radial, smoothed {:.2}", mean(&ball), mean(&ball_smoothed));
+    assert!(mean(&ball_smoothed) < mean(&ball) + 5.0, "smoothed {} deg, {} before", mean(&ball_smoothed), mean(&ball));
 }
 
 /// Seeds on the faces z = 0 (x < 0) and x = 0 (z > 0) of a box's edge, each

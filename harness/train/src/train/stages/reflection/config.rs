@@ -109,9 +109,6 @@ pub struct ReflectionConfig {
     /// onto it with its normal (flat windows; seed/planes.rs;
     /// perf/journal/2026-12-05-sixtieth.md).
     pub seed_planes: bool,
-    /// With `seed_planes`: the most planes a piece may be seeded on, 2 (a
-    /// window's corner) or 3 (a box's convex corner, `cabinet`).
-    pub seed_planes_most: u32,
     /// With masks: one round of bilateral smoothing of the seeds' normals
     /// (seed/smooth.rs): the hull's bulges between views lean each seed's
     /// local plane off a flat face.
@@ -210,7 +207,6 @@ impl Default for ReflectionConfig {
             seed_rim: true,
             seed_rim_all_around: false,
             seed_planes: true,
-            seed_planes_most: 2,
             seed_smooth: false,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
@@ -263,9 +259,6 @@ impl ReflectionConfig {
         }
         if !self.seed_masks.is_empty() && !self.init.parts().1 {
             bail!("reflection.seed_masks places the hull's seeds; reflection.init = \"{}\" has none (use \"hull\" or \"copy+hull\")", self.init.name());
-        }
-        if !(2..=3).contains(&self.seed_planes_most) {
-            bail!("reflection.seed_planes_most must be 2 (a corner of two planes) or 3 (of three), not {}", self.seed_planes_most);
         }
         if !(self.seed_opacity > 0.0 && self.seed_opacity < 1.0) {
             bail!("reflection.seed_opacity must be in (0, 1), not {}", self.seed_opacity);

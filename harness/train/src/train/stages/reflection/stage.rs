@@ -341,7 +341,6 @@ fn seed_model(
             rim: rc.seed_rim,
             rim_all_around: rc.seed_rim_all_around,
             planes: rc.seed_planes,
-            planes_most: rc.seed_planes_most,
             smooth: rc.seed_smooth,
             relax: &MASK_SIGNIFICANCE,
             ..p

@@ -126,9 +126,6 @@ pub struct SeedParams {
     /// With given glass masks: each view's mask pieces whose hull points lie
     /// on a plane, or two at a corner, seeded on it (the `planes` module).
     pub planes: bool,
-    /// With `planes`: the most planes one piece is seeded on, 2 (a corner
-    /// of two) or 3 (a convex corner of three: a box).
-    pub planes_most: u32,
     /// Bilateral smoothing of the seeds' normals (the `smooth` module).
     pub smooth: bool,
     /// Threads for the march and the normals (0: every core the process
@@ -231,7 +228,6 @@ impl Default for SeedParams {
             rim: false,
             rim_all_around: false,
             planes: false,
-            planes_most: 2,
             smooth: false,
             threads: 0,
         }
@@ -394,7 +390,7 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     let dropped = found.significant.is_empty() && !found.agreeing.is_empty() && p.significance < 1.0;
     let fixed = |f: &Found| if dropped { 0 } else { f.rim_normals.iter().filter(|n| n.is_some()).count() };
     let rim_seeds = fixed(&found);
-    let plane_pieces = if p.planes && !dropped { planes::snap(&mut found, &prepared, p.planes_most) } else { 0 };
+    let plane_pieces = if p.planes && !dropped { planes::snap(&mut found, &prepared) } else { 0 };
     let plane_seeds = fixed(&found) - rim_seeds;
     let (chosen, fixed, normal) = if dropped { (&found.agreeing, &[][..], p.normal.without_outline()) } else { (&found.significant, &found.rim_normals[..], p.normal) };
     let mut seeds = surfels(chosen, fixed, &prepared, normal, p.threads);

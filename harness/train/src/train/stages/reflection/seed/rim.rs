@@ -80,12 +80,12 @@ pub(super) struct Corner {
 }
 
 /// 1 / z of plane `c` at normalised image point (x, y).
-pub(super) fn inv_at(c: &[f64; 3], x: f64, y: f64) -> f64 {
+fn inv_at(c: &[f64; 3], x: f64, y: f64) -> f64 {
     c[0] * x + c[1] * y + c[2]
 }
 
 /// How far `p` ([x, y, 1 / z]) lies from plane `c`, as a share of its depth.
-pub(super) fn off_plane(c: &[f64; 3], p: &[f64; 3]) -> f64 {
+fn off_plane(c: &[f64; 3], p: &[f64; 3]) -> f64 {
     (1.0 - inv_at(c, p[0], p[1]) / p[2]).abs()
 }
 
@@ -128,20 +128,15 @@ impl Membrane {
     /// The membrane's unit normal in world space at normalised image point
     /// (x, y): in view space the plane there is a X + b Y + c Z = 1.
     pub(super) fn normal_at(&self, v: &Prepared, x: f64, y: f64) -> V3 {
-        world_normal(v, self.plane(x, y))
+        let c = self.plane(x, y);
+        let m = &v.cam.world_to_view;
+        normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * c[r]).sum()))
     }
 
     /// How far `p` ([x, y, 1 / z]) lies from the membrane, as a share of its depth.
     pub(super) fn off(&self, p: &[f64; 3]) -> f64 {
         off_plane(self.plane(p[0], p[1]), p)
     }
-}
-
-/// The unit world normal of plane `c` of `v`'s view (in view space
-/// a X + b Y + c Z = 1).
-pub(super) fn world_normal(v: &Prepared, c: &[f64; 3]) -> V3 {
-    let m = &v.cam.world_to_view;
-    normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * c[r]).sum()))
 }
 
 /// The pixels of a `w` x `h` image within `r` of pixel `i` (the
