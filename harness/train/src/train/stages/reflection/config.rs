@@ -110,8 +110,10 @@ pub struct ReflectionConfig {
     /// perf/journal/2026-12-05-sixtieth.md).
     pub seed_planes: bool,
     /// With masks: one round of bilateral smoothing of the seeds' normals
-    /// (seed/smooth.rs): the hull's bulges between views lean each seed's
-    /// local plane off a flat face.
+    /// (seed/smooth.rs): the hull bulges between the views that carve it,
+    /// leaning each seed's local plane off a flat face; on by default for
+    /// flat glass's sake, at a cost of 1–3° on closed curved glass
+    /// (perf/journal/2026-12-06-sixty-fifth.md).
     pub seed_smooth: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
@@ -207,7 +209,7 @@ impl Default for ReflectionConfig {
             seed_rim: true,
             seed_rim_all_around: false,
             seed_planes: true,
-            seed_smooth: false,
+            seed_smooth: true,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,
