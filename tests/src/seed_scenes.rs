@@ -4,7 +4,7 @@
 //! with the f64 vector helpers they use.
 
 use crate::Rng;
-use tgs::train::stages::reflection::seed::{Seed, SeedView};
+use tgs::train::stages::reflection::seed::{Seed, SeedNormal, SeedParams, SeedView};
 use tgs_pipelines::Camera;
 
 pub type V3 = [f64; 3];
@@ -285,4 +285,11 @@ pub fn glass_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32
 /// ([`glass_box_views`]) and that face's normal.
 pub fn glass_box_face(x: V3) -> (f64, V3) {
     nearest_face(x, &[(0, 0.5), (0, -0.5), (1, 0.5), (1, -0.5), (2, 0.8)], ([-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]))
+}
+
+/// The seeding's parameters for views whose residual planes are glass
+/// masks (1 on the glass): a pixel is glass above 0.5, unblurred, 3,000
+/// rays, seed normals by `normal`; the rest at their defaults.
+pub fn mask_params(normal: SeedNormal) -> SeedParams {
+    SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal, ..SeedParams::default() }
 }

@@ -18,7 +18,7 @@ fn box_tilt(h: &HullSeeding) -> f64 {
 fn a_glass_box_seeds_normals_are_smoothed_onto_its_faces() {
     let (cams, masks, depth) = glass_box_views(40);
     let sv = seed_views(&cams, &masks, &depth);
-    let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Consensus, planes: true, ..SeedParams::default() };
+    let base = SeedParams { planes: true, ..mask_params(SeedNormal::Consensus) };
     let plain = hull_seeding(&sv, &base);
     let smoothed = hull_seeding(&sv, &SeedParams { smooth: true, ..base });
     eprintln!("glass box: {} seeds, normals {:.2} deg off its faces, smoothed {:.2}", plain.seeds.len(), box_tilt(&plain), box_tilt(&smoothed));

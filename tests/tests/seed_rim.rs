@@ -17,7 +17,7 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
     let (cams, masks, depth) = window_views(24);
     let sv = seed_views(&cams, &masks, &depth);
     // As Stage II takes given masks: 0/1, no blur, threshold 0.5.
-    let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
+    let base = mask_params(SeedNormal::Plane);
     let hull = hull_seeding(&sv, &base);
     let rim = hull_seeding(&sv, &SeedParams { rim: true, ..base });
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
@@ -100,7 +100,7 @@ fn a_window_seen_from_one_side_is_seeded_on_its_rim_plane() {
 fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
     let (cams, masks, depth) = stepped_window_views(24);
     let sv = seed_views(&cams, &masks, &depth);
-    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, ..SeedParams::default() };
+    let p = SeedParams { rim: true, ..mask_params(SeedNormal::Plane) };
     let rim = hull_seeding(&sv, &p);
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
     let off = |side: f64, wall: f64| median(rim.seeds.iter().filter(|s| (s.position[1] as f64) * side > 0.0).map(|s| (s.position[0] as f64 - wall).abs()).collect());
@@ -128,7 +128,7 @@ fn two_windows_in_one_view_are_seeded_each_on_its_own_rim_plane() {
 fn a_window_in_a_box_seen_all_around_is_seeded_on_its_rim_plane() {
     let (cams, masks, depth) = window_box_views(24);
     let sv = seed_views(&cams, &masks, &depth);
-    let p = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, rim: true, rim_all_around: true, ..SeedParams::default() };
+    let p = SeedParams { rim: true, rim_all_around: true, ..mask_params(SeedNormal::Plane) };
     let rim = hull_seeding(&sv, &p);
     // Counting every view that the point projects into, the views behind
     // the box veto every rim point: no plane.
@@ -185,7 +185,7 @@ fn rim_plane_fit_recovers_the_plane_through_outliers() {
 fn windows_meeting_at_a_corner_are_seeded_on_their_planes() {
     let (cams, masks, depth) = cabin_views(24);
     let sv = seed_views(&cams, &masks, &depth);
-    let base = SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal: SeedNormal::Plane, ..SeedParams::default() };
+    let base = mask_params(SeedNormal::Plane);
     let hull = hull_seeding(&sv, &base);
     let planes = hull_seeding(&sv, &SeedParams { planes: true, ..base });
     let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
