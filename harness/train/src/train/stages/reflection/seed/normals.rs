@@ -5,8 +5,87 @@
 //! why) and its size (the spacing of its nearest seeds), and the
 //! quaternion that turns a surfel's normal axis onto a normal.
 
-use super::{in_parallel, normalize, Prepared, Seed, SeedNormal, V3};
+use super::{in_parallel, normalize, Prepared, Seed, V3};
 use glam::DVec3;
+
+crate::train::settings::name_enum!(
+    /// A seed's normal (see the seed module's documentation; `reflection.seed_normal`).
+    SeedNormal, "reflection.seed_normal", {
+        /// The unit direction from the seed to the centre of the camera whose
+        /// ray found it.
+        View = "view",
+        /// The least-squares plane of the seed and its 16 nearest seeds,
+        /// turned to face that camera (the camera direction with fewer than 3
+        /// neighbours).
+        Plane = "plane",
+        /// The plane through the seed that most of its 128 nearest seeds lie
+        /// on within 2% of its depth (the best of 128 through the seed and two
+        /// of them, a fixed sequence), refitted by least squares to those:
+        /// a mask's hull points scatter about the glass by as much as their
+        /// spacing, which tilts `Plane`'s 16-point fit (docs/stage2.md).
+        Consensus = "consensus",
+        /// Against the gradient of the hull's agreement field: the sum, over
+        /// the views that see the seed, of their residual masks blurred by a
+        /// tenth of the image width and sampled at its projections,
+        /// differentiated in 3D by central differences over that width. A view
+        /// whose mask edge passes near the seed adds the normal of its
+        /// silhouette cone there; a view that sees it deep inside or outside
+        /// its mask adds nothing. Where the field changes by less than
+        /// [`GRADIENT_MIN`] over the step, the camera direction (as `View`).
+        Gradient = "gradient",
+        /// The unit bisector of `View` and `Gradient`'s normals (the camera
+        /// direction where the field is flat). The hull's outward normal is
+        /// right where the residual's hull is the glass's (closed objects)
+        /// and wrong where it is not (a flat pane or an open tube inside a
+        /// blob of residual); halfway keeps most of its gain on the first
+        /// and most of the camera direction on the second (perf/RESULTS.md,
+        /// thirty-third session).
+        Halfway = "halfway",
+        /// `Consensus` when the hull comes from given glass masks
+        /// (`reflection.seed_masks`), `Halfway` when it comes from the
+        /// residual ([`SeedNormal::for_source`]): an exact mask's hull puts
+        /// the seeds on the glass, and their neighbours' plane is then its
+        /// tangent plane (perf/RESULTS.md, forty-fourth entry; the consensus
+        /// over `Plane`: perf/journal/2026-12-05-sixty-first.md).
+        Auto = "auto",
+    }
+);
+
+impl SeedNormal {
+    /// [`SeedNormal::Auto`] resolved for a hull from given glass masks
+    /// (`masks`) or from the residual; any other choice as it is.
+    pub fn for_source(self, masks: bool) -> SeedNormal {
+        match self {
+            SeedNormal::Auto if masks => SeedNormal::Consensus,
+            SeedNormal::Auto => SeedNormal::Halfway,
+            n => n,
+        }
+    }
+
+    /// Whether the normal reads the views' blurred masks' gradient.
+    pub(super) fn uses_field(self) -> bool {
+        matches!(self.for_source(false), SeedNormal::Gradient | SeedNormal::Halfway)
+    }
+
+    /// The normal where no hull point beat chance ([`super::hull_seeding`]'s
+    /// fallback): the masks then cover most of every image, so their sum
+    /// has no outline to take a normal from, and the normals that read it
+    /// ([`SeedNormal::Gradient`], [`SeedNormal::Halfway`]) face the camera
+    /// instead. Measured on the path-traced room fronts and `lantern`
+    /// (perf/RESULTS.md, thirty-third entry), glass normal MAE after Stage
+    /// II with the fallback's most-agreeing seeds, halfway against the
+    /// camera direction: `facade` 16.9 / 17.7 against 18.6 / 16.6 degrees
+    /// (seeds 0 / 1), `windshield` 18.6 / 19.0 against 20.9 / 18.9,
+    /// `lantern` 50.8 against 47.5 (seed 0; its Stage I 47.7), and beside
+    /// the glass 5 to 7 degrees worse on the rooms.
+    pub fn without_outline(self) -> SeedNormal {
+        if self.uses_field() {
+            SeedNormal::View
+        } else {
+            self
+        }
+    }
+}
 
 /// Normals (`normal`, facing the finding camera) and scales (root mean
 /// squared distance to the 3 nearest) of the found points.
