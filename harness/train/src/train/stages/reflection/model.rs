@@ -253,9 +253,8 @@ impl ReflectionModel {
     /// Render `cam` composited over the scattering colour `scat` (3 planes).
     pub fn render(&mut self, cam: &Camera, scat: &Buffer<f32>) -> Result<ReflRendered> {
         self.forward(cam, false)?;
-        let b = &self.sizes[&(cam.width, cam.height)];
+        let b = &self.sizes[&(cam.width, cam.height)].step;
         let mut rec = Recorder::new(&self.ctx)?;
-        let b = &b.step;
         self.shading.record_composite(&mut rec, cam, self.fresnel, &CompositeInputs { scat, refl: &b.frame.out }, &b.loss_in)?;
         rec.submit_and_wait()?;
         Ok(ReflRendered { width: cam.width, height: cam.height, composite: b.loss_in.download()?, refl: b.frame.out.download()?, channels: self.fresnel.channels(), phi: None })

@@ -85,6 +85,20 @@ pub(super) fn box_blur(img: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     out
 }
 
+/// The `k` points of `pts` nearest `x` (all of them if fewer), as
+/// (squared distance, index), nearest first; the point at index `skip`
+/// left out. Deterministic: the same points in the same order every run.
+pub(super) fn nearest(x: DVec3, pts: impl Iterator<Item = DVec3>, skip: Option<usize>, k: usize) -> Vec<(f64, usize)> {
+    let mut near: Vec<(f64, usize)> = pts.enumerate().filter(|&(j, _)| Some(j) != skip).map(|(j, p)| (x.distance_squared(p), j)).collect();
+    let k = k.min(near.len());
+    if k > 0 {
+        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+        near.truncate(k);
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    near
+}
+
 /// `f` over contiguous runs of `items` on up to `threads` scoped threads
 /// (0: the available parallelism), the results in the runs' order: the
 /// same as `f(items)` split at the run boundaries, whatever the count.

@@ -5,7 +5,7 @@
 //! why) and its size (the spacing of its nearest seeds), and the
 //! quaternion that turns a surfel's normal axis onto a normal.
 
-use super::{in_parallel, normalize, Prepared, Seed, V3};
+use super::{in_parallel, nearest, normalize, Prepared, Seed, V3};
 use glam::DVec3;
 
 crate::train::settings::name_enum!(
@@ -100,14 +100,9 @@ pub(super) fn surfels(found: &[(V3, usize)], fixed: &[Option<V3>], views: &[Prep
 fn surfel(found: &[(V3, usize)], i: usize, fixed: Option<V3>, views: &[Prepared], normal: SeedNormal) -> Seed {
     const K: usize = 16;
     let (x, vi) = found[i];
-    let mut near: Vec<(f64, usize)> = found.iter().enumerate().filter(|&(j, _)| j != i).map(|(j, &(y, _))| (DVec3::from(x).distance_squared(DVec3::from(y)), j)).collect();
     let wide = fixed.is_none() && normal.for_source(false) == SeedNormal::Consensus;
-    let k = if wide { CONSENSUS_NEIGHBOURS } else { K }.min(near.len());
-    if k > 0 {
-        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-        near.truncate(k);
-        near.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
+    let near = nearest(DVec3::from(x), found.iter().map(|&(y, _)| DVec3::from(y)), Some(i), if wide { CONSENSUS_NEIGHBOURS } else { K });
+    let k = near.len();
     let cam = views[vi].cam.centre().map(f64::from);
     let to_cam = normalize((DVec3::from(cam) - DVec3::from(x)).to_array());
     let mut n = if let Some(f) = fixed {

@@ -11,7 +11,7 @@
 //! off radial after one round, 15° after six;
 //! perf/journal/2026-12-06-sixty-fifth.md).
 
-use super::{in_parallel, Seed};
+use super::{in_parallel, nearest, Seed};
 use glam::DVec3;
 
 /// The share of the seeds (the nearest to each) its mean reads.
@@ -35,7 +35,12 @@ pub fn smooth_normals(seeds: &mut [Seed], threads: usize) {
         run.iter()
             .map(|&i| {
                 let c = n[i];
-                let sum: DVec3 = nearest(&pos, i, k).into_iter().map(|j| (n[j], n[j].dot(c))).filter(|&(_, d)| d.abs() >= cos_min).map(|(m, d)| if d < 0.0 { -m } else { m }).sum();
+                let sum: DVec3 = nearest(pos[i], pos.iter().copied(), None, k)
+                    .into_iter()
+                    .map(|(_, j)| (n[j], n[j].dot(c)))
+                    .filter(|&(_, d)| d.abs() >= cos_min)
+                    .map(|(m, d)| if d < 0.0 { -m } else { m })
+                    .sum();
                 sum.try_normalize().unwrap_or(c)
             })
             .collect::<Vec<_>>()
@@ -46,16 +51,4 @@ pub fn smooth_normals(seeds: &mut [Seed], threads: usize) {
         let m = if m.dot(old) < 0.0 { -m } else { m };
         s.normal = m.as_vec3().to_array();
     }
-}
-
-/// The `k` seeds nearest seed `i` (itself first), nearest first, ties by index.
-fn nearest(pos: &[DVec3], i: usize, k: usize) -> Vec<usize> {
-    let mut d: Vec<(f64, usize)> = pos.iter().enumerate().map(|(j, p)| (pos[i].distance_squared(*p), j)).collect();
-    let by = |a: &(f64, usize), b: &(f64, usize)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
-    if k < d.len() {
-        d.select_nth_unstable_by(k - 1, by);
-        d.truncate(k);
-    }
-    d.sort_by(by);
-    d.into_iter().map(|(_, j)| j).collect()
 }
