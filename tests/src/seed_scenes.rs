@@ -240,6 +240,18 @@ pub fn cabin_glass(x: V3) -> (f64, V3) {
     nearest_face(x, &[(0, 0.5), (0, -0.5), (1, 0.4), (1, -0.4)], ([-0.5, -0.4, 0.4], [0.5, 0.4, 0.8]))
 }
 
+/// The normals of the box's `faces` (as [`nearest_face`] takes them) that
+/// lie within `slack` of the nearest to `x`: near an edge, either face may
+/// be the glass that a seed there stands for.
+pub fn faces_near(x: V3, faces: &[(usize, f64)], (lo, hi): (V3, V3), slack: f64) -> Vec<V3> {
+    let dist: Vec<(f64, V3)> = faces.iter().map(|&f| nearest_face(x, &[f], (lo, hi))).collect();
+    let best = dist.iter().map(|d| d.0).fold(f64::INFINITY, f64::min);
+    dist.into_iter().filter(|d| d.0 <= best + slack).map(|d| d.1).collect()
+}
+
+/// The glass faces of [`glass_box_views`]'s box: (axis, at) and its extent.
+pub const GLASS_BOX: ([(usize, f64); 5], (V3, V3)) = ([(0, 0.5), (0, -0.5), (1, 0.5), (1, -0.5), (2, 0.8)], ([-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]));
+
 /// The distance of `x` from the nearest of a box's `faces` ((axis, at):
 /// the face where coordinate `axis` is `at`, within the box `lo`..`hi`
 /// on the other axes) and that face's normal along +axis.
@@ -284,7 +296,7 @@ pub fn glass_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32
 /// The distance of `x` from the glass box's nearest glass face
 /// ([`glass_box_views`]) and that face's normal.
 pub fn glass_box_face(x: V3) -> (f64, V3) {
-    nearest_face(x, &[(0, 0.5), (0, -0.5), (1, 0.5), (1, -0.5), (2, 0.8)], ([-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]))
+    nearest_face(x, &GLASS_BOX.0, GLASS_BOX.1)
 }
 
 /// The seeding's parameters for views whose residual planes are glass
@@ -292,4 +304,22 @@ pub fn glass_box_face(x: V3) -> (f64, V3) {
 /// rays, seed normals by `normal`; the rest at their defaults.
 pub fn mask_params(normal: SeedNormal) -> SeedParams {
     SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal, ..SeedParams::default() }
+}
+
+/// A free-standing glass pane (x = 0, y in [-0.6, 0.6], z in [0, 0.7]: the
+/// suite's `pane`) on the floor z = 0, seen from `count` cameras all around
+/// it from 20 to 50 degrees above, from both sides. Masks of the glass,
+/// depths of the floor.
+pub fn glass_pane_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let eye = |i: usize| {
+        let a = (i as f64 * 0.618_034).fract() * std::f64::consts::TAU;
+        let el = (20.0 + 30.0 * (i as f64 * 0.377).fract()).to_radians();
+        [3.0 * el.cos() * a.cos(), 3.0 * el.cos() * a.sin(), 3.0 * el.sin()]
+    };
+    views_from(count, eye, [0.0, 0.0, 0.35], 0.8, |e, d, len| {
+        let floor = if d[2] < 0.0 { (-e[2] / d[2] / len) as f32 } else { 0.0 };
+        let t = -e[0] / d[0];
+        let glass = t > 0.0 && (e[1] + t * d[1]).abs() <= 0.6 && (0.0..=0.7).contains(&(e[2] + t * d[2]));
+        (glass as u8 as f32, floor)
+    })
 }

@@ -115,6 +115,12 @@ pub struct ReflectionConfig {
     /// flat glass's sake, at a cost of 1–3° on closed curved glass
     /// (perf/journal/2026-12-06-sixty-fifth.md).
     pub seed_smooth: bool,
+    /// With masks: where many seeds lie within a pixel and a half of one
+    /// plane, agreeing on its normal, that plane is a flat face of the
+    /// glass and the seeds over it take its normal (seed/faces.rs): a box's
+    /// pillowed faces, a pane's ridge; curved glass offers no such plane
+    /// (perf/journal/2026-12-07-sixty-sixth.md).
+    pub seed_faces: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
     /// High-frequency loss (method-notes §3.6): weight of the mean error of
@@ -210,6 +216,7 @@ impl Default for ReflectionConfig {
             seed_rim_all_around: false,
             seed_planes: true,
             seed_smooth: true,
+            seed_faces: true,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,

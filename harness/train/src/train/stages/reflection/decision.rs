@@ -77,6 +77,10 @@ pub struct ReflDecision {
     /// moved onto it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_planes: Option<[u32; 2]>,
+    /// With those masks and reflection.seed_faces: the flat faces of the
+    /// glass found among the seeds, and the seeds that took their normal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_faces: Option<[u32; 2]>,
     /// With a validation slice and `reflection.validation_cells`: the set's
     /// pieces as the validation views judged them (the ones not kept were
     /// removed before the stage closed; stages/reflection/pieces.rs).

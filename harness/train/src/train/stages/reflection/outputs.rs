@@ -48,7 +48,7 @@ impl ReflDecision {
                 d.seeds,
                 match d.seed_mask_coverage {
                     Some(c) => format!(
-                        "glass-mask ({:.1}% of the pixels{}; {}{}{}{})",
+                        "glass-mask ({:.1}% of the pixels{}; {}{}{}{}{})",
                         100.0 * c,
                         match d.seed_mask_views {
                             Some([n, all]) if n < all => format!(" of the {n} of {all} training views that have one"),
@@ -61,6 +61,10 @@ impl ReflDecision {
                         },
                         match d.seed_planes {
                             Some([pieces, seeds]) if pieces > 0 => format!("; {seeds} moved onto the plane their hull points gave {pieces} pieces of mask"),
+                            _ => String::new(),
+                        },
+                        match d.seed_faces {
+                            Some([faces, seeds]) if faces > 0 => format!("; {seeds} took the normal of the {faces} flat faces of the glass they lie over"),
                             _ => String::new(),
                         },
                         d.seed_significance.map(|a| format!("; hull points beat chance at {a:e} only, too few masked views for reflection.seed_significance")).unwrap_or_default()

@@ -214,6 +214,7 @@ pub fn begin(
         seed_mask_coverage: None,
         seed_rim: None,
         seed_planes: None,
+        seed_faces: None,
         seed_mask_source: None,
         seed_mask_views: None,
         seed_significance: None,
@@ -342,6 +343,7 @@ fn seed_model(
             rim_all_around: rc.seed_rim_all_around,
             planes: rc.seed_planes,
             smooth: rc.seed_smooth,
+            faces: rc.seed_faces,
             relax: &MASK_SIGNIFICANCE,
             ..p
         }
@@ -354,6 +356,7 @@ fn seed_model(
         d.significance_dropped = h.significance_dropped;
         d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
         d.seed_planes = p.planes.then_some([h.plane_pieces as u32, h.plane_seeds as u32]);
+        d.seed_faces = p.faces.then_some(h.faces.map(|c| c as u32));
         h.seeds
     } else {
         Vec::new()

@@ -59,6 +59,7 @@
 //! ([`SeedParams::planes`], the `planes` module).
 
 mod chance;
+mod faces;
 mod geometry;
 mod normals;
 mod planes;
@@ -67,6 +68,7 @@ mod smooth;
 
 pub use chance::min_hits;
 
+pub use faces::{flat_faces, FACE_BAND_PIXELS, FACE_DEGREES, FACE_SHARE, FACE_TURN_DEGREES};
 pub use geometry::pixel_of;
 pub(crate) use geometry::unproject_pixel;
 use geometry::{box_blur, image_point, image_xy, in_parallel, nearest, normalize, unproject_xy, V3};
@@ -128,6 +130,9 @@ pub struct SeedParams {
     pub planes: bool,
     /// Bilateral smoothing of the seeds' normals (the `smooth` module).
     pub smooth: bool,
+    /// With given glass masks: the seeds over a flat face of the glass take
+    /// its normal (the `faces` module; after `smooth`).
+    pub faces: bool,
     /// Threads for the march and the normals (0: every core the process
     /// may use). The seeds are the same, bit for bit, at any count: the
     /// rays and seeds are split into contiguous runs whose results are
@@ -150,6 +155,7 @@ impl Default for SeedParams {
             rim_all_around: false,
             planes: false,
             smooth: false,
+            faces: false,
             threads: 0,
         }
     }
@@ -273,6 +279,8 @@ pub struct HullSeeding {
     pub plane_pieces: usize,
     /// Seeds moved onto those planes.
     pub plane_seeds: usize,
+    /// Flat faces of the glass found ([`SeedParams::faces`]), and the seeds that took their normal.
+    pub faces: [usize; 2],
     /// No hull point beat chance, so the seeds are the hull's without the
     /// significance test.
     pub significance_dropped: bool,
@@ -318,7 +326,8 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     if p.smooth && !dropped {
         smooth::smooth_normals(&mut seeds, p.threads);
     }
-    HullSeeding { seeds, rim_views: found.rim_views, rim_seeds, plane_pieces, plane_seeds, significance_dropped: dropped, significance_relaxed: relaxed }
+    let faces = if p.faces && !dropped { faces::flat_faces(&mut seeds, faces::face_band(chosen, &prepared)) } else { (0, 0) };
+    HullSeeding { seeds, rim_views: found.rim_views, rim_seeds, plane_pieces, plane_seeds, faces: [faces.0, faces.1], significance_dropped: dropped, significance_relaxed: relaxed }
 }
 
 /// Each view's membranes where [`SeedParams::rim`] asks for them.
