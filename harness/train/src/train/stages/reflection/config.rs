@@ -119,7 +119,7 @@ pub struct ReflectionConfig {
     /// plane, agreeing on its normal, that plane is a flat face of the
     /// glass and the seeds over it take its normal (seed/faces.rs): a box's
     /// pillowed faces, a pane's ridge; curved glass offers no such plane
-    /// (perf/journal/2026-12-07-sixty-sixth.md).
+    /// (perf/journal/2026-12-06-sixty-sixth.md).
     pub seed_faces: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,

@@ -12,7 +12,7 @@
 //! surface offers no such plane (a sphere's cap within 10° holds about 1%
 //! of its seeds, and the seeds a cap would take turn to it by more than
 //! [`FACE_MEDIAN_TURN_DEGREES`] at the median) and keeps its normals.
-//! perf/journal/2026-12-07-sixty-sixth.md.
+//! perf/journal/2026-12-06-sixty-sixth.md.
 
 use super::{image_point, jacobi_eigen, Prepared, Seed, V3};
 use glam::{DVec2, DVec3};
