@@ -208,6 +208,9 @@ fn stage_two_runs_on_glass_and_is_skipped_below_the_residual_threshold() {
     // So are the planes (reflection.seed_planes); a ball's pieces are not flat.
     assert_eq!(dm["seed_planes"], serde_json::json!([0, 0]), "{dm}");
     assert!(d.get("seed_planes").is_none(), "the residual's seeds take no planes: {d}");
+    // And the flat faces (reflection.seed_faces); a ball offers none.
+    assert_eq!(dm["seed_faces"], serde_json::json!([0, 0]), "{dm}");
+    assert!(d.get("seed_faces").is_none(), "the residual's seeds take no faces: {d}");
     let (dd, default_ply) = seeding("1e-6");
     eprintln!(
         "mean distance of the seeds to the glass: {:.3} from the glass masks ({} seeds), {:.3} from the residual ({} seeds)",
