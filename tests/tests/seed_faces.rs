@@ -93,3 +93,21 @@ fn a_sphere_offers_no_face() {
         assert_eq!(s, seeds[..n]);
     }
 }
+
+#[test]
+fn regions_marked_in_the_viewer_are_recognised() {
+    use tgs::train::stages::reflection::masks::marked_regions;
+    let dir = tgs_tests::TempDir::new("seed-faces-marks");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    assert!(!marked_regions(&dir), "no marks.json: exact masks");
+    for (text, marked) in [
+        (r#"{"regions": [{"flat": true, "outlines": []}]}"#, false),
+        (r#"{"regions": [{"flat": true}, {"flat": false}]}"#, true),
+        (r#"{"regions": []}"#, false),
+        ("not json", false),
+    ] {
+        std::fs::write(dir.join("marks.json"), text).unwrap();
+        assert_eq!(marked_regions(&dir), marked, "{text}");
+    }
+}

@@ -81,6 +81,10 @@ pub struct ReflDecision {
     /// glass found among the seeds, and the seeds that took their normal.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_faces: Option<[u32; 2]>,
+    /// reflection.seed_faces was skipped: the masks are regions marked in
+    /// `tgs view` (masks::marked_regions).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub seed_faces_marked: bool,
     /// With a validation slice and `reflection.validation_cells`: the set's
     /// pieces as the validation views judged them (the ones not kept were
     /// removed before the stage closed; stages/reflection/pieces.rs).

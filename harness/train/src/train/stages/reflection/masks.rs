@@ -74,6 +74,19 @@ pub(super) fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(
     Ok((Some(Cow::Borrowed(&v.masks[..])), MaskSource::Dataset))
 }
 
+/// Whether a `reflection.seed_masks` directory holds masks marked in `tgs
+/// view` as regions (its `marks.json` names a region that is not a flat
+/// pane): their hull is the few outlined views' polyhedron, whose flat
+/// facets are the marking's, not the glass's, so `reflection.seed_faces`
+/// must not take them for faces (a sphere marked in four views: glass MAE
+/// 13.5° → 20.3° with them; perf/journal/2026-12-06-sixty-sixth.md). A
+/// missing or unreadable `marks.json` says no.
+pub fn marked_regions(dir: &Path) -> bool {
+    let Ok(text) = std::fs::read(dir.join("marks.json")) else { return false };
+    let Ok(v) = serde_json::from_slice::<serde_json::Value>(&text) else { return false };
+    v["regions"].as_array().is_some_and(|r| r.iter().any(|g| g["flat"] != serde_json::Value::Bool(true)))
+}
+
 /// The file stem of training view `name`'s glass mask in a
 /// `reflection.seed_masks` directory: the name without its extension.
 pub fn mask_stem(name: &str) -> String {

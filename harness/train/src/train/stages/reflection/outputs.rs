@@ -65,6 +65,7 @@ impl ReflDecision {
                         },
                         match d.seed_faces {
                             Some([faces, seeds]) if faces > 0 => format!("; {seeds} took the normal of the {faces} flat faces of the glass they lie over"),
+                            _ if d.seed_faces_marked => "; no flat faces sought (reflection.seed_faces): the masks are regions marked in tgs view, whose flat facets are the marking's".into(),
                             _ => String::new(),
                         },
                         d.seed_significance.map(|a| format!("; hull points beat chance at {a:e} only, too few masked views for reflection.seed_significance")).unwrap_or_default()

@@ -215,6 +215,7 @@ pub fn begin(
         seed_rim: None,
         seed_planes: None,
         seed_faces: None,
+        seed_faces_marked: false,
         seed_mask_source: None,
         seed_mask_views: None,
         seed_significance: None,
@@ -335,6 +336,8 @@ fn seed_model(
         significance: rc.seed_significance as f64,
         ..SeedParams::default()
     };
+    // Regions marked in `tgs view`: their hull's facets are the marking's.
+    d.seed_faces_marked = masks.is_some() && rc.seed_faces && !rc.seed_masks.is_empty() && super::masks::marked_regions(Path::new(&rc.seed_masks));
     let p = if masks.is_some() {
         SeedParams {
             threshold: 0.5,
@@ -343,7 +346,7 @@ fn seed_model(
             rim_all_around: rc.seed_rim_all_around,
             planes: rc.seed_planes,
             smooth: rc.seed_smooth,
-            faces: rc.seed_faces,
+            faces: rc.seed_faces && !d.seed_faces_marked,
             relax: &MASK_SIGNIFICANCE,
             ..p
         }
