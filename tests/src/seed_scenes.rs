@@ -281,16 +281,17 @@ pub fn seed_views<'a>(cams: &[Camera], res: &'a [Vec<f32>], depth: &'a [Vec<f32>
 /// (no view sees a face edge on). Masks of the glass, depths of the floor
 /// (inside the box through the glass, or around it).
 pub fn glass_box_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let eye = |i: usize| {
-        let a = (i as f64 * 0.618_034).fract() * std::f64::consts::TAU;
-        let el = (20.0 + 30.0 * (i as f64 * 0.377).fract()).to_radians();
-        [3.5 * el.cos() * a.cos(), 3.5 * el.cos() * a.sin(), 3.5 * el.sin()]
-    };
-    views_from(count, eye, [0.0, 0.0, 0.4], 0.8, |e, d, len| {
-        let floor = if d[2] < 0.0 { (-e[2] / d[2] / len) as f32 } else { 0.0 };
-        let glass = slabs(e, d, [-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]).is_some();
-        (glass as u8 as f32, floor)
-    })
+    views_from(
+        count,
+        |i| above_eye(i, 3.5),
+        [0.0, 0.0, 0.4],
+        0.8,
+        |e, d, len| {
+            let floor = if d[2] < 0.0 { (-e[2] / d[2] / len) as f32 } else { 0.0 };
+            let glass = slabs(e, d, [-0.5, -0.5, 0.0], [0.5, 0.5, 0.8]).is_some();
+            (glass as u8 as f32, floor)
+        },
+    )
 }
 
 /// The distance of `x` from the glass box's nearest glass face
@@ -311,15 +312,36 @@ pub fn mask_params(normal: SeedNormal) -> SeedParams {
 /// it from 20 to 50 degrees above, from both sides. Masks of the glass,
 /// depths of the floor.
 pub fn glass_pane_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let eye = |i: usize| {
-        let a = (i as f64 * 0.618_034).fract() * std::f64::consts::TAU;
-        let el = (20.0 + 30.0 * (i as f64 * 0.377).fract()).to_radians();
-        [3.0 * el.cos() * a.cos(), 3.0 * el.cos() * a.sin(), 3.0 * el.sin()]
-    };
-    views_from(count, eye, [0.0, 0.0, 0.35], 0.8, |e, d, len| {
-        let floor = if d[2] < 0.0 { (-e[2] / d[2] / len) as f32 } else { 0.0 };
-        let t = -e[0] / d[0];
-        let glass = t > 0.0 && (e[1] + t * d[1]).abs() <= 0.6 && (0.0..=0.7).contains(&(e[2] + t * d[2]));
-        (glass as u8 as f32, floor)
-    })
+    views_from(
+        count,
+        |i| above_eye(i, 3.0),
+        [0.0, 0.0, 0.35],
+        0.8,
+        |e, d, len| {
+            let floor = if d[2] < 0.0 { (-e[2] / d[2] / len) as f32 } else { 0.0 };
+            let t = -e[0] / d[0];
+            let glass = t > 0.0 && (e[1] + t * d[1]).abs() <= 0.6 && (0.0..=0.7).contains(&(e[2] + t * d[2]));
+            (glass as u8 as f32, floor)
+        },
+    )
+}
+
+/// `n` seeds uniform on the unit sphere, each with its radial normal.
+pub fn unit_sphere_seeds(rng: &mut Rng, n: usize) -> Vec<Seed> {
+    (0..n)
+        .map(|_| {
+            let (z, a) = (2.0 * uniform(rng) - 1.0, std::f64::consts::TAU * uniform(rng));
+            let r = (1.0 - z * z).sqrt();
+            let n = [r * a.cos(), r * a.sin(), z];
+            Seed { position: n.map(|c| c as f32), normal: n.map(|c| c as f32), scale: 0.01 }
+        })
+        .collect()
+}
+
+/// Camera `i` of `count` all around the origin at `distance`, from 20 to 50
+/// degrees above (golden-ratio azimuths): [`glass_box_views`], [`glass_pane_views`].
+fn above_eye(i: usize, distance: f64) -> V3 {
+    let a = (i as f64 * 0.618_034).fract() * std::f64::consts::TAU;
+    let el = (20.0 + 30.0 * (i as f64 * 0.377).fract()).to_radians();
+    [distance * el.cos() * a.cos(), distance * el.cos() * a.sin(), distance * el.sin()]
 }

@@ -98,15 +98,7 @@ fn smoothing_averages_a_pillow_flat_without_crossing_the_edge() {
 
 #[test]
 fn smoothing_keeps_a_spheres_normals_radial() {
-    let mut rng = Rng(seed("seed-smooth-sphere"));
-    let seeds: Vec<Seed> = (0..3000)
-        .map(|_| {
-            let (z, a) = (2.0 * uniform(&mut rng) - 1.0, std::f64::consts::TAU * uniform(&mut rng));
-            let r = (1.0 - z * z).sqrt();
-            let n = [r * a.cos(), r * a.sin(), z];
-            Seed { position: n.map(|c| c as f32), normal: n.map(|c| c as f32), scale: 0.01 }
-        })
-        .collect();
+    let seeds = unit_sphere_seeds(&mut Rng(seed("seed-smooth-sphere")), 3000);
     let mut s = seeds.clone();
     smooth_normals(&mut s, 0);
     let err = radial_error(&s);

@@ -65,15 +65,7 @@ fn a_panes_ridge_takes_the_panes_normal() {
 
 #[test]
 fn a_sphere_offers_no_face() {
-    let mut rng = Rng(seed("seed-faces-sphere"));
-    let seeds: Vec<Seed> = (0..3000)
-        .map(|_| {
-            let (z, a) = (2.0 * uniform(&mut rng) - 1.0, std::f64::consts::TAU * uniform(&mut rng));
-            let r = (1.0 - z * z).sqrt();
-            let n = [r * a.cos(), r * a.sin(), z];
-            Seed { position: n.map(|c| c as f32), normal: n.map(|c| c as f32), scale: 0.01 }
-        })
-        .collect();
+    let seeds = unit_sphere_seeds(&mut Rng(seed("seed-faces-sphere")), 3000);
     // A band of 0.05 (a pixel and a half at 50² and the suite's distance, for a unit sphere).
     let mut s = seeds.clone();
     assert_eq!(flat_faces(&mut s, 0.05), (0, 0));
