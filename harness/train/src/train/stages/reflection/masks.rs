@@ -79,8 +79,9 @@ pub(super) fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(
 /// pane): their hull is the few outlined views' polyhedron, whose flat
 /// facets are the marking's, not the glass's, so `reflection.seed_faces`
 /// must not take them for faces (a sphere marked in four views: glass MAE
-/// 13.5° → 20.3° with them, in six 9.2° → 11.1°; perf/journal/2026-12-06-sixty-sixth.md). A
-/// missing or unreadable `marks.json` says no.
+/// 13.5° → 20.3° with them, in six 9.2° → 11.1°;
+/// perf/journal/2026-12-06-sixty-sixth.md). A missing or unreadable
+/// `marks.json` says no.
 pub fn marked_regions(dir: &Path) -> bool {
     let Ok(text) = std::fs::read(dir.join("marks.json")) else { return false };
     let Ok(v) = serde_json::from_slice::<serde_json::Value>(&text) else { return false };

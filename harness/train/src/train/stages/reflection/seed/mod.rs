@@ -56,7 +56,10 @@
 //! instead (the `rim` module). And where a view's hull points over one
 //! piece of its mask lie on a plane, or on two meeting at a corner (a
 //! cabin's windows), those seeds move onto it and take its normal
-//! ([`SeedParams::planes`], the `planes` module).
+//! ([`SeedParams::planes`], the `planes` module). With masks the seeds'
+//! normals are then smoothed over their neighbours ([`SeedParams::smooth`])
+//! and, where flat faces of the glass show among them, take their face's
+//! ([`SeedParams::faces`]).
 
 mod chance;
 mod faces;
@@ -68,7 +71,7 @@ mod smooth;
 
 pub use chance::min_hits;
 
-pub use faces::{flat_faces, FACE_BAND_PIXELS, FACE_DEGREES, FACE_SHARE, FACE_TURN_DEGREES};
+pub use faces::flat_faces;
 pub use geometry::pixel_of;
 pub(crate) use geometry::unproject_pixel;
 use geometry::{box_blur, image_point, image_xy, in_parallel, nearest, normalize, unproject_xy, V3};
