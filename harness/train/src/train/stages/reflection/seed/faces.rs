@@ -14,7 +14,7 @@
 //! [`FACE_MEDIAN_TURN_DEGREES`] at the median) and keeps its normals.
 //! perf/journal/2026-12-06-sixty-sixth.md.
 
-use super::{image_point, jacobi_eigen, Prepared, Seed, V3};
+use super::{image_point, least_squares_plane, Prepared, Seed, V3};
 use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 
@@ -107,17 +107,17 @@ pub fn flat_faces(seeds: &mut [Seed], band: f64) -> (usize, usize) {
     if !(band > 0.0 && band.is_finite()) || seeds.len() < min_support {
         return (0, 0);
     }
-    let faces = find_faces(&pos, &n, band, min_support);
-    // Refit each face to the seeds it takes, over all of them.
-    let owner = assign(&faces, &pos, &n, band);
-    let faces: Vec<Face> = faces
+    let found = find_faces(&pos, &n, band, min_support);
+    // Refit each face to the seeds it takes, over all of them; its extent
+    // is where those and the seeds that found it lie.
+    let owner = assign(found.iter().map(|f| &f.0), &pos, &n, band);
+    let faces: Vec<Face> = found
         .iter()
         .enumerate()
-        .filter_map(|(k, f)| {
+        .filter_map(|(k, (f, support))| {
             let mine: Vec<DVec3> = (0..pos.len()).filter(|&j| owner[j] == Some(k)).map(|j| pos[j]).collect();
             let (centre, normal) = plane_of(&mine, f.normal)?;
-            let support = f.cells.values().flatten().map(|q| f.centre + q.x * f.axes.0 + q.y * f.axes.1);
-            Some(Face::new(centre, normal, support.chain(mine.iter().copied()), f.cell))
+            Some(Face::new(centre, normal, support.iter().map(|&j| pos[j]).chain(mine.iter().copied()), f.cell))
         })
         .collect();
     let owner = assign(&faces, &pos, &n, band);
@@ -132,14 +132,15 @@ pub fn flat_faces(seeds: &mut [Seed], band: f64) -> (usize, usize) {
     (faces.len(), taken)
 }
 
-/// The faces, largest first: each the plane (through a seed, refined to
-/// the mean of its inliers) that the most of the seeds not yet taken lie
-/// on; a face then removes from the pool the seeds it would take.
-fn find_faces(pos: &[DVec3], n: &[DVec3], band: f64, min_support: usize) -> Vec<Face> {
+/// The faces, largest first, each with the seeds that found it (its
+/// inliers): each the plane (through a seed, refined to the mean of its
+/// inliers) that the most of the seeds not yet taken lie on; a face then
+/// removes from the pool the seeds it would take.
+fn find_faces(pos: &[DVec3], n: &[DVec3], band: f64, min_support: usize) -> Vec<(Face, Vec<usize>)> {
     let cos_in = FACE_DEGREES.to_radians().cos();
     let inlier = |j: usize, c: DVec3, m: DVec3| (pos[j] - c).dot(m).abs() <= band && n[j].dot(m).abs() >= cos_in;
     let mut free = vec![true; pos.len()];
-    let mut faces: Vec<Face> = Vec::new();
+    let mut faces: Vec<(Face, Vec<usize>)> = Vec::new();
     loop {
         let pool: Vec<usize> = (0..pos.len()).filter(|&j| free[j]).collect();
         if pool.len() < min_support {
@@ -164,11 +165,11 @@ fn find_faces(pos: &[DVec3], n: &[DVec3], band: f64, min_support: usize) -> Vec<
                 best = Some((count, c, m));
             }
         }
-        let Some((count, c, m)) = best.filter(|b| b.0 >= min_support) else { break };
+        let Some((_, c, m)) = best.filter(|b| b.0 >= min_support) else { break };
         let support: Vec<usize> = pool.iter().copied().filter(|&j| inlier(j, c, m)).collect();
         support.iter().for_each(|&j| free[j] = false);
         let merge = FACE_MERGE_DEGREES.to_radians().cos();
-        if count == 0 || faces.iter().any(|f| m.dot(f.normal).abs() >= merge && (c - f.centre).dot(f.normal).abs() <= 2.0 * band) {
+        if faces.iter().any(|(f, _)| m.dot(f.normal).abs() >= merge && (c - f.centre).dot(f.normal).abs() <= 2.0 * band) {
             continue;
         }
         let face = Face::new(c, m, support.iter().map(|&j| pos[j]), 3.0 * band);
@@ -179,17 +180,17 @@ fn find_faces(pos: &[DVec3], n: &[DVec3], band: f64, min_support: usize) -> Vec<
             continue;
         }
         taken.iter().for_each(|&j| free[j] = false);
-        faces.push(face);
+        faces.push((face, support));
     }
     faces
 }
 
 /// Per seed, the face that takes it and that it stands farthest out of.
-fn assign(faces: &[Face], pos: &[DVec3], n: &[DVec3], band: f64) -> Vec<Option<usize>> {
+fn assign<'a>(faces: impl IntoIterator<Item = &'a Face> + Clone, pos: &[DVec3], n: &[DVec3], band: f64) -> Vec<Option<usize>> {
     (0..pos.len())
         .map(|j| {
             let mut best: Option<(f64, usize)> = None;
-            for (k, f) in faces.iter().enumerate() {
+            for (k, f) in faces.clone().into_iter().enumerate() {
                 if let Some(out) = f.takes(pos[j], n[j], band) {
                     if best.is_none_or(|(b, _)| out > b) {
                         best = Some((out, k));
@@ -206,18 +207,7 @@ fn plane_of(pts: &[DVec3], towards: DVec3) -> Option<(DVec3, DVec3)> {
     if pts.len() < 3 {
         return None;
     }
-    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
-    let mut cov = [[0.0; 3]; 3];
-    for p in pts {
-        let d = (*p - c).to_array();
-        for (a, row) in cov.iter_mut().enumerate() {
-            for (b, v) in row.iter_mut().enumerate() {
-                *v += d[a] * d[b];
-            }
-        }
-    }
-    let (vals, vecs) = jacobi_eigen(cov);
-    let k = (0..3).min_by(|&a, &b| vals[a].total_cmp(&vals[b]))?;
-    let m = DVec3::new(vecs[0][k], vecs[1][k], vecs[2][k]).try_normalize()?;
+    let (c, m) = least_squares_plane(pts);
+    let m = m.try_normalize()?;
     Some((c, if m.dot(towards) < 0.0 { -m } else { m }))
 }

@@ -76,7 +76,7 @@ pub use geometry::pixel_of;
 pub(crate) use geometry::unproject_pixel;
 use geometry::{box_blur, image_point, image_xy, in_parallel, nearest, normalize, unproject_xy, V3};
 pub use normals::{consensus_normal, jacobi_eigen, quat_for_normal, SeedNormal, GRADIENT_MIN};
-use normals::{gradient_pixels, surfels};
+use normals::{gradient_pixels, least_squares_plane, surfels};
 pub use rim::fit_plane;
 pub use smooth::smooth_normals;
 use tgs_pipelines::Camera;

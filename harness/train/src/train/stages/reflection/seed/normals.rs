@@ -210,15 +210,20 @@ fn field_normal(x: V3, views: &[Prepared], finder: &Prepared) -> Option<V3> {
     (len * h > GRADIENT_MIN).then(|| g.map(|c| -c / len))
 }
 
-/// Unit normal of the least-squares plane through `x` and `pts`: the
-/// eigenvector of the smallest eigenvalue of their covariance.
+/// Unit normal of the least-squares plane through `x` and `pts`.
 fn plane_normal(x: V3, pts: impl Iterator<Item = V3>) -> V3 {
-    let all: Vec<V3> = std::iter::once(x).chain(pts).collect();
-    let n = all.len() as f64;
-    let mean = [0, 1, 2].map(|k| all.iter().map(|p| p[k]).sum::<f64>() / n);
+    let all: Vec<DVec3> = std::iter::once(x).chain(pts).map(DVec3::from).collect();
+    normalize(least_squares_plane(&all).1.to_array())
+}
+
+/// The least-squares plane of `pts` (at least one): their mean, and the
+/// eigenvector (as the Jacobi rotations leave it, near unit length) of the
+/// smallest eigenvalue of their covariance, its normal.
+pub(super) fn least_squares_plane(pts: &[DVec3]) -> (DVec3, DVec3) {
+    let mean = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
     let mut c = [[0.0f64; 3]; 3];
-    for p in &all {
-        let d = DVec3::from(*p) - DVec3::from(mean);
+    for p in pts {
+        let d = *p - mean;
         for r in 0..3 {
             for s in 0..3 {
                 c[r][s] += d[r] * d[s];
@@ -227,7 +232,7 @@ fn plane_normal(x: V3, pts: impl Iterator<Item = V3>) -> V3 {
     }
     let (vals, vecs) = jacobi_eigen(c);
     let k = (0..3).min_by(|&a, &b| vals[a].total_cmp(&vals[b])).unwrap_or(2);
-    normalize([vecs[0][k], vecs[1][k], vecs[2][k]])
+    (mean, DVec3::new(vecs[0][k], vecs[1][k], vecs[2][k]))
 }
 
 /// Eigenvalues and eigenvectors (columns) of a symmetric 3x3 matrix by
