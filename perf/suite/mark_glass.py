@@ -28,6 +28,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 
@@ -58,6 +59,26 @@ def clicks(mask, n, offset=0.0):
     return out
 
 
+def quad_corners(mask):
+    """A pane's four corners as a user clicks them: the two mask pixels farthest apart, and on each side of the line
+    through them the pixel farthest from it (the largest quadrilateral, near enough), clockwise on the screen from
+    the one nearest its top left (window coordinates: each the outer corner of its pixel)."""
+    ys, xs = np.nonzero(mask)
+    p = np.stack([xs + 0.5, ys + 0.5], 1)
+    if len(p) < 4:
+        return [tuple(q) for q in p]
+    d2 = ((p[:, None] - p[None]) ** 2).sum(-1)
+    i, j = np.unravel_index(int(np.argmax(d2)), d2.shape)
+    a, b = p[i], p[j]
+    side = (b[0] - a[0]) * (p[:, 1] - a[1]) - (b[1] - a[1]) * (p[:, 0] - a[0])
+    quad = [a, p[int(np.argmax(side))], b, p[int(np.argmin(side))]]
+    c = np.mean(quad, 0)
+    quad.sort(key=lambda q: math.atan2(q[1] - c[1], q[0] - c[0]))
+    k = min(range(4), key=lambda t: quad[t][0] + quad[t][1])
+    # The corner pixel's outer corner, where the pane's corner lies within it.
+    return [tuple(float(v + 0.5 * np.sign(v - cv)) for v, cv in zip(quad[(k + t) % 4], c)) for t in range(4)]
+
+
 def hull_area(mask):
     """Area of the convex hull of the mask's pixels (their corners), by the shoelace formula."""
     ys, xs = np.nonzero(mask)
@@ -79,10 +100,12 @@ def hull_area(mask):
     return 0.5 * abs(sum(hull[i][0] * hull[(i + 1) % len(hull)][1] - hull[(i + 1) % len(hull)][0] * hull[i][1] for i in range(len(hull))))
 
 
-def choose(masks, dirs, n, solidity):
+def choose(masks, dirs, n, solidity, same_side=False):
     """Views where the glass's outline is clear (its mask fills at least SOLIDITY of its convex hull: not cut by
     an occluder or the image border), the one with the most glass first, then each next the one whose camera
-    direction is farthest from those chosen."""
+    direction is farthest from those chosen; with SAME_SIDE only views looking the first one's way (within 70
+    degrees: a pane's corners clicked from its back come in the mirrored order, which no user clicks) that show at
+    least half as much of it (a user clicks corners where the pane faces the camera, not edge on)."""
     area = [m.sum() for m in masks]
     clear = [i for i in range(len(masks)) if area[i] >= 9 and not (masks[i][0].any() or masks[i][-1].any() or masks[i][:, 0].any() or masks[i][:, -1].any())]
     clear = [i for i in clear if area[i] >= solidity * hull_area(masks[i])]
@@ -90,11 +113,42 @@ def choose(masks, dirs, n, solidity):
     if not have:
         return []
     chosen = [max(have, key=lambda i: area[i])]
+    if same_side:
+        have = [i for i in have if float(np.dot(dirs[i], dirs[chosen[0]])) > math.cos(math.radians(70)) and area[i] >= 0.5 * area[chosen[0]]]
     while len(chosen) < n and len(chosen) < len(have):
         def gap(i):
             return min(math.acos(max(-1.0, min(1.0, float(np.dot(dirs[i], dirs[j]))))) for j in chosen)
         chosen.append(max((i for i in have if i not in chosen), key=gap))
     return chosen
+
+
+def mark(a, scene, run, pieces, chosen, out, size):
+    """Replay the clicks of CHOSEN (views per piece) in `tgs view`, the masks into OUT; the clicks and the masks."""
+    if os.path.exists(out):
+        raise SystemExit(f"{out} exists: choose another --out (nothing is written over)")
+    lines = ["key t", "key g"]
+    at, n_clicks = 0, 0
+    for k, (piece, views) in enumerate(zip(pieces, chosen)):
+        if k > 0:
+            lines.append("key b")
+        if a.flat:
+            lines.append("key f")
+        for i in views:
+            lines += ["key n"] * (i - at) if i >= at else ["key p"] * (at - i)
+            at = i
+            for x, y in (quad_corners(piece[i]) if a.flat else clicks(piece[i], a.clicks)):
+                lines.append(f"click {x} {y}")
+                n_clicks += 1
+    lines.append(f"marks {out}")
+    os.makedirs(a.out, exist_ok=True)
+    script = out + ".view.txt"
+    open(script, "w").write("\n".join(lines) + "\n")
+    w, h = size
+    p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", a.tgs, "view", run, "--size", f"{w}x{h}", "--mark-tolerance", str(a.tolerance), "--script", script], capture_output=True, text=True)
+    if p.returncode != 0:
+        raise SystemExit(f"{scene}: tgs view failed:\n{p.stdout}{p.stderr}")
+    names = [stem(f["file_path"]) for f in frames(os.path.join(a.scenes, scene))]
+    return n_clicks, [np.array(Image.open(os.path.join(out, n + ".png")).convert("L")) > 127 for n in names]
 
 
 def main():
@@ -109,9 +163,12 @@ def main():
     ap.add_argument("--only", action="append")
     ap.add_argument("--tolerance", type=int, default=0, help="tgs view --mark-tolerance: outlined views that may leave a point out")
     ap.add_argument("--pieces", metavar="ROOT", help="mark the glass of ROOT/SCENE/K piece by piece (one region each)")
-    ap.add_argument("--flat", action="store_true", help="with --pieces: each piece a flat pane (key F), clicked at its four corners (its outermost pixels along the image diagonals, in the same order in every view)")
+    ap.add_argument("--flat", action="store_true", help="with --pieces: each piece a flat pane (key F), clicked at its four corners (the largest quadrilateral in its mask, clockwise from the top left, in every view)")
+    ap.add_argument("--greedy", action="store_true", help="the first two views by angle, each next the one whose marked mask is furthest off the glass (as a user sees the tinted region)")
     ap.add_argument("--tgs", default="target/release/tgs")
     a = ap.parse_args()
+    if a.greedy and a.pieces:
+        raise SystemExit("--greedy marks one region: not with --pieces")
     scenes = a.only or sorted(d for d in os.listdir(a.exact) if os.path.isdir(os.path.join(a.exact, d)))
     print("| scene | views marked | clicks | IoU against exact masks | recall | marked share of the image |")
     print("|---|---|---|---|---|---|")
@@ -132,29 +189,21 @@ def main():
         if os.path.exists(out):
             raise SystemExit(f"{out} exists: choose another --out (nothing is written over)")
         h, w = masks[0].shape
-        lines = ["key t", "key g"]
-        at, n_clicks, chosen = 0, 0, []
-        for k, piece in enumerate(pieces):
-            if k > 0:
-                lines.append("key b")
-            if a.flat:
-                lines.append("key f")
-            views = choose(piece, dirs, a.views, a.solidity)
-            chosen.append(views)
-            for i in views:
-                lines += ["key n"] * (i - at) if i >= at else ["key p"] * (at - i)
-                at = i
-                for x, y in (clicks(piece[i], 4, math.pi / 4) if a.flat else clicks(piece[i], a.clicks)):
-                    lines.append(f"click {x} {y}")
-                    n_clicks += 1
-        lines.append(f"marks {out}")
-        os.makedirs(a.out, exist_ok=True)
-        script = os.path.join(a.out, scene + ".view.txt")
-        open(script, "w").write("\n".join(lines) + "\n")
         run = os.path.join(a.runs, scene, "s0", "I")
-        p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", a.tgs, "view", run, "--size", f"{w}x{h}", "--mark-tolerance", str(a.tolerance), "--script", script], capture_output=True, text=True)
-        if p.returncode != 0:
-            raise SystemExit(f"{scene}: tgs view failed:\n{p.stdout}{p.stderr}")
+        chosen = [choose(piece, dirs, min(a.views, 2) if a.greedy else a.views, a.solidity, a.flat) for piece in pieces]
+        if a.greedy:
+            # A user sees the marked region tinted on the photo of the view
+            # at hand, and outlines next the view where it is furthest off.
+            while len(chosen[0]) < a.views:
+                probe = os.path.abspath(os.path.join(a.out, f".{scene}-probe-{len(chosen[0])}"))
+                n_clicks, k_masks = mark(a, scene, run, pieces, chosen, probe, (w, h))
+                shutil.rmtree(probe)
+                os.remove(probe + ".view.txt")
+                pool = [i for i in choose(masks, dirs, len(masks), a.solidity) if i not in chosen[0]]
+                if not pool:
+                    break
+                chosen[0].append(max(pool, key=lambda i: int((k_masks[i] != masks[i]).sum())))
+        n_clicks, _ = mark(a, scene, run, pieces, chosen, out, (w, h))
         both = either = truth = covered = marked = 0
         for n, m in zip(names, masks):
             k = np.array(Image.open(os.path.join(out, n + ".png")).convert("L")) > 127

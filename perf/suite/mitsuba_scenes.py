@@ -465,6 +465,7 @@ def main():
     ap.add_argument("--split", choices=["both", "train", "test"], default="both", help="which views to render")
     ap.add_argument("--median-of", type=int, default=1, metavar="K", help="each image the per-pixel median of K renderings of --spp samples (no fireflies; biased: drops the sun's caustics through the glass)")
     ap.add_argument("--compact", action="store_true", help="JPEG images (quality 95) and half-float EXR normals: ~10x smaller, for datasets that travel (perf/suite/gpu_paper.sh)")
+    ap.add_argument("--whole", action="store_true", help="with --piece: the piece's whole outline, what stands in front of it ignored (the corners a user clicks around an occluder)")
     ap.add_argument("--piece", type=int, metavar="K", help="with --train-masks: the masks of the scene's K-th glass primitive alone (a pane of `vehicle`), for marking each piece of glass as its own region")
     ap.add_argument("--mask-share", type=float, default=1.0, metavar="F", help="with --train-masks: the share of a pixel's 16 rays that must hit glass (default 1: all)")
     ap.add_argument("--train-masks", metavar="DATASET", help="only write DATASET's training views' glass masks into --out (one --scene)")
@@ -565,7 +566,10 @@ def train_masks(mi, a):
             raise SystemExit(f"{img}: {w}x{h}; this script's cameras make square images")
         ro, rd = rays(np.array(f["transform_matrix"], float), w, t["camera_angle_x"], 4)
         _, _, g, k = first_hit(prims, ro, rd)
-        if a.piece is not None:
+        if a.piece is not None and a.whole:
+            # The piece's whole outline: rays that meet its primitive, whatever stands before it.
+            g = np.isfinite(prims[glass[a.piece]].intersect(ro, rd)[0])
+        elif a.piece is not None:
             # The piece alone: rays whose first hit is its primitive.
             g = k == glass[a.piece]
         write_8bit(mi, out, (g.reshape(w, w, 16).mean(2) >= a.mask_share - 1e-9).astype(np.float32)[:, :, None], False)

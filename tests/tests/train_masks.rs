@@ -58,6 +58,17 @@ fn stage_two_seeds_from_the_datasets_training_masks() {
     assert_eq!(dm["seed_mask_source"].as_str().map(PathBuf::from), Some(masks.clone()), "{dm}");
     assert_eq!(dm["seed_mask_coverage"], dd["seed_mask_coverage"]);
     assert!(dataset_ply == dir_ply, "the dataset's masks seed differently from the same masks in a directory");
+    // Marked in `tgs view` as a flat pane (a large square in z = 0 here):
+    // the seeds lie on it (reflection.seed_panes), recorded; turned off,
+    // the masks' hull seeds as before, bit for bit.
+    let pane = r#"{"regions": [{"flat": true, "outlines": [], "pane": {"corners": [[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]]}}]}"#;
+    std::fs::write(masks.join("marks.json"), pane).unwrap();
+    let (dp, pane_ply) = step("pane", vec![format!("reflection.seed_masks={}", masks.display())]);
+    assert!(dp["seed_panes"][0] == 1 && dp["seed_panes"][1] == dp["seeds"] && dp["seeds"].as_u64().unwrap() > 0, "{dp}");
+    assert!(dp.get("seed_rim").is_none_or(|r| r[1] == 0) && pane_ply != dir_ply, "{dp}");
+    let (doff, off_ply) = step("pane-off", vec![format!("reflection.seed_masks={}", masks.display()), "reflection.seed_panes=false".into()]);
+    assert!(doff.get("seed_panes").is_none() && off_ply == dir_ply, "{doff}");
+    std::fs::remove_file(masks.join("marks.json")).unwrap();
     // The masks of every 4th view alone: those seed, at a looser
     // significance that so few views can beat (1e-6 needs more).
     let sparse = base.join("sparse");

@@ -113,6 +113,19 @@ enum Shape {
 }
 
 impl Region {
+    /// The region in `marks.json`: its outlines' clicks and cameras, and
+    /// for a flat pane that meets its corners, the pane.
+    fn record(&self, tolerance: usize) -> serde_json::Value {
+        let mut r = serde_json::json!({"flat": self.flat, "outlines": self.outlines.iter().map(|o| serde_json::json!({
+            "width": o.camera.width, "height": o.camera.height, "fx": o.camera.fx, "fy": o.camera.fy, "cx": o.camera.cx, "cy": o.camera.cy,
+            "world_to_view": o.camera.world_to_view, "points": o.points,
+        })).collect::<Vec<_>>()});
+        if let Ok(Shape::Pane(p)) = self.shape(tolerance) {
+            r["pane"] = serde_json::json!({"corners": p.0.corners().iter().map(|c| c.to_array()).collect::<Vec<_>>(), "normal": p.0.normal().to_array()});
+        }
+        r
+    }
+
     /// The outlines that span a polygon (three clicks or more, not on a line).
     fn cones(&self) -> Vec<Cone> {
         self.outlines.iter().filter_map(Outline::cone).collect()
@@ -282,12 +295,9 @@ impl Marks {
         });
         let glass: usize = glass?.into_iter().sum();
         let record = serde_json::json!({
-            "what": "glass marked in tgs view: per region (a piece of glass) each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet, in one region, every outline's cone but `tolerance`, or for a flat region the polygon of its corners (the i-th click of every outline), triangulated",
+            "what": "glass marked in tgs view: per region (a piece of glass) each outline's clicks (pixel coordinates, centres at integers) on its camera; a view's mask is where its rays meet, in one region, every outline's cone but `tolerance`, or for a flat region the polygon of its corners (the i-th click of every outline), triangulated (`pane`: the corners in world space, on their plane, and its normal; Stage II seeds on them, reflection.seed_panes)",
             "tolerance": self.tolerance,
-            "regions": self.regions.iter().filter(|r| !r.outlines.is_empty()).map(|r| serde_json::json!({"flat": r.flat, "outlines": r.outlines.iter().map(|o| serde_json::json!({
-                "width": o.camera.width, "height": o.camera.height, "fx": o.camera.fx, "fy": o.camera.fy, "cx": o.camera.cx, "cy": o.camera.cy,
-                "world_to_view": o.camera.world_to_view, "points": o.points,
-            })).collect::<Vec<_>>()})).collect::<Vec<_>>(),
+            "regions": self.regions.iter().filter(|r| !r.outlines.is_empty()).map(|r| r.record(self.tolerance)).collect::<Vec<_>>(),
         });
         let path = dir.join("marks.json");
         std::fs::write(&path, serde_json::to_vec_pretty(&record)?).with_context(|| format!("{}: cannot write", path.display()))?;

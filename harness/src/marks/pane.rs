@@ -6,15 +6,10 @@
 //! flat pane is a wedge through it.
 
 use super::{Outline, Rays};
+use crate::train::stages::reflection::seed::PanePolygon;
 use glam::{DMat3, DVec3};
 
-pub struct Pane {
-    centre: DVec3,
-    normal: DVec3,
-    /// An orthonormal basis of the plane, and the corners in it.
-    axes: (DVec3, DVec3),
-    polygon: Vec<(f64, f64)>,
-}
+pub struct Pane(pub PanePolygon);
 
 impl Pane {
     /// The pane of `outlines` (those of three clicks or more), or why
@@ -56,44 +51,11 @@ impl Pane {
                 }
             }
         }
-        let centre = corners.iter().copied().sum::<DVec3>() / n as f64;
-        // Newell's normal: the polygon's area vector, robust to noise in the corners.
-        let area: DVec3 = (0..n).map(|i| corners[i].cross(corners[(i + 1) % n])).sum();
-        let size = corners.iter().map(|c| (*c - centre).length()).fold(0.0, f64::max);
-        if area.length() < 1e-9 * size.max(1e-9) {
-            return Err("the corners lie on a line".into());
-        }
-        let normal = area.normalize();
-        if corners.iter().any(|c| (*c - centre).dot(normal).abs() > 0.1 * size) {
-            return Err("the corners do not lie on a plane".into());
-        }
-        let u = (corners[0] - centre).reject_from(normal).normalize();
-        let v = normal.cross(u);
-        let polygon = corners.iter().map(|c| ((*c - centre).dot(u), (*c - centre).dot(v))).collect();
-        Ok(Pane { centre, normal, axes: (u, v), polygon })
+        PanePolygon::from_corners(&corners).map(Pane)
     }
 
     /// Whether the ray `o + t d` (t > 0) meets the pane.
     pub fn hit(&self, o: DVec3, d: DVec3) -> bool {
-        let den = self.normal.dot(d);
-        if den.abs() < 1e-12 {
-            return false;
-        }
-        let t = self.normal.dot(self.centre - o) / den;
-        if t <= 0.0 {
-            return false;
-        }
-        let p = o + t * d - self.centre;
-        let (x, y) = (p.dot(self.axes.0), p.dot(self.axes.1));
-        // Crossing number: the polygon need not be convex.
-        let n = self.polygon.len();
-        let mut inside = false;
-        for i in 0..n {
-            let (a, b) = (self.polygon[i], self.polygon[(i + 1) % n]);
-            if (a.1 > y) != (b.1 > y) && x < a.0 + (y - a.1) / (b.1 - a.1) * (b.0 - a.0) {
-                inside = !inside;
-            }
-        }
-        inside
+        self.0.hit(o, d).is_some()
     }
 }

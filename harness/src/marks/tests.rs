@@ -214,3 +214,49 @@ fn masks_go_into_a_new_directory_only() {
     assert!(e.contains("r_0.png") && !dir.join("n").exists(), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A flat pane's corners go into `marks.json` for Stage II
+/// (`reflection.seed_panes`), read back as they were triangulated; a
+/// marking with a hull region gives none.
+#[test]
+fn a_flat_panes_corners_reach_stage_two() {
+    use crate::train::stages::reflection::masks::marked_panes;
+    let corners = [[-0.5, 0.0, -0.4], [0.5, 0.0, -0.4], [0.5, 0.0, 0.4], [-0.5, 0.0, 0.4]].map(DVec3::from_array);
+    let (a, b) = (cam([1.5, -3.0, 0.5]), cam([-1.5, -3.0, 0.2]));
+    let view = |name: &str, c: Camera| View {
+        name: name.into(),
+        camera: c,
+        image: crate::data::image_io::ImageF { width: c.width, height: c.height, channels: 3, data: vec![0.0; 3 * (c.width * c.height) as usize] },
+        normals: None,
+        mask: None,
+    };
+    let views = [view("r_0", a), view("r_1", b)];
+    let dir = std::env::temp_dir().join(format!("tgs-marks-panes-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut marks = Marks::default();
+    marks.flat();
+    for c in [&a, &b] {
+        for &x in &corners {
+            let (u, v) = project(c, x);
+            marks.click(c, u, v);
+        }
+    }
+    marks.write(&views, &dir.join("flat")).unwrap();
+    let panes = marked_panes(&dir.join("flat")).unwrap().expect("every region a flat pane");
+    assert_eq!(panes.len(), 1);
+    for (got, want) in panes[0].corners().iter().zip(&corners) {
+        assert!(got.distance(*want) < 1e-4, "{got} against {want}");
+    }
+    assert!(panes[0].normal().dot(DVec3::Y).abs() > 1.0 - 1e-6, "{}", panes[0].normal());
+    // A second piece outlined as a hull region: the masks' hull seeds.
+    marks.new_region();
+    for c in [&a, &b] {
+        for x in [[-0.3, 1.0, -0.3], [0.3, 1.0, -0.3], [0.0, 1.0, 0.3]] {
+            let (u, v) = project(c, DVec3::from_array(x));
+            marks.click(c, u, v);
+        }
+    }
+    marks.write(&views, &dir.join("mixed")).unwrap();
+    assert!(marked_panes(&dir.join("mixed")).unwrap().is_none());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -121,6 +121,11 @@ pub struct ReflectionConfig {
     /// pillowed faces, a pane's ridge; curved glass offers no such plane
     /// (perf/journal/2026-12-06-sixty-sixth.md).
     pub seed_faces: bool,
+    /// With masks marked in `tgs view` as flat panes by their corners
+    /// (every region of their `marks.json`): the seeds lie on the marked
+    /// panes with their normals, not on the masks' hull (seed/panes.rs;
+    /// perf/journal/2026-12-07-sixty-seventh.md).
+    pub seed_panes: bool,
     /// Initial opacity of a seed.
     pub seed_opacity: f32,
     /// High-frequency loss (method-notes §3.6): weight of the mean error of
@@ -217,6 +222,7 @@ impl Default for ReflectionConfig {
             seed_planes: true,
             seed_smooth: true,
             seed_faces: true,
+            seed_panes: true,
             seed_opacity: 0.5,
             lambda_hf: 0.1,
             hf_percentile: 90.0,

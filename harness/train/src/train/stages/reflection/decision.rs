@@ -85,6 +85,11 @@ pub struct ReflDecision {
     /// `tgs view` (masks::marked_regions).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub seed_faces_marked: bool,
+    /// With masks marked in `tgs view` as flat panes and
+    /// reflection.seed_panes: the panes, and the seeds placed on them
+    /// (instead of the masks' hull).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_panes: Option<[u32; 2]>,
     /// With a validation slice and `reflection.validation_cells`: the set's
     /// pieces as the validation views judged them (the ones not kept were
     /// removed before the stage closed; stages/reflection/pieces.rs).

@@ -2,10 +2,12 @@
 //! (`reflection.seed_masks`) or the dataset's own training masks
 //! (`reflection.dataset_masks`), and where they came from for the record.
 
+use super::seed::PanePolygon;
 use crate::data::downscale_mask;
 use crate::data::image_io::read_grey_mask;
 use crate::train::stages::shared::Shared;
 use anyhow::{bail, Context as _, Result};
+use glam::DVec3;
 use std::borrow::Cow;
 use std::path::Path;
 use std::sync::Arc;
@@ -86,6 +88,32 @@ pub fn marked_regions(dir: &Path) -> bool {
     let Ok(text) = std::fs::read(dir.join("marks.json")) else { return false };
     let Ok(v) = serde_json::from_slice::<serde_json::Value>(&text) else { return false };
     v["regions"].as_array().is_some_and(|r| r.iter().any(|g| g["flat"] != serde_json::Value::Bool(true)))
+}
+
+/// The flat panes of a `reflection.seed_masks` directory marked in `tgs
+/// view` by their corners (its `marks.json`'s `pane` corners), when every
+/// region marked there is such a pane: their seeds lie on them
+/// (`seed::pane_seeds`). None where any region is not (its hull seeds as
+/// masks do), or `marks.json` is missing, unreadable or older than the
+/// corners; a pane whose corners are not a flat polygon is an error that
+/// names the file.
+pub fn marked_panes(dir: &Path) -> Result<Option<Vec<PanePolygon>>> {
+    let path = dir.join("marks.json");
+    let Ok(text) = std::fs::read(&path) else { return Ok(None) };
+    let Ok(v) = serde_json::from_slice::<serde_json::Value>(&text) else { return Ok(None) };
+    let Some(regions) = v["regions"].as_array().filter(|r| !r.is_empty()) else { return Ok(None) };
+    let mut panes = Vec::with_capacity(regions.len());
+    for (k, r) in regions.iter().enumerate() {
+        let corners: Option<Vec<DVec3>> =
+            r["pane"]["corners"].as_array().and_then(|c| c.iter().map(|p| serde_json::from_value::<[f64; 3]>(p.clone()).ok().map(DVec3::from)).collect());
+        match corners {
+            Some(c) if r["flat"] == serde_json::Value::Bool(true) => {
+                panes.push(PanePolygon::from_corners(&c).map_err(|e| anyhow::anyhow!("{}: region {}: {e}", path.display(), k + 1))?);
+            }
+            _ => return Ok(None),
+        }
+    }
+    Ok(Some(panes))
 }
 
 /// The file stem of training view `name`'s glass mask in a

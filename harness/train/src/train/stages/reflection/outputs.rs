@@ -48,13 +48,17 @@ impl ReflDecision {
                 d.seeds,
                 match d.seed_mask_coverage {
                     Some(c) => format!(
-                        "glass-mask ({:.1}% of the pixels{}; {}{}{}{}{})",
+                        "glass-mask ({:.1}% of the pixels{}; {}{}{}{}{}{})",
                         100.0 * c,
                         match d.seed_mask_views {
                             Some([n, all]) if n < all => format!(" of the {n} of {all} training views that have one"),
                             _ => String::new(),
                         },
                         d.mask_setting(),
+                        match d.seed_panes {
+                            Some([panes, seeds]) => format!("; {seeds} on the {panes} flat panes marked in tgs view (reflection.seed_panes)"),
+                            None => String::new(),
+                        },
                         match d.seed_rim {
                             Some([views, seeds]) if views > 0 => format!("; {seeds} on the glass rim's plane of {views} views"),
                             _ => String::new(),

@@ -7,7 +7,7 @@ use super::checkpoint::{host_reflection_set, ReflHeader};
 use super::env_init::{scene_env_map, SceneLight};
 use super::model::{residual, ReflStepInput, ReflectionModel, ScatTrain};
 use super::outputs::write_residual;
-use super::seed::{hull_seeding, SeedParams, SeedView};
+use super::seed::{hull_seeding, pane_seeds, SeedParams, SeedView};
 use super::view_dependence::{view_dependence, VdMap};
 use crate::outdir::OutDir;
 use crate::train::config::TrainConfig;
@@ -216,6 +216,7 @@ pub fn begin(
         seed_planes: None,
         seed_faces: None,
         seed_faces_marked: false,
+        seed_panes: None,
         seed_mask_source: None,
         seed_mask_views: None,
         seed_significance: None,
@@ -353,7 +354,12 @@ fn seed_model(
     } else {
         p
     };
-    let seeds = if hull {
+    let panes = if masks.is_some() && rc.seed_panes && !rc.seed_masks.is_empty() { super::masks::marked_panes(Path::new(&rc.seed_masks))? } else { None };
+    let seeds = if let (true, Some(panes)) = (hull, &panes) {
+        let seeds = pane_seeds(&views, panes, &p);
+        d.seed_panes = Some([panes.len() as u32, seeds.len() as u32]);
+        seeds
+    } else if hull {
         let h = hull_seeding(&views, &p);
         d.seed_significance = h.significance_relaxed;
         d.significance_dropped = h.significance_dropped;

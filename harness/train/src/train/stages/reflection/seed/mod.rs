@@ -59,12 +59,15 @@
 //! ([`SeedParams::planes`], the `planes` module). With masks the seeds'
 //! normals are then smoothed over their neighbours ([`SeedParams::smooth`])
 //! and, where flat faces of the glass show among them, take their face's
-//! ([`SeedParams::faces`]).
+//! ([`SeedParams::faces`]). Panes a user marked by their corners in `tgs
+//! view` are the glass's planes themselves: their seeds lie on them
+//! ([`pane_seeds`], the `panes` module).
 
 mod chance;
 mod faces;
 mod geometry;
 mod normals;
+mod panes;
 mod planes;
 mod rim;
 mod smooth;
@@ -77,6 +80,7 @@ pub(crate) use geometry::unproject_pixel;
 use geometry::{box_blur, image_point, image_xy, in_parallel, nearest, normalize, unproject_xy, V3};
 pub use normals::{consensus_normal, jacobi_eigen, quat_for_normal, SeedNormal, GRADIENT_MIN};
 use normals::{gradient_pixels, least_squares_plane, surfels};
+pub use panes::{pane_seeds, PanePolygon};
 pub use rim::fit_plane;
 pub use smooth::smooth_normals;
 use tgs_pipelines::Camera;
