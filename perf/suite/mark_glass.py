@@ -79,6 +79,19 @@ def quad_corners(mask):
     return [tuple(float(v + 0.5 * np.sign(v - cv)) for v, cv in zip(quad[(k + t) % 4], c)) for t in range(4)]
 
 
+def corner_clicks(corners, frame, fov, size):
+    """A rectangle's world corners as a user clicks them in a view: each at the centre of the pixel it falls in."""
+    c2w = np.array(frame["transform_matrix"], float)
+    w, h = size
+    f = 0.5 * w / math.tan(0.5 * fov)
+    out = []
+    for x in corners:
+        p = c2w[:3, :3].T @ (np.array(x) - c2w[:3, 3])
+        u, v = f * p[0] / -p[2] + 0.5 * w, -f * p[1] / -p[2] + 0.5 * h
+        out.append((math.floor(u) + 0.5, math.floor(v) + 0.5))
+    return out
+
+
 def hull_area(mask):
     """Area of the convex hull of the mask's pixels (their corners), by the shoelace formula."""
     ys, xs = np.nonzero(mask)
@@ -122,8 +135,11 @@ def choose(masks, dirs, n, solidity, same_side=False):
     return chosen
 
 
-def mark(a, scene, run, pieces, chosen, out, size):
-    """Replay the clicks of CHOSEN (views per piece) in `tgs view`, the masks into OUT; the clicks and the masks."""
+def mark(a, scene, run, pieces, chosen, out, size, corners):
+    """Replay the clicks of CHOSEN (views per piece) in `tgs view`, the masks into OUT; the clicks and the masks.
+    A flat piece with CORNERS (its world corners, `mitsuba_scenes.py --piece`'s corners.json) is clicked at them."""
+    t = json.load(open(os.path.join(a.scenes, scene, "transforms_train.json")))
+    fr, fov = t["frames"], t["camera_angle_x"]
     if os.path.exists(out):
         raise SystemExit(f"{out} exists: choose another --out (nothing is written over)")
     lines = ["key t", "key g"]
@@ -136,7 +152,11 @@ def mark(a, scene, run, pieces, chosen, out, size):
         for i in views:
             lines += ["key n"] * (i - at) if i >= at else ["key p"] * (at - i)
             at = i
-            for x, y in (quad_corners(piece[i]) if a.flat else clicks(piece[i], a.clicks)):
+            if a.flat and corners[k] is not None:
+                pts = corner_clicks(corners[k], fr[i], fov, size)
+            else:
+                pts = quad_corners(piece[i]) if a.flat else clicks(piece[i], a.clicks)
+            for x, y in pts:
                 lines.append(f"click {x} {y}")
                 n_clicks += 1
     lines.append(f"marks {out}")
@@ -163,7 +183,7 @@ def main():
     ap.add_argument("--only", action="append")
     ap.add_argument("--tolerance", type=int, default=0, help="tgs view --mark-tolerance: outlined views that may leave a point out")
     ap.add_argument("--pieces", metavar="ROOT", help="mark the glass of ROOT/SCENE/K piece by piece (one region each)")
-    ap.add_argument("--flat", action="store_true", help="with --pieces: each piece a flat pane (key F), clicked at its four corners (the largest quadrilateral in its mask, clockwise from the top left, in every view)")
+    ap.add_argument("--flat", action="store_true", help="with --pieces: each piece a flat pane (key F), clicked at its four corners: where its corners.json (mitsuba_scenes.py --piece) puts them, each at the centre of the pixel it falls in, else the largest quadrilateral in its mask, clockwise from the top left")
     ap.add_argument("--greedy", action="store_true", help="the first two views by angle, each next the one whose marked mask is furthest off the glass (as a user sees the tinted region)")
     ap.add_argument("--tgs", default="target/release/tgs")
     a = ap.parse_args()
@@ -183,8 +203,10 @@ def main():
         if pdir and os.path.isdir(pdir):
             keys = sorted(os.listdir(pdir), key=lambda k: int(k) if k.isdigit() else k)
             pieces = [[np.array(Image.open(os.path.join(pdir, k, n + ".png")).convert("L")) > 127 for n in names] for k in keys]
+            found = [os.path.join(pdir, k, "corners.json") for k in keys]
+            corners = [json.load(open(c))["corners"] if os.path.exists(c) else None for c in found]
         else:
-            pieces = [masks]
+            pieces, corners = [masks], [None]
         out = os.path.abspath(os.path.join(a.out, scene))
         if os.path.exists(out):
             raise SystemExit(f"{out} exists: choose another --out (nothing is written over)")
@@ -196,14 +218,14 @@ def main():
             # at hand, and outlines next the view where it is furthest off.
             while len(chosen[0]) < a.views:
                 probe = os.path.abspath(os.path.join(a.out, f".{scene}-probe-{len(chosen[0])}"))
-                n_clicks, k_masks = mark(a, scene, run, pieces, chosen, probe, (w, h))
+                n_clicks, k_masks = mark(a, scene, run, pieces, chosen, probe, (w, h), corners)
                 shutil.rmtree(probe)
                 os.remove(probe + ".view.txt")
                 pool = [i for i in choose(masks, dirs, len(masks), a.solidity) if i not in chosen[0]]
                 if not pool:
                     break
                 chosen[0].append(max(pool, key=lambda i: int((k_masks[i] != masks[i]).sum())))
-        n_clicks, _ = mark(a, scene, run, pieces, chosen, out, (w, h))
+        n_clicks, _ = mark(a, scene, run, pieces, chosen, out, (w, h), corners)
         both = either = truth = covered = marked = 0
         for n, m in zip(names, masks):
             k = np.array(Image.open(os.path.join(out, n + ".png")).convert("L")) > 127

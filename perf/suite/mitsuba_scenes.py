@@ -573,6 +573,11 @@ def train_masks(mi, a):
             # The piece alone: rays whose first hit is its primitive.
             g = k == glass[a.piece]
         write_8bit(mi, out, (g.reshape(w, w, 16).mean(2) >= a.mask_share - 1e-9).astype(np.float32)[:, :, None], False)
+    if a.piece is not None and prims[glass[a.piece]].kind == "rectangle":
+        # The pane's corners in order around it, for a replay that clicks them (mark_glass.py --flat).
+        m = prims[glass[a.piece]].m
+        corners = [(m @ np.array([x, y, 0.0, 1.0]))[:3].tolist() for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        json.dump({"corners": corners}, open(os.path.join(a.out, "corners.json"), "w"))
     print(f"{len(t['frames'])} masks of {name} in {a.out}")
 
 

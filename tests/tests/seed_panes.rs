@@ -2,7 +2,8 @@
 //! (`reflection.seed_panes`;
 //! harness/train/src/train/stages/reflection/seed/panes.rs), on the CPU:
 //! the seeds lie on the marked pane with its normal, whatever the masks'
-//! hull says; `marks.json`'s panes are read only where every region is one.
+//! hull says; `marks.json`'s panes are read only where every region is flat
+//! (a flat region whose corners did not meet has none, and no mask).
 
 use glam::DVec3;
 use tgs::train::stages::reflection::masks::marked_panes;
@@ -64,7 +65,7 @@ fn a_pane_polygon_is_flat_and_hit_inside_only() {
 }
 
 #[test]
-fn marks_json_gives_panes_only_when_every_region_is_one() {
+fn marks_json_gives_panes_only_when_every_region_is_flat() {
     let dir = tgs_tests::TempDir::new("seed-panes-marks");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -74,6 +75,7 @@ fn marks_json_gives_panes_only_when_every_region_is_one() {
         (format!(r#"{{"regions": [{pane}]}}"#), Some(1)),
         (format!(r#"{{"regions": [{pane}, {pane}]}}"#), Some(2)),
         (format!(r#"{{"regions": [{pane}, {{"flat": false, "outlines": []}}]}}"#), None),
+        (format!(r#"{{"regions": [{pane}, {{"flat": true, "outlines": []}}]}}"#), Some(1)),
         (r#"{"regions": [{"flat": true, "outlines": []}]}"#.to_string(), None),
         (r#"{"regions": []}"#.to_string(), None),
         ("not json".to_string(), None),

@@ -92,28 +92,30 @@ pub fn marked_regions(dir: &Path) -> bool {
 
 /// The flat panes of a `reflection.seed_masks` directory marked in `tgs
 /// view` by their corners (its `marks.json`'s `pane` corners), when every
-/// region marked there is such a pane: their seeds lie on them
-/// (`seed::pane_seeds`). None where any region is not (its hull seeds as
-/// masks do), or `marks.json` is missing, unreadable or older than the
-/// corners; a pane whose corners are not a flat polygon is an error that
-/// names the file.
+/// region marked there is flat: their seeds lie on them
+/// (`seed::pane_seeds`); a flat region whose corners did not meet has no
+/// pane and marked no mask. None where any region is not flat (its hull
+/// seeds as masks do), or `marks.json` is missing, unreadable or older
+/// than the corners; a pane whose corners are not a flat polygon is an
+/// error that names the file.
 pub fn marked_panes(dir: &Path) -> Result<Option<Vec<PanePolygon>>> {
     let path = dir.join("marks.json");
     let Ok(text) = std::fs::read(&path) else { return Ok(None) };
     let Ok(v) = serde_json::from_slice::<serde_json::Value>(&text) else { return Ok(None) };
     let Some(regions) = v["regions"].as_array().filter(|r| !r.is_empty()) else { return Ok(None) };
+    if regions.iter().any(|r| r["flat"] != serde_json::Value::Bool(true)) {
+        return Ok(None);
+    }
     let mut panes = Vec::with_capacity(regions.len());
     for (k, r) in regions.iter().enumerate() {
+        // A flat region without a pane did not triangulate: it marked no mask either.
         let corners: Option<Vec<DVec3>> =
             r["pane"]["corners"].as_array().and_then(|c| c.iter().map(|p| serde_json::from_value::<[f64; 3]>(p.clone()).ok().map(DVec3::from)).collect());
-        match corners {
-            Some(c) if r["flat"] == serde_json::Value::Bool(true) => {
-                panes.push(PanePolygon::from_corners(&c).map_err(|e| anyhow::anyhow!("{}: region {}: {e}", path.display(), k + 1))?);
-            }
-            _ => return Ok(None),
+        if let Some(c) = corners {
+            panes.push(PanePolygon::from_corners(&c).map_err(|e| anyhow::anyhow!("{}: region {}: {e}", path.display(), k + 1))?);
         }
     }
-    Ok(Some(panes))
+    Ok((!panes.is_empty()).then_some(panes))
 }
 
 /// The file stem of training view `name`'s glass mask in a

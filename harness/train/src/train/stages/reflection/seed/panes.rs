@@ -11,6 +11,9 @@ use super::normals::surfels;
 use super::{Prepared, Seed, SeedParams, SeedView};
 use glam::DVec3;
 
+/// A pane's hit this far behind the view's Stage I depth is hidden there.
+const HIDDEN: f64 = 1.02;
+
 /// A flat polygon in 3D: its corners' plane and their outline in it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PanePolygon {
@@ -86,7 +89,8 @@ impl PanePolygon {
 /// the views, at most [`SeedParams::max_rays`], as the hull's march takes
 /// them) each seed where it first meets a pane, with the pane's normal
 /// turned to its camera and the hull seeds' size (the spacing to their
-/// nearest neighbours). A ray that meets no pane seeds nothing.
+/// nearest neighbours). A ray that meets no pane, or meets it behind the
+/// view's Stage I surface (hidden there), seeds nothing.
 /// Deterministic, the same at any thread count.
 pub fn pane_seeds(views: &[SeedView], panes: &[PanePolygon], p: &SeedParams) -> Vec<Seed> {
     let prepared: Vec<Prepared> = views.iter().map(|v| Prepared::new(v, p)).collect();
@@ -104,7 +108,10 @@ pub fn pane_seeds(views: &[SeedView], panes: &[PanePolygon], p: &SeedParams) -> 
                 let o = DVec3::from(cam.centre().map(f64::from));
                 let d = DVec3::from(unproject_pixel(cam, i, 1.0)) - o;
                 let (t, pane) = panes.iter().filter_map(|q| q.hit(o, d).map(|t| (t, q))).min_by(|a, b| a.0.total_cmp(&b.0))?;
-                Some(((o + t * d).to_array(), vi, pane.normal.to_array()))
+                // Behind the Stage I surface (d has view depth 1, so t is
+                // the hit's): an opaque thing hides the pane in this view,
+                // which the marks do not model.
+                (t <= prepared[vi].depth[i] as f64 * HIDDEN).then(|| ((o + t * d).to_array(), vi, pane.normal.to_array()))
             })
             .collect::<Vec<_>>()
     })
