@@ -465,6 +465,7 @@ def main():
     ap.add_argument("--split", choices=["both", "train", "test"], default="both", help="which views to render")
     ap.add_argument("--median-of", type=int, default=1, metavar="K", help="each image the per-pixel median of K renderings of --spp samples (no fireflies; biased: drops the sun's caustics through the glass)")
     ap.add_argument("--compact", action="store_true", help="JPEG images (quality 95) and half-float EXR normals: ~10x smaller, for datasets that travel (perf/suite/gpu_paper.sh)")
+    ap.add_argument("--face", type=int, metavar="F", help="with --piece K of a cube and --whole: its face F alone (0..5: +x, -x, +y, -y, +z, -z), as a user marks a glass box face by face")
     ap.add_argument("--whole", action="store_true", help="with --piece: the piece's whole outline, what stands in front of it ignored (the corners a user clicks around an occluder)")
     ap.add_argument("--piece", type=int, metavar="K", help="with --train-masks: the masks of the scene's K-th glass primitive alone (a pane of `vehicle`), for marking each piece of glass as its own region")
     ap.add_argument("--mask-share", type=float, default=1.0, metavar="F", help="with --train-masks: the share of a pixel's 16 rays that must hit glass (default 1: all)")
@@ -553,6 +554,17 @@ def train_masks(mi, a):
     glass = [i for i, p in enumerate(prims) if p.glass]
     if a.piece is not None and not 0 <= a.piece < len(glass):
         raise SystemExit(f"--piece {a.piece}: {name} has {len(glass)} glass primitives (0..{len(glass) - 1})")
+    face = None
+    if a.face is not None:
+        if a.piece is None or not a.whole or prims[glass[a.piece]].kind != "cube" or not 0 <= a.face < 6:
+            raise SystemExit("--face F (0..5: +x, -x, +y, -y, +z, -z) needs --piece K of a cube and --whole")
+        # The face as a rectangle: its own u, v axes and the cube's axis as its normal, out at that side.
+        axis, sign = a.face // 2, 1.0 - 2.0 * (a.face % 2)
+        e = np.eye(4)
+        local = np.zeros((4, 4))
+        local[:3, 0], local[:3, 1], local[:3, 2] = e[:3, (axis + 1) % 3] * sign, e[:3, (axis + 2) % 3], e[:3, axis] * sign
+        local[:3, 3], local[3, 3] = e[:3, axis] * sign, 1.0
+        face = Prim("rectangle", prims[glass[a.piece]].m @ local, None)
     os.makedirs(a.out, exist_ok=True)
     for f in t["frames"]:
         stem = os.path.basename(f["file_path"])
@@ -566,16 +578,18 @@ def train_masks(mi, a):
             raise SystemExit(f"{img}: {w}x{h}; this script's cameras make square images")
         ro, rd = rays(np.array(f["transform_matrix"], float), w, t["camera_angle_x"], 4)
         _, _, g, k = first_hit(prims, ro, rd)
-        if a.piece is not None and a.whole:
+        if face is not None:
+            g = np.isfinite(face.intersect(ro, rd)[0])
+        elif a.piece is not None and a.whole:
             # The piece's whole outline: rays that meet its primitive, whatever stands before it.
             g = np.isfinite(prims[glass[a.piece]].intersect(ro, rd)[0])
         elif a.piece is not None:
             # The piece alone: rays whose first hit is its primitive.
             g = k == glass[a.piece]
         write_8bit(mi, out, (g.reshape(w, w, 16).mean(2) >= a.mask_share - 1e-9).astype(np.float32)[:, :, None], False)
-    if a.piece is not None and prims[glass[a.piece]].kind == "rectangle":
+    if face is not None or (a.piece is not None and prims[glass[a.piece]].kind == "rectangle"):
         # The pane's corners in order around it, for a replay that clicks them (mark_glass.py --flat).
-        m = prims[glass[a.piece]].m
+        m = (face or prims[glass[a.piece]]).m
         corners = [(m @ np.array([x, y, 0.0, 1.0]))[:3].tolist() for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         json.dump({"corners": corners}, open(os.path.join(a.out, "corners.json"), "w"))
     print(f"{len(t['frames'])} masks of {name} in {a.out}")

@@ -37,6 +37,10 @@ fn seeds_lie_on_the_marked_pane_with_its_normal() {
     // Seeds on both sides' views face them: both signs appear.
     assert!(seeds.iter().any(|s| s.normal[0] > 0.5) && seeds.iter().any(|s| s.normal[0] < -0.5));
     assert_eq!(pane_seeds(&sv, std::slice::from_ref(&pane), &SeedParams { threads: 1, ..p }), seeds, "the same at one thread");
+    // Stage I's surface in front of the pane in every view (something
+    // opaque the marks do not know of): hidden, no seeds.
+    let near: Vec<Vec<f32>> = depth.iter().map(|d| vec![0.5; d.len()]).collect();
+    assert!(pane_seeds(&seed_views(&cams, &masks, &near), std::slice::from_ref(&pane), &p).is_empty());
     // A pane no masked ray meets, or none at all: no seeds.
     let far = PanePolygon::from_corners(&pane_corners(0.0).iter().map(|x| *x + DVec3::new(0.0, 0.0, 50.0)).collect::<Vec<_>>()).unwrap();
     assert!(pane_seeds(&sv, &[far], &p).is_empty());
