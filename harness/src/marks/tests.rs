@@ -6,6 +6,17 @@ fn cam(eye: [f32; 3]) -> Camera {
     Camera::look_at(eye, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.8, 64, 48)
 }
 
+/// A training view named `name` seen by `c` (a black image).
+fn view(name: &str, c: Camera) -> View {
+    View {
+        name: name.into(),
+        camera: c,
+        image: crate::data::image_io::ImageF { width: c.width, height: c.height, channels: 3, data: vec![0.0; 3 * (c.width * c.height) as usize] },
+        normals: None,
+        mask: None,
+    }
+}
+
 /// The pixel coordinates of world point `x` in `c`.
 fn project(c: &Camera, x: DVec3) -> (f64, f64) {
     let r = Rays::of(c);
@@ -184,13 +195,6 @@ fn a_flat_pane_is_its_corners_polygon() {
 
 #[test]
 fn masks_go_into_a_new_directory_only() {
-    let view = |name: &str, c: Camera| View {
-        name: name.into(),
-        camera: c,
-        image: crate::data::image_io::ImageF { width: c.width, height: c.height, channels: 3, data: vec![0.0; 3 * (c.width * c.height) as usize] },
-        normals: None,
-        mask: None,
-    };
     let (a, b) = (cam([1.5, -3.0, 0.5]), cam([-1.5, -3.0, 0.2]));
     let views = [view("train/r_0.png", a), view("train/r_1", b)];
     let dir = std::env::temp_dir().join(format!("tgs-marks-{}", std::process::id()));
@@ -223,13 +227,6 @@ fn a_flat_panes_corners_reach_stage_two() {
     use crate::train::stages::reflection::masks::marked_panes;
     let corners = [[-0.5, 0.0, -0.4], [0.5, 0.0, -0.4], [0.5, 0.0, 0.4], [-0.5, 0.0, 0.4]].map(DVec3::from_array);
     let (a, b) = (cam([1.5, -3.0, 0.5]), cam([-1.5, -3.0, 0.2]));
-    let view = |name: &str, c: Camera| View {
-        name: name.into(),
-        camera: c,
-        image: crate::data::image_io::ImageF { width: c.width, height: c.height, channels: 3, data: vec![0.0; 3 * (c.width * c.height) as usize] },
-        normals: None,
-        mask: None,
-    };
     let views = [view("r_0", a), view("r_1", b)];
     let dir = std::env::temp_dir().join(format!("tgs-marks-panes-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
