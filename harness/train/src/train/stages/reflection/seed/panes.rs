@@ -3,7 +3,7 @@
 //! plane, so the seeds lie on it with its normal, where the masks' hull
 //! (the hull of one pane's projections) and a rim plane fitted to what
 //! rings it only approximate it. A vehicle's four windows marked so at
-//! 50²: the hull's seeds 65–82° off the windows, the marked panes 3–10°
+//! 50²: the hull's seeds 65–90° off the windows, the marked panes 2–8°
 //! (perf/journal/2026-12-07-sixty-seventh.md).
 
 use super::geometry::{in_parallel, unproject_pixel, V3};
