@@ -77,7 +77,9 @@ impl ReflDecision {
                     None => "residual".into(),
                 },
                 d.copied,
-                if d.hull_empty {
+                if d.hull_empty && d.seed_panes.is_some() {
+                    ": no masked ray met a marked pane in front of Stage I's surface, so the set starts as a copy of Stage I's"
+                } else if d.hull_empty {
                     ": no ray crossed carved space into the residual hull, so the set starts as a copy of Stage I's"
                 } else if d.significance_dropped {
                     ": no hull point beat chance at reflection.seed_significance, so the seeds come from the hull without that test (on each ray the point the most views agree on)"
@@ -142,6 +144,11 @@ mod tests {
         // Seeded from masks, or the paper's copy start: no note.
         let masked = ReflDecision { seed_mask_coverage: Some(0.3), seed_mask_source: Some("dataset".into()), ..residual.clone() };
         assert!(!masked.message(false, 100).contains("without glass masks"), "{}", masked.message(false, 100));
+        // Marked panes: their seeds counted; none left in front of Stage I's surface, said so.
+        let panes = ReflDecision { seed_panes: Some([2, 10]), ..masked.clone() };
+        assert!(panes.message(false, 100).contains("10 on the 2 flat panes marked in tgs view"), "{}", panes.message(false, 100));
+        let hidden = ReflDecision { seeds: 0, hull_empty: true, seed_panes: Some([2, 0]), ..masked.clone() };
+        assert!(hidden.message(false, 100).contains("no masked ray met a marked pane"), "{}", hidden.message(false, 100));
         let copy = ReflDecision { seeds: 0, copied: 10, ..residual.clone() };
         assert!(!copy.message(false, 100).contains("without glass masks"));
         // A skipped Stage II says why, without the note.
