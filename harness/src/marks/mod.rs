@@ -101,7 +101,7 @@ type Cone = (Rays, Vec<DVec3>);
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Region {
     pub outlines: Vec<Outline>,
-    /// A flat pane: each outline is its corners, in the same order.
+    /// A flat pane: each outline is its corners, in order round it.
     pub flat: bool,
 }
 
@@ -212,7 +212,7 @@ impl Marks {
     }
 
     /// The current region is a flat pane: its outlines are its corners,
-    /// clicked in the same order in each view.
+    /// clicked in order round it in each view (from any corner, either way).
     pub fn flat(&mut self) {
         self.current().flat = true;
     }

@@ -1,5 +1,6 @@
-//! A flat pane marked by its corners: the same number of clicks, in the
-//! same order around the pane, in two or more views. Each corner is the
+//! A flat pane marked by its corners: the same number of clicks, in
+//! order around the pane (starting anywhere, either way round: each view
+//! is matched to the first), in two or more views. Each corner is the
 //! point nearest to its rays (least squares), the pane the polygon of the
 //! corners on their plane; a view's mask is the pixels whose ray meets
 //! that polygon. Tighter than the visual hull of a few views, which for a
@@ -27,27 +28,26 @@ impl Pane {
             return Err(format!("a pane's views need the same number of corners ({})", counts.join(", ")));
         }
         let rays: Vec<Rays> = outs.iter().map(|o| Rays::of(&o.camera)).collect();
-        let mut corners = Vec::with_capacity(n);
-        for k in 0..n {
-            let (mut a, mut b) = (DMat3::ZERO, DVec3::ZERO);
-            for (o, r) in outs.iter().zip(&rays) {
-                let d = r.dir(o.points[k].0, o.points[k].1).normalize();
-                // (I - d d^T): the part of a point's offset across the ray.
-                let m = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-                a += m;
-                b += m * r.centre;
-            }
-            if a.determinant().abs() < 1e-12 {
-                return Err(format!("corner {}: its rays are parallel (views too close together)", k + 1));
-            }
-            corners.push(a.inverse() * b);
+        // Each later view's clicks in the first view's order: started at
+        // any corner and going either way round, the turn whose rays pass
+        // closest to the first view's (a user need not keep the order).
+        let mut points: Vec<Vec<(f64, f64)>> = vec![outs[0].points.clone()];
+        for (o, r) in outs.iter().zip(&rays).skip(1) {
+            let turns = (0..2 * n).map(|t| (0..n).map(|k| o.points[if t < n { (t + k) % n } else { (t + n - k) % n }]).collect::<Vec<_>>());
+            let misfit = |p: &Vec<(f64, f64)>| corners_of(&[&rays[0], r], &[&points[0], p]).map_or(f64::INFINITY, |c| reprojection(&[&rays[0], r], &[&points[0], p], &c));
+            let best = turns
+                .map(|p| (misfit(&p), p))
+                .fold(None, |acc: Option<(f64, Vec<(f64, f64)>)>, (e, p)| if acc.as_ref().is_some_and(|(b, _)| *b <= e) { acc } else { Some((e, p)) });
+            points.push(best.map(|(_, p)| p).unwrap_or_else(|| o.points.clone()));
         }
-        for (o, r) in outs.iter().zip(&rays) {
+        let (ray_refs, point_refs): (Vec<&Rays>, Vec<&Vec<(f64, f64)>>) = (rays.iter().collect(), points.iter().collect());
+        let corners = corners_of(&ray_refs, &point_refs)?;
+        for ((o, r), p) in outs.iter().zip(&rays).zip(&points) {
             let tolerance_px = (0.02 * o.camera.width.max(o.camera.height) as f64).max(2.0);
-            for (k, (&c, &(u, v))) in corners.iter().zip(&o.points).enumerate() {
+            for (k, (&c, &(u, v))) in corners.iter().zip(p).enumerate() {
                 match r.project(c) {
                     Some((pu, pv)) if (pu - u).hypot(pv - v) <= tolerance_px => {}
-                    _ => return Err(format!("corner {}: its clicks do not meet in 3D (click the corners in the same order in each view)", k + 1)),
+                    _ => return Err(format!("corner {}: its clicks do not meet in 3D (click the same corners in each view)", k + 1)),
                 }
             }
         }
@@ -58,4 +58,37 @@ impl Pane {
     pub fn hit(&self, o: DVec3, d: DVec3) -> bool {
         self.0.hit(o, d).is_some()
     }
+}
+
+/// Each corner the point nearest its clicks' rays (least squares), one
+/// click per view in `points` (the same order in each); or why not.
+fn corners_of(rays: &[&Rays], points: &[&Vec<(f64, f64)>]) -> Result<Vec<DVec3>, String> {
+    (0..points[0].len())
+        .map(|k| {
+            let (mut a, mut b) = (DMat3::ZERO, DVec3::ZERO);
+            for (r, p) in rays.iter().zip(points) {
+                let d = r.dir(p[k].0, p[k].1).normalize();
+                // (I - d d^T): the part of a point's offset across the ray.
+                let m = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+                a += m;
+                b += m * r.centre;
+            }
+            if a.determinant().abs() < 1e-12 {
+                return Err(format!("corner {}: its rays are parallel (views too close together)", k + 1));
+            }
+            Ok(a.inverse() * b)
+        })
+        .collect()
+}
+
+/// The largest distance (pixels) between a click and its corner's
+/// projection; infinite where a corner is behind a camera.
+fn reprojection(rays: &[&Rays], points: &[&Vec<(f64, f64)>], corners: &[DVec3]) -> f64 {
+    let mut worst = 0.0f64;
+    for (r, p) in rays.iter().zip(points) {
+        for (&c, &(u, v)) in corners.iter().zip(p.iter()) {
+            worst = worst.max(r.project(c).map_or(f64::INFINITY, |(pu, pv)| (pu - u).hypot(pv - v)));
+        }
+    }
+    worst
 }

@@ -62,7 +62,7 @@ tgs view keys:
   C: next checkpoint (Stage I, II, III)   F12 or O: screenshot   H: this help   Esc: quit
   G: mark the glass: left clicks around it (a pane's corners, a dome's outline) in two or more views
      B: the next clicks outline another piece of glass (each pane its own region)
-     F: this piece is a flat pane: click its corners, in the same order, in two or more views
+     F: this piece is a flat pane: click its corners, in order round it, in two or more views
      U: take back a click   M: write every training view's glass mask (reflection.seed_masks)";
 
 /// The action of a key press (with shift held or not).
