@@ -40,7 +40,8 @@ impl Pane {
                 .fold(None, |acc: Option<(f64, Vec<(f64, f64)>)>, (e, p)| if acc.as_ref().is_some_and(|(b, _)| *b <= e) { acc } else { Some((e, p)) });
             points.push(best.map(|(_, p)| p).unwrap_or_else(|| o.points.clone()));
         }
-        let (ray_refs, point_refs): (Vec<&Rays>, Vec<&Vec<(f64, f64)>>) = (rays.iter().collect(), points.iter().collect());
+        let ray_refs: Vec<&Rays> = rays.iter().collect();
+        let point_refs: Vec<&Vec<(f64, f64)>> = points.iter().collect();
         let corners = corners_of(&ray_refs, &point_refs)?;
         for ((o, r), p) in outs.iter().zip(&rays).zip(&points) {
             let tolerance_px = (0.02 * o.camera.width.max(o.camera.height) as f64).max(2.0);
