@@ -167,7 +167,7 @@ def mark(a, scene, run, pieces, chosen, out, size, corners):
     p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", a.tgs, "view", run, "--size", f"{w}x{h}", "--mark-tolerance", str(a.tolerance), "--script", script], capture_output=True, text=True)
     if p.returncode != 0:
         raise SystemExit(f"{scene}: tgs view failed:\n{p.stdout}{p.stderr}")
-    names = [stem(f["file_path"]) for f in frames(os.path.join(a.scenes, scene))]
+    names = [stem(f["file_path"]) for f in fr]
     return n_clicks, [np.array(Image.open(os.path.join(out, n + ".png")).convert("L")) > 127 for n in names]
 
 

@@ -577,15 +577,16 @@ def train_masks(mi, a):
         if w != h:
             raise SystemExit(f"{img}: {w}x{h}; this script's cameras make square images")
         ro, rd = rays(np.array(f["transform_matrix"], float), w, t["camera_angle_x"], 4)
-        _, _, g, k = first_hit(prims, ro, rd)
         if face is not None:
             g = np.isfinite(face.intersect(ro, rd)[0])
         elif a.piece is not None and a.whole:
             # The piece's whole outline: rays that meet its primitive, whatever stands before it.
             g = np.isfinite(prims[glass[a.piece]].intersect(ro, rd)[0])
-        elif a.piece is not None:
-            # The piece alone: rays whose first hit is its primitive.
-            g = k == glass[a.piece]
+        else:
+            _, _, g, k = first_hit(prims, ro, rd)
+            if a.piece is not None:
+                # The piece alone: rays whose first hit is its primitive.
+                g = k == glass[a.piece]
         write_8bit(mi, out, (g.reshape(w, w, 16).mean(2) >= a.mask_share - 1e-9).astype(np.float32)[:, :, None], False)
     if face is not None or (a.piece is not None and prims[glass[a.piece]].kind == "rectangle"):
         # The pane's corners in order around it, for a replay that clicks them (mark_glass.py --flat).

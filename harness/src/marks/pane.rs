@@ -35,10 +35,9 @@ impl Pane {
         for (o, r) in outs.iter().zip(&rays).skip(1) {
             let turns = (0..2 * n).map(|t| (0..n).map(|k| o.points[if t < n { (t + k) % n } else { (t + n - k) % n }]).collect::<Vec<_>>());
             let misfit = |p: &Vec<(f64, f64)>| corners_of(&[&rays[0], r], &[&points[0], p]).map_or(f64::INFINITY, |c| reprojection(&[&rays[0], r], &[&points[0], p], &c));
-            let best = turns
-                .map(|p| (misfit(&p), p))
-                .fold(None, |acc: Option<(f64, Vec<(f64, f64)>)>, (e, p)| if acc.as_ref().is_some_and(|(b, _)| *b <= e) { acc } else { Some((e, p)) });
-            points.push(best.map(|(_, p)| p).unwrap_or_else(|| o.points.clone()));
+            // The first of the best (the clicks' own order on a tie).
+            let best = turns.map(|p| (misfit(&p), p)).min_by(|a, b| a.0.total_cmp(&b.0));
+            points.push(best.map_or_else(|| o.points.clone(), |(_, p)| p));
         }
         let ray_refs: Vec<&Rays> = rays.iter().collect();
         let point_refs: Vec<&Vec<(f64, f64)>> = points.iter().collect();

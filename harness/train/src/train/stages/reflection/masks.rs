@@ -85,9 +85,20 @@ pub(super) fn glass_masks<'a>(shared: &Shared<'a>, names: &[String]) -> Result<(
 /// perf/journal/2026-12-06-sixty-sixth.md). A missing or unreadable
 /// `marks.json` says no.
 pub fn marked_regions(dir: &Path) -> bool {
-    let Ok(text) = std::fs::read(dir.join("marks.json")) else { return false };
-    let Ok(v) = serde_json::from_slice::<serde_json::Value>(&text) else { return false };
-    v["regions"].as_array().is_some_and(|r| r.iter().any(|g| g["flat"] != serde_json::Value::Bool(true)))
+    marks_regions(dir).is_some_and(|r| r.iter().any(|g| !is_flat(g)))
+}
+
+/// The regions of `dir/marks.json` (`tgs view`'s record of a marking);
+/// None where it is missing or unreadable.
+fn marks_regions(dir: &Path) -> Option<Vec<serde_json::Value>> {
+    let text = std::fs::read(dir.join("marks.json")).ok()?;
+    let mut v = serde_json::from_slice::<serde_json::Value>(&text).ok()?;
+    v.get_mut("regions")?.as_array_mut().map(std::mem::take)
+}
+
+/// Whether a `marks.json` region is a flat pane (key F).
+fn is_flat(region: &serde_json::Value) -> bool {
+    region["flat"] == serde_json::Value::Bool(true)
 }
 
 /// The flat panes of a `reflection.seed_masks` directory marked in `tgs
@@ -100,12 +111,7 @@ pub fn marked_regions(dir: &Path) -> bool {
 /// error that names the file.
 pub fn marked_panes(dir: &Path) -> Result<Option<Vec<PanePolygon>>> {
     let path = dir.join("marks.json");
-    let Ok(text) = std::fs::read(&path) else { return Ok(None) };
-    let Ok(v) = serde_json::from_slice::<serde_json::Value>(&text) else { return Ok(None) };
-    let Some(regions) = v["regions"].as_array().filter(|r| !r.is_empty()) else { return Ok(None) };
-    if regions.iter().any(|r| r["flat"] != serde_json::Value::Bool(true)) {
-        return Ok(None);
-    }
+    let Some(regions) = marks_regions(dir).filter(|r| !r.is_empty() && r.iter().all(is_flat)) else { return Ok(None) };
     let mut panes = Vec::with_capacity(regions.len());
     for (k, r) in regions.iter().enumerate() {
         // A flat region without a pane did not triangulate: it marked no mask either.

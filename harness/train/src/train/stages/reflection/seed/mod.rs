@@ -368,10 +368,7 @@ fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]
     }
     let pixels: usize = prepared.iter().map(|v| v.mask.len()).sum();
     let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
-    // Every `stride`-th residual pixel over the views, in view order.
-    let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
-    let rays: Vec<(usize, usize)> =
-        prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
+    let rays = strided_rays(prepared, total, p.max_rays);
     found.rim_views = membranes.iter().filter(|m| m.any()).count();
     for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, membranes)) {
         found.significant.extend(part.significant);
@@ -379,6 +376,13 @@ fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]
         found.agreeing.extend(part.agreeing);
     }
     found
+}
+
+/// The rays the seeding casts, (view, pixel): every `stride`-th of the
+/// `total` masked pixels over the views, in view order, at most `max_rays`.
+fn strided_rays(prepared: &[Prepared], total: usize, max_rays: u32) -> Vec<(usize, usize)> {
+    let stride = total.div_ceil(max_rays.max(1) as usize).max(1);
+    prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect()
 }
 
 /// [`march`] along `rays` (view, pixel), in order.

@@ -8,7 +8,7 @@
 
 use super::geometry::{in_parallel, unproject_pixel, V3};
 use super::normals::surfels;
-use super::{Prepared, Seed, SeedParams, SeedView};
+use super::{strided_rays, Prepared, Seed, SeedParams, SeedView};
 use glam::DVec3;
 
 /// A pane's hit this far behind the view's Stage I depth is hidden there.
@@ -98,9 +98,7 @@ pub fn pane_seeds(views: &[SeedView], panes: &[PanePolygon], p: &SeedParams) -> 
     if total == 0 || panes.is_empty() {
         return Vec::new();
     }
-    let stride = total.div_ceil(p.max_rays.max(1) as usize).max(1);
-    let rays: Vec<(usize, usize)> =
-        prepared.iter().enumerate().flat_map(|(vi, v)| (0..v.mask.len()).filter(|&i| v.mask[i]).map(move |i| (vi, i))).skip(stride - 1).step_by(stride).collect();
+    let rays = strided_rays(&prepared, total, p.max_rays);
     let hits: Vec<(V3, usize, V3)> = in_parallel(&rays, p.threads, |run| {
         run.iter()
             .filter_map(|&(vi, i)| {
