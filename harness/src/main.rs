@@ -78,7 +78,8 @@ enum Cmd {
         /// the training is the same as without it; closing it leaves the training running).
         #[arg(long)]
         view: bool,
-        /// With --view: milliseconds between the models the window is sent (at least 50).
+        /// With --view: the fewest milliseconds between the models the window is sent (at least 50;
+        /// longer where drawing one takes more than a twentieth of that).
         #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u64).range(50..=3_600_000))]
         view_every: u64,
         /// With --view: replay a `tgs view --script` file in the window (tests).

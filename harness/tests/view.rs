@@ -138,8 +138,11 @@ fn the_window_shows_what_tgs_render_writes() {
         "--view-script",
         base.join("live.txt").to_str().unwrap(),
     ]);
-    ok(&mut c);
+    let t = ok(&mut c);
     assert_eq!(checkpoint_arrays(&live), checkpoint_arrays(&run), "the window changed the training");
+    // The training waited while the window drew each model (at least the first and the last).
+    let sent = t.split("tgs train --view: ").nth(1).and_then(|r| r.split(' ').next()).and_then(|n| n.parse::<u32>().ok());
+    assert!(sent.is_some_and(|n| n >= 2) && t.contains("the training waited"), "{t}");
     assert_eq!(shot("live-early.png").dimensions(), (48, 48));
     assert_eq!(shot("live-final.png"), render("r_0.png"), "the trained model in the window");
     marking_the_glass(&base, &run);

@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tgs_engine::Buffer;
-use tgs_train::train::live::Snapshot;
+use tgs_train::train::live::{Handshake, Snapshot};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -50,8 +50,10 @@ struct App<'a> {
     /// A run still training: where its snapshots arrive; the window (and
     /// its device) until the first one came.
     live: Option<Slot>,
-    /// Live: the snapshot pace the window asks of the training (ms).
-    pace: Option<Arc<std::sync::atomic::AtomicU64>>,
+    /// Live: the window's word to the training that a snapshot is drawn.
+    handshake: Option<Arc<Handshake>>,
+    /// Live: the snapshot the next whole frame shows (told to the training once drawn).
+    unshown: Option<u64>,
     early: Option<(Gpu, Window)>,
     error: Option<anyhow::Error>,
     script: Option<VecDeque<Action>>,
@@ -87,14 +89,15 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 
 /// Run the window on `el` until it closes: on `args.run`, or with `live`
 /// on the snapshots of a run while it trains.
-pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<(Slot, Arc<std::sync::atomic::AtomicU64>)>) -> Result<()> {
-    let (live, pace) = live.unzip();
+pub fn run_on(el: EventLoop<LiveEvent>, args: &ViewArgs, live: Option<(Slot, Arc<Handshake>)>) -> Result<()> {
+    let (live, handshake) = live.unzip();
     let script = args.script.as_deref().map(read_script).transpose()?.map(VecDeque::from);
     let mut app = App {
         args,
         open: None,
         live,
-        pace,
+        handshake,
+        unshown: None,
         early: None,
         error: None,
         script,
@@ -144,6 +147,7 @@ impl App<'_> {
     fn take_snapshot(&mut self) -> Result<()> {
         let Some(snap) = self.live.as_ref().and_then(|s| s.lock().ok().and_then(|mut g| g.take())) else { return Ok(()) };
         self.dirty = true;
+        self.unshown = Some(snap.seq);
         if let Some(o) = self.open.as_mut() {
             return o.scene.update(snap);
         }
@@ -250,8 +254,20 @@ impl App<'_> {
         Ok(())
     }
 
-    /// Draw one frame; whether it was whole (else draw again).
+    /// Draw one frame; whether it was whole (else draw again). A live
+    /// snapshot counts as shown after a whole frame, or when there is
+    /// nothing to draw on (a minimised window): the training waits till then.
     fn draw(&mut self) -> Result<bool> {
+        let whole = self.draw_frame();
+        if !matches!(whole, Ok(false)) {
+            if let (Some(seq), Some(hs)) = (self.unshown.take(), &self.handshake) {
+                hs.drawn(seq);
+            }
+        }
+        whole
+    }
+
+    fn draw_frame(&mut self) -> Result<bool> {
         let Some(o) = self.open.as_mut() else { return Ok(true) };
         let size = o.window.inner_size();
         let Some((w, h)) = o.gpu.extent((size.width, size.height))? else { return Ok(true) };
@@ -291,11 +307,6 @@ impl App<'_> {
         self.frames = (self.frames.0 + 1, self.frames.1 + dt);
         self.last_ms = 1e3 * dt;
         self.motion.drawn(scale, self.last_ms);
-        // Live: a new model no sooner than nine frame times from now, so
-        // drawing takes at most a tenth of the machine the training shares.
-        if let Some(p) = &self.pace {
-            p.store((9.0 * self.last_ms) as u64, std::sync::atomic::Ordering::Relaxed);
-        }
         if let (Some(px), Some(path)) = (captured, self.capture.take()) {
             shot::write_new(&path, &px, (w, h), order)?;
             eprintln!("tgs view: wrote {}", path.display());

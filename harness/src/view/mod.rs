@@ -62,7 +62,7 @@ pub fn train_live(
     let proxy = el.create_proxy();
     let slot: app::Slot = Default::default();
     let open = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
-    let pace = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let handshake = std::sync::Arc::new(crate::train::live::Handshake::default());
     let send = {
         let (slot, proxy, open) = (slot.clone(), proxy.clone(), open.clone());
         std::sync::Arc::new(move |s: crate::train::live::Snapshot| {
@@ -75,20 +75,29 @@ pub fn train_live(
         })
     };
     let mut args = t.clone();
-    args.live = Some(crate::train::live::LiveSink { every, send, open: open.clone(), pace_ms: pace.clone() });
+    args.live = Some(crate::train::live::LiveSink { every, send, open: open.clone(), handshake: handshake.clone() });
     let trainer = std::thread::spawn(move || {
         let r = ctx().and_then(|c| crate::train::run::train(&c, &args));
         let _ = proxy.send_event(app::LiveEvent::Done { interrupted: r.as_ref().is_ok_and(|o| o.interrupted) });
         r
     });
-    let shown = app::run_on(el, v, Some((slot, pace)));
+    let shown = app::run_on(el, v, Some((slot, handshake.clone())));
     open.store(false, std::sync::atomic::Ordering::Relaxed);
     if let Err(e) = &shown {
         eprintln!("tgs: the view failed ({e:#}); training goes on without it");
     } else if !trainer.is_finished() {
         eprintln!("tgs: the window closed; training goes on (Ctrl-C stops it)");
     }
-    trainer.join().map_err(|_| anyhow::anyhow!("the training thread panicked"))?
+    let outcome = trainer.join().map_err(|_| anyhow::anyhow!("the training thread panicked"))?;
+    if let Ok(o) = &outcome {
+        let (sent, late, waited) = handshake.totals();
+        let pc = 100.0 * waited / o.wall_s.max(1e-9);
+        eprintln!(
+            "tgs train --view: {sent} models sent to the window ({late} not drawn within the wait's limit); the training waited {waited:.1} s for it ({pc:.1}% of its {:.1} s)",
+            o.wall_s
+        );
+    }
+    outcome
 }
 
 fn check_run(a: &ViewArgs) -> Result<()> {
