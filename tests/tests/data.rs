@@ -676,4 +676,12 @@ fn colmap_points_skipped_or_few_are_said() {
     std::fs::remove_file(c.join("sparse/0/points3D.txt")).unwrap();
     let ds = Dataset::load(&c, &LoadOptions::default()).unwrap();
     assert!(ds.points.is_none() && ds.warnings.is_empty(), "{:?}", ds.warnings);
+    // A points file that is there but unreadable is an error naming it, not "no points".
+    std::fs::write(c.join("sparse/0/points3D.txt"), "1 0 0\n").unwrap();
+    expect_err(Dataset::load(&c, &LoadOptions::default()), &["points3D.txt", "corrupt"]);
+    std::fs::write(c.join("sparse/0/points3D.txt"), [0xffu8, 0xfe, b'\n']).unwrap();
+    expect_err(Dataset::load(&c, &LoadOptions::default()), &["points3D.txt", "UTF-8"]);
+    std::fs::remove_file(c.join("sparse/0/points3D.txt")).unwrap();
+    std::fs::write(c.join("sparse/0/images.txt"), [0xffu8, 0xfe, b'\n']).unwrap();
+    expect_err(Dataset::load(&c, &LoadOptions::default()), &["images.txt", "UTF-8"]);
 }

@@ -137,36 +137,30 @@ pub type Model = (Vec<ColmapCamera>, Vec<ColmapImage>, Option<(Points, usize)>);
 
 /// Read cameras, images and points from a model directory (binary preferred).
 pub fn read_model(dir: &Path) -> Result<Model> {
-    let bin = dir.join("cameras.bin").is_file();
-    if bin {
-        let read = |name: &str| {
-            let p = dir.join(name);
-            std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display())).map(|b| (p, b))
-        };
-        let (p, b) = read("cameras.bin")?;
-        let cams = parse_cameras_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?;
-        let (p, b) = read("images.bin")?;
-        let ims = parse_images_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?;
-        let pts = match read("points3D.bin") {
-            Ok((p, b)) => Some(parse_points_bin(&b).with_context(|| format!("{}: corrupt", p.display()))?),
-            Err(_) => None,
-        };
-        Ok((cams, ims, pts))
+    if dir.join("cameras.bin").is_file() {
+        let (cams, ims) = (parse_file(dir, "cameras.bin", parse_cameras_bin)?, parse_file(dir, "images.bin", parse_images_bin)?);
+        Ok((cams, ims, optional(dir, "points3D.bin", parse_points_bin)?))
     } else {
-        let read = |name: &str| {
-            let p = dir.join(name);
-            std::fs::read_to_string(&p).with_context(|| format!("{}: cannot read", p.display())).map(|t| (p, t))
-        };
-        let (p, t) = read("cameras.txt")?;
-        let cams = parse_cameras_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?;
-        let (p, t) = read("images.txt")?;
-        let ims = parse_images_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?;
-        let pts = match read("points3D.txt") {
-            Ok((p, t)) => Some(parse_points_txt(&t).with_context(|| format!("{}: corrupt", p.display()))?),
-            Err(_) => None,
-        };
-        Ok((cams, ims, pts))
+        let (cams, ims) = (parse_file(dir, "cameras.txt", text(parse_cameras_txt))?, parse_file(dir, "images.txt", text(parse_images_txt))?);
+        Ok((cams, ims, optional(dir, "points3D.txt", text(parse_points_txt))?))
     }
+}
+
+/// Parse `dir/name`; the errors name the file.
+fn parse_file<T>(dir: &Path, name: &str, parse: impl FnOnce(&[u8]) -> Result<T>) -> Result<T> {
+    let p = dir.join(name);
+    let b = std::fs::read(&p).with_context(|| format!("{}: cannot read", p.display()))?;
+    parse(&b).with_context(|| format!("{}: corrupt", p.display()))
+}
+
+/// [`parse_file`] of a file a model may lack (None where it is absent).
+fn optional<T>(dir: &Path, name: &str, parse: impl FnOnce(&[u8]) -> Result<T>) -> Result<Option<T>> {
+    dir.join(name).exists().then(|| parse_file(dir, name, parse)).transpose()
+}
+
+/// A text parser as a parser of the file's bytes (UTF-8).
+fn text<T>(parse: impl FnOnce(&str) -> Result<T>) -> impl FnOnce(&[u8]) -> Result<T> {
+    move |b| parse(std::str::from_utf8(b).context("not UTF-8 text")?)
 }
 
 fn content_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
