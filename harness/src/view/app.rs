@@ -145,6 +145,11 @@ impl App<'_> {
     /// The latest snapshot of a run while it trains, into the scene (the
     /// first one opens it).
     fn take_snapshot(&mut self) -> Result<()> {
+        // Before the window exists a snapshot stays in the slot: `start`
+        // takes it (it was taken and dropped, and the window waited for the next).
+        if self.open.is_none() && self.early.is_none() {
+            return Ok(());
+        }
         let Some(snap) = self.live.as_ref().and_then(|s| s.lock().ok().and_then(|mut g| g.take())) else { return Ok(()) };
         self.dirty = true;
         self.unshown = Some(snap.seq);
