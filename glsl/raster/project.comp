@@ -50,8 +50,12 @@ layout(std430, binding = 10) writeonly buffer Keys { uint depth_keys[]; };
 layout(std430, binding = 11) writeonly buffer Ids { uint depth_ids[]; };
 // Screen radius in pixels (0 when culled): densification statistics.
 layout(std430, binding = 12) writeonly buffer Radii { float radii[]; };
+// The tiles of its rectangle it reaches (emit.comp reads them where it
+// has 2 to MASK_TILES).
+layout(std430, binding = 13) writeonly buffer TileMasks { uvec4 tile_masks[]; };
 
 #include "raster/project.glsl"
+#include "raster/tile_cull.glsl"
 
 void main() {
     // The Gaussians of this slice (pc.feat_base on; all of them unsliced).
@@ -75,7 +79,9 @@ void main() {
     }
     uint count = (rect.z - rect.x) * (rect.w - rect.y);
     rects[g] = rect;
-    tiles[g] = count;
+    uvec4 mask = uvec4(0u);
+    tiles[g] = count > 1u ? tiles_reached(pr.s.tu, pr.s.tv, pr.s.tw, pr.s.mu, pr.s.o, box, rect, mask) : count;
+    tile_masks[g] = mask;
     radii[g] = count > 0u ? pr.radius : 0.0;
     depth_keys[g] = count > 0u ? floatBitsToUint(pr.pv.z) : 0xFFFFFFFFu;
     if (count == 0u) {

@@ -543,6 +543,9 @@ pub struct SplatReach {
     /// pixel bounds widened by one pixel) where the splat is bounded and
     /// its bounding conic is well conditioned.
     pub pixel_box: Option<[f64; 4]>,
+    /// Every pixel centre (x, y) in `pixels`' sense: the splat reaches
+    /// alpha 1/255 there with a hit past the near plane.
+    pub reached: Vec<(u32, u32)>,
 }
 
 /// Where splat `g` reaches on screen; None when it is culled (not
@@ -554,6 +557,7 @@ pub fn splat_reach(s: &RefScene, cam: &Camera, degree: u32, g: usize) -> Option<
     let tw = sp.tw;
     let bounded = k2 * (tw[0] * tw[0] + tw[1] * tw[1]) - tw[2] * tw[2] < 0.0;
     let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    let mut reached = Vec::new();
     for py in 0..c.h {
         for px in 0..c.w {
             let (x, y) = (px as f64, py as f64);
@@ -563,13 +567,14 @@ pub fn splat_reach(s: &RefScene, cam: &Camera, degree: u32, g: usize) -> Option<
                 continue;
             }
             b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+            reached.push((px as u32, py as u32));
         }
     }
     let pixel_box = (bounded && !bbox_ill_conditioned(&sp, c.tiles())).then(|| {
         let p = pixel_bounds(sp.tu, sp.tv, sp.tw, sp.mu, k2);
         [p[0] - 1.0, p[1] - 1.0, p[2] + 1.0, p[3] + 1.0]
     });
-    Some(SplatReach { pixels: b[0].is_finite().then_some(b), bounded, pixel_box })
+    Some(SplatReach { pixels: b[0].is_finite().then_some(b), bounded, pixel_box, reached })
 }
 
 /// Tiles the splats of `s` that can reach alpha 1/255 would cover with a

@@ -24,7 +24,9 @@ fn forward_matches_cpu_random_scenes() {
 /// reaches: the GPU render equals the reference in which every splat is
 /// tested at every pixel of the image (no tiles), over opacities from below
 /// 1/255 to 0.99 and anisotropic splats, at sizes that are not multiples of
-/// the tile. And the boxes bin fewer tiles than 3-sigma squares.
+/// the tile. And the boxes bin fewer tiles than 3-sigma squares (and the
+/// splats are binned to no more tiles than their boxes' rectangles hold:
+/// raster/tile_cull.glsl drops those they cannot reach).
 #[test]
 fn binning_drops_no_pixel_a_splat_reaches() {
     let (ctx, rast, mut rng) = sh3_case("binning_drops_no_pixel_a_splat_reaches");
@@ -49,7 +51,7 @@ fn binning_drops_no_pixel_a_splat_reaches() {
         let culled = (0..scene.len()).filter(|&g| faint(g)).count();
         let binned: usize = run.rects.iter().map(tiles_of).sum();
         eprintln!("{w}x{h}: {} intersections (3-sigma squares: {squares}); {culled} of {n} splats below alpha 1/255", run.intersections);
-        assert_eq!(binned, run.intersections as usize);
+        assert!(run.intersections as usize <= binned, "{w}x{h}: {} intersections, more than the rectangles' {binned} tiles", run.intersections);
         assert!(culled > 0 && (0..scene.len()).all(|g| !faint(g) || tiles_of(&run.rects[g]) == 0));
         assert!(run.intersections as usize * 10 < squares * 9, "{w}x{h}: {} intersections, 3-sigma squares {squares}", run.intersections);
     }

@@ -265,10 +265,13 @@ fn tile_with_fifty_thousand_splats() {
 
 /// More intersections than one storage binding can hold gradient records
 /// for (128 MiB on lavapipe: 1.86M at 3 channels): the records are reached
-/// by device address. 20,000 thin diagonal "filler" splats in front bin into
-/// 100 tiles each while reaching alpha 1/255 at no pixel, so the 24 splats
-/// of a small scene behind them render and get gradients exactly as alone,
-/// from record slots past the binding limit (they are emitted last).
+/// by device address. 45,000 thin diagonal "filler" splats in front bin into
+/// about 46 tiles each (16 x 16 tiles; 94 at 8 x 8) while reaching alpha
+/// 1/255 at no pixel centre (a line between the centres, its low-pass disc
+/// off screen: the tile culling keeps tiles within a pixel of the line), so
+/// the 24 splats of a small scene behind them render and get gradients
+/// exactly as alone, from record slots past the binding limit (they are
+/// emitted last).
 #[test]
 fn gradient_records_past_the_binding_limit() {
     let ctx = ctx_shared();
@@ -289,18 +292,19 @@ fn gradient_records_past_the_binding_limit() {
         small.push(m.map(|v| v as f32), ls, random_quat(&mut rng), rng.uniform(-1.0, 2.0) as f32, &feats(&mut rng, 3));
     }
     let mut big = small.clone();
-    let fillers = 20_000;
-    // Long axis along screen (1, -1), centred at pixel (350, 350): the line
-    // x + y = 700, 134 px from the image's far corner, within an axis box
-    // [99, 601]^2 (o = 0.5: k = 3.11, half-length 355 px).
+    let fillers = 45_000;
+    // Long axis along screen (1, -1), centred at pixel (300, -44.5), off
+    // screen: the line x + y = 255.5, 0.35 px from the nearest pixel centres,
+    // across the whole image (o = 0.5: k = 3.11, half-length 435 px, half
+    // width 0.16 px; the low-pass disc's radius is 2.2 px).
     let q = {
         let h = -std::f64::consts::FRAC_PI_8;
         [h.cos() as f32, 0.0, 0.0, h.sin() as f32]
     };
     for i in 0..fillers {
         let z = 4.0 + 2.0 * i as f64 / fillers as f64;
-        let m = [(350.0 - cam.cx as f64) * z / f as f64, (350.0 - cam.cy as f64) * z / f as f64, z];
-        let ls = [(114.0 * z / f as f64).ln() as f32, (0.02 * z / f as f64).ln() as f32];
+        let m = [(300.0 - cam.cx as f64) * z / f as f64, (-44.5 - cam.cy as f64) * z / f as f64, z];
+        let ls = [(140.0 * z / f as f64).ln() as f32, (0.05 * z / f as f64).ln() as f32];
         big.push(m.map(|v| v as f32), ls, q, 0.0, &feats(&mut rng, 3));
     }
     let pixels = 256 * 256;
@@ -309,7 +313,7 @@ fn gradient_records_past_the_binding_limit() {
     let run = gpu_run(&rast, &big, &cam, &[0.2; 3], 0, Some(&go));
     let binding_cap = ctx.caps().max_storage_buffer_range / (4 * rast.record_len() as u64);
     eprintln!("{} intersections ({} alone); a binding holds records for {binding_cap}; {} span passes", run.intersections, alone.intersections, run.spans);
-    assert!(run.intersections as u64 >= alone.intersections as u64 + 100 * fillers as u64, "fillers binned into {} tiles", run.intersections - alone.intersections);
+    assert!(run.intersections as u64 >= alone.intersections as u64 + 40 * fillers as u64, "fillers binned into {} tiles", run.intersections - alone.intersections);
     if ctx.caps().max_storage_buffer_range <= 128 << 20 {
         assert!(run.intersections as u64 > binding_cap);
         // The same scene with the records in a binding is refused by name.
@@ -413,6 +417,51 @@ fn pixel_boxes_hold_every_reached_pixel() {
     assert!(reached >= 150 && unbounded >= 1 && compared >= 150, "the scene should hold both kinds of splat");
     // (Measured: about 35% with 16 x 16 tiles, 65% with 8 x 8.)
     assert!(in_boxes * 5 < in_tiles * 4, "the boxes hold {in_boxes} of their tiles' {in_tiles} pixels: they should cull");
+    check_validation(ctx);
+}
+
+/// A splat is binned only to the tiles of its rectangle it can reach
+/// (raster/tile_cull.glsl), once each, and to every tile holding a pixel the
+/// f64 reference sees it reach alpha 1/255 at (tiny, huge, faint, thin,
+/// edge-on and near-plane splats; 16 x 16 tiles with both kernels, 8 x 8
+/// with the Subgroup ones). On this scene of thin splats at every angle the
+/// culling drops a share of the rectangles' tiles.
+#[test]
+fn binned_tiles_hold_every_reached_pixel() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("binned_tiles_hold_every_reached_pixel"));
+    let cam = axis_camera(48, 40, 36.0);
+    let s = reach_scene(&mut rng);
+    let scene = RefScene::from_host(&s, false);
+    let reach: Vec<_> = (0..s.len()).map(|i| splat_reach(&scene, &cam, 3, i)).collect();
+    let g = Gaussians::upload(ctx, &s).unwrap();
+    for (kernels, small) in [(RasterKernels::Workgroup, false), (RasterKernels::Subgroup, false), (RasterKernels::Subgroup, true)] {
+        let rast = Rasterizer::with_options(ctx, 3, SH3, None, kernels).unwrap().small_tiles(small);
+        let mut frame = rast.frame(cam.width, cam.height, s.len() as u32, 1024).unwrap();
+        rast.forward(&g, &cam, &[0.2; 3], 3, &mut frame, false).unwrap();
+        let rects = frame.download_rects(s.len()).unwrap();
+        let isects = frame.download_intersections().unwrap();
+        let what = format!("{kernels:?} kernels, {} x {} tiles", frame.tile, frame.tile);
+        let mut binned = vec![std::collections::BTreeSet::new(); s.len()];
+        for &(t, i) in &isects {
+            assert!(binned[i as usize].insert(t), "{what}: Gaussian {i} binned to tile {t} twice");
+        }
+        let (tile, tiles_x) = (frame.tile, frame.tiles_x);
+        let mut in_rects = 0;
+        for (i, r) in rects.iter().enumerate() {
+            in_rects += ((r[2] - r[0]) * (r[3] - r[1])) as usize;
+            for &t in &binned[i] {
+                let (x, y) = (t % tiles_x, t / tiles_x);
+                assert!(x >= r[0] && x < r[2] && y >= r[1] && y < r[3], "{what}: Gaussian {i} binned to tile ({x}, {y}) outside its rectangle {r:?}");
+            }
+            for &(x, y) in reach[i].as_ref().map_or(&[][..], |r| &r.reached[..]) {
+                let t = (y / tile) * tiles_x + x / tile;
+                assert!(binned[i].contains(&t), "{what}: Gaussian {i} reaches pixel ({x}, {y}) but is not binned to its tile");
+            }
+        }
+        eprintln!("{what}: {} intersections of the rectangles' {in_rects} tiles", isects.len());
+        assert!(isects.len() < in_rects, "{what}: {} of {in_rects} tiles binned: the culling should drop some", isects.len());
+    }
     check_validation(ctx);
 }
 

@@ -44,7 +44,14 @@ impl Rasterizer {
             let mut bindings = self.param_bindings(frame, g, features, slice);
             bindings.extend([frame.proj.binding(), frame.pfeat.binding()]);
             if geometry {
-                bindings.extend([frame.rects.binding(), frame.tiles.binding(), frame.depth_keys.binding(), frame.depth_ids.binding(), frame.radii.binding()]);
+                bindings.extend([
+                    frame.rects.binding(),
+                    frame.tiles.binding(),
+                    frame.depth_keys.binding(),
+                    frame.depth_ids.binding(),
+                    frame.radii.binding(),
+                    frame.tile_masks.binding(),
+                ]);
             }
             let p = Push { feat_base: slice.0, feat_end: slice.1, ..*push };
             let count = slice.1.min(g.n) - slice.0;
@@ -74,8 +81,17 @@ impl Rasterizer {
 
         let sc = rec.begin_scope("raster.emit");
         rec.dispatch(
-            &self.emit,
-            &[frame.depth_ids.binding(), frame.offsets.binding(), frame.rects.binding(), frame.isect_keys.binding(), frame.isect_vals.binding(), frame.isect_gid.binding()],
+            &self.tile_kernels(frame.tile)?.emit,
+            &[
+                frame.depth_ids.binding(),
+                frame.offsets.binding(),
+                frame.rects.binding(),
+                frame.isect_keys.binding(),
+                frame.isect_vals.binding(),
+                frame.isect_gid.binding(),
+                frame.proj.binding(),
+                frame.tile_masks.binding(),
+            ],
             bytemuck::bytes_of(push),
             self.groups(n),
         )?;

@@ -66,6 +66,10 @@ pub struct Frame {
     pub(crate) pfeat: Buffer<f32>,
     pub(crate) rects: Buffer<u32>,
     pub(crate) tiles: Buffer<u32>,
+    /// Which tiles of its rectangle each Gaussian reaches, a bit a tile in
+    /// row order (four words), where the rectangle has at most 128
+    /// (raster/tile_cull.glsl `MASK_TILES`).
+    pub(crate) tile_masks: Buffer<u32>,
     pub(crate) depth_keys: Buffer<u32>,
     pub(crate) depth_ids: Buffer<u32>,
     pub(crate) depth_scratch: SortScratch,
@@ -122,6 +126,17 @@ impl Frame {
         let stride = super::PROJ_STRIDE;
         let proj = self.proj.download_range(0, stride * n)?;
         Ok(proj.chunks(stride).map(|c| [c[16], c[17], c[18], c[19]]).collect())
+    }
+    /// (tile, Gaussian) of every intersection of the last forward, in the
+    /// tile-sorted order the tile kernels read (tiles ascending, each
+    /// tile's splats front to back). One read-back, for inspection.
+    pub fn download_intersections(&self) -> anyhow::Result<Vec<(u32, u32)>> {
+        let m = self.last_intersections.min(self.capacity) as usize;
+        if m == 0 {
+            return Ok(Vec::new());
+        }
+        let (keys, vals, gid) = (self.isect_keys.download_range(0, m)?, self.isect_vals.download_range(0, m)?, self.isect_gid.download_range(0, m)?);
+        Ok(keys.iter().zip(&vals).map(|(&k, &v)| (k, gid[v as usize])).collect())
     }
     pub fn pixels(&self) -> usize {
         self.width as usize * self.height as usize

@@ -165,7 +165,6 @@ pub struct Rasterizer {
     sort: RadixSort,
     scan: PrefixSum,
     gather: Kernel,
-    emit: Kernel,
     plan: Kernel,
     gate: Kernel,
     ranges: Kernel,
@@ -254,7 +253,6 @@ impl Rasterizer {
             sort: RadixSort::new(ctx)?,
             scan: PrefixSum::new(ctx)?,
             gather: k("raster.gather", shaders::RASTER_GATHER, 4, false)?,
-            emit: k("raster.emit", shaders::RASTER_EMIT, push, false)?,
             plan: Kernel::new(ctx, &KernelDesc { name: "raster.plan", spirv: shaders::RASTER_PLAN, spec: &[], push_bytes: 16, subgroup_size: None, full_subgroups: false })?,
             gate: Kernel::new(
                 ctx,
@@ -398,6 +396,7 @@ impl Rasterizer {
             pfeat: fbuf("raster.pfeat", self.channels as usize * n)?,
             rects: buf("raster.rects", 4 * n)?,
             tiles: buf("raster.tiles", n)?,
+            tile_masks: buf("raster.tile_masks", 4 * n)?,
             depth_keys: buf("raster.depth_keys", n)?,
             depth_ids: buf("raster.depth_ids", n)?,
             depth_scratch: self.sort.scratch(n as u32)?,

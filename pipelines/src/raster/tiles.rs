@@ -45,6 +45,8 @@ pub(super) struct TileSpec {
 
 pub(super) struct TileKernels {
     pub(super) project: Kernel,
+    /// The emission of each splat's tiles (it tests them at this tile side).
+    pub(super) emit: Kernel,
     pub(super) forward: Kernel,
     pub(super) backward: Kernel,
     /// The feature-only backward (variant COLOUR_ONLY), built on first use.
@@ -135,6 +137,7 @@ impl TileSpec {
         let full_forward = self.kernels == RasterKernels::Subgroup;
         Ok(TileKernels {
             project: k("raster.project", project, &common, false)?,
+            emit: k("raster.emit", shaders::RASTER_EMIT, &common, false)?,
             forward: k("raster.forward", fwd, &spec, full_forward)?,
             backward: k("raster.backward", bwd, &spec, true)?,
             backward_colour: OnceLock::new(),
