@@ -28,7 +28,7 @@ bash scripts/setup.sh
 # The second pass also keeps the CPU rasterizer at 16 x 16 tiles
 # (TGS_RASTER_TILE=16; the default there is 8 x 8), so both tile sizes of
 # its kernels are compared against the f64 reference.
-KERNEL_SUITES=(engine sort scan raster raster_hard kept_weights loss loss_hf mlp mlp_blocks lightfield reflection env_init train_kernels slices train_step)
+KERNEL_SUITES=(engine sort scan raster raster_hard raster_reach kept_weights loss loss_hf mlp mlp_blocks lightfield reflection env_init train_kernels slices train_step)
 # Stream A's test binaries besides the subgroup-4 pass: the first before
 # it, the rest after. Stream B skips exactly their tests (listed from the
 # binaries, each name checked to be unique across the workspace, so a skip

@@ -5,7 +5,7 @@
 // tiles of its rectangle it can reach (raster/tile_cull.glsl, as
 // project.comp counted them: from its mask where the rectangle has at most
 // MASK_TILES, tested again where it has more), or the whole rectangle when
-// that is one tile. Should the count and the tiles ever disagree, the slots
+// that is one row or one column of tiles. Should the count and the tiles ever disagree, the slots
 // left are filled with the rectangle's other tiles (where the tile kernels
 // skip the splat), never left unwritten. Intersections past the capacity
 // are dropped (the plan records the total).
@@ -40,6 +40,16 @@ void main() {
         return;
     }
     uvec4 rc = rects[g];
+    if (!tiles_to_test(rc)) {
+        // One row or one column: every tile.
+        for (uint ty = rc.y; ty < rc.w && p < end; ty++) {
+            for (uint tx = rc.x; tx < rc.z && p < end; tx++) {
+                emit(p, ty * pc.tiles_x + tx, g);
+                p++;
+            }
+        }
+        return;
+    }
     uint area = (rc.z - rc.x) * (rc.w - rc.y);
     if (area > MASK_TILES) {
         uint o = PROJ_STRIDE * g;
@@ -59,7 +69,7 @@ void main() {
         }
         return;
     }
-    uvec4 mask = area <= 1u ? uvec4(1u, 0u, 0u, 0u) : tile_masks[g];
+    uvec4 mask = tile_masks[g];
     for (uint pass = 0u; pass < 2u && p < end; pass++) {
         uint bit = 0u;
         for (uint ty = rc.y; ty < rc.w && p < end; ty++) {

@@ -51,7 +51,7 @@ layout(std430, binding = 11) writeonly buffer Ids { uint depth_ids[]; };
 // Screen radius in pixels (0 when culled): densification statistics.
 layout(std430, binding = 12) writeonly buffer Radii { float radii[]; };
 // The tiles of its rectangle it reaches (emit.comp reads them where it
-// has 2 to MASK_TILES).
+// has two rows and two columns or more, at most MASK_TILES tiles).
 layout(std430, binding = 13) writeonly buffer TileMasks { uvec4 tile_masks[]; };
 
 #include "raster/project.glsl"
@@ -79,9 +79,13 @@ void main() {
     }
     uint count = (rect.z - rect.x) * (rect.w - rect.y);
     rects[g] = rect;
-    uvec4 mask = uvec4(0u);
-    tiles[g] = count > 1u ? tiles_reached(pr.s.tu, pr.s.tv, pr.s.tw, pr.s.mu, pr.s.o, box, rect, mask) : count;
-    tile_masks[g] = mask;
+    if (tiles_to_test(rect)) {
+        uvec4 mask;
+        tiles[g] = tiles_reached(pr.s.tu, pr.s.tv, pr.s.tw, pr.s.mu, pr.s.o, box, rect, mask);
+        tile_masks[g] = mask;
+    } else {
+        tiles[g] = count;
+    }
     radii[g] = count > 0u ? pr.radius : 0.0;
     depth_keys[g] = count > 0u ? floatBitsToUint(pr.pv.z) : 0xFFFFFFFFu;
     if (count == 0u) {

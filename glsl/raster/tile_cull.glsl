@@ -102,20 +102,34 @@ bool tile_reached(TileCull c, vec4 box, uint tx, uint ty) {
 // the rest of its work on lavapipe).
 #define MASK_TILES 128u
 
+// Whether the rectangle `rect` (x0, y0, x1, y1) is worth testing: one row
+// or one column of tiles is reached whole (the ellipse crosses its
+// bounds' every x and y, and the test widens the tiles by a pixel).
+bool tiles_to_test(uvec4 rect) {
+    return rect.z - rect.x > 1u && rect.w - rect.y > 1u;
+}
+
+// The mask of a rectangle of `area` tiles reached whole.
+uvec4 mask_all(uint area) {
+    uvec4 mask;
+    for (uint w = 0u; w < 4u; w++) {
+        uint bits = uint(clamp(int(area) - int(32u * w), 0, 32));
+        mask[w] = bits == 32u ? 0xFFFFFFFFu : (1u << bits) - 1u;
+    }
+    return mask;
+}
+
 // How many tiles of the rectangle `rect` (x0, y0, x1, y1) the splat
 // reaches; where it has at most MASK_TILES, `mask` gets a bit for each
 // (tiles in row order), so the emission need not test them again.
 uint tiles_reached(vec3 tu, vec3 tv, vec3 tw, vec2 mu, float o, vec4 box, uvec4 rect, out uvec4 mask) {
     uint area = (rect.z - rect.x) * (rect.w - rect.y);
     TileCull c = tile_cull_of(tu, tv, tw, mu, o);
-    mask = uvec4(0u);
     if (c.all) {
-        for (uint w = 0u; w < 4u; w++) {
-            uint bits = clamp(int(area) - int(32u * w), 0, 32);
-            mask[w] = bits == 32u ? 0xFFFFFFFFu : (1u << bits) - 1u;
-        }
+        mask = mask_all(area);
         return area;
     }
+    mask = uvec4(0u);
     uint n = 0u, bit = 0u;
     for (uint ty = rect.y; ty < rect.w; ty++) {
         for (uint tx = rect.x; tx < rect.z; tx++) {

@@ -276,3 +276,21 @@ pub fn constant_grads(channels: u32, pixels: usize, v: f32) -> Vec<f32> {
 pub fn random_grads(rng: &mut Rng, channels: u32, pixels: usize) -> Vec<f32> {
     (0..Plane::count(channels) as usize * pixels).map(|_| rng.uniform(-1.0, 1.0) as f32).collect()
 }
+
+/// Camera at the origin looking down +z (identity pose).
+pub fn axis_camera(w: u32, h: u32, f: f32) -> Camera {
+    Camera {
+        width: w,
+        height: h,
+        fx: f,
+        fy: f,
+        cx: (w as f32 - 1.0) * 0.5,
+        cy: (h as f32 - 1.0) * 0.5,
+        world_to_view: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+    }
+}
+
+/// `n` features uniform in [-1, 1].
+pub fn feats(rng: &mut Rng, n: usize) -> Vec<f32> {
+    (0..n).map(|_| rng.uniform(-1.0, 1.0) as f32).collect()
+}
