@@ -45,7 +45,15 @@ TileCull tile_cull_of(vec3 tu, vec3 tv, vec3 tw, vec2 mu, float o) {
     precise float d = c.K * (tw.x * tw.x + tw.y * tw.y) - tw.z * tw.z;
     precise vec2 centre = vec2(c.K * (tu.x * tw.x + tu.y * tw.y) - tu.z * tw.z, c.K * (tv.x * tw.x + tv.y * tw.y) - tv.z * tw.z) / d;
     c.centre = centre;
-    c.all = !(d < 0.0) || any(isnan(centre)) || any(isinf(centre)) || !(k2 > 0.0);
+    // Near the camera plane the conic is ill-conditioned in f32 (a splat
+    // 40 units wide seen nearly edge-on, its bounds 6e6 pixels across,
+    // had every tile culled although it reached the image's corner): such
+    // splats keep every tile, as tests/src/raster_ref.rs bbox_ill_conditioned
+    // judges them, and so do bounds far wider than the grid.
+    float scale = c.K * (tw.x * tw.x + tw.y * tw.y) + tw.z * tw.z;
+    vec2 grid = vec2(pc.tiles_x, pc.tiles_y) * float(TILE);
+    bool wide = any(greaterThan(abs(centre - mu), 16.0 * grid));
+    c.all = !(d < -1e-2 * scale) || wide || any(isnan(centre)) || any(isinf(centre)) || !(k2 > 0.0);
     return c;
 }
 

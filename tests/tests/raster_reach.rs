@@ -3,7 +3,7 @@
 //! of tiny, huge, faint, thin, edge-on and near-plane splats, and the image
 //! does not depend on the tile size.
 
-use tgs_pipelines::{Features, Gaussians, HostGaussians, RasterKernels, Rasterizer};
+use tgs_pipelines::{Camera, Features, Gaussians, HostGaussians, RasterKernels, Rasterizer};
 use tgs_tests::raster_ref::{splat_reach, RefScene};
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
@@ -136,6 +136,48 @@ fn binned_tiles_hold_every_reached_pixel() {
         }
         eprintln!("{what}: {} intersections of the rectangles' {in_rects} tiles", isects.len());
         assert!(isects.len() < in_rects, "{what}: {} of {in_rects} tiles binned: the culling should drop some", isects.len());
+    }
+    check_validation(ctx);
+}
+
+/// A splat whose conic is nearly degenerate (40 units wide, seen nearly
+/// edge-on, its bounds millions of pixels across: met in Stage I on a
+/// path-traced scene at 600 iterations) keeps every tile of its rectangle:
+/// the tile test's f32 conic culled them all, though it reaches the
+/// image's corner. The camera and splat are that run's, to the bit.
+#[test]
+fn an_ill_conditioned_conic_keeps_its_tiles() {
+    let ctx = ctx_shared();
+    let cam = Camera {
+        width: 50,
+        height: 50,
+        fx: 60.35534,
+        fy: 60.35534,
+        cx: 24.5,
+        cy: 24.5,
+        world_to_view: [[-0.71225935, -0.7019164, 0.0, 4.440892e-16], [-0.21419314, 0.21734934, -0.95230275, 0.47615138], [0.66843694, -0.67828655, -0.30515477, 4.216243]],
+    };
+    let mut rng = Rng(seed("an_ill_conditioned_conic_keeps_its_tiles"));
+    let mut s = HostGaussians::new(3, 16);
+    s.push([137.49989, 19.331934, -5.1486378], [3.5111022, 3.7653258], [0.38995364, 0.8836341, 0.55414945, 0.9168146], -1.9272645, &feats(&mut rng, 48));
+    let scene = RefScene::from_host(&s, false);
+    let reach = splat_reach(&scene, &cam, 1, 0).expect("the splat is projected");
+    assert!(reach.reached.len() >= 20, "the splat should reach the image's corner ({} pixels)", reach.reached.len());
+    let g = Gaussians::upload(ctx, &s).unwrap();
+    for (kernels, small) in [(RasterKernels::Workgroup, false), (RasterKernels::Subgroup, true)] {
+        let rast = Rasterizer::with_options(ctx, 3, SH3, None, kernels).unwrap().small_tiles(small);
+        let mut frame = rast.frame(cam.width, cam.height, 1, 1024).unwrap();
+        rast.forward(&g, &cam, &[0.0; 3], 1, &mut frame, false).unwrap();
+        let tiles: Vec<u32> = frame.download_intersections().unwrap().iter().map(|&(t, _)| t).collect();
+        for &(x, y) in &reach.reached {
+            let t = (y / frame.tile) * frame.tiles_x + x / frame.tile;
+            assert!(
+                tiles.contains(&t),
+                "{kernels:?}, {} x {} tiles: the splat reaches pixel ({x}, {y}) but is not binned to its tile (binned to {tiles:?})",
+                frame.tile,
+                frame.tile
+            );
+        }
     }
     check_validation(ctx);
 }
