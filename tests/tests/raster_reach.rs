@@ -95,25 +95,22 @@ fn pixel_boxes_hold_every_reached_pixel() {
     check_validation(ctx);
 }
 
-/// A splat is binned only to the tiles of its rectangle it can reach
-/// (raster/tile_cull.glsl), once each, and to every tile holding a pixel the
-/// f64 reference sees it reach alpha 1/255 at (tiny, huge, faint, thin,
-/// edge-on and near-plane splats; 16 x 16 tiles with both kernels, 8 x 8
-/// with the Subgroup ones). On this scene of thin splats at every angle the
-/// culling drops a share of the rectangles' tiles.
-#[test]
-fn binned_tiles_hold_every_reached_pixel() {
+/// Bins `s` seen by `cam` (SH degree `degree`) with each tile layout (16 x
+/// 16 tiles with both kernels, 8 x 8 with the Subgroup ones) and checks that
+/// every splat is binned only to tiles of its rectangle, once each, and to
+/// every tile holding a pixel the f64 reference sees it reach alpha 1/255
+/// at. Returns per layout its name, the intersections and the rectangles'
+/// tiles.
+fn check_binning(s: &HostGaussians, cam: &Camera, degree: u32) -> Vec<(String, usize, usize)> {
     let ctx = ctx_shared();
-    let mut rng = Rng(seed("binned_tiles_hold_every_reached_pixel"));
-    let cam = axis_camera(48, 40, 36.0);
-    let s = reach_scene(&mut rng);
-    let scene = RefScene::from_host(&s, false);
-    let reach: Vec<_> = (0..s.len()).map(|i| splat_reach(&scene, &cam, 3, i)).collect();
-    let g = Gaussians::upload(ctx, &s).unwrap();
+    let scene = RefScene::from_host(s, false);
+    let reach: Vec<_> = (0..s.len()).map(|i| splat_reach(&scene, cam, degree, i)).collect();
+    let g = Gaussians::upload(ctx, s).unwrap();
+    let mut out = Vec::new();
     for (kernels, small) in [(RasterKernels::Workgroup, false), (RasterKernels::Subgroup, false), (RasterKernels::Subgroup, true)] {
         let rast = Rasterizer::with_options(ctx, 3, SH3, None, kernels).unwrap().small_tiles(small);
         let mut frame = rast.frame(cam.width, cam.height, s.len() as u32, 1024).unwrap();
-        rast.forward(&g, &cam, &[0.2; 3], 3, &mut frame, false).unwrap();
+        rast.forward(&g, cam, &[0.2; 3], degree, &mut frame, false).unwrap();
         let rects = frame.download_rects(s.len()).unwrap();
         let isects = frame.download_intersections().unwrap();
         let what = format!("{kernels:?} kernels, {} x {} tiles", frame.tile, frame.tile);
@@ -131,13 +128,28 @@ fn binned_tiles_hold_every_reached_pixel() {
             }
             for &(x, y) in reach[i].as_ref().map_or(&[][..], |r| &r.reached[..]) {
                 let t = (y / tile) * tiles_x + x / tile;
-                assert!(binned[i].contains(&t), "{what}: Gaussian {i} reaches pixel ({x}, {y}) but is not binned to its tile");
+                assert!(binned[i].contains(&t), "{what}: Gaussian {i} reaches pixel ({x}, {y}) but is not binned to its tile (binned to {:?})", binned[i]);
             }
         }
-        eprintln!("{what}: {} intersections of the rectangles' {in_rects} tiles", isects.len());
-        assert!(isects.len() < in_rects, "{what}: {} of {in_rects} tiles binned: the culling should drop some", isects.len());
+        out.push((what, isects.len(), in_rects));
     }
     check_validation(ctx);
+    out
+}
+
+/// A splat is binned only to the tiles of its rectangle it can reach
+/// (raster/tile_cull.glsl) and to every tile holding a pixel it reaches
+/// (`check_binning`; tiny, huge, faint, thin, edge-on and near-plane
+/// splats). On this scene of thin splats at every angle the culling drops
+/// a share of the rectangles' tiles.
+#[test]
+fn binned_tiles_hold_every_reached_pixel() {
+    let mut rng = Rng(seed("binned_tiles_hold_every_reached_pixel"));
+    let s = reach_scene(&mut rng);
+    for (what, binned, in_rects) in check_binning(&s, &axis_camera(48, 40, 36.0), 3) {
+        eprintln!("{what}: {binned} intersections of the rectangles' {in_rects} tiles");
+        assert!(binned < in_rects, "{what}: {binned} of {in_rects} tiles binned: the culling should drop some");
+    }
 }
 
 /// A splat whose conic is nearly degenerate (40 units wide, seen nearly
@@ -147,7 +159,6 @@ fn binned_tiles_hold_every_reached_pixel() {
 /// image's corner. The camera and splat are that run's, to the bit.
 #[test]
 fn an_ill_conditioned_conic_keeps_its_tiles() {
-    let ctx = ctx_shared();
     let cam = Camera {
         width: 50,
         height: 50,
@@ -160,26 +171,9 @@ fn an_ill_conditioned_conic_keeps_its_tiles() {
     let mut rng = Rng(seed("an_ill_conditioned_conic_keeps_its_tiles"));
     let mut s = HostGaussians::new(3, 16);
     s.push([137.4999, 19.331934, -5.148638], [3.5111022, 3.7653258], [0.38995364, 0.8836341, 0.55414945, 0.9168146], -1.9272645, &feats(&mut rng, 48));
-    let scene = RefScene::from_host(&s, false);
-    let reach = splat_reach(&scene, &cam, 1, 0).expect("the splat is projected");
+    let reach = splat_reach(&RefScene::from_host(&s, false), &cam, 1, 0).expect("the splat is projected");
     assert!(reach.reached.len() >= 20, "the splat should reach the image's corner ({} pixels)", reach.reached.len());
-    let g = Gaussians::upload(ctx, &s).unwrap();
-    for (kernels, small) in [(RasterKernels::Workgroup, false), (RasterKernels::Subgroup, true)] {
-        let rast = Rasterizer::with_options(ctx, 3, SH3, None, kernels).unwrap().small_tiles(small);
-        let mut frame = rast.frame(cam.width, cam.height, 1, 1024).unwrap();
-        rast.forward(&g, &cam, &[0.0; 3], 1, &mut frame, false).unwrap();
-        let tiles: Vec<u32> = frame.download_intersections().unwrap().iter().map(|&(t, _)| t).collect();
-        for &(x, y) in &reach.reached {
-            let t = (y / frame.tile) * frame.tiles_x + x / frame.tile;
-            assert!(
-                tiles.contains(&t),
-                "{kernels:?}, {} x {} tiles: the splat reaches pixel ({x}, {y}) but is not binned to its tile (binned to {tiles:?})",
-                frame.tile,
-                frame.tile
-            );
-        }
-    }
-    check_validation(ctx);
+    check_binning(&s, &cam, 1);
 }
 
 /// The image does not depend on the tile size: the Subgroup kernels' 8 x 8
