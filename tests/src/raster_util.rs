@@ -277,6 +277,9 @@ pub fn random_grads(rng: &mut Rng, channels: u32, pixels: usize) -> Vec<f32> {
     (0..Plane::count(channels) as usize * pixels).map(|_| rng.uniform(-1.0, 1.0) as f32).collect()
 }
 
+/// Degree-3 spherical harmonics, the rasterizer tests' usual features.
+pub const SH3: Features = Features::Sh { degree: 3 };
+
 /// Camera at the origin looking down +z (identity pose).
 pub fn axis_camera(w: u32, h: u32, f: f32) -> Camera {
     Camera {

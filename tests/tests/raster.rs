@@ -7,8 +7,6 @@ use tgs_tests::raster_ref::RefScene;
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
 
-const SH3: Features = Features::Sh { degree: 3 };
-
 #[test]
 fn forward_matches_cpu_random_scenes() {
     let (ctx, rast, mut rng) = sh3_case("forward_matches_cpu_random_scenes");

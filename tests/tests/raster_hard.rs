@@ -7,8 +7,6 @@ use tgs_tests::raster_ref::{render, RefScene};
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
 
-const SH3: Features = Features::Sh { degree: 3 };
-
 /// Forward against the CPU, then a backward with random upstream gradients:
 /// every gradient finite.
 fn check_finite_backward(rast: &Rasterizer, scene: &HostGaussians, cam: &Camera, bg: &[f32], degree: u32, rng: &mut Rng, what: &str) -> GpuRun {

@@ -3,12 +3,10 @@
 //! of tiny, huge, faint, thin, edge-on and near-plane splats, and the image
 //! does not depend on the tile size.
 
-use tgs_pipelines::{Camera, Features, Gaussians, HostGaussians, RasterKernels, Rasterizer};
+use tgs_pipelines::{Camera, Gaussians, HostGaussians, RasterKernels, Rasterizer};
 use tgs_tests::raster_ref::{splat_reach, RefScene};
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
-
-const SH3: Features = Features::Sh { degree: 3 };
 
 /// Tiny, huge, faint, thin, edge-on and near-plane splats, some of them
 /// unbounded on screen, seen by `axis_camera(48, 40, 36.0)`.
