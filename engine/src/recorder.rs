@@ -144,7 +144,9 @@ impl Recorder {
     }
 
     /// Global memory barrier: all earlier compute/transfer writes become
-    /// visible to all later compute/transfer/indirect reads and writes.
+    /// visible to all later compute/transfer/indirect reads and writes, and
+    /// earlier indirect reads finish before later writes (a reused slot of
+    /// indirect arguments).
     pub fn barrier(&mut self) {
         let mb = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_READ | vk::AccessFlags::TRANSFER_READ)
@@ -159,7 +161,7 @@ impl Recorder {
         unsafe {
             self.ctx.device.cmd_pipeline_barrier(
                 self.cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::DRAW_INDIRECT,
                 vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::DRAW_INDIRECT,
                 vk::DependencyFlags::empty(),
                 &mb,

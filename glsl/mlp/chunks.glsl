@@ -17,9 +17,9 @@ uint weight_chunk_count(uint n) {
     return max((n + weight_chunk(n) - 1u) / weight_chunk(n), 1u);
 }
 
-// The walk of a counted grid (a power of two of workgroups along y or z):
-// g's bits reversed within log2(n) bits, so that the busy workgroups (the
-// first rows and chunks) spread over the grid.
+// The walk of a counted grid (a power of two of workgroups along z): g's
+// bits reversed within log2(n) bits, so that the busy workgroups (the first
+// chunks) spread over the grid.
 uint spread(uint g, uint n) {
     return n <= 1u ? g : bitfieldReverse(g) >> (32u - uint(findMSB(n)));
 }

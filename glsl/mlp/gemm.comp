@@ -22,9 +22,9 @@
 // written as the ReLU layer below's dZ).
 //
 // Rows on the GPU: with m_count != 0, C has min(m, rows[0]) rows (a sample
-// count a kernel wrote, e.g. the light field's compacted list); the grid
-// covers m and workgroups past the count do no work, so the work follows
-// the count without the host reading it back.
+// count a kernel wrote, e.g. the light field's compacted list); the grid is
+// written from the same count (mlp/grid.comp, an indirect dispatch), so the
+// work follows the count without the host reading it back.
 //
 // The k range is split over workgroups in z: chunk z sums
 // k in [z k_chunk, min((z + 1) k_chunk, kdim)) and writes its C at
@@ -80,13 +80,14 @@ float load_b(uint k, uint j) {
 void main() {
     uint lid = gl_LocalInvocationID.x;
     uint tx = lid % 8u, ty = lid / 8u;
-    // Counted rows and chunks: the grid (a power of two along y and z) is
-    // walked in bit-reversed order, so that the busy workgroups (the first
-    // rows and chunks) spread over the grid. A driver that hands each thread
-    // a contiguous range of workgroups (llvmpipe does) then balances them.
-    // Measured on lavapipe, 2 threads, forward on 2,340 of 4,096 samples:
-    // 59 ms in grid order, 39 ms bit-reversed, 36 ms with the host count.
-    uint row_tile = pc.m_count != 0u ? spread(gl_WorkGroupID.y, gl_NumWorkGroups.y) : gl_WorkGroupID.y;
+    // Counted chunks: the grid (a power of two along z) is walked in
+    // bit-reversed order, so that the busy workgroups (the first chunks)
+    // spread over the grid. A driver that hands each thread a contiguous
+    // range of workgroups (llvmpipe does) then balances them. (Counted rows
+    // were once walked so too: 59 ms in grid order, 39 ms bit-reversed, 36
+    // ms with the host count, forward on 2,340 of 4,096 samples on lavapipe;
+    // their grid now follows the count.)
+    uint row_tile = gl_WorkGroupID.y;
     uint zc = pc.k_count != 0u ? spread(gl_WorkGroupID.z, gl_NumWorkGroups.z) : gl_WorkGroupID.z;
     uint i0 = row_tile * TM, j0 = gl_WorkGroupID.x * TN;
     uint count = (pc.m_count | pc.k_count) != 0u ? rows[0] : 0u;

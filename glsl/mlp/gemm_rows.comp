@@ -23,8 +23,8 @@
 // (perf/RESULTS.md, twenty-eighth session). No branch sits in the inner
 // loop for the same reason (a branch masks the loads inside it).
 //
-// Rows on the GPU (m_count), chunks of k over z (k_count), the bit-reversed
-// walk of counted grids: as in mlp/gemm.comp.
+// Rows on the GPU (m_count, their grid from the count), chunks of k over z
+// (k_count, walked bit-reversed): as in mlp/gemm.comp.
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -74,7 +74,7 @@ float load_a(uint i, uint k) {
 }
 
 void main() {
-    uint row_group = pc.m_count != 0u ? spread(gl_WorkGroupID.y, gl_NumWorkGroups.y) : gl_WorkGroupID.y;
+    uint row_group = gl_WorkGroupID.y;
     uint zc = pc.k_count != 0u ? spread(gl_WorkGroupID.z, gl_NumWorkGroups.z) : gl_WorkGroupID.z;
     uint i = row_group * WGX * RR + gl_LocalInvocationID.x;
     uint j0 = gl_WorkGroupID.x * NB;

@@ -270,7 +270,9 @@ fn counted(name: &str, shape: MlpShape, cap: u32, extent: f64) -> Counted {
 /// The forward with the sample count read on the GPU (the embedded light
 /// field): the first `count` outputs bit-equal the host-count forward's,
 /// nothing past the count is written, a count past the capacity is
-/// clamped to it, and a count of 0 writes nothing.
+/// clamped to it, and a count of 0 writes nothing. The workgroups follow
+/// the count, not the capacity: none for 0, one row of them for 1, the
+/// same for counts past the capacity as for the capacity.
 #[test]
 fn forward_with_a_gpu_count_matches_and_stops_at_it() {
     let ctx = ctx_shared();
@@ -286,6 +288,7 @@ fn forward_with_a_gpu_count_matches_and_stops_at_it() {
         s.out.download_range(0, (cap * OUT) as usize).unwrap()
     };
     const SENTINEL: f32 = -7.25;
+    let mut rows_launched = Vec::new();
     for count in [0u32, 1, 63, 64, 65, 333, cap, cap + 500] {
         let s = mlp.scratch(shape, cap).unwrap();
         s.samples.upload(&flat).unwrap();
@@ -298,7 +301,11 @@ fn forward_with_a_gpu_count_matches_and_stops_at_it() {
         let k = (count.min(cap) * OUT) as usize;
         assert!(out[..k].iter().zip(&host[..k]).all(|(a, b)| a.to_bits() == b.to_bits()), "count {count}: outputs differ from the host-count forward");
         assert!(out[k..].iter().all(|&v| v == SENTINEL), "count {count}: wrote past the count");
+        rows_launched.push(s.last_counted_grid().unwrap()[1]);
     }
+    let [zero, one, .., full, past] = rows_launched[..] else { unreachable!() };
+    assert!(zero == 0 && one == 1 && past == full, "workgroup rows launched for counts 0, 1, ..., cap, past it: {rows_launched:?}");
+    assert!(rows_launched.windows(2).all(|w| w[0] <= w[1]) && full > 1, "workgroup rows launched must grow with the count: {rows_launched:?}");
     check_validation(ctx);
 }
 

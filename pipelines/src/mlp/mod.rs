@@ -34,9 +34,10 @@ pub use shape::{MlpShape, OUT, SAMPLE};
 
 use crate::shaders;
 use crate::train::{grid, kernel};
+use crate::WG;
 use anyhow::{bail, Result};
 use std::sync::Arc;
-use tgs_engine::{Buffer, Context, Kernel, KernelDesc, Recorder};
+use tgs_engine::{Buffer, BufferBinding, Context, Kernel, KernelDesc, Recorder};
 
 /// Chunk of samples per weight-gradient partial for `n` samples, and the
 /// number of chunks (at most [`MAX_CHUNKS`]). `glsl/mlp/chunks.glsl` is the
@@ -55,6 +56,8 @@ pub struct Mlp {
     encode: Kernel,
     head_grad: Kernel,
     reduce: Kernel,
+    /// The grid of a counted dispatch from the GPU-held count (glsl/mlp/grid.comp).
+    grid: Kernel,
 }
 
 /// Where a block's backward reads the output gradient and writes the
@@ -102,6 +105,7 @@ impl Mlp {
             encode: kernel(ctx, "mlp.encode", shaders::MLP_ENCODE, 24)?,
             head_grad: kernel(ctx, "mlp.head_grad", shaders::MLP_HEAD_GRAD, 12)?,
             reduce: kernel(ctx, "mlp.reduce", shaders::MLP_REDUCE, 20)?,
+            grid: kernel(ctx, "mlp.grid", shaders::MLP_GRID, 20)?,
         })
     }
 
@@ -179,6 +183,7 @@ impl Mlp {
             hidden,
             d,
             part: Buffer::uninit(ctx, "mlp.partials", (MAX_CHUNKS * shape.params()) as usize)?,
+            grid: Buffer::uninit(ctx, "mlp.grid", 3)?,
             fused,
         })
     }
@@ -193,18 +198,37 @@ impl Mlp {
         Ok(())
     }
 
-    /// One GEMM; `rows` (binding 4) is read only with `p.m_count` set.
-    fn dispatch(&self, rec: &mut Recorder, p: &Product, bufs: [&Buffer<f32>; 4], chunks: u32, rows: Option<&Buffer<u32>>) -> Result<()> {
+    /// The workgroups for a counted dispatch's items, at most `capacity`
+    /// and `per_group` a workgroup, written from the GPU-held `count` into
+    /// the scratch's argument slot (glsl/mlp/grid.comp): `[x, groups, z]`,
+    /// or with `x` 0 the groups laid out as [`grid`] would. One slot serves
+    /// every counted dispatch: each is recorded right after its grid.
+    fn record_grid(&self, rec: &mut Recorder, count: &Buffer<u32>, s: &MlpScratch, capacity: u32, per_group: u32, [x, z]: [u32; 2]) -> Result<BufferBinding> {
+        let max = self.ctx.caps().max_workgroup_count;
+        let max_x = max[0].min(65535);
+        if x != 0 && capacity.div_ceil(per_group) > max[1] {
+            bail!("the light field's {capacity} samples need {} workgroups; this device dispatches at most {}", capacity.div_ceil(per_group), max[1]);
+        }
+        let push = [capacity, per_group, x, z, max_x];
+        rec.dispatch(&self.grid, &[count.binding(), s.grid.binding()], bytemuck::cast_slice(&push), [1, 1, 1])?;
+        Ok(s.grid.binding())
+    }
+
+    /// One GEMM; `rows` (binding 4) is read only with `p.m_count` or
+    /// `p.k_count` set. Counted rows (`p.m_count`) are dispatched for the
+    /// count alone ([`Mlp::record_grid`]).
+    fn dispatch(&self, rec: &mut Recorder, p: &Product, bufs: [&Buffer<f32>; 4], chunks: u32, rows: Option<&Buffer<u32>>, s: &MlpScratch) -> Result<()> {
         let [a, b, y, c] = bufs.map(|b| b.binding());
         let r = rows.map(|r| r.binding()).unwrap_or_else(|| a.clone());
-        // Counted rows are walked in bit-reversed order over a power-of-two
-        // grid (glsl/mlp/chunks.glsl `spread`); counted chunks are MAX_CHUNKS.
-        let row_groups = |rows_per_group: u32| {
-            let g = p.m.div_ceil(rows_per_group);
-            if p.m_count != 0 {
-                g.next_power_of_two()
-            } else {
-                g
+        let counted = rows.filter(|_| p.m_count != 0);
+        let go = |rec: &mut Recorder, kernel: &Kernel, push: &Product, x: u32, per_group: u32| -> Result<()> {
+            let bindings = [a.clone(), b.clone(), y.clone(), c.clone(), r.clone()];
+            match counted {
+                Some(count) => {
+                    let args = self.record_grid(rec, count, s, p.m, per_group, [x, chunks])?;
+                    rec.dispatch_indirect(kernel, &bindings, bytemuck::bytes_of(push), &args)
+                }
+                None => rec.dispatch(kernel, &bindings, bytemuck::bytes_of(push), [x, p.m.div_ceil(per_group), chunks]),
             }
         };
         if self.gemm_kind == Gemm::Rows {
@@ -220,19 +244,14 @@ impl Mlp {
                     y_off: p.y_off + j0 * p.y_cs,
                     ..*p
                 };
-                rec.dispatch(
-                    &self.gemm[k],
-                    &[a.clone(), b.clone(), y.clone(), c.clone(), r.clone()],
-                    bytemuck::bytes_of(&q),
-                    [cols.div_ceil(cfg.nb), row_groups(cfg.wg * cfg.rr), chunks],
-                )?;
+                go(rec, &self.gemm[k], &q, cols.div_ceil(cfg.nb), cfg.wg * cfg.rr)?;
             }
             return Ok(());
         }
         let side = p.m.min(p.n).max(32);
         let k = BLOCKS.iter().rposition(|&rb| 8 * rb <= side).unwrap_or(0);
         let tile = 8 * BLOCKS[k];
-        rec.dispatch(&self.gemm[k], &[a, b, y, c, r], bytemuck::bytes_of(p), [p.n.div_ceil(tile), row_groups(tile), chunks])
+        go(rec, &self.gemm[k], p, p.n.div_ceil(tile), tile)
     }
 
     /// Record Phi on the first `n` samples of `s.samples` into `s.out`.
@@ -275,8 +294,14 @@ impl Mlp {
         let m_count = rows.is_some() as u32;
         let sc = rec.begin_scope("mlp.encode");
         let push = [n, sh.levels_x, sh.levels_w, sh.width, m_count, base];
-        let r = rows.map(|r| r.binding()).unwrap_or_else(|| s.samples.binding());
-        rec.dispatch(&self.encode, &[s.samples.binding(), s.in0.binding(), s.cat.binding(), r], bytemuck::cast_slice(&push), grid(&self.ctx, n))?;
+        let bindings = [s.samples.binding(), s.in0.binding(), s.cat.binding(), rows.map(|r| r.binding()).unwrap_or_else(|| s.samples.binding())];
+        match rows {
+            Some(count) => {
+                let args = self.record_grid(rec, count, s, n, WG, [0, 1])?;
+                rec.dispatch_indirect(&self.encode, &bindings, bytemuck::cast_slice(&push), &args)?;
+            }
+            None => rec.dispatch(&self.encode, &bindings, bytemuck::cast_slice(&push), grid(&self.ctx, n))?,
+        }
         rec.end_scope(sc);
         let sc = rec.begin_scope("mlp.forward");
         for l in 0..sh.layers() {
@@ -302,7 +327,7 @@ impl Mlp {
                 m_count,
                 ..Default::default()
             };
-            self.dispatch(rec, &p, [x, params, x, out], 1, rows)?;
+            self.dispatch(rec, &p, [x, params, x, out], 1, rows, s)?;
         }
         rec.end_scope(sc);
         Ok(())
@@ -409,7 +434,7 @@ impl Mlp {
                 k_count: counted,
                 ..Default::default()
             };
-            self.dispatch(rec, &pw, [dz, x, dz, &s.part], chunks, rows)?;
+            self.dispatch(rec, &pw, [dz, x, dz, &s.part], chunks, rows, s)?;
             if l > 0 && s.fused.is_none() {
                 // dZ_{l-1} (n x width) = (dZ W[:, :width]) * ReLU'(Y_{l-1})
                 // (the skip layer's encoded columns need no gradient).
@@ -436,7 +461,7 @@ impl Mlp {
                     m_count: counted,
                     ..Default::default()
                 };
-                self.dispatch(rec, &pd, [dz, params, y, dz_below], 1, rows)?;
+                self.dispatch(rec, &pd, [dz, params, y, dz_below], 1, rows, s)?;
             }
         }
         rec.end_scope(sc);

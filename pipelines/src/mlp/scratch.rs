@@ -33,6 +33,8 @@ pub struct MlpScratch {
     /// between (none with the fused kernels, which keep every layer's).
     pub(super) d: Vec<Buffer<f32>>,
     pub(super) part: Buffer<f32>,
+    /// The indirect arguments of the counted dispatches ([`Mlp::record_grid`](super::Mlp)).
+    pub(super) grid: Buffer<u32>,
     /// The fused kernels of this shape and their activations
     /// ([`Gemm::Fused`](super::Gemm::Fused); the hidden layers' outputs and dZ are theirs then).
     pub(super) fused: Option<Fused>,
@@ -58,10 +60,16 @@ impl MlpScratch {
     }
     /// Bytes of device memory held.
     pub fn bytes(&self) -> u64 {
-        let mut b = self.samples.bytes() + self.out.bytes() + self.in0.bytes() + self.cat.bytes() + self.part.bytes();
+        let mut b = self.samples.bytes() + self.out.bytes() + self.in0.bytes() + self.cat.bytes() + self.part.bytes() + self.grid.bytes();
         b += self.hidden.iter().flatten().map(|h| h.bytes()).sum::<u64>();
         b += self.fused.as_ref().map_or(0, |f| f.bytes());
         b + self.d.iter().map(|d| d.bytes()).sum::<u64>()
+    }
+    /// The workgroups (x, y, z) the last counted dispatch ran: those its
+    /// GPU-held count needed, not the capacity's (tests).
+    pub fn last_counted_grid(&self) -> anyhow::Result<[u32; 3]> {
+        let g = self.grid.download()?;
+        Ok([g[0], g[1], g[2]])
     }
     /// gamma(x) per sample (row stride `dx`), after a forward.
     pub fn first_input(&self) -> &Buffer<f32> {
