@@ -1,4 +1,5 @@
 #version 460
+// variant: COLOUR_ONLY
 // Per-pixel 2DGS forward (method-notes §1.5): one 16x16 workgroup per tile
 // (TILE is 16 for these kernels), splats staged in shared memory in batches
 // of 256, front to back, each evaluated at the pixels of its box only.

@@ -1,4 +1,5 @@
 #version 460
+// variant: COLOUR_ONLY
 // Per-pixel 2DGS forward in ONE SUBGROUP per tile (for CPU drivers; see
 // raster/backward_sg.comp): invocation l owns the PPT = TILE^2 / WG pixels
 // l, l + WG, ... of the tile (8x8 where the frame allows, else 16x16) with

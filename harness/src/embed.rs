@@ -115,7 +115,8 @@ impl SceneRenderer {
         self.view(cam.width, cam.height)?;
         let v = &self.views[&(cam.width, cam.height)];
         let sc = rec.begin_scope("view.scattering");
-        self.raster.record_forward(rec, &self.scat, cam, &bg, sh, &v.scat)?;
+        // The composite reads the scattering set's colour alone.
+        self.raster.record_forward_colour(rec, &self.scat, cam, &bg, sh, &v.scat)?;
         rec.end_scope(sc);
         let colour = match (self.layer.as_mut(), v.composite.as_ref()) {
             (None, _) => &v.scat.out,

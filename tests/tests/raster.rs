@@ -2,7 +2,8 @@
 //! finite differences of it (gradients), plus determinism, multi-span tiles
 //! and the hard cases. CI runs this at subgroup 8 and 4.
 
-use tgs_pipelines::{Features, RasterKernels, Rasterizer, RecordAccess};
+use tgs_engine::Recorder;
+use tgs_pipelines::{Features, Gaussians, RasterKernels, Rasterizer, RecordAccess};
 use tgs_tests::raster_ref::RefScene;
 use tgs_tests::raster_util::*;
 use tgs_tests::*;
@@ -329,6 +330,48 @@ fn colour_only_backward_matches_the_full_feature_gradients() {
             let moved = |v: &[f32], w: &[f32]| v.iter().zip(w).filter(|(a, b)| a != b).count();
             assert!(moved(&full.means, &colour.means) > full.means.len() / 4, "{kernels:?}: the positions' gradients should lack the geometric terms");
         }
+    }
+    check_validation(ctx);
+}
+
+/// The colour-only forward (a final image: `tgs::embed`, the viewer) gives
+/// the full forward's feature and alpha planes bit for bit — an ordinary
+/// scene with both tile kernels, both tile sizes and tiles over several
+/// span passes — and writes no other plane.
+#[test]
+fn a_colour_only_forward_gives_the_full_forwards_colour() {
+    let ctx = ctx_shared();
+    let mut rng = Rng(seed("a_colour_only_forward_gives_the_full_forwards_colour"));
+    let cam = default_camera(45, 38);
+    let mut spec = SceneSpec::new(400, 3, SH3);
+    spec.log_scale = (-3.0, -1.0);
+    let scene = random_scene(&mut rng, &spec);
+    let bg = [0.3, 0.6, 0.1];
+    const SENTINEL: f32 = -3.5;
+    let planes = (cam.width * cam.height) as usize;
+    for (kernels, small, span) in
+        [(RasterKernels::Subgroup, true, None), (RasterKernels::Subgroup, false, Some(32)), (RasterKernels::Workgroup, false, None), (RasterKernels::Workgroup, false, Some(32))]
+    {
+        let what = format!("{kernels:?}, small tiles {small}, span {span:?}");
+        let rast = Rasterizer::with_options(ctx, 3, SH3, span, kernels).unwrap().small_tiles(small);
+        let full = gpu_run(&rast, &scene, &cam, &bg, 3, None);
+        let g = Gaussians::upload(ctx, &scene).unwrap();
+        let mut frame = rast.frame(cam.width, cam.height, scene.len() as u32, 64).unwrap();
+        frame.out.upload(&vec![SENTINEL; frame.out.len()]).unwrap();
+        for tries in 0.. {
+            assert!(tries < 4, "{what}: the view never fitted its frame");
+            let mut rec = Recorder::new(ctx).unwrap();
+            rast.record_forward_colour(&mut rec, &g, &cam, &bg, 3, &frame).unwrap();
+            rec.submit_and_wait().unwrap();
+            if rast.fit(&mut frame).unwrap() {
+                break;
+            }
+        }
+        assert!(span.is_none() || frame.spans > 1, "{what}: one span pass");
+        let out = frame.out.download().unwrap();
+        let colour = 4 * planes; // three features and alpha
+        assert_eq!(bits(&out[..colour]), bits(&full.out[..colour]), "{what}: colour or alpha differs from the full forward's");
+        assert!(out[colour..].iter().all(|&v| v == SENTINEL), "{what}: wrote a plane past alpha");
     }
     check_validation(ctx);
 }

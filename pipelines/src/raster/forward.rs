@@ -21,7 +21,19 @@ impl Rasterizer {
     pub fn record_forward_with(&self, rec: &mut Recorder, s: Splats, cam: &Camera, background: &[f32], frame: &Frame) -> Result<()> {
         let push = self.begin_forward(rec, &s, cam, background, frame)?;
         self.record_binning(rec, s.g, s.features, &push, frame)?;
-        self.record_tiles_forward(rec, &push, frame)
+        self.record_tiles_forward(rec, &push, frame, false)
+    }
+
+    /// As [`Rasterizer::record_forward`] for a final image: the feature
+    /// planes and alpha, bit for bit the full forward's, and nothing else
+    /// (the depth, normal, median and distortion planes keep what they
+    /// held; no backward may read the frame). Cheaper per pixel
+    /// (glsl/raster/pixel_blend.glsl).
+    pub fn record_forward_colour(&self, rec: &mut Recorder, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
+        let s = Splats::own(g, sh_degree);
+        let push = self.begin_forward(rec, &s, cam, background, frame)?;
+        self.record_binning(rec, s.g, s.features, &push, frame)?;
+        self.record_tiles_forward(rec, &push, frame, true)
     }
 
     /// A view's forward up to its binning: the inputs checked, the camera
@@ -41,9 +53,11 @@ impl Rasterizer {
         Ok(push)
     }
 
-    /// A view's forward after its binning: each tile's splats, span by span.
-    pub(super) fn record_tiles_forward(&self, rec: &mut Recorder, push: &Push, frame: &Frame) -> Result<()> {
-        let forward = &self.tile_kernels(frame.tile)?.forward;
+    /// A view's forward after its binning: each tile's splats, span by
+    /// span (`colour_only`: [`Rasterizer::record_forward_colour`]'s kernel).
+    pub(super) fn record_tiles_forward(&self, rec: &mut Recorder, push: &Push, frame: &Frame, colour_only: bool) -> Result<()> {
+        let kernels = self.tile_kernels(frame.tile)?;
+        let forward = if colour_only { kernels.forward_colour()? } else { &kernels.forward };
         let tiles = frame.tiles();
         let tile_groups = groups_2d(tiles, self.max_x());
         let mut bindings = Self::tile_bindings(frame);

@@ -49,12 +49,17 @@ pub(super) struct TileKernels {
     pub(super) emit: Kernel,
     pub(super) forward: Kernel,
     pub(super) backward: Kernel,
-    /// The feature-only backward (variant COLOUR_ONLY), built on first use.
+    /// The feature-only backward and the colour-only forward (variant
+    /// COLOUR_ONLY of each), built on first use.
     backward_colour: OnceLock<Kernel>,
-    /// The tile kernels' specialization (the backward's, for the colour one).
+    forward_colour: OnceLock<Kernel>,
+    /// The tile kernels' specialization (the forward's and backward's, for the colour ones).
     spec: Vec<(u32, u32)>,
     ctx: Arc<Context>,
-    colour_spirv: &'static [u8],
+    /// SPIR-V of the colour backward and forward.
+    colour_spirv: [&'static [u8]; 2],
+    /// Whether the forwards need full subgroups (the Subgroup kernels).
+    full_forward: bool,
 }
 
 impl TileSpec {
@@ -127,6 +132,10 @@ impl TileSpec {
             (RasterKernels::Subgroup, false) => (shaders::RASTER_FORWARD_SG, shaders::RASTER_BACKWARD_SG, shaders::RASTER_BACKWARD_SG_COLOUR_ONLY),
             (RasterKernels::Subgroup, true) => (shaders::RASTER_FORWARD_SG, shaders::RASTER_BACKWARD_SG_RECORDS_BDA, shaders::RASTER_BACKWARD_SG_COLOUR_ONLY_RECORDS_BDA),
         };
+        let fwd_colour = match self.kernels {
+            RasterKernels::Workgroup => shaders::RASTER_FORWARD_COLOUR_ONLY,
+            RasterKernels::Subgroup => shaders::RASTER_FORWARD_SG_COLOUR_ONLY,
+        };
         // The Subgroup kernels' projection reads the Gaussians as texel
         // buffers (one gather a load on llvmpipe, where a storage load
         // loops over the lanes).
@@ -141,21 +150,32 @@ impl TileSpec {
             forward: k("raster.forward", fwd, &spec, full_forward)?,
             backward: k("raster.backward", bwd, &spec, true)?,
             backward_colour: OnceLock::new(),
+            forward_colour: OnceLock::new(),
             spec,
             ctx: ctx.clone(),
-            colour_spirv: colour,
+            colour_spirv: [colour, fwd_colour],
+            full_forward,
         })
     }
 }
 
 impl TileKernels {
     pub(super) fn backward_colour(&self) -> Result<&Kernel> {
-        if let Some(k) = self.backward_colour.get() {
+        self.colour_kernel(&self.backward_colour, "raster.backward", self.colour_spirv[0], true)
+    }
+
+    /// The forward that writes the features and alpha alone (a final image).
+    pub(super) fn forward_colour(&self) -> Result<&Kernel> {
+        self.colour_kernel(&self.forward_colour, "raster.forward", self.colour_spirv[1], self.full_forward)
+    }
+
+    fn colour_kernel<'a>(&self, cell: &'a OnceLock<Kernel>, name: &str, spirv: &[u8], full_subgroups: bool) -> Result<&'a Kernel> {
+        if let Some(k) = cell.get() {
             return Ok(k);
         }
         let push_bytes = std::mem::size_of::<Push>() as u32;
-        let k = Kernel::new(&self.ctx, &KernelDesc { name: "raster.backward", spirv: self.colour_spirv, spec: &self.spec, push_bytes, subgroup_size: None, full_subgroups: true })?;
-        Ok(self.backward_colour.get_or_init(|| k))
+        let k = Kernel::new(&self.ctx, &KernelDesc { name, spirv, spec: &self.spec, push_bytes, subgroup_size: None, full_subgroups })?;
+        Ok(cell.get_or_init(|| k))
     }
 }
 
