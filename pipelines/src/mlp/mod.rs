@@ -206,8 +206,10 @@ impl Mlp {
     fn record_grid(&self, rec: &mut Recorder, count: &Buffer<u32>, s: &MlpScratch, capacity: u32, per_group: u32, [x, z]: [u32; 2]) -> Result<BufferBinding> {
         let max = self.ctx.caps().max_workgroup_count;
         let max_x = max[0].min(65535);
-        if x != 0 && capacity.div_ceil(per_group) > max[1] {
-            bail!("the light field's {capacity} samples need {} workgroups; this device dispatches at most {}", capacity.div_ceil(per_group), max[1]);
+        // The most rows of workgroups the count can ask for (x = 0: rows of max_x).
+        let rows = if x == 0 { capacity.div_ceil(per_group).div_ceil(max_x) } else { capacity.div_ceil(per_group) };
+        if rows > max[1] {
+            bail!("the light field's {capacity} samples need {rows} rows of workgroups; this device dispatches at most {}", max[1]);
         }
         let push = [capacity, per_group, x, z, max_x];
         rec.dispatch(&self.grid, &[count.binding(), s.grid.binding()], bytemuck::cast_slice(&push), [1, 1, 1])?;
