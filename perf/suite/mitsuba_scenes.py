@@ -91,17 +91,20 @@ def translate_scale(t, s, rot_z_deg=0.0):
 class Prim:
     """One shape: kind in sphere | cube | rectangle | cylinder (Mitsuba's unit
     shapes; the cylinder open, radius 1, z in [0, 1]) | arc (the part of that
-    cylinder with |azimuth| <= `half_angle`, a triangle mesh for Mitsuba)."""
+    cylinder with |azimuth| <= `half_angle`, a triangle mesh for Mitsuba) |
+    triangles (flat triangles, `tris` a T x 3 x 3 array in the shape's frame)."""
 
-    def __init__(self, kind, to_world, bsdf, glass=False, emitter=None, half_angle=None):
+    def __init__(self, kind, to_world, bsdf, glass=False, emitter=None, half_angle=None, tris=None):
         self.kind, self.m, self.bsdf, self.glass = kind, to_world, bsdf, glass
-        self.emitter, self.half_angle = emitter, half_angle
+        self.emitter, self.half_angle, self.tris = emitter, half_angle, tris
         self.inv = np.linalg.inv(to_world)
 
     def mitsuba(self, mi, tmp):
         d = {"type": self.kind, "to_world": mi.ScalarTransform4f(self.m.tolist()), "bsdf": self.bsdf}
         if self.kind == "arc":
             d["type"], d["filename"], d["face_normals"] = "obj", arc_obj(tmp, self.half_angle), False
+        if self.kind == "triangles":
+            d["type"], d["filename"], d["face_normals"] = "obj", triangles_obj(tmp, self.tris), True
         if self.emitter is not None:
             d["emitter"] = self.emitter
         return d
@@ -160,6 +163,23 @@ class Prim:
                     good &= np.abs(np.arctan2(p[:, 1], p[:, 0])) <= self.half_angle
                 t = np.where(good, r, t)
                 n_local = np.where(good[:, None], p * np.array([1.0, 1.0, 0.0]), n_local)
+        elif self.kind == "triangles":
+            t = inf.copy()
+            for a, b, c in self.tris:
+                # Moller-Trumbore, both sides.
+                e1, e2 = b - a, c - a
+                pv = np.cross(ld, e2)
+                det = pv @ e1
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    inv = 1.0 / det
+                    tv = lo - a
+                    u = (tv * pv).sum(1) * inv
+                    qv = np.cross(tv, e1)
+                    v = (ld * qv).sum(1) * inv
+                    r = (qv @ e2) * inv
+                good = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (r > 1e-6) & (r < t)
+                t = np.where(good, r, t)
+                n_local = np.where(good[:, None], np.cross(e1, e2), n_local)
         else:
             raise ValueError(self.kind)
         n = n_local @ self.inv[:3, :3]  # inverse transpose
@@ -186,6 +206,24 @@ def arc_obj(tmp, half_angle, segments=512):
     return path
 
 
+def triangles_obj(tmp, tris):
+    """An OBJ of flat triangles (T x 3 x 3)."""
+    path = os.path.join(tmp, f"tris_{len(tris)}_{abs(hash(tris.tobytes()))}.obj")
+    lines = [f"v {x:.9f} {y:.9f} {z:.9f}" for tri in tris for x, y, z in tri]
+    lines += [f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}" for k in range(len(tris))]
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path
+
+
+def pyramid_faces(half, height):
+    """The four sloping faces of a square pyramid standing on z = 0, base
+    half-width `half`, apex `height` above the centre (no base)."""
+    c = [np.array(p, float) for p in ((half, half, 0), (-half, half, 0), (-half, -half, 0), (half, -half, 0))]
+    apex = np.array([0.0, 0.0, height])
+    return np.array([[c[k], c[(k + 1) % 4], apex] for k in range(4)])
+
+
 def twosided(bsdf):
     return {"type": "twosided", "bsdf": bsdf}
 
@@ -194,13 +232,14 @@ def checker(mi, c0, c1, scale):
     return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
 
 
-SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near", "bookshelf", "house"]
+SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near", "bookshelf", "house", "pyramid"]
 # The suite of issue 42; `vehicle` (planar windows around an opaque body),
 # `globe_near` (a glass sphere among nearby objects), `bookshelf` (two
 # glass doors in one frame, pieces of glass apart in one plane) and `house`
-# (a window in each of two walls at a right angle) are the paper's kinds
-# added for issue 77: `--scene paper` makes them.
-PAPER = ["vehicle", "globe_near", "bookshelf", "house"]
+# (a window in each of two walls at a right angle) and `pyramid` (a glass
+# pyramid over two objects among near pillars: closed glass of flat faces)
+# are the paper's kinds added for issue 77: `--scene paper` makes them.
+PAPER = ["vehicle", "globe_near", "bookshelf", "house", "pyramid"]
 SUITE = [n for n in SCENES if n != "diffuse" and n not in PAPER]
 FRONT_ONLY = {"facade", "windshield", "bookshelf"}
 
@@ -376,6 +415,14 @@ def build(mi, name, reflection=True):
         prims.append(Prim("cube", translate_scale([-1.3, -1.2, 0.3], [0.3, 0.2, 0.3], 40), checker(mi, [0.9, 0.3, 0.3], [0.95, 0.95, 0.95], 3)))
     elif name == "cabinet":
         prims.append(Prim("cube", translate_scale([0, 0, 0.61], [0.7, 0.7, 0.6], 25), glass, glass=True))
+    elif name == "pyramid":
+        # A glass pyramid over the two objects, among near pillars (the
+        # paper's "pyramid of glass"): closed glass of four flat faces.
+        prims.append(Prim("triangles", translate_scale([0, 0, 0.002], 1.0, 15), glass, glass=True, tris=pyramid_faces(1.2, 1.6)))
+        for k in range(4):
+            a = k * math.pi / 2 + 0.3
+            prims.append(Prim("cube", translate_scale([2.4 * math.cos(a), 2.4 * math.sin(a), 0.7], [0.12, 0.12, 0.7], 30 * k),
+                              checker(mi, [0.95, 0.95, 0.9], [0.25, 0.25, 0.3], 4)))
     elif name == "cylinder":
         prims.append(Prim("cylinder", translate_scale([0, 0, 0.005], [0.85, 0.85, 1.3]), glass, glass=True))
     elif name == "facade":
@@ -455,7 +502,7 @@ def write_8bit(mi, path, image, srgb, quality=-1):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--scene", action="append", choices=SCENES + ["suite", "paper"], help="repeatable; suite: issue 42's glass scenes; paper: the paper's kinds added since (vehicle, globe_near, bookshelf, house); default: all")
+    ap.add_argument("--scene", action="append", choices=SCENES + ["suite", "paper"], help="repeatable; suite: issue 42's glass scenes; paper: the paper's kinds added since (vehicle, globe_near, bookshelf, house, pyramid); default: all")
     ap.add_argument("--res", type=int, default=200)
     ap.add_argument("--spp", type=int, default=128)
     ap.add_argument("--train", type=int, default=60)
