@@ -2,6 +2,7 @@
 // One invocation: the intersection total (the scan's last element), clamped
 // to the capacity, and the indirect grid for one invocation per intersection.
 // stats[0] = total as counted, stats[1] = span overflow flag (reset here).
+#include "util/groups_2d.glsl"
 layout(local_size_x = 1) in;
 
 layout(std430, binding = 0) readonly buffer Offsets { uint offsets[]; };
@@ -17,7 +18,8 @@ void main() {
     stats[0] = total;
     stats[1] = 0u;
     uint groups = (m + pc.wg - 1u) / pc.wg;
-    args[0] = groups <= pc.max_x ? groups : pc.max_x;
-    args[1] = groups <= pc.max_x ? 1u : (groups + pc.max_x - 1u) / pc.max_x;
-    args[2] = 1u;
+    uvec3 g = groups_2d(groups, pc.max_x);
+    args[0] = g.x;
+    args[1] = g.y;
+    args[2] = g.z;
 }

@@ -7,6 +7,7 @@
 // params[2 + l] = length of scan level l; params[2 + levels] = the count as
 // read, before clamping (so callers can detect a count over capacity).
 // args[4*0 ..] = partition grid (sort); args[4*(1+l) ..] = grid of scan level l.
+#include "util/groups_2d.glsl"
 layout(local_size_x = 1) in;
 
 layout(std430, binding = 0) readonly buffer Count { uint count[]; };
@@ -25,11 +26,10 @@ layout(push_constant) uniform Push {
 } pc;
 
 void grid(uint slot, uint groups) {
-    uint x = groups <= pc.max_x ? groups : pc.max_x;
-    uint y = groups <= pc.max_x ? 1u : (groups + pc.max_x - 1u) / pc.max_x;
-    args[4u * slot + 0u] = x;
-    args[4u * slot + 1u] = y;
-    args[4u * slot + 2u] = 1u;
+    uvec3 g = groups_2d(groups, pc.max_x);
+    args[4u * slot + 0u] = g.x;
+    args[4u * slot + 1u] = g.y;
+    args[4u * slot + 2u] = g.z;
     args[4u * slot + 3u] = 0u;
 }
 
