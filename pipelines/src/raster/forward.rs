@@ -19,9 +19,7 @@ impl Rasterizer {
     /// per Gaussian), which may be another kernel's instead of the set's
     /// own (e.g. the reflection colour).
     pub fn record_forward_with(&self, rec: &mut Recorder, s: Splats, cam: &Camera, background: &[f32], frame: &Frame) -> Result<()> {
-        let push = self.begin_forward(rec, &s, cam, background, frame)?;
-        self.record_binning(rec, s.g, s.features, &push, frame)?;
-        self.record_tiles_forward(rec, &push, frame, false)
+        self.record_forward_of(rec, s, cam, background, frame, false)
     }
 
     /// As [`Rasterizer::record_forward`] for a final image: the feature
@@ -30,10 +28,14 @@ impl Rasterizer {
     /// held; no backward may read the frame). Cheaper per pixel
     /// (glsl/raster/pixel_blend.glsl).
     pub fn record_forward_colour(&self, rec: &mut Recorder, g: &Gaussians, cam: &Camera, background: &[f32], sh_degree: u32, frame: &Frame) -> Result<()> {
-        let s = Splats::own(g, sh_degree);
+        self.record_forward_of(rec, Splats::own(g, sh_degree), cam, background, frame, true)
+    }
+
+    /// Binning, then the tiles' forward (`colour_only`: its COLOUR_ONLY kernel).
+    fn record_forward_of(&self, rec: &mut Recorder, s: Splats, cam: &Camera, background: &[f32], frame: &Frame, colour_only: bool) -> Result<()> {
         let push = self.begin_forward(rec, &s, cam, background, frame)?;
         self.record_binning(rec, s.g, s.features, &push, frame)?;
-        self.record_tiles_forward(rec, &push, frame, true)
+        self.record_tiles_forward(rec, &push, frame, colour_only)
     }
 
     /// A view's forward up to its binning: the inputs checked, the camera

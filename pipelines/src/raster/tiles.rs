@@ -56,8 +56,9 @@ pub(super) struct TileKernels {
     /// The tile kernels' specialization (the forward's and backward's, for the colour ones).
     spec: Vec<(u32, u32)>,
     ctx: Arc<Context>,
-    /// SPIR-V of the colour backward and forward.
-    colour_spirv: [&'static [u8]; 2],
+    /// SPIR-V of the two colour kernels.
+    backward_colour_spirv: &'static [u8],
+    forward_colour_spirv: &'static [u8],
     /// Whether the forwards need full subgroups (the Subgroup kernels).
     full_forward: bool,
 }
@@ -153,7 +154,8 @@ impl TileSpec {
             forward_colour: OnceLock::new(),
             spec,
             ctx: ctx.clone(),
-            colour_spirv: [colour, fwd_colour],
+            backward_colour_spirv: colour,
+            forward_colour_spirv: fwd_colour,
             full_forward,
         })
     }
@@ -161,12 +163,12 @@ impl TileSpec {
 
 impl TileKernels {
     pub(super) fn backward_colour(&self) -> Result<&Kernel> {
-        self.colour_kernel(&self.backward_colour, "raster.backward", self.colour_spirv[0], true)
+        self.colour_kernel(&self.backward_colour, "raster.backward", self.backward_colour_spirv, true)
     }
 
     /// The forward that writes the features and alpha alone (a final image).
     pub(super) fn forward_colour(&self) -> Result<&Kernel> {
-        self.colour_kernel(&self.forward_colour, "raster.forward", self.colour_spirv[1], self.full_forward)
+        self.colour_kernel(&self.forward_colour, "raster.forward", self.forward_colour_spirv, self.full_forward)
     }
 
     fn colour_kernel<'a>(&self, cell: &'a OnceLock<Kernel>, name: &str, spirv: &[u8], full_subgroups: bool) -> Result<&'a Kernel> {
