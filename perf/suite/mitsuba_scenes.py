@@ -32,6 +32,13 @@ of checkered blocks outside the camera orbit for near-field reflections):
              lamp, books, a ball inside); cameras in front only
   house      a house with a window in each of two walls at a right angle (a
              lamp, a ball and a box inside)
+  vehicle    planar windows around an opaque body (a cabin on four wheels)
+  globe_near the globe among nearby pillars and boxes
+  pyramid    a glass pyramid of four flat faces over the objects, pillars near
+  garage     the vehicle inside an open-fronted garage: its windows mirror
+             the near walls; cameras in front only
+  display    a monitor's glass 0.03 in front of its lit screen, on a desk;
+             cameras in front only
 The suite the Stage II defaults are chosen on: every scene but `diffuse`
 (`--scene suite`).
 
@@ -232,16 +239,18 @@ def checker(mi, c0, c1, scale):
     return {"type": "diffuse", "reflectance": {"type": "checkerboard", "color0": {"type": "rgb", "value": c0}, "color1": {"type": "rgb", "value": c1}, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}}
 
 
-SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near", "bookshelf", "house", "pyramid"]
+SCENES = ["globe", "globe_far", "pane", "dome", "cabinet", "cylinder", "facade", "windshield", "diffuse", "vehicle", "globe_near", "bookshelf", "house", "pyramid", "garage", "display"]
 # The suite of issue 42; `vehicle` (planar windows around an opaque body),
 # `globe_near` (a glass sphere among nearby objects), `bookshelf` (two
 # glass doors in one frame, pieces of glass apart in one plane) and `house`
 # (a window in each of two walls at a right angle) and `pyramid` (a glass
-# pyramid over two objects among near pillars: closed glass of flat faces)
-# are the paper's kinds added for issue 77: `--scene paper` makes them.
-PAPER = ["vehicle", "globe_near", "bookshelf", "house", "pyramid"]
+# pyramid over two objects among near pillars: closed glass of flat faces),
+# `garage` (the vehicle inside an open-fronted garage: its windows reflect
+# the near walls) and `display` (a monitor's glass over its screen, on a
+# desk) are the paper's kinds added for issue 77: `--scene paper` makes them.
+PAPER = ["vehicle", "globe_near", "bookshelf", "house", "pyramid", "garage", "display"]
 SUITE = [n for n in SCENES if n != "diffuse" and n not in PAPER]
-FRONT_ONLY = {"facade", "windshield", "bookshelf"}
+FRONT_ONLY = {"facade", "windshield", "bookshelf", "garage", "display"}
 
 
 def upright(width, height, centre, normal_axis="x"):
@@ -256,6 +265,14 @@ def upright(width, height, centre, normal_axis="x"):
     return m
 
 
+def lamp(centre, half, radiance):
+    """A ceiling lamp: a rectangle of half-sizes `half` facing down (its
+    normal flipped by a rotation about x) that emits `radiance`."""
+    m = translate_scale(centre, [half[0], half[1], 1]) @ np.diag([1.0, -1.0, -1.0, 1.0])
+    return Prim("rectangle", m, {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.9, 0.9]}},
+                emitter={"type": "area", "radiance": {"type": "rgb", "value": radiance}})
+
+
 def room(mi, front_x):
     """A room behind a glass front at x = front_x: checkered back and side
     walls, a ceiling with a lamp under it, a sphere and a box inside."""
@@ -266,10 +283,7 @@ def room(mi, front_x):
              Prim("rectangle", upright(depth, 1.5, [front_x - depth / 2, -1.4, 0.75], "y"), side),
              Prim("rectangle", upright(depth, 1.5, [front_x - depth / 2, 1.4, 0.75], "y"), side),
              Prim("rectangle", translate_scale([-0.6, 0, 1.5], [1.0, 1.4, 1]), twosided({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}}))]
-    # The lamp faces down (the rectangle's normal flipped by a rotation about x).
-    lamp = translate_scale([-0.6, 0, 1.49], [0.35, 0.25, 1]) @ np.diag([1.0, -1.0, -1.0, 1.0])
-    prims.append(Prim("rectangle", lamp, {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.9, 0.9]}},
-                      emitter={"type": "area", "radiance": {"type": "rgb", "value": [6.0, 5.6, 5.0]}}))
+    prims.append(lamp([-0.6, 0, 1.49], [0.35, 0.25], [6.0, 5.6, 5.0]))
     prims.append(Prim("sphere", translate_scale([-0.5, -0.5, 0.35], 0.35), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
     prims.append(Prim("cube", translate_scale([-0.9, 0.55, 0.4], [0.2, 0.2, 0.4], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
     return prims
@@ -322,9 +336,7 @@ def bookshelf(mi, glass):
              Prim("rectangle", translate_scale([0, 0, 0.1], [0.4, 1.0, 1]), inner),
              Prim("rectangle", translate_scale([0, 0, 0.75], [0.4, 1.0, 1]), inner),
              Prim("cube", translate_scale([0, 0, 0.05], [0.4, 1.0, 0.05]), wood)]
-    lamp = translate_scale([0.0, 0, 1.39], [0.3, 0.8, 1]) @ np.diag([1.0, -1.0, -1.0, 1.0])
-    prims.append(Prim("rectangle", lamp, {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.9, 0.9]}},
-                      emitter={"type": "area", "radiance": {"type": "rgb", "value": [4.0, 3.8, 3.4]}}))
+    prims.append(lamp([0.0, 0, 1.39], [0.3, 0.8], [4.0, 3.8, 3.4]))
     prims.append(Prim("sphere", translate_scale([-0.05, -0.5, 0.32], 0.22), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
     prims.append(Prim("cube", translate_scale([0.0, 0.5, 0.28], [0.15, 0.2, 0.18], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
     for k, c in enumerate([[0.7, 0.1, 0.1], [0.1, 0.3, 0.7], [0.1, 0.55, 0.2], [0.85, 0.75, 0.2], [0.5, 0.2, 0.6]]):
@@ -355,14 +367,52 @@ def house(mi, glass):
              Prim("rectangle", upright(1.2, 1.2, [-0.8, 0.0, 0.6]), wall),
              Prim("rectangle", upright(1.6, 1.2, [0.0, -0.6, 0.6], "y"), wall),
              Prim("rectangle", translate_scale([0, 0, 1.2], [0.8, 0.6, 1]), roof)]
-    lamp = translate_scale([0.0, 0, 1.19], [0.25, 0.2, 1]) @ np.diag([1.0, -1.0, -1.0, 1.0])
-    prims.append(Prim("rectangle", lamp, {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.9, 0.9]}},
-                      emitter={"type": "area", "radiance": {"type": "rgb", "value": [5.0, 4.7, 4.2]}}))
+    prims.append(lamp([0.0, 0, 1.19], [0.25, 0.2], [5.0, 4.7, 4.2]))
     prims.append(Prim("sphere", translate_scale([0.2, 0.05, 0.25], 0.25), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)))
     prims.append(Prim("cube", translate_scale([-0.35, 0.2, 0.3], [0.15, 0.15, 0.3], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}}))
     # The windows: glass only, each in its opening.
     prims.append(Prim("rectangle", upright(0.6, 0.5, [0.8, 0.0, 0.65]), glass, glass=True))
     prims.append(Prim("rectangle", upright(0.7, 0.5, [0.0, 0.6, 0.65], "y"), glass, glass=True))
+    return prims
+
+
+def garage(mi, glass):
+    """The vehicle inside an open-fronted garage (open at +x): a checkered
+    back wall at x = -1.5, side walls at y = +-1.3 reaching x = 0.9, a roof
+    at z = 1.6 with a lamp under it, a workbench and boxes along the walls:
+    planar glass whose reflections are of near geometry (the paper's
+    near-field kind), the side windows 0.86 from the walls they mirror."""
+    back = twosided(checker(mi, [0.85, 0.82, 0.7], [0.35, 0.35, 0.4], 6))
+    side = twosided(checker(mi, [0.3, 0.45, 0.7], [0.85, 0.85, 0.8], 5))
+    prims = [Prim("rectangle", upright(2.6, 1.6, [-1.5, 0.0, 0.8]), back),
+             Prim("rectangle", upright(2.4, 1.6, [-0.3, -1.3, 0.8], "y"), side),
+             Prim("rectangle", upright(2.4, 1.6, [-0.3, 1.3, 0.8], "y"), side),
+             Prim("rectangle", translate_scale([-0.3, 0, 1.6], [1.2, 1.3, 1]), matte([0.7, 0.7, 0.7]))]
+    prims.append(lamp([-0.3, 0, 1.59], [0.4, 0.2], [6.0, 5.6, 5.0]))
+    prims.append(Prim("cube", translate_scale([-1.3, 0.0, 0.4], [0.18, 0.8, 0.4]), matte([0.45, 0.28, 0.15], False)))
+    prims.append(Prim("cube", translate_scale([-0.6, 1.1, 0.2], [0.15, 0.15, 0.2], 10), checker(mi, [0.2, 0.5, 0.9], [0.9, 0.8, 0.2], 3)))
+    prims.append(Prim("cube", translate_scale([0.3, -1.1, 0.25], [0.15, 0.15, 0.25], 35), checker(mi, [0.9, 0.3, 0.3], [0.95, 0.95, 0.95], 3)))
+    car = vehicle(mi, glass)
+    for q in car:  # a quarter larger than `vehicle`'s, so that its windows span more pixels
+        q.m = np.diag([1.25, 1.25, 1.25, 1.0]) @ q.m
+        q.inv = np.linalg.inv(q.m)
+    return prims + car
+
+
+def display(mi, glass):
+    """A monitor on a desk under the sky (the paper's "computer"): a dark
+    case, a lit screen showing a coloured pattern, and a pane of glass 0.03 in
+    front of it (facing +x), a box and a ball beside it: planar glass over
+    a textured surface close behind it."""
+    dark = matte([0.06, 0.06, 0.07], False)
+    prims = [Prim("cube", translate_scale([0.0, 0.0, 0.35], [0.45, 1.0, 0.35]), matte([0.45, 0.28, 0.15], False)),
+             Prim("cube", translate_scale([-0.12, 0.0, 1.22], [0.05, 0.72, 0.44]), dark),
+             Prim("cube", translate_scale([-0.15, 0.0, 0.74], [0.04, 0.05, 0.05]), dark),
+             Prim("rectangle", upright(1.3, 0.76, [-0.065, 0.0, 1.22]), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.05, 0.05, 0.05]}},
+                  emitter={"type": "area", "radiance": {"type": "checkerboard", "color0": {"type": "rgb", "value": [1.0, 0.65, 0.15]}, "color1": {"type": "rgb", "value": [0.15, 0.35, 0.9]}, "to_uv": mi.ScalarTransform4f().scale([3, 3, 1])}}),
+             Prim("sphere", translate_scale([0.1, 0.75, 0.82], 0.12), checker(mi, [0.9, 0.85, 0.2], [0.8, 0.2, 0.6], 4)),
+             Prim("cube", translate_scale([0.1, -0.75, 0.8], [0.1, 0.12, 0.1], 20), {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.95, 0.55, 0.15]}})]
+    prims.append(Prim("rectangle", upright(1.36, 0.82, [-0.035, 0.0, 1.22]), glass, glass=True))
     return prims
 
 
@@ -384,6 +434,10 @@ def build(mi, name, reflection=True):
         prims += bookshelf(mi, glass)
     elif name == "house":
         prims += house(mi, glass)
+    elif name == "garage":
+        prims += garage(mi, glass)
+    elif name == "display":
+        prims += display(mi, glass)
     elif name in FRONT_ONLY:
         prims += room(mi, 0.4)
     elif name == "vehicle":
