@@ -8,7 +8,7 @@
 # paper preset (`RUNS/paper/...`) until BUDGET, whose logs say how far it got.
 #
 #   here:   python3 perf/suite/mitsuba_scenes.py --out .suite/p400 --scene paper --res 400 --compact
-#           for s in vehicle globe_near bookshelf house; do python3 perf/suite/mitsuba_scenes.py \
+#           for s in vehicle globe_near bookshelf house pyramid garage display; do python3 perf/suite/mitsuba_scenes.py \
 #               --train-masks .suite/p400/$s --scene $s --out .suite/p400-masks/$s; done
 #           cargo build --release -p tgs; the loader debs in .gl (perf/suite/gpu_suite.sh)
 #   device: carry .gl .suite target/release/tgs; bash perf/suite/gpu_paper.sh
