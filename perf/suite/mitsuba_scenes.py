@@ -381,7 +381,7 @@ def garage(mi, glass):
     back wall at x = -1.5, side walls at y = +-1.3 reaching x = 0.9, a roof
     at z = 1.6 with a lamp under it, a workbench and boxes along the walls:
     planar glass whose reflections are of near geometry (the paper's
-    near-field kind), the side windows 0.86 from the walls they mirror."""
+    near-field kind), the side windows 0.75 from the walls they mirror."""
     back = twosided(checker(mi, [0.85, 0.82, 0.7], [0.35, 0.35, 0.4], 6))
     side = twosided(checker(mi, [0.3, 0.45, 0.7], [0.85, 0.85, 0.8], 5))
     prims = [Prim("rectangle", upright(2.6, 1.6, [-1.5, 0.0, 0.8]), back),
