@@ -307,6 +307,28 @@ pub fn mask_params(normal: SeedNormal) -> SeedParams {
     SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal, ..SeedParams::default() }
 }
 
+/// A pane standing free (x = 0, y in [-1, 1], z in [0.2, 1.2]) before a
+/// wall at x = -2 that is all Stage I sees, from `count` cameras within
+/// 50 degrees of +x: no surface meets the glass's edge. Masks of the glass,
+/// depths of the wall.
+pub fn free_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    views_from(
+        count,
+        |i| front_eye(i, count, 50.0),
+        [0.0, 0.0, 0.7],
+        0.8,
+        |e, d, len| {
+            if d[0] >= -1e-9 {
+                return (0.0, 0.0);
+            }
+            let t = -e[0] / d[0];
+            let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
+            let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
+            (glass as u8 as f32, ((-2.0 - e[0]) / d[0] / len) as f32)
+        },
+    )
+}
+
 /// A free-standing glass pane (x = 0, y in [-0.6, 0.6], z in [0, 0.7]: the
 /// suite's `pane`) on the floor z = 0, seen from `count` cameras all around
 /// it from 20 to 50 degrees above, from both sides. Masks of the glass,

@@ -223,3 +223,52 @@ fn windows_meeting_at_a_corner_are_seeded_on_their_planes() {
     assert_eq!((with.plane_pieces, with.plane_seeds), (0, 0));
     assert_eq!(with.seeds, hull_seeding(&sv, &p).seeds);
 }
+
+/// A pane standing free before a far wall, seen from one side: no surface
+/// meets its edge, so no Stage I rim point agrees and its seeds are the
+/// hull's wedge in front of it; with `rim_hull` the masks' own edge (the
+/// first hull points of the rays at it) rings every view, which is seeded
+/// on the pane's plane. A sphere seen all around keeps its seeds: the
+/// hull's points at one view's silhouette lie inside the other views'
+/// masks, not at their edges.
+#[test]
+fn a_free_pane_seen_from_one_side_is_seeded_on_the_masks_own_rim() {
+    let count = 24;
+    let (cams, masks, depth) = free_window_views(count);
+    let sv = seed_views(&cams, &masks, &depth);
+    let base = SeedParams { rim: true, ..mask_params(SeedNormal::Plane) };
+    let rim = hull_seeding(&sv, &base);
+    let hull = hull_seeding(&sv, &SeedParams { rim_hull: true, ..base });
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
+    let off = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.position[0] as f64).abs()).collect());
+    let tilt = |h: &HullSeeding| median(h.seeds.iter().map(|s| (s.normal[0] as f64).abs().clamp(-1.0, 1.0).acos().to_degrees()).collect());
+    eprintln!(
+        "free pane: surface rim {} views, seeds a median {:.3} off, {:.1} degrees; with the masks' rim {} views, {} of {} seeds on planes, {:.4} off, {:.2} degrees",
+        rim.rim_views,
+        off(&rim),
+        tilt(&rim),
+        hull.rim_views,
+        hull.rim_seeds,
+        hull.seeds.len(),
+        off(&hull),
+        tilt(&hull)
+    );
+    assert_eq!(rim.rim_views, 0, "no surface rim agrees on a free pane");
+    assert!(off(&rim) > 0.1, "the wedge: seeds a median {} in front", off(&rim));
+    assert!(hull.rim_views as f64 >= 0.9 * count as f64, "{} of {count} views ringed by the masks' rim", hull.rim_views);
+    assert!(hull.rim_seeds as f64 > 0.9 * hull.seeds.len() as f64, "{} of {} seeds on a rim plane", hull.rim_seeds, hull.seeds.len());
+    assert!(off(&hull) < 0.02 && tilt(&hull) < 2.0, "seeds {} off the pane, normals {} degrees", off(&hull), tilt(&hull));
+    for s in &hull.seeds {
+        assert!(s.position.iter().chain(&s.normal).all(|v| v.is_finite()) && s.scale > 0.0, "{s:?}");
+    }
+    assert_eq!(hull_seeding(&sv, &SeedParams { rim_hull: true, threads: 1, ..base }), hull, "the same at one thread");
+    let (cams, masks, depth) = ring(24, 0.0, true);
+    let sv = seed_views(&cams, &masks, &depth);
+    // Its masks are residual planes of 0.03 on the glass.
+    let glass = SeedParams { threshold: 0.01, ..base };
+    let sphere = hull_seeding(&sv, &glass);
+    let sphere_hull = hull_seeding(&sv, &SeedParams { rim_hull: true, ..glass });
+    assert!(sphere.seeds.len() > 500, "{} sphere seeds", sphere.seeds.len());
+    assert_eq!(sphere_hull.rim_views, 0, "a silhouette is no rim");
+    assert_eq!(sphere_hull, sphere, "a sphere's seeds unchanged by the masks' rim");
+}

@@ -104,6 +104,12 @@ pub struct ReflectionConfig {
     /// whose windows meet at its corners (21.1° → 25.4°;
     /// perf/journal/2026-12-04-fifty-ninth.md).
     pub seed_rim_all_around: bool,
+    /// With `seed_rim`: the masks' own outline is rim too, where no
+    /// surface meets the glass's edge (a cabin's windows under a roof seen
+    /// edge-on, a pane standing free): the first hull point of each ray at
+    /// a mask edge, kept where the views agree it lies on their edges
+    /// (seed/rim.rs; perf/journal/2026-12-07-seventy-first.md).
+    pub seed_rim_hull: bool,
     /// With masks: where a view's hull points over one piece of its mask
     /// lie on a plane (or two meeting at a corner), move that piece's seeds
     /// onto it with its normal (flat windows; seed/planes.rs;
@@ -219,6 +225,7 @@ impl Default for ReflectionConfig {
             dataset_masks: true,
             seed_rim: true,
             seed_rim_all_around: false,
+            seed_rim_hull: false,
             seed_planes: true,
             seed_smooth: true,
             seed_faces: true,

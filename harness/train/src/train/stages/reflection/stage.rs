@@ -345,6 +345,7 @@ fn seed_model(
             blur: 0,
             rim: rc.seed_rim,
             rim_all_around: rc.seed_rim_all_around,
+            rim_hull: rc.seed_rim_hull,
             planes: rc.seed_planes,
             smooth: rc.seed_smooth,
             faces: rc.seed_faces && !d.seed_faces_marked,

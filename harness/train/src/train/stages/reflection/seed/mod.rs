@@ -132,6 +132,9 @@ pub struct SeedParams {
     /// plane must be ringed by the points on it
     /// (`reflection.seed_rim_all_around`; rim::membranes).
     pub rim_all_around: bool,
+    /// With `rim`: the first hull points of the rays at the masks' edges
+    /// are rim candidates too (`reflection.seed_rim_hull`; rim::membranes).
+    pub rim_hull: bool,
     /// With given glass masks: each view's mask pieces whose hull points lie
     /// on a plane, or two at a corner, seeded on it (the `planes` module).
     pub planes: bool,
@@ -160,6 +163,7 @@ impl Default for SeedParams {
             relax: &[],
             rim: false,
             rim_all_around: false,
+            rim_hull: false,
             planes: false,
             smooth: false,
             faces: false,
@@ -340,7 +344,7 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
 /// Each view's membranes where [`SeedParams::rim`] asks for them.
 fn membranes(prepared: &[Prepared], p: &SeedParams) -> Vec<rim::ViewMembranes> {
     if p.rim {
-        rim::membranes(prepared, p.rim_all_around)
+        rim::membranes(prepared, p)
     } else {
         vec![rim::ViewMembranes::default(); prepared.len()]
     }

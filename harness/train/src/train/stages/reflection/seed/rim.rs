@@ -30,7 +30,7 @@
 //! silhouettes) and the seeds are unchanged, and `pane`'s (its foot on the
 //! floor) ring at most 4 of 60 views, moving it by 0.1 degrees.
 
-use super::{image_point, image_xy, normalize, pixel_of, Prepared, V3};
+use super::{image_point, image_xy, in_parallel, normalize, pixel_of, Prepared, SeedParams, V3};
 use glam::DVec3;
 
 /// The share of the views holding a rim point in their image that must see
@@ -177,27 +177,68 @@ impl Edge {
 
 /// The rim points of all views, in view and pixel order: Stage I surface
 /// points on a mask's ring that enough views see at a mask edge.
-fn rim_points(views: &[Prepared], edges: &[Edge], all_around: bool) -> Vec<V3> {
-    let mut out = Vec::new();
+fn rim_points(views: &[Prepared], edges: &[Edge], all_around: bool, hull: Option<&SeedParams>) -> Vec<V3> {
+    let mut candidates: Vec<V3> = Vec::new();
     for (v, e) in views.iter().zip(edges) {
-        for i in (0..e.ring.len()).filter(|&i| e.ring[i] && v.depth[i].is_finite()) {
-            let p = v.unproject(i, v.depth[i] as f64);
-            let (mut seen, mut hit) = (0u32, 0u32);
-            for (u, f) in views.iter().zip(edges) {
-                // All around: a view counts where it sees the point, not
-                // behind its own Stage I surface there (an object seen all
-                // around hides its front's rim from the views behind it).
-                if let Some((j, _)) = pixel_of(&u.cam, p).filter(|&(j, z)| !all_around || z <= u.depth[j] as f64 * (1.0 + RIM_VISIBLE)) {
-                    seen += 1;
-                    hit += f.near[j] as u32;
-                }
+        candidates.extend((0..e.ring.len()).filter(|&i| e.ring[i] && v.depth[i].is_finite()).map(|i| v.unproject(i, v.depth[i] as f64)));
+    }
+    if let Some(p) = hull {
+        candidates.extend(hull_edge_points(views, p));
+    }
+    let mut out = Vec::new();
+    for p in candidates {
+        let (mut seen, mut hit) = (0u32, 0u32);
+        for (u, f) in views.iter().zip(edges) {
+            // All around: a view counts where it sees the point, not
+            // behind its own Stage I surface there (an object seen all
+            // around hides its front's rim from the views behind it).
+            if let Some((j, _)) = pixel_of(&u.cam, p).filter(|&(j, z)| !all_around || z <= u.depth[j] as f64 * (1.0 + RIM_VISIBLE)) {
+                seen += 1;
+                hit += f.near[j] as u32;
             }
-            if seen >= 3 && hit as f64 >= RIM_AGREE * seen as f64 {
-                out.push(p);
-            }
+        }
+        if seen >= 3 && hit as f64 >= RIM_AGREE * seen as f64 {
+            out.push(p);
         }
     }
     out
+}
+
+/// The first hull point (where `p.agree` of the views that see it in
+/// front of their Stage I surface hold it in their masks) along the ray of
+/// each mask pixel at a view's mask edge, in view and pixel order: the
+/// glass's outline as the masks alone place it, where no surface meets it.
+/// Near the glass's edge the hull is thin, so these lie on the outline
+/// where it is real (a free pane's edge, a window's top under a roof seen
+/// edge-on) and the rim test keeps them; on a silhouette they are where
+/// the other views do not see an edge, and it drops them.
+fn hull_edge_points(views: &[Prepared], p: &SeedParams) -> Vec<V3> {
+    let far = views.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
+    let rays: Vec<(usize, usize)> = views
+        .iter()
+        .enumerate()
+        .flat_map(|(vi, v)| {
+            let (w, h) = (v.cam.width as usize, v.cam.height as usize);
+            (0..w * h).filter(move |&i| v.mask[i] && square(i, w, h, 1).any(|j| !v.mask[j])).map(move |i| (vi, i))
+        })
+        .collect();
+    let steps = p.steps.max(1);
+    let first = |&(vi, i): &(usize, usize)| -> Option<V3> {
+        let v = &views[vi];
+        let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
+        let z_near = 0.05 * z_far;
+        (0..steps).map(|s| v.unproject(i, z_near + (z_far - z_near) * (s as f64 + 0.5) / steps as f64)).find(|&x| {
+            let (mut seen, mut hit) = (0u32, 0u32);
+            for u in views {
+                if let Some(j) = u.in_front(x) {
+                    seen += 1;
+                    hit += u.mask[j] as u32;
+                }
+            }
+            seen >= 3 && hit as f64 >= p.agree as f64 * seen as f64
+        })
+    };
+    in_parallel(&rays, p.threads, |run| run.iter().filter_map(first).collect::<Vec<V3>>()).into_iter().flatten().collect()
 }
 
 /// A view's membranes: one for each piece of its mask (8-connected: a
@@ -225,13 +266,16 @@ impl ViewMembranes {
 }
 
 /// Each view's membranes, one per piece of its mask that rim points ring.
-/// `all_around` (`reflection.seed_rim_all_around`, for glass in an object
-/// seen from every side): only the views that see a rim point count for or
-/// against it, and a piece's membrane needs the points on its plane to
-/// ring it too.
-pub(super) fn membranes(views: &[Prepared], all_around: bool) -> Vec<ViewMembranes> {
+/// `p.rim_all_around` (`reflection.seed_rim_all_around`, for glass in an
+/// object seen from every side): only the views that see a rim point count
+/// for or against it, and a piece's membrane needs the points on its plane
+/// to ring it too. `p.rim_hull` (`reflection.seed_rim_hull`): the first
+/// hull points at the masks' edges are candidates beside the Stage I
+/// surface's ([`hull_edge_points`]).
+pub(super) fn membranes(views: &[Prepared], p: &SeedParams) -> Vec<ViewMembranes> {
+    let all_around = p.rim_all_around;
     let edges: Vec<Edge> = views.iter().map(|v| Edge::new(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
-    let rim = rim_points(views, &edges, all_around);
+    let rim = rim_points(views, &edges, all_around, p.rim_hull.then_some(p));
     views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim, all_around)).collect()
 }
 
