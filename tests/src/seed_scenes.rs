@@ -127,6 +127,17 @@ pub fn radial_error(set: &[Seed]) -> Vec<f64> {
 /// side within 50 degrees of the window's normal. Each view's mask is the
 /// window and its Stage I depth the wall, or the back wall through the window.
 pub fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    front_window(count, true)
+}
+
+/// The same window standing free (no wall round it) before the wall at
+/// x = -2 that is all Stage I sees: no surface meets the glass's edge.
+pub fn free_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    front_window(count, false)
+}
+
+/// [`window_views`] (`in_wall`) or [`free_window_views`].
+fn front_window(count: usize, in_wall: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
     views_from(
         count,
         |i| front_eye(i, count, 50.0),
@@ -139,7 +150,7 @@ pub fn window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>)
             let t = -e[0] / d[0];
             let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
             let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
-            let t = if glass { (-2.0 - e[0]) / d[0] } else { t };
+            let t = if glass || !in_wall { (-2.0 - e[0]) / d[0] } else { t };
             (glass as u8 as f32, (t / len) as f32)
         },
     )
@@ -305,28 +316,6 @@ pub fn glass_box_face(x: V3) -> (f64, V3) {
 /// rays, seed normals by `normal`; the rest at their defaults.
 pub fn mask_params(normal: SeedNormal) -> SeedParams {
     SeedParams { threshold: 0.5, blur: 0, max_rays: 3000, normal, ..SeedParams::default() }
-}
-
-/// A pane standing free (x = 0, y in [-1, 1], z in [0.2, 1.2]) before a
-/// wall at x = -2 that is all Stage I sees, from `count` cameras within
-/// 50 degrees of +x: no surface meets the glass's edge. Masks of the glass,
-/// depths of the wall.
-pub fn free_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    views_from(
-        count,
-        |i| front_eye(i, count, 50.0),
-        [0.0, 0.0, 0.7],
-        0.8,
-        |e, d, len| {
-            if d[0] >= -1e-9 {
-                return (0.0, 0.0);
-            }
-            let t = -e[0] / d[0];
-            let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
-            let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
-            (glass as u8 as f32, ((-2.0 - e[0]) / d[0] / len) as f32)
-        },
-    )
 }
 
 /// A free-standing glass pane (x = 0, y in [-0.6, 0.6], z in [0, 0.7]: the
