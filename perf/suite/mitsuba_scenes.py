@@ -106,6 +106,10 @@ class Prim:
         self.emitter, self.half_angle, self.tris = emitter, half_angle, tris
         self.inv = np.linalg.inv(to_world)
 
+    def transformed(self, t):
+        """The same shape moved by the 4x4 `t` (applied after its own to_world)."""
+        return Prim(self.kind, t @ self.m, self.bsdf, self.glass, self.emitter, self.half_angle, self.tris)
+
     def mitsuba(self, mi, tmp):
         d = {"type": self.kind, "to_world": mi.ScalarTransform4f(self.m.tolist()), "bsdf": self.bsdf}
         if self.kind == "arc":
@@ -392,11 +396,8 @@ def garage(mi, glass):
     prims.append(Prim("cube", translate_scale([-1.3, 0.0, 0.4], [0.18, 0.8, 0.4]), matte([0.45, 0.28, 0.15], False)))
     prims.append(Prim("cube", translate_scale([-0.6, 1.1, 0.2], [0.15, 0.15, 0.2], 10), checker(mi, [0.2, 0.5, 0.9], [0.9, 0.8, 0.2], 3)))
     prims.append(Prim("cube", translate_scale([0.3, -1.1, 0.25], [0.15, 0.15, 0.25], 35), checker(mi, [0.9, 0.3, 0.3], [0.95, 0.95, 0.95], 3)))
-    car = vehicle(mi, glass)
-    for q in car:  # a quarter larger than `vehicle`'s, so that its windows span more pixels
-        q.m = np.diag([1.25, 1.25, 1.25, 1.0]) @ q.m
-        q.inv = np.linalg.inv(q.m)
-    return prims + car
+    # A quarter larger than `vehicle`'s, so that its windows span more pixels.
+    return prims + [q.transformed(np.diag([1.25, 1.25, 1.25, 1.0])) for q in vehicle(mi, glass)]
 
 
 def display(mi, glass):

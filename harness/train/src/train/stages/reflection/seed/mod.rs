@@ -236,6 +236,19 @@ impl Prepared {
     fn unproject(&self, i: usize, z: f64) -> V3 {
         unproject_pixel(&self.cam, i, z)
     }
+
+    /// The span of pixel `i`'s ray the hull march walks, (near, far): from
+    /// 5% of its far end to its Stage I depth, or to `far` where it has none.
+    fn ray_span(&self, i: usize, far: f64) -> (f64, f64) {
+        let z_far = if self.depth[i].is_finite() { self.depth[i] as f64 } else { far };
+        (0.05 * z_far, z_far)
+    }
+}
+
+/// The depths the hull march samples in `span`: the midpoints of `steps`
+/// equal steps, near to far.
+fn span_depths((z_near, z_far): (f64, f64), steps: u32) -> impl Iterator<Item = f64> {
+    (0..steps).map(move |s| z_near + (z_far - z_near) * (s as f64 + 0.5) / steps as f64)
 }
 
 /// What the views that see a point in front of their Stage I surface say of it.
@@ -251,13 +264,7 @@ enum Verdict {
 }
 
 fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict {
-    let (mut seen, mut hit) = (0u32, 0u32);
-    for v in views {
-        if let Some(i) = v.in_front(x) {
-            seen += 1;
-            hit += v.mask[i] as u32;
-        }
-    }
+    let (seen, hit) = hull_votes(views, x);
     if seen < 3 {
         Verdict::Unseen
     } else if (hit as f64) < agree as f64 * seen as f64 {
@@ -265,6 +272,33 @@ fn hull_test(views: &[Prepared], x: V3, agree: f32, min_hits: &[u32]) -> Verdict
     } else {
         Verdict::Agrees { significant: hit >= min_hits[seen as usize], hits: hit }
     }
+}
+
+/// Of the views that see `x` in front of their Stage I surface: how many,
+/// and how many hold it in their mask.
+fn hull_votes(views: &[Prepared], x: V3) -> (u32, u32) {
+    let (mut seen, mut hit) = (0u32, 0u32);
+    for v in views {
+        if let Some(i) = v.in_front(x) {
+            seen += 1;
+            hit += v.mask[i] as u32;
+        }
+    }
+    (seen, hit)
+}
+
+/// Whether `x` is in the hull: at least 3 views see it in front of their
+/// Stage I surface and `agree` of them hold it ([`hull_test`]'s
+/// [`Verdict::Agrees`], without the significance it grades).
+fn in_hull(views: &[Prepared], x: V3, agree: f32) -> bool {
+    let (seen, hit) = hull_votes(views, x);
+    seen >= 3 && hit as f64 >= agree as f64 * seen as f64
+}
+
+/// The far end of a ray with no Stage I surface: the largest finite depth
+/// any view saw.
+fn far_depth(views: &[Prepared]) -> f64 {
+    views.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64
 }
 
 /// Seeds of the reflection set from the views' residuals and Stage I depths
@@ -364,8 +398,7 @@ struct Found {
 
 fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]) -> Found {
     let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
-    // The far end of a ray with no Stage I surface: the largest finite depth seen.
-    let far = prepared.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
+    let far = far_depth(prepared);
     let total: usize = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).sum();
     if total == 0 || far <= 0.0 || p.steps == 0 {
         return found;
@@ -394,8 +427,7 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
     let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     for &(vi, i) in rays {
         let v = &prepared[vi];
-        let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
-        let z_near = 0.05 * z_far;
+        let (z_near, z_far) = v.ray_span(i, far);
         // A view with a membrane seeds on it where the hull holds it. Where
         // the hull does not, the ray's first hull point is kept unless it
         // lies in front of the membrane by more than [`rim::RIM_FRONT`]:
@@ -420,8 +452,7 @@ fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], fa
         let mut carved = false;
         let mut after_carved: Option<bool> = None;
         let mut best: Option<(u32, V3)> = None;
-        for s in 0..p.steps {
-            let z = z_near + (z_far - z_near) * (s as f64 + 0.5) / p.steps as f64;
+        for z in span_depths((z_near, z_far), p.steps) {
             let x = v.unproject(i, z);
             match hull_test(prepared, x, p.agree, min_hits) {
                 Verdict::Agrees { significant, hits } => {

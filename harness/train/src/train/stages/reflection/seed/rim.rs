@@ -30,7 +30,7 @@
 //! silhouettes) and the seeds are unchanged, and `pane`'s (its foot on the
 //! floor) ring at most 4 of 60 views, moving it by 0.1 degrees.
 
-use super::{image_point, image_xy, in_parallel, normalize, pixel_of, Prepared, SeedParams, V3};
+use super::{far_depth, image_point, image_xy, in_hull, in_parallel, normalize, pixel_of, span_depths, Prepared, SeedParams, V3};
 use glam::DVec3;
 
 /// The share of the views holding a rim point in their image that must see
@@ -162,6 +162,8 @@ struct Edge {
     /// Pixels within one pixel (3 x 3) of the edge: of the ring, or of the
     /// mask pixels with a neighbour outside it (or beyond the image).
     near: Vec<bool>,
+    /// Mask pixels with a neighbour outside the mask (in the image).
+    inner: Vec<bool>,
 }
 
 impl Edge {
@@ -170,20 +172,23 @@ impl Edge {
         let outside: Vec<bool> = mask.iter().map(|&m| !m).collect();
         let open = dilate(&outside, w, h);
         let border = |i: usize| i.is_multiple_of(w) || i % w == w - 1 || i / w == 0 || i / w == h - 1;
-        let band: Vec<bool> = (0..w * h).map(|i| ring[i] || (mask[i] && (open[i] || border(i)))).collect();
-        Edge { near: dilate(&band, w, h), ring }
+        let inner: Vec<bool> = mask.iter().zip(&open).map(|(&m, &o)| m && o).collect();
+        let band: Vec<bool> = (0..w * h).map(|i| ring[i] || inner[i] || (mask[i] && border(i))).collect();
+        Edge { near: dilate(&band, w, h), ring, inner }
     }
 }
 
 /// The rim points of all views, in view and pixel order: Stage I surface
-/// points on a mask's ring that enough views see at a mask edge.
-fn rim_points(views: &[Prepared], edges: &[Edge], all_around: bool, hull: Option<&SeedParams>) -> Vec<V3> {
+/// points on a mask's ring (and with `p.rim_hull` the [`hull_edge_points`])
+/// that enough views see at a mask edge.
+fn rim_points(views: &[Prepared], edges: &[Edge], p: &SeedParams) -> Vec<V3> {
+    let all_around = p.rim_all_around;
     let mut candidates: Vec<V3> = Vec::new();
     for (v, e) in views.iter().zip(edges) {
         candidates.extend((0..e.ring.len()).filter(|&i| e.ring[i] && v.depth[i].is_finite()).map(|i| v.unproject(i, v.depth[i] as f64)));
     }
-    if let Some(p) = hull {
-        candidates.extend(hull_edge_points(views, p));
+    if p.rim_hull {
+        candidates.extend(hull_edge_points(views, edges, p));
     }
     let mut out = Vec::new();
     for p in candidates {
@@ -212,31 +217,12 @@ fn rim_points(views: &[Prepared], edges: &[Edge], all_around: bool, hull: Option
 /// where it is real (a free pane's edge, a window's top under a roof seen
 /// edge-on) and the rim test keeps them; on a silhouette they are where
 /// the other views do not see an edge, and it drops them.
-fn hull_edge_points(views: &[Prepared], p: &SeedParams) -> Vec<V3> {
-    let far = views.iter().flat_map(|v| v.depth.iter()).filter(|d| d.is_finite()).fold(0.0f32, |a, &b| a.max(b)) as f64;
-    let rays: Vec<(usize, usize)> = views
-        .iter()
-        .enumerate()
-        .flat_map(|(vi, v)| {
-            let (w, h) = (v.cam.width as usize, v.cam.height as usize);
-            (0..w * h).filter(move |&i| v.mask[i] && square(i, w, h, 1).any(|j| !v.mask[j])).map(move |i| (vi, i))
-        })
-        .collect();
-    let steps = p.steps.max(1);
+fn hull_edge_points(views: &[Prepared], edges: &[Edge], p: &SeedParams) -> Vec<V3> {
+    let far = far_depth(views);
+    let rays: Vec<(usize, usize)> = edges.iter().enumerate().flat_map(|(vi, e)| (0..e.inner.len()).filter(|&i| e.inner[i]).map(move |i| (vi, i))).collect();
     let first = |&(vi, i): &(usize, usize)| -> Option<V3> {
         let v = &views[vi];
-        let z_far = if v.depth[i].is_finite() { v.depth[i] as f64 } else { far };
-        let z_near = 0.05 * z_far;
-        (0..steps).map(|s| v.unproject(i, z_near + (z_far - z_near) * (s as f64 + 0.5) / steps as f64)).find(|&x| {
-            let (mut seen, mut hit) = (0u32, 0u32);
-            for u in views {
-                if let Some(j) = u.in_front(x) {
-                    seen += 1;
-                    hit += u.mask[j] as u32;
-                }
-            }
-            seen >= 3 && hit as f64 >= p.agree as f64 * seen as f64
-        })
+        span_depths(v.ray_span(i, far), p.steps.max(1)).map(|z| v.unproject(i, z)).find(|&x| in_hull(views, x, p.agree))
     };
     in_parallel(&rays, p.threads, |run| run.iter().filter_map(first).collect::<Vec<V3>>()).into_iter().flatten().collect()
 }
@@ -273,10 +259,9 @@ impl ViewMembranes {
 /// hull points at the masks' edges are candidates beside the Stage I
 /// surface's ([`hull_edge_points`]).
 pub(super) fn membranes(views: &[Prepared], p: &SeedParams) -> Vec<ViewMembranes> {
-    let all_around = p.rim_all_around;
     let edges: Vec<Edge> = views.iter().map(|v| Edge::new(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
-    let rim = rim_points(views, &edges, all_around, p.rim_hull.then_some(p));
-    views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim, all_around)).collect()
+    let rim = rim_points(views, &edges, p);
+    views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim, p.rim_all_around)).collect()
 }
 
 /// `mask`'s 8-connected pieces, numbered in pixel order: each pixel's piece
