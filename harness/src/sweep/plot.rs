@@ -151,9 +151,17 @@ fn cut(name: &str, max: usize) -> String {
     }
 }
 
-fn one(path: &Path, rows: &[Row], (what, better): (&str, &str), y: impl Fn(&Row) -> f64, higher_better: bool) -> Result<()> {
+/// One plot, drawn into an RGB buffer and written as a PNG with the
+/// project's own `image` (plotters' encoder would build a second one).
+fn one(path: &Path, rows: &[Row], axis: (&str, &str), y: impl Fn(&Row) -> f64, higher_better: bool) -> Result<()> {
+    let mut rgb = vec![0u8; 3 * SIZE.0 as usize * SIZE.1 as usize];
+    draw_plot(&mut rgb, path, rows, axis, y, higher_better)?;
+    image::save_buffer(path, &rgb, SIZE.0, SIZE.1, image::ExtendedColorType::Rgb8).with_context(|| format!("writing the plot {}", path.display()))
+}
+
+fn draw_plot(rgb: &mut [u8], path: &Path, rows: &[Row], (what, better): (&str, &str), y: impl Fn(&Row) -> f64, higher_better: bool) -> Result<()> {
     let err = |e: &dyn std::fmt::Display| anyhow!("{}: drawing the plot: {e}", path.display());
-    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    let root = BitMapBackend::with_buffer(rgb, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let (left, right) = root.split_horizontally(CHART_W);
     let times: Vec<f64> = rows.iter().map(|r| r.wall_s).collect();
