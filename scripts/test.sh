@@ -7,8 +7,9 @@
 # two at once finish sooner than one after the other (measured: 215 s in
 # sequence, 161 s together; perf/RESULTS.md, twenty-ninth entry). Stream A
 # is the longest binary (`train_quality`, the method end to end), the
-# subgroup-4 pass, then `train_stage3`, which balances the two streams
-# (thirtieth entry); stream B is everything else. Nothing in the suite
+# subgroup-4 pass, then `validation` and `train_stage3`, which balance
+# the two streams (thirtieth and seventy-second entries); stream B is
+# everything else. Nothing in the suite
 # measures time; each stream's output is printed whole, B's as it runs and
 # A's when it ends. TGS_TEST_STREAMS=1 runs them one after the other.
 set -euo pipefail
@@ -33,7 +34,7 @@ KERNEL_SUITES=(engine sort scan raster raster_hard raster_reach kept_weights los
 # it, the rest after. Stream B skips exactly their tests (listed from the
 # binaries, each name checked to be unique across the workspace, so a skip
 # cannot drop another binary's test of the same name).
-A_BINARIES=(train_quality train_stage3)
+A_BINARIES=(train_quality validation train_stage3)
 
 a_binary() {
   local s rc=0
