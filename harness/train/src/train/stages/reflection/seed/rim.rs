@@ -182,7 +182,6 @@ impl Edge {
 /// points on a mask's ring (and with `p.rim_hull` the [`hull_edge_points`])
 /// that enough views see at a mask edge.
 fn rim_points(views: &[Prepared], edges: &[Edge], p: &SeedParams) -> Vec<V3> {
-    let all_around = p.rim_all_around;
     let mut candidates: Vec<V3> = Vec::new();
     for (v, e) in views.iter().zip(edges) {
         candidates.extend((0..e.ring.len()).filter(|&i| e.ring[i] && v.depth[i].is_finite()).map(|i| v.unproject(i, v.depth[i] as f64)));
@@ -191,19 +190,19 @@ fn rim_points(views: &[Prepared], edges: &[Edge], p: &SeedParams) -> Vec<V3> {
         candidates.extend(hull_edge_points(views, edges, p));
     }
     let mut out = Vec::new();
-    for p in candidates {
+    for x in candidates {
         let (mut seen, mut hit) = (0u32, 0u32);
         for (u, f) in views.iter().zip(edges) {
             // All around: a view counts where it sees the point, not
             // behind its own Stage I surface there (an object seen all
             // around hides its front's rim from the views behind it).
-            if let Some((j, _)) = pixel_of(&u.cam, p).filter(|&(j, z)| !all_around || z <= u.depth[j] as f64 * (1.0 + RIM_VISIBLE)) {
+            if let Some((j, _)) = pixel_of(&u.cam, x).filter(|&(j, z)| !p.rim_all_around || z <= u.depth[j] as f64 * (1.0 + RIM_VISIBLE)) {
                 seen += 1;
                 hit += f.near[j] as u32;
             }
         }
         if seen >= 3 && hit as f64 >= RIM_AGREE * seen as f64 {
-            out.push(p);
+            out.push(x);
         }
     }
     out
