@@ -156,6 +156,44 @@ fn front_window(count: usize, in_wall: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec
     )
 }
 
+/// The radius of [`curved_front_views`]' front: a vertical cylinder about
+/// the axis x = -R, y = 0, through the origin.
+pub const FRONT_R: f64 = 1.5;
+
+/// A curved front (a windshield, a bent shop window): the cylinder of
+/// radius [`FRONT_R`] bulging towards +x is an opaque wall but for its
+/// glass, |y| <= 1 and 0.2 <= z <= 1.2 on it (the glass's normals turn
+/// 42 degrees from its middle to its sides), a room's back wall at x = -2
+/// behind it; captured from one side as [`window_views`]. Masks of the
+/// glass, depths of the wall or, through the glass, the back wall.
+pub fn curved_front_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    views_from(
+        count,
+        |i| front_eye(i, count, 50.0),
+        [0.0, 0.0, 0.7],
+        0.8,
+        |e, d, len| {
+            let back = if d[0] < -1e-9 { (-2.0 - e[0]) / d[0] } else { return (0.0, 0.0) };
+            let o = [e[0] + FRONT_R, e[1]];
+            let (a, b, c) = (d[0] * d[0] + d[1] * d[1], 2.0 * (o[0] * d[0] + o[1] * d[1]), o[0] * o[0] + o[1] * o[1] - FRONT_R * FRONT_R);
+            let disc = b * b - 4.0 * a * c;
+            let t = (disc >= 0.0).then(|| (-b - disc.sqrt()) / (2.0 * a)).filter(|&t| t > 0.0 && t < back);
+            let Some(t) = t else { return (0.0, (back / len) as f32) };
+            let (y, z) = (e[1] + t * d[1], e[2] + t * d[2]);
+            let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&z);
+            (glass as u8 as f32, ((if glass { back } else { t }) / len) as f32)
+        },
+    )
+}
+
+/// The distance of `x` from [`curved_front_views`]' cylinder and its
+/// normal there.
+pub fn curved_front(x: V3) -> (f64, V3) {
+    let r = [x[0] + FRONT_R, x[1], 0.0];
+    let len = dot(r, r).sqrt();
+    ((len - FRONT_R).abs(), r.map(|c| c / len))
+}
+
 /// Two windows in a stepped front, seen together from `count` cameras in
 /// front of it: window A in the wall x = 0 (y < 0), window B in the wall
 /// x = 0.6 (y >= 0), the step y = 0 between them opaque; each window 1

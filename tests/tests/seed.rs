@@ -286,11 +286,31 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     let seeding = |a: f64| hull_seeding(&sv, &SeedParams { significance: a, ..base });
     assert_eq!(
         seeding(1e-8),
-        HullSeeding { seeds: tight.clone(), rim_views: 0, rim_seeds: 0, plane_pieces: 0, plane_seeds: 0, faces: [0, 0], significance_dropped: false, significance_relaxed: None }
+        HullSeeding {
+            seeds: tight.clone(),
+            rim_views: 0,
+            rim_curved: 0,
+            rim_seeds: 0,
+            plane_pieces: 0,
+            plane_seeds: 0,
+            faces: [0, 0],
+            significance_dropped: false,
+            significance_relaxed: None
+        }
     );
     assert_eq!(
         seeding(1.0),
-        HullSeeding { seeds: loose.clone(), rim_views: 0, rim_seeds: 0, plane_pieces: 0, plane_seeds: 0, faces: [0, 0], significance_dropped: false, significance_relaxed: None }
+        HullSeeding {
+            seeds: loose.clone(),
+            rim_views: 0,
+            rim_curved: 0,
+            rim_seeds: 0,
+            plane_pieces: 0,
+            plane_seeds: 0,
+            faces: [0, 0],
+            significance_dropped: false,
+            significance_relaxed: None
+        }
     );
     assert!(at(1e-300).is_empty(), "1e-300 is beaten by chance with 48 views");
     let dropped = seeding(1e-300);
@@ -330,6 +350,7 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
         HullSeeding {
             seeds: tight.clone(),
             rim_views: 0,
+            rim_curved: 0,
             rim_seeds: 0,
             plane_pieces: 0,
             plane_seeds: 0,

@@ -112,6 +112,13 @@ pub struct ReflectionConfig {
     /// 9.0°, the suite's fronts and panes better, closed glass unchanged
     /// (perf/journal/2026-12-07-seventy-first.md).
     pub seed_rim_hull: bool,
+    /// With `seed_rim`: where a view's rim points lie off their plane the
+    /// way a bent front's do (their plane leaves them a median 0.4% of
+    /// their depth off or more, and 1 / z quadratic in the image brings
+    /// that to 0.85 of it or less), the view seeds on that curved membrane
+    /// instead (seed/curved.rs): a windshield, a section of a cylinder
+    /// whose plane is its chord.
+    pub seed_rim_curved: bool,
     /// With masks: where a view's hull points over one piece of its mask
     /// lie on a plane (or two meeting at a corner), move that piece's seeds
     /// onto it with its normal (flat windows; seed/planes.rs;
@@ -228,6 +235,7 @@ impl Default for ReflectionConfig {
             seed_rim: true,
             seed_rim_all_around: false,
             seed_rim_hull: true,
+            seed_rim_curved: true,
             seed_planes: true,
             seed_smooth: true,
             seed_faces: true,

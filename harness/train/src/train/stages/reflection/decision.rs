@@ -72,6 +72,10 @@ pub struct ReflDecision {
     /// glass rim gave them a plane, and the seeds placed on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_rim: Option<[u32; 2]>,
+    /// With reflection.seed_rim_curved too: of those views, the ones whose
+    /// membrane is curved.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_rim_curved: Option<u32>,
     /// With those masks and reflection.seed_planes: the views' mask pieces
     /// whose hull points lay on a plane (or two at a corner), and the seeds
     /// moved onto it.

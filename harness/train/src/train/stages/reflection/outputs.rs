@@ -60,7 +60,13 @@ impl ReflDecision {
                             None => String::new(),
                         },
                         match d.seed_rim {
-                            Some([views, seeds]) if views > 0 => format!("; {seeds} on the glass rim's plane of {views} views"),
+                            Some([views, seeds]) if views > 0 => format!(
+                                "; {seeds} on the glass rim's plane of {views} views{}",
+                                match d.seed_rim_curved {
+                                    Some(c) if c > 0 => format!(" ({c} of them curved)"),
+                                    _ => String::new(),
+                                }
+                            ),
                             _ => String::new(),
                         },
                         match d.seed_planes {

@@ -213,6 +213,7 @@ pub fn begin(
         env_proxy: None,
         seed_mask_coverage: None,
         seed_rim: None,
+        seed_rim_curved: None,
         seed_planes: None,
         seed_faces: None,
         seed_faces_marked: false,
@@ -346,6 +347,7 @@ fn seed_model(
             rim: rc.seed_rim,
             rim_all_around: rc.seed_rim_all_around,
             rim_hull: rc.seed_rim_hull,
+            rim_curved: rc.seed_rim_curved,
             planes: rc.seed_planes,
             smooth: rc.seed_smooth,
             faces: rc.seed_faces && !d.seed_faces_marked,
@@ -365,6 +367,7 @@ fn seed_model(
         d.seed_significance = h.significance_relaxed;
         d.significance_dropped = h.significance_dropped;
         d.seed_rim = p.rim.then_some([h.rim_views as u32, h.rim_seeds as u32]);
+        d.seed_rim_curved = (p.rim && p.rim_curved).then_some(h.rim_curved as u32);
         d.seed_planes = p.planes.then_some([h.plane_pieces as u32, h.plane_seeds as u32]);
         d.seed_faces = p.faces.then_some(h.faces.map(|c| c as u32));
         h.seeds

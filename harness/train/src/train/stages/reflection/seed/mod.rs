@@ -64,6 +64,7 @@
 //! ([`pane_seeds`], the `panes` module).
 
 mod chance;
+mod curved;
 mod faces;
 mod geometry;
 mod normals;
@@ -135,6 +136,10 @@ pub struct SeedParams {
     /// With `rim`: the first hull points of the rays at the masks' edges
     /// are rim candidates too (`reflection.seed_rim_hull`; rim::membranes).
     pub rim_hull: bool,
+    /// With `rim`: where a view's rim points lie off their plane the way a
+    /// bent front's do, the membrane is curved through them (the `curved`
+    /// module; `reflection.seed_rim_curved`).
+    pub rim_curved: bool,
     /// With given glass masks: each view's mask pieces whose hull points lie
     /// on a plane, or two at a corner, seeded on it (the `planes` module).
     pub planes: bool,
@@ -164,6 +169,7 @@ impl Default for SeedParams {
             rim: false,
             rim_all_around: false,
             rim_hull: false,
+            rim_curved: false,
             planes: false,
             smooth: false,
             faces: false,
@@ -318,6 +324,8 @@ pub struct HullSeeding {
     pub seeds: Vec<Seed>,
     /// Views whose rim gave them a membrane ([`SeedParams::rim`]).
     pub rim_views: usize,
+    /// Of those, the views with a curved membrane ([`SeedParams::rim_curved`]).
+    pub rim_curved: usize,
     /// Seeds placed on a membrane.
     pub rim_seeds: usize,
     /// Mask pieces whose hull points gave a plane ([`SeedParams::planes`]).
@@ -372,7 +380,17 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
         smooth::smooth_normals(&mut seeds, p.threads);
     }
     let faces = if p.faces && !dropped { faces::flat_faces(&mut seeds, faces::face_band(chosen, &prepared)) } else { (0, 0) };
-    HullSeeding { seeds, rim_views: found.rim_views, rim_seeds, plane_pieces, plane_seeds, faces: [faces.0, faces.1], significance_dropped: dropped, significance_relaxed: relaxed }
+    HullSeeding {
+        seeds,
+        rim_views: found.rim_views,
+        rim_curved: found.rim_curved,
+        rim_seeds,
+        plane_pieces,
+        plane_seeds,
+        faces: [faces.0, faces.1],
+        significance_dropped: dropped,
+        significance_relaxed: relaxed,
+    }
 }
 
 /// Each view's membranes where [`SeedParams::rim`] asks for them.
@@ -394,10 +412,11 @@ struct Found {
     rim_normals: Vec<Option<V3>>,
     agreeing: Vec<(V3, usize)>,
     rim_views: usize,
+    rim_curved: usize,
 }
 
 fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]) -> Found {
-    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_curved: 0 };
     let far = far_depth(prepared);
     let total: usize = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).sum();
     if total == 0 || far <= 0.0 || p.steps == 0 {
@@ -407,6 +426,7 @@ fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]
     let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
     let rays = strided_rays(prepared, total, p.max_rays);
     found.rim_views = membranes.iter().filter(|m| m.any()).count();
+    found.rim_curved = membranes.iter().filter(|m| m.curved()).count();
     for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, membranes)) {
         found.significant.extend(part.significant);
         found.rim_normals.extend(part.rim_normals);
@@ -424,7 +444,7 @@ fn strided_rays(prepared: &[Prepared], total: usize, max_rays: u32) -> Vec<(usiz
 
 /// [`march`] along `rays` (view, pixel), in order.
 fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32], membranes: &[rim::ViewMembranes]) -> Found {
-    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_curved: 0 };
     for &(vi, i) in rays {
         let v = &prepared[vi];
         let (z_near, z_far) = v.ray_span(i, far);

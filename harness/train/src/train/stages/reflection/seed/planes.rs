@@ -59,7 +59,7 @@ pub(super) fn snap(found: &mut Found, views: &[Prepared]) -> usize {
 /// The plane, or the corner of two, that [`PLANE_SHARE`] of `pts`
 /// ([x, y, 1 / z]) lie on within [`PLANE_TOL`].
 fn piece_plane(pts: &[[f64; 3]]) -> Option<Membrane> {
-    let one = Membrane { coef: consensus(pts, PLANE_TOL)?, corner: None };
+    let one = Membrane::flat(consensus(pts, PLANE_TOL)?);
     let m = corner(pts, one, PLANE_TOL).unwrap_or(one);
     let on = pts.iter().filter(|p| m.off(p) <= PLANE_TOL).count();
     (on as f64 >= PLANE_SHARE * pts.len() as f64).then_some(m)

@@ -30,6 +30,7 @@
 //! silhouettes) and the seeds are unchanged, and `pane`'s (its foot on the
 //! floor) ring at most 4 of 60 views, moving it by 0.1 degrees.
 
+use super::curved::{curved, median_off};
 use super::{far_depth, image_point, image_xy, in_hull, in_parallel, normalize, pixel_of, span_depths, Prepared, SeedParams, V3};
 use glam::DVec3;
 
@@ -69,6 +70,9 @@ const RIM_MIN_POINTS: usize = 12;
 pub(super) struct Membrane {
     pub(super) coef: [f64; 3],
     pub(super) corner: Option<Corner>,
+    /// A curved membrane's quadratic terms (without a corner): 1 / z gains
+    /// d x² + e x y + f y² (zero for a plane).
+    pub(super) bend: [f64; 3],
 }
 
 /// A membrane's second plane.
@@ -90,6 +94,17 @@ fn off_plane(c: &[f64; 3], p: &[f64; 3]) -> f64 {
 }
 
 impl Membrane {
+    /// A flat membrane: plane `coef`.
+    pub(super) fn flat(coef: [f64; 3]) -> Membrane {
+        Membrane { coef, corner: None, bend: [0.0; 3] }
+    }
+
+    /// 1 / z of the membrane at normalised image point (x, y).
+    fn inv(&self, x: f64, y: f64) -> f64 {
+        let b = &self.bend;
+        inv_at(self.plane(x, y), x, y) + b[0] * x * x + b[1] * x * y + b[2] * y * y
+    }
+
     /// The plane that holds normalised image point (x, y): the first, or at
     /// a corner the farther (convex) or nearer of the two there.
     fn plane(&self, x: f64, y: f64) -> &[f64; 3] {
@@ -115,7 +130,7 @@ impl Membrane {
     /// The membrane's view depth at normalised image point (x, y), if it is
     /// in front of the camera.
     pub(super) fn depth_at(&self, x: f64, y: f64) -> Option<f64> {
-        let inv = inv_at(self.plane(x, y), x, y);
+        let inv = self.inv(x, y);
         (inv > 1e-9 && inv.is_finite()).then(|| 1.0 / inv)
     }
 
@@ -126,16 +141,19 @@ impl Membrane {
     }
 
     /// The membrane's unit normal in world space at normalised image point
-    /// (x, y): in view space the plane there is a X + b Y + c Z = 1.
+    /// (x, y): in view space the surface is G = 0, G = a X + b Y + c Z +
+    /// (d X² + e X Y + f Y²) / Z - 1, whose gradient at (x, y) is
+    /// (a + 2 d x + e y, b + e x + 2 f y, c - d x² - e x y - f y²).
     pub(super) fn normal_at(&self, v: &Prepared, x: f64, y: f64) -> V3 {
-        let c = self.plane(x, y);
+        let (c, [d, e, f]) = (self.plane(x, y), self.bend);
+        let g = [c[0] + 2.0 * d * x + e * y, c[1] + e * x + 2.0 * f * y, c[2] - d * x * x - e * x * y - f * y * y];
         let m = &v.cam.world_to_view;
-        normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * c[r]).sum()))
+        normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * g[r]).sum()))
     }
 
     /// How far `p` ([x, y, 1 / z]) lies from the membrane, as a share of its depth.
     pub(super) fn off(&self, p: &[f64; 3]) -> f64 {
-        off_plane(self.plane(p[0], p[1]), p)
+        (1.0 - self.inv(p[0], p[1]) / p[2]).abs()
     }
 }
 
@@ -248,6 +266,10 @@ impl ViewMembranes {
     pub(super) fn any(&self) -> bool {
         self.planes.iter().any(Option::is_some)
     }
+    /// Whether any piece's membrane is curved.
+    pub(super) fn curved(&self) -> bool {
+        self.planes.iter().flatten().any(|m| m.bend != [0.0; 3])
+    }
 }
 
 /// Each view's membranes, one per piece of its mask that rim points ring.
@@ -260,7 +282,7 @@ impl ViewMembranes {
 pub(super) fn membranes(views: &[Prepared], p: &SeedParams) -> Vec<ViewMembranes> {
     let edges: Vec<Edge> = views.iter().map(|v| Edge::new(&v.mask, v.cam.width as usize, v.cam.height as usize)).collect();
     let rim = rim_points(views, &edges, p);
-    views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim, p.rim_all_around)).collect()
+    views.iter().zip(&edges).map(|(v, e)| view_membranes(v, &e.near, &rim, p)).collect()
 }
 
 /// `mask`'s 8-connected pieces, numbered in pixel order: each pixel's piece
@@ -291,7 +313,7 @@ pub(super) fn pieces(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, u32) {
 /// [`membranes`] for one view: the rim points at its mask edge (`edge`),
 /// each given to the pieces within two pixels of it (a pillar between two
 /// windows rims both), and a membrane for each piece they ring.
-fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], all_around: bool) -> ViewMembranes {
+fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], p: &SeedParams) -> ViewMembranes {
     let (w, h) = (v.cam.width as usize, v.cam.height as usize);
     let (piece, n) = pieces(&v.mask, w, h);
     let mut centre = vec![(0usize, 0.0f64, 0.0f64); n as usize];
@@ -302,9 +324,9 @@ fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], all_around: bool) -> 
     // Per piece: (u, v) and (x, y, 1 / z) of its rim points, in rim order.
     let mut pts: Vec<Vec<([f64; 2], [f64; 3])>> = vec![Vec::new(); n as usize];
     let mut near = Vec::new();
-    for &p in rim {
-        let Some((i, _)) = pixel_of(&v.cam, p) else { continue };
-        let Some((u, vv, z)) = image_point(&v.cam, p) else { continue };
+    for &r in rim {
+        let Some((i, _)) = pixel_of(&v.cam, r) else { continue };
+        let Some((u, vv, z)) = image_point(&v.cam, r) else { continue };
         if !edge[i] {
             continue;
         }
@@ -319,7 +341,7 @@ fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], all_around: bool) -> 
             pts[k as usize].push(([u, vv], [x, y, 1.0 / z]));
         }
     }
-    let planes: Vec<Option<Membrane>> = centre.iter().zip(&pts).map(|(&(m, su, sv), p)| membrane(p, [su / m as f64, sv / m as f64], all_around)).collect();
+    let planes: Vec<Option<Membrane>> = centre.iter().zip(&pts).map(|(&(m, su, sv), pts)| membrane(pts, [su / m as f64, sv / m as f64], p)).collect();
     if planes.iter().all(Option::is_none) {
         return ViewMembranes::default();
     }
@@ -328,8 +350,9 @@ fn view_membranes(v: &Prepared, edge: &[bool], rim: &[V3], all_around: bool) -> 
 
 /// A piece's membrane from its rim points (image position, plane
 /// coordinates), where they lie all around its centre `c` (with
-/// `planar`, those on the fitted plane too).
-fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], planar: bool) -> Option<Membrane> {
+/// `p.rim_all_around`, those on the fitted membrane too); curved where
+/// `p.rim_curved` and the points call for it.
+fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], p: &SeedParams) -> Option<Membrane> {
     let rings = |pts: &mut dyn Iterator<Item = [f64; 2]>| {
         let mut sectors = [false; 12];
         let mut n = 0;
@@ -344,12 +367,17 @@ fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], planar: bool) -> Option<M
         return None;
     }
     let plane: Vec<[f64; 3]> = pts.iter().map(|p| p.1).collect();
-    let one = Membrane { coef: fit_plane(&plane)?, corner: None };
-    let m = corner(&plane, one, RIM_PLANAR).unwrap_or(one);
+    let one = Membrane::flat(fit_plane(&plane)?);
+    // Two planes at a corner, or a curve: whichever the points lie nearer.
+    let bent = if p.rim_curved { curved(&plane, &one) } else { None };
+    let m = match (corner(&plane, one, RIM_PLANAR), bent) {
+        (Some(k), Some(b)) => [k, b].into_iter().min_by(|x, y| median_off(&plane, x).total_cmp(&median_off(&plane, y))).unwrap_or(k),
+        (k, b) => k.or(b).unwrap_or(one),
+    };
     // The points on the membrane (within RIM_PLANAR of their depth) must
     // ring the piece too: where a piece's rim lies on planes the fit does
     // not explain, it fits none of them.
-    (!planar || rings(&mut pts.iter().filter(|p| m.off(&p.1) <= RIM_PLANAR).map(|p| p.0))).then_some(m)
+    (!p.rim_all_around || rings(&mut pts.iter().filter(|p| m.off(&p.1) <= RIM_PLANAR).map(|p| p.0))).then_some(m)
 }
 
 /// Two planes for points ([x, y, 1 / z]) that `one` plane leaves off (a
@@ -375,7 +403,7 @@ pub(super) fn corner(pts: &[[f64; 3]], one: Membrane, tol: f64) -> Option<Membra
         }
         (a, b) = (fit_plane(&sa)?, fit_plane(&sb)?);
     }
-    let two = [false, true].map(|convex| Membrane { coef: a, corner: Some(Corner { coef: b, convex }) });
+    let two = [false, true].map(|convex| Membrane { coef: a, corner: Some(Corner { coef: b, convex }), bend: [0.0; 3] });
     let (n, m) = two.iter().map(|m| (within(m), *m)).max_by_key(|&(n, _)| n)?;
     (n as f64 >= RIM_CORNER * pts.len() as f64 && 2 * (pts.len() - n) <= pts.len() - on_one).then_some(m)
 }

@@ -1,0 +1,86 @@
+//! A curved rim membrane: where a view's rim points lie off their plane the
+//! way a bent front's do (a windshield, a section of a cylinder, whose
+//! plane is its chord), 1 / z quadratic in the normalised image
+//! coordinates through them instead: a ruled or gently curved front's rim
+//! rings its inside, so the fit interpolates the bend between its edges.
+
+use super::rim::Membrane;
+
+/// The plane's median distance from its rim points (a share of their
+/// depth) must exceed this for a curved membrane to be tried: below it the
+/// points are on a plane to within Stage I's noise.
+pub const CURVE_MIN: f64 = 0.004;
+/// The curved membrane replaces the plane where it brings the points'
+/// median distance to at most this share of the plane's.
+pub const CURVE_GAIN: f64 = 0.85;
+
+/// The curved membrane through `pts` ([x, y, 1 / z]) where they call for
+/// it against their plane `flat` ([`CURVE_MIN`], [`CURVE_GAIN`]).
+pub(super) fn curved(pts: &[[f64; 3]], flat: &Membrane) -> Option<Membrane> {
+    let c = fit_bent(pts)?;
+    let bent = Membrane { coef: [c[0], c[1], c[2]], corner: None, bend: [c[3], c[4], c[5]] };
+    let f = median_off(pts, flat);
+    (f > CURVE_MIN && median_off(pts, &bent) <= CURVE_GAIN * f).then_some(bent)
+}
+
+/// The median distance of `pts` from `m`, as a share of their depth.
+pub(super) fn median_off(pts: &[[f64; 3]], m: &Membrane) -> f64 {
+    let mut off: Vec<f64> = pts.iter().map(|p| m.off(p)).collect();
+    off.sort_by(f64::total_cmp);
+    off.get(off.len() / 2).copied().unwrap_or(f64::INFINITY)
+}
+
+/// 1 / z = a x + b y + c + d x² + e x y + f y² through `pts` by iteratively
+/// reweighted least squares, as [`super::rim::fit_plane`] fits a plane.
+/// None where the points do not fix the six terms.
+fn fit_bent(pts: &[[f64; 3]]) -> Option<[f64; 6]> {
+    let row = |p: &[f64; 3]| [p[0], p[1], 1.0, p[0] * p[0], p[0] * p[1], p[1] * p[1]];
+    let mut wts = vec![1.0f64; pts.len()];
+    let mut coef = None;
+    for _ in 0..10 {
+        let (mut a, mut b) = ([[0.0f64; 6]; 6], [0.0f64; 6]);
+        for (p, &wt) in pts.iter().zip(&wts) {
+            let r = row(p);
+            for i in 0..6 {
+                for j in 0..6 {
+                    a[i][j] += wt * wt * r[i] * r[j];
+                }
+                b[i] += wt * wt * r[i] * p[2];
+            }
+        }
+        let c = solve(a, b)?;
+        let res: Vec<f64> = pts.iter().map(|p| (row(p).iter().zip(&c).map(|(r, c)| r * c).sum::<f64>() - p[2]).abs()).collect();
+        let mut sorted = res.clone();
+        sorted.sort_by(f64::total_cmp);
+        let s = 2.0 * 1.4826 * sorted[sorted.len() / 2] + 1e-12;
+        wts = res.iter().map(|&r| if r < s { 1.0 } else { s / r }).collect();
+        coef = Some(c);
+    }
+    coef
+}
+
+/// `a` x = `b` by Gaussian elimination with partial pivoting; None where
+/// `a` is (nearly) singular.
+fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    for col in 0..N {
+        let piv = (col..N).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if !(a[piv][col].abs() > 1e-12 * scale) {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for r in col + 1..N {
+            let f = a[r][col] / a[col][col];
+            for c in col..N {
+                a[r][c] -= f * a[col][c];
+            }
+            b[r] -= f * b[col];
+        }
+    }
+    let mut x = [0.0f64; N];
+    for r in (0..N).rev() {
+        x[r] = (b[r] - (r + 1..N).map(|c| a[r][c] * x[c]).sum::<f64>()) / a[r][r];
+    }
+    Some(x)
+}
