@@ -115,9 +115,9 @@ pub struct ReflectionConfig {
     /// With `seed_rim`: where a view's rim points lie off their plane the
     /// way a bent front's do (their plane leaves them a median 0.4% of
     /// their depth off or more, and 1 / z quadratic in the image brings
-    /// that to 0.85 of it or less), the view seeds on that curved membrane
+    /// that to 0.7 of it or less), the view seeds on that curved membrane
     /// instead (seed/curved.rs): a windshield, a section of a cylinder
-    /// whose plane is its chord.
+    /// whose plane is its chord (perf/journal/2026-12-07-seventy-third.md).
     pub seed_rim_curved: bool,
     /// With masks: where a view's hull points over one piece of its mask
     /// lie on a plane (or two meeting at a corner), move that piece's seeds
