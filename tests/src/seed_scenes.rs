@@ -136,24 +136,24 @@ pub fn free_window_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f
     front_window(count, false)
 }
 
+/// `count` views of a front from within 50 degrees of +x, aimed at its
+/// middle (0, 0, 0.7): [`views_from`] with those cameras.
+fn front_views(count: usize, pixel: impl Fn(V3, V3, f64) -> (f32, f32)) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    views_from(count, |i| front_eye(i, count, 50.0), [0.0, 0.0, 0.7], 0.8, pixel)
+}
+
 /// [`window_views`] (`in_wall`) or [`free_window_views`].
 fn front_window(count: usize, in_wall: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    views_from(
-        count,
-        |i| front_eye(i, count, 50.0),
-        [0.0, 0.0, 0.7],
-        0.8,
-        |e, d, len| {
-            if d[0] >= -1e-9 {
-                return (0.0, 0.0);
-            }
-            let t = -e[0] / d[0];
-            let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
-            let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
-            let t = if glass || !in_wall { (-2.0 - e[0]) / d[0] } else { t };
-            (glass as u8 as f32, (t / len) as f32)
-        },
-    )
+    front_views(count, |e, d, len| {
+        if d[0] >= -1e-9 {
+            return (0.0, 0.0);
+        }
+        let t = -e[0] / d[0];
+        let (y, zz) = (e[1] + t * d[1], e[2] + t * d[2]);
+        let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&zz);
+        let t = if glass || !in_wall { (-2.0 - e[0]) / d[0] } else { t };
+        (glass as u8 as f32, (t / len) as f32)
+    })
 }
 
 /// The radius of [`curved_front_views`]' front: a vertical cylinder about
@@ -167,23 +167,17 @@ pub const FRONT_R: f64 = 1.5;
 /// behind it; captured from one side as [`window_views`]. Masks of the
 /// glass, depths of the wall or, through the glass, the back wall.
 pub fn curved_front_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    views_from(
-        count,
-        |i| front_eye(i, count, 50.0),
-        [0.0, 0.0, 0.7],
-        0.8,
-        |e, d, len| {
-            let back = if d[0] < -1e-9 { (-2.0 - e[0]) / d[0] } else { return (0.0, 0.0) };
-            let o = [e[0] + FRONT_R, e[1]];
-            let (a, b, c) = (d[0] * d[0] + d[1] * d[1], 2.0 * (o[0] * d[0] + o[1] * d[1]), o[0] * o[0] + o[1] * o[1] - FRONT_R * FRONT_R);
-            let disc = b * b - 4.0 * a * c;
-            let t = (disc >= 0.0).then(|| (-b - disc.sqrt()) / (2.0 * a)).filter(|&t| t > 0.0 && t < back);
-            let Some(t) = t else { return (0.0, (back / len) as f32) };
-            let (y, z) = (e[1] + t * d[1], e[2] + t * d[2]);
-            let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&z);
-            (glass as u8 as f32, ((if glass { back } else { t }) / len) as f32)
-        },
-    )
+    front_views(count, |e, d, len| {
+        let back = if d[0] < -1e-9 { (-2.0 - e[0]) / d[0] } else { return (0.0, 0.0) };
+        let o = [e[0] + FRONT_R, e[1]];
+        let (a, b, c) = (d[0] * d[0] + d[1] * d[1], 2.0 * (o[0] * d[0] + o[1] * d[1]), o[0] * o[0] + o[1] * o[1] - FRONT_R * FRONT_R);
+        let disc = b * b - 4.0 * a * c;
+        let t = (disc >= 0.0).then(|| (-b - disc.sqrt()) / (2.0 * a)).filter(|&t| t > 0.0 && t < back);
+        let Some(t) = t else { return (0.0, (back / len) as f32) };
+        let (y, z) = (e[1] + t * d[1], e[2] + t * d[2]);
+        let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&z);
+        (glass as u8 as f32, ((if glass { back } else { t }) / len) as f32)
+    })
 }
 
 /// The distance of `x` from [`curved_front_views`]' cylinder and its

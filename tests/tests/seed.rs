@@ -284,34 +284,19 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     // agreeing point the most views agree on instead of the first (which
     // few views see, near the cameras), so as many seeds, more on the glass.
     let seeding = |a: f64| hull_seeding(&sv, &SeedParams { significance: a, ..base });
-    assert_eq!(
-        seeding(1e-8),
-        HullSeeding {
-            seeds: tight.clone(),
-            rim_views: 0,
-            rim_curved: 0,
-            rim_seeds: 0,
-            plane_pieces: 0,
-            plane_seeds: 0,
-            faces: [0, 0],
-            significance_dropped: false,
-            significance_relaxed: None
-        }
-    );
-    assert_eq!(
-        seeding(1.0),
-        HullSeeding {
-            seeds: loose.clone(),
-            rim_views: 0,
-            rim_curved: 0,
-            rim_seeds: 0,
-            plane_pieces: 0,
-            plane_seeds: 0,
-            faces: [0, 0],
-            significance_dropped: false,
-            significance_relaxed: None
-        }
-    );
+    let plain = HullSeeding {
+        seeds: tight.clone(),
+        rim_views: 0,
+        rim_curved: 0,
+        rim_seeds: 0,
+        plane_pieces: 0,
+        plane_seeds: 0,
+        faces: [0, 0],
+        significance_dropped: false,
+        significance_relaxed: None,
+    };
+    assert_eq!(seeding(1e-8), plain);
+    assert_eq!(seeding(1.0), HullSeeding { seeds: loose.clone(), ..plain.clone() });
     assert!(at(1e-300).is_empty(), "1e-300 is beaten by chance with 48 views");
     let dropped = seeding(1e-300);
     assert!(dropped.significance_dropped);
@@ -345,20 +330,7 @@ fn seeds_on_the_glass_through_dense_residual_noise() {
     assert_eq!(seeding(1e-300), dropped);
     assert_eq!(hull_seeding(&sv, &SeedParams { significance: 1e-300, normal: SeedNormal::View, ..base }), dropped);
     // Looser levels before that fallback (`relax`; Stage II's with masks): the first that some point beats, not one below the test's.
-    assert_eq!(
-        hull_seeding(&sv, &SeedParams { significance: 1e-300, relax: &[1e-301, 1e-8, 1.0], ..base }),
-        HullSeeding {
-            seeds: tight.clone(),
-            rim_views: 0,
-            rim_curved: 0,
-            rim_seeds: 0,
-            plane_pieces: 0,
-            plane_seeds: 0,
-            faces: [0, 0],
-            significance_dropped: false,
-            significance_relaxed: Some(1e-8)
-        }
-    );
+    assert_eq!(hull_seeding(&sv, &SeedParams { significance: 1e-300, relax: &[1e-301, 1e-8, 1.0], ..base }), HullSeeding { significance_relaxed: Some(1e-8), ..plain });
 }
 
 /// The march and the normals run on threads, each on a contiguous run of

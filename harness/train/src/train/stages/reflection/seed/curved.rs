@@ -4,7 +4,7 @@
 //! coordinates through them instead: a ruled or gently curved front's rim
 //! rings its inside, so the fit interpolates the bend between its edges.
 
-use super::rim::Membrane;
+use super::rim::{reweighted_fit, Membrane};
 
 /// The plane's median distance from its rim points (a share of their
 /// depth) must exceed this for a curved membrane to be tried: below it the
@@ -35,33 +35,11 @@ pub(super) fn median_off(pts: &[[f64; 3]], m: &Membrane) -> f64 {
     off.get(off.len() / 2).copied().unwrap_or(f64::INFINITY)
 }
 
-/// 1 / z = a x + b y + c + d x² + e x y + f y² through `pts` by iteratively
-/// reweighted least squares, as [`super::rim::fit_plane`] fits a plane.
-/// None where the points do not fix the six terms.
+/// 1 / z = a x + b y + c + d x² + e x y + f y² through `pts` by the
+/// plane's reweighted least squares ([`reweighted_fit`]). None where the
+/// points do not fix the six terms.
 fn fit_bent(pts: &[[f64; 3]]) -> Option<[f64; 6]> {
-    let row = |p: &[f64; 3]| [p[0], p[1], 1.0, p[0] * p[0], p[0] * p[1], p[1] * p[1]];
-    let mut wts = vec![1.0f64; pts.len()];
-    let mut coef = None;
-    for _ in 0..10 {
-        let (mut a, mut b) = ([[0.0f64; 6]; 6], [0.0f64; 6]);
-        for (p, &wt) in pts.iter().zip(&wts) {
-            let r = row(p);
-            for i in 0..6 {
-                for j in 0..6 {
-                    a[i][j] += wt * wt * r[i] * r[j];
-                }
-                b[i] += wt * wt * r[i] * p[2];
-            }
-        }
-        let c = solve(a, b)?;
-        let res: Vec<f64> = pts.iter().map(|p| (row(p).iter().zip(&c).map(|(r, c)| r * c).sum::<f64>() - p[2]).abs()).collect();
-        let mut sorted = res.clone();
-        sorted.sort_by(f64::total_cmp);
-        let s = 2.0 * 1.4826 * sorted[sorted.len() / 2] + 1e-12;
-        wts = res.iter().map(|&r| if r < s { 1.0 } else { s / r }).collect();
-        coef = Some(c);
-    }
-    coef
+    reweighted_fit(pts, |p| [p[0], p[1], 1.0, p[0] * p[0], p[0] * p[1], p[1] * p[1]], solve)
 }
 
 /// `a` x = `b` by Gaussian elimination with partial pivoting; None where

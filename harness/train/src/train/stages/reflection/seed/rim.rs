@@ -449,21 +449,33 @@ const CONSENSUS_TRIES: usize = 256;
 /// pane's top edge) do not tilt the plane. None where the points are
 /// collinear.
 pub fn fit_plane(pts: &[[f64; 3]]) -> Option<[f64; 3]> {
+    reweighted_fit(pts, |p| [p[0], p[1], 1.0], solve3)
+}
+
+/// 1 / z = row(x, y) · coef through `pts` ([x, y, 1 / z]) by iteratively
+/// reweighted least squares (10 rounds; rows weighted 1 within twice the
+/// residuals' robust spread, s / r beyond it), each round's normal
+/// equations solved by `solve`. None where `solve` finds them singular.
+pub(super) fn reweighted_fit<const N: usize>(
+    pts: &[[f64; 3]],
+    row: impl Fn(&[f64; 3]) -> [f64; N],
+    solve: impl Fn([[f64; N]; N], [f64; N]) -> Option<[f64; N]>,
+) -> Option<[f64; N]> {
     let mut wts = vec![1.0f64; pts.len()];
     let mut coef = None;
     for _ in 0..10 {
-        let (mut a, mut b) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
+        let (mut a, mut b) = ([[0.0f64; N]; N], [0.0f64; N]);
         for (p, &wt) in pts.iter().zip(&wts) {
-            let row = [p[0], p[1], 1.0];
-            for r in 0..3 {
-                for c in 0..3 {
+            let row = row(p);
+            for r in 0..N {
+                for c in 0..N {
                     a[r][c] += wt * wt * row[r] * row[c];
                 }
                 b[r] += wt * wt * row[r] * p[2];
             }
         }
-        let c = solve3(a, b)?;
-        let res: Vec<f64> = pts.iter().map(|p| (c[0] * p[0] + c[1] * p[1] + c[2] - p[2]).abs()).collect();
+        let c = solve(a, b)?;
+        let res: Vec<f64> = pts.iter().map(|p| (row(p).iter().zip(&c).map(|(r, c)| c * r).sum::<f64>() - p[2]).abs()).collect();
         let mut sorted = res.clone();
         sorted.sort_by(f64::total_cmp);
         let s = 2.0 * 1.4826 * sorted[sorted.len() / 2] + 1e-12;
