@@ -4,7 +4,8 @@
 //! coordinates through them instead: a ruled or gently curved front's rim
 //! rings its inside, so the fit interpolates the bend between its edges.
 
-use super::rim::{reweighted_fit, Membrane};
+use super::geometry::{reweighted_fit, solve};
+use super::membrane::Membrane;
 
 /// The plane's median distance from its rim points (a share of their
 /// depth) must exceed this for a curved membrane to be tried: below it the
@@ -40,30 +41,4 @@ pub(super) fn median_off(pts: &[[f64; 3]], m: &Membrane) -> f64 {
 /// points do not fix the six terms.
 fn fit_bent(pts: &[[f64; 3]]) -> Option<[f64; 6]> {
     reweighted_fit(pts, |p| [p[0], p[1], 1.0, p[0] * p[0], p[0] * p[1], p[1] * p[1]], solve)
-}
-
-/// `a` x = `b` by Gaussian elimination with partial pivoting; None where
-/// `a` is (nearly) singular.
-fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
-    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    for col in 0..N {
-        let piv = (col..N).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if !(a[piv][col].abs() > 1e-12 * scale) {
-            return None;
-        }
-        a.swap(col, piv);
-        b.swap(col, piv);
-        for r in col + 1..N {
-            let f = a[r][col] / a[col][col];
-            for c in col..N {
-                a[r][c] -= f * a[col][c];
-            }
-            b[r] -= f * b[col];
-        }
-    }
-    let mut x = [0.0f64; N];
-    for r in (0..N).rev() {
-        x[r] = (b[r] - (r + 1..N).map(|c| a[r][c] * x[c]).sum::<f64>()) / a[r][r];
-    }
-    Some(x)
 }

@@ -114,3 +114,62 @@ pub(super) fn in_parallel<T: Sync, R: Send>(items: &[T], threads: usize, f: impl
         handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
     })
 }
+
+/// 1 / z = row(x, y) · coef through `pts` ([x, y, 1 / z]) by iteratively
+/// reweighted least squares (10 rounds; rows weighted 1 within twice the
+/// residuals' robust spread, s / r beyond it), each round's normal
+/// equations solved by `solve`. None where `solve` finds them singular.
+pub(super) fn reweighted_fit<const N: usize>(
+    pts: &[[f64; 3]],
+    row: impl Fn(&[f64; 3]) -> [f64; N],
+    solve: impl Fn([[f64; N]; N], [f64; N]) -> Option<[f64; N]>,
+) -> Option<[f64; N]> {
+    let mut wts = vec![1.0f64; pts.len()];
+    let mut coef = None;
+    for _ in 0..10 {
+        let (mut a, mut b) = ([[0.0f64; N]; N], [0.0f64; N]);
+        for (p, &wt) in pts.iter().zip(&wts) {
+            let row = row(p);
+            for r in 0..N {
+                for c in 0..N {
+                    a[r][c] += wt * wt * row[r] * row[c];
+                }
+                b[r] += wt * wt * row[r] * p[2];
+            }
+        }
+        let c = solve(a, b)?;
+        let res: Vec<f64> = pts.iter().map(|p| (row(p).iter().zip(&c).map(|(r, c)| c * r).sum::<f64>() - p[2]).abs()).collect();
+        let mut sorted = res.clone();
+        sorted.sort_by(f64::total_cmp);
+        let s = 2.0 * 1.4826 * sorted[sorted.len() / 2] + 1e-12;
+        wts = res.iter().map(|&r| if r < s { 1.0 } else { s / r }).collect();
+        coef = Some(c);
+    }
+    coef
+}
+
+/// `a` x = `b` by Gaussian elimination with partial pivoting; None where
+/// `a` is (nearly) singular.
+pub(super) fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    for col in 0..N {
+        let piv = (col..N).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if !(a[piv][col].abs() > 1e-12 * scale) {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for r in col + 1..N {
+            let f = a[r][col] / a[col][col];
+            for c in col..N {
+                a[r][c] -= f * a[col][c];
+            }
+            b[r] -= f * b[col];
+        }
+    }
+    let mut x = [0.0f64; N];
+    for r in (0..N).rev() {
+        x[r] = (b[r] - (r + 1..N).map(|c| a[r][c] * x[c]).sum::<f64>()) / a[r][r];
+    }
+    Some(x)
+}

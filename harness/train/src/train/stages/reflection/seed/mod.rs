@@ -11,25 +11,23 @@
 //! point along a residual pixel's ray lies on its front, provided the ray
 //! met carved space first: where glass fills every view, the residual has no
 //! silhouette, nothing near the cameras is carved, and a ray that is inside
-//! the hull from its start says nothing about where the surface is. Nor
-//! does a point whose agreement chance explains: where noise and texture
-//! put residual on most pixels, a point near the cameras that few views
-//! see lands on residual in 90% of them by chance, so a hull point also
-//! needs a binomial tail at the masks' coverage below
-//! [`SeedParams::significance`] ([`min_hits`]); where no point can
-//! pass it, Stage II's [`hull_seeding`] takes the hull without it, found
-//! in the same march, each ray's seed the point of it that the most views
-//! agree on. Seeds
-//! are the first hull points of rays that crossed carved space; their
-//! normals are by default ([`SeedNormal::Halfway`]) the bisector of the
-//! direction to the camera that found them ([`SeedNormal::View`]) and the
-//! silhouette cones' normal from the gradient of the views' blurred masks
-//! ([`SeedNormal::Gradient`]); or, with [`SeedNormal::Plane`], the local
-//! plane of neighbouring seeds (PCA), or with [`SeedNormal::Consensus`]
-//! (masks' default) the plane most of its wider neighbourhood lies on;
-//! all turned to that camera. Their
-//! size is the seed spacing. Stage II then refines them by the reflection
-//! it has to explain.
+//! the hull from its start says nothing about where the surface is. Nor does
+//! a point whose agreement chance explains: where noise and texture put
+//! residual on most pixels, a point near the cameras that few views see
+//! lands on residual in 90% of them by chance, so a hull point also needs a
+//! binomial tail at the masks' coverage below [`SeedParams::significance`]
+//! ([`min_hits`]); where no point can pass it, Stage II's [`hull_seeding`]
+//! takes the hull without it, found in the same march, each ray's seed the
+//! point of it that the most views agree on. Seeds are the first hull points
+//! of rays that crossed carved space; their normals are by default
+//! ([`SeedNormal::Halfway`]) the bisector of the direction to the camera
+//! that found them ([`SeedNormal::View`]) and the silhouette cones' normal
+//! from the gradient of the views' blurred masks ([`SeedNormal::Gradient`]);
+//! or, with [`SeedNormal::Plane`], the local plane of neighbouring seeds
+//! (PCA), or with [`SeedNormal::Consensus`] (masks' default) the plane most
+//! of its wider neighbourhood lies on; all turned to that camera. Their size
+//! is the seed spacing. Stage II then refines them by the reflection it has
+//! to explain.
 //!
 //! Why not the plane: on an ideal hull the seeds lie on the surface and
 //! their plane is its tangent plane (the synthetic sphere in
@@ -67,6 +65,7 @@ mod chance;
 mod curved;
 mod faces;
 mod geometry;
+mod membrane;
 mod normals;
 mod panes;
 mod planes;
@@ -136,9 +135,8 @@ pub struct SeedParams {
     /// With `rim`: the first hull points of the rays at the masks' edges
     /// are rim candidates too (`reflection.seed_rim_hull`; rim::membranes).
     pub rim_hull: bool,
-    /// With `rim`: where a view's rim points lie off their plane the way a
-    /// bent front's do, the membrane is curved through them (the `curved`
-    /// module; `reflection.seed_rim_curved`).
+    /// With `rim`: a view whose rim lies off its plane as a bent front's
+    /// does seeds on a curved membrane (`curved`; `seed_rim_curved`).
     pub rim_curved: bool,
     /// With given glass masks: each view's mask pieces whose hull points lie
     /// on a plane, or two at a corner, seeded on it (the `planes` module).
@@ -383,7 +381,7 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     HullSeeding {
         seeds,
         rim_views: found.rim_views,
-        rim_curved: found.rim_curved,
+        rim_curved: if found.rim_views > 0 { membranes.iter().filter(|m| m.curved()).count() } else { 0 },
         rim_seeds,
         plane_pieces,
         plane_seeds,
@@ -412,11 +410,10 @@ struct Found {
     rim_normals: Vec<Option<V3>>,
     agreeing: Vec<(V3, usize)>,
     rim_views: usize,
-    rim_curved: usize,
 }
 
 fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]) -> Found {
-    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_curved: 0 };
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     let far = far_depth(prepared);
     let total: usize = prepared.iter().map(|v| v.mask.iter().filter(|&&m| m).count()).sum();
     if total == 0 || far <= 0.0 || p.steps == 0 {
@@ -426,7 +423,6 @@ fn march(prepared: &[Prepared], p: &SeedParams, membranes: &[rim::ViewMembranes]
     let min_hits = min_hits(prepared.len(), total as f64 / pixels.max(1) as f64, p.significance);
     let rays = strided_rays(prepared, total, p.max_rays);
     found.rim_views = membranes.iter().filter(|m| m.any()).count();
-    found.rim_curved = membranes.iter().filter(|m| m.curved()).count();
     for part in in_parallel(&rays, p.threads, |chunk| march_rays(prepared, p, chunk, far, &min_hits, membranes)) {
         found.significant.extend(part.significant);
         found.rim_normals.extend(part.rim_normals);
@@ -444,7 +440,7 @@ fn strided_rays(prepared: &[Prepared], total: usize, max_rays: u32) -> Vec<(usiz
 
 /// [`march`] along `rays` (view, pixel), in order.
 fn march_rays(prepared: &[Prepared], p: &SeedParams, rays: &[(usize, usize)], far: f64, min_hits: &[u32], membranes: &[rim::ViewMembranes]) -> Found {
-    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0, rim_curved: 0 };
+    let mut found = Found { significant: Vec::new(), rim_normals: Vec::new(), agreeing: Vec::new(), rim_views: 0 };
     for &(vi, i) in rays {
         let v = &prepared[vi];
         let (z_near, z_far) = v.ray_span(i, far);

@@ -8,7 +8,8 @@
 //! piece's seeds are moved onto it along their rays and take its normal;
 //! a curved piece (a sphere's silhouette) fits no plane and keeps its seeds.
 
-use super::rim::{consensus, corner, pieces, Membrane, NO_PIECE};
+use super::membrane::Membrane;
+use super::rim::{consensus, corner, pieces, NO_PIECE};
 use super::{image_point, image_xy, pixel_of, unproject_xy, Found, Prepared};
 
 /// How far from a piece's plane (a share of the depth) its hull points may

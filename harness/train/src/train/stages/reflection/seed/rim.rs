@@ -31,7 +31,9 @@
 //! floor) ring at most 4 of 60 views, moving it by 0.1 degrees.
 
 use super::curved::{curved, median_off};
-use super::{far_depth, image_point, image_xy, in_hull, in_parallel, normalize, pixel_of, span_depths, Prepared, SeedParams, V3};
+use super::geometry::reweighted_fit;
+use super::membrane::{off_plane, Corner, Membrane};
+use super::{far_depth, image_point, image_xy, in_hull, in_parallel, pixel_of, span_depths, Prepared, SeedParams, V3};
 use glam::DVec3;
 
 /// The share of the views holding a rim point in their image that must see
@@ -60,102 +62,6 @@ pub const RIM_PLANAR: f64 = 0.05;
 pub const RIM_CORNER: f64 = 0.8;
 /// The fewest rim points a membrane is fitted to.
 const RIM_MIN_POINTS: usize = 12;
-
-/// A view's membrane: 1 / z = a x + b y + c at normalised image
-/// coordinates x = (u - cx) / fx, y = (v - cy) / fy; or, where a mask
-/// piece turns a corner (two windows of a cabin meeting edge to edge), two
-/// such planes, the surface at each pixel the farther of the two (a convex
-/// corner) or the nearer (a concave one).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct Membrane {
-    pub(super) coef: [f64; 3],
-    pub(super) corner: Option<Corner>,
-    /// A curved membrane's quadratic terms (without a corner): 1 / z gains
-    /// d x² + e x y + f y² (zero for a plane).
-    pub(super) bend: [f64; 3],
-}
-
-/// A membrane's second plane.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct Corner {
-    coef: [f64; 3],
-    /// The surface is the farther plane (a corner seen from outside).
-    convex: bool,
-}
-
-/// 1 / z of plane `c` at normalised image point (x, y).
-fn inv_at(c: &[f64; 3], x: f64, y: f64) -> f64 {
-    c[0] * x + c[1] * y + c[2]
-}
-
-/// How far `p` ([x, y, 1 / z]) lies from plane `c`, as a share of its depth.
-fn off_plane(c: &[f64; 3], p: &[f64; 3]) -> f64 {
-    (1.0 - inv_at(c, p[0], p[1]) / p[2]).abs()
-}
-
-impl Membrane {
-    /// A flat membrane: plane `coef`.
-    pub(super) fn flat(coef: [f64; 3]) -> Membrane {
-        Membrane { coef, corner: None, bend: [0.0; 3] }
-    }
-
-    /// 1 / z of the membrane at normalised image point (x, y).
-    fn inv(&self, x: f64, y: f64) -> f64 {
-        let b = &self.bend;
-        inv_at(self.plane(x, y), x, y) + b[0] * x * x + b[1] * x * y + b[2] * y * y
-    }
-
-    /// The plane that holds normalised image point (x, y): the first, or at
-    /// a corner the farther (convex) or nearer of the two there.
-    fn plane(&self, x: f64, y: f64) -> &[f64; 3] {
-        match &self.corner {
-            Some(k) if (inv_at(&k.coef, x, y) < inv_at(&self.coef, x, y)) == k.convex => &k.coef,
-            _ => &self.coef,
-        }
-    }
-
-    /// Normalised image coordinates of pixel `i` of `v`'s image.
-    fn xy(v: &Prepared, i: usize) -> (f64, f64) {
-        let w = v.cam.width as usize;
-        image_xy(&v.cam, (i % w) as f64, (i / w) as f64)
-    }
-
-    /// The membrane's view depth at pixel `i` of `cam`'s image, if it is in
-    /// front of the camera.
-    pub(super) fn depth(&self, v: &Prepared, i: usize) -> Option<f64> {
-        let (x, y) = Self::xy(v, i);
-        self.depth_at(x, y)
-    }
-
-    /// The membrane's view depth at normalised image point (x, y), if it is
-    /// in front of the camera.
-    pub(super) fn depth_at(&self, x: f64, y: f64) -> Option<f64> {
-        let inv = self.inv(x, y);
-        (inv > 1e-9 && inv.is_finite()).then(|| 1.0 / inv)
-    }
-
-    /// The membrane's unit normal in world space at pixel `i`.
-    pub(super) fn normal(&self, v: &Prepared, i: usize) -> V3 {
-        let (x, y) = Self::xy(v, i);
-        self.normal_at(v, x, y)
-    }
-
-    /// The membrane's unit normal in world space at normalised image point
-    /// (x, y): in view space the surface is G = 0, G = a X + b Y + c Z +
-    /// (d X² + e X Y + f Y²) / Z - 1, whose gradient at (x, y) is
-    /// (a + 2 d x + e y, b + e x + 2 f y, c - d x² - e x y - f y²).
-    pub(super) fn normal_at(&self, v: &Prepared, x: f64, y: f64) -> V3 {
-        let (c, [d, e, f]) = (self.plane(x, y), self.bend);
-        let g = [c[0] + 2.0 * d * x + e * y, c[1] + e * x + 2.0 * f * y, c[2] - d * x * x - e * x * y - f * y * y];
-        let m = &v.cam.world_to_view;
-        normalize([0, 1, 2].map(|j| (0..3).map(|r| m[r][j] as f64 * g[r]).sum()))
-    }
-
-    /// How far `p` ([x, y, 1 / z]) lies from the membrane, as a share of its depth.
-    pub(super) fn off(&self, p: &[f64; 3]) -> f64 {
-        (1.0 - self.inv(p[0], p[1]) / p[2]).abs()
-    }
-}
 
 /// The pixels of a `w` x `h` image within `r` of pixel `i` (the
 /// (2r + 1)² square around it, row by row; `i` included, nothing beyond
@@ -450,39 +356,6 @@ const CONSENSUS_TRIES: usize = 256;
 /// collinear.
 pub fn fit_plane(pts: &[[f64; 3]]) -> Option<[f64; 3]> {
     reweighted_fit(pts, |p| [p[0], p[1], 1.0], solve3)
-}
-
-/// 1 / z = row(x, y) · coef through `pts` ([x, y, 1 / z]) by iteratively
-/// reweighted least squares (10 rounds; rows weighted 1 within twice the
-/// residuals' robust spread, s / r beyond it), each round's normal
-/// equations solved by `solve`. None where `solve` finds them singular.
-pub(super) fn reweighted_fit<const N: usize>(
-    pts: &[[f64; 3]],
-    row: impl Fn(&[f64; 3]) -> [f64; N],
-    solve: impl Fn([[f64; N]; N], [f64; N]) -> Option<[f64; N]>,
-) -> Option<[f64; N]> {
-    let mut wts = vec![1.0f64; pts.len()];
-    let mut coef = None;
-    for _ in 0..10 {
-        let (mut a, mut b) = ([[0.0f64; N]; N], [0.0f64; N]);
-        for (p, &wt) in pts.iter().zip(&wts) {
-            let row = row(p);
-            for r in 0..N {
-                for c in 0..N {
-                    a[r][c] += wt * wt * row[r] * row[c];
-                }
-                b[r] += wt * wt * row[r] * p[2];
-            }
-        }
-        let c = solve(a, b)?;
-        let res: Vec<f64> = pts.iter().map(|p| (row(p).iter().zip(&c).map(|(r, c)| c * r).sum::<f64>() - p[2]).abs()).collect();
-        let mut sorted = res.clone();
-        sorted.sort_by(f64::total_cmp);
-        let s = 2.0 * 1.4826 * sorted[sorted.len() / 2] + 1e-12;
-        wts = res.iter().map(|&r| if r < s { 1.0 } else { s / r }).collect();
-        coef = Some(c);
-    }
-    coef
 }
 
 /// The solution of the 3 x 3 system `a` x = `b` (Cramer's rule), None
