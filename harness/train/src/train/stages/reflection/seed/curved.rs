@@ -12,12 +12,9 @@ use super::membrane::Membrane;
 /// points are on a plane to within Stage I's noise.
 pub const CURVE_MIN: f64 = 0.004;
 /// The curved membrane replaces the plane where it brings the points'
-/// median distance to at most this share of the plane's. On the suite's
-/// exact masks (50²) a curved front's views read 0.52–0.82, flat fronts'
-/// 0.87 and more, a cabin's windows 0.67–0.92. At 0.85 all of the
-/// windshield's 60 views took it (7.8°; at 0.7 44 of them, 6.2°) and 32
-/// of `garage`'s (+1.3°; at 0.7 one). The quadratic fits a cylinder worst
-/// from far off its axis (a synthetic front seen 50° off: 13° median).
+/// median distance to at most this share of the plane's: the suite's
+/// curved front reads 0.52–0.82 a view, its flat fronts 0.87 and more
+/// (perf/journal/2026-12-07-seventy-third.md).
 pub const CURVE_GAIN: f64 = 0.7;
 
 /// The curved membrane through `pts` ([x, y, 1 / z]) where they call for

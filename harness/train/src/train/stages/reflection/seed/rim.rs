@@ -283,7 +283,7 @@ fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], p: &SeedParams) -> Option
     // The points on the membrane (within RIM_PLANAR of their depth) must
     // ring the piece too: where a piece's rim lies on planes the fit does
     // not explain, it fits none of them.
-    (!p.rim_all_around || rings(&mut pts.iter().filter(|p| m.off(&p.1) <= RIM_PLANAR).map(|p| p.0))).then_some(m)
+    (!p.rim_all_around || rings(&mut pts.iter().filter(|q| m.off(&q.1) <= RIM_PLANAR).map(|q| q.0))).then_some(m)
 }
 
 /// Two planes for points ([x, y, 1 / z]) that `one` plane leaves off (a
