@@ -277,7 +277,13 @@ fn membrane(pts: &[([f64; 2], [f64; 3])], c: [f64; 2], p: &SeedParams) -> Option
     // Two planes at a corner, or a curve: whichever the points lie nearer.
     let bent = if p.rim_curved { curved(&plane, &one) } else { None };
     let m = match (corner(&plane, one, RIM_PLANAR), bent) {
-        (Some(k), Some(b)) => [k, b].into_iter().min_by(|x, y| median_off(&plane, x).total_cmp(&median_off(&plane, y))).unwrap_or(k),
+        (Some(k), Some(b)) => {
+            if median_off(&plane, &b).total_cmp(&median_off(&plane, &k)).is_lt() {
+                b
+            } else {
+                k
+            }
+        }
         (k, b) => k.or(b).unwrap_or(one),
     };
     // The points on the membrane (within RIM_PLANAR of their depth) must
