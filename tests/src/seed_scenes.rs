@@ -167,7 +167,19 @@ pub const FRONT_R: f64 = 1.5;
 /// behind it; captured from one side as [`window_views`]. Masks of the
 /// glass, depths of the wall or, through the glass, the back wall.
 pub fn curved_front_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    front_views(count, |e, d, len| {
+    curved_front_in(count, true)
+}
+
+/// [`curved_front_views`]' glass in a band of its wall as wide as the glass
+/// (|y| <= 1): past the glass's sides the back wall, so only its top and
+/// bottom edges meet a surface (a windshield's roof and bonnet).
+pub fn curved_band_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    curved_front_in(count, false)
+}
+
+/// [`curved_front_views`] (`sides`: the wall all round the glass) or [`curved_band_views`].
+fn curved_front_in(count: usize, sides: bool) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    front_views(count, move |e, d, len| {
         let back = if d[0] < -1e-9 { (-2.0 - e[0]) / d[0] } else { return (0.0, 0.0) };
         let o = [e[0] + FRONT_R, e[1]];
         let (a, b, c) = (d[0] * d[0] + d[1] * d[1], 2.0 * (o[0] * d[0] + o[1] * d[1]), o[0] * o[0] + o[1] * o[1] - FRONT_R * FRONT_R);
@@ -176,7 +188,8 @@ pub fn curved_front_views(count: usize) -> (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<
         let Some(t) = t else { return (0.0, (back / len) as f32) };
         let (y, z) = (e[1] + t * d[1], e[2] + t * d[2]);
         let glass = y.abs() <= 1.0 && (0.2..=1.2).contains(&z);
-        (glass as u8 as f32, ((if glass { back } else { t }) / len) as f32)
+        let wall = sides || y.abs() <= 1.0;
+        (glass as u8 as f32, ((if glass || !wall { back } else { t }) / len) as f32)
     })
 }
 

@@ -33,9 +33,26 @@ pub(super) fn median_off(pts: &[[f64; 3]], m: &Membrane) -> f64 {
     off.get(off.len() / 2).copied().unwrap_or(f64::INFINITY)
 }
 
+/// The ridge on the quadratic terms, a share of the points' weight times
+/// their spread (mean x² + y²) squared: a rim seen along two edges only (a
+/// windshield's top and bottom, its sides free) leaves the bend across them
+/// unfixed, and the bare fit bowed the inside by the points' noise
+/// (perf/journal/2026-12-08-seventy-fourth.md).
+pub const CURVE_RIDGE: f64 = 0.01;
+
 /// 1 / z = a x + b y + c + d x² + e x y + f y² through `pts` by the
-/// plane's reweighted least squares ([`reweighted_fit`]). None where the
-/// points do not fix the six terms.
+/// plane's reweighted least squares ([`reweighted_fit`]), with
+/// [`CURVE_RIDGE`] on d, e and f. None where the points do not fix the
+/// plane's terms.
 fn fit_bent(pts: &[[f64; 3]]) -> Option<[f64; 6]> {
-    reweighted_fit(pts, |p| [p[0], p[1], 1.0, p[0] * p[0], p[0] * p[1], p[1] * p[1]], solve)
+    let ridged = |mut a: [[f64; 6]; 6], b: [f64; 6]| {
+        // a[2][2] is the rows' weight; a[0][0] + a[1][1] their weighted x² + y².
+        let spread = (a[0][0] + a[1][1]) / a[2][2];
+        let ridge = CURVE_RIDGE * a[2][2] * spread * spread;
+        for k in 3..6 {
+            a[k][k] += ridge;
+        }
+        solve(a, b)
+    };
+    reweighted_fit(pts, |p| [p[0], p[1], 1.0, p[0] * p[0], p[0] * p[1], p[1] * p[1]], ridged)
 }
