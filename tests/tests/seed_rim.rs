@@ -1,8 +1,10 @@
 //! The rim of the glass masks (harness/train/src/train/stages/reflection/seed/rim.rs),
 //! on the CPU: a window seen from one side, two windows in a stepped
-//! front, a window in a box seen all around, and the rim's plane fit.
+//! front, a window in a box seen all around, a curved front, and the rim's
+//! plane fit.
 
-use tgs::train::stages::reflection::seed::{fit_plane, hull_seeding, HullSeeding, SeedNormal, SeedParams};
+use tgs::train::stages::reflection::seed::{fit_plane, hull_seeding, HullSeeding, Seed, SeedNormal, SeedParams};
+use tgs_pipelines::Camera;
 use tgs_tests::seed_scenes::*;
 use tgs_tests::{seed, Rng};
 
@@ -273,6 +275,34 @@ fn a_free_pane_seen_from_one_side_is_seeded_on_the_masks_own_rim() {
     assert_eq!(sphere_hull, sphere, "a sphere's seeds unchanged by the masks' rim");
 }
 
+/// The rim's planes' seeds and the curved rim's (`rim_curved`) for a
+/// curved front's views, each with its seeds' median distance from the
+/// glass and their normals' from its normals (degrees), printed as `what`.
+fn planes_and_curve(what: &str, views: (Vec<Camera>, Vec<Vec<f32>>, Vec<Vec<f32>>)) -> [(HullSeeding, f64, f64); 2] {
+    let sv = seed_views(&views.0, &views.1, &views.2);
+    let flat = SeedParams { rim: true, ..mask_params(SeedNormal::Plane) };
+    let curved = SeedParams { rim_curved: true, ..flat };
+    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
+    let on_glass = |h: HullSeeding| {
+        let at = |s: &Seed| curved_front(s.position.map(f64::from));
+        let off = median(h.seeds.iter().map(|s| at(s).0).collect());
+        let tilt = median(h.seeds.iter().map(|s| dot(s.normal.map(f64::from), at(s).1).abs().min(1.0).acos().to_degrees()).collect());
+        (h, off, tilt)
+    };
+    let [(a, off_a, tilt_a), (b, off_b, tilt_b)] = [flat, curved].map(|p| on_glass(hull_seeding(&sv, &p)));
+    eprintln!(
+        "{what}: the rim's planes ({} views) leave seeds a median {off_a:.4} off, normals {tilt_a:.2} degrees; curved ({} of {} views) {off_b:.4} off, {tilt_b:.2} degrees",
+        a.rim_views, b.rim_curved, b.rim_views
+    );
+    assert_eq!((a.rim_views, a.rim_curved), (views.0.len(), 0));
+    assert!(b.rim_views == views.0.len() && b.rim_curved >= views.0.len() / 2, "{} of {} views curved", b.rim_curved, b.rim_views);
+    for s in &b.seeds {
+        assert!(s.position.iter().chain(&s.normal).all(|v| v.is_finite()) && s.scale > 0.0, "{s:?}");
+    }
+    assert_eq!(hull_seeding(&sv, &SeedParams { threads: 1, ..curved }), b, "the same at one thread");
+    [(a, off_a, tilt_a), (b, off_b, tilt_b)]
+}
+
 /// A curved front (a section of a cylinder, set in a wall of the same
 /// curve) seen from one side: its rim's plane is the glass's chord, whose
 /// normal leaves the glass's by up to 42 degrees at its sides; with
@@ -282,37 +312,15 @@ fn a_free_pane_seen_from_one_side_is_seeded_on_the_masks_own_rim() {
 #[test]
 fn a_curved_front_is_seeded_on_its_curved_rim() {
     let count = 24;
-    let (cams, masks, depth) = curved_front_views(count);
-    let sv = seed_views(&cams, &masks, &depth);
-    let flat = SeedParams { rim: true, ..mask_params(SeedNormal::Plane) };
-    let curved = SeedParams { rim_curved: true, ..flat };
-    let (a, b) = (hull_seeding(&sv, &flat), hull_seeding(&sv, &curved));
-    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
-    let off = |h: &HullSeeding| median(h.seeds.iter().map(|s| curved_front(s.position.map(f64::from)).0).collect());
-    let tilt =
-        |h: &HullSeeding| median(h.seeds.iter().map(|s| dot(s.normal.map(f64::from), curved_front(s.position.map(f64::from)).1).abs().min(1.0).acos().to_degrees()).collect());
-    eprintln!(
-        "curved front: the rim's planes ({} views) leave seeds a median {:.4} off, normals {:.2} degrees; curved ({} of {} views) {:.4} off, {:.2} degrees",
-        a.rim_views,
-        off(&a),
-        tilt(&a),
-        b.rim_curved,
-        b.rim_views,
-        off(&b),
-        tilt(&b)
-    );
-    assert_eq!((a.rim_views, a.rim_curved), (count, 0));
     // 1 / z quadratic in the image only approximates a cylinder (worst in
     // the views 50 degrees off its axis), and some views' rims lie nearer
-    // two planes at a corner.
-    assert!(b.rim_views == count && b.rim_curved >= count / 2, "{} of {} views curved", b.rim_curved, b.rim_views);
-    assert!(tilt(&a) > 8.0, "the chord's normals {} degrees off", tilt(&a));
+    // two planes at a corner: half the views curved at least.
+    let [(_, off_a, tilt_a), (b, off_b, tilt_b)] = planes_and_curve("curved front", curved_front_views(count));
+    assert!(tilt_a > 8.0, "the chord's normals {tilt_a} degrees off");
     assert!(b.rim_seeds as f64 > 0.9 * b.seeds.len() as f64, "{} of {} seeds on a rim membrane", b.rim_seeds, b.seeds.len());
-    assert!(off(&b) < 0.7 * off(&a) && tilt(&b) < 0.6 * tilt(&a), "curved seeds {} off the glass, normals {} degrees", off(&b), tilt(&b));
-    for s in &b.seeds {
-        assert!(s.position.iter().chain(&s.normal).all(|v| v.is_finite()) && s.scale > 0.0, "{s:?}");
-    }
-    assert_eq!(hull_seeding(&sv, &SeedParams { threads: 1, ..curved }), b, "the same at one thread");
+    assert!(off_b < 0.7 * off_a && tilt_b < 0.6 * tilt_a, "curved seeds {off_b} off the glass, normals {tilt_b} degrees");
+    let flat = SeedParams { rim: true, ..mask_params(SeedNormal::Plane) };
+    let curved = SeedParams { rim_curved: true, ..flat };
     let (cams, masks, depth) = window_views(count);
     let sv = seed_views(&cams, &masks, &depth);
     let window = hull_seeding(&sv, &curved);
@@ -328,28 +336,7 @@ fn a_curved_front_is_seeded_on_its_curved_rim() {
 /// the quadratic terms keeps the seeds on the glass.
 #[test]
 fn a_curved_front_seen_along_two_edges_keeps_its_seeds_on_the_glass() {
-    let count = 24;
-    let (cams, masks, depth) = curved_band_views(count);
-    let sv = seed_views(&cams, &masks, &depth);
-    let flat = SeedParams { rim: true, ..mask_params(SeedNormal::Plane) };
-    let curved = SeedParams { rim_curved: true, ..flat };
-    let (a, b) = (hull_seeding(&sv, &flat), hull_seeding(&sv, &curved));
-    let median = |mut v: Vec<f64>| (v.sort_by(f64::total_cmp), v[v.len() / 2]).1;
-    let off = |h: &HullSeeding| median(h.seeds.iter().map(|s| curved_front(s.position.map(f64::from)).0).collect());
-    let tilt =
-        |h: &HullSeeding| median(h.seeds.iter().map(|s| dot(s.normal.map(f64::from), curved_front(s.position.map(f64::from)).1).abs().min(1.0).acos().to_degrees()).collect());
-    eprintln!(
-        "curved band: planes ({} views) {:.4} off, {:.2} degrees; curved ({} of {} views) {:.4} off, {:.2} degrees",
-        a.rim_views,
-        off(&a),
-        tilt(&a),
-        b.rim_curved,
-        b.rim_views,
-        off(&b),
-        tilt(&b)
-    );
-    assert!(b.rim_views == count && b.rim_curved >= count / 2, "{} of {} views curved", b.rim_curved, b.rim_views);
+    let [(_, off_a, tilt_a), (_, off_b, tilt_b)] = planes_and_curve("curved band", curved_band_views(24));
     // Without the ridge: 0.025 off and 5.4 degrees (the planes' 0.040 and 11.9).
-    assert!(off(&b) < 0.4 * off(&a) && tilt(&b) < 0.35 * tilt(&a), "curved seeds {} off the glass, normals {} degrees", off(&b), tilt(&b));
-    assert_eq!(hull_seeding(&sv, &SeedParams { threads: 1, ..curved }), b, "the same at one thread");
+    assert!(off_b < 0.4 * off_a && tilt_b < 0.35 * tilt_a, "curved seeds {off_b} off the glass, normals {tilt_b} degrees");
 }
