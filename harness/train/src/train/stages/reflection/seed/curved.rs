@@ -2,7 +2,9 @@
 //! way a bent front's do (a windshield, a section of a cylinder, whose
 //! plane is its chord), 1 / z quadratic in the normalised image
 //! coordinates through them instead: a ruled or gently curved front's rim
-//! rings its inside, so the fit interpolates the bend between its edges.
+//! rings its inside, so the fit interpolates the bend between its edges;
+//! where the rim runs along two edges only, a ridge ([`CURVE_RIDGE`])
+//! keeps the bend the rim does not fix flat.
 
 use super::geometry::{reweighted_fit, solve};
 use super::membrane::Membrane;
