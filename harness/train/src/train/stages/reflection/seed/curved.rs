@@ -22,10 +22,14 @@ pub const CURVE_GAIN: f64 = 0.7;
 /// The curved membrane through `pts` ([x, y, 1 / z]) where they call for
 /// it against their plane `flat` ([`CURVE_MIN`], [`CURVE_GAIN`]).
 pub(super) fn curved(pts: &[[f64; 3]], flat: &Membrane) -> Option<Membrane> {
+    // The plane first: where it fits, the six-term fit is not run at all.
+    let f = median_off(pts, flat);
+    if f <= CURVE_MIN {
+        return None;
+    }
     let c = fit_bent(pts)?;
     let bent = Membrane { coef: [c[0], c[1], c[2]], corner: None, bend: [c[3], c[4], c[5]] };
-    let f = median_off(pts, flat);
-    (f > CURVE_MIN && median_off(pts, &bent) <= CURVE_GAIN * f).then_some(bent)
+    (median_off(pts, &bent) <= CURVE_GAIN * f).then_some(bent)
 }
 
 /// The median distance of `pts` from `m`, as a share of their depth.

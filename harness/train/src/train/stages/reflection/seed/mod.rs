@@ -381,7 +381,7 @@ pub fn hull_seeding(views: &[SeedView], p: &SeedParams) -> HullSeeding {
     HullSeeding {
         seeds,
         rim_views: found.rim_views,
-        rim_curved: if found.rim_views > 0 { membranes.iter().filter(|m| m.curved()).count() } else { 0 },
+        rim_curved: membranes.iter().filter(|m| m.curved()).count(),
         rim_seeds,
         plane_pieces,
         plane_seeds,
